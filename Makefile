@@ -1,0 +1,40 @@
+# Quick start: `make run` (main job) and `make test` (default test suite). Both create .venv on first use.
+PYTHON ?= python3
+VENV   := .venv
+PY     := $(VENV)/bin/python
+STAMP  := $(VENV)/.installed
+
+.PHONY: run run-quick test test-all bench fmus install clean
+
+$(STAMP): pyproject.toml
+	$(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install -q --upgrade pip
+	# CPU build of torch first: an unpinned torch requirement would pull several GB of CUDA packages.
+	$(PY) -m pip install -q torch==2.13.0
+	$(PY) -m pip install -q -e ".[test]"
+	touch $(STAMP)
+
+install: $(STAMP)
+
+run: $(STAMP)
+	$(VENV)/bin/piezotwin run
+
+run-quick: $(STAMP)
+	$(VENV)/bin/piezotwin run --quick
+
+test: $(STAMP)
+	$(PY) -m pytest -q
+
+test-all: $(STAMP)
+	$(PY) -m pytest -q -m "slow or not slow"
+
+bench: $(STAMP)
+	$(PY) -m pytest -q -m "slow or not slow" benchmarks/perf --benchmark-enable --benchmark-only \
+	  --benchmark-json=benchmarks/results/bench.json -p no:randomly
+
+fmus: $(STAMP)
+	$(VENV)/bin/piezotwin export-fmu cantilever -o fmus/cantilever.fmu
+	$(VENV)/bin/piezotwin export-fmu acoustic -o fmus/acoustic.fmu
+
+clean:
+	rm -rf $(VENV) report .pytest_cache .benchmarks

@@ -1,0 +1,145 @@
+"""The interface every identifier follows (scikit-learn shape, DESIGN.md "Style").
+
+- configuration in ``__init__`` (keyword arguments with defaults; :meth:`get_params` lists them);
+- ``fit(record_or_list)`` returns ``self``; a list of Records is several separate experiments, and no
+  regressor may span the boundary between two of them;
+- learned values end in ``_``; ``max_lag_`` is the number of leading samples a prediction copies from the
+  measurement as initial conditions (metrics skip them);
+- ``predict(record, horizon=1 | k | None)``: one-step-ahead, k-step-ahead at every sample, or free-run
+  simulation (``None``). Returns an array shaped like ``record.y``. A free run that diverges is stopped, the
+  remaining samples are ``nan``, ``diverged_at_`` holds the index and a :class:`~sysid.errors.DivergenceWarning`
+  is issued — never an exception;
+- ``n_parameters_`` counts the estimated parameters; ``describe()`` returns a JSON-able summary (terms...);
+- ``save(path)`` / :func:`load_model` round-trip a fitted model so it predicts identically.
+"""
+
+from __future__ import annotations
+
+import inspect
+import json
+from abc import ABC, abstractmethod
+from pathlib import Path
+from typing import Any, ClassVar, Sequence
+
+import numpy as np
+
+from sysid.errors import ConfigError, DataError
+from sysid.record import Record
+
+__all__ = ["Identifier", "as_record_list", "load_model"]
+
+
+def as_record_list(data: Record | Sequence[Record]) -> list[Record]:
+    """Accept one Record or a sequence of them; check each has an output."""
+    recs = [data] if isinstance(data, Record) else list(data)
+    if not recs:
+        raise DataError("fit: no records given")
+    for r in recs:
+        if not isinstance(r, Record):
+            raise DataError(f"fit: expected Record objects, got {type(r).__name__}")
+        r.require_output()
+    return recs
+
+
+class Identifier(ABC):
+    """Base class of all identifiers. Subclasses set ``name`` (the registry id) and implement fit/predict."""
+
+    name: ClassVar[str] = "identifier"
+
+    # ------------------------------------------------------------------ configuration
+    @classmethod
+    def _param_names(cls) -> list[str]:
+        sig = inspect.signature(cls.__init__)
+        return [p.name for p in sig.parameters.values() if p.name != "self" and p.kind is p.POSITIONAL_OR_KEYWORD]
+
+    def get_params(self) -> dict[str, Any]:
+        """The constructor arguments of this instance."""
+        return {k: getattr(self, k) for k in self._param_names()}
+
+    def set_params(self, **params: Any) -> "Identifier":
+        valid = self._param_names()
+        for k, v in params.items():
+            if k not in valid:
+                raise ConfigError(f"{self.name}: unknown option {k!r}; valid: {', '.join(valid)}")
+            setattr(self, k, v)
+        return self
+
+    @classmethod
+    def from_assignments(cls, assignments: dict[str, str]) -> "Identifier":
+        """Build from raw ``--set`` strings, coercing each to the type of the constructor default."""
+        from sysid.config import apply_assignments
+
+        sig = inspect.signature(cls.__init__)
+        defaults = {
+            p.name: p.default
+            for p in sig.parameters.values()
+            if p.name != "self" and p.kind is p.POSITIONAL_OR_KEYWORD
+        }
+        values = apply_assignments(defaults, assignments, what=f"{cls.name} option")
+        return cls(**values)
+
+    # ------------------------------------------------------------------ learning / prediction
+    @abstractmethod
+    def fit(self, data: Record | Sequence[Record]) -> "Identifier":
+        ...
+
+    @abstractmethod
+    def predict(self, record: Record, horizon: int | None = 1) -> np.ndarray:
+        ...
+
+    def describe(self) -> dict[str, Any]:
+        """JSON-able summary of the fitted model (subclasses add terms, structure...)."""
+        return {"identifier": self.name, "params": self.get_params(), "n_parameters": getattr(self, "n_parameters_", None)}
+
+    # ------------------------------------------------------------------ persistence
+    @abstractmethod
+    def _state(self) -> dict[str, Any]:
+        """Learned state as JSON-able dict (arrays as lists) — enough to predict identically."""
+
+    @abstractmethod
+    def _load_state(self, state: dict[str, Any]) -> None:
+        ...
+
+    def save(self, path: str | Path) -> Path:
+        """Save config and learned state as JSON (neural models may override to use torch files)."""
+        path = Path(path)
+        payload = {"format": "piezotwin-model/1", "identifier": self.name, "params": self.get_params(), "state": self._state()}
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(json.dumps(payload, default=_json_default))
+        return path
+
+
+def _json_default(obj: Any) -> Any:
+    if isinstance(obj, np.ndarray):
+        return obj.tolist()
+    if isinstance(obj, np.generic):
+        return obj.item()
+    raise TypeError(f"not JSON serialisable: {type(obj).__name__}")
+
+
+def load_model(path: str | Path) -> Identifier:
+    """Load a model written by :meth:`Identifier.save` (any registered identifier)."""
+    from sysid.registry import get_identifier
+
+    path = Path(path)
+    if not path.exists():
+        raise DataError(f"{path}: model file not found")
+    loader = None
+    try:
+        payload = json.loads(path.read_text())
+    except (UnicodeDecodeError, json.JSONDecodeError):
+        payload = None
+    if payload is None:
+        # Binary formats (torch) register a loader by suffix in the registry.
+        from sysid.registry import binary_loader
+
+        loader = binary_loader(path)
+        if loader is None:
+            raise DataError(f"{path}: not a piezotwin model file")
+        return loader(path)
+    if payload.get("format") != "piezotwin-model/1":
+        raise DataError(f"{path}: not a piezotwin model file (format {payload.get('format')!r})")
+    cls = get_identifier(payload["identifier"])
+    model = cls(**payload["params"])
+    model._load_state(payload["state"])
+    return model

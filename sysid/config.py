@@ -1,0 +1,145 @@
+"""Parsing of ``KEY=VALUE`` assignments (``--set``) and coercion to typed values.
+
+One place for the rules of DESIGN.md: ``--set`` may repeat; one ``--set`` may carry several pairs separated
+by commas; a list value is written with dashes (``hidden=75-75``); names are checked against the valid ones
+and refused with the list of valid names.
+"""
+
+from __future__ import annotations
+
+import typing
+from typing import Any, Iterable, Mapping
+
+from sysid.errors import ConfigError
+
+__all__ = ["parse_assignments", "coerce", "apply_assignments"]
+
+
+def parse_assignments(items: Iterable[str] | None, what: str = "--set") -> dict[str, str]:
+    """``["a=1,b=2", "c=x"]`` → ``{"a": "1", "b": "2", "c": "x"}`` (raw strings, later pairs win)."""
+    out: dict[str, str] = {}
+    for item in items or []:
+        for pair in str(item).split(","):
+            pair = pair.strip()
+            if not pair:
+                continue
+            if "=" not in pair:
+                raise ConfigError(f"{what}: expected KEY=VALUE, got {pair!r}")
+            key, value = pair.split("=", 1)
+            key, value = key.strip(), value.strip()
+            if not key:
+                raise ConfigError(f"{what}: empty name in {pair!r}")
+            out[key] = value
+    return out
+
+
+def _parse_bool(text: str, key: str) -> bool:
+    t = text.strip().lower()
+    if t in ("1", "true", "yes", "on"):
+        return True
+    if t in ("0", "false", "no", "off"):
+        return False
+    raise ConfigError(f"{key}: expected a boolean (true/false), got {text!r}")
+
+
+def coerce(text: Any, like: Any, key: str = "value", annotation: Any = None) -> Any:
+    """Convert ``text`` to the type of the example value ``like`` (or of ``annotation`` when given).
+
+    Lists/tuples are written with dashes (``75-75``) and negative numbers keep their sign (``-3``), so a
+    list of negative numbers is written with ``;`` (``-1;-2``). ``None`` for ``like`` accepts numbers or
+    strings; ``none`` gives ``None``.
+    """
+    if not isinstance(text, str):
+        return text
+    if text.lower() == "none" and (like is None or _optional(annotation)):
+        return None
+    target = _target_type(like, annotation)
+    try:
+        if target is bool:
+            return _parse_bool(text, key)
+        if target is int:
+            v = float(text)
+            if v != int(v):
+                raise ValueError
+            return int(v)
+        if target is float:
+            return float(text)
+        if target in (list, tuple):
+            elem_like = None
+            if isinstance(like, (list, tuple)) and like:
+                elem_like = like[0]
+            parts = [p for p in (text.split(";") if ";" in text else text.split("-")) if p != ""] if text else []
+            vals = [coerce(p, elem_like if elem_like is not None else 0.0, key) if _numeric(p) else p for p in parts]
+            if elem_like is not None and isinstance(elem_like, int) and not isinstance(elem_like, bool):
+                vals = [int(v) for v in vals]
+            return target(vals)
+        if target is str:
+            return text
+    except ValueError:
+        name = getattr(target, "__name__", str(target))
+        raise ConfigError(f"{key}: expected {name}, got {text!r}") from None
+    # unknown type: try number, else keep string
+    return float(text) if _numeric(text) else text
+
+
+def _numeric(text: str) -> bool:
+    try:
+        float(text)
+        return True
+    except ValueError:
+        return False
+
+
+def _optional(annotation: Any) -> bool:
+    return annotation is not None and type(None) in typing.get_args(annotation)
+
+
+def _target_type(like: Any, annotation: Any) -> Any:
+    if annotation is not None:
+        origin = typing.get_origin(annotation)
+        args = [a for a in typing.get_args(annotation) if a is not type(None)]
+        if origin in (list, tuple):
+            return origin
+        if origin is typing.Union and args:
+            return _target_type(like, args[0])
+        if annotation in (bool, int, float, str, list, tuple):
+            return annotation
+        if isinstance(annotation, str):  # postponed annotations: fall back on the example
+            pass
+    if isinstance(like, bool):
+        return bool
+    if isinstance(like, int):
+        return int
+    if isinstance(like, float):
+        return float
+    if isinstance(like, (list, tuple)):
+        return type(like)
+    if isinstance(like, str):
+        return str
+    return None
+
+
+def apply_assignments(
+    defaults: Mapping[str, Any],
+    assignments: Mapping[str, str],
+    what: str = "parameter",
+    ranges: Mapping[str, tuple[float, float]] | None = None,
+    choices: Mapping[str, Iterable[Any]] | None = None,
+) -> dict[str, Any]:
+    """Return ``defaults`` updated by the raw ``assignments`` with types coerced and names/ranges checked."""
+    out = dict(defaults)
+    for key, text in assignments.items():
+        if key not in defaults:
+            valid = ", ".join(sorted(defaults))
+            raise ConfigError(f"unknown {what} {key!r}; valid: {valid}")
+        value = coerce(text, defaults[key], key)
+        if ranges and key in ranges and isinstance(value, (int, float)) and not isinstance(value, bool):
+            lo, hi = ranges[key]
+            if not (lo <= value <= hi):
+                raise ConfigError(f"{what} {key}={value} out of range [{lo}, {hi}]")
+        if choices and key in choices:
+            opts = list(choices[key])
+            if value not in opts:
+                raise ConfigError(f"{what} {key}={value!r} not one of: {', '.join(map(str, opts))}")
+        out[key] = value
+    return out

@@ -1,0 +1,331 @@
+"""Reading and writing :class:`~sysid.record.Record` files (DESIGN.md, "Contracts").
+
+- ``.npz``: arrays ``u``, ``y`` (absent for input-only records), scalar ``fs`` and ``meta``, a JSON string that
+  also carries the units. Loadable with plain ``numpy.load(path, allow_pickle=False)``.
+- ``.csv``: a header row names the columns (a file without a header has its columns named ``0, 1, 2 ...``).
+  The sampling rate comes from a ``t`` column (uniform within 1 %) or from ``fs``. Columns are chosen with
+  ``u_col`` / ``y_col`` (default ``u`` and ``y``; several channels as ``"u1,u2"``). Columns that are not
+  selected may hold anything, including empty cells (an empty trailing column is common).
+- ``.mat``: variables chosen by ``u_var`` / ``y_var`` (default ``u`` and ``y``), ``fs`` from ``fs_var`` (default
+  ``fs``) or from ``fs``; MATLAB v7.3 files (HDF5) are read with h5py.
+
+Every failure raises :class:`~sysid.errors.DataError` with one line naming the file and the problem.
+Missing samples (NaN, empty cells) are refused unless ``fill_missing=True``, which interpolates them linearly
+and records every filled index in ``meta['preprocessing']``.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+import os
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from sysid.errors import DataError
+from sysid.record import Record, check_array
+
+__all__ = ["read_record", "write_record", "SUPPORTED_SUFFIXES"]
+
+SUPPORTED_SUFFIXES = (".npz", ".csv", ".mat")
+_UNIFORM_TOL = 0.01  # relative jitter of the t column accepted as uniform sampling
+
+
+def write_record(record: Record, path: str | os.PathLike) -> Path:
+    """Write ``record`` to ``path``: ``.npz`` (the native format, with metadata), or ``.csv`` / ``.mat`` for
+    other tools (columns/variables ``t, u, y`` resp. ``u, y, fs``; the CSV keeps the metadata out).
+    Every format reads back bit-exactly (CSV uses the shortest round-tripping decimal text)."""
+    path = Path(path)
+    suffix = path.suffix.lower()
+    if suffix not in SUPPORTED_SUFFIXES:
+        raise DataError(f"{path}: unknown format {suffix or '(no suffix)'!r}; supported: {', '.join(SUPPORTED_SUFFIXES)}")
+    if path.parent and not path.parent.exists():
+        path.parent.mkdir(parents=True, exist_ok=True)
+    if suffix == ".csv":
+        _write_csv(record, path)
+        return path
+    if suffix == ".mat":
+        from scipy.io import savemat
+
+        mdict = {"u": record.u, "fs": record.fs}
+        if record.y is not None:
+            mdict["y"] = record.y
+        savemat(path, mdict)
+        return path
+    meta = dict(record.meta)
+    meta["units"] = dict(record.units)
+    arrays: dict[str, Any] = {"u": record.u, "fs": np.float64(record.fs), "meta": np.array(json.dumps(meta, default=_json_default))}
+    if record.y is not None:
+        arrays["y"] = record.y
+    np.savez(path, **arrays)
+    return path
+
+
+def _write_csv(record: Record, path: Path) -> None:
+    def names(x: np.ndarray, base: str) -> list[str]:
+        return [base] if x.ndim == 1 else [f"{base}{i + 1}" for i in range(x.shape[1])]
+
+    cols = [record.u.reshape(len(record), -1)]
+    header = names(record.u, "u")
+    if record.y is not None:
+        cols.append(record.y.reshape(len(record), -1))
+        header += names(record.y, "y")
+    data = np.hstack(cols)
+    with open(path, "w", newline="") as fh:
+        fh.write(",".join(["t"] + header) + "\n")
+        for k, row in enumerate(data):
+            fh.write(",".join([repr(k / record.fs)] + [repr(float(v)) for v in row]) + "\n")
+
+
+def _json_default(obj: Any) -> Any:
+    if isinstance(obj, np.ndarray):
+        return obj.tolist()
+    if isinstance(obj, np.generic):
+        return obj.item()
+    if isinstance(obj, Path):
+        return str(obj)
+    raise TypeError(f"not JSON serialisable: {type(obj).__name__}")
+
+
+def read_record(
+    path: str | os.PathLike,
+    *,
+    fs: float | None = None,
+    u_col: str = "u",
+    y_col: str | None = "y",
+    u_var: str = "u",
+    y_var: str | None = "y",
+    fs_var: str = "fs",
+    require_y: bool = False,
+    fill_missing: bool = False,
+) -> Record:
+    """Read a Record from ``.npz``, ``.csv`` or ``.mat``.
+
+    ``fs`` overrides (or supplies) the sampling rate. ``y_col`` / ``y_var`` of ``None`` read an input-only
+    record; otherwise a missing output column is an error only if ``require_y`` is true or the column was
+    named explicitly (not the default ``y``).
+    """
+    p = Path(path)
+    src = str(path)
+    if not p.exists():
+        raise DataError(f"{src}: file not found")
+    if p.is_dir():
+        raise DataError(f"{src}: is a directory, expected a data file")
+    suffix = p.suffix.lower()
+    if suffix not in SUPPORTED_SUFFIXES:
+        raise DataError(f"{src}: unknown format {suffix or '(no suffix)'!r}; supported: {', '.join(SUPPORTED_SUFFIXES)}")
+    if p.stat().st_size == 0:
+        raise DataError(f"{src}: file is empty")
+    if fs is not None and (not math.isfinite(float(fs)) or float(fs) <= 0):
+        raise DataError(f"{src}: sampling rate fs must be positive and finite, got {fs}")
+    if suffix == ".npz":
+        u, y, file_fs, units, meta = _read_npz(p, src)
+    elif suffix == ".csv":
+        u, y, file_fs, units, meta = _read_csv(p, src, u_col, y_col, explicit_y=(y_col not in (None, "y")))
+    else:
+        u, y, file_fs, units, meta = _read_mat(p, src, u_var, y_var, fs_var, explicit_y=(y_var not in (None, "y")))
+    if fs is None:
+        if file_fs is None:
+            raise DataError(f"{src}: no sampling rate in the file (no t column or fs); give --fs / fs=")
+        fs = file_fs
+    if require_y and y is None:
+        raise DataError(f"{src}: missing output column/variable y")
+    meta.setdefault("provenance", {"file": os.path.basename(src)})
+    filled: dict[str, list[int]] = {}
+    u = check_array(u, "u", src, allow_nan=True)
+    if y is not None:
+        y = check_array(y, "y", src, allow_nan=True)
+    if fill_missing:
+        u, filled_u = _fill(u, "u", src)
+        if filled_u:
+            filled["u"] = filled_u
+        if y is not None:
+            y, filled_y = _fill(y, "y", src)
+            if filled_y:
+                filled["y"] = filled_y
+        if filled:
+            meta.setdefault("preprocessing", []).append({"step": "fill_missing", "filled_indices": filled})
+    if y is not None and y.shape[0] != u.shape[0]:
+        raise DataError(f"{src}: u and y have unequal lengths ({u.shape[0]} and {y.shape[0]} samples)")
+    return Record(u=u, y=y, fs=fs, units=units, meta=meta, source=src)
+
+
+def _fill(x: np.ndarray, name: str, src: str) -> tuple[np.ndarray, list[int]]:
+    """Linear interpolation of non-finite samples (per channel); ends are held at the nearest good value."""
+    if np.isinf(x).any():
+        raise DataError(f"{src}: {name} has infinite samples; only missing (NaN/empty) samples can be interpolated")
+    bad = np.isnan(x)
+    if not bad.any():
+        return x, []
+    x2 = x.reshape(x.shape[0], -1).copy()
+    idx = np.arange(x2.shape[0])
+    for c in range(x2.shape[1]):
+        b = np.isnan(x2[:, c])
+        if b.all():
+            raise DataError(f"{src}: {name} has no valid samples to interpolate from")
+        if b.any():
+            x2[b, c] = np.interp(idx[b], idx[~b], x2[~b, c])
+    rows = np.flatnonzero(bad.reshape(x.shape[0], -1).any(axis=1)).tolist()
+    return x2.reshape(x.shape), rows
+
+
+# ---------------------------------------------------------------------------------------------- npz
+def _read_npz(p: Path, src: str):
+    try:
+        with np.load(p, allow_pickle=False) as z:
+            keys = set(z.files)
+            if "u" not in keys:
+                raise DataError(f"{src}: missing array 'u' (found: {', '.join(sorted(keys)) or 'none'})")
+            u = z["u"]
+            y = z["y"] if "y" in keys else None
+            fs = float(z["fs"]) if "fs" in keys else None
+            meta: dict[str, Any] = {}
+            if "meta" in keys:
+                try:
+                    meta = json.loads(str(z["meta"]))
+                except json.JSONDecodeError as exc:
+                    raise DataError(f"{src}: 'meta' is not valid JSON ({exc.msg})") from None
+    except DataError:
+        raise
+    except Exception as exc:  # zipfile.BadZipFile, ValueError (pickled object arrays), OSError
+        raise DataError(f"{src}: not a readable .npz file ({type(exc).__name__}: {exc})") from None
+    units = meta.pop("units", {"u": "", "y": ""}) if isinstance(meta, dict) else {}
+    return u, y, fs, units, meta
+
+
+# ---------------------------------------------------------------------------------------------- csv
+def _is_number(text: str) -> bool:
+    try:
+        float(text)
+        return True
+    except ValueError:
+        return False
+
+
+def _read_csv(p: Path, src: str, u_col: str, y_col: str | None, explicit_y: bool):
+    try:
+        with open(p, newline="", encoding="utf-8-sig") as fh:
+            sample = fh.read(65536)
+            fh.seek(0)
+            try:
+                dialect = csv.Sniffer().sniff(sample, delimiters=",;\t ")
+            except csv.Error:
+                dialect = csv.excel
+            rows = [r for r in csv.reader(fh, dialect) if any(c.strip() for c in r)]
+    except UnicodeDecodeError:
+        raise DataError(f"{src}: not a text CSV file") from None
+    if not rows:
+        raise DataError(f"{src}: file has no rows")
+    first = [c.strip() for c in rows[0]]
+    has_header = not all(_is_number(c) for c in first if c != "")
+    if has_header:
+        header = first
+        body = rows[1:]
+    else:
+        header = [str(i) for i in range(len(first))]
+        body = rows
+    if not body:
+        raise DataError(f"{src}: file has a header but no data rows")
+    index = {name: i for i, name in enumerate(header) if name != ""}
+
+    def column(name: str) -> np.ndarray:
+        i = index[name]
+        out = np.empty(len(body))
+        for k, row in enumerate(body):
+            cell = row[i].strip() if i < len(row) else ""
+            if cell == "" or cell.lower() in ("nan", "na", "null"):
+                out[k] = np.nan
+            else:
+                try:
+                    out[k] = float(cell)
+                except ValueError:
+                    raise DataError(f"{src}: column {name!r} row {k + 1 + has_header} is not a number: {cell!r}") from None
+        return out
+
+    def columns(spec: str, role: str) -> np.ndarray:
+        names = [s.strip() for s in str(spec).split(",") if s.strip()]
+        missing = [n for n in names if n not in index]
+        if missing:
+            raise DataError(
+                f"{src}: missing column {missing[0]!r} for {role} (columns: {', '.join(index) or 'none'}); "
+                f"choose with --{role}-col"
+            )
+        cols = [column(n) for n in names]
+        return cols[0] if len(cols) == 1 else np.column_stack(cols)
+
+    u = columns(u_col, "u")
+    y = None
+    if y_col is not None:
+        names = [s.strip() for s in str(y_col).split(",") if s.strip()]
+        if all(n in index for n in names):
+            y = columns(y_col, "y")
+        elif explicit_y:
+            columns(y_col, "y")  # raises the clear message
+    fs = None
+    if "t" in index:
+        t = column("t")
+        fs = _fs_from_time(t, src)
+    meta = {"provenance": {"file": p.name, "u_col": u_col, "y_col": y_col}}
+    return u, y, fs, {"u": "", "y": ""}, meta
+
+
+def _fs_from_time(t: np.ndarray, src: str) -> float:
+    if t.size < 2 or not np.isfinite(t).all():
+        raise DataError(f"{src}: column 't' needs at least two finite values to give the sampling rate")
+    d = np.diff(t)
+    span = t[-1] - t[0]
+    if span <= 0:
+        raise DataError(f"{src}: column 't' is not increasing")
+    dt = span / (t.size - 1)
+    if np.max(np.abs(d - dt)) > _UNIFORM_TOL * dt:
+        raise DataError(f"{src}: column 't' is not uniformly sampled (steps {d.min():.6g}..{d.max():.6g} s); resample first")
+    return 1.0 / dt
+
+
+# ---------------------------------------------------------------------------------------------- mat
+def _read_mat(p: Path, src: str, u_var: str, y_var: str | None, fs_var: str, explicit_y: bool):
+    from scipy.io import loadmat
+
+    try:
+        data = loadmat(p, squeeze_me=True)
+        variables = {k: v for k, v in data.items() if not k.startswith("__")}
+    except NotImplementedError:  # v7.3 = HDF5
+        variables = _read_mat73(p, src)
+    except Exception as exc:
+        raise DataError(f"{src}: not a readable .mat file ({type(exc).__name__}: {exc})") from None
+    if u_var not in variables:
+        raise DataError(f"{src}: missing variable {u_var!r} for u (variables: {', '.join(sorted(variables)) or 'none'}); choose with --u-var")
+    u = np.asarray(variables[u_var], dtype=float).squeeze()
+    y = None
+    if y_var is not None:
+        if y_var in variables:
+            y = np.asarray(variables[y_var], dtype=float).squeeze()
+        elif explicit_y:
+            raise DataError(f"{src}: missing variable {y_var!r} for y (variables: {', '.join(sorted(variables))}); choose with --y-var")
+    fs = None
+    if fs_var in variables:
+        fs = float(np.asarray(variables[fs_var]).squeeze())
+    if u.ndim == 2 and u.shape[0] < u.shape[1]:
+        u = u.T  # MATLAB row vectors / channels-by-samples
+    if y is not None and y.ndim == 2 and y.shape[0] < y.shape[1]:
+        y = y.T
+    return u, y, fs, {"u": "", "y": ""}, {"provenance": {"file": p.name, "u_var": u_var, "y_var": y_var}}
+
+
+def _read_mat73(p: Path, src: str) -> dict[str, np.ndarray]:
+    try:
+        import h5py
+    except ImportError:  # pragma: no cover - h5py is a runtime dependency
+        raise DataError(f"{src}: MATLAB v7.3 file needs h5py") from None
+    out: dict[str, np.ndarray] = {}
+    try:
+        with h5py.File(p, "r") as f:
+            for k, v in f.items():
+                if isinstance(v, h5py.Dataset):
+                    out[k] = np.asarray(v).T
+    except Exception as exc:
+        raise DataError(f"{src}: not a readable .mat file ({type(exc).__name__}: {exc})") from None
+    return out

@@ -1,0 +1,59 @@
+"""Registry of identifiers: id → class, imported lazily so that e.g. torch loads only when used."""
+
+from __future__ import annotations
+
+import importlib
+from pathlib import Path
+from typing import Callable
+
+from sysid.errors import ConfigError
+
+__all__ = ["IDENTIFIERS", "get_identifier", "available_identifiers", "binary_loader"]
+
+# id -> "module:Class". Each module owns its identifier; add a line here to register a new one.
+IDENTIFIERS: dict[str, str] = {
+    "arx": "sysid.linear:ARX",
+    "armax": "sysid.linear:ARMAX",
+    "narx-poly": "sysid.polynomial:NARXPoly",
+    "narmax-poly": "sysid.polynomial:NARMAXPoly",
+    "narx-mlp": "sysid.neural.narx_mlp:NARXMLP",
+    "narx-mlp-sim": "sysid.neural.narx_mlp:NARXMLPSim",
+    "rnn": "sysid.neural.rnn:RNNStateSpace",
+}
+
+# Binary (non-JSON) model files: suffix -> "module:function(path) -> Identifier".
+BINARY_LOADERS: dict[str, str] = {
+    ".pt": "sysid.neural.persist:load",
+}
+
+
+def _import(spec: str):
+    module, _, attr = spec.partition(":")
+    return getattr(importlib.import_module(module), attr)
+
+
+def available_identifiers() -> list[str]:
+    """Ids whose module imports (an id whose module is not present yet is left out)."""
+    out = []
+    for key, spec in IDENTIFIERS.items():
+        try:
+            _import(spec)
+        except (ImportError, AttributeError):
+            continue
+        out.append(key)
+    return out
+
+
+def get_identifier(name: str):
+    """The identifier class registered as ``name``; unknown names are refused with the valid list."""
+    if name not in IDENTIFIERS:
+        raise ConfigError(f"unknown identifier {name!r}; valid: {', '.join(IDENTIFIERS)}")
+    try:
+        return _import(IDENTIFIERS[name])
+    except (ImportError, AttributeError) as exc:
+        raise ConfigError(f"identifier {name!r} is not available in this build ({exc})") from None
+
+
+def binary_loader(path: Path) -> Callable | None:
+    spec = BINARY_LOADERS.get(Path(path).suffix.lower())
+    return None if spec is None else _import(spec)

@@ -1,0 +1,276 @@
+"""What every twin shares: parameter dataclasses with units and ranges, the effect catalog, configuration.
+
+A twin's *configuration* is its parameters (a dataclass whose fields carry unit, range and description in
+their metadata, see :func:`pfield`) and its set of switched-on effects (DESIGN.md "Effects"). The helpers
+here turn the CLI's ``--params / --set / --effect / --without / --effects / --seed`` into a configured twin,
+and write and read parameter files.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+from abc import ABC, abstractmethod
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, ClassVar, Iterable, Mapping
+
+import numpy as np
+
+from sysid.config import coerce, parse_assignments
+from sysid.errors import ConfigError, DataError
+from sysid.record import Record
+
+__all__ = ["pfield", "ParamInfo", "param_info", "EffectSpec", "Twin", "PARAMS_FORMAT"]
+
+PARAMS_FORMAT = "piezotwin-params/1"
+
+
+def pfield(default: Any, unit: str, lo: float | None = None, hi: float | None = None, doc: str = "",
+           choices: Iterable[Any] | None = None, source: str = "") -> Any:
+    """A dataclass field for a physical parameter: default, unit, documented range [lo, hi], description.
+
+    ``source`` says where the value comes from (physics notes section, paper). ``choices`` restricts
+    string-valued parameters (e.g. a fluid name).
+    """
+    meta = {"unit": unit, "range": (lo, hi), "doc": doc, "source": source,
+            "choices": tuple(choices) if choices is not None else None}
+    if isinstance(default, (list, dict)):
+        return field(default_factory=lambda d=default: type(d)(d), metadata=meta)
+    return field(default=default, metadata=meta)
+
+
+@dataclass(frozen=True)
+class ParamInfo:
+    name: str
+    default: Any
+    unit: str
+    range: tuple[float | None, float | None]
+    doc: str
+    source: str
+    choices: tuple[Any, ...] | None
+
+
+def param_info(params_cls: type) -> dict[str, ParamInfo]:
+    """Field name → :class:`ParamInfo` for a parameter dataclass."""
+    out = {}
+    for f in dataclasses.fields(params_cls):
+        md = f.metadata or {}
+        default = f.default if f.default is not dataclasses.MISSING else (
+            f.default_factory() if f.default_factory is not dataclasses.MISSING else None)  # type: ignore[misc]
+        out[f.name] = ParamInfo(f.name, default, md.get("unit", ""), tuple(md.get("range", (None, None))),
+                                md.get("doc", ""), md.get("source", ""), md.get("choices"))
+    return out
+
+
+@dataclass(frozen=True)
+class EffectSpec:
+    """One effect of a twin's catalog.
+
+    ``params`` maps the short keys accepted by ``--effect NAME:key=value`` to field names of the twin's
+    parameter dataclass (the effect's own parameters). ``signature`` is the one-line residual signature
+    that reveals the effect when a twin without it is compared with data that has it.
+    """
+
+    id: str
+    twin: str
+    description: str
+    signature: str
+    params: Mapping[str, str] = field(default_factory=dict)
+    default_on: bool = False
+    group: str = ""  # effects the data cannot tell apart share a group name
+
+    def to_dict(self, params_cls: type | None = None) -> dict[str, Any]:
+        d: dict[str, Any] = {"id": self.id, "twin": self.twin, "description": self.description,
+                             "signature": self.signature, "default_on": self.default_on, "group": self.group}
+        info = param_info(params_cls) if params_cls is not None else {}
+        d["params"] = {
+            k: ({"field": f, "unit": info[f].unit, "range": list(info[f].range), "default": info[f].default,
+                 "doc": info[f].doc} if f in info else {"field": f})
+            for k, f in self.params.items()
+        }
+        return d
+
+
+class Twin(ABC):
+    """Base class of the digital twins.
+
+    Subclasses define ``name``, ``Params`` (a dataclass built with :func:`pfield`), ``EFFECTS`` (catalog),
+    ``PROTOCOLS`` (id → one-line description), and implement :meth:`simulate` and :meth:`generate`.
+    """
+
+    name: ClassVar[str] = "twin"
+    Params: ClassVar[type]
+    EFFECTS: ClassVar[dict[str, EffectSpec]] = {}
+    PROTOCOLS: ClassVar[dict[str, str]] = {}
+    units: ClassVar[dict[str, str]] = {"u": "V", "y": ""}
+    #: parameters that ``piezotwin calibrate`` fits by default (fields of ``Params``)
+    CALIBRATION_PARAMS: ClassVar[tuple[str, ...]] = ()
+
+    def __init__(self, params: Any = None, effects: Iterable[str] | None = None, seed: int | None = 0):
+        self.params = params if params is not None else self.Params()
+        if not isinstance(self.params, self.Params):
+            raise ConfigError(f"{self.name}: params must be a {self.Params.__name__}")
+        self.effects = frozenset(self.default_effects() if effects is None else effects)
+        unknown = sorted(self.effects - set(self.EFFECTS))
+        if unknown:
+            raise ConfigError(f"unknown effect {unknown[0]!r} for twin {self.name}; valid: {', '.join(self.EFFECTS)}")
+        self.seed = seed
+        self.validate_params()
+
+    # ------------------------------------------------------------------ catalog
+    @classmethod
+    def default_effects(cls) -> frozenset[str]:
+        return frozenset(k for k, e in cls.EFFECTS.items() if e.default_on)
+
+    def has(self, effect: str) -> bool:
+        return effect in self.effects
+
+    # ------------------------------------------------------------------ parameters
+    def validate_params(self) -> None:
+        """Refuse out-of-range values with a message that names the parameter and its range."""
+        for name, info in param_info(self.Params).items():
+            value = getattr(self.params, name)
+            lo, hi = info.range
+            if isinstance(value, (int, float)) and not isinstance(value, bool):
+                if (lo is not None and value < lo) or (hi is not None and value > hi):
+                    raise ConfigError(f"{self.name} parameter {name}={value} out of range [{lo}, {hi}] {info.unit}")
+            if info.choices is not None and value not in info.choices:
+                raise ConfigError(f"{self.name} parameter {name}={value!r} not one of: {', '.join(map(str, info.choices))}")
+
+    def with_params(self, **changes: Any) -> "Twin":
+        """A new twin of the same class, effects and seed, with some parameters changed."""
+        return type(self)(dataclasses.replace(self.params, **changes), self.effects, self.seed)
+
+    def with_effects(self, effects: Iterable[str]) -> "Twin":
+        return type(self)(self.params, effects, self.seed)
+
+    def config(self) -> dict[str, Any]:
+        """JSON-able configuration: twin, parameters, effects, seed."""
+        return {"twin": self.name, "params": dataclasses.asdict(self.params), "effects": sorted(self.effects),
+                "seed": self.seed}
+
+    # ------------------------------------------------------------------ simulation
+    @abstractmethod
+    def simulate(self, u: np.ndarray, fs: float) -> np.ndarray:
+        """Output ``y`` for the input samples ``u`` at rate ``fs`` [Hz] (deterministic for ``self.seed``)."""
+
+    def simulate_record(self, record: Record) -> Record:
+        """Simulate the input of ``record``; returns a new Record with the twin's configuration in its metadata."""
+        y = self.simulate(record.u, record.fs)
+        meta = dict(record.meta)
+        meta.update(self.config())
+        return Record(u=record.u, y=y, fs=record.fs, units=dict(self.units), meta=meta, source=record.source)
+
+    @abstractmethod
+    def generate(self, protocol: str, **options: Any) -> Record:
+        """Run a named protocol (``PROTOCOLS``) and return its Record."""
+
+    def check_protocol(self, protocol: str) -> None:
+        if protocol not in self.PROTOCOLS:
+            raise ConfigError(f"unknown protocol {protocol!r} for twin {self.name}; valid: {', '.join(self.PROTOCOLS)}")
+
+    def calibrate(self, data: Record, val: Record | None = None, names: Iterable[str] | None = None, **options: Any):
+        """Fit ``names`` (default ``CALIBRATION_PARAMS``) to ``data`` by free-run output error.
+
+        Returns a :class:`twins.calibration.CalibrationResult`; twins override this to add a good start
+        (e.g. a linear pre-fit) or a staged fit.
+        """
+        from twins.calibration import calibrate
+
+        fit = list(names) if names is not None else list(self.CALIBRATION_PARAMS)
+        if not fit:
+            raise ConfigError(f"twin {self.name} names no parameters to calibrate")
+        return calibrate(self, data, fit, val=val, **options)
+
+    # ------------------------------------------------------------------ parameter files
+    def save_params(self, path: str | Path, extra: Mapping[str, Any] | None = None) -> Path:
+        """Write the configuration (and e.g. calibration statistics in ``extra``) as a JSON parameter file."""
+        payload = {"format": PARAMS_FORMAT, **self.config(), **(dict(extra) if extra else {})}
+        path = Path(path)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(json.dumps(payload, indent=2, default=_json_default))
+        return path
+
+    # ------------------------------------------------------------------ configuration from the CLI
+    @classmethod
+    def from_options(cls, params_file: str | Path | None = None, set_: Iterable[str] | None = None,
+                     effect: Iterable[str] | None = None, without: Iterable[str] | None = None,
+                     effects: str | None = None, seed: int | None = 0) -> "Twin":
+        """Build a configured twin from the options every twin command takes (DESIGN.md).
+
+        Order: defaults → ``params_file`` → ``effects`` (exact set, ``none`` = bare core) → ``effect``
+        (add, with ``NAME:key=value,...``) → ``without`` (remove) → ``set_`` (parameters by name).
+        """
+        values = {f.name: getattr(cls.Params(), f.name) for f in dataclasses.fields(cls.Params)}
+        active = set(cls.default_effects())
+        if params_file is not None:
+            data = load_params_file(params_file, cls.name)
+            values.update(_coerce_all(cls, data.get("params", {}), str(params_file)))
+            if "effects" in data:
+                active = set(data["effects"])
+        if effects is not None:
+            text = effects.strip()
+            active = set() if text.lower() in ("none", "") else {e.strip() for e in text.split(",") if e.strip()}
+        for item in effect or []:
+            name, _, kv = str(item).partition(":")
+            name = name.strip()
+            spec = cls._effect_spec(name)
+            active.add(name)
+            for key, text in parse_assignments([kv], f"--effect {name}").items():
+                fname = spec.params.get(key, key if key in spec.params.values() else None)
+                if fname is None:
+                    raise ConfigError(f"effect {name} has no parameter {key!r}; valid: {', '.join(spec.params) or 'none'}")
+                values.update(_coerce_all(cls, {fname: text}, f"--effect {name}"))
+        for name in without or []:
+            for n in str(name).split(","):
+                n = n.strip()
+                if n:
+                    cls._effect_spec(n)
+                    active.discard(n)
+        for key, text in parse_assignments(set_).items():
+            values.update(_coerce_all(cls, {key: text}, "--set"))
+        unknown = sorted(active - set(cls.EFFECTS))
+        if unknown:
+            raise ConfigError(f"unknown effect {unknown[0]!r} for twin {cls.name}; valid: {', '.join(cls.EFFECTS)}")
+        return cls(cls.Params(**values), active, seed)
+
+    @classmethod
+    def _effect_spec(cls, name: str) -> EffectSpec:
+        if name not in cls.EFFECTS:
+            raise ConfigError(f"unknown effect {name!r} for twin {cls.name}; valid: {', '.join(cls.EFFECTS)}")
+        return cls.EFFECTS[name]
+
+
+def _coerce_all(cls: type[Twin], raw: Mapping[str, Any], where: str) -> dict[str, Any]:
+    info = param_info(cls.Params)
+    out = {}
+    for key, value in raw.items():
+        if key not in info:
+            raise ConfigError(f"{where}: unknown parameter {key!r} for twin {cls.name}; valid: {', '.join(info)}")
+        out[key] = coerce(value, info[key].default, key) if isinstance(value, str) else value
+    return out
+
+
+def load_params_file(path: str | Path, twin: str | None = None) -> dict[str, Any]:
+    """Read a parameter file written by :meth:`Twin.save_params`; check it belongs to ``twin``."""
+    p = Path(path)
+    if not p.exists():
+        raise DataError(f"{p}: parameter file not found")
+    try:
+        data = json.loads(p.read_text())
+    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise DataError(f"{p}: not a JSON parameter file ({exc})") from None
+    if not isinstance(data, dict) or data.get("format") != PARAMS_FORMAT:
+        raise DataError(f"{p}: not a piezotwin parameter file (expected format {PARAMS_FORMAT!r})")
+    if twin is not None and data.get("twin") != twin:
+        raise DataError(f"{p}: parameter file is for twin {data.get('twin')!r}, not {twin!r}")
+    return data
+
+
+def _json_default(obj: Any) -> Any:
+    if isinstance(obj, np.ndarray):
+        return obj.tolist()
+    if isinstance(obj, np.generic):
+        return obj.item()
+    raise TypeError(f"not JSON serialisable: {type(obj).__name__}")
