@@ -101,7 +101,12 @@ class LagData:
 
 # ---------------------------------------------------------------------------------------------- network
 class FlatMLP(torch.nn.Module):
-    """Dense network of eq. 2-10 with hidden widths ``hidden`` and activation ``activation`` (linear output)."""
+    """Dense network of eq. 2-10 with hidden widths ``hidden`` and activation ``activation`` (linear output).
+
+    Every weight matrix and bias is a leaf tensor whose storage is a slice of one flat buffer ``flat`` (and
+    whose gradient is a slice of ``flat.grad``), so the forward pass is plain ``addmm`` calls and the
+    optimiser updates all 2501 weights of the 4 × 25 net with a handful of whole-buffer operations.
+    """
 
     def __init__(self, n_in: int, hidden: Sequence[int], n_out: int, activation: str, generator: torch.Generator,
                  device: torch.device, dtype: torch.dtype = torch.float32):
@@ -111,7 +116,6 @@ class FlatMLP(torch.nn.Module):
         self.activation = activation
         self.act = {"relu": torch.relu, "tanh": torch.tanh, "sigmoid": torch.sigmoid}[activation]
         n_total = count_mlp_parameters(n_in, hidden, n_out)
-        self.flat = torch.nn.Parameter(torch.zeros(n_total, dtype=dtype, device=device))
         # Glorot-uniform init (Keras default) drawn on the CPU generator so the draw is device-independent.
         init = torch.zeros(n_total, dtype=torch.float64)
         o = 0
@@ -119,24 +123,37 @@ class FlatMLP(torch.nn.Module):
             lim = (6.0 / (a + b)) ** 0.5
             init[o:o + a * b] = (torch.rand(a * b, generator=generator, dtype=torch.float64) * 2 - 1) * lim
             o += a * b + b  # biases stay zero
-        with torch.no_grad():
-            self.flat.copy_(init.to(dtype))
+        self.flat = torch.nn.Parameter(init.to(device=device, dtype=dtype))
+        self.flat.grad = torch.zeros_like(self.flat)
+        self.layers: list[tuple[torch.Tensor, torch.Tensor]] = []
+        o = 0
+        for a, b in zip(sizes[:-1], sizes[1:]):
+            W = torch.empty(0, dtype=dtype, device=device)
+            W.data = self.flat.data[o:o + a * b].view(b, a)
+            W.requires_grad_(True)
+            W.grad = self.flat.grad[o:o + a * b].view(b, a)
+            o += a * b
+            bias = torch.empty(0, dtype=dtype, device=device)
+            bias.data = self.flat.data[o:o + b]
+            bias.requires_grad_(True)
+            bias.grad = self.flat.grad[o:o + b]
+            o += b
+            self.layers.append((W, bias))
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
-        # Views are re-sliced each call so autograd sees the current flat parameter.
-        o = 0
-        sizes = self.sizes
-        flat = self.flat
-        last = len(sizes) - 2
-        for i, (a, b) in enumerate(zip(sizes[:-1], sizes[1:])):
-            W = flat[o:o + a * b].view(b, a)
-            o += a * b
-            bias = flat[o:o + b]
-            o += b
-            x = torch.addmm(bias, x, W.t())
+        last = len(self.layers) - 1
+        act = self.act
+        for i, (W, b) in enumerate(self.layers):
+            x = torch.addmm(b, x, W.t())
             if i < last:
-                x = self.act(x)
+                x = act(x)
         return x
+
+    def check_grad_storage(self) -> bool:
+        """True while every layer's gradient still lives in ``flat.grad`` (autograd accumulates in place)."""
+        g = self.flat.grad
+        return all(W.grad is not None and W.grad.untyped_storage().data_ptr() == g.untyped_storage().data_ptr()
+                   for W, _ in self.layers)
 
     def weights_np(self) -> np.ndarray:
         return self.flat.detach().to("cpu", torch.float64).numpy().copy()
@@ -150,7 +167,8 @@ class RMSprop:
         self.lr, self.alpha, self.eps = float(lr), float(alpha), float(eps)
         self.v = torch.zeros_like(param)
         self._tmp = torch.empty_like(param)
-        param.grad = torch.zeros_like(param)
+        if param.grad is None:
+            param.grad = torch.zeros_like(param)
 
     def zero_grad(self) -> None:
         self.p.grad.zero_()
@@ -158,9 +176,10 @@ class RMSprop:
     @torch.no_grad()
     def step(self) -> None:
         g = self.p.grad
+        p = self.p.data
         self.v.mul_(self.alpha).addcmul_(g, g, value=1.0 - self.alpha)            # eq. 2-25
         torch.add(self.v, self.eps, out=self._tmp).sqrt_()
-        self.p.addcdiv_(g, self._tmp, value=-self.lr)                              # eq. 2-26
+        p.addcdiv_(g, self._tmp, value=-self.lr)                                   # eq. 2-26
 
 
 # ---------------------------------------------------------------------------------------------- prediction

@@ -70,6 +70,12 @@ def check_channels(recs: Sequence[Record]) -> tuple[int, int]:
     return nu, ny
 
 
+def _check_storage(net: FlatMLP) -> None:
+    """Once per epoch: the layer gradients must still be the slices of the flat buffer the optimiser reads."""
+    if not net.check_grad_storage():  # pragma: no cover - would be a torch behaviour change
+        raise RuntimeError("neural training: layer gradients left the flat buffer; the optimiser would not see them")
+
+
 class _NeuralNARXBase(Identifier):
     """Shared fit/predict/persistence of the two NARX-MLP identifiers (training differs)."""
 
@@ -149,6 +155,7 @@ class _NeuralNARXBase(Identifier):
                 loss.backward()
                 opt.step()
                 total += loss.detach() * xb.shape[0]
+            _check_storage(net)
             self.loss_history_.append(float(total.item()) / M)  # one device sync per epoch
 
     def _train(self, net: FlatMLP, data: LagData, gen: torch.Generator) -> None:  # pragma: no cover - abstract
@@ -375,4 +382,5 @@ class NARXMLPSim(_NeuralNARXBase):
                 loss.backward()
                 opt.step()
                 total += loss.detach() * s.shape[0]
+            _check_storage(net)
             self.loss_history_.append(float(total.item()) / n_win)
