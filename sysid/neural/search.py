@@ -181,12 +181,12 @@ def _open_storage(url: str):
     optuna.logging.set_verbosity(optuna.logging.WARNING)
     # Trials of a killed worker stop sending heartbeats; after the grace period Optuna fails them and the
     # callback re-queues the same configuration (the name of that option changed in Optuna 4.9).
-    if "heartbeat_stale_trial_callback" in inspect.signature(storages.RDBStorage.__init__).parameters:
-        kwargs["heartbeat_stale_trial_callback"] = storages.RetryHeartbeatStaleTrialCallback(max_retry=2)
-    else:  # pragma: no cover - older Optuna
-        kwargs["failed_trial_callback"] = storages.RetryFailedTrialCallback(max_retry=2)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", optuna.exceptions.ExperimentalWarning)
+        if "heartbeat_stale_trial_callback" in inspect.signature(storages.RDBStorage.__init__).parameters:
+            kwargs["heartbeat_stale_trial_callback"] = storages.RetryHeartbeatStaleTrialCallback(max_retry=2)
+        else:  # pragma: no cover - older Optuna
+            kwargs["failed_trial_callback"] = storages.RetryFailedTrialCallback(max_retry=2)
         return storages.RDBStorage(url, heartbeat_interval=20, grace_period=60, **kwargs)
 
 
