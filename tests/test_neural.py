@@ -165,3 +165,50 @@ def test_rnn_k_step_matches_free_run_from_each_start(plant):
         sub = short[start - m.max_lag_: t + 1]  # free run from the start encodes exactly at `start`
         fr = m.predict(sub, None)
         assert ks[t] == pytest.approx(fr[-1], rel=1e-10, abs=1e-12)
+
+
+@pytest.mark.parametrize("activation", ["relu", "tanh", "sigmoid"])
+def test_hand_written_backprop_equals_autograd(activation):
+    from sysid.neural.core import FlatMLP
+
+    g = torch.Generator().manual_seed(0)
+    net = FlatMLP(6, [5, 4], 2, activation, g, torch.device("cpu"), torch.float64)
+    x = torch.randn(9, 6, dtype=torch.float64, generator=g)
+    y = torch.randn(9, 2, dtype=torch.float64, generator=g)
+    loss = net.mse_grad_(x, y)
+    manual = net.flat.grad.clone()
+    net.flat.grad.zero_()
+    ref = ((net(x) - y) ** 2).mean()
+    ref.backward()
+    assert float(loss) == pytest.approx(float(ref), rel=1e-14)
+    np.testing.assert_allclose(manual.numpy(), net.flat.grad.numpy(), rtol=1e-12, atol=1e-14)
+    assert net.check_grad_storage()
+
+
+@pytest.mark.parametrize("name,opts", [
+    ("narx-mlp", "n_y=3,n_u=3,hidden=8-8,epochs=2,device=cpu"),
+    ("narx-mlp-sim", "n_y=3,n_u=3,hidden=8,epochs=1,pretrain_epochs=1,window=10,device=cpu"),
+    ("rnn", "n_state=4,n_enc=4,enc_hidden=8,window=20,epochs=1,device=cpu"),
+])
+def test_identify_cli_same_json_as_polynomial_models(tmp_path, plant, capsys, name, opts):
+    import json
+
+    from benchmarks.cli import main
+    from sysid.io import write_record
+
+    est, val = plant
+    write_record(est, tmp_path / "est.npz")
+    write_record(val, tmp_path / "val.npz")
+    model_file = tmp_path / "m.pt"
+    code = main(["identify", name, "--est", str(tmp_path / "est.npz"), "--val", str(tmp_path / "val.npz"),
+                 "--set", opts, "--json", "-o", str(model_file)])
+    assert code == 0
+    out = json.loads(capsys.readouterr().out)
+    for key in ("identifier", "params", "n_parameters", "fit_seconds", "terms", "estimation", "validation"):
+        assert key in out
+    assert out["identifier"] == name and out["terms"] == []
+    for part in ("estimation", "validation"):
+        assert set(out[part]) >= {"one_step", "free_run"} and set(out[part]["one_step"]) >= {"r2", "nrmse"}
+    m = load_model(model_file)
+    assert m.n_parameters_ == out["n_parameters"]
+    assert main(["identify", name, "--est", str(tmp_path / "est.npz"), "--set", "nosuch=1"]) == 2
