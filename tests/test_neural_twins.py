@@ -40,3 +40,29 @@ def test_cantilever_full_budget_sim_training():
     res = cantilever_sines("narx-mlp-sim", {"epochs": 10, "pretrain_epochs": 20, "window": 50, "batch_size": 16,
                                             "lr": 3e-4}, seed=0, data=data)
     assert res["r2_mean"] >= TABLE_4_3_MIN, res["r2_per_freq"]
+
+
+@pytest.mark.slow
+def test_acoustic_estimation_matches_figure_5_13a():
+    """Dissertation's best acoustic network (lags 512, 2 × 75 sigmoid, 75 epochs) on the twin's preprocessed
+    multisine: estimation free-run R² ≥ 0.99 for one-step and simulation-error training (Fig. 5.13a: 0.997 ±
+    0.001 over 75 runs)."""
+    pytest.importorskip("twins.acoustic")
+    from benchmarks.neural_twins import acoustic_data, acoustic_osa_vs_sim
+
+    res = acoustic_osa_vs_sim(seeds=(0, 1), data=acoustic_data())
+    for run in res["runs"]:
+        assert run["osa_r2_est_frs"] >= 0.99 and run["sim_r2_est_frs"] >= 0.99, run
+
+
+@pytest.mark.slow
+@pytest.mark.xfail(strict=False, reason="not reached on the current acoustic twin: its 1 ms-chirp validation output is "
+                   "dominated by a 1.17 MHz ring-down while the input sits at 0.92 MHz; every model tried (incl. a "
+                   "ridge ARX 512/512) has negative free-run R² there, and simulation-error training is lower "
+                   "(-10.4 ± 1.0) than one-step (-7.4 ± 0.8) over 5 seeds; see README")
+def test_acoustic_sim_training_beats_one_step_on_chirp_validation():
+    pytest.importorskip("twins.acoustic")
+    from benchmarks.neural_twins import acoustic_data, acoustic_osa_vs_sim
+
+    res = acoustic_osa_vs_sim(seeds=(0, 1, 2, 3, 4), data=acoustic_data())
+    assert res["sim_wins"] == 5 and res["sim_r2_val_frs_mean"] > res["osa_r2_val_frs_mean"], res
