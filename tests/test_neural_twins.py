@@ -66,3 +66,16 @@ def test_acoustic_sim_training_beats_one_step_on_chirp_validation():
 
     res = acoustic_osa_vs_sim(seeds=(0, 1, 2, 3, 4), data=acoustic_data())
     assert res["sim_wins"] == 5 and res["sim_r2_val_frs_mean"] > res["osa_r2_val_frs_mean"], res
+
+
+@pytest.mark.slow
+def test_acoustic_sim_training_beats_one_step_on_multisine_validation():
+    """Validation on the next 2000 samples of the multisine record (the twin's validation regime that the
+    estimation data covers): simulation-error training beats one-step training in free-run R² on average over
+    5 seeds and in at least 4 of them (measured: 0.665 ± 0.038 vs 0.630 ± 0.027, 5 of 5; dissertation's
+    one-step figure on its own validation data: 0.548 ± 0.053)."""
+    pytest.importorskip("twins.acoustic")
+    from benchmarks.neural_twins import acoustic_data, acoustic_osa_vs_sim
+
+    res = acoustic_osa_vs_sim(seeds=(0, 1, 2, 3, 4), data=acoustic_data(validation="multisine"))
+    assert res["sim_r2_val_frs_mean"] > res["osa_r2_val_frs_mean"] and res["sim_wins"] >= 4, res
