@@ -79,7 +79,8 @@ def run(args: argparse.Namespace) -> int:
     for c in summary["configs"]:
         print(f"  {c['config_key']:<44} {c['n_parameters']:>7}  {_fmt(c['r2_est_osa_mean']):>10} "
               f"{_fmt(c['r2_est_frs_mean'])} ± {_fmt(c['r2_est_frs_sd'])} {_fmt(c['r2_val_osa_mean']):>10} "
-              f"{_fmt(c['r2_val_frs_mean'])} ± {_fmt(c['r2_val_frs_sd'])}")
+              f"{_fmt(c['r2_val_frs_mean'])} ± {_fmt(c['r2_val_frs_sd'])}"
+              + (f"  ({c['diverged_val_frs']} of {c['runs']} diverged)" if c.get("diverged_val_frs") else ""))
     if summary["best_runs"]:
         print("  runs of the best configuration (Table 5.6 analogue):")
         for r in summary["best_runs"]:
