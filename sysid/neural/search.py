@@ -37,7 +37,7 @@ from typing import Any, Callable, Sequence
 
 import numpy as np
 
-from sysid.config import coerce, parse_assignments
+from sysid.config import coerce
 from sysid.errors import ConfigError, DivergenceWarning
 from sysid.record import Record
 
