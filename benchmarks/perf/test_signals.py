@@ -78,3 +78,8 @@ def test_bandpass_10M_points(benchmark, x10m):
 def test_suggest_rate_10M_points(benchmark, x10m):
     """Aguirre's covariance rule on 10 M samples (two FFT autocovariances)."""
     benchmark.pedantic(P.suggest_rate, args=(x10m,), kwargs={"max_lag": 100_000}, rounds=1, iterations=1)
+
+
+def test_hampel_10M_points(benchmark, x10m):
+    """Hampel identifier (21-sample window, compiled running median/MAD) on 10 M samples, with its report."""
+    benchmark.pedantic(P.hampel, args=(x10m,), rounds=1, iterations=1)
