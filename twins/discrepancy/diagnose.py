@@ -58,9 +58,15 @@ NOISE_EFFECTS: tuple[str, ...] = ("measurement_noise",)
 
 
 # ---------------------------------------------------------------------------------------------- helpers
+def _unpredictable(twin: Twin) -> set[str]:
+    """Effects that add error no prediction can follow: noise, and quantisation (its error depends on the
+    noise); they are left out of the fitted prediction and are judged by their data signature only."""
+    return {e for e, s in twin.EFFECTS.items() if e in NOISE_EFFECTS or ev.family_of(s) in ("noise", "quantization")}
+
+
 def _deterministic(twin: Twin) -> Twin:
-    """The same twin without its noise effects (the prediction to compare with data)."""
-    eff = set(twin.effects) - set(NOISE_EFFECTS)
+    """The same twin without its noise and quantisation effects (the prediction to compare with data)."""
+    eff = set(twin.effects) - _unpredictable(twin)
     return twin if eff == set(twin.effects) else twin.with_effects(eff)
 
 
@@ -137,6 +143,16 @@ def _guesses(field: str, unit: str, a: dict[str, Any], twin: Twin, current: floa
     return [float(v) for v in out if math.isfinite(v)]
 
 
+def _core_for(twin: Twin, core: Sequence[str]) -> list[str]:
+    """Core calibration parameters that act in this configuration: a parameter that belongs only to effects
+    that are switched off has no effect on the output and is not fitted."""
+    owned_off = set()
+    owned_on = set()
+    for e, spec in twin.EFFECTS.items():
+        (owned_on if e in twin.effects else owned_off).update(spec.params.values())
+    return [c for c in core if c not in owned_off or c in owned_on]
+
+
 # ---------------------------------------------------------------------------------------------- trials
 @dataclasses.dataclass
 class Trial:
@@ -176,6 +192,24 @@ def _prescan(tw: Twin, est: Record, fields: list[str], a: dict[str, Any], points
             return float("inf")
 
     best_cost = cost(best)
+    # joint start from the feature guesses (e.g. echo delay and amplitude together), when every field has one
+    guess = {}
+    for f in fields:
+        lo, hi = (float(v) for v in info[f].range)
+        g = [v for v in _guesses(f, info[f].unit, a, tw, best[f]) if lo <= v <= hi]
+        if g:
+            guess[f] = g
+    if guess:
+        import itertools
+
+        keys = list(guess)
+        for combo in itertools.islice(itertools.product(*(guess[k][:4] for k in keys)), 64):
+            trial = dict(best)
+            trial.update({k: (int(round(v)) if isinstance(getattr(tw.params, k), int) else float(v))
+                          for k, v in zip(keys, combo)})
+            c = cost(trial)
+            if c < best_cost:
+                best_cost, best = c, trial
     for _sweep in range(2 if len(fields) > 1 else 1):
         for f in fields:
             lo, hi = (float(v) for v in info[f].range)
@@ -192,24 +226,36 @@ def _prescan(tw: Twin, est: Record, fields: list[str], a: dict[str, Any], points
 
 
 def _run_trial(base: Twin, effect: str, est: Record, val: Record, core: list[str], a_val: dict[str, Any],
-               opts: dict[str, Any]) -> Trial:
+               opts: dict[str, Any], refit_core: bool, start: dict[str, float] | None = None) -> Trial:
+    """Add ``effect`` to ``base`` and fit it to ``est``: stage A (``refit_core=False``) fits the effect's own
+    parameters after a pre-scan with the core held at its calibration; stage B also refits the core."""
     t0 = time.perf_counter()
     spec = base.EFFECTS[effect]
     tw = base.with_effects(set(base.effects) | {effect})
     eff_fields = _numeric_fields(tw, spec.params.values())
-    x0 = _prescan(tw, est, eff_fields, a_val, opts["scan_points"], opts["skip"]) if eff_fields else {}
-    names = eff_fields + [c for c in core if c not in eff_fields]
-    res = ls_calibrate(tw, est, names, x0={**{c: float(getattr(base.params, c)) for c in core}, **x0},
-                       simulate=_simulate, max_nfev=opts["trial_nfev"], skip=opts["skip"])
-    fit_tw = res.twin
+    if start is None:
+        x0 = _prescan(tw, est, eff_fields, a_val, opts["scan_points"], opts["skip"]) if eff_fields else {}
+    else:
+        x0 = dict(start)
+    names = list(eff_fields)
+    if refit_core:
+        names += [c for c in _core_for(tw, core) if c not in eff_fields]
+    if names:
+        res = ls_calibrate(tw, est, names, x0={**{c: float(getattr(base.params, c)) for c in core}, **x0},
+                           simulate=_simulate, max_nfev=opts["trial_nfev"] if refit_core else opts["scan_nfev"],
+                           skip=opts["skip"])
+        fit_tw, fitted, stderr = res.twin, res.fitted, res.stderr
+    else:
+        fit_tw, fitted, stderr = tw, {}, {}
     yv = _simulate(fit_tw, val)
     ye = _simulate(fit_tw, est)
-    return Trial(effect=effect, twin=fit_tw, fitted=res.fitted,
-                 effect_params={f: res.fitted[f] for f in eff_fields},
-                 stderr={f: res.stderr.get(f, float("nan")) for f in eff_fields},
+    ok = bool(np.all(np.isfinite(yv)))
+    return Trial(effect=effect, twin=fit_tw, fitted=fitted,
+                 effect_params={f: fitted.get(f, float(getattr(fit_tw.params, f))) for f in eff_fields},
+                 stderr={f: stderr.get(f, float("nan")) for f in eff_fields},
                  sse_est=_sse(est.y, ye, opts["skip"]), sse_val=_sse(val.y, yv, opts["skip"]), yhat_val=yv,
-                 nrmse_val=nrmse(val.y, yv, opts["skip"]) if np.all(np.isfinite(yv)) else float("inf"),
-                 r2_val=r2(val.y, yv, opts["skip"]) if np.all(np.isfinite(yv)) else float("-inf"),
+                 nrmse_val=nrmse(val.y, yv, opts["skip"]) if ok else float("inf"),
+                 r2_val=r2(val.y, yv, opts["skip"]) if ok else float("-inf"),
                  seconds=time.perf_counter() - t0, n_added=max(len(eff_fields), 1))
 
 
@@ -270,7 +316,7 @@ def _generic_residual_model(est: Record, val: Record, e_est: np.ndarray, e_val: 
 def diagnose(twin: Twin, data: Record, val: Record | None = None, max_rounds: int = 3, *,
              candidates: Sequence[str] | None = None, calibrate_baseline: bool = True,
              calibration_params: Sequence[str] | None = None, alpha: float = 0.01, min_rel_gain: float = 0.005,
-             trial_nfev: int = 40, scan_points: int = 13, max_lag: int = 20, max_echo_s: float | None = None,
+             trial_nfev: int = 30, scan_nfev: int = 15, scan_points: int = 13, refine: int = 3, max_lag: int = 20, max_echo_s: float | None = None,
              skip: int = 0, split: float = 0.6, generic_lags: int = 10, keep_stages: bool = False) -> dict[str, Any]:
     """Diagnose what ``twin`` gets wrong about ``data`` (issue 8); return the JSON-able result.
 
@@ -288,8 +334,10 @@ def diagnose(twin: Twin, data: Record, val: Record | None = None, max_rounds: in
         Core parameters refitted with every trial (default ``twin.CALIBRATION_PARAMS``).
     alpha, min_rel_gain : float
         Significance level (Bonferroni over the candidates) and minimum relative validation NRMSE reduction.
-    trial_nfev, scan_points : int
-        Budget of each trial fit (least-squares evaluations) and points of each parameter pre-scan.
+    trial_nfev, scan_nfev, scan_points, refine : int
+        Budgets: least-squares evaluations of a full trial (effect + core parameters) and of the first-stage
+        fit (effect parameters only, core held), points of each parameter pre-scan, and how many of the
+        best first-stage candidates get the full refit.
 
     Returns a dict with ``verdict``, ``causes``, ``baseline``, ``extended``, ``gain`` (issue 8) and the details
     ``rounds`` (every trial with its numbers), ``unexplained`` and ``analysis`` (baseline and final residual
@@ -305,7 +353,7 @@ def diagnose(twin: Twin, data: Record, val: Record | None = None, max_rounds: in
         raise DataError(f"{data.source}: diagnose handles single-input single-output records")
     if abs(data.fs - val.fs) > 1e-9 * data.fs:
         raise DataError(f"estimation and validation records have different fs ({data.fs} and {val.fs} Hz)")
-    opts = {"trial_nfev": int(trial_nfev), "scan_points": int(scan_points), "skip": int(skip), "max_lag": int(max_lag),
+    opts = {"trial_nfev": int(trial_nfev), "scan_nfev": int(scan_nfev), "scan_points": int(scan_points), "skip": int(skip), "max_lag": int(max_lag),
             "max_echo_s": max_echo_s}
     t_start = time.perf_counter()
     core = list(calibration_params if calibration_params is not None else twin.CALIBRATION_PARAMS)
@@ -314,11 +362,12 @@ def diagnose(twin: Twin, data: Record, val: Record | None = None, max_rounds: in
     # 1. calibrate the current configuration (deterministic prediction)
     current = _deterministic(twin)
     calib_info: dict[str, Any] = {}
-    if calibrate_baseline and core:
+    core0 = _core_for(current, core)
+    if calibrate_baseline and core0:
         try:
-            res = current.calibrate(data, val=val, names=core)
+            res = current.calibrate(data, val=val, names=core0)
         except TypeError:
-            res = ls_calibrate(current, data, core, val=val, simulate=_simulate)
+            res = ls_calibrate(current, data, core0, val=val, simulate=_simulate)
         current = _deterministic(res.twin)
         calib_info = {"fitted": res.fitted, "stderr": res.stderr}
     base = _stage(current, data, val, opts)
@@ -347,14 +396,29 @@ def diagnose(twin: Twin, data: Record, val: Record | None = None, max_rounds: in
         trials: list[Trial] = []
         for e in remaining:
             try:
-                tr = _run_trial(stage.twin, e, data, val, core, a_fit_est, opts)
+                tr = _run_trial(stage.twin, e, data, val, core, a_fit_est, opts, refit_core=False)
             except (ConfigError, DataError, ValueError, np.linalg.LinAlgError) as exc:  # an effect that cannot run here
                 rounds.append({"round": rnd + 1, "effect": e, "error": str(exc)})
                 continue
+            trials.append(tr)
+        # stage B: the most promising candidates are refitted together with the core parameters
+        trials.sort(key=lambda t: t.sse_val)
+        for i, tr in enumerate(trials[: max(int(refine), 0)]):
+            # the leader, and whoever comes close to it (within a factor 1.5 in validation SSE)
+            if i > 0 and (tr.sse_val > 1.5 * trials[0].sse_val or tr.sse_val >= stage.sse_val * (1 - 1e-9)):
+                continue
+            try:
+                trB = _run_trial(stage.twin, tr.effect, data, val, core, a_fit_est, opts, refit_core=True,
+                                 start=tr.effect_params)
+            except (ConfigError, DataError, ValueError, np.linalg.LinAlgError):
+                continue
+            trB.seconds += tr.seconds
+            if trB.sse_est <= tr.sse_est:
+                trials[i] = trB
+        for tr in trials:
             n_eff = min(n_eff0, ft.effective_samples(val.y[skip:] - tr.yhat_val[skip:]))
             tr.p_value = significance(stage.sse_val, tr.sse_val, n_eff, tr.n_added)
             tr.gain = max(0.0, 1.0 - tr.nrmse_val / stage.nrmse_val) if stage.nrmse_val > 0 else 0.0
-            trials.append(tr)
         if not trials:
             break
         n_c = len(trials)
@@ -370,10 +434,12 @@ def diagnose(twin: Twin, data: Record, val: Record | None = None, max_rounds: in
         top_group = twin.EFFECTS[top.effect].group
         group = [top.effect]
         for tr in trials[1:]:
-            same_group = bool(top_group) and twin.EFFECTS[tr.effect].group == top_group and tr.gain >= 0.5 * top.gain
+            # the data cannot tell tr from the leader when the leader's residual is not significantly smaller
+            not_better = significance(tr.sse_val, top.sse_val, n_eff_top, 1) > alpha
+            same_group = bool(top_group) and twin.EFFECTS[tr.effect].group == top_group and tr.significant
             d_pred = float(np.sqrt(np.mean((tr.yhat_val[skip:] - top.yhat_val[skip:]) ** 2)))
-            equal = tr.significant and tr.sse_val <= top.sse_val * (1 + tol) and d_pred < 0.5 * e_rms_top
-            if same_group or equal:
+            equal = tr.significant and (tr.sse_val <= top.sse_val * (1 + tol) or not_better) and d_pred < 0.5 * e_rms_top
+            if (same_group and not_better) or equal:
                 group.append(tr.effect)
         g1 = top.gain
         g2 = max([t.gain for t in trials if t.effect not in group] + [0.0])

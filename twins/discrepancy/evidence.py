@@ -116,7 +116,9 @@ def _nl_db(a: dict) -> tuple[float | None, str]:
                                          f"{ln['e_even_db']:.1f} dB re excited lines")
     h = a.get("harmonics", {})
     if h.get("sine_share", 0.0) > 0.8:
-        return h["odd_over_even_db"], f"odd/even harmonics of {h['f0_hz']:.4g} Hz differ by {h['odd_over_even_db']:.1f} dB"
+        f0 = h["f0_hz"]
+        where = f"{f0:.4g} Hz" if not isinstance(f0, list) else f"{len(f0)} sine segments"
+        return h["odd_over_even_db"], f"odd/even harmonics of {where} differ by {h['odd_over_even_db']:.1f} dB"
     return None, ""
 
 

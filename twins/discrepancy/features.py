@@ -163,28 +163,45 @@ def lag_regression(e: np.ndarray, ref: np.ndarray, fs: float, max_lag_s: float |
     return {"lag_s": kk / fs, "lag_samples": int(k), "coef": float(c[k]), "envelope": float(env[k]), "z": zscore}
 
 
+def _shift(x: np.ndarray, d: float) -> np.ndarray:
+    """x delayed by d samples (fractional, linear interpolation; zeros shifted in)."""
+    n = x.size
+    return np.interp(np.arange(n) - d, np.arange(n), x, left=x[0], right=x[-1])
+
+
 def delay_estimate(y: np.ndarray, ysim: np.ndarray, fs: float, max_shift_s: float | None = None) -> dict[str, float]:
     """Shift [s] of the measured output relative to the simulated one (positive: measurement arrives later).
 
-    Found as the peak of the cross-correlation of y and ŷ, refined by a parabola through the three samples
-    around it. ``gain`` is the least-squares scale of the shifted simulation, ``corr`` the peak correlation.
+    Integer start at the peak of the cross-correlation of y and ŷ, then Gauss–Newton on the fractional shift d
+    and a gain g minimising Σ(y − g·ŷ(t − d))² (the derivative of the shifted simulation as the sensitivity).
+    ``corr`` is the correlation of y with the aligned simulation, ``gain`` the fitted g.
     """
-    y = _z(y)
-    s = _z(ysim)
+    y = np.asarray(y, float) - np.mean(y)
+    s = np.asarray(ysim, float) - np.mean(ysim)
     n = y.size
     L = n // 4 if max_shift_s is None else int(min(n // 2, max(1, round(max_shift_s * fs))))
     m = 1 << int(np.ceil(np.log2(2 * n)))
-    xc = np.fft.irfft(np.fft.rfft(y, m) * np.conj(np.fft.rfft(s, m)), m) / n
+    xc = np.fft.irfft(np.fft.rfft(y, m) * np.conj(np.fft.rfft(s, m)), m)
     lags = np.r_[np.arange(0, L + 1), np.arange(-L, 0)]
     vals = np.r_[xc[: L + 1], xc[m - L:]]
-    k = int(np.argmax(vals))
-    lag = float(lags[k])
-    if 0 < k < vals.size - 1 and lags[k - 1] == lags[k] - 1 and lags[(k + 1) % vals.size] == lags[k] + 1:
-        y0, y1, y2 = vals[k - 1], vals[k], vals[k + 1]
-        den = y0 - 2 * y1 + y2
-        if den < 0:
-            lag += 0.5 * (y0 - y2) / den
-    return {"shift_s": lag / fs, "shift_samples": lag, "corr": float(vals[k])}
+    d = float(lags[int(np.argmax(vals))])
+    g = 1.0
+    for _ in range(8):
+        sh = _shift(s, d)
+        ds = np.gradient(sh)
+        A = np.column_stack([sh, -g * ds])
+        try:
+            (g_new, dd), *_ = np.linalg.lstsq(A, y, rcond=None)
+        except np.linalg.LinAlgError:
+            break
+        g = float(g_new) if np.isfinite(g_new) and g_new != 0 else g
+        dd = float(np.clip(dd, -1.0, 1.0))
+        d += dd
+        if abs(dd) < 1e-4:
+            break
+    sh = _shift(s, d)
+    den = float(np.sqrt((y @ y) * (sh @ sh))) or 1e-300
+    return {"shift_s": d / fs, "shift_samples": d, "corr": float(y @ sh) / den, "gain": g}
 
 
 def io_delay(u: np.ndarray, y: np.ndarray, fs: float, max_shift_s: float | None = None) -> float:
@@ -259,7 +276,7 @@ def harmonics(e: np.ndarray, u: np.ndarray, fs: float, n_harm: int = 5) -> dict[
         k = h * k0
         if k + 2 >= E.size:
             break
-        amps.append(float(np.max(E[k - 2 : k + 3])) * 2 / win.sum())
+        amps.append(float(np.max(E[max(k - 2, 0) : k + 3])) * 2 / win.sum())
     odd = sum(a ** 2 for i, a in enumerate(amps, 1) if i % 2 == 1 and i > 1)
     even = sum(a ** 2 for i, a in enumerate(amps, 1) if i % 2 == 0)
     return {"f0_hz": float(freqs[k0]), "sine_share": float(sine_like), "amplitudes": amps,
@@ -539,7 +556,15 @@ def analyse(u: np.ndarray, y: np.ndarray, ysim: np.ndarray, fs: float, meta: dic
     out["echo"] = lag_regression(e, ysim, fs, max_lag_s=max_echo_s, min_lag=_min_echo_lag(ysim, fs))
     out["input_lag"] = lag_regression(e, u, fs, max_lag_s=max_lag / fs * 5)
     out["bands"] = band_powers(e, u, y, fs)
-    out["harmonics"] = harmonics(e, u, fs)
+    segs = [sg for sg in _segments(meta, e.size) if sg["freq_hz"] * (sg["stop"] - sg["start"]) / fs >= 2]
+    if segs:  # sine segments: harmonics per segment, odd and even powers summed over segments
+        hs = [harmonics(e[sg["start"]:sg["stop"]], u[sg["start"]:sg["stop"]], fs) for sg in segs]
+        odd = sum(sum(a ** 2 for i, a in enumerate(h["amplitudes"], 1) if i % 2 == 1 and i > 1) for h in hs)
+        even = sum(sum(a ** 2 for i, a in enumerate(h["amplitudes"], 1) if i % 2 == 0) for h in hs)
+        out["harmonics"] = {"f0_hz": [h["f0_hz"] for h in hs], "sine_share": 1.0, "per_segment": hs,
+                            "odd_over_even_db": float(10 * np.log10((odd + 1e-300) / (even + 1e-300)))}
+    else:
+        out["harmonics"] = harmonics(e, u, fs)
     period = meta.get("period_samples") or (meta.get("multisine") or {}).get("period_samples")
     out["lines"] = odd_even_lines(u, y, e, fs, period=int(period) if period else None)
     out["nonlinear"] = nonlinear_correlation(e, u, ysim, max_lag=max_lag)
