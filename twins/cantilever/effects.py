@@ -1,0 +1,85 @@
+"""Effect catalog of the cantilever twin (DESIGN.md "Effects").
+
+Each effect names its own parameters (fields of :class:`CantileverParams`) and the one-line residual
+signature that reveals it when a twin without the effect is compared with data that has it. The effects are
+chosen to be physically distinct: input-independent additive (thermal drift, noise, quantisation), linear
+dynamic (second mode, sensor low-pass, amplifier bandwidth, input delay, creep) and nonlinear (saturation,
+rate-dependent and asymmetric hysteresis).
+"""
+
+from __future__ import annotations
+
+from twins.base import EffectSpec
+
+__all__ = ["EFFECTS", "DEFAULT_ON"]
+
+_T = "cantilever"
+
+EFFECTS: dict[str, EffectSpec] = {
+    "creep": EffectSpec(
+        "creep", _T,
+        "logarithmic creep: Kelvin–Voigt chain Σ γ_c·d/(τ_i s + 1), one element per decade from τ_1",
+        "slow exponential/log-time tail after every voltage change, residual ∝ low-pass of u (τ ≥ 0.1 s); "
+        "no effect at u = 0",
+        {"rate": "creep_per_decade", "tau_min": "creep_tau_min_s", "elements": "creep_elements"}, default_on=True),
+    "second_mode": EffectSpec(
+        "second_mode", _T,
+        "second bending mode of D(s) at f₂ = mode_ratio·f₁ carrying mode2_share of the static deflection",
+        "residual spectrum peak near 6.27·f₁ (≈4.4 kHz), ringing after fast edges; nothing at low frequency",
+        {"ratio": "mode_ratio", "share": "mode2_share", "zeta": "zeta2"}, default_on=True),
+    "sensor_lowpass": EffectSpec(
+        "sensor_lowpass", _T,
+        "2nd-order Butterworth low-pass of the optical sensor",
+        "residual grows with frequency near the sensor corner: phase lag ≈ √2·f/f_c rad and roll-off above; "
+        "nothing below ≈ 100 Hz",
+        {"bandwidth": "sensor_bandwidth_hz"}, default_on=True),
+    "sensor_quantization": EffectSpec(
+        "sensor_quantization", _T,
+        "sensor/ADC quantiser with step quant_um",
+        "residual uniformly distributed in ±q/2, white, independent of u; output takes values on a q grid",
+        {"step": "quant_um"}, default_on=True),
+    "measurement_noise": EffectSpec(
+        "measurement_noise", _T,
+        "white Gaussian sensor noise σ = noise_um, seeded by the twin's seed",
+        "white residual (flat spectrum, r_ee = δ) uncorrelated with u, Gaussian",
+        {"sigma": "noise_um"}, default_on=True),
+    "input_delay": EffectSpec(
+        "input_delay", _T,
+        "pure delay of the input in seconds (fractional samples by linear interpolation)",
+        "residual ∝ τ·dy/dt: phase lag growing linearly with frequency (2π f τ), cross-correlation r_ue peaks "
+        "at lag τ·fs; gain unchanged",
+        {"delay": "input_delay_s"}, group="lag"),
+    "thermal_drift": EffectSpec(
+        "thermal_drift", _T,
+        "additive thermal drift D·(1 − e^(−t/τ)) of the reading, independent of the input",
+        "slow monotone trend in the residual present even at u = 0; no correlation with u",
+        {"amplitude": "thermal_drift_um", "tau": "thermal_tau_s"}),
+    "saturation": EffectSpec(
+        "saturation", _T,
+        "soft amplifier/actuator limit v = u/(1 + |u/V_s|^p)^(1/p) before the hard clip",
+        "output compressed at large |u| only (flattened loop tips, odd harmonics growing with amplitude); "
+        "residual ∝ −u|u|^p near the peaks, none at small u",
+        {"knee": "sat_voltage_v", "sharpness": "sat_sharpness"}),
+    "rate_dependent_hysteresis": EffectSpec(
+        "rate_dependent_hysteresis", _T,
+        "hysteresis strength grows with input rate: α (Bouc–Wen) or play thresholds (PI) × (1 + |v̇|/rate_ref)",
+        "loop width and phase lag grow with frequency already far below f₁ (10–200 Hz), where D(s) is flat; "
+        "residual ∝ |u̇|·loop width",
+        {"rate_ref": "rate_ref_v_per_s"}),
+    "asymmetric_hysteresis": EffectSpec(
+        "asymmetric_hysteresis", _T,
+        "stronger hysteresis against the poling direction: α or PI weights × (1 + a·max(0, −v)/amp_limit)",
+        "loop wider and flatter for negative voltages than positive; even harmonics in the residual, "
+        "residual mean shifts with the sign of u",
+        {"factor": "asym_factor"}),
+    "amplifier_bandwidth": EffectSpec(
+        "amplifier_bandwidth", _T,
+        "first-order low-pass of the power amplifier",
+        "extra phase lag ≈ f/f_amp growing linearly at low frequency plus gain roll-off near f_amp; "
+        "looks like a delay below f_amp (same ambiguity group)",
+        {"bandwidth": "amp_bandwidth_hz"}, group="lag"),
+}
+# input_delay and amplifier_bandwidth share the ambiguity group "lag": both are a phase lag ∝ f well below
+# f_amp; a sweep to frequencies near f_amp (gain roll-off only for the low-pass) separates them.
+
+DEFAULT_ON = tuple(k for k, e in EFFECTS.items() if e.default_on)
