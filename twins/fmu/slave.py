@@ -137,19 +137,23 @@ class TwinSlave(Fmi2Slave):
         ratio = step_size * self._fs
         n = round(ratio)
         if n < 1 or abs(ratio - n) > STEP_TOLERANCE * n:
-            self.log(f"communication step {step_size!r} s is not a whole number of sampling periods "
-                     f"1/fs = {1.0 / self._fs!r} s", Fmi2Status.error)
-            return False
+            return self._fail(f"communication step {step_size!r} s is not a whole number of sampling periods "
+                              f"1/fs = {1.0 / self._fs!r} s")
         u = float(self.u)
         if not math.isfinite(u):
-            self.log(f"input u={u!r} at t={current_time!r} s is not finite", Fmi2Status.error)
-            return False
+            return self._fail(f"input u={u!r} at t={current_time!r} s is not finite")
         step = self._core.step
         y = 0.0
         for _ in range(n):
             y = step(u)
         self.y = float(y)
         return True
+
+    def _fail(self, message: str) -> bool:
+        """Log ``message`` for the importing tool and raise: pythonfmu turns the exception into an error
+        status of the FMI call (a plain ``False`` would only discard the step)."""
+        self.log(message, Fmi2Status.error)
+        raise RuntimeError(message)
 
     # ------------------------------------------------------------------ model
     def make_twin(self):
