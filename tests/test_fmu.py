@@ -212,3 +212,74 @@ def test_response_core_step_equals_vectorised_fir():
     core = ResponseCore(segs, twin.amplifier, None, fs)
     y = np.array([core.step(float(v)) for v in u])
     assert np.allclose(y, fir_apply(segs, twin.amplifier(u)), rtol=0, atol=1e-12 * np.max(np.abs(y)))
+
+
+# ------------------------------------------------------------------------------------- cantilever twin
+@pytest.fixture(scope="module")
+def cantilever_fmu(tmp_path_factory):
+    from twins.cantilever import CantileverTwin
+
+    twin = CantileverTwin()  # default configuration, measurement noise on, seed 0
+    return twin, export_fmu(twin, tmp_path_factory.mktemp("cant") / "cantilever.fmu")
+
+
+@pytest.fixture(scope="module")
+def multisine_head():
+    from twins.cantilever import CantileverTwin
+
+    rec = CantileverTwin().generate("thesis-multisine")
+    return rec.u[:1500], rec.fs
+
+
+def test_cantilever_fmu_round_trip(cantilever_fmu, multisine_head):
+    twin, path = cantilever_fmu
+    assert validate_fmu(str(path)) == []
+    u, fs = multisine_head
+    assert fs == 10e3
+    y = fmu_simulate(path, u, fs)
+    ref = twin.simulate(u, fs)
+    assert relative_rms(y, ref) <= 1e-9
+    root, _ = _md(path)
+    assert _var(root, "gain_um_per_v").find("Real").get("unit") == "um/V"
+    assert _var(root, "hysteresis").find("String").get("start") == "bouc-wen"
+
+
+@pytest.mark.parametrize("start,params,effects", [
+    ({"bw_alpha": 0.45, "f1_hz": 900.0}, {"bw_alpha": 0.45, "f1_hz": 900.0}, None),
+    ({"hysteresis": "prandtl-ishlinskii"}, {"hysteresis": "prandtl-ishlinskii"}, None),
+    ({"effect_input_delay": True, "effect_measurement_noise": False}, {}, "+input_delay-measurement_noise"),
+    ({"seed": 3}, {}, "seed"),
+])
+def test_cantilever_tunable_parameters_match_native(cantilever_fmu, multisine_head, start, params, effects):
+    twin, path = cantilever_fmu
+    u, fs = multisine_head
+    u = u[:600]
+    native = twin.with_params(**params)
+    if effects == "seed":
+        native = type(twin)(twin.params, twin.effects, 3)
+    elif effects:
+        native = native.with_effects((set(twin.effects) | {"input_delay"}) - {"measurement_noise"})
+    ref = native.simulate(u, fs)
+    y = fmu_simulate(path, u, fs, start_values=start)
+    assert relative_rms(y, ref) <= 1e-9
+    assert relative_rms(twin.simulate(u, fs), ref) > 1e-4  # the change is visible
+
+
+def test_cli_export_fmu(tmp_path, capsys):
+    from benchmarks.cli import main
+
+    out = tmp_path / "c.fmu"
+    code = main(["export-fmu", "cantilever", "--effects", "none", "--set", "f1_hz=800", "--seed", "4",
+                 "-o", str(out), "--json"])
+    assert code == 0
+    summary = json.loads(capsys.readouterr().out)
+    assert summary["validation_problems"] == [] and summary["effects"] == [] and summary["seed"] == 4
+    root, cfg = _md(out)
+    assert float(_var(root, "f1_hz").find("Real").get("start")) == 800.0
+    assert _var(root, "effect_measurement_noise").find("Boolean").get("start") == "false"
+    assert cfg["config"]["params"]["f1_hz"] == 800.0
+    for bad in (["export-fmu", "cantilever", "-o", str(tmp_path / "x.zip")],
+                ["export-fmu", "cantilever", "--set", "f1_hz=1e9", "-o", str(out)]):
+        assert main(bad) == 2
+        err = capsys.readouterr().err.strip()
+        assert err.count("\n") == 0 and "Traceback" not in err
