@@ -566,7 +566,10 @@ def apply_steps(record: Record, steps: Iterable[Any]) -> Record:
     ``remove_offset``, ``detrend``, ``hampel``, ``moving_average`` and ``bandpass`` accept
     ``signals="u"|"y"|"both"``. ``decimate`` and ``resample`` always act on both and change ``fs``;
     ``segment`` writes ``meta["segments"]`` (``Record.segments()`` splits by it); ``suggest_rate`` changes
-    nothing and reports the Aguirre suggestion computed on ``y`` (on ``u`` for an input-only record).
+    nothing and reports the Aguirre suggestion computed on ``y`` (its first channel; on ``u`` for an
+    input-only record). A Record cannot hold missing samples (they are refused, or filled by
+    ``read_record(..., fill_missing=True)`` when the file is read), so ``fill_missing`` here only records that
+    nothing was missing.
 
     Each step appends ``{"step": name, "params": {...}, "changes": {...}}`` to ``meta["preprocessing"]``:
     the offsets / trend coefficients removed, every outlier replaced (index, channel, value, replacement),
@@ -646,7 +649,7 @@ def apply_steps(record: Record, steps: Iterable[Any]) -> Record:
             target = rec.y if rec.y is not None else rec.u
             if target.ndim == 2:
                 target = target[:, 0]
-            changes = {"signal": "y" if rec.y is not None else "u",
+            changes = {"signal": "y" if rec.y is not None else "u", "channel": 0,
                        **suggest_rate(target, fs=fs, max_lag=params.get("max_lag"))}
         if new:
             kw = {k: v for k, v in new.items() if k in ("u", "y", "fs")}

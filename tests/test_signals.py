@@ -248,3 +248,33 @@ def test_aprbs_levels_and_holds():
     assert set(np.unique(v)) <= {0.0, 0.5, 1.0}
     with pytest.raises(ConfigError):
         S.aprbs(1000.0, 1.0, low=1.0, high=0.0)
+
+
+# ---------------------------------------------------------------------------------------------- properties
+from hypothesis import given, settings, strategies as st  # noqa: E402
+
+
+@settings(max_examples=40, deadline=None)
+@given(n0=st.integers(16, 600), lo=st.floats(0, 0.45), width=st.floats(0.01, 0.5), grid=st.sampled_from(S.GRIDS),
+       amp=st.floats(1e-3, 1e3), rms=st.booleans(), phase=st.sampled_from(S.PHASES), seed=st.integers(0, 10))
+def test_multisine_invariants(n0, lo, width, grid, amp, rms, phase, seed):
+    fs = 1000.0
+    fmin = lo * fs / 2
+    fmax = min(fmin + width * fs / 2, 0.999 * fs / 2)
+    try:
+        u, info = S.multisine(fs, duration=n0 / fs, band=(fmin, fmax), amplitude=amp, rms=rms, grid=grid,
+                              phase=phase, seed=seed, return_info=True)
+    except ConfigError as e:  # only refusal allowed: no grid line in a narrow band
+        assert "no " in str(e) and "grid line" in str(e)
+        return
+    m = info["excited_bins"]
+    df = fs / n0
+    assert np.all(m * df >= fmin - 1e-9) and np.all(m * df <= fmax + 1e-9) and np.all(2 * m < n0)
+    assert {"full": True, "odd": np.all(m % 2 == 1), "odd-odd": np.all(m % 4 == 1)}[grid]
+    level = np.sqrt(np.mean(u ** 2)) if rms else np.max(np.abs(u))
+    assert level == pytest.approx(amp, rel=1e-9)
+    X = np.abs(np.fft.rfft(u))
+    others = np.setdiff1d(np.arange(X.size), m)
+    assert X[m].min() > 0.999 * X[m].max()
+    if others.size:
+        assert X[others].max() < 1e-9 * X[m].max()
