@@ -50,7 +50,7 @@ def lab_twin(hysteresis: str = "bouc-wen"):
 
 
 def calibrate_lab(hysteresis: str = "bouc-wen", est: Record | None = None, val: Record | None = None,
-                  substep_s: float | None = 4e-5, max_nfev: int = 60):
+                  substep_s: float | None = 5e-5, max_nfev: int = 60):
     """Calibrate :func:`lab_twin` on ``est`` (default: first 5 s) and score ``val`` (default: last 5 s)."""
     if est is None or val is None:
         est, val = lab_split()

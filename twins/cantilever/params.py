@@ -103,7 +103,7 @@ class CantileverParams:
                                      source=f"{_NOTES} A.4 (rate-dependent PI, Al Janaideh & Krejčí 2013: r_i grows with |u̇|)")
     rate_tau_s: float = pfield(0.01, "s", 1e-5, 10.0, "time constant of the rate envelope ρ (≈ mean |v̇| above 1/(2πτ))",
                                source="assumed; keeps the loop shape smooth within a period")
-    asym_factor: float = pfield(0.5, "1", -0.9, 5.0,
+    asym_factor: float = pfield(1.0, "1", -0.9, 5.0,
                                 "extra hysteresis strength against the poling direction: × (1 + a·max(0, −v)/amp_limit)",
                                 source=f"{_NOTES} A.2 (negative field against poling), A.3 asymmetric variants")
 
