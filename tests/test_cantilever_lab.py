@@ -113,3 +113,13 @@ def test_steps_protocol_and_cli_generate(tmp_path):
     assert proc.returncode == 2 and "thesis-multisine" in proc.stderr and "Traceback" not in proc.stderr
     with pytest.raises(Exception, match="unknown option"):
         CantileverTwin().generate("steps", bogus=1)
+
+
+def test_local_multisine_fallback_lines_exact():
+    from twins.cantilever.protocols import multisine_local
+
+    x = multisine_local(1000.0, 2.0, 50, 20.0, seed=3)
+    X = np.abs(np.fft.rfft(x))
+    k = np.flatnonzero(X > 1e-9 * X.max())
+    assert list(k) == list(range(1, 41))  # 0.5 Hz grid, lines 1…40 (≤ 20 Hz), equal amplitudes
+    assert np.ptp(X[k]) < 1e-9 * X.max() and np.max(np.abs(x)) == pytest.approx(1.0)
