@@ -169,3 +169,18 @@ def test_amplifier_bandwidth_lag_grows_with_frequency():
     assert lag == pytest.approx(math.degrees(math.atan(f / fa)), abs=0.2)
     off, on = pair("amplifier_bandwidth", sine(2.0, 2, 2000.0), 2000.0)
     assert np.max(np.abs(on - off)) < 1e-3 * np.ptp(off)
+
+
+def test_figures_write_pngs(tmp_path):
+    from twins.cantilever.figures import plot_multisine_spectra, plot_sine_loops
+
+    meas = CantileverTwin(effects=["rate_dependent_hysteresis", "second_mode", "sensor_lowpass"])
+    rec = meas.generate("thesis-sines", freqs_hz="1-50-500", min_duration_s=0.1)
+    assert [s["freq_hz"] for s in rec.meta["segments"]] == [1.0, 50.0, 500.0]
+    p = plot_sine_loops(rec, CantileverTwin().noise_free(), tmp_path / "f43.png")
+    assert p.stat().st_size > 10_000
+    ms = meas.generate("thesis-multisine", duration_s=1.0)
+    p = plot_multisine_spectra(ms, tmp_path / "f34.png", twin=meas)
+    assert p.stat().st_size > 10_000
+    with pytest.raises(ValueError, match="segments"):
+        plot_sine_loops(ms, meas, tmp_path / "x.png")
