@@ -125,10 +125,11 @@ def test_saturation_compresses_large_amplitudes_only():
     assert d[np.abs(big) < 30].max() < 0.2 * d[np.abs(big) > 90].max()
 
 
-def test_rate_dependent_hysteresis_widens_loops_at_high_rate_only():
+@pytest.mark.parametrize("model", ["bouc-wen", "prandtl-ishlinskii"])
+def test_rate_dependent_hysteresis_widens_loops_at_high_rate_only(model):
     def width(tw_eff, f, fs, periods):
         u = sine(f, periods, fs)
-        y = CantileverTwin(effects=tw_eff).simulate(u, fs)
+        y = CantileverTwin(effects=tw_eff).with_params(hysteresis=model).simulate(u, fs)
         sl = last_period(u.size, fs, f)
         return loop_metrics(u[sl], y[sl], f, fs)["area"]
 
@@ -138,12 +139,13 @@ def test_rate_dependent_hysteresis_widens_loops_at_high_rate_only():
     assert fast[1] > 1.2 * fast[0]
 
 
-def test_asymmetric_hysteresis_only_for_negative_voltage():
+@pytest.mark.parametrize("model", ["bouc-wen", "prandtl-ishlinskii"])
+def test_asymmetric_hysteresis_only_for_negative_voltage(model):
     pos = sine(2.0, 2, 2000.0, amp=50.0, offset=50.0)  # 0 … 100 V, never negative
-    off, on = pair("asymmetric_hysteresis", pos, 2000.0)
+    off, on = pair("asymmetric_hysteresis", pos, 2000.0, hysteresis=model)
     assert np.array_equal(off, on)
     sym = sine(2.0, 2, 2000.0)
-    off, on = pair("asymmetric_hysteresis", sym, 2000.0)
+    off, on = pair("asymmetric_hysteresis", sym, 2000.0, hysteresis=model)
     d = on - off
     assert np.max(np.abs(d[sym < -20])) > 0.02 * np.ptp(off)
     # the negative half of the loop widens more than the positive half
