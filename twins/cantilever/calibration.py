@@ -71,6 +71,10 @@ def calibrate_cantilever(twin, data: Record, val: Record | None = None, names: I
     if names is None:
         names = PI_FIT if p.hysteresis == "prandtl-ishlinskii" else twin.CALIBRATION_PARAMS
     names = list(names)
+    for n in names:
+        if n in p.__dataclass_fields__ and not isinstance(getattr(p, n), float):
+            kind = type(getattr(p, n)).__name__
+            raise ConfigError(f"cannot fit {n!r}: it is a {kind} setting, not a continuous parameter (use --set)")
     notes = []
     umax = float(np.max(np.abs(data.u)))
     if val is not None:
