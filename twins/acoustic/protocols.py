@@ -14,7 +14,8 @@ Signals come from :mod:`sysid.signals`, the recipe from :mod:`sysid.preprocess` 
 - ``thesis-chirp-1ms``: linear up-chirp 900 → 1350 kHz with a 1 ms sweep time, 150 mVpp, repeated by the
   generator (sweep mode) for the 100 ms record — the validation signal of the second dataset.
 - Periodic excitations (multisine, 1 ms chirp) were running before the scope triggered: the twin simulates a
-  warm-up of ``warmup_s`` first and discards it, so the record starts in steady state.
+  warm-up of ``warmup_s`` (default: the length of its impulse response, ≈ 5 ms) first and discards it, so the
+  record starts in steady state.
 
 Recipe (``preprocess=true``, §3.2): moving average of 100 points, resampling to 6.75 MHz, fifth-order
 band-pass 900–1350 kHz (zero phase), truncation to ``keep`` samples from ``start`` (2000 for the multisine and

@@ -267,8 +267,10 @@ class AcousticTwin(Twin):
         self.check_protocol(protocol)
         if protocol == "vna-sweep":
             return self._vna(**options)
-        opts = {"duration": 0.1, "fs": FS_ACQ, "warmup_s": 2e-3, "awg_rate_hz": 10e6, "preprocess": False,
-                "start": 0, "keep": RECIPE_KEEP[protocol]}
+        # warm-up of the periodic protocols: the whole impulse response (all summed reverberations), so the
+        # record starts in the steady state the looping generator had reached before the scope triggered
+        opts = {"duration": 0.1, "fs": FS_ACQ, "warmup_s": self.response_duration(), "awg_rate_hz": 10e6,
+                "preprocess": False, "start": 0, "keep": RECIPE_KEEP[protocol]}
         unknown = set(options) - set(opts)
         if unknown:
             raise ConfigError(f"protocol {protocol}: unknown option(s) {', '.join(sorted(unknown))}; valid: {', '.join(opts)}")
