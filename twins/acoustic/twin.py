@@ -81,6 +81,7 @@ EFFECTS: dict[str, EffectSpec] = {
 }
 
 _SINGLE_PRECISION_FROM = 1 << 21  # samples
+_TAIL_TOL = 1e-6  # energy fraction allowed in the last eighth of h (wrap-around below ≈ −60 dB)
 _RING_S = 1.0e-3  # margin after the last summed arrival for the transducers' ringing [s] (tail < −60 dB)
 
 
@@ -97,12 +98,14 @@ class AcousticTwin(Twin):
     def __init__(self, params: Any = None, effects=None, seed: int | None = 0):
         super().__init__(params, effects, seed)
         self._h_cache: dict[tuple, np.ndarray] = {}
+        self.impulse_tail_energy_: float | None = None
 
     # ------------------------------------------------------------------ the three stages (interfaces.md)
     def frequency_response(self, f_hz, direct_only: bool = False, include_amplifier: bool = True) -> np.ndarray:
         """Complex H(f) = V_rx/V_oc of the linear chain as configured (echoes, crosstalk, misalignment, …).
 
         Multiply ``amplifier(x)`` by it (in the frequency domain) to get the noise-free output; H(0) = 0.
+        (:meth:`simulate` additionally sets H = 0 above ``model_max_hz``, where |H| < −74 dB re its peak.)
         """
         return frequency_response(np.asarray(f_hz, dtype=float), self.params, self.effects,
                                   direct_only=direct_only, include_amplifier=include_amplifier)
@@ -155,18 +158,27 @@ class AcousticTwin(Twin):
         """h[k] of the linear chain at rate ``fs`` (its first ``n`` samples when given).
 
         H is evaluated on the rfft grid of a length covering :meth:`response_duration`, so the circular
-        inverse transform does not wrap any summed arrival back onto the start.
+        inverse transform does not wrap any summed arrival back onto the start; if the last eighth of h still
+        holds more than ``_TAIL_TOL`` of its energy (slow ringing), the grid is doubled (at most 3 times).
+        ``impulse_tail_energy_`` keeps the fraction reached.
         """
         fs = float(fs)
         n_grid = scipy.fft.next_fast_len(max(int(np.ceil(self.response_duration() * fs)), 256), real=True)
         key = (fs, n_grid)
         h = self._h_cache.get(key)
         if h is None:
-            f = np.fft.rfftfreq(n_grid, 1.0 / fs)
-            H = np.zeros(f.size, dtype=complex)
-            keep = f <= self.params.model_max_hz
-            H[keep] = self.frequency_response(f[keep])
-            h = scipy.fft.irfft(H, n_grid)
+            for _ in range(4):
+                f = np.fft.rfftfreq(n_grid, 1.0 / fs)
+                H = np.zeros(f.size, dtype=complex)
+                keep = f <= self.params.model_max_hz
+                H[keep] = self.frequency_response(f[keep])
+                h = scipy.fft.irfft(H, n_grid)
+                e = h * h
+                total = float(e.sum())
+                self.impulse_tail_energy_ = float(e[-n_grid // 8:].sum()) / total if total > 0 else 0.0
+                if self.impulse_tail_energy_ <= _TAIL_TOL:
+                    break
+                n_grid = scipy.fft.next_fast_len(2 * n_grid, real=True)
             self._h_cache = {key: h}
         return h if n is None else h[:n]
 
