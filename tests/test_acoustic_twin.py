@@ -104,6 +104,17 @@ def test_fft_convolution_equals_direct_convolution_and_no_wrap():
     assert np.sqrt(np.mean(tail**2)) < 1e-3 * np.max(np.abs(h))
 
 
+def test_overlap_save_blocks_equal_direct_convolution(monkeypatch):
+    import twins.acoustic.twin as tmod
+
+    monkeypatch.setattr(tmod, "_OLS_MIN_BLOCK", 256)  # force many overlap-save blocks on a short record
+    tw = AcousticTwin(effects=[]).with_params(reverb_orders=0)
+    fs = 5e6
+    h = tw.impulse_response(fs)
+    v = np.random.default_rng(1).standard_normal(5 * h.size + 123)
+    np.testing.assert_allclose(tw.linear(v, fs), np.convolve(v, h)[: v.size], atol=1e-10 * np.abs(h).max())
+
+
 def test_simulate_is_measure_of_linear_of_amplifier():
     tw = AcousticTwin(seed=3)
     u = _burst(n=2000)
