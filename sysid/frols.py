@@ -257,7 +257,8 @@ class FrolsResult:
     err: list[float]               # ERR of each selected term (eq. 2-20)
     criterion_values: list[float]  # information criterion after 1, 2, ... terms (nan for criterion="err")
     n_samples: int
-    ssr: list[float] = field(default_factory=list)  # residual sum of squares after each term
+    ssr: list[float] = field(default_factory=list)  # residual sum of squares after each kept term
+    scored: list[int] = field(default_factory=list)  # every term added in the pass (criterion_values[i] ↔ scored[:i+1])
 
 
 def _info_criterion(name: str, n_theta: int, n_samples: int, e_var: float) -> float:
@@ -346,12 +347,13 @@ def frols(G: np.ndarray, n_candidates: int, output: int = 0, n_samples: int = 0,
         if criterion == "err" and not continue_err and 1.0 - sum(errs) < rho:
             break
 
+    scored = list(selected)
     if criterion != "err" and len(selected) > n_forced:
         vals = np.asarray(ic[n_forced:])
         best = n_forced + int(np.argmin(vals)) + 1
-        # exact fit (round-off residual) → the IC is -inf or meaningless; keep all terms up to the exact fit
-        selected, errs, ic, ssr = selected[:best], errs[:best], ic, ssr[:best]
-    return FrolsResult(selected=selected, err=errs, criterion_values=ic, n_samples=n_samples, ssr=ssr)
+        # an exact fit (round-off residual, IC → −∞) ends the pass, so the minimiser is the exact model
+        selected, errs, ssr = selected[:best], errs[:best], ssr[:best]
+    return FrolsResult(selected=selected, err=errs, criterion_values=ic, n_samples=n_samples, ssr=ssr, scored=scored)
 
 
 # ---------------------------------------------------------------------------------------------------- final LS

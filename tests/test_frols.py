@@ -247,3 +247,45 @@ def test_sysidentpy_cross_check_terms_and_parameters():
         assert abs(r["parameter"] - ref_theta[r["term"]]) <= 1e-6 * abs(ref_theta[r["term"]])
     np.testing.assert_allclose([r["err"] for r in ours], np.asarray(ref.err[:4]).ravel(), rtol=1e-6)
     assert set(ref_terms) == set(TRUE_TERMS)
+
+
+def test_incremental_order_selection_equals_refits():
+    """The criterion of every model size, from the single FROLS pass, equals N ln(SSR_k/N) + k ln N of a
+    separate least-squares refit (numpy lstsq) on the first k selected terms."""
+    rec = narx_record(800, seed=9, noise=0.05)
+    m = NARXPoly(ny=2, nu=2, degree=2, criterion="bic", max_terms=8).fit(rec)
+    s = m.structure_
+    G, n = fr.gram_matrix([rec], s)
+    res = fr.frols(G, len(s.terms), 0, n, "bic", max_terms=8)
+    X = np.vstack([x for x, _ in fr.lagged_chunks([rec], s)])
+    P = fr.term_columns(X, s.terms)
+    y = rec.y[2:]
+    for k in range(1, 9):
+        A = P[:, res.scored[:k]]
+        ssr = np.sum((y - A @ np.linalg.lstsq(A, y, rcond=None)[0]) ** 2)
+        assert res.criterion_values[k - 1] == pytest.approx(n * np.log(ssr / n) + k * np.log(n), rel=1e-9)
+    assert m.n_parameters_ == int(np.argmin(res.criterion_values)) + 1
+
+
+def test_bic_default_finds_true_structure_aic_overfits():
+    sizes = {"bic": [], "aic": []}
+    for seed in range(4):
+        rec = narx_record(5000, seed=seed, noise=0.02)
+        for c in sizes:
+            m = NARXPoly(ny=2, nu=2, degree=2, criterion=c).fit(rec)
+            sizes[c].append(m.n_parameters_)
+            if c == "bic":
+                assert set(table(m)) == set(TRUE_TERMS)
+    assert NARXPoly().criterion == "bic"
+    assert sum(sizes["aic"]) > sum(sizes["bic"])
+
+
+def test_narmax_k_step_limits():
+    rec = narmax_record(800)
+    m = NARMAXPoly(ny=2, nu=2, ne=2, degree=2).fit(rec)
+    y1 = m.predict(rec, 1)
+    # one-step residuals are the recursion e(t) = y(t) - ŷ(t|t-1) used by the noise terms
+    np.testing.assert_array_equal(m.predict(rec, 1), y1)
+    np.testing.assert_array_equal(m.predict(rec, len(rec)), m.predict(rec, None))
+    y3 = m.predict(rec, 3)
+    assert np.std((rec.y - y1)[2:]) < np.std((rec.y - y3)[2:]) <= np.std((rec.y - m.predict(rec, None))[2:]) * 1.01
