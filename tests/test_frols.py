@@ -29,13 +29,7 @@ def test_noise_free_narx_exact_recovery(criterion):
 
 
 def test_degree3_larger_lags_exact():
-    rng = np.random.default_rng(5)
-    n = 3000
-    u = rng.uniform(-1, 1, n)
-    y = np.zeros(n)
-    for k in range(4, n):
-        y[k] = 0.4 * y[k - 1] - 0.2 * y[k - 3] + 0.7 * u[k - 2] + 0.15 * u[k - 1] * u[k - 3] ** 2 + 0.05
-    m = NARXPoly(ny=4, nu=4, degree=3).fit(Record(u, y, fs=1.0))
+    m = NARXPoly(ny=4, nu=4, degree=3).fit(_degree3_record())
     want = {"y(k-1)": 0.4, "y(k-3)": -0.2, "u(k-2)": 0.7, "u(k-1)*u(k-3)^2": 0.15, "1": 0.05}
     got = table(m)
     assert set(got) == set(want)
@@ -217,18 +211,34 @@ def test_narmax_els_recovers_noise_term_and_whitens_residuals():
         assert np.std(e[2:]) < 0.9 * np.std(e_narx[2:])
 
 
-def test_sysidentpy_cross_check_terms_and_parameters():
+def _degree3_record():
+    rng = np.random.default_rng(5)
+    n = 3000
+    u = rng.uniform(-1, 1, n)
+    y = np.zeros(n)
+    for k in range(4, n):
+        y[k] = 0.4 * y[k - 1] - 0.2 * y[k - 3] + 0.7 * u[k - 2] + 0.15 * u[k - 1] * u[k - 3] ** 2 + 0.05
+    return Record(u, y, fs=1.0)
+
+
+@pytest.mark.parametrize("case", ["degree2-lags2", "degree3-lags4-constant"])
+def test_sysidentpy_cross_check_terms_and_parameters(case):
     pytest.importorskip("sysidentpy", reason="SysIdentPy is not installed: cross-check skipped")
     from sysidentpy.basis_function import Polynomial
     from sysidentpy.model_structure_selection import FROLS
     from sysidentpy.parameter_estimation import LeastSquares
 
-    rec = narx_record(1000, seed=21)
-    ref = FROLS(order_selection=False, n_terms=4, ylag=2, xlag=2, estimator=LeastSquares(),
-                basis_function=Polynomial(degree=2), model_type="NARMAX")
+    if case == "degree2-lags2":
+        rec, lags, degree, true = narx_record(1000, seed=21), 2, 2, TRUE_TERMS
+    else:
+        rec, lags, degree = _degree3_record(), 4, 3
+        true = {"y(k-1)": 0.4, "y(k-3)": -0.2, "u(k-2)": 0.7, "u(k-1)*u(k-3)^2": 0.15, "1": 0.05}
+    n_terms = len(true)
+    ref = FROLS(order_selection=False, n_terms=n_terms, ylag=lags, xlag=lags, estimator=LeastSquares(),
+                basis_function=Polynomial(degree=degree), model_type="NARMAX")
     ref.fit(X=rec.u.reshape(-1, 1), y=rec.y.reshape(-1, 1))
 
-    def code_name(code):
+    def code_name(code):  # SysIdentPy's regressor codes: 1000 + j = y(k-j), 2000 + j = x1(k-j), 0 = none
         facs = []
         for c in sorted((int(c) for c in code if c != 0), key=lambda c: (c // 1000 != 1, c)):
             facs.append(("y" if c // 1000 == 1 else "u") + f"(k-{c % 1000})")
@@ -240,13 +250,15 @@ def test_sysidentpy_cross_check_terms_and_parameters():
 
     ref_terms = [code_name(c) for c in ref.final_model]
     ref_theta = dict(zip(ref_terms, ref.theta.ravel()))
-    m = NARXPoly(ny=2, nu=2, degree=2, criterion="err", rho_p=1e-10, max_terms=4).fit(rec)
+    m = NARXPoly(ny=lags, nu=lags, degree=degree, criterion="err", rho_p=1e-10, max_terms=n_terms).fit(rec)
     ours = m.term_table()
     assert [r["term"] for r in ours] == ref_terms  # same terms, same order of selection
     for r in ours:
         assert abs(r["parameter"] - ref_theta[r["term"]]) <= 1e-6 * abs(ref_theta[r["term"]])
-    np.testing.assert_allclose([r["err"] for r in ours], np.asarray(ref.err[:4]).ravel(), rtol=1e-6)
-    assert set(ref_terms) == set(TRUE_TERMS)
+    np.testing.assert_allclose([r["err"] for r in ours], np.asarray(ref.err[:n_terms]).ravel(), rtol=1e-6)
+    assert set(ref_terms) == set(true)
+    # and our default (BIC, no term count given) finds exactly the true model too
+    assert set(table(NARXPoly(ny=lags, nu=lags, degree=degree).fit(rec))) == set(true)
 
 
 def test_incremental_order_selection_equals_refits():
