@@ -301,3 +301,36 @@ def test_narmax_k_step_limits():
     np.testing.assert_array_equal(m.predict(rec, len(rec)), m.predict(rec, None))
     y3 = m.predict(rec, 3)
     assert np.std((rec.y - y1)[2:]) < np.std((rec.y - y3)[2:]) <= np.std((rec.y - m.predict(rec, None))[2:]) * 1.01
+
+
+def test_large_offset_keeps_precision_and_matches_sysidentpy():
+    """Output offset 1000× its variation: the centred Gram keeps the orthogonalisation exact (parameters to
+    1e-9 relative) and the selection equals SysIdentPy's Householder FROLS term for term."""
+    rng = np.random.default_rng(0)
+    n, off = 2000, 1e3
+    u = rng.uniform(-1, 1, n)
+    y = np.full(n, off)
+    for k in range(2, n):
+        y[k] = 0.5 * y[k - 1] + 0.9 * u[k - 2] - 0.3 * u[k - 1] ** 2 + 0.5 * off
+    rec = Record(u, y, fs=1.0)
+    G, N = fr.gram_matrix([rec], NARXPoly(ny=2, nu=2).fit(rec).structure_)
+    X = np.vstack([x for x, _ in fr.lagged_chunks([rec], NARXPoly(ny=2, nu=2).fit(rec).structure_)])
+    P = np.c_[fr.term_columns(X, fr.candidate_terms(4, 2)), y[2:]]
+    Pc = P - P.mean(axis=0)
+    np.testing.assert_allclose(G.centred, Pc.T @ Pc, rtol=1e-9, atol=1e-9 * np.abs(Pc.T @ Pc).max())
+    m = NARXPoly(ny=2, nu=2, degree=2, criterion="err", rho_p=1e-14, max_terms=5).fit(rec)
+    got = table(m)
+    for k, v in {"1": 0.5 * off, "y(k-1)": 0.5, "u(k-2)": 0.9, "u(k-1)^2": -0.3}.items():
+        assert abs(got[k] - v) <= 1e-9 * abs(v)
+    pytest.importorskip("sysidentpy", reason="SysIdentPy is not installed: cross-check skipped")
+    from sysidentpy.basis_function import Polynomial
+    from sysidentpy.model_structure_selection import FROLS
+    from sysidentpy.parameter_estimation import LeastSquares
+
+    ref = FROLS(order_selection=False, n_terms=5, ylag=2, xlag=2, estimator=LeastSquares(),
+                basis_function=Polynomial(degree=2))
+    ref.fit(X=u[:, None], y=y[:, None])
+    codes = {(0, 0): "1", (2002, 1001): "y(k-1)*u(k-2)", (1001, 0): "y(k-1)", (2001, 2001): "u(k-1)^2",
+             (2002, 0): "u(k-2)"}
+    assert [r["term"] for r in m.term_table()] == [codes[tuple(int(c) for c in row)] for row in ref.final_model]
+    np.testing.assert_allclose([r["err"] for r in m.term_table()], np.asarray(ref.err[:5]).ravel(), rtol=1e-5, atol=1e-15)
