@@ -334,3 +334,23 @@ def test_large_offset_keeps_precision_and_matches_sysidentpy():
              (2002, 0): "u(k-2)"}
     assert [r["term"] for r in m.term_table()] == [codes[tuple(int(c) for c in row)] for row in ref.final_model]
     np.testing.assert_allclose([r["err"] for r in m.term_table()], np.asarray(ref.err[:5]).ravel(), rtol=1e-5, atol=1e-15)
+
+
+def test_mimo_narmax_noise_term_per_output():
+    rng = np.random.default_rng(2)
+    n = 4000
+    u = rng.uniform(-1, 1, (n, 2))
+    e = 0.05 * rng.standard_normal((n, 2))
+    y = np.zeros((n, 2))
+    for k in range(2, n):
+        y[k, 0] = 0.5 * y[k - 1, 0] + 0.8 * u[k - 1, 0] + 0.2 * y[k - 1, 1] * u[k - 1, 1] + 0.7 * e[k - 1, 0] + e[k, 0]
+        y[k, 1] = -0.3 * y[k - 2, 1] + 0.6 * u[k - 1, 1] - 0.25 * u[k - 1, 0] ** 2 + e[k, 1]
+    rec = Record(u, y, fs=1.0)
+    m = NARMAXPoly(ny=2, nu=2, ne=1, degree=2).fit(rec)
+    rows = {(r["output"], r["term"]): r for r in m.term_table()}
+    assert {t for o, t in rows if o == 0} == {"y1(k-1)", "u1(k-1)", "y2(k-1)*u2(k-1)", "e1(k-1)"}
+    assert {t for o, t in rows if o == 1} == {"y2(k-2)", "u2(k-1)", "u1(k-1)^2"}
+    r = rows[(0, "e1(k-1)")]
+    assert abs(r["parameter"] - 0.7) < 3 * r["stderr"]
+    for h in (1, 3, None):
+        assert m.predict(rec, h).shape == (n, 2)
