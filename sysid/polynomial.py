@@ -111,7 +111,8 @@ class PolynomialModel(Identifier):
             col = [s.column_of(r) for r in range(len(s.regressors))]
             lag = [lg for _, _, lg in s.regressors]
             self._compiled = sim.CompiledModel(n_out, s.n_inputs, s.has_e, col, lag, terms,
-                                               [len(t) for t in self.terms_], theta, s.max_lag)
+                                               [len(t) for t in self.terms_], theta, s.max_lag,
+                                               kinds=[k for k, _, _ in s.regressors])
         return self._compiled
 
     def _check_fitted(self) -> None:
