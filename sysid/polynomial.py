@@ -301,14 +301,15 @@ class NARMAXPoly(PolynomialModel):
     """Polynomial NARMAX by ELS-FROLS (§2.6 steps 1–4, eq. 2-6/2-7).
 
     Parameters as :class:`NARXPoly`, plus ``ne`` (noise lags e(k−1)..e(k−ne)), ``rho_n`` (a noise term is added
-    while its ERR ≥ rho_n, when ``criterion="err"``; otherwise the information criterion decides), ``els_iter``
+    while its ERR ≥ rho_n, when ``criterion="err"``; default 1e-5 = rho_p/10 as in the dissertation's Table 5.1;
+    otherwise the information criterion decides), ``els_iter``
     (most extended-least-squares iterations) and ``els_tol`` (relative parameter change that ends them).
     """
 
     name = "narmax-poly"
 
     def __init__(self, ny: int = 2, nu: int = 2, ne: int = 2, nk: int = 1, degree: int = 2, criterion: str = "bic",
-                 rho_p: float = 1e-4, rho_n: float = 1e-3, max_terms: int = 40, els_iter: int = 20,
+                 rho_p: float = 1e-4, rho_n: float = 1e-5, max_terms: int = 40, els_iter: int = 20,
                  els_tol: float = 1e-6, constant: bool = True, chunk: int = fr.DEFAULT_CHUNK):
         self.ny = ny
         self.nu = nu
