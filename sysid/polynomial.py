@@ -379,7 +379,15 @@ class NARMAXPoly(PolynomialModel):
                 terms_all.append(terms)
                 errs_all.append(res.err)
                 lss.append(ls)
-            new_e = self._recursive_residuals(records, s, terms_all, [ls.theta for ls in lss])
+            thetas = [ls.theta for ls in lss]
+            new_e = self._recursive_residuals(records, s, terms_all, thetas)
+            # The recursion e(t) = y(t) − ŷ(t|t−1) is unstable while the noise model is (e.g. an early estimate of an
+            # MA coefficient above 1): then take the plain ELS residual y − Pθ with the previous e, which is bounded.
+            plain = fr.fitted_residuals(records, s, terms_all, thetas, e_list=e_list, chunk=self.chunk)
+            with np.errstate(over="ignore", invalid="ignore"):
+                finite = all(np.isfinite(e).all() for e in new_e)
+                if not finite or max(float(np.std(e)) for e in new_e) > 2.0 * max(float(np.std(e)) for e in plain):
+                    new_e = plain
             self.els_iterations_ = it + 1
             cur = (terms_all, [ls.theta for ls in lss])
             done = False

@@ -360,3 +360,17 @@ def test_mimo_narmax_noise_term_per_output():
     assert abs(r["parameter"] - 0.7) < 3 * r["stderr"]
     for h in (1, 3, None):
         assert m.predict(rec, h).shape == (n, 2)
+
+
+def test_narmax_long_record_unstable_early_noise_model_is_survived():
+    """At N = 1e5 the first ELS iteration (on the biased residuals of the process-only fit) proposes a noise
+    model whose one-step recursion is unstable (MA coefficient > 1); ELS must fall back to the bounded residual
+    and still converge to the true structure."""
+    rec = narmax_record(100_000, seed=3)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)
+        m = NARMAXPoly(ny=2, nu=2, ne=3, degree=2).fit(rec)
+    assert m.els_converged_
+    rows = {r["term"]: r for r in m.term_table()}
+    assert set(rows) == {"u(k-1)", "y(k-1)", "u(k-1)^2", "y(k-1)*u(k-1)", "e(k-1)"}
+    assert abs(rows["e(k-1)"]["parameter"] - 0.8) < 3 * rows["e(k-1)"]["stderr"]
