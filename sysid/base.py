@@ -24,6 +24,7 @@ from typing import Any, ClassVar, Sequence
 import numpy as np
 
 from sysid.errors import ConfigError, DataError
+from sysid.io import json_default
 from sysid.record import Record
 
 __all__ = ["Identifier", "as_record_list", "load_model"]
@@ -105,16 +106,8 @@ class Identifier(ABC):
         path = Path(path)
         payload = {"format": "piezotwin-model/1", "identifier": self.name, "params": self.get_params(), "state": self._state()}
         path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_text(json.dumps(payload, default=_json_default))
+        path.write_text(json.dumps(payload, default=json_default))
         return path
-
-
-def _json_default(obj: Any) -> Any:
-    if isinstance(obj, np.ndarray):
-        return obj.tolist()
-    if isinstance(obj, np.generic):
-        return obj.item()
-    raise TypeError(f"not JSON serialisable: {type(obj).__name__}")
 
 
 def load_model(path: str | Path) -> Identifier:

@@ -28,7 +28,7 @@ import numpy as np
 from sysid.errors import DataError
 from sysid.record import Record, check_array
 
-__all__ = ["read_record", "write_record", "SUPPORTED_SUFFIXES"]
+__all__ = ["read_record", "write_record", "json_default", "SUPPORTED_SUFFIXES"]
 
 SUPPORTED_SUFFIXES = (".npz", ".csv", ".mat")
 _UNIFORM_TOL = 0.01  # relative jitter of the t column accepted as uniform sampling
@@ -57,7 +57,7 @@ def write_record(record: Record, path: str | os.PathLike) -> Path:
         return path
     meta = dict(record.meta)
     meta["units"] = dict(record.units)
-    arrays: dict[str, Any] = {"u": record.u, "fs": np.float64(record.fs), "meta": np.array(json.dumps(meta, default=_json_default))}
+    arrays: dict[str, Any] = {"u": record.u, "fs": np.float64(record.fs), "meta": np.array(json.dumps(meta, default=json_default))}
     if record.y is not None:
         arrays["y"] = record.y
     np.savez(path, **arrays)
@@ -80,7 +80,8 @@ def _write_csv(record: Record, path: Path) -> None:
             fh.write(",".join([repr(k / record.fs)] + [repr(float(v)) for v in row]) + "\n")
 
 
-def _json_default(obj: Any) -> Any:
+def json_default(obj: Any) -> Any:
+    """``json.dumps(default=...)`` hook for numpy arrays/scalars and paths (one place for the whole project)."""
     if isinstance(obj, np.ndarray):
         return obj.tolist()
     if isinstance(obj, np.generic):

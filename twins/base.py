@@ -19,6 +19,7 @@ import numpy as np
 
 from sysid.config import coerce, parse_assignments
 from sysid.errors import ConfigError, DataError
+from sysid.io import json_default as _json_default
 from sysid.record import Record
 
 __all__ = ["pfield", "ParamInfo", "param_info", "EffectSpec", "Twin", "PARAMS_FORMAT"]
@@ -268,9 +269,3 @@ def load_params_file(path: str | Path, twin: str | None = None) -> dict[str, Any
     return data
 
 
-def _json_default(obj: Any) -> Any:
-    if isinstance(obj, np.ndarray):
-        return obj.tolist()
-    if isinstance(obj, np.generic):
-        return obj.item()
-    raise TypeError(f"not JSON serialisable: {type(obj).__name__}")

@@ -18,7 +18,6 @@ import math
 from benchmarks.commands.common import add_data_args, emit_json, read_data
 from sysid.errors import ConfigError
 from sysid.io import write_record
-from sysid.preprocess import apply_steps
 
 
 class _Step(argparse.Action):
@@ -118,6 +117,8 @@ def to_steps(raw: list[tuple[str, str | list, str]], signals: str = "both") -> l
 
 
 def run(args: argparse.Namespace) -> int:
+    from sysid.preprocess import apply_steps  # imported here: numba is slow to import for every CLI start
+
     steps = to_steps(args.steps, args.signals)
     if not steps and not args.fill_missing:
         raise ConfigError("preprocess: give at least one step (see piezotwin preprocess --help)")
