@@ -143,20 +143,19 @@ class _NeuralNARXBase(Identifier):
         dev = data.device
         for _ in range(int(epochs)):
             perm = torch.randperm(M, generator=gen).to(dev)
-            total = torch.zeros((), device=dev)
+            losses: list[torch.Tensor] = []
             if data.X is not None:
                 batches = zip(data.X[perm].split(B), data.Y[perm].split(B))
             else:
                 batches = ((data.x(idx), data.Y[idx]) for idx in perm.split(B))
             for xb, yb in batches:
-                d = net(xb) - yb
-                loss = (d * d).mean()
-                opt.zero_grad()
-                loss.backward()
+                loss = net.mse_grad_(xb, yb)  # forward, MSE and hand-written back-propagation
                 opt.step()
-                total += loss.detach() * xb.shape[0]
-            _check_storage(net)
-            self.loss_history_.append(float(total.item()) / M)  # one device sync per epoch
+                losses.append(loss)
+            # mean of the batch losses weighted by batch size; one device sync per epoch
+            sizes = torch.full((len(losses),), float(B), device=dev)
+            sizes[-1] = M - B * (len(losses) - 1)
+            self.loss_history_.append(float((torch.stack(losses) * sizes).sum().item()) / M)
 
     def _train(self, net: FlatMLP, data: LagData, gen: torch.Generator) -> None:  # pragma: no cover - abstract
         raise NotImplementedError

@@ -1,0 +1,91 @@
+"""``piezotwin search IDENTIFIER --est FILE --val FILE --grid SPEC [--repeats R] [--json]``.
+
+Structure sweep with repeated runs (dissertation Tables 4.2, 5.4–5.6, Fig. 5.13) on Optuna; see
+:mod:`sysid.neural.search`. SPEC: ``KEY=V1,V2,...`` items separated by ``;`` — identifier options as for
+``identify --set``; list values with dashes (``hidden=25-25,25-25-25-25``); integer ranges ``a..b``; ``lags``
+sets n_y and n_u together. Example::
+
+    piezotwin search narx-mlp --est est.npz --val val.npz \\
+        --grid "lags=5,10;hidden=25-25,25-25-25-25;activation=relu,tanh" --repeats 5 --set epochs=20
+
+Storage: ``--storage FILE.db`` (SQLite, default ``STUDY.db`` in the current folder) or an Optuna URL such as
+``postgresql://user:pw@host/db`` shared by workers on several machines (run the same command on each).
+Re-running the same command resumes an interrupted sweep. ``--workers N`` runs N local processes.
+"""
+
+from __future__ import annotations
+
+import argparse
+
+from benchmarks.commands.common import add_data_args, emit_json, read_data
+from sysid.config import parse_assignments
+
+
+def register(sub) -> None:
+    p = sub.add_parser("search", help="structure sweep with repeated runs (grid / random / TPE, Optuna storage)")
+    p.add_argument("identifier", help="identifier id (narx-mlp, narx-mlp-sim, rnn, narx-poly, ...)")
+    p.add_argument("--est", required=True, action="append", metavar="FILE", help="estimation record; may repeat")
+    p.add_argument("--val", required=True, metavar="FILE", help="validation record")
+    p.add_argument("--grid", required=True, metavar="SPEC",
+                   help="choices, e.g. 'lags=5,10;hidden=25-25,25-25-25-25;activation=relu,tanh'")
+    p.add_argument("--repeats", type=int, default=1, metavar="R", help="runs per configuration (seeds seed..seed+R-1)")
+    p.add_argument("--seed", type=int, default=0, help="first seed (default 0)")
+    p.add_argument("--set", dest="set_", action="append", default=[], metavar="KEY=VALUE[,...]",
+                   help="options fixed for every run (e.g. epochs=20)")
+    p.add_argument("--sampler", choices=("grid", "random", "tpe"), default="grid")
+    p.add_argument("--trials", type=int, metavar="N", help="configurations to evaluate (default: the whole grid)")
+    p.add_argument("--storage", metavar="URL|FILE", help="Optuna storage: SQLite file (default STUDY.db) or URL")
+    p.add_argument("--study", default="piezotwin-search", help="study name inside the storage")
+    p.add_argument("--workers", type=int, default=1, help="local worker processes sharing the storage")
+    p.add_argument("--export", metavar="FILE.jsonl", help="write one JSON line per run")
+    p.add_argument("--plot", metavar="FILE.png", help="R² distribution of the best configuration (Fig. 5.13 analogue)")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    add_data_args(p)
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(func=run)
+
+
+def _fmt(v) -> str:
+    return "   nan" if v is None else f"{v:.4f}"
+
+
+def run(args: argparse.Namespace) -> int:
+    from sysid.errors import ConfigError
+    from sysid.neural.search import SweepSpec, collect, export_jsonl, parse_grid, plot_r2_distribution, run_sweep, storage_url
+
+    if args.workers < 1:
+        raise ConfigError(f"--workers must be ≥ 1, got {args.workers}")
+    est = [read_data(args, f) for f in args.est]
+    val = read_data(args, args.val)
+    spec = SweepSpec(identifier=args.identifier, grid=parse_grid(args.grid, args.identifier), repeats=args.repeats,
+                     seed=args.seed, fixed=parse_assignments(args.set_), sampler=args.sampler)
+    summary = run_sweep(spec, est if len(est) > 1 else est[0], val, storage=args.storage, study=args.study,
+                        trials=args.trials, workers=args.workers, progress=not args.no_progress)
+    url = storage_url(args.storage, args.study)
+    summary.update({"identifier": args.identifier, "study": args.study, "storage": url, "sampler": args.sampler,
+                    "repeats": args.repeats, "grid": spec.grid})
+    runs = None
+    if args.export or args.plot:
+        runs = collect(url, args.study)
+    if args.export:
+        summary["runs_file"] = str(export_jsonl(runs, args.export))
+    if args.plot and summary["best"] is not None:
+        summary["plot"] = str(plot_r2_distribution(runs, summary["best"]["config_key"], args.plot))
+    if args.json:
+        emit_json(summary)
+        return 0
+    print(f"{args.identifier}: {summary['n_configs']} configurations, {summary['n_runs']} runs  (storage {url}, study {args.study})")
+    print(f"  {'configuration':<44} {'params':>7}  {'R2 OSA est':>10} {'R2 FRS est':>17} {'R2 OSA val':>10} {'R2 FRS val':>17}")
+    for c in summary["configs"]:
+        print(f"  {c['config_key']:<44} {c['n_parameters']:>7}  {_fmt(c['r2_est_osa_mean']):>10} "
+              f"{_fmt(c['r2_est_frs_mean'])} ± {_fmt(c['r2_est_frs_sd'])} {_fmt(c['r2_val_osa_mean']):>10} "
+              f"{_fmt(c['r2_val_frs_mean'])} ± {_fmt(c['r2_val_frs_sd'])}")
+    if summary["best_runs"]:
+        print("  runs of the best configuration (Table 5.6 analogue):")
+        for r in summary["best_runs"]:
+            print(f"    seed {r['seed']:>4}: OSA est {_fmt(r['r2_est_osa'])}  FRS est {_fmt(r['r2_est_frs'])}  "
+                  f"OSA val {_fmt(r['r2_val_osa'])}  FRS val {_fmt(r['r2_val_frs'])}")
+    for key in ("runs_file", "plot"):
+        if key in summary:
+            print(f"  {key} -> {summary[key]}")
+    return 0

@@ -1,0 +1,290 @@
+"""Recurrent state-space model (registry id ``rnn``): the recurrent network the dissertation names as the way on.
+
+Model (discrete time, normalised units)::
+
+    h(t0)   = E([y(t0-1) … y(t0-n_enc), u(t0-1) … u(t0-n_enc)])      encoder: MLP, tanh output
+    h(t+1)  = GRU(u(t), h(t))            (or an LSTM cell; its cell state also comes from the encoder)
+    ŷ(t+1)  = C h(t+1) + d
+
+The encoder estimates the initial state from ``n_enc`` past measured samples (the same regressor as a NARX
+with n_y = n_u = n_enc, eq. 2-14); afterwards the model runs on the input alone, so every prediction is a
+simulation. Training minimises the free-run (simulation) MSE over windows of ``window`` samples started at
+random positions (multiple shooting, many windows as one batch), with Adam and gradient-norm clipping.
+
+``predict(record, None)`` encodes the state from the first ``n_enc`` samples and simulates the rest;
+``predict(record, k)`` encodes at every ``t − k`` and simulates k steps (all windows as one batch).
+Prediction runs on the CPU in float64 from the saved weights, so it is identical after save/load.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+import warnings
+from pathlib import Path
+from typing import Any, Sequence
+
+import numpy as np
+import torch
+
+from sysid.base import Identifier, as_record_list
+from sysid.errors import ConfigError, DataError, DivergenceWarning
+from sysid.neural.core import LagData, lag_matrix_np
+from sysid.neural.device import configure_threads, select_device
+from sysid.neural.narx_mlp import MAX_LAG, _as2d, check_channels, fit_normaliser, normalised_pairs
+from sysid.record import Normaliser, Record
+
+__all__ = ["RNNStateSpace"]
+
+CELLS = ("gru", "lstm")
+
+
+class _Net(torch.nn.Module):
+    def __init__(self, n_enc_in: int, enc_hidden: Sequence[int], n_state: int, nu: int, ny: int, cell: str):
+        super().__init__()
+        self.cell = cell
+        self.n_state = n_state
+        n_init = n_state * (2 if cell == "lstm" else 1)
+        layers: list[torch.nn.Module] = []
+        a = n_enc_in
+        for w in enc_hidden:
+            layers += [torch.nn.Linear(a, w), torch.nn.Tanh()]
+            a = w
+        layers += [torch.nn.Linear(a, n_init), torch.nn.Tanh()]
+        self.encoder = torch.nn.Sequential(*layers)
+        rnn_cls = torch.nn.GRU if cell == "gru" else torch.nn.LSTM
+        self.rnn = rnn_cls(nu, n_state, batch_first=True)
+        self.readout = torch.nn.Linear(n_state, ny)
+
+    def forward(self, x0: torch.Tensor, useq: torch.Tensor) -> torch.Tensor:
+        """``x0`` (B, n_enc_in) past regressor, ``useq`` (B, T, nu) inputs u(t0-1) … u(t0+T-2) → ŷ (B, T, ny)."""
+        z = self.encoder(x0)
+        if self.cell == "lstm":
+            h0 = (z[:, : self.n_state].unsqueeze(0).contiguous(), z[:, self.n_state:].unsqueeze(0).contiguous())
+        else:
+            h0 = z.unsqueeze(0).contiguous()
+        out, _ = self.rnn(useq, h0)
+        return self.readout(out)
+
+
+class RNNStateSpace(Identifier):
+    """GRU/LSTM state-space model with a learned initial-state encoder, trained on simulation error.
+
+    Parameters
+    ----------
+    n_state : int
+        Dimension of the recurrent state h.
+    n_enc : int
+        Past samples of y and u given to the encoder (the model's ``max_lag_``).
+    enc_hidden : list of int
+        Hidden widths of the encoder MLP (tanh).
+    cell : str
+        ``gru`` or ``lstm``.
+    window, batch_size, epochs, lr : int, int, int, float
+        Simulated window length T, windows per batch, epochs (each draws rows/T windows) and Adam step size.
+    clip : float
+        Gradient-norm clipping (0: off).
+    seed, device :
+        As for the NARX-MLP.
+    """
+
+    name = "rnn"
+
+    def __init__(self, n_state: int = 32, n_enc: int = 20, enc_hidden: Sequence[int] = (64,), cell: str = "gru",
+                 window: int = 100, batch_size: int = 32, epochs: int = 30, lr: float = 3e-3, clip: float = 1.0,
+                 seed: int = 0, device: str = "auto"):
+        self.n_state = n_state
+        self.n_enc = n_enc
+        self.enc_hidden = list(enc_hidden) if isinstance(enc_hidden, (list, tuple)) else enc_hidden
+        self.cell = cell
+        self.window = window
+        self.batch_size = batch_size
+        self.epochs = epochs
+        self.lr = lr
+        self.clip = clip
+        self.seed = seed
+        self.device = device
+
+    # ------------------------------------------------------------------ checks
+    def _check_params(self) -> None:
+        def pos_int(key: str, lo: int, hi: int) -> None:
+            v = getattr(self, key)
+            if not isinstance(v, (int, np.integer)) or isinstance(v, bool) or not lo <= v <= hi:
+                raise ConfigError(f"{self.name}: {key}={v!r} must be an integer in [{lo}, {hi}]")
+
+        pos_int("n_state", 1, 4096)
+        pos_int("n_enc", 1, MAX_LAG)
+        pos_int("window", 1, 100_000)
+        pos_int("batch_size", 1, 1_000_000)
+        pos_int("epochs", 0, 1_000_000)
+        eh = self.enc_hidden
+        if not isinstance(eh, (list, tuple)) or not all(isinstance(w, (int, np.integer)) and not isinstance(w, bool) and w >= 1 for w in eh):
+            raise ConfigError(f"{self.name}: enc_hidden={eh!r} must be a list of widths, e.g. enc_hidden=64 or 64-64")
+        self.enc_hidden = [int(w) for w in eh]
+        if self.cell not in CELLS:
+            raise ConfigError(f"{self.name}: cell={self.cell!r} not one of: {', '.join(CELLS)}")
+        if not (isinstance(self.lr, (int, float)) and 0 < self.lr < 10):
+            raise ConfigError(f"{self.name}: lr={self.lr!r} must be a positive number below 10")
+        if not (isinstance(self.clip, (int, float)) and self.clip >= 0):
+            raise ConfigError(f"{self.name}: clip={self.clip!r} must be ≥ 0")
+        if not isinstance(self.seed, (int, np.integer)) or isinstance(self.seed, bool):
+            raise ConfigError(f"{self.name}: seed={self.seed!r} must be an integer")
+        select_device(self.device)
+
+    def _build(self, nu: int, ny: int) -> _Net:
+        return _Net(self.n_enc * (nu + ny), self.enc_hidden, int(self.n_state), nu, ny, self.cell)
+
+    # ------------------------------------------------------------------ fit
+    def fit(self, data: Record | Sequence[Record]) -> "RNNStateSpace":
+        self._check_params()
+        recs = as_record_list(data)
+        nu, ny = check_channels(recs)
+        t0 = time.perf_counter()
+        configure_threads()
+        device = select_device(self.device)
+        torch.manual_seed(int(self.seed))
+        gen = torch.Generator().manual_seed(int(self.seed))
+        self.normaliser_ = fit_normaliser(recs)
+        pairs = normalised_pairs(recs, self.normaliser_)
+        data_t = LagData(pairs, self.n_enc, self.n_enc, device)
+        T = int(self.window)
+        starts = data_t.window_starts(T)
+        if starts.size == 0:
+            raise DataError(f"{self.name}: no record has {T + self.n_enc} samples for one window; lower window or n_enc")
+        net = self._build(nu, ny).to(device)
+        opt = torch.optim.Adam(net.parameters(), lr=float(self.lr))
+        starts_t = torch.as_tensor(starts, device=device)
+        steps = torch.arange(T, device=device)
+        n_win = max(1, math.ceil(data_t.n_rows / T))
+        self.loss_history_ = []
+        for _ in range(int(self.epochs)):
+            pick = torch.randint(0, starts.size, (n_win,), generator=gen).to(device)
+            total = torch.zeros((), device=device)
+            for sel in pick.split(int(self.batch_size)):
+                s = starts_t[sel]
+                rows = (s[:, None] + steps[None, :]).reshape(-1)
+                x0 = data_t.x(s)
+                useq = data_t.u[data_t.row_time[rows] - 1].view(s.shape[0], T, nu)
+                target = data_t.Y[rows].view(s.shape[0], T, ny)
+                d = net(x0, useq) - target
+                loss = (d * d).mean()
+                opt.zero_grad(set_to_none=True)
+                loss.backward()
+                if self.clip:
+                    torch.nn.utils.clip_grad_norm_(net.parameters(), float(self.clip))
+                opt.step()
+                total += loss.detach() * s.shape[0]
+            self.loss_history_.append(float(total.item()) / n_win)
+        self.state_dict_ = {k: v.detach().to("cpu", torch.float64).numpy().copy() for k, v in net.state_dict().items()}
+        self.n_inputs_, self.n_outputs_ = nu, ny
+        self.max_lag_ = int(self.n_enc)
+        self.n_parameters_ = int(sum(v.size for v in self.state_dict_.values()))
+        self.device_used_ = str(device)
+        self.fit_seconds_ = time.perf_counter() - t0
+        self.diverged_at_ = None
+        self._net64 = None
+        return self
+
+    # ------------------------------------------------------------------ predict
+    def _cpu_net(self) -> _Net:
+        if getattr(self, "_net64", None) is None:
+            net = self._build(self.n_inputs_, self.n_outputs_).to(torch.float64)
+            net.load_state_dict({k: torch.as_tensor(v, dtype=torch.float64) for k, v in self.state_dict_.items()})
+            net.eval()
+            self._net64 = net
+        return self._net64
+
+    def predict(self, record: Record, horizon: int | None = 1) -> np.ndarray:
+        """Free run (``None``) or k-step-ahead at every sample (``horizon=k``; 1 = one step). Shaped like y."""
+        if not hasattr(self, "state_dict_"):
+            raise ConfigError(f"{self.name}: model is not fitted; call fit() first")
+        record.require_output()
+        if (record.n_inputs, record.n_outputs) != (self.n_inputs_, self.n_outputs_):
+            raise DataError(f"{record.source}: {record.n_inputs} inputs / {record.n_outputs} outputs, model has "
+                            f"{self.n_inputs_} / {self.n_outputs_}")
+        lag = self.max_lag_
+        n = len(record)
+        if n <= lag:
+            raise DataError(f"{record.source}: {n} samples, need more than the model's lag {lag}")
+        if horizon is not None and (not isinstance(horizon, (int, np.integer)) or isinstance(horizon, bool) or horizon < 1):
+            raise ConfigError(f"{self.name}: horizon must be a positive integer or None (free run), got {horizon!r}")
+        configure_threads()
+        (un, yn), = normalised_pairs([record], self.normaliser_)
+        net = self._cpu_net()
+        self.diverged_at_ = None
+        yhat = yn.copy()
+        with torch.no_grad():
+            if horizon is None or horizon >= n - lag:
+                x0 = np.concatenate([lag_matrix_np(yn, lag, np.array([lag])), lag_matrix_np(un, lag, np.array([lag]))], axis=1)
+                useq = un[lag - 1 : n - 1][None]
+                yhat[lag:] = net(torch.from_numpy(x0), torch.from_numpy(np.ascontiguousarray(useq))).numpy()[0]
+            else:
+                k = int(horizon)
+                targets = np.arange(lag, n)
+                t0 = np.maximum(targets - k + 1, lag)  # window start (first simulated target) per target
+                steps = targets - t0 + 1                 # ≤ k; shorter only at the record start
+                chunk = max(1, 4_000_000 // max(1, k * int(self.n_state)))
+                for a in range(0, targets.size, chunk):
+                    sl = slice(a, a + chunk)
+                    tt0 = t0[sl]
+                    x0 = np.concatenate([lag_matrix_np(yn, lag, tt0), lag_matrix_np(un, lag, tt0)], axis=1)
+                    idx = np.clip(tt0[:, None] - 1 + np.arange(k)[None, :], 0, n - 1)
+                    useq = un[idx]  # (B, k, nu); steps past a short window are simply not read
+                    out = net(torch.from_numpy(x0), torch.from_numpy(useq)).numpy()
+                    yhat[targets[sl]] = out[np.arange(out.shape[0]), steps[sl] - 1]
+        bad = ~np.isfinite(yhat).all(axis=1)
+        if bad.any():
+            first = int(np.flatnonzero(bad)[0])
+            self.diverged_at_ = first
+            if horizon is None:
+                yhat[first:] = np.nan
+            warnings.warn(f"{self.name}: non-finite predictions from sample {first}", DivergenceWarning, stacklevel=2)
+        out = self.normaliser_.inverse_y(yhat)
+        out[:lag] = _as2d(record.y)[:lag]
+        return out[:, 0] if record.y.ndim == 1 else out
+
+    # ------------------------------------------------------------------ description / persistence
+    def describe(self) -> dict[str, Any]:
+        d = super().describe()
+        if hasattr(self, "state_dict_"):
+            d.update({"structure": {"cell": self.cell, "n_state": self.n_state, "n_enc": self.n_enc,
+                                    "enc_hidden": list(self.enc_hidden)},
+                      "terms": [], "max_lag": self.max_lag_, "device": self.device_used_,
+                      "final_loss": self.loss_history_[-1] if self.loss_history_ else None})
+        return d
+
+    def _state(self) -> dict[str, Any]:
+        if not hasattr(self, "state_dict_"):
+            raise ConfigError(f"{self.name}: model is not fitted; nothing to save")
+        return {"state_dict": {k: np.asarray(v) for k, v in self.state_dict_.items()},
+                "normaliser": self.normaliser_.to_dict(), "n_inputs": int(self.n_inputs_),
+                "n_outputs": int(self.n_outputs_), "loss_history": [float(v) for v in self.loss_history_],
+                "device_used": self.device_used_, "fit_seconds": float(self.fit_seconds_)}
+
+    def _load_state(self, state: dict[str, Any]) -> None:
+        self._check_params()
+        self.n_inputs_, self.n_outputs_ = int(state["n_inputs"]), int(state["n_outputs"])
+        ref = self._build(self.n_inputs_, self.n_outputs_).state_dict()
+        sd = {}
+        for k, v in ref.items():
+            if k not in state["state_dict"]:
+                raise DataError(f"{self.name}: saved state lacks {k}")
+            arr = np.asarray(state["state_dict"][k], dtype=np.float64).reshape(tuple(v.shape))
+            sd[k] = arr
+        self.state_dict_ = sd
+        self.normaliser_ = Normaliser.from_dict(state["normaliser"])
+        self.loss_history_ = [float(v) for v in state.get("loss_history", [])]
+        self.device_used_ = state.get("device_used", "cpu")
+        self.fit_seconds_ = float(state.get("fit_seconds", float("nan")))
+        self.max_lag_ = int(self.n_enc)
+        self.n_parameters_ = int(sum(v.size for v in sd.values()))
+        self.diverged_at_ = None
+        self._net64 = None
+
+    def save(self, path: str | Path) -> Path:
+        from sysid.neural.persist import save_torch
+
+        path = Path(path)
+        if path.suffix.lower() == ".pt":
+            return save_torch(self, path)
+        return super().save(path)

@@ -1,0 +1,478 @@
+"""Structure sweeps with repeated runs (dissertation Tables 4.2, 5.4–5.6 and Fig. 5.13), on Optuna.
+
+A sweep tries configurations of one identifier (lags, layers, widths, activation …), fits each ``repeats``
+times with seeds ``seed, seed+1, …`` and scores every run by R² one-step and free-run on the estimation and
+validation data. Per configuration it reports mean and SD of the four R² values and the parameter count.
+
+Grid SPEC (``--grid``): ``KEY=V1,V2,...`` items separated by ``;``. Keys are constructor options of the
+identifier (``piezotwin identify`` ``--set`` names); a list value is written with dashes as in ``--set``
+(``hidden=25-25,25-25-25-25`` gives two choices); an integer range ``a..b`` expands to every integer from a
+to b; the key ``lags`` sets ``n_y`` and ``n_u`` together (``n_enc`` for ``rnn``). Example::
+
+    lags=5,10;hidden=25-25,25-25-25-25;activation=relu,tanh
+
+Samplers: ``grid`` (every combination), ``random`` and ``tpe`` (Bayesian, Optuna's Tree-structured Parzen
+Estimator) draw ``trials`` distinct configurations from the same choices. One Optuna trial is one
+configuration with all its repeats (per-run results in the trial's user attributes).
+
+Storage: an Optuna storage URL — by default an SQLite file; ``postgresql://user:pw@host/db`` lets workers on
+several machines share one study. Re-running the same command resumes: finished configurations are kept,
+configurations whose trial failed or was interrupted run again (trials of a killed worker are detected by
+Optuna's heartbeat and retried). ``workers`` local processes share the storage; a progress bar shows the
+configurations done and the time left. Results export as JSON lines (one line per run).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import multiprocessing as mp
+import os
+import sys
+import time
+import warnings
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any, Callable, Sequence
+
+import numpy as np
+
+from sysid.config import coerce, parse_assignments
+from sysid.errors import ConfigError, DivergenceWarning
+from sysid.record import Record
+
+__all__ = ["SweepSpec", "parse_grid", "storage_url", "run_sweep", "collect", "summarise", "export_jsonl",
+           "plot_r2_distribution"]
+
+SAMPLERS = ("grid", "random", "tpe")
+R2_KEYS = (("estimation", "one_step"), ("estimation", "free_run"), ("validation", "one_step"), ("validation", "free_run"))
+DIVERGED_OBJECTIVE = -1.0  # a diverged validation free run counts as R² = -1 in the objective only
+
+
+# ---------------------------------------------------------------------------------------------- spec
+def _identifier_defaults(identifier: str) -> dict[str, Any]:
+    import inspect
+
+    from sysid.registry import get_identifier
+
+    cls = get_identifier(identifier)
+    sig = inspect.signature(cls.__init__)
+    return {p.name: p.default for p in sig.parameters.values() if p.name != "self" and p.kind is p.POSITIONAL_OR_KEYWORD}
+
+
+def parse_grid(spec: str, identifier: str) -> dict[str, list[str]]:
+    """``"lags=5,10;hidden=25-25,50-50"`` → ``{"lags": ["5", "10"], "hidden": ["25-25", "50-50"]}`` (checked)."""
+    defaults = _identifier_defaults(identifier)
+    valid = sorted(defaults) + ["lags"]
+    grid: dict[str, list[str]] = {}
+    for item in str(spec or "").split(";"):
+        item = item.strip()
+        if not item:
+            continue
+        if "=" not in item:
+            raise ConfigError(f"--grid: expected KEY=V1,V2,... got {item!r}")
+        key, _, values = item.partition("=")
+        key = key.strip()
+        if key not in valid:
+            raise ConfigError(f"--grid: unknown option {key!r} of {identifier}; valid: {', '.join(valid)}")
+        if key in grid:
+            raise ConfigError(f"--grid: {key!r} given twice")
+        choices: list[str] = []
+        for v in values.split(","):
+            v = v.strip()
+            if not v:
+                continue
+            if ".." in v:
+                a, _, b = v.partition("..")
+                try:
+                    lo, hi = int(a), int(b)
+                except ValueError:
+                    raise ConfigError(f"--grid: range {v!r} of {key} must be integers a..b") from None
+                if hi < lo or hi - lo > 10_000:
+                    raise ConfigError(f"--grid: range {v!r} of {key} is empty or too long")
+                choices += [str(i) for i in range(lo, hi + 1)]
+            else:
+                choices.append(v)
+        if not choices:
+            raise ConfigError(f"--grid: no values for {key!r}")
+        # type check every value now (a typo fails before hours of training, not in the middle)
+        for v in choices:
+            for target in _targets(key, identifier, defaults):
+                coerce(v, defaults[target], target)
+        grid[key] = list(dict.fromkeys(choices))
+    if not grid:
+        raise ConfigError("--grid: empty SPEC; e.g. lags=5,10;hidden=25-25,25-25-25-25;activation=relu,tanh")
+    return grid
+
+
+def _targets(key: str, identifier: str, defaults: dict[str, Any]) -> list[str]:
+    if key != "lags":
+        return [key]
+    if "n_enc" in defaults and "n_y" not in defaults:
+        return ["n_enc"]
+    if "n_y" in defaults:
+        return [k for k in ("n_y", "n_u") if k in defaults]
+    if "ny" in defaults:  # polynomial / linear identifiers spell them ny, nu
+        return [k for k in ("ny", "nu") if k in defaults]
+    raise ConfigError(f"--grid: {identifier} has no lag options for 'lags'")
+
+
+@dataclass
+class SweepSpec:
+    identifier: str
+    grid: dict[str, list[str]]
+    repeats: int = 1
+    seed: int = 0
+    fixed: dict[str, str] = field(default_factory=dict)
+    sampler: str = "grid"
+
+    def __post_init__(self) -> None:
+        if self.sampler not in SAMPLERS:
+            raise ConfigError(f"--sampler {self.sampler!r} not one of: {', '.join(SAMPLERS)}")
+        if not isinstance(self.repeats, int) or self.repeats < 1:
+            raise ConfigError(f"--repeats must be a positive integer, got {self.repeats!r}")
+        defaults = _identifier_defaults(self.identifier)
+        for k in self.fixed:
+            if k not in defaults:
+                raise ConfigError(f"--set: unknown option {k!r} of {self.identifier}; valid: {', '.join(sorted(defaults))}")
+            if k in self.grid or (k in ("n_y", "n_u", "n_enc", "ny", "nu") and "lags" in self.grid):
+                raise ConfigError(f"--set {k} conflicts with the same option in --grid")
+        if "seed" in self.grid:
+            raise ConfigError("--grid: seed is set by --seed and --repeats, not swept")
+
+    @property
+    def n_configs(self) -> int:
+        return int(np.prod([len(v) for v in self.grid.values()]))
+
+    def assignments(self, config: dict[str, str], seed: int) -> dict[str, str]:
+        defaults = _identifier_defaults(self.identifier)
+        out = dict(self.fixed)
+        for key, value in config.items():
+            for target in _targets(key, self.identifier, defaults):
+                out[target] = value
+        if "seed" in defaults:
+            out["seed"] = str(seed)
+        return out
+
+
+def config_key(config: dict[str, str]) -> str:
+    return ";".join(f"{k}={config[k]}" for k in sorted(config))
+
+
+# ---------------------------------------------------------------------------------------------- storage
+def storage_url(storage: str | None, study: str) -> str:
+    """A URL as given (``sqlite:///…``, ``postgresql://…``), or a file path → SQLite URL; None → ``STUDY.db``."""
+    if not storage:
+        storage = f"{study}.db"
+    if "://" in storage:
+        return storage
+    return "sqlite:///" + str(Path(storage).expanduser().resolve())
+
+
+def _open_storage(url: str):
+    import inspect
+
+    import optuna
+    from optuna import storages
+
+    kwargs: dict[str, Any] = {}
+    if url.startswith("sqlite"):
+        kwargs["engine_kwargs"] = {"connect_args": {"timeout": 120}}
+    optuna.logging.set_verbosity(optuna.logging.WARNING)
+    # Trials of a killed worker stop sending heartbeats; after the grace period Optuna fails them and the
+    # callback re-queues the same configuration (the name of that option changed in Optuna 4.9).
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", optuna.exceptions.ExperimentalWarning)
+        if "heartbeat_stale_trial_callback" in inspect.signature(storages.RDBStorage.__init__).parameters:
+            kwargs["heartbeat_stale_trial_callback"] = storages.RetryHeartbeatStaleTrialCallback(max_retry=2)
+        else:  # pragma: no cover - older Optuna
+            kwargs["failed_trial_callback"] = storages.RetryFailedTrialCallback(max_retry=2)
+        return storages.RDBStorage(url, heartbeat_interval=20, grace_period=60, **kwargs)
+
+
+def _make_sampler(spec: SweepSpec):
+    import optuna
+
+    if spec.sampler == "grid":
+        return optuna.samplers.GridSampler(spec.grid, seed=spec.seed)
+    if spec.sampler == "random":
+        return optuna.samplers.RandomSampler(seed=spec.seed)
+    return optuna.samplers.TPESampler(seed=spec.seed, n_startup_trials=5)
+
+
+def _spec_dict(spec: SweepSpec) -> dict[str, Any]:
+    d = asdict(spec)
+    d.pop("sampler")  # a study may be continued with another sampler
+    return d
+
+
+def open_study(spec: SweepSpec, url: str, study_name: str, create: bool = True):
+    import optuna
+
+    storage = _open_storage(url)
+    if create:
+        study = optuna.create_study(study_name=study_name, storage=storage, sampler=_make_sampler(spec),
+                                    direction="maximize", load_if_exists=True)
+        saved = study.user_attrs.get("spec")
+        if saved is None:
+            study.set_user_attr("spec", _spec_dict(spec))
+        elif saved != json.loads(json.dumps(_spec_dict(spec))):
+            raise ConfigError(f"study {study_name!r} in {url} was made with another sweep ({saved}); use another --study")
+        return study
+    return optuna.load_study(study_name=study_name, storage=storage, sampler=_make_sampler(spec))
+
+
+# ---------------------------------------------------------------------------------------------- one configuration
+def run_config(spec: SweepSpec, config: dict[str, str], est: Record | Sequence[Record],
+               val: Record | Sequence[Record]) -> list[dict[str, Any]]:
+    """Fit ``spec.repeats`` models of one configuration; one dict per run with the identify-JSON scores."""
+    from sysid.evaluate import evaluate
+    from sysid.registry import get_identifier
+
+    cls = get_identifier(spec.identifier)
+    runs = []
+    for r in range(spec.repeats):
+        seed = spec.seed + r
+        model = cls.from_assignments(spec.assignments(config, seed))
+        t0 = time.perf_counter()
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", DivergenceWarning)
+            model.fit(est)
+        fit_s = time.perf_counter() - t0
+        runs.append({"config": dict(config), "repeat": r, "seed": seed, "n_parameters": model.n_parameters_,
+                     "fit_seconds": fit_s, "estimation": evaluate(model, est), "validation": evaluate(model, val),
+                     "pid": os.getpid()})
+    return runs
+
+
+def _objective_value(runs: list[dict[str, Any]]) -> float:
+    vals = [run["validation"]["free_run"]["r2"] for run in runs]
+    vals = [DIVERGED_OBJECTIVE if v is None or not math.isfinite(v) else max(v, DIVERGED_OBJECTIVE) for v in vals]
+    return float(np.mean(vals))
+
+
+def _clean(obj: Any) -> Any:
+    if isinstance(obj, dict):
+        return {k: _clean(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_clean(v) for v in obj]
+    if isinstance(obj, (np.floating, float)):
+        return float(obj) if math.isfinite(obj) else None
+    if isinstance(obj, np.integer):
+        return int(obj)
+    return obj
+
+
+def _done_keys(study) -> set[str]:
+    from optuna.trial import TrialState
+
+    return {t.user_attrs["config_key"] for t in study.get_trials(deepcopy=False, states=(TrialState.COMPLETE,))
+            if "config_key" in t.user_attrs}
+
+
+def _make_objective(spec: SweepSpec, est, val) -> Callable:
+    import optuna
+
+    def objective(trial: "optuna.Trial") -> float:
+        config = {k: trial.suggest_categorical(k, v) for k, v in spec.grid.items()}
+        key = config_key(config)
+        if key in _done_keys(trial.study):
+            raise optuna.TrialPruned("configuration already done")  # random/TPE redraw; cheap
+        trial.set_user_attr("config_key", key)
+        runs = run_config(spec, config, est, val)
+        trial.set_user_attr("runs", _clean(runs))
+        return _objective_value(runs)
+
+    return objective
+
+
+def _requeue_failed(study, spec: SweepSpec) -> int:
+    """Resume: configurations whose trial failed (interrupted, error) and never completed run again."""
+    from optuna.trial import TrialState
+
+    trials = study.get_trials(deepcopy=False)
+    done = {t.user_attrs.get("config_key") for t in trials if t.state == TrialState.COMPLETE}
+    pending = {config_key({k: str(v) for k, v in t.params.items()}) for t in trials if t.state == TrialState.WAITING}
+    n = 0
+    for t in trials:
+        if t.state != TrialState.FAIL or not t.params or set(t.params) != set(spec.grid):
+            continue
+        key = config_key({k: str(v) for k, v in t.params.items()})
+        if key in done or key in pending:
+            continue
+        study.enqueue_trial(dict(t.params), skip_if_exists=False)
+        pending.add(key)
+        n += 1
+    return n
+
+
+def _worker_loop(spec: SweepSpec, url: str, study_name: str, est, val, target: int,
+                 on_trial: Callable[[], None] | None = None, barrier=None) -> None:
+    import optuna
+
+    study = open_study(spec, url, study_name, create=False)
+    objective = _make_objective(spec, est, val)
+    if barrier is not None:
+        barrier.wait(timeout=300)
+    attempts = 0
+    while len(_done_keys(study)) < target and attempts < 50 * max(target, 1):
+        attempts += 1
+        study.optimize(objective, n_trials=1, catch=(), gc_after_trial=False)
+        if on_trial is not None:
+            on_trial()
+
+
+def _worker_main(spec_d: dict, url: str, study_name: str, est, val, target: int, barrier) -> None:
+    from sysid.neural.device import configure_threads
+
+    configure_threads(1)
+    _worker_loop(SweepSpec(**spec_d), url, study_name, est, val, target, barrier=barrier)
+
+
+def run_sweep(spec: SweepSpec, est: Record | Sequence[Record], val: Record | Sequence[Record], storage: str | None = None,
+              study: str = "piezotwin-search", trials: int | None = None, workers: int = 1, progress: bool = True,
+              ) -> dict[str, Any]:
+    """Run (or resume) a sweep; returns :func:`summarise` of everything the study holds."""
+    from tqdm import tqdm
+
+    url = storage_url(storage, study)
+    st = open_study(spec, url, study)
+    n_all = spec.n_configs
+    target = n_all if trials is None else int(trials)
+    if target < 1:
+        raise ConfigError(f"--trials must be ≥ 1, got {trials}")
+    target = min(target, n_all)
+    _requeue_failed(st, spec)
+    done0 = len(_done_keys(st))
+    bar = tqdm(total=target, initial=min(done0, target), unit="config", desc=f"{spec.identifier} sweep",
+               disable=not progress, file=sys.stderr, dynamic_ncols=True)
+    try:
+        if workers <= 1:
+            def tick() -> None:
+                bar.n = min(len(_done_keys(st)), target)
+                bar.refresh()
+
+            _worker_loop(spec, url, study, est, val, target, on_trial=tick)
+        else:
+            ctx = mp.get_context("spawn")
+            barrier = ctx.Barrier(int(workers))
+            procs = [ctx.Process(target=_worker_main, args=(asdict(spec), url, study, est, val, target, barrier), daemon=False)
+                     for _ in range(int(workers))]
+            for p in procs:
+                p.start()
+            try:
+                while any(p.is_alive() for p in procs):
+                    time.sleep(1.0)
+                    bar.n = min(len(_done_keys(st)), target)
+                    bar.refresh()
+            except KeyboardInterrupt:
+                for p in procs:
+                    p.terminate()
+                raise
+            for p in procs:
+                p.join()
+            bad = [p.exitcode for p in procs if p.exitcode != 0]
+            if bad:
+                raise RuntimeError(f"search: {len(bad)} worker process(es) failed (exit codes {bad}); rerun to resume")
+        bar.n = min(len(_done_keys(st)), target)
+        bar.refresh()
+    finally:
+        bar.close()
+    return summarise(collect(url, study))
+
+
+# ---------------------------------------------------------------------------------------------- results
+def collect(url: str, study_name: str) -> list[dict[str, Any]]:
+    """All finished runs of a study (one dict per run, first complete trial of each configuration)."""
+    import optuna
+    from optuna.trial import TrialState
+
+    st = optuna.load_study(study_name=study_name, storage=_open_storage(url))
+    seen: set[str] = set()
+    runs: list[dict[str, Any]] = []
+    for t in sorted(st.get_trials(deepcopy=False, states=(TrialState.COMPLETE,)), key=lambda t: t.number):
+        key = t.user_attrs.get("config_key")
+        if key is None or key in seen:
+            continue
+        seen.add(key)
+        for run in t.user_attrs.get("runs", []):
+            runs.append({"trial": t.number, "config_key": key, **run})
+    return runs
+
+
+def _stat(values: list[float | None]) -> tuple[float | None, float | None, int]:
+    v = np.array([x for x in values if x is not None and math.isfinite(x)], dtype=float)
+    if v.size == 0:
+        return None, None, 0
+    return float(v.mean()), (float(v.std(ddof=1)) if v.size > 1 else 0.0), int(v.size)
+
+
+def summarise(runs: list[dict[str, Any]]) -> dict[str, Any]:
+    """Per configuration: mean/SD of R² (one-step / free-run × estimation / validation), parameters, runs.
+
+    ``configs`` is ordered best first by mean validation free-run R² (Table 5.5 lists the same ascending);
+    ``best_runs`` are the individual runs of the best configuration (Table 5.6 analogue).
+    """
+    by: dict[str, list[dict[str, Any]]] = {}
+    for run in runs:
+        by.setdefault(run["config_key"], []).append(run)
+    configs = []
+    for key, rs in by.items():
+        entry: dict[str, Any] = {"config": rs[0]["config"], "config_key": key, "n_parameters": rs[0]["n_parameters"],
+                                 "runs": len(rs), "fit_seconds_mean": float(np.mean([r["fit_seconds"] for r in rs]))}
+        for part, mode in R2_KEYS:
+            mean, sd, n_ok = _stat([r[part][mode]["r2"] for r in rs])
+            tag = f"{'est' if part == 'estimation' else 'val'}_{'osa' if mode == 'one_step' else 'frs'}"
+            entry[f"r2_{tag}_mean"] = mean
+            entry[f"r2_{tag}_sd"] = sd
+            if mode == "free_run":
+                entry[f"diverged_{tag}"] = len(rs) - n_ok
+        configs.append(entry)
+    configs.sort(key=lambda e: -np.inf if e["r2_val_frs_mean"] is None else e["r2_val_frs_mean"], reverse=True)
+    best = configs[0]["config_key"] if configs else None
+    best_runs = sorted((r for r in runs if r["config_key"] == best),
+                       key=lambda r: -np.inf if r["validation"]["free_run"]["r2"] is None else r["validation"]["free_run"]["r2"])
+    return {"n_configs": len(configs), "n_runs": len(runs), "configs": configs,
+            "best": configs[0] if configs else None,
+            "best_runs": [{"repeat": r["repeat"], "seed": r["seed"],
+                           "r2_est_osa": r["estimation"]["one_step"]["r2"], "r2_est_frs": r["estimation"]["free_run"]["r2"],
+                           "r2_val_osa": r["validation"]["one_step"]["r2"], "r2_val_frs": r["validation"]["free_run"]["r2"]}
+                          for r in best_runs]}
+
+
+def export_jsonl(runs: list[dict[str, Any]], path: str | Path) -> Path:
+    """One JSON object per run (config, seed, n_parameters, fit_seconds, estimation/validation scores)."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with path.open("w") as fh:
+        for run in runs:
+            fh.write(json.dumps(_clean(run)) + "\n")
+    return path
+
+
+def plot_r2_distribution(runs: list[dict[str, Any]], config_key_: str, path: str | Path) -> Path:
+    """Fig. 5.13 analogue: histograms of free-run R² in estimation and validation with fitted normal curves."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    rs = [r for r in runs if r["config_key"] == config_key_]
+    fig, axes = plt.subplots(1, 2, figsize=(10, 3.8))
+    for ax, part, title in zip(axes, ("estimation", "validation"), ("(a) estimation", "(b) validation")):
+        v = np.array([r[part]["free_run"]["r2"] for r in rs if r[part]["free_run"]["r2"] is not None], dtype=float)
+        v = v[np.isfinite(v)]
+        if v.size:
+            ax.hist(v, bins=max(5, min(30, v.size // 2)), density=True, alpha=0.6)
+            if v.size > 1 and v.std() > 0:
+                x = np.linspace(v.min(), v.max(), 200)
+                ax.plot(x, np.exp(-0.5 * ((x - v.mean()) / v.std(ddof=1)) ** 2) / (v.std(ddof=1) * np.sqrt(2 * np.pi)))
+            ax.set_title(f"{title}: mean {v.mean():.4f}, SD {v.std(ddof=1) if v.size > 1 else 0:.4f}, {v.size} runs")
+        ax.set_xlabel("free-run R²")
+    fig.suptitle(config_key_)
+    fig.tight_layout()
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path

@@ -1,0 +1,98 @@
+"""Structure sweeps (sysid.neural.search / `piezotwin search`): grid parsing, repeats, resume, two workers."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+pytest.importorskip("optuna")
+pytest.importorskip("torch")
+
+from benchmarks.cli import main  # noqa: E402
+from sysid.errors import ConfigError  # noqa: E402
+from sysid.io import write_record  # noqa: E402
+from sysid.neural.search import SweepSpec, collect, parse_grid, run_sweep, storage_url  # noqa: E402
+from tests.neural_systems import bouc_wen_record, multisine_input  # noqa: E402
+
+FIXED = {"epochs": "2", "lr": "1e-3", "device": "cpu"}
+
+
+@pytest.fixture(scope="module")
+def data():
+    est = bouc_wen_record(multisine_input(1200, 1000.0, 100.0, seed=1), 1000.0, f0=100.0)
+    val = bouc_wen_record(multisine_input(600, 1000.0, 100.0, seed=2), 1000.0, f0=100.0)
+    return est, val
+
+
+def test_parse_grid():
+    g = parse_grid("lags=2..4;hidden=25-25,25-25-25-25;activation=relu,tanh", "narx-mlp")
+    assert g == {"lags": ["2", "3", "4"], "hidden": ["25-25", "25-25-25-25"], "activation": ["relu", "tanh"]}
+    spec = SweepSpec("narx-mlp", g, repeats=3, fixed={"epochs": "5"})
+    assert spec.n_configs == 12
+    a = spec.assignments({"lags": "3", "hidden": "25-25", "activation": "tanh"}, seed=7)
+    assert a == {"epochs": "5", "n_y": "3", "n_u": "3", "hidden": "25-25", "activation": "tanh", "seed": "7"}
+    for bad in ("nosuch=1", "lags=a", "hidden", "lags=5..2", ""):
+        with pytest.raises(ConfigError):
+            parse_grid(bad, "narx-mlp")
+    with pytest.raises(ConfigError):
+        SweepSpec("narx-mlp", g, fixed={"n_y": "3"})  # conflicts with lags in the grid
+
+
+def test_grid_sweep_repeats_and_resume(tmp_path, data):
+    est, val = data
+    spec = SweepSpec("narx-mlp", parse_grid("lags=2,3;hidden=4,6", "narx-mlp"), repeats=2, fixed=FIXED)
+    db = tmp_path / "s.db"
+    first = run_sweep(spec, est, val, storage=str(db), study="t", trials=2, progress=False)
+    assert first["n_configs"] == 2 and first["n_runs"] == 4
+    done_first = {c["config_key"] for c in first["configs"]}
+    # "resume": the same sweep without the trial limit runs only the two missing configurations
+    second = run_sweep(spec, est, val, storage=str(db), study="t", progress=False)
+    assert second["n_configs"] == 4 and second["n_runs"] == 8
+    runs = collect(storage_url(str(db), "t"), "t")
+    trials_of = {}
+    for r in runs:
+        trials_of.setdefault(r["config_key"], set()).add(r["trial"])
+    assert all(len(v) == 1 for v in trials_of.values())  # no configuration ran twice
+    assert done_first <= set(trials_of)
+    for c in second["configs"]:
+        assert c["runs"] == 2 and c["n_parameters"] > 0
+        assert c["r2_est_osa_mean"] is not None and c["r2_est_osa_sd"] is not None
+    # parameter count follows the structure: lags 3, widths 6 → 6 inputs, 6 hidden, 1 output
+    c = next(c for c in second["configs"] if c["config"] == {"lags": "3", "hidden": "6"})
+    assert c["n_parameters"] == 6 * 6 + 6 + 6 + 1
+    # a different sweep may not reuse the study
+    with pytest.raises(ConfigError):
+        run_sweep(SweepSpec("narx-mlp", parse_grid("lags=5", "narx-mlp"), fixed=FIXED), est, val, storage=str(db),
+                  study="t", progress=False)
+
+
+def test_two_worker_processes_share_one_sqlite_storage(tmp_path, data):
+    est, val = data
+    spec = SweepSpec("narx-mlp", parse_grid("lags=2,3;hidden=4,5", "narx-mlp"), repeats=1, fixed=FIXED)
+    res = run_sweep(spec, est, val, storage=str(tmp_path / "w.db"), study="w", workers=2, progress=False)
+    assert res["n_configs"] == 4 and res["n_runs"] == 4
+    runs = collect(storage_url(str(tmp_path / "w.db"), "w"), "w")
+    assert len({r["pid"] for r in runs}) == 2  # both workers ran configurations
+
+
+def test_cli_search_json_and_export(tmp_path, data, capsys):
+    est, val = data
+    write_record(est, tmp_path / "est.npz")
+    write_record(val, tmp_path / "val.npz")
+    code = main(["search", "narx-mlp", "--est", str(tmp_path / "est.npz"), "--val", str(tmp_path / "val.npz"),
+                 "--grid", "lags=2;activation=relu,tanh", "--repeats", "2", "--set", "epochs=1,hidden=4,device=cpu",
+                 "--storage", str(tmp_path / "c.db"), "--sampler", "random", "--trials", "2", "--no-progress",
+                 "--export", str(tmp_path / "runs.jsonl"), "--plot", str(tmp_path / "r2.png"), "--json"])
+    assert code == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["n_configs"] == 2 and out["n_runs"] == 4 and len(out["best_runs"]) == 2
+    lines = (tmp_path / "runs.jsonl").read_text().splitlines()
+    assert len(lines) == 4
+    row = json.loads(lines[0])
+    for part in ("estimation", "validation"):
+        assert set(row[part]) == {"one_step", "free_run"}
+    assert (tmp_path / "r2.png").stat().st_size > 1000
+    assert main(["search", "narx-mlp", "--est", str(tmp_path / "est.npz"), "--val", str(tmp_path / "val.npz"),
+                 "--grid", "bogus=1", "--storage", str(tmp_path / "c2.db")]) == 2
