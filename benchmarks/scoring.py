@@ -57,19 +57,42 @@ SETTINGS: dict[str, dict[str, dict[str, Any]]] = {
         "cantilever-thesis": {"ny": 3, "nu": 3, "degree": 2},
         "cantilever-thesis-clean": {"ny": 3, "nu": 3, "degree": 2},
     },
-    "narx-mlp": {"*": {"n_y": 10, "n_u": 10, "hidden": [25, 25, 25, 25], "epochs": 30}},
-    "narx-mlp-sim": {"*": {"n_y": 10, "n_u": 10, "hidden": [25, 25, 25, 25], "epochs": 10}},
+    # Neural (they normalise internally): the dissertation's 4 x 25 ReLU, lags 10, with epochs sized so that
+    # each dataset costs seconds on 2 cores; small data get more epochs.
+    "narx-mlp": {
+        "*": {"n_y": 10, "n_u": 10, "hidden": [25, 25, 25, 25], "epochs": 10},
+        "cascaded-tanks": {"epochs": 200},
+        "piezo-tue": {"n_y": 1, "n_u": 2, "hidden": [25, 25], "epochs": 20},
+        "wiener-hammerstein": {"epochs": 5},
+    },
+    "narx-mlp-sim": {
+        "*": {"n_y": 10, "n_u": 10, "hidden": [25, 25, 25, 25], "epochs": 2},
+        "cascaded-tanks": {"epochs": 100},
+        "piezo-tue": {"n_y": 2, "n_u": 2, "hidden": [25, 25], "epochs": 5},
+        "wiener-hammerstein": {"epochs": 1},
+    },
     "rnn": {"*": {}},
 }
-# NARMAX: the NARX process structure of each dataset plus noise terms (ELS, a few iterations).
-SETTINGS["narmax-poly"] = {k: {**v, "ne": 2, "els_iter": 5} if k != "*" else {**v, "ne": 2, "els_iter": 5}
-                           for k, v in SETTINGS["narx-poly"].items()}
-QUICK_SETTINGS: dict[str, dict[str, dict[str, Any]]] = {}
+# The acoustic channel delays the input by its time of flight (~76 µs = ~510 samples at 6.75 MHz, found by
+# cross-correlation of u and y): the polynomial and linear models take the input from nk = 505 samples back.
+for _ident in ("arx", "armax", "narx-poly"):
+    for _d in ("acoustic-thesis", "acoustic-thesis-clean"):
+        SETTINGS[_ident][_d] = {**SETTINGS[_ident].get(_d, {}), "ny": 4, "nu": 4, "nk": 505}
+SETTINGS["narx-poly"]["acoustic-thesis"].update(degree=2)
+SETTINGS["narx-poly"]["acoustic-thesis-clean"].update(degree=2)
+# NARMAX: the NARX process structure of each dataset plus noise terms by ELS (two iterations: more made the
+# residual recursion of the noise terms blow up on several datasets in this build).
+SETTINGS["narmax-poly"] = {k: {**v, "ne": 2, "els_iter": 2} for k, v in SETTINGS["narx-poly"].items()}
+QUICK_SETTINGS: dict[str, dict[str, dict[str, Any]]] = {
+    "narx-mlp": {"*": {"epochs": 5}, "cascaded-tanks": {"epochs": 100}, "piezo-tue": {"epochs": 10},
+                 "wiener-hammerstein": {"epochs": 3}},
+    "narx-mlp-sim": {"*": {"epochs": 1}, "cascaded-tanks": {"epochs": 50}, "piezo-tue": {"epochs": 2}},
+}
 
 # Datasets of the quick check (small or fast enough for CI) and the sample budget of each part in quick mode:
 # estimation data and tests longer than this are cut to their first QUICK_MAX_SAMPLES samples.
 QUICK_DATASETS = ("silverbox", "wiener-hammerstein", "cascaded-tanks", "bouc-wen", "piezo-tue")
-QUICK_MAX_SAMPLES: dict[str, dict[str, int]] = {}
+QUICK_MAX_SAMPLES: dict[str, dict[str, int]] = {"wiener-hammerstein": {"est": 30_000}}
 
 # SysIdentPy FROLS on the same split: lags and degree per dataset (its defaults otherwise).
 SYSIDENTPY_SETTINGS: dict[str, dict[str, Any]] = {
@@ -450,8 +473,15 @@ def _check_rule(rule: dict[str, Any], by_key: dict[tuple[str, str, str], dict[st
     return out
 
 
+# Neural training is seeded but its float results depend on the BLAS / thread count of the machine: their
+# floors get a wider margin than the deterministic least-squares identifiers.
+STOCHASTIC_IDENTIFIERS = ("narx-mlp", "narx-mlp-sim", "rnn")
+STOCHASTIC_MARGIN = 0.5
+
+
 def make_floors(run: ScoreRun | dict[str, Any], margin: float = 0.15, previous: dict[str, Any] | None = None) -> dict[str, Any]:
-    """Baselines from a measured run: ceiling = measured free-run RMSE × (1 + margin) for each finite pair.
+    """Baselines from a measured run: ceiling = measured free-run RMSE × (1 + margin) for each finite pair
+    (× (1 + max(margin, STOCHASTIC_MARGIN)) for the neural identifiers).
 
     Rules of ``previous`` are kept. The run's mode gets new floors; other modes are kept.
     """
@@ -463,8 +493,9 @@ def make_floors(run: ScoreRun | dict[str, Any], margin: float = 0.15, previous: 
         rmse = (r.get("free_run") or {}).get("rmse")
         if r.get("status") != "ok" or not _finite(rmse):
             continue
+        m = max(margin, STOCHASTIC_MARGIN) if r["identifier"] in STOCHASTIC_IDENTIFIERS else margin
         floors.setdefault(r["identifier"], {}).setdefault(r["dataset"], {})[r["test"]] = {
-            "max_rmse": float(f"{rmse * (1.0 + margin):.4g}"), "measured": float(f"{rmse:.6g}"),
+            "max_rmse": float(f"{rmse * (1.0 + m):.4g}"), "measured": float(f"{rmse:.6g}"),
             "units": r.get("units", ""), "r2_measured": float(f"{r['free_run']['r2']:.6g}"),
         }
     base.setdefault("modes", {})[data["mode"]] = floors

@@ -90,6 +90,8 @@ def summarise(data: dict[str, Any]) -> str:
         if ref is not None:
             rtxt = f"{_short(ref['name'])} ({_fmt_s(ref['stats']['mean'])})"
             ratio = f"{ref['stats']['mean'] / mean:.3g}×"
+        elif info.get("ratio") is not None:  # a ratio measured inside the benchmark (e.g. vs SysIdentPy)
+            rtxt, ratio = "measured in the benchmark", f"{float(info['ratio']):.3g}×"
         else:
             rtxt, ratio = "", ""
         tgt = info.get("target_s")
