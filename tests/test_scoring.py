@@ -157,3 +157,9 @@ def test_score_cli_check_exit_codes(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "narx-poly on cascaded-tanks/test" in err
     assert main(["score", "--identifiers", "nosuch"]) == 2
+
+
+@pytest.mark.slow
+def test_quick_check_passes_on_this_build():
+    """What CI runs: `piezotwin score --quick --check` (about 1 CPU-minute)."""
+    assert main(["score", "--quick", "--check", "--no-sysidentpy", "--json"]) == 0
