@@ -70,7 +70,7 @@ def plot_correlation_tests(result: dict[str, Any], path, title: str = "residual 
         ax.set(title=f"{t['name']} ({'pass' if t['passed'] else 'fail'})", xlabel="lag τ")
     np.atleast_1d(axes)[0].set_ylabel("φ(τ)")
     np.atleast_1d(axes)[0].set_ylim(-1, 1)
-    fig.suptitle(f"{title}: band ±{result['band']:.3g} (95 %, N = {result['n']})")
+    fig.suptitle(f"{title}: band ±{result['band']:.3g} (95 %, N = {result['n']})", y=1.06)
     return _save(fig, path)
 
 
