@@ -212,3 +212,14 @@ def test_identify_cli_same_json_as_polynomial_models(tmp_path, plant, capsys, na
     m = load_model(model_file)
     assert m.n_parameters_ == out["n_parameters"]
     assert main(["identify", name, "--est", str(tmp_path / "est.npz"), "--set", "nosuch=1"]) == 2
+
+
+def test_model_trained_for_cuda_loads_and_predicts_on_cpu(plant, tmp_path):
+    est, val = plant
+    m = NARXMLP(n_y=2, n_u=2, hidden=[4], epochs=1, device="cpu").fit(est)
+    ref = m.predict(val, None)
+    m.device = "cuda"  # as saved by a GPU run; prediction never needs the training device
+    for suffix in (".pt", ".json"):
+        m2 = load_model(m.save(tmp_path / f"gpu{suffix}"))
+        assert m2.device == "cuda"
+        np.testing.assert_array_equal(m2.predict(val, None), ref)

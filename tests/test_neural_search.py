@@ -96,3 +96,31 @@ def test_cli_search_json_and_export(tmp_path, data, capsys):
     assert (tmp_path / "r2.png").stat().st_size > 1000
     assert main(["search", "narx-mlp", "--est", str(tmp_path / "est.npz"), "--val", str(tmp_path / "val.npz"),
                  "--grid", "bogus=1", "--storage", str(tmp_path / "c2.db")]) == 2
+
+
+def test_interrupted_sweep_resumes(tmp_path, data, monkeypatch):
+    """Ctrl-C in the middle of the second configuration: the rerun keeps the finished one, reruns the
+    interrupted one and runs the rest."""
+    import sysid.neural.search as S
+
+    est, val = data
+    spec = SweepSpec("narx-mlp", parse_grid("lags=2,3,4", "narx-mlp"), repeats=1, fixed=FIXED)
+    real = S.run_config
+    calls = []
+
+    def flaky(*args, **kwargs):
+        calls.append(args[1])
+        if len(calls) == 2:
+            raise KeyboardInterrupt
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(S, "run_config", flaky)
+    with pytest.raises(KeyboardInterrupt):
+        run_sweep(spec, est, val, storage=str(tmp_path / "i.db"), study="i", progress=False)
+    monkeypatch.setattr(S, "run_config", real)
+    res = run_sweep(spec, est, val, storage=str(tmp_path / "i.db"), study="i", progress=False)
+    assert res["n_configs"] == 3 and res["n_runs"] == 3
+    runs = collect(storage_url(str(tmp_path / "i.db"), "i"), "i")
+    first = S.config_key(calls[0])
+    assert sum(r["config_key"] == first for r in runs) == 1  # the finished configuration was not rerun
+    assert S.config_key(calls[1]) in {r["config_key"] for r in runs}  # the interrupted one was

@@ -82,7 +82,7 @@ class _NeuralNARXBase(Identifier):
     name = "narx-mlp-base"
 
     # ------------------------------------------------------------------ checks
-    def _check_params(self) -> None:
+    def _check_params(self, check_device: bool = True) -> None:
         for key in ("n_y", "n_u"):
             v = getattr(self, key)
             if not isinstance(v, (int, np.integer)) or isinstance(v, bool) or not 0 <= v <= MAX_LAG:
@@ -103,7 +103,8 @@ class _NeuralNARXBase(Identifier):
                 raise ConfigError(f"{self.name}: {key}={v!r} must be a positive integer")
         if not isinstance(self.seed, (int, np.integer)) or isinstance(self.seed, bool):
             raise ConfigError(f"{self.name}: seed={self.seed!r} must be an integer")
-        select_device(self.device)
+        if check_device:  # a saved model trained on a GPU must still load (and predict) on a CPU machine
+            select_device(self.device)
 
     # ------------------------------------------------------------------ fit
     def fit(self, data: Record | Sequence[Record]) -> "_NeuralNARXBase":
@@ -239,7 +240,7 @@ class _NeuralNARXBase(Identifier):
         }
 
     def _load_state(self, state: dict[str, Any]) -> None:
-        self._check_params()
+        self._check_params(check_device=False)
         self.weights_ = np.asarray(state["weights"], dtype=np.float64)
         self.sizes_ = [int(s) for s in state["sizes"]]
         if int(np.sum([a * b + b for a, b in zip(self.sizes_[:-1], self.sizes_[1:])])) != self.weights_.size:
@@ -338,8 +339,8 @@ class NARXMLPSim(_NeuralNARXBase):
         self.pretrain_epochs = pretrain_epochs
         self.pretrain_lr = pretrain_lr
 
-    def _check_params(self) -> None:
-        super()._check_params()
+    def _check_params(self, check_device: bool = True) -> None:
+        super()._check_params(check_device)
         if not isinstance(self.window, (int, np.integer)) or isinstance(self.window, bool) or not 1 <= self.window <= 100_000:
             raise ConfigError(f"{self.name}: window={self.window!r} must be an integer in [1, 100000]")
         if not isinstance(self.pretrain_epochs, (int, np.integer)) or self.pretrain_epochs < 0:

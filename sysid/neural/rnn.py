@@ -106,7 +106,7 @@ class RNNStateSpace(Identifier):
         self.device = device
 
     # ------------------------------------------------------------------ checks
-    def _check_params(self) -> None:
+    def _check_params(self, check_device: bool = True) -> None:
         def pos_int(key: str, lo: int, hi: int) -> None:
             v = getattr(self, key)
             if not isinstance(v, (int, np.integer)) or isinstance(v, bool) or not lo <= v <= hi:
@@ -129,7 +129,8 @@ class RNNStateSpace(Identifier):
             raise ConfigError(f"{self.name}: clip={self.clip!r} must be ≥ 0")
         if not isinstance(self.seed, (int, np.integer)) or isinstance(self.seed, bool):
             raise ConfigError(f"{self.name}: seed={self.seed!r} must be an integer")
-        select_device(self.device)
+        if check_device:  # a saved model trained on a GPU must still load (and predict) on a CPU machine
+            select_device(self.device)
 
     def _build(self, nu: int, ny: int) -> _Net:
         return _Net(self.n_enc * (nu + ny), self.enc_hidden, int(self.n_state), nu, ny, self.cell)
@@ -262,7 +263,7 @@ class RNNStateSpace(Identifier):
                 "device_used": self.device_used_, "fit_seconds": float(self.fit_seconds_)}
 
     def _load_state(self, state: dict[str, Any]) -> None:
-        self._check_params()
+        self._check_params(check_device=False)
         self.n_inputs_, self.n_outputs_ = int(state["n_inputs"]), int(state["n_outputs"])
         ref = self._build(self.n_inputs_, self.n_outputs_).state_dict()
         sd = {}

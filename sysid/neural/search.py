@@ -11,7 +11,7 @@ to b; the key ``lags`` sets ``n_y`` and ``n_u`` together (``n_enc`` for ``rnn``)
 
     lags=5,10;hidden=25-25,25-25-25-25;activation=relu,tanh
 
-Samplers: ``grid`` (every combination), ``random`` and ``tpe`` (Bayesian, Optuna's Tree-structured Parzen
+Samplers: ``grid`` (every combination, queued in the storage so that all workers share one queue), ``random`` and ``tpe`` (Bayesian, Optuna's Tree-structured Parzen
 Estimator) draw ``trials`` distinct configurations from the same choices. One Optuna trial is one
 configuration with all its repeats (per-run results in the trial's user attributes).
 
@@ -193,9 +193,10 @@ def _open_storage(url: str):
 def _make_sampler(spec: SweepSpec):
     import optuna
 
-    if spec.sampler == "grid":
-        return optuna.samplers.GridSampler(spec.grid, seed=spec.seed)
-    if spec.sampler == "random":
+    if spec.sampler in ("grid", "random"):
+        # grid: every configuration is queued explicitly (enqueue_trial), so the sampler never draws; queued
+        # trials survive interruptions and are shared by all workers (Optuna's GridSampler cannot re-queue a
+        # failed grid point: its after_trial needs a grid_id that enqueued trials lack).
         return optuna.samplers.RandomSampler(seed=spec.seed)
     return optuna.samplers.TPESampler(seed=spec.seed, n_startup_trials=5)
 
@@ -274,6 +275,8 @@ def _make_objective(spec: SweepSpec, est, val) -> Callable:
     import optuna
 
     def objective(trial: "optuna.Trial") -> float:
+        if spec.sampler == "grid" and "fixed_params" not in trial.study._storage.get_trial_system_attrs(trial._trial_id):
+            raise optuna.TrialPruned("grid sweep: no queued configuration left")  # a worker raced past the queue
         config = {k: trial.suggest_categorical(k, v) for k, v in spec.grid.items()}
         key = config_key(config)
         if key in _done_keys(trial.study):
@@ -284,6 +287,41 @@ def _make_objective(spec: SweepSpec, est, val) -> Callable:
         return _objective_value(runs)
 
     return objective
+
+
+def _grid_configs(spec: SweepSpec) -> list[dict[str, str]]:
+    import itertools
+
+    keys = list(spec.grid)
+    return [dict(zip(keys, values)) for values in itertools.product(*(spec.grid[k] for k in keys))]
+
+
+def _queue_grid(study, spec: SweepSpec, target: int) -> int:
+    """Queue the grid configurations that are neither finished nor queued/running, up to ``target`` in all."""
+    from optuna.trial import TrialState
+
+    trials = study.get_trials(deepcopy=False)
+    done = {t.user_attrs.get("config_key") for t in trials if t.state == TrialState.COMPLETE}
+    busy = {config_key({k: str(v) for k, v in t.params.items()}) if t.params else
+            config_key({k: str(v) for k, v in t.system_attrs.get("fixed_params", {}).items()})
+            for t in trials if t.state in (TrialState.WAITING, TrialState.RUNNING)}
+    room = target - len(done & {config_key(c) for c in _grid_configs(spec)}) - len(busy)
+    n = 0
+    for cfg in _grid_configs(spec):
+        if n >= room:
+            break
+        key = config_key(cfg)
+        if key in done or key in busy:
+            continue
+        study.enqueue_trial(cfg, skip_if_exists=False)
+        n += 1
+    return n
+
+
+def _n_waiting(study) -> int:
+    from optuna.trial import TrialState
+
+    return len(study.get_trials(deepcopy=False, states=(TrialState.WAITING,)))
 
 
 def _requeue_failed(study, spec: SweepSpec) -> int:
@@ -315,7 +353,12 @@ def _worker_loop(spec: SweepSpec, url: str, study_name: str, est, val, target: i
     if barrier is not None:
         barrier.wait(timeout=300)
     attempts = 0
-    while len(_done_keys(study)) < target and attempts < 50 * max(target, 1):
+    while attempts < 50 * max(target, 1):
+        if spec.sampler == "grid":
+            if _n_waiting(study) == 0:
+                break
+        elif len(_done_keys(study)) >= target:
+            break
         attempts += 1
         study.optimize(objective, n_trials=1, catch=(), gc_after_trial=False)
         if on_trial is not None:
@@ -342,7 +385,15 @@ def run_sweep(spec: SweepSpec, est: Record | Sequence[Record], val: Record | Seq
     if target < 1:
         raise ConfigError(f"--trials must be ≥ 1, got {trials}")
     target = min(target, n_all)
-    _requeue_failed(st, spec)
+    from optuna.storages import fail_stale_trials
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # Optuna marks the heartbeat API experimental
+        fail_stale_trials(st)  # trials of a killed worker (heartbeat older than the grace period) are re-queued
+    if spec.sampler == "grid":
+        _queue_grid(st, spec, target)
+    else:
+        _requeue_failed(st, spec)
     done0 = len(_done_keys(st))
     bar = tqdm(total=target, initial=min(done0, target), unit="config", desc=f"{spec.identifier} sweep",
                disable=not progress, file=sys.stderr, dynamic_ncols=True)
