@@ -27,7 +27,10 @@ from itertools import combinations_with_replacement
 from typing import Iterator, Sequence
 
 import numpy as np
+from numba import njit
+from scipy.linalg.blas import dsyrk as _dsyrk
 
+from sysid._blas import blas_threads
 from sysid.errors import ConfigError, DataError
 
 __all__ = [
@@ -166,23 +169,85 @@ def term_columns(X: np.ndarray, terms, out: np.ndarray | None = None) -> np.ndar
     return out
 
 
+def _term_table(terms) -> np.ndarray:
+    d = max([len(t) for t in terms] + [1])
+    tab = -np.ones((len(terms), d), dtype=np.int64)
+    for j, t in enumerate(terms):
+        tab[j, : len(t)] = t
+    return tab
+
+
+@njit(cache=True)
+def _fill_rows(Z, a, n, col, lag, tab, n_out, out):
+    """out[i, j] = Π_d Z[a+i−lag[r], col[r]] over r = tab[j, d] (constant → 1); out[i, M+o] = Z[a+i, o] (= y_o).
+
+    Row-major so that each sample's candidate values are contiguous (the layout the BLAS rank-k update wants).
+    """
+    M = tab.shape[0]
+    D = tab.shape[1]
+    for i in range(n):
+        t = a + i
+        for j in range(M):
+            v = 1.0
+            for d in range(D):
+                r = tab[j, d]
+                if r < 0:
+                    break
+                v *= Z[t - lag[r], col[r]]
+            out[i, j] = v
+        for o in range(n_out):
+            out[i, M + o] = Z[t, o]
+
+
+def _signal_matrix(rec, structure: Structure, e) -> np.ndarray:
+    """[y | u | e] columns of one record (the layout of :mod:`sysid.simulate`)."""
+    N = len(rec)
+    parts = [_as2d(rec.y), _as2d(rec.u)]
+    if structure.has_e:
+        if e is None:
+            raise DataError("noise regressors need residuals (internal: e_list missing)")
+        parts.append(_as2d(e))
+    return np.ascontiguousarray(np.hstack(parts).reshape(N, -1), dtype=np.float64)
+
+
 def gram_matrix(records, structure: Structure, terms=None, e_list=None, chunk: int = DEFAULT_CHUNK):
-    """One pass: ``G = [P Y]ᵀ [P Y]`` over all records (P = candidate columns, Y = outputs) and the row count."""
+    """One pass: ``G = [P Y]ᵀ [P Y]`` over all records (P = candidate columns, Y = outputs) and the row count.
+
+    Rows are built ``chunk`` at a time by a compiled loop and added with a BLAS symmetric rank-k update
+    (``dsyrk``), so memory stays at chunk × (M + n_outputs) × 8 bytes whatever N is.
+    """
     terms = structure.terms if terms is None else terms
     M = len(terms)
-    K = M + structure.n_outputs
-    G = np.zeros((K, K))
+    n_out = structure.n_outputs
+    K = M + n_out
+    G = np.zeros((K, K), order="F")
+    tab = _term_table(terms)
+    col = np.array([structure.column_of(r) for r in range(len(structure.regressors))], dtype=np.int64)
+    lag = np.array([lg for _, _, lg in structure.regressors], dtype=np.int64)
+    L = structure.max_lag
     n_rows = 0
-    buf = None
-    for X, Y in lagged_chunks(records, structure, e_list, chunk):
-        n = X.shape[0]
-        if buf is None or buf.shape[0] != n:
-            buf = np.empty((n, K), order="F")
-        term_columns(X, terms, buf[:, :M])
-        buf[:, M:] = Y
-        G += buf.T @ buf
-        n_rows += n
-    return G, n_rows
+    buf = np.empty((max(1, int(chunk)), K))
+    with blas_threads():
+        n_rows = _accumulate(records, structure, e_list, chunk, L, col, lag, tab, n_out, buf, G)
+    G = np.triu(G) + np.triu(G, 1).T
+    return np.ascontiguousarray(G), n_rows
+
+
+def _accumulate(records, structure, e_list, chunk, L, col, lag, tab, n_out, buf, G) -> int:
+    n_rows = 0
+    for idx, rec in enumerate(records):
+        Z = _signal_matrix(rec, structure, None if e_list is None else e_list[idx])
+        N = Z.shape[0]
+        for a in range(L, N, chunk):
+            n = min(N, a + chunk) - a
+            b = buf[:n]
+            _fill_rows(Z, a, n, col, lag, tab, n_out, b)
+            # b is C-ordered (n × K): its transpose is a Fortran K × n matrix, so syrk computes bᵀb without a copy
+            G2 = _dsyrk(1.0, b.T, beta=1.0, c=G, trans=0, lower=0, overwrite_c=1)
+            if G2 is not G:  # pragma: no cover - f2py copied (should not happen for a Fortran-ordered G)
+                G[...] = G2
+            n_rows += n
+    return n_rows
 
 
 # ---------------------------------------------------------------------------------------------------- FROLS
@@ -305,14 +370,15 @@ def least_squares(records, structure: Structure, terms, output: int = 0, e_list=
     R = np.zeros((0, k + 1))
     n_rows = 0
     buf = None
-    for X, Y in lagged_chunks(records, structure, e_list, chunk):
-        n = X.shape[0]
-        if buf is None or buf.shape[0] != n:
-            buf = np.empty((n, k + 1), order="F")
-        term_columns(X, terms, buf[:, :k])
-        buf[:, k] = Y[:, output]
-        R = np.linalg.qr(np.vstack([R, buf]), mode="r")
-        n_rows += n
+    with blas_threads():
+        for X, Y in lagged_chunks(records, structure, e_list, chunk):
+            n = X.shape[0]
+            if buf is None or buf.shape[0] != n:
+                buf = np.empty((n, k + 1), order="F")
+            term_columns(X, terms, buf[:, :k])
+            buf[:, k] = Y[:, output]
+            R = np.linalg.qr(np.vstack([R, buf]), mode="r")
+            n_rows += n
     if n_rows <= k:
         raise DataError(f"too few samples ({n_rows} usable rows) for {k} parameters")
     if R.shape[0] < k + 1:

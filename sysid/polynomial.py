@@ -284,6 +284,18 @@ class NARXPoly(PolynomialModel):
             self.criterion_values_.append(res.criterion_values)
 
 
+def _recursive_residuals_impl(model: PolynomialModel, records, s, terms_all, thetas) -> list[np.ndarray]:
+    model.structure_, model.terms_, model.theta_ = s, terms_all, thetas
+    model._compiled = None
+    m = model.compiled()
+    out = []
+    for rec in records:
+        _, e = sim.one_step(m, rec.u.reshape(len(rec), -1), rec.y.reshape(len(rec), -1))
+        out.append(e)
+    model._compiled = None
+    return out
+
+
 class NARMAXPoly(PolynomialModel):
     """Polynomial NARMAX by ELS-FROLS (§2.6 steps 1–4, eq. 2-6/2-7).
 
@@ -296,7 +308,7 @@ class NARMAXPoly(PolynomialModel):
 
     def __init__(self, ny: int = 2, nu: int = 2, ne: int = 2, nk: int = 1, degree: int = 2, criterion: str = "bic",
                  rho_p: float = 1e-4, rho_n: float = 1e-3, max_terms: int = 40, els_iter: int = 20,
-                 els_tol: float = 1e-8, constant: bool = True, chunk: int = fr.DEFAULT_CHUNK):
+                 els_tol: float = 1e-6, constant: bool = True, chunk: int = fr.DEFAULT_CHUNK):
         self.ny = ny
         self.nu = nu
         self.ne = ne
@@ -310,6 +322,10 @@ class NARMAXPoly(PolynomialModel):
         self.els_tol = els_tol
         self.constant = constant
         self.chunk = chunk
+
+    def _recursive_residuals(self, records, s, terms_all, thetas) -> list[np.ndarray]:
+        """One-step prediction errors of the current model, e computed recursively (pseudo-linear regression)."""
+        return _recursive_residuals_impl(self, records, s, terms_all, thetas)
 
     def _fit_records(self, records: list[Record]) -> None:
         _check_common(self)
@@ -334,26 +350,34 @@ class NARMAXPoly(PolynomialModel):
                   for o in range(n_out)]
         e_list = fr.fitted_residuals(records, s, proc_sel, thetas, e_list=zeros, chunk=self.chunk)
         # Step 3: noise terms on the residuals, extended least squares until terms and parameters settle.
-        union_proc = sorted({t for ts in proc_sel for t in ts})
+        # With criterion="err" the process terms of step 2 stay and noise terms are added while ERR >= rho_n.
+        # With an information criterion, process and noise terms are re-selected together on every iteration
+        # (the coloured residuals of step 2 make the criterion accept spurious process terms that the noise
+        # terms then explain).
+        joint = self.criterion != "err"
+        union_proc = process if joint else sorted({t for ts in proc_sel for t in ts})
         cand = union_proc + noise
-        allowed = np.array([False] * len(union_proc) + [True] * len(noise))
         prev = None
         self.els_iterations_ = 0
+        self.els_converged_ = False
         for it in range(int(self.els_iter)):
             G, n = fr.gram_matrix(records, s, terms=cand, e_list=e_list, chunk=self.chunk)
             terms_all, errs_all, lss = [], [], []
             for o in range(n_out):
-                forced = [cand.index(t) for t in proc_sel[o]]
-                crit = self.criterion
-                max_terms = len(forced) + (self.max_terms if self.max_terms is not None else len(noise))
-                res = fr.frols(G, len(cand), o, n, crit, self.rho_n, max_terms, forced=forced, allowed=allowed,
-                               continue_err=True)
+                if joint:
+                    res = fr.frols(G, len(cand), o, n, self.criterion, self.rho_p, self.max_terms)
+                else:
+                    forced = [cand.index(t) for t in proc_sel[o]]
+                    allowed = np.array([False] * len(union_proc) + [True] * len(noise))
+                    max_terms = len(forced) + (self.max_terms if self.max_terms is not None else len(noise))
+                    res = fr.frols(G, len(cand), o, n, "err", self.rho_n, max_terms, forced=forced,
+                                   allowed=allowed, continue_err=True)
                 terms = [cand[j] for j in res.selected]
                 ls = fr.least_squares(records, s, terms, o, e_list=e_list, chunk=self.chunk)
                 terms_all.append(terms)
                 errs_all.append(res.err)
                 lss.append(ls)
-            new_e = fr.fitted_residuals(records, s, terms_all, [ls.theta for ls in lss], e_list=e_list, chunk=self.chunk)
+            new_e = self._recursive_residuals(records, s, terms_all, [ls.theta for ls in lss])
             self.els_iterations_ = it + 1
             cur = (terms_all, [ls.theta for ls in lss])
             done = False
@@ -364,6 +388,7 @@ class NARMAXPoly(PolynomialModel):
             prev = cur
             e_list = new_e
             if done:
+                self.els_converged_ = True
                 break
         # Step 4: final least squares on the residuals of the converged model.
         self.terms_, self.theta_, self.stderr_, self.err_ = [], [], [], []

@@ -32,31 +32,40 @@ __all__ = ["one_step", "free_run", "k_step"]
 
 
 @njit(cache=True, inline="always")
-def _eval(o, W, t, terms, n_terms, theta, col, lag):
-    """Model output ``o`` at row ``t`` of signal matrix ``W``: Σ_i θ_i Π_d W[t − lag, col] (eq. 2-7, 2-22)."""
+def _eval(o, W, t, fac, theta, n_terms, ncol):
+    """Model output ``o`` at row ``t`` of the flat signal matrix ``W``: Σ_i θ_i Π_d W[t·ncol + fac[o, i, d]]
+    (eq. 2-7, 2-22). ``fac`` holds flat offsets −lag·ncol + col; unused factors point at the ones column, so
+    the loop has no branch."""
     acc = 0.0
-    max_deg = terms.shape[2]
+    base = t * ncol
+    D = fac.shape[2]
+    if D == 2:  # the common degree-2 case, unrolled
+        for i in range(n_terms[o]):
+            acc += theta[o, i] * W[base + fac[o, i, 0]] * W[base + fac[o, i, 1]]
+        return acc
+    if D == 1:
+        for i in range(n_terms[o]):
+            acc += theta[o, i] * W[base + fac[o, i, 0]]
+        return acc
     for i in range(n_terms[o]):
         v = theta[o, i]
-        for d in range(max_deg):
-            r = terms[o, i, d]
-            if r < 0:
-                break
-            v *= W[t - lag[r], col[r]]
+        for d in range(D):
+            v *= W[base + fac[o, i, d]]
         acc += v
     return acc
 
 
 @njit(cache=True)
-def _one_step(Z, n_out, e_col0, has_e, L, terms, n_terms, theta, col, lag):
-    N = Z.shape[0]
+def _one_step(Z, n_out, e_col0, has_e, L, fac, theta, n_terms):
+    N, ncol = Z.shape
+    W = Z.reshape(N * ncol)
     yhat = np.empty((N, n_out))
     for t in range(min(L, N)):
         for o in range(n_out):
             yhat[t, o] = Z[t, o]
     for t in range(L, N):
         for o in range(n_out):
-            yhat[t, o] = _eval(o, Z, t, terms, n_terms, theta, col, lag)
+            yhat[t, o] = _eval(o, W, t, fac, theta, n_terms, ncol)
         if has_e:
             for o in range(n_out):
                 Z[t, e_col0 + o] = Z[t, o] - yhat[t, o]
@@ -64,14 +73,15 @@ def _one_step(Z, n_out, e_col0, has_e, L, terms, n_terms, theta, col, lag):
 
 
 @njit(cache=True)
-def _free_run(Z, n_out, L, terms, n_terms, theta, col, lag, bound):
+def _free_run(Z, n_out, L, fac, theta, n_terms, bound):
     """Simulate in place in the y columns of Z (e columns must be zero). Returns the divergence index or -1."""
-    N = Z.shape[0]
+    N, ncol = Z.shape
+    W = Z.reshape(N * ncol)
     for t in range(L, N):
         bad = False
         for o in range(n_out):
-            v = _eval(o, Z, t, terms, n_terms, theta, col, lag)
-            Z[t, o] = v
+            v = _eval(o, W, t, fac, theta, n_terms, ncol)
+            W[t * ncol + o] = v
             if not (abs(v) <= bound):  # catches nan too
                 bad = True
         if bad:
@@ -83,7 +93,7 @@ def _free_run(Z, n_out, L, terms, n_terms, theta, col, lag, bound):
 
 
 @njit(cache=True)
-def _k_step(Z, n_out, e_col0, has_e, L, k, terms, n_terms, theta, col, lag, bound):
+def _k_step(Z, n_out, e_col0, has_e, L, k, fac, theta, n_terms, bound):
     """k-step-ahead at every sample. Z holds measured y, u and (if has_e) one-step residuals in the e columns."""
     N = Z.shape[0]
     ncol = Z.shape[1]
@@ -94,7 +104,8 @@ def _k_step(Z, n_out, e_col0, has_e, L, k, terms, n_terms, theta, col, lag, boun
     first_bad = -1
     if N <= L:
         return yhat, first_bad
-    W = np.empty((L + k, ncol))
+    W2 = np.empty((L + k, ncol))
+    W = W2.reshape((L + k) * ncol)
     # origins s = L .. N-k; the prediction for t = s + k - 1 ends each window; the window from s = L also yields
     # every t < L + k - 1 (those have their origin clamped at L).
     last_origin = max(L, N - k)
@@ -103,33 +114,33 @@ def _k_step(Z, n_out, e_col0, has_e, L, k, terms, n_terms, theta, col, lag, boun
         # copy rows s-L .. s+steps-1
         for j in range(L + steps):
             for c in range(ncol):
-                W[j, c] = Z[s - L + j, c]
+                W2[j, c] = Z[s - L + j, c]
         for j in range(L, L + steps):
             for o in range(n_out):
-                W[j, o] = 0.0
+                W2[j, o] = 0.0
                 if has_e:
-                    W[j, e_col0 + o] = 0.0
+                    W2[j, e_col0 + o] = 0.0
         bad = False
         for j in range(L, L + steps):
             if not bad:
                 for o in range(n_out):
-                    v = _eval(o, W, j, terms, n_terms, theta, col, lag)
-                    W[j, o] = v
+                    v = _eval(o, W, j, fac, theta, n_terms, ncol)
+                    W2[j, o] = v
                     if not (abs(v) <= bound):
                         bad = True
             if bad:
                 for o in range(n_out):
-                    W[j, o] = np.nan
+                    W2[j, o] = np.nan
             if s == L:
                 t = j - L + s
                 for o in range(n_out):
-                    yhat[t, o] = W[j, o]
+                    yhat[t, o] = W2[j, o]
                 if bad and first_bad < 0:
                     first_bad = t
         if s > L:
             t = s + steps - 1
             for o in range(n_out):
-                yhat[t, o] = W[L + steps - 1, o]
+                yhat[t, o] = W2[L + steps - 1, o]
             if bad and first_bad < 0:
                 first_bad = t
     return yhat, first_bad
@@ -148,24 +159,29 @@ class CompiledModel:
         self.n_terms = np.ascontiguousarray(n_terms, dtype=np.int64)
         self.theta = np.ascontiguousarray(theta, dtype=np.float64)
         self.max_lag = int(max_lag)
+        # flat offsets: factor r of a term reads Z[t − lag_r, col_r] = Zflat[t·ncol − lag_r·ncol + col_r]; padding
+        # (−1) reads the trailing ones column of the same row.
+        self.ncol = self.n_out + self.n_in + (self.n_out if self.has_e else 0) + 1
+        off = np.append(-self.lag * self.ncol + self.col, self.ncol - 1)
+        self.fac = np.ascontiguousarray(off[np.where(self.terms < 0, off.size - 1, self.terms)], dtype=np.int64)
 
     def signal_matrix(self, u: np.ndarray, y: np.ndarray) -> np.ndarray:
         N = u.shape[0]
-        ncol = self.n_out + self.n_in + (self.n_out if self.has_e else 0)
-        Z = np.zeros((N, ncol))
+        Z = np.zeros((N, self.ncol))
         Z[:, : self.n_out] = y.reshape(N, -1)
         Z[:, self.n_out : self.n_out + self.n_in] = u.reshape(N, -1)
+        Z[:, -1] = 1.0
         return Z
 
     def _args(self):
-        return self.terms, self.n_terms, self.theta, self.col, self.lag
+        return self.fac, self.theta, self.n_terms
 
 
 def one_step(model: CompiledModel, u: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
     """One-step-ahead prediction ŷ(t|t−1) (N, n_out) and the residuals e (N, n_out) or None for NARX."""
     Z = model.signal_matrix(u, y)
     yhat = _one_step(Z, model.n_out, model.n_out + model.n_in, model.has_e, model.max_lag, *model._args())
-    e = Z[:, model.n_out + model.n_in :].copy() if model.has_e else None
+    e = Z[:, model.n_out + model.n_in : model.ncol - 1].copy() if model.has_e else None
     return yhat, e
 
 
@@ -188,7 +204,7 @@ def k_step(model: CompiledModel, u: np.ndarray, y: np.ndarray, k: int, bound: fl
     Z = model.signal_matrix(u, y)
     if model.has_e:
         _, e = one_step(model, u, y)
-        Z[:, model.n_out + model.n_in :] = e
+        Z[:, model.n_out + model.n_in : model.ncol - 1] = e
     N = Z.shape[0]
     k = int(min(k, max(N - model.max_lag, 1)))
     yhat, bad = _k_step(Z, model.n_out, model.n_out + model.n_in, model.has_e, model.max_lag, k, *model._args(),

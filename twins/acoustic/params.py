@@ -1,7 +1,7 @@
 """Parameters of the piezoacoustic twin (dataclass with units, ranges and sources; twins.base.pfield).
 
 Default stack (chosen in issue 4, see README section "acoustic" and :mod:`twins.acoustic.calibration`):
-PZT-4 2.15 mm | epoxy 100 µm | SS316 6.25 mm | water 100 mm at 24 °C | SS316 | epoxy | PZT-4, plates
+PZT-4 2.16 mm | epoxy 100 µm | SS316 6.25 mm | water 100 mm at 24 °C | SS316 | epoxy | PZT-4, plates
 70 × 25 mm, air backing, Tx driven through 50 Ω, Rx into 1 MΩ ∥ 15 pF. Its direct-path transmission peaks
 at ≈ 940 and ≈ 1162 kHz (dissertation Figure 3.9).
 """
@@ -31,8 +31,8 @@ class AcousticParams:
     salinity_psu: float = pfield(35.0, "‰", 0.0, 45.0, "salinity (seawater only)", source="notes B.6")
     # ---------------------------------------------------------------- transducers (identical Tx and Rx)
     piezo: str = pfield("pzt4", "", doc="piezoceramic", choices=_PIEZO_NAMES, source="notes B.4")
-    pzt_thickness_m: float = pfield(2.15e-3, "m", 0.2e-3, 10e-3, "PZT plate thickness",
-                                    source="notes B.7 candidate 1; checked in calibration.py")
+    pzt_thickness_m: float = pfield(2.16e-3, "m", 0.2e-3, 10e-3, "PZT plate thickness",
+                                    source="notes B.7 candidate 1 (2.15 mm) retuned to 2.16 mm: peaks 939.4 / 1162.4 kHz")
     pzt_qm: float = pfield(0.0, "", 0.0, 5000.0, "mechanical Q of the PZT (0 = material value)", source="notes B.4")
     epoxy_thickness_m: float = pfield(100e-6, "m", 0.0, 1e-3, "epoxy bond PZT–steel", source="notes B.7")
     steel: str = pfield("ss316", "", doc="plate steel", choices=_STEELS, source="notes B.4")

@@ -58,9 +58,12 @@ def excitation(protocol: str, fs: float = FS_ACQ, duration: float = 0.1, seed: i
         raise ConfigError(f"{protocol}: duration {duration} s gives fewer than 2 samples at {fs:g} Hz")
     if protocol == "thesis-chirp-100ms":
         # one 100 ms sweep; a shorter duration records the start of the same sweep (rate 4.5 kHz/ms unchanged)
-        u = signals.chirp(fs, 0.1, BAND_HZ[0], BAND_HZ[1], amplitude=0.040, method="linear")
-        if n > u.size:
+        full = int(round(0.1 * fs))
+        if n >= full:
+            u = signals.chirp(fs, 0.1, BAND_HZ[0], BAND_HZ[1], amplitude=0.040, method="linear")
             u = np.concatenate([u, np.zeros(n - u.size)])
+        else:  # the first n samples of the same sweep, without computing the other 10^7 - n
+            u = chirp_prefix(fs, 0.1, BAND_HZ[0], BAND_HZ[1], 0.040, n)
         return u[:n], False, {"sweep_s": 0.1, "vpp": 0.080}
     if protocol == "thesis-chirp-1ms":
         period = int(round(1e-3 * fs))
@@ -86,6 +89,16 @@ def excitation(protocol: str, fs: float = FS_ACQ, duration: float = 0.1, seed: i
                 {"awg_rate_hz": awg_rate_hz, "file_points": int(file_.size), "played_points": 5000,
                  "period_s": period_s, "crest_factor_file": float(info["crest_factor"])})
     raise ConfigError(f"{protocol} is not a time-domain protocol")
+
+
+def chirp_prefix(fs: float, sweep_s: float, f0: float, f1: float, amplitude: float, n: int) -> np.ndarray:
+    """First ``n`` samples of ``sysid.signals.chirp(fs, sweep_s, f0, f1, amplitude)`` (linear sweep, eq. 2-2):
+    cycles(k) = f0 t + (f1 − f0) t²/(2 T0), t = k/fs — the same expression, evaluated on a prefix only."""
+    k = np.arange(n, dtype=np.float64)
+    t0 = int(round(sweep_s * fs)) / fs
+    cycles = k * (f0 / fs) + (k * k) * ((f1 - f0) / (2.0 * t0 * fs * fs))
+    cycles -= np.floor(cycles)
+    return amplitude * np.cos(2.0 * np.pi * cycles)
 
 
 def recipe_steps() -> list[dict]:

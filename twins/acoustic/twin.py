@@ -81,7 +81,7 @@ EFFECTS: dict[str, EffectSpec] = {
 }
 
 _SINGLE_PRECISION_FROM = 1 << 21  # samples
-_RING_S = 0.5e-3  # margin after the last summed arrival for the transducers' ringing [s]
+_RING_S = 1.0e-3  # margin after the last summed arrival for the transducers' ringing [s] (tail < −60 dB)
 
 
 class AcousticTwin(Twin):
@@ -226,6 +226,18 @@ class AcousticTwin(Twin):
                 "time_of_flight_s": self.time_of_flight(), "fluid_delay_s": geo.distance_m / geo.fluid.speed,
                 "sound_speed_m_s": geo.fluid.speed}
 
+    def sweep_metrics(self, protocol: str | None = None, identify: bool = True) -> dict[str, Any]:
+        """Figures of ``piezotwin sweep`` (see :func:`twins.acoustic.studies.sweep_metrics`)."""
+        from twins.acoustic.studies import sweep_metrics
+
+        return sweep_metrics(self, protocol, identify)
+
+    def sweep_spectrum(self, band=(0.5e6, 2.0e6), points: int = 2000):
+        """(f, {"direct": dB, "full": dB}) of |V_rx/V_oc| for the sweep report's spectrum plot."""
+        from twins.acoustic.studies import sweep_spectrum
+
+        return sweep_spectrum(self, band, points)
+
     # ------------------------------------------------------------------ protocols
     def generate(self, protocol: str, **options: Any) -> Record:
         """Run a protocol (``PROTOCOLS``). Options (strings from the CLI are coerced): see PROTOCOLS."""
@@ -305,3 +317,4 @@ def recipe_filter_response(f_hz) -> np.ndarray:
     sos = bandpass_design(FS_RECIPE, BAND_HZ[0], BAND_HZ[1], 5)
     _, hb = sps.sosfreqz(sos, worN=np.minimum(f, FS_RECIPE / 2 * 0.999), fs=FS_RECIPE)
     return np.abs(ma) * np.abs(hb) ** 2
+

@@ -1,0 +1,249 @@
+"""FROLS / polynomial NARX-NARMAX: exact recovery, MIMO, separate experiments, zero-start columns, prediction
+modes, divergence, persistence, bad input, and a cross-check against SysIdentPy."""
+
+import warnings
+
+import numpy as np
+import pytest
+
+from sysid import frols as fr
+from sysid.base import load_model
+from sysid.errors import DataError, DivergenceWarning, InputError
+from sysid.polynomial import NARMAXPoly, NARXPoly
+from sysid.record import Record
+from sysid.residuals import correlation_tests
+from tests._polysys import TRUE_TERMS, narmax_record, narx_record, table
+
+
+@pytest.mark.parametrize("criterion", ["bic", "aic", "fpe", "lilc", "err"])
+def test_noise_free_narx_exact_recovery(criterion):
+    rec = narx_record()
+    m = NARXPoly(ny=2, nu=2, degree=2, criterion=criterion, rho_p=1e-8).fit(rec)
+    got = table(m)
+    assert set(got) == set(TRUE_TERMS)
+    for k, v in TRUE_TERMS.items():
+        assert abs(got[k] - v) < 1e-8
+    assert m.n_parameters_ == 4
+    # ERR of the selected terms sums to 1 for an exact model (eq. 2-21)
+    assert abs(sum(r["err"] for r in m.term_table()) - 1.0) < 1e-9
+
+
+def test_degree3_larger_lags_exact():
+    rng = np.random.default_rng(5)
+    n = 3000
+    u = rng.uniform(-1, 1, n)
+    y = np.zeros(n)
+    for k in range(4, n):
+        y[k] = 0.4 * y[k - 1] - 0.2 * y[k - 3] + 0.7 * u[k - 2] + 0.15 * u[k - 1] * u[k - 3] ** 2 + 0.05
+    m = NARXPoly(ny=4, nu=4, degree=3).fit(Record(u, y, fs=1.0))
+    want = {"y(k-1)": 0.4, "y(k-3)": -0.2, "u(k-2)": 0.7, "u(k-1)*u(k-3)^2": 0.15, "1": 0.05}
+    got = table(m)
+    assert set(got) == set(want)
+    assert max(abs(got[k] - v) for k, v in want.items()) < 1e-8
+
+
+def test_candidate_count_matches_formula():
+    # M = (n + l)! / (n! l!) with n = ny + nu = 20, l = 2  -> 231 (constant included)
+    regs = fr.make_regressors(10, 10)
+    assert len(fr.candidate_terms(len(regs), 2)) == 231
+    assert len(fr.candidate_terms(len(fr.make_regressors(2, 2, 3)), 3)) == 120
+
+
+def test_gram_matrix_equals_dense_product_across_chunks_and_records():
+    recs = [narx_record(700, seed=1), narx_record(500, seed=2)]
+    s = fr.Structure(fr.make_regressors(3, 2), fr.candidate_terms(5, 2))
+    G, n = fr.gram_matrix(recs, s, chunk=97)
+    rows = []
+    for r in recs:
+        for k in range(3, len(r)):
+            x = [r.y[k - 1], r.y[k - 2], r.y[k - 3], r.u[k - 1], r.u[k - 2]]
+            rows.append([np.prod([x[i] for i in t]) for t in s.terms] + [r.y[k]])
+    P = np.array(rows)
+    assert n == P.shape[0] == 697 + 497
+    np.testing.assert_allclose(G, P.T @ P, rtol=1e-12, atol=1e-9)
+
+
+def test_mimo_one_model_per_output_shared_regressors():
+    rng = np.random.default_rng(2)
+    n = 2000
+    u = rng.uniform(-1, 1, (n, 2))
+    y = np.zeros((n, 2))
+    for k in range(2, n):
+        y[k, 0] = 0.5 * y[k - 1, 0] + 0.8 * u[k - 1, 0] + 0.2 * y[k - 1, 1] * u[k - 1, 1]
+        y[k, 1] = -0.3 * y[k - 2, 1] + 0.6 * u[k - 1, 1] - 0.25 * u[k - 1, 0] ** 2
+    rec = Record(u, y, fs=1.0)
+    m = NARXPoly(ny=2, nu=2, degree=2).fit(rec)
+    assert table(m, 0).keys() == {"y1(k-1)", "u1(k-1)", "y2(k-1)*u2(k-1)"}
+    assert table(m, 1).keys() == {"y2(k-2)", "u2(k-1)", "u1(k-1)^2"}
+    assert abs(table(m, 0)["y2(k-1)*u2(k-1)"] - 0.2) < 1e-8
+    assert abs(table(m, 1)["u1(k-1)^2"] + 0.25) < 1e-8
+    yfr = m.predict(rec, None)
+    assert yfr.shape == y.shape
+    np.testing.assert_allclose(yfr, y, atol=1e-8)
+
+
+def test_separate_experiments_no_regressor_across_boundary():
+    a, b = narx_record(800, seed=11), narx_record(800, seed=12)
+    m = NARXPoly(ny=2, nu=2, degree=2).fit([a, b])
+    got = table(m)
+    assert set(got) == set(TRUE_TERMS) and max(abs(got[k] - v) for k, v in TRUE_TERMS.items()) < 1e-8
+    # Control: gluing the two experiments into one record creates rows that mix them; the fit is then not exact.
+    glued = Record(np.concatenate([a.u, b.u]), np.concatenate([a.y, b.y]), fs=1.0)
+    m2 = NARXPoly(ny=2, nu=2, degree=2, criterion="err", rho_p=1e-12, max_terms=4).fit(glued)
+    g2 = table(m2)
+    assert set(g2) != set(TRUE_TERMS) or max(abs(g2[k] - v) for k, v in TRUE_TERMS.items()) > 1e-6
+
+
+def test_zero_start_candidate_column_does_not_change_selection():
+    ref = NARXPoly(ny=2, nu=2, degree=2).fit(narx_record(1500, seed=4))
+    rec = narx_record(1500, seed=4, lead_zeros=300)  # data recorded from rest: every u column starts with zeros
+    assert np.all(rec.u[:300] == 0.0)
+    m = NARXPoly(ny=2, nu=2, degree=2).fit(rec)
+    assert [r["term"] for r in m.term_table()] == [r["term"] for r in ref.term_table()]
+    got = table(m)
+    assert max(abs(got[k] - v) for k, v in TRUE_TERMS.items()) < 1e-8
+
+
+def test_k_step_equals_one_step_and_free_run():
+    rec = narx_record(600, seed=7, noise=0.01)
+    m = NARXPoly(ny=2, nu=2, degree=2, criterion="bic").fit(rec)
+    y1 = m.predict(rec, 1)
+    np.testing.assert_array_equal(m.predict(rec, horizon=1), y1)
+    yk = m.predict(rec, len(rec))
+    yf = m.predict(rec, None)
+    np.testing.assert_array_equal(yk, yf)
+    assert np.array_equal(yf[:2], rec.y[:2]) and np.array_equal(y1[:2], rec.y[:2])
+
+
+def _naive_k_step(m, rec, k):
+    """Independent reference: restart a free run from measured data at origin max(t-k+1, L) for every t."""
+    L = m.max_lag_
+    out = rec.y.copy()
+    rows = m.term_table()
+    for t in range(L, len(rec)):
+        s = max(t - k + 1, L)
+        y = rec.y.copy()
+        for j in range(s, t + 1):
+            env = {"y": lambda lag, j=j: y[j - lag], "u": lambda lag, j=j: rec.u[j - lag]}
+            acc = 0.0
+            for r in rows:
+                v = r["parameter"]
+                if r["term"] != "1":
+                    for f in r["term"].split("*"):
+                        name, _, rest = f.partition("(k-")
+                        lag, _, p = rest.partition(")")
+                        v *= env[name](int(lag)) ** (int(p[1:]) if p else 1)
+                acc += v
+            y[j] = acc
+        out[t] = y[t]
+    return out
+
+
+@pytest.mark.parametrize("k", [2, 3, 7])
+def test_k_step_matches_naive_restart(k):
+    rec = narx_record(150, seed=8, noise=0.02)
+    m = NARXPoly(ny=2, nu=2, degree=2, criterion="aic").fit(rec)
+    np.testing.assert_allclose(m.predict(rec, k), _naive_k_step(m, rec, k), rtol=1e-12, atol=1e-12)
+
+
+def test_free_run_divergence_is_reported_not_raised():
+    rng = np.random.default_rng(0)
+    n = 400
+    u = rng.uniform(-0.3, 0.3, n)
+    y = np.zeros(n)
+    for k in range(1, n):  # quadratic feedback: stable for small inputs, unbounded for large ones
+        y[k] = 0.5 * y[k - 1] + u[k - 1] + 0.3 * y[k - 1] ** 2
+    assert np.abs(y).max() < 1.0
+    m = NARXPoly(ny=1, nu=1, degree=2).fit(Record(u, y, fs=1.0))
+    assert set(table(m)) == {"y(k-1)", "u(k-1)", "y(k-1)^2"}
+    big = Record(5.0 * np.ones(n) + u, np.zeros(n), fs=1.0)  # drive far outside the estimation range
+    with pytest.warns(DivergenceWarning):
+        yf = m.predict(big, None)
+    assert m.diverged_at_ is not None
+    assert np.isnan(yf[m.diverged_at_:]).all() and np.isfinite(yf[: m.diverged_at_]).all()
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        m.predict(Record(u, y, fs=1.0), None)
+    assert m.diverged_at_ is None
+
+
+@pytest.mark.parametrize("cls,kw", [(NARXPoly, dict(ny=2, nu=2, degree=2)),
+                                    (NARMAXPoly, dict(ny=2, nu=2, ne=2, degree=2))])
+def test_save_load_round_trip(tmp_path, cls, kw):
+    rec = narmax_record(1200)
+    m = cls(**kw).fit(rec)
+    path = m.save(tmp_path / "m.json")
+    m2 = load_model(path)
+    assert type(m2) is cls and m2.get_params() == m.get_params()
+    for h in (1, 4, None):
+        np.testing.assert_array_equal(m2.predict(rec, h), m.predict(rec, h))
+
+
+def test_bad_input_is_refused_clearly():
+    rec = narx_record(100)
+    with pytest.raises(DataError, match="too few"):
+        NARXPoly(ny=10, nu=10, degree=2).fit(rec[:30])
+    with pytest.raises(DataError, match="too few for the lags"):
+        NARXPoly(ny=10, nu=2).fit(rec[:8])
+    with pytest.raises(DataError, match="constant"):
+        NARXPoly().fit(Record(np.ones(100), rec.y, fs=1.0))
+    with pytest.raises(InputError, match="NaN"):
+        Record(np.where(np.arange(100) == 5, np.nan, rec.u), rec.y, fs=1.0)
+    bad = narx_record(100)
+    bad.u[7] = np.nan  # mutated after construction: fit still refuses it
+    with pytest.raises(DataError, match="non-finite"):
+        NARXPoly().fit(bad)
+    with pytest.raises(InputError, match="criterion"):
+        NARXPoly(criterion="xyz").fit(rec)
+
+
+def test_narmax_els_recovers_noise_term_and_whitens_residuals():
+    rec = narmax_record()
+    narx = NARXPoly(ny=2, nu=2, degree=2).fit(rec)
+    e_narx = rec.y - narx.predict(rec, 1)
+    assert not correlation_tests(e_narx[2:], rec.u[2:])["passed"]
+    r_ee = correlation_tests(e_narx[2:], rec.u[2:])["tests"][0]
+    assert r_ee["name"] == "r_ee" and 1 in r_ee["failing_lags"]
+
+    for crit, kw in (("err", dict(rho_p=1e-2, rho_n=1e-4)), ("bic", {})):
+        m = NARMAXPoly(ny=2, nu=2, ne=2, degree=2, criterion=crit, **kw).fit(rec)
+        rows = {r["term"]: r for r in m.term_table()}
+        assert "e(k-1)" in rows
+        assert abs(rows["e(k-1)"]["parameter"] - 0.8) < 3 * rows["e(k-1)"]["stderr"]
+        for k, v in {"y(k-1)": 0.5, "u(k-1)": 1.0, "u(k-1)^2": -0.3, "y(k-1)*u(k-1)": 0.1}.items():
+            assert abs(rows[k]["parameter"] - v) < 3.5 * rows[k]["stderr"]
+        e = rec.y - m.predict(rec, 1)
+        assert correlation_tests(e[2:], rec.u[2:])["passed"], crit
+        assert np.std(e[2:]) < 0.9 * np.std(e_narx[2:])
+
+
+def test_sysidentpy_cross_check_terms_and_parameters():
+    pytest.importorskip("sysidentpy", reason="SysIdentPy is not installed: cross-check skipped")
+    from sysidentpy.basis_function import Polynomial
+    from sysidentpy.model_structure_selection import FROLS
+    from sysidentpy.parameter_estimation import LeastSquares
+
+    rec = narx_record(1000, seed=21)
+    ref = FROLS(order_selection=False, n_terms=4, ylag=2, xlag=2, estimator=LeastSquares(),
+                basis_function=Polynomial(degree=2), model_type="NARMAX")
+    ref.fit(X=rec.u.reshape(-1, 1), y=rec.y.reshape(-1, 1))
+
+    def code_name(code):
+        facs = []
+        for c in sorted((int(c) for c in code if c != 0), key=lambda c: (c // 1000 != 1, c)):
+            facs.append(("y" if c // 1000 == 1 else "u") + f"(k-{c % 1000})")
+        out = []
+        for f in dict.fromkeys(facs):
+            n = facs.count(f)
+            out.append(f if n == 1 else f"{f}^{n}")
+        return "*".join(out) or "1"
+
+    ref_terms = [code_name(c) for c in ref.final_model]
+    ref_theta = dict(zip(ref_terms, ref.theta.ravel()))
+    m = NARXPoly(ny=2, nu=2, degree=2, criterion="err", rho_p=1e-10, max_terms=4).fit(rec)
+    ours = m.term_table()
+    assert [r["term"] for r in ours] == ref_terms  # same terms, same order of selection
+    for r in ours:
+        assert abs(r["parameter"] - ref_theta[r["term"]]) <= 1e-6 * abs(ref_theta[r["term"]])
+    np.testing.assert_allclose([r["err"] for r in ours], np.asarray(ref.err[:4]).ravel(), rtol=1e-6)
+    assert set(ref_terms) == set(TRUE_TERMS)

@@ -1,0 +1,83 @@
+"""Residual correlation tests (eq. 2-32/2-33), spectrum and normality."""
+
+import numpy as np
+import pytest
+
+from sysid.errors import DataError
+from sysid.residuals import correlation_tests, normality, residual_spectrum, xcorr
+
+
+def test_xcorr_matches_eq_2_33_directly():
+    rng = np.random.default_rng(0)
+    x, y = rng.standard_normal(300), rng.standard_normal(300)
+    xm, ym = x - x.mean(), y - y.mean()
+    den = np.sqrt(np.sum(xm ** 2) * np.sum(ym ** 2))
+    lags = np.array([-7, -1, 0, 1, 5, 20])
+    want = [np.sum(xm[: 300 - t] * ym[t:]) / den if t >= 0 else np.sum(xm[-t:] * ym[: 300 + t]) / den for t in lags]
+    np.testing.assert_allclose(xcorr(x, y, lags), want, atol=1e-12)
+
+
+def test_white_noise_about_five_percent_outside_the_band():
+    fractions, passed = [], 0
+    n = 4000
+    for seed in range(30):
+        rng = np.random.default_rng(seed)
+        r = correlation_tests(rng.standard_normal(n), rng.uniform(-1, 1, n), max_lag=30)
+        assert r["band"] == pytest.approx(1.959964 / np.sqrt(n), rel=1e-6)
+        fractions += [t["fraction_outside"] for t in r["tests"]]
+        passed += r["passed"]
+    frac = float(np.mean(fractions))
+    # ~30 seeds x 5 tests x ~50 lags: the binomial sd of the fraction is ~0.0025
+    assert 0.04 < frac < 0.06, frac  # not 12-14 % as a 1.96/sqrt(2N-1) band gives
+    assert passed >= 26  # family-wise level 5 %: most white residuals pass all five tests
+
+
+def test_each_test_detects_its_own_kind_of_dependence():
+    rng = np.random.default_rng(1)
+    n = 3000
+    u = rng.uniform(-1, 1, n)
+    w = rng.standard_normal(n)
+    names = ["r_ee", "r_ue", "r_e(eu)", "r_u2'e", "r_u2'e2"]
+
+    def failing(e):
+        r = correlation_tests(e, u, max_lag=10)
+        return {t["name"] for t in r["tests"] if not t["passed"]}, {t["name"]: t for t in r["tests"]}
+
+    coloured = w + 0.6 * np.r_[0, w[:-1]]            # MA(1): r_ee at lag 1
+    f, t = failing(coloured)
+    assert "r_ee" in f and 1 in t["r_ee"]["failing_lags"]
+    linear_u = w + 0.5 * np.r_[0, 0, 0, u[:-3]]      # unmodelled u(t-3)
+    f, t = failing(linear_u)
+    assert "r_ue" in f and 3 in t["r_ue"]["failing_lags"]
+    quad_u = w + 1.0 * (np.r_[0, 0, u[:-2]] ** 2 - 1 / 3)  # unmodelled u(t-2)^2
+    f, t = failing(quad_u)
+    assert "r_u2'e" in f and 2 in t["r_u2'e"]["failing_lags"] and "r_ue" not in f
+    cross = w + 0.8 * np.r_[0, w[:-1] * u[:-1]]      # unmodelled e(t-1) u(t-1)
+    f, t = failing(cross)
+    assert "r_e(eu)" in f and 0 in t["r_e(eu)"]["failing_lags"]
+    hetero = w * (1 + 1.5 * np.r_[0, u[:-1] ** 2])     # variance depends on u(t-1)^2
+    f, t = failing(hetero)
+    assert "r_u2'e2" in f and 1 in t["r_u2'e2"]["failing_lags"]
+    assert set(names) == set(t)
+
+
+def test_spectrum_and_normality():
+    rng = np.random.default_rng(2)
+    w = rng.standard_normal(8192)
+    s_white = residual_spectrum(w, fs=1000.0)
+    s_col = residual_spectrum(np.convolve(w, np.ones(8) / 8, mode="same"), fs=1000.0)
+    assert s_white["flatness"] > 0.8 > s_col["flatness"]
+    assert s_white["f_hz"][-1] == pytest.approx(500.0)
+    # Parseval: the integral of the one-sided PSD is the variance
+    assert np.trapezoid(s_white["psd"], s_white["f_hz"]) == pytest.approx(np.var(w), rel=0.05)
+    assert normality(w)["passed"]
+    assert not normality(rng.exponential(size=4000))["passed"]
+
+
+def test_bad_input():
+    with pytest.raises(DataError, match="unequal"):
+        correlation_tests(np.ones(100), np.ones(99))
+    with pytest.raises(DataError, match="non-finite"):
+        correlation_tests(np.r_[np.nan, np.ones(99)], np.ones(100))
+    with pytest.raises(DataError, match="max_lag"):
+        correlation_tests(np.random.randn(10), np.random.randn(10), max_lag=50)
