@@ -74,6 +74,22 @@ def _simulate(twin: Twin, rec: Record) -> np.ndarray:
     return np.asarray(twin.simulate(rec.u, rec.fs), dtype=float)
 
 
+def _continues(est: Record, val: Record) -> bool:
+    """True when ``val`` directly continues ``est`` (same source and fs, ``t0`` at the end of ``est``, as
+    ``Record.split`` makes them): the validation is then simulated as the continuation of the estimation input
+    (still free run, no measured output used), so a system with memory (hysteresis, creep) is not restarted."""
+    if val.fs != est.fs or "t0" not in val.meta or est.source != val.source:
+        return False
+    t_end = float(est.meta.get("t0", 0.0)) + len(est) / est.fs
+    return abs(float(val.meta["t0"]) - t_end) < 0.5 / est.fs
+
+
+def _simulate_val(twin: Twin, est: Record, val: Record) -> np.ndarray:
+    if _continues(est, val):
+        return _simulate(twin, Record(u=np.concatenate([est.u, val.u]), y=None, fs=est.fs))[len(est):]
+    return _simulate(twin, val)
+
+
 def significance(sse0: float, sse1: float, n_eff: float, p_extra: int) -> float:
     """p-value of the F-test that the residual variance fell from sse0 to sse1 by adding ``p_extra`` parameters,
     with ``n_eff`` effective independent samples (see the module docstring)."""
@@ -276,7 +292,7 @@ def _run_trial(base: Twin, effect: str, est: Record, val: Record, core: list[str
         fit_tw, fitted, stderr = res.twin, res.fitted, res.stderr
     else:
         fit_tw, fitted, stderr = tw, {}, {}
-    yv = _simulate(fit_tw, val)
+    yv = _simulate_val(fit_tw, est, val)
     ye = _simulate(fit_tw, est)
     ok = bool(np.all(np.isfinite(yv)))
     eff_all = eff_fields + [c for c in cat_fields if c not in eff_fields]
@@ -312,7 +328,7 @@ class Stage:
 
 def _stage(twin: Twin, est: Record, val: Record, opts: dict[str, Any]) -> Stage:
     ye = _simulate(twin, est)
-    yv = _simulate(twin, val)
+    yv = _simulate_val(twin, est, val)
     ae = ft.analyse(est.u, est.y, ye, est.fs, est.meta, max_lag=opts["max_lag"], max_echo_s=opts["max_echo_s"])
     av = ft.analyse(val.u, val.y, yv, val.fs, val.meta, max_lag=opts["max_lag"], max_echo_s=opts["max_echo_s"])
     return Stage(twin, ye, yv, ae, av, nrmse(val.y, yv, opts["skip"]), r2(val.y, yv, opts["skip"]),
@@ -408,7 +424,7 @@ def diagnose(twin: Twin, data: Record, val: Record | None = None, max_rounds: in
 
     pool = [e for e in (candidates if candidates is not None else twin.EFFECTS)
             if e in twin.EFFECTS and e not in twin.effects and e not in NOISE_EFFECTS
-            and ev.family_of(twin.EFFECTS[e]) != "noise"]
+            and e not in _unpredictable(twin)]
     unknown = [e for e in (candidates or []) if e not in twin.EFFECTS]
     if unknown:
         raise ConfigError(f"unknown effect {unknown[0]!r} for twin {twin.name}; valid: {', '.join(twin.EFFECTS)}")
