@@ -48,6 +48,8 @@ def piezo(out: Path) -> dict[str, Any]:
     from twins.discrepancy.report import write_report
 
     est, val = lab_split()
+    # the validation part is one 150 V, 1 Hz sine: give the loop analysis its segment (whole periods at the end)
+    val.meta["segments"] = [{"start": 0, "stop": len(val), "freq_hz": 1.0}]
     twin = lab_twin()
     t0 = time.perf_counter()
     res = diagnose(twin, est, val, max_rounds=3, keep_stages=True)
@@ -84,8 +86,13 @@ def water(out: Path, distance_mm: int = 20) -> dict[str, Any]:
     from twins.discrepancy import diagnose
     from twins.discrepancy.report import write_report
 
+    from twins.acoustic.amplifier import voltage_gain
+
     p40, fit = fit_transducer(40)
-    p = dataclasses.replace(p40, distance_m=distance_mm * 1e-3)
+    # the FIR is the electro-acoustic response V_rx/V_oc: the twin's amplifier (V_oc = 2·G_v·u) is divided out
+    # through the receive gain, and no amplifier nonlinearity is switched on
+    g_amp = 2.0 * voltage_gain(p40.amp_gain_db)
+    p = dataclasses.replace(p40, distance_m=distance_mm * 1e-3, output_gain=p40.output_gain / g_amp)
     twin = AcousticTwin(p, effects=set(), seed=0)
     est, val = water_records(distance_mm)
     t0 = time.perf_counter()

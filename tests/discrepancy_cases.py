@@ -80,7 +80,12 @@ def records(name: str, truth, kind: str, seed: int) -> tuple[Record, Record]:
             val = tv.generate("thesis-sines", freqs_hz="1-10-50-200", min_duration_s=0.2, min_periods=1)
     else:
         est = truth.generate("thesis-multisine", fs=5e6, duration=2e-3, warmup_s=0.0)
-        val = tv.generate("thesis-chirp-1ms", fs=5e6, duration=2e-3, warmup_s=0.0)
+        # the thesis chirp (150 mVpp) barely drives the amplifier into compression: validate with the same
+        # chirp at the multisine's 0.4 V peak so that amplitude-dependent effects are visible in validation
+        ch = tv.generate("thesis-chirp-1ms", fs=5e6, duration=2e-3, warmup_s=0.0)
+        u = ch.u * (0.4 / np.max(np.abs(ch.u)))
+        val = Record(u=u, y=tv.simulate(u, ch.fs), fs=ch.fs, units=ch.units, meta={**ch.meta, "scaled_to_v": 0.4},
+                     source=ch.source)
     return est, val
 
 

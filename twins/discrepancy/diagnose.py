@@ -165,6 +165,10 @@ def _guesses(field: str, unit: str, a: dict[str, Any], twin: Twin, current: floa
             out += [k * c * sh, current + k * c * sh]
             if math.isfinite(tau):
                 out += [k * c * tau, k * c * tau / 2]
+                # lateral image source (a wall beside a path of length L): extra path √(L² + 4w²) − L = c·τ
+                L = getattr(twin.params, "distance_m", None)
+                if isinstance(L, (int, float)) and L > 0:
+                    out += [k * math.sqrt(max((L + c * tau) ** 2 - L * L, 0.0)) / 2]
     if any(w in name for w in ("amp", "gain", "coef", "reflect", "level", "scale")) and u in ("", "1", "-", "ratio"):
         out += [coef, abs(coef)]
     return [float(v) for v in out if math.isfinite(v)]
@@ -252,14 +256,34 @@ def _prescan(tw: Twin, est: Record, fields: list[str], a: dict[str, Any], points
         for f in fields:
             lo, hi = (float(v) for v in info[f].range)
             is_int = isinstance(getattr(tw.params, f), int)
-            cands = list(_grid(lo, hi, points, is_int))
-            cands += [g for g in _guesses(f, info[f].unit, a, tw, best[f]) if lo <= g <= hi]
+            grid = _grid(lo, hi, points, is_int)
+            cands = list(grid) + [g for g in _guesses(f, info[f].unit, a, tw, best[f]) if lo <= g <= hi]
             for v in cands:
                 trial = dict(best)
                 trial[f] = int(round(v)) if is_int else float(v)
                 c = cost(trial)
                 if c < best_cost:
                     best_cost, best = c, trial
+            if is_int:
+                continue
+            # zoom: rescan finer around the best value (the cost of a delay-like parameter oscillates)
+            geo = lo > 0 and hi / lo > 30
+            step = (np.log(hi / lo) if geo else (hi - lo)) / max(points - 1, 1)
+            for _z in range(2):
+                x = float(best[f])
+                if geo:
+                    zg = np.exp(np.linspace(np.log(x) - step, np.log(x) + step, points))
+                else:
+                    zg = np.linspace(x - step, x + step, points)
+                for v in zg:
+                    if not lo <= v <= hi:
+                        continue
+                    trial = dict(best)
+                    trial[f] = float(v)
+                    c = cost(trial)
+                    if c < best_cost:
+                        best_cost, best = c, trial
+                step /= (points - 1) / 2.0
     return best
 
 
@@ -350,7 +374,11 @@ def _generic_residual_model(est: Record, val: Record, e_est: np.ndarray, e_val: 
                 cols.append(np.r_[np.zeros(k), x[: x.size - k]])
         return np.column_stack(cols)
     A = design(est)[skip:]
-    c, *_ = np.linalg.lstsq(A, e_est[skip:], rcond=None)
+    # ridge-regularised least squares: lagged copies of a slow input are nearly collinear, and an unregularised
+    # fit would extrapolate wildly to the validation record
+    G = A.T @ A
+    lam = 1e-4 * float(np.mean(np.diag(G))) or 1e-12
+    c = np.linalg.solve(G + lam * np.eye(G.shape[0]), A.T @ e_est[skip:])
     pv = design(val)[skip:] @ c
     ev_ = e_val[skip:]
     sse0 = float(ev_ @ ev_)
@@ -528,7 +556,7 @@ def diagnose(twin: Twin, data: Record, val: Record | None = None, max_rounds: in
         row = rows[0]
         fams = [ev.family_of(twin.EFFECTS[g]) for g in group]
         text = (f"{row['signature']}; adding {top.effect} and fitting "
-                f"{', '.join(f'{k}={v:.4g}' for k, v in top.effect_params.items()) or 'the core'} lowers the "
+                f"{_fmt_params(top.effect_params) or 'the core'} lowers the "
                 f"validation NRMSE {stage.nrmse_val:.4g} → {top.nrmse_val:.4g} (F-test p = {top.p_value:.2g})")
         cause = {"effect": top.effect, "confidence": row["confidence"], "evidence": text,
                  "params": dict(top.effect_params), "stderr": dict(top.stderr), "family": row["family"],
@@ -600,6 +628,10 @@ def _quant_params(twin: Twin, effect: str, step: float) -> dict[str, float]:
         return {bits[0]: float(np.log2(2 * r / step)), rng[0]: r}
     floats = [f for f in fields if isinstance(getattr(twin.params, f, None), float)]
     return {floats[0]: float(step)} if floats else {}
+
+
+def _fmt_params(p: dict[str, Any]) -> str:
+    return ", ".join(f"{k}={v:.4g}" if isinstance(v, (int, float)) else f"{k}={v}" for k, v in p.items())
 
 
 def _public(a: dict[str, Any]) -> dict[str, Any]:
