@@ -7,7 +7,6 @@ What goes into the FMU (``resources/``):
 - the packages ``twins/`` and ``sysid/`` (Python sources only) and any extra module the twin class lives in,
   so the FMU runs where only CPython 3 with numpy and scipy is installed (pythonfmu puts ``resources/`` first
   on ``sys.path``; a host process that has already imported ``twins`` keeps its own copy);
-- the core's data file when it has one (acoustic: ``*_core.npz``);
 - ``pythonfmu/`` (embedded by pythonfmu itself) and the binaries ``linux64``/``win64`` (no macOS binary).
 """
 
@@ -106,8 +105,7 @@ def export_fmu(twin: Twin, path: str | Path, fs: float | None = None, model_name
         if core["kind"] == "response":
             from twins.fmu.response import prepare_response_core
 
-            core = prepare_response_core(twin, fs, core, stage, f"{model_name}_core.npz")
-            files.append(stage / core["file"])
+            core = prepare_response_core(twin, fs, core)
         cfg = fmu_config(twin, fs, core, model_name)
         cfg["project_version"] = _project_version()
         (stage / CONFIG_NAME).write_text(json.dumps(cfg, indent=1, default=_json_default))
