@@ -147,7 +147,9 @@ def read_record(
             if filled_y:
                 filled["y"] = filled_y
         if filled:
-            meta.setdefault("preprocessing", []).append({"step": "fill_missing", "filled_indices": filled})
+            # same schema as sysid.preprocess.apply_steps (step, params, changes); filled_indices kept at top level too
+            meta.setdefault("preprocessing", []).append({"step": "fill_missing", "params": {"method": "linear", "at": "read"},
+                                                         "changes": {"filled_indices": filled}, "filled_indices": filled})
     if y is not None and y.shape[0] != u.shape[0]:
         raise DataError(f"{src}: u and y have unequal lengths ({u.shape[0]} and {y.shape[0]} samples)")
     return Record(u=u, y=y, fs=fs, units=units, meta=meta, source=src)

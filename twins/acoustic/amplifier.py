@@ -1,0 +1,58 @@
+"""RF power amplifier (E&I 2100L class) as a Thevenin source with a memoryless nonlinearity (physics notes B.9).
+
+- Gain G_v = 10^(gain_db/20) (50 dB is specified into a matched 50 Ω load), output resistance R_s = 50 Ω,
+  so the open-circuit voltage is V_oc = 2·G_v·x for a linear amplifier. The load (the transmitter's Z_el)
+  divides it; that division is part of the linear chain H(f) = V_rx/V_oc.
+- Compression (odd, AM/AM) acts on the matched-load voltage v = G_v·x:
+  * Rapp (1991): v_c = v / (1 + |v/A_sat|^{2p})^{1/(2p)}; saturates at A_sat (≈ 100–110 V peak into 50 Ω).
+  * cubic soft clipper: v_c = v − v³/(3 v0²) for |v| ≤ v0, ±(2/3) v0 beyond, with v0 = 1.5·A_sat so that it
+    also saturates at A_sat. For one tone of amplitude a (< v0): fundamental a − a³/(4 v0²), third harmonic
+    a³/(12 v0²) (the general rule 3rd = a3·a³/4 with a3 = −1/(3v0²)).
+  Both are odd functions of v: they produce odd harmonics only.
+- Optional even-order term (push-pull imbalance): v_c + k2·v_c²/A_sat; a tone of amplitude a gives
+  k2·a²/(2 A_sat) at 2f (and the same at DC, removed by the AC-coupled chain).
+- Bandwidth (≈ 10 kHz – 12 MHz): first-order high-pass and low-pass, applied in the frequency domain as a
+  factor of the linear chain (the nonlinearity is memoryless; the out-of-band filtering after it differs from a
+  Wiener–Hammerstein placement only outside 10 kHz–12 MHz).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["amplifier_voltage", "amplifier_bandwidth", "voltage_gain"]
+
+
+def voltage_gain(gain_db: float) -> float:
+    """G_v = 10^(gain_db/20) (matched-load voltage gain)."""
+    return float(10.0 ** (gain_db / 20.0))
+
+
+def amplifier_voltage(x: np.ndarray, gain_db: float = 50.0, compression: str | None = None, sat_v: float = 105.0,
+                      smoothness: float = 2.5, even_ratio: float = 0.0) -> np.ndarray:
+    """Open-circuit output voltage V_oc [V] of the amplifier for the input ``x`` [V] (memoryless).
+
+    ``compression``: None (linear), ``"rapp"`` or ``"cubic"``; ``sat_v``: output saturation A_sat [V peak into
+    50 Ω]; ``smoothness``: Rapp p; ``even_ratio``: k2 of the even-order term (0 = none).
+    """
+    v = voltage_gain(gain_db) * np.asarray(x, dtype=float)
+    if compression == "rapp":
+        p2 = 2.0 * smoothness
+        v = v / (1.0 + np.abs(v / sat_v) ** p2) ** (1.0 / p2)
+    elif compression == "cubic":
+        v0 = 1.5 * sat_v
+        vc = np.clip(v, -v0, v0)
+        v = vc - vc**3 / (3.0 * v0 * v0)
+    elif compression not in (None, "none", "linear"):
+        raise ValueError(f"unknown compression model {compression!r}")
+    if even_ratio:
+        v = v + even_ratio * v * v / sat_v
+    return 2.0 * v
+
+
+def amplifier_bandwidth(f_hz: np.ndarray, f_low_hz: float, f_high_hz: float) -> np.ndarray:
+    """First-order high-pass (f_low) × first-order low-pass (f_high) response of the amplifier."""
+    jf = 1j * np.asarray(f_hz, dtype=float)
+    hp = (jf / f_low_hz) / (1.0 + jf / f_low_hz) if f_low_hz > 0 else 1.0
+    lp = 1.0 / (1.0 + jf / f_high_hz) if np.isfinite(f_high_hz) else 1.0
+    return hp * lp

@@ -1,0 +1,257 @@
+"""The linear chain H(f) = V_rx/V_oc of the piezoacoustic channel (physics notes B.1–B.3, B.8).
+
+Structure (everything a function of frequency, vectorised):
+
+    V_oc ─R_s─ Tx PZT | epoxy | steel ║ fluid gap L ║ steel | epoxy | Rx PZT ─ Z_L → V_rx
+
+The fluid gap is written as its Fabry–Pérot series, which for plane waves is an identity of the 1-D chain:
+
+    H = T_tx · R_v · Σ_n (R_tx R_rx)^n · e^{−jk(2n+1)L} · D((2n+1)L) · M_n  +  wall-echo terms  +  crosstalk
+
+- T_tx = p⁺/V_oc: forward pressure wave launched into a semi-infinite fluid by the driven Tx stack.
+- R_v = V_rx/p_inc: Rx voltage per incident pressure wave (its reflection R_rx included).
+- R_tx, R_rx: pressure reflection coefficients of the Tx stack (terminals loaded by R_s) and Rx stack (by Z_L)
+  seen from the fluid; n = 0 is the direct arrival, n ≥ 1 the inter-plate reverberations (2L/c apart).
+- D(z): aperture-dependent spreading, the coupling of two identical Gaussian modes a distance z apart,
+  D = (jω/(jω + ω_c))^m with ω_c = z c / w0² (m = 1/2 per transverse dimension of a rectangular face with
+  w0 = a·√(2/π) for a half-width a; m = 1 for a circular face with w0 = a/√2). These w0 match the far-field
+  on-axis amplitude of a uniform strip / piston pair (2a√(k/2πz) resp. ka²/2z), so D → 1 in the near field
+  (plane wave, the 70 × 25 mm plates at 100 mm lose 0.1 dB) and D → spherical/cylindrical spreading far away.
+  The phase of D is the Gouy phase. With D = 1 and all orders summed (``reverb_orders = −1``) the series is
+  the exact 1-D transfer-matrix chain (checked in tests).
+- M_n: misalignment (effect), lateral overlap × tilt phase-averaging factor (see :func:`misalignment_factor`).
+- Wall echo (effect): image path of length L_w = √(L² + (2w)²) off a side wall at lateral distance w:
+  a = R_wall · κ · D(L_w) · e^{−jkL_w}, delay (L_w − L)/c after the direct arrival; κ (``wall_coupling``) is
+  the fitted fraction of the beam reaching the wall path (edge waves / frame scattering: the far-field sinc
+  directivity of a 70 × 25 mm piston would put it below −60 dB; notes B.8 recommends fitting a_k).
+- Crosstalk (effect): the Tx terminal voltage couples through a stray capacitance C_x into the Rx node
+  (Z_L ∥ Z_el,rx): H_x = V_tx · Z_node/(Z_node + 1/(jωC_x)).
+- Amplifier bandwidth (first-order HP/LP) and ``output_gain`` multiply the whole.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numba import njit
+
+from sysid.errors import ConfigError
+from twins.acoustic.amplifier import amplifier_bandwidth
+from twins.acoustic.fluids import FluidState, fluid_state
+from twins.acoustic.layers import Layer, chain, input_impedance, layer_matrix, propagate_forward
+from twins.acoustic.materials import PIEZOS, SOLIDS, Piezo
+from twins.acoustic.transducer import (electrical_impedance, face_impedance, parallel_rc, plate_two_port,
+                                       receive_voltage, transmit)
+
+__all__ = ["ChannelGeometry", "geometry", "channel_parts", "frequency_response", "spreading_factor",
+           "misalignment_factor", "wall_path_length"]
+
+
+@dataclass(frozen=True)
+class ChannelGeometry:
+    """The effective medium and geometry after the effects are applied (what the 'true' tank is)."""
+
+    distance_m: float
+    fluid: FluidState
+    piezo: Piezo
+    area_m2: float
+    misaligned: bool
+    wall_echo: bool
+    crosstalk: bool
+
+
+def geometry(p, effects=frozenset()) -> ChannelGeometry:
+    """Effective geometry and fluid for parameters ``p`` with the switched-on ``effects``."""
+    d = p.distance_m + (p.distance_offset_m if "distance_offset" in effects else 0.0)
+    if d < 0:
+        raise ConfigError(f"distance_m + distance_offset_m = {d} m is negative")
+    T = p.temperature_c + (p.temperature_offset_k if "temperature_offset" in effects else 0.0)
+    fluid_name = p.mismatch_fluid if "fluid_mismatch" in effects else p.fluid
+    fl = fluid_state(fluid_name, T, p.salinity_psu)
+    pz = PIEZOS[p.piezo]
+    if p.pzt_qm > 0:
+        pz = Piezo(pz.name, pz.density, pz.c33d, pz.e33, pz.eps33s_rel, p.pzt_qm, pz.tan_delta, pz.source)
+    area = p.plate_width_m * p.plate_height_m if p.aperture == "rectangular" else np.pi * p.aperture_radius_m**2
+    return ChannelGeometry(d, fl, pz, area, "misalignment" in effects, "wall_echo" in effects, "crosstalk" in effects)
+
+
+def spreading_factor(f_hz: np.ndarray, z_m: float, speed: float, p) -> np.ndarray:
+    """D(z, f): coupling of identical Tx/Rx apertures a distance z apart (Gaussian-mode equivalent, see module)."""
+    f = np.asarray(f_hz, dtype=float)
+    jw = 2j * np.pi * f
+    if not p.diffraction or z_m <= 0:
+        return np.ones_like(jw)
+    if p.aperture == "circular":
+        w0sq = p.aperture_radius_m**2 / 2.0
+        return jw / (jw + z_m * speed / w0sq)
+    out = np.ones_like(jw)
+    for size in (p.plate_width_m, p.plate_height_m):
+        w0sq = (size / 2.0) ** 2 * 2.0 / np.pi
+        out = out * np.sqrt(jw / (jw + z_m * speed / w0sq))
+    return out
+
+
+def misalignment_factor(f_hz: np.ndarray, speed: float, p, order: int = 0) -> np.ndarray:
+    """Overlap × tilt factor of a misaligned receiver (documented approximation, plane-wave near field).
+
+    Lateral offset δ: fraction of the Rx face inside the Tx beam footprint — rectangular 1 − δ/H (δ along the
+    plate height H); circular: normalised overlap area of two discs. Tilt φ: a plane wave meeting the Rx face
+    at angle φ has a linear phase k x sin φ across it; averaging over the face (height H) gives
+    sinc(k (H/2) sin φ) with sinc(x) = sin x / x. Each round trip between the plates doubles the angle, so the
+    reverberation of order n sees (2n + 1)φ.
+    """
+    f = np.asarray(f_hz, dtype=float)
+    delta = p.misalignment_offset_m
+    if p.aperture == "circular":
+        s = min(delta / (2.0 * p.aperture_radius_m), 1.0)
+        overlap = (2.0 / np.pi) * (np.arccos(s) - s * np.sqrt(1.0 - s * s))
+        half = p.aperture_radius_m
+    else:
+        overlap = max(1.0 - delta / p.plate_height_m, 0.0)
+        half = p.plate_height_m / 2.0
+    phi = np.deg2rad(p.misalignment_tilt_deg) * (2 * order + 1)
+    x = 2 * np.pi * f / speed * half * np.sin(phi)
+    return overlap * np.sinc(x / np.pi)
+
+
+def wall_path_length(distance_m: float, wall_distance_m: float) -> float:
+    """Length of the single-bounce image path off a side wall parallel to the axis: √(L² + (2w)²)."""
+    return float(np.hypot(distance_m, 2.0 * wall_distance_m))
+
+
+def _layers(p, fl: FluidState) -> tuple[Layer, Layer]:
+    ep, st = SOLIDS["epoxy"], SOLIDS[p.steel]
+    return (Layer(ep.density, ep.speed, p.epoxy_thickness_m, ep.alpha0_np_m, ep.alpha_power),
+            Layer(st.density, st.speed, p.steel_thickness_m, st.alpha0_np_m, st.alpha_power))
+
+
+def channel_parts(f_hz: np.ndarray, p, effects=frozenset()) -> dict[str, np.ndarray]:
+    """All factors of H at positive frequencies ``f_hz`` (> 0): t_tx, r_tx, r_rx, r_v, v_tx, z_el, k, ..."""
+    f = np.asarray(f_hz, dtype=float)
+    if np.any(f <= 0):
+        raise ValueError("channel_parts needs f > 0")
+    g = geometry(p, effects)
+    area = g.area_m2
+    fl = g.fluid
+    zf = fl.density * fl.speed * area
+    epoxy, steel = _layers(p, fl)
+    m_ep = layer_matrix(f, epoxy, area)
+    m_st = layer_matrix(f, steel, area)
+    m_tx = chain([m_ep, m_st])  # PZT face → fluid
+    m_rx = chain([m_st, m_ep])  # fluid → PZT face
+    tp = plate_two_port(f, g.piezo, p.pzt_thickness_m, area, p.backing_rayl * area)
+    # transmitter
+    z_front = input_impedance(m_tx, zf)
+    force0, u0, v_tx = transmit(tp, z_front, p.source_resistance_ohm)
+    force1, _ = propagate_forward(m_tx, force0, u0)
+    t_tx = force1 / area  # p⁺ per volt of V_oc
+    z_tx_back = input_impedance(m_st, input_impedance(m_ep, face_impedance(tp, p.source_resistance_ohm)))
+    r_tx = (z_tx_back - zf) / (z_tx_back + zf)
+    # receiver
+    z_load = parallel_rc(f, p.rx_load_ohm, p.rx_load_capacitance_f)
+    z_rx_in = input_impedance(m_rx, face_impedance(tp, z_load))
+    r_rx = (z_rx_in - zf) / (z_rx_in + zf)
+    force_in = area * (1.0 + r_rx)
+    _, u2 = propagate_forward(m_rx, force_in, force_in / z_rx_in)
+    r_v = receive_voltage(tp, z_load) * u2  # V_rx per incident pressure [V/Pa]
+    k = 2 * np.pi * f / fl.speed - 1j * fl.alpha(f)
+    z_el = electrical_impedance(tp, z_front)
+    return {"t_tx": t_tx, "r_tx": r_tx, "r_rx": r_rx, "r_v": r_v, "v_tx": v_tx, "z_el": z_el, "k": k,
+            "z_load": z_load, "geometry": g}
+
+
+def frequency_response(f_hz: np.ndarray, p, effects=frozenset(), parts: dict | None = None,
+                       direct_only: bool = False, include_amplifier: bool = True) -> np.ndarray:
+    """H(f) = V_rx/V_oc [V/V] of the linear chain as configured (effects included); H(0) = 0.
+
+    ``direct_only`` keeps only the direct arrival (gated: no reverberation, no echo, no crosstalk).
+    ``include_amplifier`` multiplies by the amplifier's bandwidth response (not its gain: the gain is in
+    the amplifier, see :func:`twins.acoustic.amplifier.amplifier_voltage`).
+    """
+    f = np.abs(np.asarray(f_hz, dtype=float))
+    out = np.zeros(f.shape, dtype=complex)
+    pos = f > 0
+    if not np.any(pos):
+        return out
+    fp = f[pos]
+    parts = parts or channel_parts(fp, p, effects)
+    g: ChannelGeometry = parts["geometry"]
+    L, c = g.distance_m, g.fluid.speed
+    k = parts["k"]
+    loop = parts["r_tx"] * parts["r_rx"] * np.exp(-2j * k * L)
+    orders = 0 if direct_only else int(p.reverb_orders)
+    if orders < 0:
+        if p.diffraction or g.misaligned:
+            raise ConfigError("reverb_orders=-1 (exact closed form) needs diffraction=false and no misalignment")
+        series = np.exp(-1j * k * L) / (1.0 - loop)
+    else:
+        series = _series(2 * np.pi * fp, k, loop, L, c, orders, p, g.misaligned)
+    if g.wall_echo and not direct_only:
+        lw = wall_path_length(L, p.wall_distance_m)
+        series = series + (p.wall_reflection * p.wall_coupling * spreading_factor(fp, lw, c, p)
+                           * np.exp(-1j * k * lw))
+    h = parts["t_tx"] * parts["r_v"] * series
+    if g.crosstalk and not direct_only:
+        z_node = 1.0 / (1.0 / parts["z_load"] + 1.0 / parts["z_el"])
+        zc = 1.0 / (2j * np.pi * fp * p.crosstalk_capacitance_f) if p.crosstalk_capacitance_f > 0 else np.inf
+        h = h + parts["v_tx"] * z_node / (z_node + zc)
+    if include_amplifier:
+        h = h * amplifier_bandwidth(fp, p.amp_f_low_hz, p.amp_f_high_hz)
+    out[pos] = h * p.output_gain
+    return out
+
+
+def _spreading_constants(p) -> tuple[int, float, float]:
+    """(mode, 1/w0x², 1/w0y²) for the compiled series: mode 0 none, 1 rectangular, 2 circular."""
+    if not p.diffraction:
+        return 0, 0.0, 0.0
+    if p.aperture == "circular":
+        return 2, 2.0 / p.aperture_radius_m**2, 0.0
+    return (1, np.pi / (2.0 * (p.plate_width_m / 2.0) ** 2), np.pi / (2.0 * (p.plate_height_m / 2.0) ** 2))
+
+
+def _series(w: np.ndarray, k: np.ndarray, loop: np.ndarray, L: float, c: float, orders: int, p,
+            misaligned: bool) -> np.ndarray:
+    """Σ_{n=0..orders} e^{−jk(2n+1)L} (R_tx R_rx e^{−2jkL})^n D((2n+1)L) M_n, compiled (same maths as
+    :func:`spreading_factor` and :func:`misalignment_factor`, checked against them in the tests)."""
+    mode, ix, iy = _spreading_constants(p)
+    if misaligned:
+        if p.aperture == "circular":
+            s = min(p.misalignment_offset_m / (2.0 * p.aperture_radius_m), 1.0)
+            overlap = (2.0 / np.pi) * (np.arccos(s) - s * np.sqrt(1.0 - s * s))
+            half = p.aperture_radius_m
+        else:
+            overlap = max(1.0 - p.misalignment_offset_m / p.plate_height_m, 0.0)
+            half = p.plate_height_m / 2.0
+        tilt = float(np.deg2rad(p.misalignment_tilt_deg))
+    else:
+        overlap, half, tilt = 1.0, 0.0, 0.0
+    return _series_kernel(np.ascontiguousarray(w, dtype=np.float64), np.ascontiguousarray(k, dtype=np.complex128),
+                          np.ascontiguousarray(loop, dtype=np.complex128), float(L), float(c), int(orders), mode,
+                          float(ix), float(iy), bool(misaligned), float(overlap), float(half), tilt)
+
+
+@njit(cache=True, fastmath=False)
+def _series_kernel(w, k, loop, L, c, orders, mode, ix, iy, misaligned, overlap, half, tilt):  # pragma: no cover
+    out = np.empty(w.shape[0], dtype=np.complex128)
+    for i in range(w.shape[0]):
+        jw = 1j * w[i]
+        term = np.exp(-1j * k[i] * L)
+        acc = 0j
+        kr = w[i] / c
+        for n in range(orders + 1):
+            z = (2 * n + 1) * L
+            if mode == 1:
+                fac = np.sqrt(jw * jw / ((jw + z * c * ix) * (jw + z * c * iy)))
+            elif mode == 2:
+                fac = jw / (jw + z * c * ix)
+            else:
+                fac = 1.0 + 0j
+            if misaligned:
+                x = kr * half * np.sin((2 * n + 1) * tilt)
+                fac = fac * overlap * (np.sin(x) / x if x != 0.0 else 1.0)
+            acc += term * fac
+            term = term * loop[i]
+        out[i] = acc
+    return out

@@ -1,0 +1,320 @@
+"""AcousticTwin: the piezoacoustic transmission channel of dissertation §3.2 / ch. 5 as a grey-box twin.
+
+    x [V, generator] → amplifier (memoryless NL, V_oc = 2·G_v·NL(x), R_s = 50 Ω)
+      → linear chain H(f) = V_rx/V_oc (Mason/Kino Tx, epoxy, steel, fluid with reverberation and spreading,
+        steel, epoxy, Mason/Kino Rx into its load; wall echo, crosstalk, amplifier bandwidth)
+      → measurement (noise, ADC) → y [V]
+
+The linear chain is applied by FFT convolution with its impulse response h (from H on a grid long enough
+for every summed reverberation and echo, so nothing wraps around); the amplifier nonlinearity acts sample
+by sample before it. :meth:`frequency_response`, :meth:`amplifier` and :meth:`measure` expose the three
+stages separately for the FMU export (interfaces.md): simulate(u) = measure(h ∗ amplifier(u)).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Any
+
+import numpy as np
+import scipy.fft
+from scipy import signal as sps
+
+from sysid.config import coerce
+from sysid.errors import ConfigError
+from sysid.record import Record
+from twins.acoustic.amplifier import amplifier_voltage
+from twins.acoustic.channel import channel_parts, frequency_response, geometry, wall_path_length
+from twins.acoustic.params import AcousticParams
+from twins.acoustic.protocols import BAND_HZ, FS_ACQ, PROTOCOLS, RECIPE_KEEP, apply_recipe, excitation
+from twins.base import EffectSpec, Twin
+
+__all__ = ["AcousticTwin", "EFFECTS"]
+
+_T = "acoustic"
+_TOF_GROUP = "time_of_flight"
+
+EFFECTS: dict[str, EffectSpec] = {
+    "measurement_noise": EffectSpec(
+        "measurement_noise", _T, "white Gaussian noise of the receiver/scope front end",
+        "white residual, flat spectrum, uncorrelated with u at every lag", {"std": "noise_v"}, default_on=True),
+    "adc_quantization": EffectSpec(
+        "adc_quantization", _T, "scope ADC: uniform quantisation to adc_bits over ±adc_range_v, clipping beyond",
+        "uniform residual within ±LSB/2 (LSB = 2·range/2^bits); flat-topped output where |y| reaches the range",
+        {"bits": "adc_bits", "range": "adc_range_v"}, default_on=True),
+    "amplifier_compression": EffectSpec(
+        "amplifier_compression", _T, "odd-order AM/AM compression of the RF power amplifier (Rapp or cubic)",
+        "residual at 3f, 5f (odd harmonics) growing faster than the drive; gain loss at large amplitude; "
+        "r_u²'e² correlation test fails", {"model": "amp_compression", "sat": "amp_sat_v", "p": "amp_smoothness"},
+        default_on=True),
+    "amplifier_even_distortion": EffectSpec(
+        "amplifier_even_distortion", _T, "even-order term k2·v²/A_sat of the amplifier (push-pull imbalance)",
+        "residual at 2f (and near DC, removed by the AC-coupled chain); r_u²'e correlation test fails",
+        {"k2": "amp_even_ratio"}),
+    "wall_echo": EffectSpec(
+        "wall_echo", _T, "tank side-wall image path, delayed by (√(L²+4w²) − L)/c after the direct arrival",
+        "residual is a delayed, scaled copy of the direct arrival: cross-correlation of e with the "
+        "simulated output peaks at the geometric extra delay", {"distance": "wall_distance_m",
+                                                                 "reflection": "wall_reflection",
+                                                                 "coupling": "wall_coupling"}),
+    "crosstalk": EffectSpec(
+        "crosstalk", _T, "capacitive electrical crosstalk from the Tx terminal into the Rx node",
+        "residual with no acoustic delay: correlated with u at lag 0 (before the time of flight), rising 20 dB/dec",
+        {"capacitance": "crosstalk_capacitance_f"}),
+    "temperature_offset": EffectSpec(
+        "temperature_offset", _T, "fluid temperature differs from the assumed one (sound speed c(T))",
+        "time-of-flight shift (≈ −123 ns/K at 100 mm of water): residual ∝ dy/dt, cross-correlation peak off 0; "
+        "reverberation comb spacing c/2L changes", {"dT": "temperature_offset_k"}, group=_TOF_GROUP),
+    "distance_offset": EffectSpec(
+        "distance_offset", _T, "plate gap differs from the assumed one",
+        "time-of-flight shift (L/c): residual ∝ dy/dt; comb spacing c/2L changes",
+        {"dd": "distance_offset_m"}, group=_TOF_GROUP),
+    "fluid_mismatch": EffectSpec(
+        "fluid_mismatch", _T, "the tank holds another fluid (e.g. seawater instead of distilled water)",
+        "time-of-flight shift and a small gain change (fluid impedance); residual ∝ dy/dt",
+        {"fluid": "mismatch_fluid"}, group=_TOF_GROUP),
+    "misalignment": EffectSpec(
+        "misalignment", _T, "lateral offset (overlap loss) and tilt (phase averaging across the Rx face)",
+        "frequency-dependent gain loss growing with f (tilt) plus a flat loss (offset); reverberations decay "
+        "faster than the aligned model predicts",
+        {"offset": "misalignment_offset_m", "tilt": "misalignment_tilt_deg"}),
+}
+
+_SINGLE_PRECISION_FROM = 1 << 21  # samples
+_RING_S = 1.0e-3  # margin after the last summed arrival for the transducers' ringing [s] (tail < −60 dB)
+
+
+class AcousticTwin(Twin):
+    """Piezoacoustic transmission: amplifier → PZT|epoxy|steel|fluid|steel|epoxy|PZT → scope (dissertation §3.2)."""
+
+    name = _T
+    Params = AcousticParams
+    EFFECTS = EFFECTS
+    PROTOCOLS = PROTOCOLS
+    units = {"u": "V", "y": "V"}
+    CALIBRATION_PARAMS = ("pzt_thickness_m", "steel_thickness_m", "epoxy_thickness_m", "output_gain")
+
+    def __init__(self, params: Any = None, effects=None, seed: int | None = 0):
+        super().__init__(params, effects, seed)
+        self._h_cache: dict[tuple, np.ndarray] = {}
+
+    # ------------------------------------------------------------------ the three stages (interfaces.md)
+    def frequency_response(self, f_hz, direct_only: bool = False, include_amplifier: bool = True) -> np.ndarray:
+        """Complex H(f) = V_rx/V_oc of the linear chain as configured (echoes, crosstalk, misalignment, …).
+
+        Multiply ``amplifier(x)`` by it (in the frequency domain) to get the noise-free output; H(0) = 0.
+        """
+        return frequency_response(np.asarray(f_hz, dtype=float), self.params, self.effects,
+                                  direct_only=direct_only, include_amplifier=include_amplifier)
+
+    def amplifier(self, x) -> np.ndarray:
+        """Open-circuit amplifier voltage V_oc [V] for the generator signal ``x`` [V] (memoryless)."""
+        p = self.params
+        return amplifier_voltage(x, p.amp_gain_db,
+                                 p.amp_compression if self.has("amplifier_compression") else None,
+                                 p.amp_sat_v, p.amp_smoothness,
+                                 p.amp_even_ratio if self.has("amplifier_even_distortion") else 0.0)
+
+    def measure(self, y, fs: float, rng: np.random.Generator | None = None) -> np.ndarray:
+        """Scope: add white noise (``measurement_noise``) then quantise/clip (``adc_quantization``)."""
+        p = self.params
+        y = np.array(y, dtype=float, copy=True)
+        if self.has("measurement_noise") and p.noise_v > 0:
+            rng = rng if rng is not None else np.random.default_rng(self.seed)
+            y += p.noise_v * rng.standard_normal(y.shape)
+        if self.has("adc_quantization"):
+            lsb = 2.0 * p.adc_range_v / 2 ** p.adc_bits
+            np.clip(y, -p.adc_range_v, p.adc_range_v - lsb, out=y)
+            np.round(y / lsb, out=y)
+            y *= lsb
+        return y
+
+    # ------------------------------------------------------------------ linear chain in the time domain
+    def response_duration(self) -> float:
+        """Time [s] after which every summed arrival (reverberation orders, wall path) has passed, plus ringing."""
+        p = self.params
+        g = geometry(p, self.effects)
+        orders = max(int(p.reverb_orders), 0)
+        path = (2 * orders + 1) * g.distance_m
+        if g.wall_echo:
+            path = max(path, wall_path_length(g.distance_m, p.wall_distance_m))
+        slow = 2 * (p.steel_thickness_m / 5000.0 + p.epoxy_thickness_m / 2000.0)
+        if p.reverb_orders < 0:  # closed form: all orders; stop where |R_tx R_rx|^n < 1e-4
+            path = 80 * 2 * g.distance_m
+        return path / g.fluid.speed + slow + _RING_S
+
+    def impulse_response(self, fs: float, n: int | None = None) -> np.ndarray:
+        """h[k] of the linear chain at rate ``fs`` (its first ``n`` samples when given).
+
+        H is evaluated on the rfft grid of a length covering :meth:`response_duration`, so the circular
+        inverse transform does not wrap any summed arrival back onto the start.
+        """
+        fs = float(fs)
+        n_grid = scipy.fft.next_fast_len(max(int(np.ceil(self.response_duration() * fs)), 256), real=True)
+        key = (fs, n_grid)
+        h = self._h_cache.get(key)
+        if h is None:
+            f = np.fft.rfftfreq(n_grid, 1.0 / fs)
+            H = np.zeros(f.size, dtype=complex)
+            keep = f <= self.params.model_max_hz
+            H[keep] = self.frequency_response(f[keep])
+            h = scipy.fft.irfft(H, n_grid)
+            self._h_cache = {key: h}
+        return h if n is None else h[:n]
+
+    def linear(self, v, fs: float) -> np.ndarray:
+        """Noise-free output of the linear chain for the open-circuit amplifier voltage ``v`` (linear convolution)."""
+        v = np.asarray(v, dtype=float)
+        n = v.shape[0]
+        h = self.impulse_response(fs, n)
+        nfft = scipy.fft.next_fast_len(n + h.size - 1, real=True)
+        # long records: single-precision FFTs (relative error ~1e-7, far below an 8-bit ADC's 2^-7) halve
+        # the time and memory of the three transforms
+        dtype = np.float32 if n >= _SINGLE_PRECISION_FROM else np.float64
+        spec = scipy.fft.rfft(v.astype(dtype, copy=False), nfft)
+        spec *= scipy.fft.rfft(h.astype(dtype), nfft)
+        return scipy.fft.irfft(spec, nfft)[:n].astype(float)
+
+    def simulate(self, u, fs: float) -> np.ndarray:
+        """Output y [V] at the Rx for the generator signal ``u`` [V] sampled at ``fs`` [Hz]."""
+        u = np.asarray(u, dtype=float)
+        if u.ndim != 1:
+            raise ConfigError(f"acoustic twin is SISO: u must be 1-D, got shape {u.shape}")
+        rng = np.random.default_rng(self.seed)
+        return self.measure(self.linear(self.amplifier(u), fs), fs, rng)
+
+    # ------------------------------------------------------------------ derived figures
+    def time_of_flight(self, fs: float = FS_ACQ, band=BAND_HZ) -> float:
+        """Arrival time [s] of the direct path, measured on the simulated response: envelope peak of the
+        band-limited (Hann window over ``band``) direct-path impulse response, parabolic interpolation.
+        Includes the group delay of transducers and plates, not only L/c."""
+        n = scipy.fft.next_fast_len(int(np.ceil(max(4 * self.response_duration_direct(), 2e-4) * fs)), real=True)
+        f = np.fft.rfftfreq(n, 1.0 / fs)
+        H = self.frequency_response(f, direct_only=True, include_amplifier=False)
+        win = np.zeros_like(f)
+        inb = (f >= band[0]) & (f <= band[1])
+        win[inb] = np.hanning(inb.sum() + 2)[1:-1]
+        spec = np.zeros(n, dtype=complex)  # analytic signal: positive frequencies doubled
+        spec[: f.size] = 2.0 * H * win
+        env = np.abs(np.fft.ifft(spec))
+        i = int(np.argmax(env))
+        if 0 < i < n - 1:
+            a, b, c = env[i - 1], env[i], env[i + 1]
+            den = a - 2 * b + c
+            i = i + (0.5 * (a - c) / den if den != 0 else 0.0)
+        return float(i / fs)
+
+    def response_duration_direct(self) -> float:
+        g = geometry(self.params, self.effects)
+        return g.distance_m / g.fluid.speed + 50e-6
+
+    def spectrum_metrics(self, band=BAND_HZ, points: int = 2000) -> dict[str, float]:
+        """Peak frequency, peak gain (20 log10|V_rx/V_oc| of the direct path) and −3 dB bandwidth in ``band``,
+        plus the time of flight; the quantities of ``piezotwin sweep``."""
+        f = np.linspace(band[0], band[1], points)
+        g_db = 20 * np.log10(np.abs(self.frequency_response(f, direct_only=True, include_amplifier=False)) + 1e-300)
+        i = int(np.argmax(g_db))
+        lo = i
+        while lo > 0 and g_db[lo - 1] >= g_db[i] - 3.0:
+            lo -= 1
+        hi = i
+        while hi < f.size - 1 and g_db[hi + 1] >= g_db[i] - 3.0:
+            hi += 1
+        geo = geometry(self.params, self.effects)
+        return {"peak_frequency_hz": float(f[i]), "peak_gain_db": float(g_db[i]),
+                "bandwidth_hz": float(f[hi] - f[lo]), "bandwidth_limited_by_band": bool(lo == 0 or hi == f.size - 1),
+                "time_of_flight_s": self.time_of_flight(), "fluid_delay_s": geo.distance_m / geo.fluid.speed,
+                "sound_speed_m_s": geo.fluid.speed}
+
+    def sweep_metrics(self, protocol: str | None = None, identify: bool = True) -> dict[str, Any]:
+        """Figures of ``piezotwin sweep`` (see :func:`twins.acoustic.studies.sweep_metrics`)."""
+        from twins.acoustic.studies import sweep_metrics
+
+        return sweep_metrics(self, protocol, identify)
+
+    def sweep_spectrum(self, band=(0.5e6, 2.0e6), points: int = 2000):
+        """(f, {"direct": dB, "full": dB}) of |V_rx/V_oc| for the sweep report's spectrum plot."""
+        from twins.acoustic.studies import sweep_spectrum
+
+        return sweep_spectrum(self, band, points)
+
+    # ------------------------------------------------------------------ protocols
+    def generate(self, protocol: str, **options: Any) -> Record:
+        """Run a protocol (``PROTOCOLS``). Options (strings from the CLI are coerced): see PROTOCOLS."""
+        self.check_protocol(protocol)
+        if protocol == "vna-sweep":
+            return self._vna(**options)
+        opts = {"duration": 0.1, "fs": FS_ACQ, "warmup_s": 2e-3, "awg_rate_hz": 10e6, "preprocess": False,
+                "start": 0, "keep": RECIPE_KEEP[protocol]}
+        unknown = set(options) - set(opts)
+        if unknown:
+            raise ConfigError(f"protocol {protocol}: unknown option(s) {', '.join(sorted(unknown))}; valid: {', '.join(opts)}")
+        for k, v in options.items():
+            opts[k] = coerce(v, opts[k], k)
+        fs, duration = float(opts["fs"]), float(opts["duration"])
+        if fs <= 0 or duration <= 0:
+            raise ConfigError(f"protocol {protocol}: fs and duration must be positive")
+        n = int(round(duration * fs))
+        periodic = protocol != "thesis-chirp-100ms"
+        warm = int(round(float(opts["warmup_s"]) * fs)) if periodic else 0
+        u_all, _, info = excitation(protocol, fs, (n + warm) / fs, self.seed, float(opts["awg_rate_hz"]))
+        if periodic and warm:
+            # the generator ran before the trigger: simulate the warm-up and discard it (steady-state record)
+            y_all = self.simulate(u_all, fs)
+            u, y = u_all[warm:], y_all[warm:]
+        else:
+            u, y = u_all, self.simulate(u_all, fs)
+        meta = {"protocol": protocol, "protocol_options": {k: opts[k] for k in opts}, "excitation": info,
+                **self.config()}
+        rec = Record(u=u, y=y, fs=fs, units=dict(self.units), meta=meta, source=f"acoustic:{protocol}")
+        if opts["preprocess"]:
+            rec = apply_recipe(rec, int(opts["keep"]), int(opts["start"]))
+        return rec
+
+    def _vna(self, **options: Any) -> Record:
+        opts = {"f_start": 100e3, "f_stop": 2.0e6, "points": 2000, "gated": False, "preprocess": False}
+        unknown = set(options) - set(opts)
+        if unknown:
+            raise ConfigError(f"protocol vna-sweep: unknown option(s) {', '.join(sorted(unknown))}; valid: {', '.join(opts)}")
+        for k, v in options.items():
+            opts[k] = coerce(v, opts[k], k)
+        f0, f1, npts = float(opts["f_start"]), float(opts["f_stop"]), int(opts["points"])
+        if not (0 < f0 < f1) or npts < 2:
+            raise ConfigError("vna-sweep: need 0 < f_start < f_stop and points >= 2")
+        f = np.linspace(f0, f1, npts)
+        H = self.frequency_response(f, direct_only=bool(opts["gated"]), include_amplifier=False)
+        if opts["preprocess"]:
+            H = H * recipe_filter_response(f)
+        mag_db = 20 * np.log10(np.abs(H) + 1e-300)
+        meta = {"protocol": "vna-sweep", "kind": "frequency_response", "protocol_options": opts,
+                "quantity": "20*log10|V_rx/V_oc| (u = frequency in Hz, fs = 1/df)",
+                "phase_rad": np.angle(H).tolist(), **self.config()}
+        return Record(u=f, y=mag_db, fs=1.0 / (f[1] - f[0]), units={"u": "Hz", "y": "dB"}, meta=meta,
+                      source="acoustic:vna-sweep")
+
+    # ------------------------------------------------------------------ calibration
+    def calibrate(self, data: Record, val: Record | None = None, names=None, **options: Any):
+        """Fit stack parameters (default ``CALIBRATION_PARAMS``) to a measured record.
+
+        A ``vna-sweep`` record (u = frequency, y = dB) is fitted in the frequency domain (log magnitude);
+        a time record by free-run output error against the noise-free simulation.
+        """
+        from twins.acoustic.calibration import calibrate_acoustic
+
+        return calibrate_acoustic(self, data, val=val, names=names, **options)
+
+
+def recipe_filter_response(f_hz) -> np.ndarray:
+    """Magnitude the §3.2 recipe imposes on a spectrum: 100-point moving average at 100 MHz × the zero-phase
+    fifth-order Butterworth band-pass (|H|²). The resampling to 6.75 MHz is flat in band (Kaiser design)."""
+    from sysid.preprocess import bandpass_design
+    from twins.acoustic.protocols import FS_RECIPE, MA_SPAN
+
+    f = np.asarray(f_hz, dtype=float)
+    x = np.pi * f / FS_ACQ
+    with np.errstate(invalid="ignore", divide="ignore"):
+        ma = np.where(x == 0, 1.0, np.sin(MA_SPAN * x) / (MA_SPAN * np.sin(x)))
+    sos = bandpass_design(FS_RECIPE, BAND_HZ[0], BAND_HZ[1], 5)
+    _, hb = sps.sosfreqz(sos, worN=np.minimum(f, FS_RECIPE / 2 * 0.999), fs=FS_RECIPE)
+    return np.abs(ma) * np.abs(hb) ** 2
+
