@@ -46,8 +46,9 @@ class CantileverTwin(Twin):
     EFFECTS = EFFECTS
     PROTOCOLS = PROTOCOLS
     units = {"u": "V", "y": "um"}
+    #: fitted by ``piezotwin calibrate`` (Bouc–Wen; with hysteresis=prandtl-ishlinskii the PI weights replace α, β, γ)
     CALIBRATION_PARAMS = ("gain_um_per_v", "bw_alpha", "bw_beta", "bw_gamma", "f1_hz", "zeta1", "creep_per_decade",
-                          "offset_um")
+                          "offset_um", "initial_state_um")
 
     def __init__(self, params: Any = None, effects: Iterable[str] | None = None, seed: int | None = 0):
         super().__init__(params, effects, seed)
@@ -147,6 +148,7 @@ class CantileverTwin(Twin):
         fcfg[K.F_RATEREF], fcfg[K.F_ASYM] = p.rate_ref_v_per_s, p.asym_factor
         fcfg[K.F_OFFSET], fcfg[K.F_DRIFT], fcfg[K.F_DRIFTTAU] = p.offset_um, p.thermal_drift_um, p.thermal_tau_s
         fcfg[K.F_Q] = p.quant_um
+        fcfg[K.F_RATEA] = math.exp(-h / p.rate_tau_s)
         cr = np.array([_first_order_foh(tau, T) for tau in taus]).reshape(-1, 3)
         cfg = dict(icfg=icfg, fcfg=fcfg, Phi=np.ascontiguousarray(Phi), G0=G0, G1=G1, Cout=C,
                    cr_a=cr[:, 0].copy(), cr_b0=cr[:, 1].copy(), cr_b1=cr[:, 2].copy(),
@@ -155,10 +157,23 @@ class CantileverTwin(Twin):
         self._cache[fs] = cfg
         return cfg
 
-    @staticmethod
-    def _fresh_state(cfg: dict[str, Any]) -> dict[str, np.ndarray]:
-        return dict(sc=np.zeros(K.N_SCAL), z=np.zeros(K.NZ), xc=np.zeros(max(1, cfg["cr_a"].size)),
-                    play=np.zeros(max(1, cfg["pi_r"].size)), buf=np.zeros(cfg["buf_len"]), vsub=np.zeros(cfg["M"] + 1))
+    def _fresh_state(self, cfg: dict[str, Any]) -> dict[str, np.ndarray]:
+        """States at rest at 0 V, in equilibrium with the initial hysteresis output Γ₀ = initial_state_um."""
+        st = dict(sc=np.zeros(K.N_SCAL), z=np.zeros(K.NZ), xc=np.zeros(max(1, cfg["cr_a"].size)),
+                  play=np.zeros(max(1, cfg["pi_r"].size)), buf=np.zeros(cfg["buf_len"]), vsub=np.zeros(cfg["M"] + 1))
+        g0 = float(self.params.initial_state_um)
+        if g0 != 0.0:
+            if self.params.hysteresis == "bouc-wen":
+                st["sc"][K.S_H] = -g0
+            else:  # plays F_i = κ r_i, |κ| ≤ 1 (the state left by a partial excursion), Σ p_i F_i = Γ₀
+                r, pw = cfg["pi_r"], cfg["pi_p"][1:]
+                kappa = float(np.clip(g0 / float(np.sum(pw * r)), -1.0, 1.0))
+                st["play"][: r.size] = kappa * r
+                g0 = float(np.sum(pw * st["play"][: r.size]))
+            A, B, _ = self.linear_system()
+            st["z"][:] = np.linalg.solve(A, -B * g0)  # equilibrium of the linear part for f = Γ₀
+            st["sc"][K.S_FPREV] = g0
+        return st
 
     # ------------------------------------------------------------------ simulation
     def simulate(self, u: np.ndarray, fs: float) -> np.ndarray:
