@@ -8,8 +8,9 @@ acoustic ``h`` is *dense*: 30 plate-to-plate reverberations ring for ~4.6 ms, i.
 costs ~400 000 taps) nor a low-order rational fit (a 13 500-sample round-trip delay inside the loop)
 gives a cheap *and* accurate per-sample core. What makes it cheap is the time of flight:
 
-**Latency-free block convolution.** ``h`` is split at ``B`` samples, a power of two (64 <= B <= 4096) not
-beyond the first arrival (the time of flight, ~6900 samples for 100 mm of water):
+**Latency-free block convolution.** ``h`` is split at ``B`` samples, a power of two (64 <= B <= 8192) chosen
+for the lowest cost per sample (:func:`plan`; for the acoustic twin ``B = 4096``, within the time of flight
+of ~6900 samples for 100 mm of water):
 
 - head ``h[:B]``: applied per sample as a FIR (one ``numpy.dot`` per segment on a mirrored ring buffer).
   It holds what arrives before the sound: for the acoustic twin ~5e-9 of the energy (the precursor of its
@@ -33,9 +34,9 @@ from typing import Any
 import numpy as np
 import scipy.fft
 
-__all__ = ["impulse_response", "sparse_segments", "ResponseCore", "prepare_response_core", "check_accuracy"]
+__all__ = ["impulse_response", "sparse_segments", "plan", "ResponseCore", "prepare_response_core", "check_accuracy"]
 
-DEFAULTS = {"energy_tol": 1e-14, "arrival_tol": 1e-6, "block_min": 64, "block_max": 4096, "merge_gap": 1024}
+DEFAULTS = {"energy_tol": 1e-14, "block_min": 64, "block_max": 8192, "merge_gap": 1024}
 
 
 def impulse_response(twin, fs: float, tail_tol: float = 1e-12, n_min: int = 2 ** 15,
@@ -91,38 +92,51 @@ def sparse_segments(h: np.ndarray, energy_tol: float, block: int = 32, merge_gap
     return out, float(dropped[n_drop - 1]) if n_drop else 0.0
 
 
-def plan(h: np.ndarray, energy_tol: float = DEFAULTS["energy_tol"], arrival_tol: float = DEFAULTS["arrival_tol"],
-         block_min: int = DEFAULTS["block_min"], block_max: int = DEFAULTS["block_max"]) -> dict[str, Any]:
+#: rough costs on x86-64 (numpy/pocketfft) used only to choose the block size: a numpy.dot call, a tap,
+#: and one real FFT pair per ``n log2 n``
+_NS_PER_DOT, _NS_PER_TAP, _NS_PER_FFT_NLOGN = 1000.0, 0.5, 0.9
+
+
+def plan(h: np.ndarray, energy_tol: float = DEFAULTS["energy_tol"], block_min: int = DEFAULTS["block_min"],
+         block_max: int = DEFAULTS["block_max"]) -> dict[str, Any]:
     """Block size, head segments and tail of ``h`` (see the module docstring).
 
-    The arrival is where the cumulated energy of ``h`` first exceeds ``arrival_tol`` of the total; the
-    block is the largest power of two in [block_min, block_max] not beyond it. The head keeps every
-    32-sample piece of ``h[:block]`` except the weakest ones holding together <= ``energy_tol`` of the
-    total energy.
+    For every power of two ``B`` in [block_min, block_max] the head is ``h[:B]`` without its weakest
+    32-sample pieces (together <= ``energy_tol`` of the total energy); the block with the lowest estimated
+    cost per sample (head dots + one FFT pair of the tail per block) is chosen. For a response whose energy
+    arrives after a flight time the head is (nearly) empty up to that time, so ``B`` grows to it.
     """
     h = np.asarray(h, dtype=float)
     e = h * h
     total = float(e.sum())
     if total == 0.0:
         return {"block": block_min, "head": [], "tail": np.zeros(0), "arrival": len(h), "head_dropped": 0.0}
-    arrival = int(np.searchsorted(np.cumsum(e), arrival_tol * total, side="right"))
-    block = block_min
-    while block * 2 <= min(arrival, block_max):
-        block *= 2
-    head, dropped = sparse_segments(h[:block], energy_tol, total=total)
-    tail = h[block:]
-    nz = np.flatnonzero(tail)  # trailing exact zeros cost FFT length and nothing else
-    tail = tail[: nz[-1] + 1] if nz.size else tail[:0]
-    return {"block": block, "head": head, "tail": tail, "arrival": arrival, "head_dropped": dropped}
+    arrival = int(np.searchsorted(np.cumsum(e), 1e-6 * total, side="right"))
+    nz = np.flatnonzero(h)
+    last = int(nz[-1]) + 1
+    best = None
+    B = block_min
+    while B <= block_max:
+        head, dropped = sparse_segments(h[:B], energy_tol, total=total)
+        n = scipy.fft.next_fast_len(max(last, B + 1) - 1, real=True)
+        cost = (len(head) * _NS_PER_DOT + sum(len(t) for _, t in head) * _NS_PER_TAP
+                + _NS_PER_FFT_NLOGN * n * np.log2(n) / B)
+        if best is None or cost < best[0]:
+            best = (cost, B, head, dropped)
+        B *= 2
+    cost, B, head, dropped = best
+    tail = h[B:last]  # trailing exact zeros cost FFT length and nothing else
+    return {"block": B, "head": head, "tail": tail, "arrival": arrival, "head_dropped": dropped,
+            "est_ns_per_sample": float(cost)}
 
 
 class ResponseCore:
     """``step(u) -> y``: amplifier, linear chain ``h`` (head FIR + block-FFT tail), measurement."""
 
     def __init__(self, h: np.ndarray, amplifier, measure=None, fs: float = 1.0, seed: int | None = 0,
-                 energy_tol: float = DEFAULTS["energy_tol"], arrival_tol: float = DEFAULTS["arrival_tol"],
-                 block_min: int = DEFAULTS["block_min"], block_max: int = DEFAULTS["block_max"]):
-        p = plan(h, energy_tol, arrival_tol, block_min, block_max)
+                 energy_tol: float = DEFAULTS["energy_tol"], block_min: int = DEFAULTS["block_min"],
+                 block_max: int = DEFAULTS["block_max"]):
+        p = plan(h, energy_tol, block_min, block_max)
         self.block = B = p["block"]
         self.arrival = p["arrival"]
         self.head_dropped = p["head_dropped"]
@@ -288,6 +302,7 @@ def prepare_response_core(twin, fs: float, core: dict[str, Any], check_samples: 
     h = impulse_response(twin, fs)
     p = plan(h, **opts)
     out.update({"impulse_length": len(h), "block": p["block"], "arrival_samples": p["arrival"],
+                "estimated_core_ns_per_sample": round(p["est_ns_per_sample"]),
                 "head_segments": [[int(s), len(t)] for s, t in p["head"]], "head_dropped_energy": p["head_dropped"],
                 "tail_length": len(p["tail"])})
     out["accuracy"] = check_accuracy(twin, fs, n=check_samples, core=out)
