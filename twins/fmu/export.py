@@ -19,6 +19,7 @@ import re
 import shutil
 import sys
 import tempfile
+import zipfile
 from pathlib import Path
 from typing import Any, Iterable
 
@@ -132,9 +133,19 @@ def export_fmu(twin: Twin, path: str | Path, fs: float | None = None, model_name
         script = script_dir / f"{model_name}_slave.py"
         script.write_text(slave_source(model_name, twin.name))
         try:
-            out = FmuBuilder.build_FMU(script, dest=path, project_files=files)
+            out = FmuBuilder.build_FMU(script, dest=stage / path.name, project_files=files)
         finally:
             sys.modules.pop(script.stem, None)
             if str(script_dir) in sys.path:
                 sys.path.remove(str(script_dir))
-    return Path(out)
+        _deflate(Path(out), path)
+    return path
+
+
+def _deflate(src: Path, dest: Path) -> None:
+    """Copy the FMU (pythonfmu stores its members uncompressed) with deflate compression (FMI allows it)."""
+    tmp = dest.with_name(dest.name + ".part")
+    with zipfile.ZipFile(src) as zin, zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED, compresslevel=9) as zout:
+        for info in zin.infolist():
+            zout.writestr(info.filename, zin.read(info.filename))
+    tmp.replace(dest)

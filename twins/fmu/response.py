@@ -277,20 +277,34 @@ def check_chirp(fs: float, h: np.ndarray, n: int) -> tuple[np.ndarray, str]:
 
 def check_accuracy(twin, fs: float, u: np.ndarray | None = None, n: int = 100_000,
                    core: dict[str, Any] | None = None) -> dict[str, Any]:
-    """Relative RMS of the per-sample core against the native ``simulate`` (both noise-free) on ``u``
-    (default: :func:`check_chirp` of ``n`` samples)."""
+    """Accuracy of the per-sample core on ``u`` (default: :func:`check_chirp` of ``n`` samples).
+
+    ``relative_rms``: core output against the native ``simulate``, both without measurement noise (the ADC,
+    if on, stays, so equal quantised samples count as equal); ``linear_relative_rms``: the core before
+    ``measure`` against the twin's own linear stage (``twin.linear(amplifier(u), fs)`` where it has one,
+    else a direct FFT convolution with ``h``), which the ADC cannot mask.
+    """
+    from scipy.signal import oaconvolve
+
     from twins.fmu.check import relative_rms
 
     quiet = twin.with_effects(set(twin.effects) - {"measurement_noise"})
     core_obj = ResponseCore.for_twin(quiet, fs, core)
+    h = impulse_response(quiet, fs)
     if u is None:
-        u, what = check_chirp(fs, impulse_response(quiet, fs), n)
+        u, what = check_chirp(fs, h, n)
     else:
         what = f"given input, {len(u)} samples"
     ref = np.asarray(quiet.simulate(u, fs), dtype=float)
     y = core_obj.run(u)
+    core_obj.measure = None
+    core_obj.reset()
+    lin = core_obj.run(u)
+    v = np.asarray(quiet.amplifier(u), dtype=float) if hasattr(quiet, "amplifier") else np.asarray(u, float)
+    lin_ref = np.asarray(quiet.linear(v, fs) if hasattr(quiet, "linear") else oaconvolve(v, h)[:len(v)], float)
     return {"signal": what, "relative_rms": relative_rms(y, ref), "max_abs_error": float(np.max(np.abs(y - ref))),
-            "rms_ref": float(np.sqrt(np.mean(ref ** 2))), "noise_free": True}
+            "rms_ref": float(np.sqrt(np.mean(ref ** 2))), "linear_relative_rms": relative_rms(lin, lin_ref),
+            "noise_free": True}
 
 
 def prepare_response_core(twin, fs: float, core: dict[str, Any], check_samples: int = 30_000) -> dict[str, Any]:
