@@ -1,0 +1,520 @@
+"""The discrepancy loop: calibrate, analyse the residual, name the cause, extend the twin, measure the gain.
+
+``diagnose(twin, data, val)`` (issue 8):
+
+1. **Calibrate** the twin's current configuration (its ``CALIBRATION_PARAMS``) to the estimation record, with
+   the measurement-noise effect switched off so that the simulation is the deterministic prediction.
+2. **Analyse** the residual ``e = y − ŷ`` on estimation and validation data
+   (:func:`twins.discrepancy.features.analyse`).
+3. **Trial every catalog effect** the configuration lacks: add it, pre-scan each of its parameters over its
+   documented range (plus the values the residual features suggest, e.g. the echo delay), then fit its
+   parameters together with the core calibration parameters by free-run output error
+   (:func:`twins.calibration.calibrate`, bounded by the ``pfield`` ranges), re-simulate the validation record.
+   The validation gain of the trial is the decisive evidence; the signature score
+   (:mod:`twins.discrepancy.evidence`) explains it in numbers and breaks ties.
+4. **Significance** of a gain (documented criterion): an F-test on the validation residual variance,
+   ``F = (N_eff − p)/p · (s₀² − s₁²)/s₁²`` with ``p`` the number of added parameters and ``N_eff`` the effective
+   number of independent residual samples (:func:`features.effective_samples`), Bonferroni-corrected over the
+   candidates tried (``p_value < alpha / n_candidates``), *and* a relative validation NRMSE reduction of at
+   least ``min_rel_gain`` (a floor against gains of no practical size on very long records).
+5. **Group** what the data cannot tell apart: candidates of the leading cause's ``EffectSpec.group`` whose gain
+   reaches half of it, and any candidate whose validation residual variance is within the sampling error
+   ``2·√(2/N_eff)`` of the leader's while its prediction differs from the leader's by less than half the
+   residual RMS. The group is reported with the experiment that would separate it.
+6. **Extend**: keep the leading cause if significant, repeat (at most ``max_rounds``) until nothing significant
+   remains. Then test what is left for structure no catalog entry explains: a generic linear-in-parameters
+   residual model (FIR of u, (u²)′, (u³)′ and a trend), fitted on the estimation residual, scored on the
+   validation residual with the same F-test; if significant it is described in generic terms.
+
+Confidence of a cause (in [0, 1]): ``(1 − p_value) · (0.5 + 0.5·√(1 − g₂/g₁)) · (0.8 + 0.2·s)`` with ``g₁`` its
+relative validation gain, ``g₂`` the best gain of a candidate outside its group and ``s`` its signature score:
+1 when only this effect explains the data and its signature is clear, ½ when another effect explains it
+about as well.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import time
+from typing import Any, Iterable, Sequence
+
+import numpy as np
+from scipy import stats
+
+from sysid.errors import ConfigError, DataError
+from sysid.metrics import nrmse, r2
+from sysid.record import Record
+from twins.base import Twin, param_info
+from twins.calibration import calibrate as ls_calibrate
+
+from . import evidence as ev
+from . import features as ft
+
+__all__ = ["diagnose", "NOISE_EFFECTS", "significance"]
+
+#: effects that model unpredictable noise: never a candidate cause, always off in the fitted prediction
+NOISE_EFFECTS: tuple[str, ...] = ("measurement_noise",)
+
+
+# ---------------------------------------------------------------------------------------------- helpers
+def _unpredictable(twin: Twin) -> set[str]:
+    """Effects that add error no prediction can follow: noise, and quantisation (its error depends on the
+    noise); they are left out of the fitted prediction and are judged by their data signature only."""
+    return {e for e, s in twin.EFFECTS.items() if e in NOISE_EFFECTS or ev.family_of(s) in ("noise", "quantization")}
+
+
+def _deterministic(twin: Twin) -> Twin:
+    """The same twin without its noise and quantisation effects (the prediction to compare with data)."""
+    eff = set(twin.effects) - _unpredictable(twin)
+    return twin if eff == set(twin.effects) else twin.with_effects(eff)
+
+
+def _simulate(twin: Twin, rec: Record) -> np.ndarray:
+    return np.asarray(twin.simulate(rec.u, rec.fs), dtype=float)
+
+
+def significance(sse0: float, sse1: float, n_eff: float, p_extra: int) -> float:
+    """p-value of the F-test that the residual variance fell from sse0 to sse1 by adding ``p_extra`` parameters,
+    with ``n_eff`` effective independent samples (see the module docstring)."""
+    p = max(int(p_extra), 1)
+    if not (math.isfinite(sse0) and math.isfinite(sse1)) or sse1 >= sse0 or sse1 <= 0:
+        return 1.0 if sse1 > 0 or sse1 >= sse0 else 0.0
+    d2 = max(n_eff - p, 1.0)
+    F = d2 / p * (sse0 - sse1) / sse1
+    return float(stats.f.sf(F, p, d2))
+
+
+def _numeric_fields(twin: Twin, fields: Iterable[str]) -> list[str]:
+    info = param_info(type(twin.params))
+    out = []
+    for f in fields:
+        if f not in info or f in out:
+            continue
+        v = getattr(twin.params, f)
+        if isinstance(v, bool) or not isinstance(v, (int, float)):
+            continue
+        lo, hi = info[f].range
+        if lo is None or hi is None or not (float(hi) > float(lo)):
+            continue
+        out.append(f)
+    return out
+
+
+def _grid(lo: float, hi: float, n: int, is_int: bool) -> np.ndarray:
+    if lo > 0 and hi / lo > 30:
+        g = np.geomspace(lo, hi, n)
+    else:
+        g = np.linspace(lo, hi, n)
+    if is_int:
+        g = np.unique(np.round(g))
+    return g
+
+
+def _guesses(field: str, unit: str, a: dict[str, Any], twin: Twin, current: float) -> list[float]:
+    """Values of an effect parameter that the residual features suggest (delays, path lengths, amplitudes)."""
+    u = (unit or "").strip().lower()
+    name = field.lower()
+    sh = a["delay"]["shift_s"]
+    tau = a["echo"].get("lag_s", float("nan"))
+    coef = a["echo"].get("coef", 0.0)
+    out: list[float] = []
+    if u in ("s", "sec", "seconds"):
+        out += [sh, abs(sh), current + sh]
+        if math.isfinite(tau):
+            out += [tau]
+    elif u in ("us", "µs"):
+        out += [sh * 1e6, current + sh * 1e6] + ([tau * 1e6] if math.isfinite(tau) else [])
+    elif u in ("ms",):
+        out += [sh * 1e3, current + sh * 1e3] + ([tau * 1e3] if math.isfinite(tau) else [])
+    elif u in ("samples", "sample"):
+        out += [a["delay"]["shift_samples"], current + a["delay"]["shift_samples"]]
+        if math.isfinite(tau):
+            out += [tau * a["fs"]]
+    elif u == "m" or u == "mm":
+        c = ev.sound_speed(twin)
+        k = 1e3 if u == "mm" else 1.0
+        if c:
+            out += [k * c * sh, current + k * c * sh]
+            if math.isfinite(tau):
+                out += [k * c * tau, k * c * tau / 2]
+    if any(w in name for w in ("amp", "gain", "coef", "reflect", "level", "scale")) and u in ("", "1", "-", "ratio"):
+        out += [coef, abs(coef)]
+    return [float(v) for v in out if math.isfinite(v)]
+
+
+def _core_for(twin: Twin, core: Sequence[str]) -> list[str]:
+    """Core calibration parameters that act in this configuration: a parameter that belongs only to effects
+    that are switched off has no effect on the output and is not fitted."""
+    owned_off = set()
+    owned_on = set()
+    for e, spec in twin.EFFECTS.items():
+        (owned_on if e in twin.effects else owned_off).update(spec.params.values())
+    return [c for c in core if c not in owned_off or c in owned_on]
+
+
+# ---------------------------------------------------------------------------------------------- trials
+@dataclasses.dataclass
+class Trial:
+    effect: str
+    twin: Twin
+    fitted: dict[str, float]
+    effect_params: dict[str, float]
+    stderr: dict[str, float]
+    sse_est: float
+    sse_val: float
+    yhat_val: np.ndarray
+    nrmse_val: float
+    r2_val: float
+    p_value: float = 1.0
+    gain: float = 0.0
+    significant: bool = False
+    seconds: float = 0.0
+    n_added: int = 0
+
+
+def _sse(y: np.ndarray, yh: np.ndarray, skip: int) -> float:
+    r = np.asarray(y, float)[skip:] - np.asarray(yh, float)[skip:]
+    v = float(np.sum(r * r))
+    return v if math.isfinite(v) else float("inf")
+
+
+def _prescan(tw: Twin, est: Record, fields: list[str], a: dict[str, Any], points: int, skip: int) -> dict[str, float]:
+    """Coordinate-wise scan of each effect parameter over its range and the feature guesses (est SSE)."""
+    info = param_info(type(tw.params))
+    best = {f: float(getattr(tw.params, f)) for f in fields}
+    y = est.y
+
+    def cost(vals: dict[str, float]) -> float:
+        try:
+            return _sse(y, _simulate(tw.with_params(**vals), est), skip)
+        except (ConfigError, DataError, ValueError, FloatingPointError):
+            return float("inf")
+
+    best_cost = cost(best)
+    # joint start from the feature guesses (e.g. echo delay and amplitude together), when every field has one
+    guess = {}
+    for f in fields:
+        lo, hi = (float(v) for v in info[f].range)
+        g = [v for v in _guesses(f, info[f].unit, a, tw, best[f]) if lo <= v <= hi]
+        if g:
+            guess[f] = g
+    if guess:
+        import itertools
+
+        keys = list(guess)
+        for combo in itertools.islice(itertools.product(*(guess[k][:4] for k in keys)), 64):
+            trial = dict(best)
+            trial.update({k: (int(round(v)) if isinstance(getattr(tw.params, k), int) else float(v))
+                          for k, v in zip(keys, combo)})
+            c = cost(trial)
+            if c < best_cost:
+                best_cost, best = c, trial
+    for _sweep in range(2 if len(fields) > 1 else 1):
+        for f in fields:
+            lo, hi = (float(v) for v in info[f].range)
+            is_int = isinstance(getattr(tw.params, f), int)
+            cands = list(_grid(lo, hi, points, is_int))
+            cands += [g for g in _guesses(f, info[f].unit, a, tw, best[f]) if lo <= g <= hi]
+            for v in cands:
+                trial = dict(best)
+                trial[f] = int(round(v)) if is_int else float(v)
+                c = cost(trial)
+                if c < best_cost:
+                    best_cost, best = c, trial
+    return best
+
+
+def _run_trial(base: Twin, effect: str, est: Record, val: Record, core: list[str], a_val: dict[str, Any],
+               opts: dict[str, Any], refit_core: bool, start: dict[str, float] | None = None) -> Trial:
+    """Add ``effect`` to ``base`` and fit it to ``est``: stage A (``refit_core=False``) fits the effect's own
+    parameters after a pre-scan with the core held at its calibration; stage B also refits the core."""
+    t0 = time.perf_counter()
+    spec = base.EFFECTS[effect]
+    tw = base.with_effects(set(base.effects) | {effect})
+    eff_fields = _numeric_fields(tw, spec.params.values())
+    if start is None:
+        x0 = _prescan(tw, est, eff_fields, a_val, opts["scan_points"], opts["skip"]) if eff_fields else {}
+    else:
+        x0 = dict(start)
+    names = list(eff_fields)
+    if refit_core:
+        names += [c for c in _core_for(tw, core) if c not in eff_fields]
+    if names:
+        res = ls_calibrate(tw, est, names, x0={**{c: float(getattr(base.params, c)) for c in core}, **x0},
+                           simulate=_simulate, max_nfev=opts["trial_nfev"] if refit_core else opts["scan_nfev"],
+                           skip=opts["skip"])
+        fit_tw, fitted, stderr = res.twin, res.fitted, res.stderr
+    else:
+        fit_tw, fitted, stderr = tw, {}, {}
+    yv = _simulate(fit_tw, val)
+    ye = _simulate(fit_tw, est)
+    ok = bool(np.all(np.isfinite(yv)))
+    return Trial(effect=effect, twin=fit_tw, fitted=fitted,
+                 effect_params={f: fitted.get(f, float(getattr(fit_tw.params, f))) for f in eff_fields},
+                 stderr={f: stderr.get(f, float("nan")) for f in eff_fields},
+                 sse_est=_sse(est.y, ye, opts["skip"]), sse_val=_sse(val.y, yv, opts["skip"]), yhat_val=yv,
+                 nrmse_val=nrmse(val.y, yv, opts["skip"]) if ok else float("inf"),
+                 r2_val=r2(val.y, yv, opts["skip"]) if ok else float("-inf"),
+                 seconds=time.perf_counter() - t0, n_added=max(len(eff_fields), 1))
+
+
+# ---------------------------------------------------------------------------------------------- stages
+@dataclasses.dataclass
+class Stage:
+    """A configuration with its validation prediction and residual analysis."""
+
+    twin: Twin
+    yhat_est: np.ndarray
+    yhat_val: np.ndarray
+    analysis_est: dict[str, Any]
+    analysis_val: dict[str, Any]
+    nrmse_val: float
+    r2_val: float
+    sse_val: float
+
+    def summary(self, noise_free: bool = True) -> dict[str, Any]:
+        return {"effects": sorted(self.twin.effects), "r2_val": self.r2_val, "nrmse_val": self.nrmse_val,
+                "tests": ft.tests_summary(self.analysis_val["_tests_full"])}
+
+
+def _stage(twin: Twin, est: Record, val: Record, opts: dict[str, Any]) -> Stage:
+    ye = _simulate(twin, est)
+    yv = _simulate(twin, val)
+    ae = ft.analyse(est.u, est.y, ye, est.fs, est.meta, max_lag=opts["max_lag"], max_echo_s=opts["max_echo_s"])
+    av = ft.analyse(val.u, val.y, yv, val.fs, val.meta, max_lag=opts["max_lag"], max_echo_s=opts["max_echo_s"])
+    return Stage(twin, ye, yv, ae, av, nrmse(val.y, yv, opts["skip"]), r2(val.y, yv, opts["skip"]),
+                 _sse(val.y, yv, opts["skip"]))
+
+
+def _generic_residual_model(est: Record, val: Record, e_est: np.ndarray, e_val: np.ndarray, lags: int,
+                            skip: int) -> dict[str, Any]:
+    """Structure no catalog entry explains: a FIR model of the residual on u, (u²)′, (u³)′ (lags 0…L) and a
+    trend, fitted on the estimation residual and scored on the validation residual (relative SSE, F-test)."""
+    def design(rec: Record) -> np.ndarray:
+        u = np.asarray(rec.u, float)
+        sc = float(np.std(est.u)) or 1.0
+        mu = float(np.mean(est.u))
+        z = (u - mu) / sc
+        cols = [np.ones_like(z), np.linspace(-1, 1, z.size)]
+        for x in (z, z ** 2 - 1.0, z ** 3 - 3 * z):
+            for k in range(lags + 1):
+                cols.append(np.r_[np.zeros(k), x[: x.size - k]])
+        return np.column_stack(cols)
+    A = design(est)[skip:]
+    c, *_ = np.linalg.lstsq(A, e_est[skip:], rcond=None)
+    pv = design(val)[skip:] @ c
+    ev_ = e_val[skip:]
+    sse0 = float(ev_ @ ev_)
+    sse1 = float((ev_ - pv) @ (ev_ - pv))
+    n_eff = ft.effective_samples(ev_ - pv)
+    p = significance(sse0, sse1, n_eff, A.shape[1])
+    return {"nrmse_ratio": math.sqrt(sse1 / sse0) if sse0 > 0 else 1.0, "p_value": p, "n_terms": int(A.shape[1])}
+
+
+# ---------------------------------------------------------------------------------------------- main entry
+def diagnose(twin: Twin, data: Record, val: Record | None = None, max_rounds: int = 3, *,
+             candidates: Sequence[str] | None = None, calibrate_baseline: bool = True,
+             calibration_params: Sequence[str] | None = None, alpha: float = 0.01, min_rel_gain: float = 0.005,
+             trial_nfev: int = 30, scan_nfev: int = 15, scan_points: int = 13, refine: int = 3, max_lag: int = 20, max_echo_s: float | None = None,
+             skip: int = 0, split: float = 0.6, generic_lags: int = 10, keep_stages: bool = False) -> dict[str, Any]:
+    """Diagnose what ``twin`` gets wrong about ``data`` (issue 8); return the JSON-able result.
+
+    Parameters
+    ----------
+    twin : Twin
+        Starting configuration (parameters and effects); its noise effects are ignored for prediction.
+    data, val : Record
+        Estimation and validation records. Without ``val`` the data is split at ``split`` of its length.
+    max_rounds : int
+        At most this many effects are added.
+    candidates : list of effect ids
+        Catalog effects to try (default: every effect not in the configuration, except noise).
+    calibration_params : list of parameter names
+        Core parameters refitted with every trial (default ``twin.CALIBRATION_PARAMS``).
+    alpha, min_rel_gain : float
+        Significance level (Bonferroni over the candidates) and minimum relative validation NRMSE reduction.
+    trial_nfev, scan_nfev, scan_points, refine : int
+        Budgets: least-squares evaluations of a full trial (effect + core parameters) and of the first-stage
+        fit (effect parameters only, core held), points of each parameter pre-scan, and how many of the
+        best first-stage candidates get the full refit.
+
+    Returns a dict with ``verdict``, ``causes``, ``baseline``, ``extended``, ``gain`` (issue 8) and the details
+    ``rounds`` (every trial with its numbers), ``unexplained`` and ``analysis`` (baseline and final residual
+    numbers on the validation data).
+    """
+    if not isinstance(twin, Twin):
+        raise ConfigError("diagnose: twin must be a Twin instance")
+    data.require_output()
+    if val is None:
+        data, val = data.split(fraction=split)
+    val.require_output()
+    if data.n_inputs != 1 or data.n_outputs != 1:
+        raise DataError(f"{data.source}: diagnose handles single-input single-output records")
+    if abs(data.fs - val.fs) > 1e-9 * data.fs:
+        raise DataError(f"estimation and validation records have different fs ({data.fs} and {val.fs} Hz)")
+    opts = {"trial_nfev": int(trial_nfev), "scan_nfev": int(scan_nfev), "scan_points": int(scan_points), "skip": int(skip), "max_lag": int(max_lag),
+            "max_echo_s": max_echo_s}
+    t_start = time.perf_counter()
+    core = list(calibration_params if calibration_params is not None else twin.CALIBRATION_PARAMS)
+    core = _numeric_fields(twin, core)
+
+    # 1. calibrate the current configuration (deterministic prediction)
+    current = _deterministic(twin)
+    calib_info: dict[str, Any] = {}
+    core0 = _core_for(current, core)
+    if calibrate_baseline and core0:
+        try:
+            res = current.calibrate(data, val=val, names=core0)
+        except TypeError:
+            res = ls_calibrate(current, data, core0, val=val, simulate=_simulate)
+        current = _deterministic(res.twin)
+        calib_info = {"fitted": res.fitted, "stderr": res.stderr}
+    base = _stage(current, data, val, opts)
+    stage = base
+
+    pool = [e for e in (candidates if candidates is not None else twin.EFFECTS)
+            if e in twin.EFFECTS and e not in twin.effects and e not in NOISE_EFFECTS
+            and ev.family_of(twin.EFFECTS[e]) != "noise"]
+    unknown = [e for e in (candidates or []) if e not in twin.EFFECTS]
+    if unknown:
+        raise ConfigError(f"unknown effect {unknown[0]!r} for twin {twin.name}; valid: {', '.join(twin.EFFECTS)}")
+
+    causes: list[dict[str, Any]] = []
+    rounds: list[dict[str, Any]] = []
+    for rnd in range(max(int(max_rounds), 0)):
+        remaining = [e for e in pool if e not in stage.twin.effects]
+        if not remaining:
+            break
+        a_val = stage.analysis_val
+        a_fit = dict(a_val)
+        a_fit["fs"] = data.fs
+        # features that guide the pre-scan come from the estimation residual (the data the trial is fitted to)
+        a_fit_est = dict(stage.analysis_est)
+        a_fit_est["fs"] = data.fs
+        n_eff0 = ft.effective_samples(val.y[skip:] - stage.yhat_val[skip:])
+        trials: list[Trial] = []
+        for e in remaining:
+            try:
+                tr = _run_trial(stage.twin, e, data, val, core, a_fit_est, opts, refit_core=False)
+            except (ConfigError, DataError, ValueError, np.linalg.LinAlgError) as exc:  # an effect that cannot run here
+                rounds.append({"round": rnd + 1, "effect": e, "error": str(exc)})
+                continue
+            trials.append(tr)
+        # stage B: the most promising candidates are refitted together with the core parameters
+        trials.sort(key=lambda t: t.sse_val)
+        for i, tr in enumerate(trials[: max(int(refine), 0)]):
+            # the leader, and whoever comes close to it (within a factor 1.5 in validation SSE)
+            if i > 0 and (tr.sse_val > 1.5 * trials[0].sse_val or tr.sse_val >= stage.sse_val * (1 - 1e-9)):
+                continue
+            try:
+                trB = _run_trial(stage.twin, tr.effect, data, val, core, a_fit_est, opts, refit_core=True,
+                                 start=tr.effect_params)
+            except (ConfigError, DataError, ValueError, np.linalg.LinAlgError):
+                continue
+            trB.seconds += tr.seconds
+            if trB.sse_est <= tr.sse_est:
+                trials[i] = trB
+        for tr in trials:
+            n_eff = min(n_eff0, ft.effective_samples(val.y[skip:] - tr.yhat_val[skip:]))
+            tr.p_value = significance(stage.sse_val, tr.sse_val, n_eff, tr.n_added)
+            tr.gain = max(0.0, 1.0 - tr.nrmse_val / stage.nrmse_val) if stage.nrmse_val > 0 else 0.0
+        if not trials:
+            break
+        n_c = len(trials)
+        for tr in trials:
+            tr.significant = bool(tr.p_value < alpha / n_c and tr.gain >= min_rel_gain)
+        sig_ev = {tr.effect: ev.signature_evidence(twin.EFFECTS[tr.effect], a_val, twin) for tr in trials}
+        trials.sort(key=lambda t: (t.significant, t.gain + 0.01 * sig_ev[t.effect]["score"] * t.gain), reverse=True)
+        top = trials[0]
+        # group what the data cannot tell apart
+        n_eff_top = ft.effective_samples(val.y[skip:] - top.yhat_val[skip:])
+        tol = 2.0 * math.sqrt(2.0 / max(n_eff_top, 1.0))
+        e_rms_top = math.sqrt(top.sse_val / max(val.n - skip, 1))
+        top_group = twin.EFFECTS[top.effect].group
+        group = [top.effect]
+        for tr in trials[1:]:
+            # the data cannot tell tr from the leader when the leader's residual is not significantly smaller
+            not_better = significance(tr.sse_val, top.sse_val, n_eff_top, 1) > alpha
+            same_group = bool(top_group) and twin.EFFECTS[tr.effect].group == top_group and tr.significant
+            d_pred = float(np.sqrt(np.mean((tr.yhat_val[skip:] - top.yhat_val[skip:]) ** 2)))
+            equal = tr.significant and (tr.sse_val <= top.sse_val * (1 + tol) or not_better) and d_pred < 0.5 * e_rms_top
+            if (same_group and not_better) or equal:
+                group.append(tr.effect)
+        g1 = top.gain
+        g2 = max([t.gain for t in trials if t.effect not in group] + [0.0])
+        rows = []
+        for tr in trials:
+            s = sig_ev[tr.effect]
+            if tr.effect in group:
+                sep = 1.0 - (g2 / g1 if g1 > 0 else 1.0)
+                conf = (1 - tr.p_value) * (0.5 + 0.5 * math.sqrt(max(sep, 0.0))) * (0.8 + 0.2 * s["score"])
+                if tr.effect != top.effect:
+                    conf *= (tr.gain / g1) if g1 > 0 else 0.0
+            else:
+                conf = (1 - tr.p_value) * 0.5 * ((tr.gain / g1) if g1 > 0 else 0.0) * (0.8 + 0.2 * s["score"])
+            conf = float(min(1.0, max(0.0, conf))) if tr.significant else float(min(0.2, max(0.0, conf)) * 0.5)
+            rows.append({"effect": tr.effect, "family": s["family"], "significant": tr.significant,
+                         "confidence": conf, "signature_score": s["score"], "signature": s["text"],
+                         "nrmse_val": tr.nrmse_val, "r2_val": tr.r2_val, "gain": tr.gain, "p_value": tr.p_value,
+                         "params": tr.effect_params, "stderr": tr.stderr, "seconds": tr.seconds})
+        round_info = {"round": rnd + 1, "nrmse_val_before": stage.nrmse_val, "n_eff": n_eff0, "candidates": rows,
+                      "group": group}
+        rounds.append(round_info)
+        if not top.significant:
+            break
+        row = rows[0]
+        fams = [ev.family_of(twin.EFFECTS[g]) for g in group]
+        text = (f"{row['signature']}; adding {top.effect} and fitting "
+                f"{', '.join(f'{k}={v:.4g}' for k, v in top.effect_params.items()) or 'the core'} lowers the "
+                f"validation NRMSE {stage.nrmse_val:.4g} → {top.nrmse_val:.4g} (F-test p = {top.p_value:.2g})")
+        cause = {"effect": top.effect, "confidence": row["confidence"], "evidence": text,
+                 "params": dict(top.effect_params), "stderr": dict(top.stderr), "family": row["family"],
+                 "round": rnd + 1, "nrmse_val_before": stage.nrmse_val, "nrmse_val_after": top.nrmse_val,
+                 "p_value": top.p_value}
+        if len(group) > 1:
+            cause["group"] = group
+            cause["separate_by"] = ev.separating_experiment(fams)
+            gains_txt = ", ".join(f"{r['gain']:.3f}" for r in rows if r["effect"] in group)
+            cause["evidence"] += (f"; the data cannot tell {', '.join(group)} apart "
+                                  f"(gains {gains_txt}); "
+                                  f"to separate them: {cause['separate_by']}")
+        causes.append(cause)
+        stage = _stage(top.twin, data, val, opts)
+
+    # what no catalog entry explains
+    e_est = data.y - stage.yhat_est
+    e_val = val.y - stage.yhat_val
+    gen = _generic_residual_model(data, val, e_est, e_val, generic_lags, skip)
+    gen_sig = bool(gen["p_value"] < alpha and (1.0 - gen["nrmse_ratio"]) >= max(5 * min_rel_gain, 0.02))
+    unexplained = {"significant": gen_sig, **gen, "description": ev.describe_generic(stage.analysis_val)}
+    if gen_sig:
+        causes.append({"effect": "unexplained", "confidence": float(1 - gen["p_value"]) * 0.5,
+                       "evidence": ("structure no catalog effect explains: a generic residual model (FIR of u, u², u³ "
+                                    f"and a trend) removes {100 * (1 - gen['nrmse_ratio'] ** 2):.0f} % of the validation "
+                                    f"residual variance; {unexplained['description']}"),
+                       "params": {}})
+    verdict = "discrepancy" if causes else "none"
+    out = {
+        "verdict": verdict,
+        "causes": causes,
+        "baseline": base.summary(),
+        "extended": stage.summary(),
+        "gain": {"nrmse_ratio": stage.nrmse_val / base.nrmse_val if base.nrmse_val > 0 else 1.0,
+                 "r2_delta": stage.r2_val - base.r2_val},
+        "twin": twin.name,
+        "calibration": calib_info,
+        "params_final": dataclasses.asdict(stage.twin.params),
+        "rounds": rounds,
+        "unexplained": unexplained,
+        "analysis": {"baseline": {"estimation": _public(base.analysis_est), "validation": _public(base.analysis_val)},
+                     "extended": {"estimation": _public(stage.analysis_est), "validation": _public(stage.analysis_val)}},
+        "seconds": time.perf_counter() - t_start,
+    }
+    if keep_stages:
+        out["_stages"] = {"baseline": base, "extended": stage, "est": data, "val": val}
+    return out
+
+
+def _public(a: dict[str, Any]) -> dict[str, Any]:
+    return {k: v for k, v in a.items() if not k.startswith("_")}

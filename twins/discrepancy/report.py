@@ -1,0 +1,143 @@
+"""Figures and an index.html for a diagnosis: residuals, spectra and correlation tests before and after.
+
+``write_report(result, directory)`` needs the result of ``diagnose(..., keep_stages=True)`` (the stages hold
+the predictions); it writes ``residuals.png``, ``spectra.png``, ``correlation_tests.png`` (and
+``hysteresis.png`` when the validation record lists sine segments) plus ``index.html``.
+"""
+
+from __future__ import annotations
+
+import html
+import json
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+__all__ = ["write_report"]
+
+
+def _plt():
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def _psd(x, fs):
+    from scipy import signal as sps
+
+    n = len(x)
+    nper = int(min(n, max(256, 1 << int(np.log2(max(n // 8, 2))))))
+    return sps.welch(np.asarray(x, float), fs=fs, nperseg=nper)
+
+
+def write_report(result: dict[str, Any], directory: str | Path) -> Path:
+    """Write the figures and ``index.html`` of ``result`` into ``directory``; return the index path."""
+    st = result.get("_stages")
+    if st is None:
+        raise ValueError("write_report needs diagnose(..., keep_stages=True)")
+    d = Path(directory)
+    d.mkdir(parents=True, exist_ok=True)
+    plt = _plt()
+    val = st["val"]
+    base, ext = st["baseline"], st["extended"]
+    t = np.arange(val.n) / val.fs
+    e0 = val.y - base.yhat_val
+    e1 = val.y - ext.yhat_val
+    files = []
+
+    fig, ax = plt.subplots(3, 1, figsize=(10, 7), sharex=True)
+    ax[0].plot(t, val.y, lw=0.6, label="measured")
+    ax[0].plot(t, base.yhat_val, lw=0.6, label="baseline twin")
+    ax[0].plot(t, ext.yhat_val, lw=0.6, ls="--", label="extended twin")
+    ax[0].legend(fontsize=8)
+    ax[0].set_ylabel(f"y [{val.units.get('y', '')}]")
+    ax[1].plot(t, e0, lw=0.5, color="C1")
+    ax[1].set_ylabel("residual before")
+    ax[2].plot(t, e1, lw=0.5, color="C2")
+    ax[2].set_ylabel("residual after")
+    ax[2].set_xlabel("time [s]")
+    fig.suptitle(f"validation: NRMSE {result['baseline']['nrmse_val']:.4g} → {result['extended']['nrmse_val']:.4g}")
+    fig.tight_layout()
+    fig.savefig(d / "residuals.png", dpi=110)
+    plt.close(fig)
+    files.append("residuals.png")
+
+    fig, ax = plt.subplots(figsize=(10, 4.5))
+    for x, lab in ((val.y, "measured output"), (e0, "residual before"), (e1, "residual after"), (val.u, None)):
+        if lab is None:
+            continue
+        f, p = _psd(x, val.fs)
+        ax.semilogy(f, p + 1e-300, lw=0.8, label=lab)
+    band = result["analysis"]["baseline"]["validation"]["bands"]["band_hz"]
+    ax.axvspan(band[0], band[1], color="0.9", zorder=0, label="excited band")
+    ax.set_xlabel("frequency [Hz]")
+    ax.set_ylabel("PSD")
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(d / "spectra.png", dpi=110)
+    plt.close(fig)
+    files.append("spectra.png")
+
+    t0 = base.analysis_val["_tests_full"]["tests"]
+    t1 = ext.analysis_val["_tests_full"]["tests"]
+    fig, ax = plt.subplots(2, len(t0), figsize=(3.2 * len(t0), 5), sharey=True)
+    for row, tests, lab in ((0, t0, "before"), (1, t1, "after")):
+        for j, tt in enumerate(tests):
+            vals = np.asarray(tt["values"], float)
+            lags = np.asarray(tt.get("lags", np.arange(vals.size) - (vals.size // 2 if vals.size % 2 else 0)))
+            a = ax[row, j]
+            a.vlines(lags, 0, vals, lw=1.0, color="C0" if tt["passed"] else "C3")
+            b = float(np.atleast_1d(tt["band"])[0])
+            a.axhline(b, color="k", ls="--", lw=0.7)
+            a.axhline(-b, color="k", ls="--", lw=0.7)
+            a.set_title(f"{tt['name']} {lab}", fontsize=9)
+            a.set_ylim(-1, 1)
+    fig.tight_layout()
+    fig.savefig(d / "correlation_tests.png", dpi=110)
+    plt.close(fig)
+    files.append("correlation_tests.png")
+
+    hy0 = result["analysis"]["baseline"]["validation"].get("hysteresis") or []
+    hy1 = result["analysis"]["extended"]["validation"].get("hysteresis") or []
+    if hy0:
+        fig, ax = plt.subplots(1, 2, figsize=(10, 4))
+        f = [h["freq_hz"] for h in hy0]
+        ax[0].semilogx(f, [100 * h["width_measured"] for h in hy0], "ko-", label="measured")
+        ax[0].semilogx(f, [100 * h["width_simulated"] for h in hy0], "s--", label="baseline twin")
+        ax[0].semilogx(f, [100 * h["width_simulated"] for h in hy1], "^:", label="extended twin")
+        ax[0].set_ylabel("loop width [% of span]")
+        ax[1].semilogx(f, [h["lag_deg_measured"] for h in hy0], "ko-", label="measured")
+        ax[1].semilogx(f, [h["lag_deg_simulated"] for h in hy0], "s--", label="baseline twin")
+        ax[1].semilogx(f, [h["lag_deg_simulated"] for h in hy1], "^:", label="extended twin")
+        ax[1].set_ylabel("phase lag [deg]")
+        for a in ax:
+            a.set_xlabel("frequency [Hz]")
+            a.legend(fontsize=8)
+        fig.tight_layout()
+        fig.savefig(d / "hysteresis.png", dpi=110)
+        plt.close(fig)
+        files.append("hysteresis.png")
+
+    rows = "".join(
+        f"<tr><td>{html.escape(c['effect'])}</td><td>{c['confidence']:.2f}</td><td>{html.escape(c['evidence'])}</td>"
+        f"<td>{html.escape(json.dumps(c.get('params', {})))}</td></tr>" for c in result["causes"])
+    def tests_txt(s):
+        return ", ".join(f"{t['name']}: {'pass' if t['passed'] else 'fail ' + str(t['n_failing'])}" for t in s["tests"]["tests"])
+    body = f"""<!doctype html><html><head><meta charset="utf-8"><title>diagnosis: {html.escape(result.get('twin', ''))}</title>
+<style>body{{font-family:sans-serif;max-width:1100px;margin:auto}}td,th{{border:1px solid #ccc;padding:4px;vertical-align:top}}table{{border-collapse:collapse}}</style></head><body>
+<h1>Discrepancy diagnosis — twin {html.escape(result.get('twin', ''))}</h1>
+<p>Verdict: <b>{result['verdict']}</b>. Validation NRMSE {result['baseline']['nrmse_val']:.4g} → {result['extended']['nrmse_val']:.4g}
+(ratio {result['gain']['nrmse_ratio']:.3f}), R² {result['baseline']['r2_val']:.5f} → {result['extended']['r2_val']:.5f}.</p>
+<p>Effects before: {html.escape(', '.join(result['baseline']['effects']) or 'none')}; after: {html.escape(', '.join(result['extended']['effects']) or 'none')}.</p>
+<h2>Causes</h2><table><tr><th>effect</th><th>confidence</th><th>evidence</th><th>params</th></tr>{rows}</table>
+<h2>Correlation tests (eq. 2-32), validation</h2><p>before: {html.escape(tests_txt(result['baseline']))}<br>after: {html.escape(tests_txt(result['extended']))}</p>
+<h2>Not explained</h2><p>{html.escape(result['unexplained']['description'])}</p>
+{''.join(f'<h2>{f[:-4]}</h2><img src="{f}" style="max-width:100%">' for f in files)}
+</body></html>"""
+    index = d / "index.html"
+    index.write_text(body)
+    return index
