@@ -265,3 +265,26 @@ def test_sweep_cli_report_and_errors(tmp_path, capsys):
     assert main(["sweep", "acoustic", "nope=1"]) == 2
     assert main(["sweep", "acoustic", "fluid=honey"]) == 2
     assert "valid" in capsys.readouterr().err
+
+
+def test_calibrate_cli_on_a_vna_file(tmp_path, capsys):
+    from benchmarks.cli import main
+    from sysid.io import write_record
+
+    truth = AcousticTwin.from_options(set_=["steel_thickness_m=0.0061"])
+    write_record(truth.generate("vna-sweep", f_start=0.85e6, f_stop=1.4e6, points=400), tmp_path / "vna.npz")
+    assert main(["calibrate", "acoustic", "--data", str(tmp_path / "vna.npz"), "--fit",
+                 "steel_thickness_m,output_gain", "--json", "-o", str(tmp_path / "p.json")]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["parameters"]["steel_thickness_m"]["value"] == pytest.approx(0.0061, rel=1e-4)
+    again = AcousticTwin.from_options(params_file=tmp_path / "p.json")
+    assert again.params.steel_thickness_m == pytest.approx(0.0061, rel=1e-4)
+
+
+def test_fmu_interface_stages():
+    tw = AcousticTwin()
+    h = tw.frequency_response(np.array([0.0, 940e3, 1162e3]))
+    assert h.dtype == complex and h[0] == 0 and np.all(np.abs(h[1:]) > 0.1)
+    assert tw.amplifier(np.array([0.01]))[0] == pytest.approx(2 * 10**2.5 * 0.01, rel=1e-4)
+    with pytest.raises(NotImplementedError):
+        tw.make_stepper(100e6)
