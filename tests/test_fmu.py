@@ -175,14 +175,14 @@ def test_response_core_round_trip(echo_fmu):
     assert validate_fmu(str(path)) == []
     _, cfg = _md(path)
     core = cfg["core"]
-    assert core["kind"] == "response" and core["accuracy"]["relative_rms"] < 1e-4
+    assert core["kind"] == "response" and core["accuracy"]["relative_rms"] < 1e-6
     fs = 100e6
     u = _burst(fs, 8000)  # past the first arrival (2000 samples) and the echo (6000)
     y = fmu_simulate(path, u, fs)
     ref = twin.simulate(u, fs)  # with its seeded noise
     quiet = twin.with_effects({"echo"}).simulate(u, fs)
     signal = np.sqrt(np.mean(quiet ** 2))
-    assert relative_rms(y, ref) < 1e-4
+    assert relative_rms(y, ref) < 1e-6
     # the noise drawn per sample in the FMU is the native sequence: the error is far below the noise
     # (independent draws would leave sqrt(2) x noise_v)
     assert np.sqrt(np.mean((y - ref) ** 2)) < 0.05 * twin.params.noise_v < signal
@@ -196,22 +196,31 @@ def test_response_core_parameter_change_refits(echo_fmu):
     y = fmu_simulate(path, u, fs, start_values=start)
     native = twin.with_params(delay_s=10e-6, q=8.0).with_effects({"echo"})
     ref = native.simulate(u, fs)
-    assert relative_rms(y, ref) < 1e-4
+    assert relative_rms(y, ref) < 1e-6
     assert relative_rms(twin.with_effects({"echo"}).simulate(u, fs), ref) > 0.5
 
 
-def test_response_core_step_equals_vectorised_fir():
-    from twins.fmu.response import ResponseCore, fir_apply, impulse_response, sparse_segments
+@pytest.mark.parametrize("effects,head", [({"echo"}, False), ({"echo", "crosstalk"}, True)])
+def test_response_core_equals_direct_convolution(effects, head):
+    """The per-sample core (head FIR + block-FFT tail) is the linear convolution with h, without delay."""
+    from twins.fmu.response import ResponseCore, impulse_response
 
-    twin = EchoTwin(effects={"echo"})
+    twin = EchoTwin(effects=effects)
     fs = 100e6
     h = impulse_response(twin, fs)
-    segs, dropped = sparse_segments(h, energy_tol=1e-8)
-    assert 0 < dropped <= 1e-8 and len(segs) == 2  # direct arrival and echo; the flight time costs nothing
-    u = _burst(fs, 7000)
-    core = ResponseCore(segs, twin.amplifier, None, fs)
-    y = np.array([core.step(float(v)) for v in u])
-    assert np.allclose(y, fir_apply(segs, twin.amplifier(u)), rtol=0, atol=1e-12 * np.max(np.abs(y)))
+    core = ResponseCore(h, twin.amplifier, None, fs)
+    assert core.arrival > 1900 if not head else core.arrival < 100  # 20 us flight time / crosstalk at once
+    assert core.block >= (1024 if not head else 64)
+    assert bool(core.head) == head  # the crosstalk path arrives at once and is kept in the head
+    rng = np.random.default_rng(1)
+    u = rng.standard_normal(5000)  # white input: every tap of h matters
+    ref = np.convolve(twin.amplifier(u), h)[:len(u)]
+    y = core.run(u)
+    # white input: expected error sqrt(dropped energy fraction); x3 for the finite record
+    assert relative_rms(y, ref) < 3 * np.sqrt(core.head_dropped) + 1e-12
+    # reset restarts from rest
+    core.reset()
+    assert np.array_equal(core.run(u[:300]), y[:300])
 
 
 # ------------------------------------------------------------------------------------- cantilever twin
@@ -283,3 +292,59 @@ def test_cli_export_fmu(tmp_path, capsys):
         assert main(bad) == 2
         err = capsys.readouterr().err.strip()
         assert err.count("\n") == 0 and "Traceback" not in err
+
+
+# --------------------------------------------------------------------------------------- acoustic twin
+@pytest.fixture(scope="module")
+def acoustic_fmu(tmp_path_factory):
+    from twins.acoustic import AcousticTwin
+
+    twin = AcousticTwin()  # default configuration: noise, ADC, amplifier compression on; seed 0
+    return twin, export_fmu(twin, tmp_path_factory.mktemp("ac") / "acoustic.fmu")
+
+
+@pytest.fixture(scope="module")
+def chirp_head(acoustic_fmu):
+    twin, _ = acoustic_fmu
+    rec = twin.generate("thesis-chirp-1ms", duration=8e-5)  # 8000 samples: past the 69 us flight time
+    return rec.u, rec.fs
+
+
+def test_acoustic_fmu_round_trip(acoustic_fmu, chirp_head):
+    twin, path = acoustic_fmu
+    assert validate_fmu(str(path)) == []
+    root, cfg = _md(path)
+    assert cfg["fs"] == 100e6 and cfg["core"]["kind"] == "response"
+    assert cfg["core"]["accuracy"]["relative_rms"] < 1e-9  # measured at export on a chirp, noise-free
+    assert _var(root, "fluid").find("String").get("start") == "water"
+    assert _var(root, "distance_m").find("Real").get("unit") == "m"
+    u, fs = chirp_head
+    ref = twin.simulate(u, fs)  # noise, 8-bit ADC, compression: all as in piezotwin simulate
+    assert np.sqrt(np.mean(ref[7000:] ** 2)) > 10 * twin.params.noise_v  # the arrival is in the window
+    y = fmu_simulate(path, u, fs)
+    assert relative_rms(y, ref) <= 1e-9
+
+
+def test_acoustic_parameter_change_matches_native(acoustic_fmu, chirp_head):
+    twin, path = acoustic_fmu
+    u, fs = chirp_head
+    native = twin.with_params(distance_m=0.09, fluid="seawater").with_effects(twin.effects | {"wall_echo"})
+    ref = native.simulate(u, fs)
+    y = fmu_simulate(path, u, fs, start_values={"distance_m": 0.09, "fluid": "seawater", "effect_wall_echo": True})
+    assert relative_rms(y, ref) <= 1e-9
+    assert relative_rms(twin.simulate(u, fs), ref) > 0.1
+
+
+def test_fresh_process_exits_cleanly(cantilever_fmu, tmp_path):
+    """A host process that first meets scipy/numba inside the FMU must not abort at exit (see the
+    ``import scipy.linalg`` note in twins/fmu/slave.py; before it, about half of such runs aborted)."""
+    _, path = cantilever_fmu
+    code = ("import numpy as np\n"
+            "from twins.fmu.check import fmu_simulate\n"
+            f"y = fmu_simulate({str(path)!r}, np.sin(np.arange(200) * 0.1), 1e4)\n"
+            "assert np.all(np.isfinite(y))\n")
+    env = dict(os.environ, PYTHONPATH=str(REPO))
+    for _ in range(3):
+        proc = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, env=env, capture_output=True, text=True,
+                              timeout=300)
+        assert proc.returncode == 0, proc.stderr[-1000:]

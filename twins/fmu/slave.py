@@ -26,6 +26,13 @@ from pythonfmu.enums import Fmi2Status
 
 from twins.fmu.spec import CONFIG_NAME, FORMAT, decode_value
 
+# Loaded with the slave module (i.e. while the FMU is instantiated), before any twin code runs: scipy's
+# LAPACK/gfortran libraries first loaded from inside a later FMI call (the twin's first use of
+# scipy.linalg in exitInitializationMode/doStep) left the heap corrupted, and the process aborted at exit
+# in libgfortran's close_units ("corrupted double-linked list") in about half of the runs; loading them
+# here gave no abort in 20 runs (tests/test_fmu.py runs a fresh process to check).
+import scipy.linalg  # noqa: E402,F401
+
 __all__ = ["TwinSlave", "load_fmu_config"]
 
 #: relative tolerance on ``step_size * fs`` being a whole number of samples
@@ -38,6 +45,15 @@ def load_fmu_config(resources: str | Path) -> dict[str, Any]:
     if cfg.get("format") != FORMAT:
         raise RuntimeError(f"{path}: not a {FORMAT} FMU configuration")
     return cfg
+
+
+def _resolve(path: str):
+    """``"module:Qual.Name"`` -> the object."""
+    module, _, qualname = path.partition(":")
+    obj = importlib.import_module(module)
+    for part in qualname.split("."):
+        obj = getattr(obj, part)
+    return obj
 
 
 class _Attrs:
@@ -78,6 +94,7 @@ class TwinSlave(Fmi2Slave):
         self.version = str(cfg.get("project_version", ""))
         self._values: dict[str, Any] = {}
         self._core = None
+        self._twin_cls = _resolve(cfg["twin_class"])  # import errors surface at instantiation
         self._fs = float(cfg["fs"])
         self.default_experiment = DefaultExperiment(start_time=0.0, step_size=1.0 / self._fs)
         self.u = 0.0
@@ -129,9 +146,20 @@ class TwinSlave(Fmi2Slave):
         return root
 
     def exit_initialization_mode(self):
-        self._start()
+        try:
+            self._start()
+        except BaseException:
+            self._before_raise()
+            raise
 
     def do_step(self, current_time: float, step_size: float) -> bool:
+        try:
+            return self._do_step(current_time, step_size)
+        except BaseException:
+            self._before_raise()
+            raise
+
+    def _do_step(self, current_time: float, step_size: float) -> bool:
         if self._core is None:
             self._start()
         ratio = step_size * self._fs
@@ -155,14 +183,25 @@ class TwinSlave(Fmi2Slave):
         self.log(message, Fmi2Status.error)
         raise RuntimeError(message)
 
+    def _before_raise(self) -> None:
+        """Keep pythonfmu 0.7's error path from freeing live objects.
+
+        On a Python exception its C++ wrapper releases its references to the slave class, the instance and
+        the log queue, and releases them once more when the instance is freed; the second release frees
+        objects still in use and corrupts the heap (the process aborts at exit: "corrupted double-linked
+        list"). One extra reference to each before the exception propagates balances the count (at worst
+        it keeps three small objects alive after an error).
+        """
+        import ctypes
+
+        for obj in (type(self), self, self.log_queue):
+            ctypes.pythonapi.Py_IncRef(ctypes.py_object(obj))
+
     # ------------------------------------------------------------------ model
     def make_twin(self):
         """The twin described by the current parameter values (raises the twin's ConfigError if invalid)."""
         cfg = self._cfg
-        module, _, qualname = cfg["twin_class"].partition(":")
-        cls = importlib.import_module(module)
-        for part in qualname.split("."):
-            cls = getattr(cls, part)
+        cls = self._twin_cls
         defaults = cls.Params()
         values, effects, seed = {}, set(), 0
         for v in cfg["variables"]:
