@@ -340,8 +340,9 @@ def _stage_discrepancy(ctx: Context) -> str:
         raise StageSkipped(str(exc)) from None
     # "measured" data: the twin WITH creep (and noise); the model under test: the twin without creep.
     truth = cls(None, set(cls.default_effects()) | {"creep"}, seed=1)
-    data = truth.generate("steps", hold_s=5.0 if ctx.quick else 10.0)
-    val = truth.generate("thesis-sines", freqs_hz=[1.0, 10.0]) if "thesis-sines" in cls.PROTOCOLS else None
+    hold = 5.0 if ctx.quick else 10.0
+    data = truth.generate("steps", hold_s=hold)
+    val = truth.generate("steps", hold_s=hold, level_v=50.0)  # held-out: other step height, same rate
     start = cls(None, set(cls.default_effects()) - {"creep"}, seed=1)
     cands = ["creep", "thermal_drift", "input_delay"] if ctx.quick else None
     res = diagnose(start, data, val, max_rounds=1, candidates=cands, keep_stages=True)

@@ -87,6 +87,7 @@ QUICK_SETTINGS: dict[str, dict[str, dict[str, Any]]] = {
     "narx-mlp": {"*": {"epochs": 5}, "cascaded-tanks": {"epochs": 100}, "piezo-tue": {"epochs": 10},
                  "wiener-hammerstein": {"epochs": 3}},
     "narx-mlp-sim": {"*": {"epochs": 1}, "cascaded-tanks": {"epochs": 50}, "piezo-tue": {"epochs": 2}},
+    "rnn": {"*": {"epochs": 8}},
 }
 
 # Datasets of the quick check (small or fast enough for CI) and the sample budget of each part in quick mode:
