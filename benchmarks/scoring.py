@@ -83,11 +83,12 @@ SETTINGS["narx-poly"]["acoustic-thesis-clean"].update(degree=2)
 # NARMAX: the NARX process structure of each dataset plus noise terms by ELS (two iterations: more made the
 # residual recursion of the noise terms blow up on several datasets in this build).
 SETTINGS["narmax-poly"] = {k: {**v, "ne": 2, "els_iter": 2} for k, v in SETTINGS["narx-poly"].items()}
+SETTINGS["narmax-poly"]["cascaded-tanks"][NORMALISE] = False  # measured: 0.79 V raw vs 3.4 V normalised
 QUICK_SETTINGS: dict[str, dict[str, dict[str, Any]]] = {
     "narx-mlp": {"*": {"epochs": 5}, "cascaded-tanks": {"epochs": 100}, "piezo-tue": {"epochs": 10},
                  "wiener-hammerstein": {"epochs": 3}},
     "narx-mlp-sim": {"*": {"epochs": 1}, "cascaded-tanks": {"epochs": 50}, "piezo-tue": {"epochs": 2}},
-    "rnn": {"*": {"epochs": 8}},
+    "rnn": {"*": {"epochs": 8}, "wiener-hammerstein": {"epochs": 16}},
 }
 
 # Datasets of the quick check (small or fast enough for CI) and the sample budget of each part in quick mode:
