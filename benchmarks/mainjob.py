@@ -289,9 +289,9 @@ def _residual_figure(ctx: Context) -> None:
     from benchmarks import scoring
 
     ds = run.datasets[r["dataset"]]
-    rec = ds.tests[r["test"]]
-    n = min(len(rec), 20000)
-    rec = rec[:n]
+    # residual tests on the estimation record (as the dissertation's Figure 5.6), first 20 000 samples
+    rec = ds.est_records[0]
+    rec = rec[: min(len(rec), 20000)]
     cls_params = dict(r["params"])
     norm = bool(cls_params.pop(scoring.NORMALISE, False))
     from sysid.registry import get_identifier
@@ -312,9 +312,10 @@ def _residual_figure(ctx: Context) -> None:
         ax.axhline(-t["band"], color="r", ls="--", lw=0.8)
         ax.set_title(f"{t['name']} ({'pass' if t['passed'] else 'fail'})", fontsize=9)
         ax.set_ylim(-1, 1)
-    fig.suptitle(f"residual tests (95 % band): {r['identifier']} one-step on {r['dataset']}/{r['test']}", fontsize=10)
+    fig.suptitle(f"residual tests (95 % band): {r['identifier']} one-step residuals on the {r['dataset']} estimation data",
+                 fontsize=10)
     fig.tight_layout()
-    ctx.save_figure(fig, "residual_tests", f"Residual correlation tests: {r['identifier']} on {r['dataset']}/{r['test']}")
+    ctx.save_figure(fig, "residual_tests", f"Residual correlation tests (eq. 2-32): {r['identifier']} on the {r['dataset']} estimation data")
 
 
 def _stage_lab(ctx: Context) -> str:

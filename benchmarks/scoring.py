@@ -580,7 +580,7 @@ def write_report(run: ScoreRun, report_dir: str | Path) -> dict[str, Path]:
         paths["nrmse"] = out / "score_nrmse.png"
         fig.savefig(paths["nrmse"], dpi=90)
         plt.close(fig)
-    # measured vs free-run predictions: one figure per dataset (first test), first 2000 scored samples
+    # measured vs free-run predictions: one figure per dataset (first test), first 1000 scored samples
     if run.predictions and run.datasets:
         for dname, ds in run.datasets.items():
             test = next(iter(ds.tests))
@@ -589,7 +589,7 @@ def write_report(run: ScoreRun, report_dir: str | Path) -> dict[str, Path]:
             if not keys:
                 continue
             n0 = ds.init_samples
-            n1 = min(len(rec), n0 + 2000)
+            n1 = min(len(rec), n0 + 1000)
             t = np.arange(n0, n1) / rec.fs
             fig, ax = plt.subplots(figsize=(8, 3.2))
             ax.plot(t, rec.y[n0:n1], "k", lw=1.2, label="measured")
