@@ -3,7 +3,7 @@
 
 For every benchmark: mean and min time per call, throughput when ``extra_info['items']`` is given, its
 reference (``extra_info['reference']`` or the naming rule of :mod:`benchmarks.perf.conftest`) with the speed
-ratio reference/ours (> 1 = faster than the reference), and its target (``extra_info['target_s']``) with the
+ratio reference/ours (> 1 = faster than the reference; per item when both give ``items``), and its target (``extra_info['target_s']``) with the
 margin. The machine line comes from the JSON (CPU, cores) — timings on a shared machine are inflated.
 """
 
@@ -23,9 +23,16 @@ def _short(name: str) -> str:
     return name.split("[")[0].removeprefix("test_")
 
 
+def _label(name: str) -> str:
+    """Display name: without ``test_``, with the parameter id (``frols_vs_sysidentpy[1000]``)."""
+    return name.removeprefix("test_")
+
+
 def _is_reference(name: str) -> bool:
     n = name.lower()
-    return any(w in n for w in REF_WORDS)
+    if "reference" in n:
+        return True
+    return any(w in n for w in REF_WORDS) and "_vs_" not in n  # "ours_vs_theirs" measures both sides itself
 
 
 def _words(name: str) -> list[str]:
@@ -44,7 +51,7 @@ def pair_references(benches: list[dict[str, Any]]) -> dict[str, str]:
                 out[b["fullname"]] = match["fullname"]
     refs = [b for b in benches if _is_reference(b["name"])]
     for b in benches:
-        if b["fullname"] in out or _is_reference(b["name"]):
+        if b["fullname"] in out or _is_reference(b["name"]) or (b.get("extra_info") or {}).get("ratio") is not None:
             continue
         module = b["fullname"].split("::")[0]
         best, best_len = None, 0
@@ -88,8 +95,12 @@ def summarise(data: dict[str, Any]) -> str:
         thr = f"{items / mean / 1e6:.3g} M/s" if items else ""
         ref = by_full.get(refs.get(b["fullname"], ""))
         if ref is not None:
-            rtxt = f"{_short(ref['name'])} ({_fmt_s(ref['stats']['mean'])})"
-            ratio = f"{ref['stats']['mean'] / mean:.3g}×"
+            rtxt = f"{_label(ref['name'])} ({_fmt_s(ref['stats']['mean'])})"
+            r_items = (ref.get("extra_info") or {}).get("items")
+            if items and r_items:  # different sizes: compare time per item
+                ratio = f"{(ref['stats']['mean'] / r_items) / (mean / items):.3g}× per item"
+            else:
+                ratio = f"{ref['stats']['mean'] / mean:.3g}×"
         elif info.get("ratio") is not None:  # a ratio measured inside the benchmark (e.g. vs SysIdentPy)
             rtxt, ratio = "measured in the benchmark", f"{float(info['ratio']):.3g}×"
         else:
@@ -98,7 +109,7 @@ def summarise(data: dict[str, Any]) -> str:
         ttxt = f"< {_fmt_s(float(tgt))}" if tgt else ""
         ok = ("yes" if mean <= float(tgt) else f"no ({mean / float(tgt):.2g}× over)") if tgt else ""
         module = b["fullname"].split("::")[0].rsplit("/", 1)[-1].removesuffix(".py").removeprefix("test_")
-        lines.append(f"| {module}: {_short(b['name'])} | {_fmt_s(mean)} | {_fmt_s(mn)} | {thr} | {rtxt} | {ratio} | {ttxt} | {ok} |")
+        lines.append(f"| {module}: {_label(b['name'])} | {_fmt_s(mean)} | {_fmt_s(mn)} | {thr} | {rtxt} | {ratio} | {ttxt} | {ok} |")
     return "\n".join(lines) + "\n"
 
 
