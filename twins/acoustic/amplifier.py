@@ -19,7 +19,7 @@
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
 
 __all__ = ["amplifier_voltage", "amplifier_bandwidth", "voltage_gain"]
 
@@ -59,14 +59,14 @@ def amplifier_bandwidth(f_hz: np.ndarray, f_low_hz: float, f_high_hz: float) -> 
     return hp * lp
 
 
-@njit(cache=True)
+@njit(cache=True, parallel=True)
 def _rapp_kernel(x, gain, sat, p, k2):  # pragma: no cover - compiled; same expressions as amplifier_voltage
     out = np.empty_like(x)
     p2 = 2.0 * p
     inv = 1.0 / p2
     ip = int(p2)
     integer = ip == p2 and ip >= 1
-    for i in range(x.shape[0]):
+    for i in prange(x.shape[0]):
         v = gain * x[i]
         a = np.abs(v / sat)
         if integer:  # |v/A|^(2p) by multiplication when 2p is whole (p = 2.5 by default): one pow per sample

@@ -25,7 +25,7 @@ the 100 ms chirp, 1000 for the 1 ms chirp).
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
 
 from sysid.errors import ConfigError
 from sysid.record import Record
@@ -100,10 +100,10 @@ def chirp_prefix(fs: float, sweep_s: float, f0: float, f1: float, amplitude: flo
     return _chirp_kernel(int(n), f0 / fs, (f1 - f0) / (2.0 * t0 * fs * fs), float(amplitude))
 
 
-@njit(cache=True)
+@njit(cache=True, parallel=True)
 def _chirp_kernel(n, a, b, amplitude):  # pragma: no cover - compiled
     out = np.empty(n)
-    for i in range(n):
+    for i in prange(n):
         k = float(i)
         c = k * a + (k * k) * b
         c -= np.floor(c)
