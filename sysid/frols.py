@@ -45,6 +45,8 @@ DEFAULT_CHUNK = 16384
 DEPENDENT_TOL = 1e-10
 # Residual energy fraction 1 − ΣERR below which the fit is exact to round-off: no further term is added.
 EXACT_FIT_TOL = 1e-11
+# Most candidate terms: the Gram matrix is candidates² × 8 B (20 000 candidates: 3.2 GB).
+MAX_CANDIDATES = 20_000
 
 
 # ---------------------------------------------------------------------------------------------------- structure
@@ -53,6 +55,10 @@ def make_regressors(ny: int, nu: int, ne: int = 0, nk: int = 1, n_outputs: int =
     for name, v in (("ny", ny), ("nu", nu), ("ne", ne), ("nk", nk)):
         if int(v) != v or v < 0:
             raise ConfigError(f"{name} must be a non-negative integer, got {v}")
+    count = n_outputs * (ny + ne) + n_inputs * nu
+    if count > MAX_CANDIDATES:  # checked before building the list (ny=1e8 would take minutes to refuse)
+        raise ConfigError(f"ny={ny}, nu={nu}, ne={ne} give {count:.4g} regressors (limit {MAX_CANDIDATES} candidate"
+                          " terms); lower the lags")
     regs = []
     for o in range(n_outputs):
         regs += [("y", o, j) for j in range(1, ny + 1)]
@@ -67,6 +73,10 @@ def candidate_terms(n_regressors: int, degree: int, constant: bool = True) -> li
     """All products of 1..degree regressors (indices non-decreasing, eq. 2-24), plus the constant ``()``."""
     if int(degree) != degree or degree < 1:
         raise ConfigError(f"degree must be an integer >= 1, got {degree}")
+    count = math.comb(n_regressors + int(degree), int(degree)) - 1 + bool(constant)
+    if count > MAX_CANDIDATES:
+        raise ConfigError(f"degree {degree} over {n_regressors} regressors gives {count:.4g} candidate terms (limit "
+                          f"{MAX_CANDIDATES}: the Gram matrix needs {count * count * 8 / 1e9:.3g} GB); lower the degree or the lags")
     terms: list[tuple[int, ...]] = [()] if constant else []
     for d in range(1, degree + 1):
         terms += list(combinations_with_replacement(range(n_regressors), d))

@@ -26,12 +26,6 @@ from pythonfmu.enums import Fmi2Status
 
 from twins.fmu.spec import CONFIG_NAME, FORMAT, decode_value
 
-# Loaded with the slave module (i.e. while the FMU is instantiated), before any twin code runs: scipy's
-# LAPACK/gfortran libraries first loaded from inside a later FMI call (the twin's first use of
-# scipy.linalg in exitInitializationMode/doStep) left the heap corrupted, and the process aborted at exit
-# in libgfortran's close_units ("corrupted double-linked list") in about half of the runs; loading them
-# here gave no abort in 20 runs (tests/test_fmu.py runs a fresh process to check).
-import scipy.linalg  # noqa: E402,F401
 
 __all__ = ["TwinSlave", "load_fmu_config"]
 
@@ -66,7 +60,8 @@ class _Attrs:
         node = type(self.var).to_xml(self.var)
         child = node[0]
         for key, value in self.extra.items():
-            child.set(key, f"{value:.16g}" if isinstance(value, float) else str(value))
+            # repr: the shortest text that reads back as the same double (pythonfmu writes 16 digits)
+            child.set(key, repr(float(value)) if isinstance(value, float) else str(value))
         return node
 
 
@@ -121,7 +116,7 @@ class TwinSlave(Fmi2Slave):
                 getter=(lambda n=name: self._values[n]), setter=(lambda x, n=name: self._set(n, x)))
             extra = {}
             if v["type"] == "Real":
-                extra = {"unit": v.get("unit"), "min": v.get("min"), "max": v.get("max")}
+                extra = {"start": float(v["start"]), "unit": v.get("unit"), "min": v.get("min"), "max": v.get("max")}
                 if v.get("unit"):
                     self._units.add(v["unit"])
             elif v["type"] == "Integer":
