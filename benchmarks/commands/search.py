@@ -22,7 +22,13 @@ from sysid.config import parse_assignments
 
 
 def register(sub) -> None:
-    p = sub.add_parser("search", help="structure sweep with repeated runs (grid / random / TPE, Optuna storage)")
+    p = sub.add_parser("search", help="structure sweep with repeated runs (grid / random / TPE, Optuna storage)",
+                       formatter_class=argparse.RawDescriptionHelpFormatter,
+                       epilog="SPEC: KEY=V1,V2,... items separated by ';'. Keys are the identifier's options (as for\n"
+                              "identify --set); list values use dashes (hidden=25-25,25-25-25-25 is two choices);\n"
+                              "a..b is every integer from a to b; 'lags' sets n_y and n_u together (n_enc for rnn).\n"
+                              "Example: --grid 'lags=5,10;hidden=25-25,25-25-25-25;activation=relu,tanh'\n"
+                              "Re-running the same command resumes the sweep stored in --storage/--study.")
     p.add_argument("identifier", help="identifier id (narx-mlp, narx-mlp-sim, rnn, narx-poly, ...)")
     p.add_argument("--est", required=True, action="append", metavar="FILE", help="estimation record; may repeat")
     p.add_argument("--val", required=True, metavar="FILE", help="validation record")
@@ -79,7 +85,8 @@ def run(args: argparse.Namespace) -> int:
     for c in summary["configs"]:
         print(f"  {c['config_key']:<44} {c['n_parameters']:>7}  {_fmt(c['r2_est_osa_mean']):>10} "
               f"{_fmt(c['r2_est_frs_mean'])} ± {_fmt(c['r2_est_frs_sd'])} {_fmt(c['r2_val_osa_mean']):>10} "
-              f"{_fmt(c['r2_val_frs_mean'])} ± {_fmt(c['r2_val_frs_sd'])}")
+              f"{_fmt(c['r2_val_frs_mean'])} ± {_fmt(c['r2_val_frs_sd'])}"
+              + (f"  ({c['diverged_val_frs']} of {c['runs']} diverged)" if c.get("diverged_val_frs") else ""))
     if summary["best_runs"]:
         print("  runs of the best configuration (Table 5.6 analogue):")
         for r in summary["best_runs"]:

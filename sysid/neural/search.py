@@ -11,7 +11,7 @@ to b; the key ``lags`` sets ``n_y`` and ``n_u`` together (``n_enc`` for ``rnn``)
 
     lags=5,10;hidden=25-25,25-25-25-25;activation=relu,tanh
 
-Samplers: ``grid`` (every combination, queued in the storage so that all workers share one queue), ``random`` and ``tpe`` (Bayesian, Optuna's Tree-structured Parzen
+Samplers: ``grid`` (every combination; workers claim configurations one at a time), ``random`` and ``tpe`` (Bayesian, Optuna's Tree-structured Parzen
 Estimator) draw ``trials`` distinct configurations from the same choices. One Optuna trial is one
 configuration with all its repeats (per-run results in the trial's user attributes).
 
@@ -37,7 +37,7 @@ from typing import Any, Callable, Sequence
 
 import numpy as np
 
-from sysid.config import coerce, parse_assignments
+from sysid.config import coerce
 from sysid.errors import ConfigError, DivergenceWarning
 from sysid.record import Record
 
@@ -194,9 +194,9 @@ def _make_sampler(spec: SweepSpec):
     import optuna
 
     if spec.sampler in ("grid", "random"):
-        # grid: every configuration is queued explicitly (enqueue_trial), so the sampler never draws; queued
-        # trials survive interruptions and are shared by all workers (Optuna's GridSampler cannot re-queue a
-        # failed grid point: its after_trial needs a grid_id that enqueued trials lack).
+        # grid: each worker fixes the next unclaimed configuration (PartialFixedSampler over this one), so the
+        # sampler never draws; Optuna's GridSampler cannot rerun an interrupted grid point (its after_trial
+        # needs a grid_id that re-queued trials lack).
         return optuna.samplers.RandomSampler(seed=spec.seed)
     return optuna.samplers.TPESampler(seed=spec.seed, n_startup_trials=5)
 
@@ -275,8 +275,6 @@ def _make_objective(spec: SweepSpec, est, val) -> Callable:
     import optuna
 
     def objective(trial: "optuna.Trial") -> float:
-        if spec.sampler == "grid" and "fixed_params" not in trial.study._storage.get_trial_system_attrs(trial._trial_id):
-            raise optuna.TrialPruned("grid sweep: no queued configuration left")  # a worker raced past the queue
         config = {k: trial.suggest_categorical(k, v) for k, v in spec.grid.items()}
         key = config_key(config)
         if key in _done_keys(trial.study):
@@ -296,32 +294,19 @@ def _grid_configs(spec: SweepSpec) -> list[dict[str, str]]:
     return [dict(zip(keys, values)) for values in itertools.product(*(spec.grid[k] for k in keys))]
 
 
-def _queue_grid(study, spec: SweepSpec, target: int) -> int:
-    """Queue the grid configurations that are neither finished nor queued/running, up to ``target`` in all."""
+def _next_grid_config(study, spec: SweepSpec, target: int, worker: int, n_workers: int) -> dict[str, str] | None:
+    """The next grid configuration for this worker: among the first ``target`` grid points, one that is
+    neither finished nor running — its own share (index mod n_workers) first, then any other."""
     from optuna.trial import TrialState
 
-    trials = study.get_trials(deepcopy=False)
-    done = {t.user_attrs.get("config_key") for t in trials if t.state == TrialState.COMPLETE}
-    busy = {config_key({k: str(v) for k, v in t.params.items()}) if t.params else
-            config_key({k: str(v) for k, v in t.system_attrs.get("fixed_params", {}).items()})
-            for t in trials if t.state in (TrialState.WAITING, TrialState.RUNNING)}
-    room = target - len(done & {config_key(c) for c in _grid_configs(spec)}) - len(busy)
-    n = 0
-    for cfg in _grid_configs(spec):
-        if n >= room:
-            break
-        key = config_key(cfg)
-        if key in done or key in busy:
-            continue
-        study.enqueue_trial(cfg, skip_if_exists=False)
-        n += 1
-    return n
-
-
-def _n_waiting(study) -> int:
-    from optuna.trial import TrialState
-
-    return len(study.get_trials(deepcopy=False, states=(TrialState.WAITING,)))
+    trials = study.get_trials(deepcopy=False, states=(TrialState.COMPLETE, TrialState.RUNNING, TrialState.WAITING))
+    taken = {config_key({k: str(v) for k, v in t.params.items()}) for t in trials if t.params}
+    taken |= {t.user_attrs.get("config_key") for t in trials}
+    missing = [(i, c) for i, c in enumerate(_grid_configs(spec)[:target]) if config_key(c) not in taken]
+    if not missing:
+        return None
+    own = [c for i, c in missing if i % n_workers == worker]
+    return (own or [c for _, c in missing])[0]
 
 
 def _requeue_failed(study, spec: SweepSpec) -> int:
@@ -345,31 +330,48 @@ def _requeue_failed(study, spec: SweepSpec) -> int:
 
 
 def _worker_loop(spec: SweepSpec, url: str, study_name: str, est, val, target: int,
-                 on_trial: Callable[[], None] | None = None, barrier=None) -> None:
+                 on_trial: Callable[[], None] | None = None, barrier=None, worker: int = 0, n_workers: int = 1) -> None:
+    """Run configurations until the sweep has ``target`` finished ones.
+
+    Grid sweeps claim configurations one at a time (fixing the trial's parameters with Optuna's
+    PartialFixedSampler) instead of queueing them as WAITING trials: two SQLite clients can pop the same
+    waiting trial (SQLite has no row locks), while a claimed configuration is visible as RUNNING at once.
+    """
     import optuna
 
     study = open_study(spec, url, study_name, create=False)
     objective = _make_objective(spec, est, val)
+    base = _make_sampler(spec)
     if barrier is not None:
         barrier.wait(timeout=300)
     attempts = 0
     while attempts < 50 * max(target, 1):
-        if spec.sampler == "grid":
-            if _n_waiting(study) == 0:
-                break
-        elif len(_done_keys(study)) >= target:
+        if len(_done_keys(study)) >= target:
             break
+        if spec.sampler == "grid":
+            cfg = _next_grid_config(study, spec, target, worker, n_workers)
+            if cfg is None:
+                break  # the rest is running in other workers
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", optuna.exceptions.ExperimentalWarning)
+                study.sampler = optuna.samplers.PartialFixedSampler(cfg, base)
         attempts += 1
-        study.optimize(objective, n_trials=1, catch=(), gc_after_trial=False)
+        try:
+            study.optimize(objective, n_trials=1, catch=(), gc_after_trial=False)
+        except ValueError as exc:  # another client finished the same (retried) trial first: its result stands
+            if "Cannot tell" not in str(exc):
+                raise
         if on_trial is not None:
             on_trial()
 
 
-def _worker_main(spec_d: dict, url: str, study_name: str, est, val, target: int, barrier) -> None:
+def _worker_main(spec_d: dict, url: str, study_name: str, est, val, target: int, barrier, worker: int,
+                 n_workers: int) -> None:
     from sysid.neural.device import configure_threads
 
     configure_threads(1)
-    _worker_loop(SweepSpec(**spec_d), url, study_name, est, val, target, barrier=barrier)
+    _worker_loop(SweepSpec(**spec_d), url, study_name, est, val, target, barrier=barrier, worker=worker,
+                 n_workers=n_workers)
 
 
 def run_sweep(spec: SweepSpec, est: Record | Sequence[Record], val: Record | Sequence[Record], storage: str | None = None,
@@ -390,10 +392,8 @@ def run_sweep(spec: SweepSpec, est: Record | Sequence[Record], val: Record | Seq
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # Optuna marks the heartbeat API experimental
         fail_stale_trials(st)  # trials of a killed worker (heartbeat older than the grace period) are re-queued
-    if spec.sampler == "grid":
-        _queue_grid(st, spec, target)
-    else:
-        _requeue_failed(st, spec)
+    if spec.sampler != "grid":
+        _requeue_failed(st, spec)  # grid sweeps rerun failed configurations by themselves
     done0 = len(_done_keys(st))
     bar = tqdm(total=target, initial=min(done0, target), unit="config", desc=f"{spec.identifier} sweep",
                disable=not progress, file=sys.stderr, dynamic_ncols=True)
@@ -407,8 +407,9 @@ def run_sweep(spec: SweepSpec, est: Record | Sequence[Record], val: Record | Seq
         else:
             ctx = mp.get_context("spawn")
             barrier = ctx.Barrier(int(workers))
-            procs = [ctx.Process(target=_worker_main, args=(asdict(spec), url, study, est, val, target, barrier), daemon=False)
-                     for _ in range(int(workers))]
+            procs = [ctx.Process(target=_worker_main, args=(asdict(spec), url, study, est, val, target, barrier, w,
+                                                            int(workers)), daemon=False)
+                     for w in range(int(workers))]
             for p in procs:
                 p.start()
             try:
