@@ -228,15 +228,15 @@ def _continuation_scan(tw: Twin, est: Record, vals: dict[str, Any], f: str, lo: 
             return float("inf")
 
     x0 = float(vals[f])
-    coarse = np.linspace(lo, hi, 10 * points)
-    local = np.linspace(x0 - 0.1 * (hi - lo), x0 + 0.1 * (hi - lo), 8 * points)  # the configured value is the prior
+    coarse = np.linspace(lo, hi, 6 * points)
+    local = np.linspace(x0 - 0.1 * (hi - lo), x0 + 0.1 * (hi - lo), 6 * points)  # the configured value is the prior
     first = np.concatenate([coarse, local, [v for v in extra if lo <= v <= hi]])
     first = first[(first >= lo) & (first <= hi)]
     part = est[: max(n // 8, min(n, 64))]
     costs = np.array([cost_on(part, v) for v in first])
-    step = 0.2 * (hi - lo) / (8 * points - 1)
+    step = 0.2 * (hi - lo) / (6 * points - 1)
     cands = []
-    for i in np.argsort(costs)[:6]:
+    for i in np.argsort(costs)[:4]:
         v = float(first[i])
         r = minimize_scalar(lambda x: cost_on(part, x), bounds=(max(lo, v - step), min(hi, v + step)),
                             method="bounded", options={"maxiter": 14, "xatol": step * 1e-3})
@@ -296,14 +296,14 @@ def _prescan(tw: Twin, est: Record, fields: list[str], a: dict[str, Any], points
     guess = {}
     for f in fields:
         lo, hi = (float(v) for v in info[f].range)
-        g = [v for v in lin_guess.get(f, []) + _guesses(f, info[f].unit, a, tw, best[f]) if lo <= v <= hi]
+        g = [v for v in _guesses(f, info[f].unit, a, tw, best[f])[::-1] + lin_guess.get(f, []) if lo <= v <= hi]
         if g:
             guess[f] = g
     if guess:
         import itertools
 
         keys = list(guess)
-        for combo in itertools.islice(itertools.product(*(guess[k][:4] for k in keys)), 64):
+        for combo in itertools.islice(itertools.product(*(guess[k][:8] for k in keys)), 96):
             trial = dict(best)
             trial.update({k: (int(round(v)) if isinstance(getattr(tw.params, k), int) else float(v))
                           for k, v in zip(keys, combo)})
@@ -335,7 +335,7 @@ def _prescan(tw: Twin, est: Record, fields: list[str], a: dict[str, Any], points
                     best_cost, best = c, trial
             gc = np.array(costs[: len(grid)])
             n_min = int(np.sum((gc[1:-1] < gc[:-2]) & (gc[1:-1] < gc[2:]))) if gc.size > 2 else 0
-            if (n_min >= 2 or f in lin_guess) and not is_int:
+            if n_min >= 2 and not is_int:
                 # a rough landscape (several local minima: phase-sensitive parameters such as a time of flight
                 # through a reverberant gap). Continuation in the record length: the cost of a short prefix
                 # (fewer late, phase-amplified arrivals) has wide basins; scan it densely, then zoom while the
@@ -557,8 +557,10 @@ def diagnose(twin: Twin, data: Record, val: Record | None = None, max_rounds: in
         # to mimic the missing effect) and the configuration as given (the prior)
         cur_core = _core_for(stage.twin, core)
         prior_base = stage.twin.with_params(**{c: getattr(prior.params, c) for c in cur_core})
-        bases = [stage.twin] + ([prior_base] if any(getattr(prior.params, c) != getattr(stage.twin.params, c)
-                                                    for c in cur_core) else [])
+        # the prior is tried only where the calibration moved a core parameter by more than 2 % of its value
+        moved = any(abs(float(getattr(prior.params, c)) - float(getattr(stage.twin.params, c)))
+                    > 0.02 * max(abs(float(getattr(prior.params, c))), 1e-300) for c in cur_core)
+        bases = [stage.twin] + ([prior_base] if moved else [])
         for e in remaining:
             best_tr = None
             for b in bases:
