@@ -211,6 +211,46 @@ def _sse(y: np.ndarray, yh: np.ndarray, skip: int) -> float:
     return v if math.isfinite(v) else float("inf")
 
 
+def _continuation_scan(tw: Twin, est: Record, vals: dict[str, Any], f: str, lo: float, hi: float, points: int,
+                       skip: int, extra: Sequence[float] = ()) -> float:
+    """Scan of ``f`` on the first eighth of the record: a coarse grid over the range, a dense one around the
+    configured value (the prior) and the ``extra`` guesses; the six best points are refined by a bounded 1-D
+    search; the winner is then re-refined on a quarter, a half and the whole record (continuation in the record
+    length: late, phase-amplified arrivals narrow the basins)."""
+    from scipy.optimize import minimize_scalar
+
+    n = len(est)
+
+    def cost_on(part: Record, v: float) -> float:
+        try:
+            return _sse(part.y, _simulate(tw.with_params(**{**vals, f: float(v)}), part), min(skip, len(part) - 1))
+        except (ConfigError, DataError, ValueError, FloatingPointError):
+            return float("inf")
+
+    x0 = float(vals[f])
+    coarse = np.linspace(lo, hi, 6 * points)
+    local = np.linspace(x0 - 0.1 * (hi - lo), x0 + 0.1 * (hi - lo), 6 * points)  # the configured value is the prior
+    first = np.concatenate([coarse, local, [v for v in extra if lo <= v <= hi]])
+    first = first[(first >= lo) & (first <= hi)]
+    part = est[: max(n // 8, min(n, 64))]
+    costs = np.array([cost_on(part, v) for v in first])
+    step = 0.2 * (hi - lo) / (6 * points - 1)
+    cands = []
+    for i in np.argsort(costs)[:4]:
+        v = float(first[i])
+        r = minimize_scalar(lambda x: cost_on(part, x), bounds=(max(lo, v - step), min(hi, v + step)),
+                            method="bounded", options={"maxiter": 14, "xatol": step * 1e-3})
+        cands.append((float(r.fun), float(r.x)) if r.fun < costs[i] else (float(costs[i]), v))
+    best_x = min(cands)[1]
+    for frac in (4, 2, 1):
+        part = est[: max(n // frac, min(n, 64))]
+        r = minimize_scalar(lambda x: cost_on(part, x), bounds=(max(lo, best_x - step / 4), min(hi, best_x + step / 4)),
+                            method="bounded", options={"maxiter": 14, "xatol": step * 1e-4})
+        if r.fun <= cost_on(part, best_x):
+            best_x = float(r.x)
+    return best_x
+
+
 def _prescan(tw: Twin, est: Record, fields: list[str], a: dict[str, Any], points: int, skip: int,
              choices: Sequence[str] = ()) -> dict[str, Any]:
     """Coordinate-wise scan of each effect parameter over its range and the feature guesses (est SSE);
@@ -227,18 +267,43 @@ def _prescan(tw: Twin, est: Record, fields: list[str], a: dict[str, Any], points
             return float("inf")
 
     best_cost = cost(best)
+    # delay-like parameters whatever their unit (temperature, distance, …): linearise the shift of the simulated
+    # output with respect to each parameter and solve for the shifts the data show. The shifts are measured on
+    # the first eighth of the record (the first arrivals, before late phase-amplified ones), at the three best
+    # peaks of the cross-correlation (a narrow-band signal leaves the carrier cycle ambiguous).
+    lin_guess: dict[str, list[float]] = {}
+    m = max(len(est) // 8, min(len(est), 256))
+    part = est[:m]
+    y0 = _simulate(tw.with_params(**best), part)
+    # window: from the first arrival of the simulated output over a sixteenth of the record
+    big = np.flatnonzero(np.abs(y0) > 0.05 * (np.max(np.abs(y0)) or 1.0))
+    i0 = max(int(big[0]) - 16, 0) if big.size else 0
+    win = slice(i0, min(m, i0 + max(128, len(est) // 16)))
+    shifts = ft.delay_candidates(part.y[win], y0[win], part.fs, max_shift_s=max(32, (win.stop - win.start) // 8) / part.fs)
+    if shifts and max(abs(v) for v in shifts) * est.fs > 0.02:
+        for f in fields:
+            lo, hi = (float(v) for v in info[f].range)
+            dx = 0.002 * (hi - lo)
+            x1 = best[f] + dx if best[f] + dx <= hi else best[f] - dx
+            try:
+                y1 = _simulate(tw.with_params(**{**best, f: x1}), part)
+            except (ConfigError, DataError, ValueError):
+                continue
+            sh = ft.delay_estimate(y1, y0, part.fs, max_shift_s=8 / part.fs)["shift_s"]
+            if abs(sh) * est.fs > 1e-4:
+                lin_guess[f] = [best[f] + t * (x1 - best[f]) / sh for t in shifts]
     # joint start from the feature guesses (e.g. echo delay and amplitude together), when every field has one
     guess = {}
     for f in fields:
         lo, hi = (float(v) for v in info[f].range)
-        g = [v for v in _guesses(f, info[f].unit, a, tw, best[f]) if lo <= v <= hi]
+        g = [v for v in _guesses(f, info[f].unit, a, tw, best[f])[::-1] + lin_guess.get(f, []) if lo <= v <= hi]
         if g:
             guess[f] = g
     if guess:
         import itertools
 
         keys = list(guess)
-        for combo in itertools.islice(itertools.product(*(guess[k][:4] for k in keys)), 64):
+        for combo in itertools.islice(itertools.product(*(guess[k][:8] for k in keys)), 96):
             trial = dict(best)
             trial.update({k: (int(round(v)) if isinstance(getattr(tw.params, k), int) else float(v))
                           for k, v in zip(keys, combo)})
@@ -257,10 +322,27 @@ def _prescan(tw: Twin, est: Record, fields: list[str], a: dict[str, Any], points
             lo, hi = (float(v) for v in info[f].range)
             is_int = isinstance(getattr(tw.params, f), int)
             grid = _grid(lo, hi, points, is_int)
-            cands = list(grid) + [g for g in _guesses(f, info[f].unit, a, tw, best[f]) if lo <= g <= hi]
+            cands = list(grid) + [g for g in lin_guess.get(f, []) + _guesses(f, info[f].unit, a, tw, best[f])
+                                  if lo <= g <= hi]
+            base_vals = dict(best)
+            costs = []
             for v in cands:
-                trial = dict(best)
+                trial = dict(base_vals)
                 trial[f] = int(round(v)) if is_int else float(v)
+                c = cost(trial)
+                costs.append(c)
+                if c < best_cost:
+                    best_cost, best = c, trial
+            gc = np.array(costs[: len(grid)])
+            n_min = int(np.sum((gc[1:-1] < gc[:-2]) & (gc[1:-1] < gc[2:]))) if gc.size > 2 else 0
+            if n_min >= 2 and not is_int:
+                # a rough landscape (several local minima: phase-sensitive parameters such as a time of flight
+                # through a reverberant gap). Continuation in the record length: the cost of a short prefix
+                # (fewer late, phase-amplified arrivals) has wide basins; scan it densely, then zoom while the
+                # prefix grows to the whole record.
+                x = _continuation_scan(tw, est, base_vals, f, lo, hi, points, skip, lin_guess.get(f, []))
+                trial = dict(base_vals)
+                trial[f] = x
                 c = cost(trial)
                 if c < best_cost:
                     best_cost, best = c, trial
@@ -345,8 +427,8 @@ class Stage:
     r2_val: float
     sse_val: float
 
-    def summary(self, noise_free: bool = True) -> dict[str, Any]:
-        return {"effects": sorted(self.twin.effects), "r2_val": self.r2_val, "nrmse_val": self.nrmse_val,
+    def summary(self, also: Iterable[str] = ()) -> dict[str, Any]:
+        return {"effects": sorted(set(self.twin.effects) | set(also)), "r2_val": self.r2_val, "nrmse_val": self.nrmse_val,
                 "tests": ft.tests_summary(self.analysis_val["_tests_full"])}
 
 
@@ -431,6 +513,9 @@ def diagnose(twin: Twin, data: Record, val: Record | None = None, max_rounds: in
         raise DataError(f"estimation and validation records have different fs ({data.fs} and {val.fs} Hz)")
     opts = {"trial_nfev": int(trial_nfev), "scan_nfev": int(scan_nfev), "scan_points": int(scan_points), "skip": int(skip), "max_lag": int(max_lag),
             "max_echo_s": max_echo_s}
+    unknown = [e for e in (candidates or []) if e not in twin.EFFECTS]
+    if unknown:
+        raise ConfigError(f"unknown effect {unknown[0]!r} for twin {twin.name}; valid: {', '.join(twin.EFFECTS)}")
     t_start = time.perf_counter()
     core = list(calibration_params if calibration_params is not None else twin.CALIBRATION_PARAMS)
     core = _numeric_fields(twin, core)
@@ -453,9 +538,6 @@ def diagnose(twin: Twin, data: Record, val: Record | None = None, max_rounds: in
     pool = [e for e in (candidates if candidates is not None else twin.EFFECTS)
             if e in twin.EFFECTS and e not in twin.effects and e not in NOISE_EFFECTS
             and e not in _unpredictable(twin)]
-    unknown = [e for e in (candidates or []) if e not in twin.EFFECTS]
-    if unknown:
-        raise ConfigError(f"unknown effect {unknown[0]!r} for twin {twin.name}; valid: {', '.join(twin.EFFECTS)}")
 
     causes: list[dict[str, Any]] = []
     rounds: list[dict[str, Any]] = []
@@ -475,8 +557,10 @@ def diagnose(twin: Twin, data: Record, val: Record | None = None, max_rounds: in
         # to mimic the missing effect) and the configuration as given (the prior)
         cur_core = _core_for(stage.twin, core)
         prior_base = stage.twin.with_params(**{c: getattr(prior.params, c) for c in cur_core})
-        bases = [stage.twin] + ([prior_base] if any(getattr(prior.params, c) != getattr(stage.twin.params, c)
-                                                    for c in cur_core) else [])
+        # the prior is tried only where the calibration moved a core parameter by more than 2 % of its value
+        moved = any(abs(float(getattr(prior.params, c)) - float(getattr(stage.twin.params, c)))
+                    > 0.02 * max(abs(float(getattr(prior.params, c))), 1e-300) for c in cur_core)
+        bases = [stage.twin] + ([prior_base] if moved else [])
         for e in remaining:
             best_tr = None
             for b in bases:
@@ -526,10 +610,12 @@ def diagnose(twin: Twin, data: Record, val: Record | None = None, max_rounds: in
         for tr in trials[1:]:
             # the data cannot tell tr from the leader when the leader's residual is not significantly smaller
             not_better = significance(tr.sse_val, top.sse_val, n_eff_top, 1) > alpha
-            same_group = bool(top_group) and twin.EFFECTS[tr.effect].group == top_group and tr.significant
+            # a catalog ambiguity group: members that explain the data nearly as well (NRMSE within 2×) go together
+            same_group = (bool(top_group) and twin.EFFECTS[tr.effect].group == top_group and tr.significant
+                          and tr.nrmse_val <= 2.0 * top.nrmse_val)
             d_pred = float(np.sqrt(np.mean((tr.yhat_val[skip:] - top.yhat_val[skip:]) ** 2)))
             equal = tr.significant and (tr.sse_val <= top.sse_val * (1 + tol) or not_better) and d_pred < 0.5 * e_rms_top
-            if (same_group and not_better) or equal:
+            if same_group or equal:
                 group.append(tr.effect)
         g1 = top.gain
         g2 = max([t.gain for t in trials if t.effect not in group] + [0.0])
@@ -596,11 +682,12 @@ def diagnose(twin: Twin, data: Record, val: Record | None = None, max_rounds: in
                                     f"residual variance; {unexplained['description']}"),
                        "params": {}})
     verdict = "discrepancy" if causes else "none"
+    kept_unpredictable = set(twin.effects) & _unpredictable(twin)  # noise/quantisation as configured
     out = {
         "verdict": verdict,
         "causes": causes,
-        "baseline": base.summary(),
-        "extended": stage.summary(),
+        "baseline": base.summary(kept_unpredictable),
+        "extended": stage.summary(kept_unpredictable),
         "gain": {"nrmse_ratio": stage.nrmse_val / base.nrmse_val if base.nrmse_val > 0 else 1.0,
                  "r2_delta": stage.r2_val - base.r2_val},
         "twin": twin.name,
