@@ -16,6 +16,7 @@ Prediction (one-step, k-step at every sample, free run) is compiled (:mod:`sysid
 
 from __future__ import annotations
 
+import math
 import warnings
 from typing import Any, Sequence
 
@@ -325,6 +326,14 @@ class NARMAXPoly(PolynomialModel):
         self.constant = constant
         self.chunk = chunk
 
+    def describe(self) -> dict[str, Any]:
+        d = super().describe()
+        if hasattr(self, "els_status_"):
+            d["els"] = {"iterations": self.els_iterations_, "converged": self.els_converged_,
+                        "kept_iteration": self.els_best_iteration_, "unstable_iterations": list(self.els_unstable_),
+                        "status": self.els_status_}
+        return d
+
     def _recursive_residuals(self, records, s, terms_all, thetas) -> list[np.ndarray]:
         """One-step prediction errors of the current model, e computed recursively (pseudo-linear regression)."""
         return _recursive_residuals_impl(self, records, s, terms_all, thetas)
@@ -348,20 +357,42 @@ class NARMAXPoly(PolynomialModel):
             res = fr.frols(G, len(process), o, n, self.criterion, self.rho_p, self.max_terms)
             proc_sel.append([process[j] for j in res.selected])
             proc_err.append(res.err)
-        thetas = [fr.least_squares(records, s, proc_sel[o], o, e_list=zeros, chunk=self.chunk).theta
-                  for o in range(n_out)]
+        lss = [fr.least_squares(records, s, proc_sel[o], o, e_list=zeros, chunk=self.chunk) for o in range(n_out)]
+        thetas = [ls.theta for ls in lss]
         e_list = fr.fitted_residuals(records, s, proc_sel, thetas, e_list=zeros, chunk=self.chunk)
+        y_max = max(float(np.max(np.abs(r.y))) for r in records)
+        bound = DIVERGENCE_FACTOR * max(y_max, 1e-300)
+        y_var = np.maximum(np.concatenate([r.y.reshape(len(r), -1)[s.max_lag:] for r in records]).var(axis=0), 1e-300)
+
+        def one_step_cost(e_rec) -> float:
+            """Mean one-step error variance of the model, relative to each output's variance (nan if the residual
+            recursion diverged: non-finite or beyond ±bound on the estimation data)."""
+            with np.errstate(over="ignore", invalid="ignore"):
+                if not all(np.isfinite(e).all() and np.abs(e).max(initial=0.0) <= bound for e in e_rec):
+                    return math.nan
+                ms = sum(np.sum(e[s.max_lag:] ** 2, axis=0) for e in e_rec) / sum(len(e) - s.max_lag for e in e_rec)
+            return float(np.mean(ms / y_var))
+
+        # Iteration 0: the process-only model (its one-step error is the fitted residual; no recursion).
+        best = {"it": 0, "terms": [list(t) for t in proc_sel], "lss": lss, "errs": proc_err,
+                "cost": one_step_cost(e_list)}
         # Step 3: noise terms on the residuals, extended least squares until terms and parameters settle.
         # With criterion="err" the process terms of step 2 stay and noise terms are added while ERR >= rho_n.
         # With an information criterion, process and noise terms are re-selected together on every iteration
         # (the coloured residuals of step 2 make the criterion accept spurious process terms that the noise
         # terms then explain).
+        # Every iteration's model is checked by running its residual recursion e(t) = y(t) − ŷ(t|t−1) on the
+        # estimation data (what one-step and k-step prediction do). A noise model whose recursion diverges
+        # (an MA part outside the unit circle, or e²/e³ terms that blow up once e grows) is never returned:
+        # the result is the iteration with the smallest one-step error among those whose recursion stays
+        # bounded, so a larger ELS budget can only give the same or a better one-step fit.
         joint = self.criterion != "err"
         union_proc = process if joint else sorted({t for ts in proc_sel for t in ts})
         cand = union_proc + noise
         prev = None
         self.els_iterations_ = 0
         self.els_converged_ = False
+        self.els_unstable_ = []
         for it in range(int(self.els_iter)):
             G, n = fr.gram_matrix(records, s, terms=cand, e_list=e_list, chunk=self.chunk)
             terms_all, errs_all, lss = [], [], []
@@ -381,32 +412,48 @@ class NARMAXPoly(PolynomialModel):
                 lss.append(ls)
             thetas = [ls.theta for ls in lss]
             new_e = self._recursive_residuals(records, s, terms_all, thetas)
-            # The recursion e(t) = y(t) − ŷ(t|t−1) is unstable while the noise model is (e.g. an early estimate of an
-            # MA coefficient above 1): then take the plain ELS residual y − Pθ with the previous e, which is bounded.
+            cost = one_step_cost(new_e)
+            self.els_iterations_ = it + 1
+            if math.isnan(cost):
+                self.els_unstable_.append(it + 1)
+            elif cost < best["cost"]:
+                best = {"it": it + 1, "terms": terms_all, "lss": lss, "errs": errs_all, "cost": cost}
+            # While the recursion diverges (or grows far beyond the fitted residual), continue ELS from the plain
+            # residual y − Pθ computed with the previous e, which is bounded.
             plain = fr.fitted_residuals(records, s, terms_all, thetas, e_list=e_list, chunk=self.chunk)
             with np.errstate(over="ignore", invalid="ignore"):
-                finite = all(np.isfinite(e).all() for e in new_e)
-                if not finite or max(float(np.std(e)) for e in new_e) > 2.0 * max(float(np.std(e)) for e in plain):
+                if math.isnan(cost) or max(float(np.std(e)) for e in new_e) > 2.0 * max(float(np.std(e)) for e in plain):
                     new_e = plain
-            self.els_iterations_ = it + 1
-            cur = (terms_all, [ls.theta for ls in lss])
+            cur = (terms_all, thetas)
             done = False
-            if prev is not None and prev[0] == terms_all:
-                change = max(float(np.max(np.abs(a - b) / np.maximum(np.abs(a), 1e-12))) if a.size else 0.0
-                             for a, b in zip(cur[1], prev[1]))
+            if prev is not None and prev[0] == terms_all and not math.isnan(cost):
+                # relative change per parameter, scale-invariant (no absolute floor: units may make θ ~ 1e-12)
+                change = max((float(np.max(np.abs(a - b) / np.maximum(np.maximum(np.abs(a), np.abs(b)), 1e-300)))
+                              if a.size else 0.0) for a, b in zip(cur[1], prev[1]))
                 done = change < self.els_tol
             prev = cur
             e_list = new_e
             if done:
                 self.els_converged_ = True
                 break
-        # Step 4: final least squares on the residuals of the converged model.
+        # Step 4: the parameters are the least squares of the kept iteration (on the residuals it was fitted with);
+        # its residual recursion was verified bounded on the estimation data above.
+        self.els_best_iteration_ = best["it"]
+        self.els_one_step_cost_ = best["cost"]
+        what = "converged" if self.els_converged_ else f"stopped after els_iter={self.els_iterations_} iterations"
+        if self.els_unstable_:
+            what += (f"; iterations {self.els_unstable_} proposed noise models whose residual recursion is unstable "
+                     "on the estimation data (rejected)")
+        what += f"; kept iteration {best['it']}" + (" (process terms only, no noise terms)" if best["it"] == 0 else "")
+        self.els_status_ = what
+        if self.els_unstable_ and best["it"] == 0 and int(self.els_iter) > 0:
+            warnings.warn(f"{self.name}: every ELS noise model had an unstable residual recursion on the estimation "
+                          "data; returning the process-only model (no noise terms)", DivergenceWarning, stacklevel=3)
         self.terms_, self.theta_, self.stderr_, self.err_ = [], [], [], []
         for o in range(n_out):
-            ls = fr.least_squares(records, s, terms_all[o], o, e_list=e_list, chunk=self.chunk)
-            self.terms_.append(terms_all[o])
-            self.theta_.append(ls.theta)
-            self.stderr_.append(ls.stderr)
-            self.err_.append(errs_all[o])
+            self.terms_.append(best["terms"][o])
+            self.theta_.append(best["lss"][o].theta)
+            self.stderr_.append(best["lss"][o].stderr)
+            self.err_.append(best["errs"][o])
         self.noise_terms_ = [[fr.term_name(t, s.regressors, s.n_outputs, s.n_inputs) for t in ts if s.is_noise(t)]
                              for ts in self.terms_]
