@@ -32,6 +32,12 @@ __all__ = ["PolynomialModel", "NARXPoly", "NARMAXPoly", "check_records"]
 
 # A free run is declared diverged when it leaves ±DIVERGENCE_FACTOR × (largest |y| seen in estimation).
 DIVERGENCE_FACTOR = 1e3
+# The residual recursion of a NARMAX noise model counts as unstable when it leaves ± this factor × the largest
+# fitted (non-recursive) residual on the estimation data.
+RECURSION_GROWTH = 10.0
+# Robustness check of the returned noise model: KICKS output disturbances of KICK_SIZE × the largest fitted residual.
+KICKS = 8
+KICK_SIZE = 3.0
 
 
 def check_records(records: Sequence[Record], max_lag: int, min_rows: int, what: str) -> None:
@@ -330,9 +336,75 @@ class NARMAXPoly(PolynomialModel):
         d = super().describe()
         if hasattr(self, "els_status_"):
             d["els"] = {"iterations": self.els_iterations_, "converged": self.els_converged_,
-                        "kept_iteration": self.els_best_iteration_, "unstable_iterations": list(self.els_unstable_),
+                        "unstable_iterations": list(self.els_unstable_), "removed_terms": list(self.els_removed_terms_),
                         "status": self.els_status_}
         return d
+
+    def _recursion_bounded(self, records, s, terms_all, thetas, e_list, kicks: bool = False):
+        """Recursive residuals of the model and whether they stay bounded on the estimation data: finite and
+        within RECURSION_GROWTH × the largest fitted residual y − Pθ (computed with the ELS residuals e_list).
+        A stable noise model keeps the two of the same size; an unstable one grows without bound.
+
+        ``kicks``: also require the recursion to recover from KICKS disturbances of KICK_SIZE × the largest
+        fitted residual spread over each record (y disturbed at one sample each, alternating sign). Terms of
+        degree ≥ 2 in e make the recursion stable only near e = 0; a model that passes on the estimation data but
+        leaves that region on other data (measured: Cascaded Tanks test record) fails this check."""
+        new_e = self._recursive_residuals(records, s, terms_all, thetas)
+        plain = fr.fitted_residuals(records, s, terms_all, thetas, e_list=e_list, chunk=self.chunk)
+        with np.errstate(over="ignore", invalid="ignore"):
+            ok = all(np.isfinite(e).all() for e in new_e)
+            big = max(float(np.max(np.abs(p), initial=0.0)) for p in plain)
+            lim = RECURSION_GROWTH * big
+            if ok:
+                ok = max(float(np.max(np.abs(e), initial=0.0)) for e in new_e) <= lim
+            if ok and kicks and any(s.is_noise(t) for ts in terms_all for t in ts):
+                kicked = []
+                for rec in records:
+                    y = np.array(rec.y, dtype=float, copy=True).reshape(len(rec), -1)
+                    L = s.max_lag
+                    at = np.linspace(L, len(rec) - 1, KICKS + 2).astype(int)[1:-1]
+                    y[at] += KICK_SIZE * big * np.where(np.arange(at.size) % 2 == 0, 1.0, -1.0)[:, None]
+                    kicked.append(Record(rec.u, y.reshape(rec.y.shape), fs=rec.fs))
+                ek = self._recursive_residuals(kicked, s, terms_all, thetas)
+                ok = all(np.isfinite(e).all() for e in ek) and \
+                    max(float(np.max(np.abs(e), initial=0.0)) for e in ek) <= lim
+        return new_e, ok
+
+    def _stable_noise_model(self, records, s, terms_all, lss, errs_all, e_list):
+        """Remove noise terms until the residual recursion is bounded (§2.7: one-step prediction needs it).
+
+        Order: first every term of degree ≥ 2 in e (e², e·e: a polynomial map of e, unbounded once e grows),
+        then the last-selected noise term (smallest ERR) of each output, one at a time. The remaining parameters
+        are kept as estimated (with their standard errors): the process part, and so the free run, is unchanged.
+        Returns (terms, lss, errs, names of the removed terms)."""
+        new_e, ok = self._recursion_bounded(records, s, terms_all, [ls.theta for ls in lss], e_list, kicks=True)
+        removed: list[str] = []
+        first = True
+        terms_all, errs_all, lss = [list(t) for t in terms_all], [list(e) for e in errs_all], list(lss)
+        while not ok:
+            changed = False
+            for o, terms in enumerate(terms_all):
+                e_deg = [sum(1 for r in t if s.regressors[r][0] == "e") for t in terms]
+                if first and any(d >= 2 for d in e_deg):
+                    drop = [i for i, d in enumerate(e_deg) if d >= 2]
+                else:
+                    drop = [i for i, d in enumerate(e_deg) if d > 0][-1:]
+                if not drop:
+                    continue
+                changed = True
+                pre = f"[y{o + 1}] " if s.n_outputs > 1 else ""
+                removed += [pre + fr.term_name(terms[i], s.regressors, s.n_outputs, s.n_inputs) for i in drop]
+                keep = [i for i in range(len(terms)) if i not in drop]
+                terms_all[o] = [terms[i] for i in keep]
+                errs_all[o] = [errs_all[o][i] for i in keep]
+                ls = lss[o]
+                lss[o] = fr.LSResult(theta=ls.theta[keep], stderr=ls.stderr[keep], ssr=ls.ssr, n_samples=ls.n_samples)
+            first = False
+            if not changed:
+                raise DataError(f"{self.name}: the one-step recursion of the process-only model is not finite "
+                                "(non-finite parameters or regressors)")
+            new_e, ok = self._recursion_bounded(records, s, terms_all, [ls.theta for ls in lss], e_list, kicks=True)
+        return terms_all, lss, errs_all, removed
 
     def _recursive_residuals(self, records, s, terms_all, thetas) -> list[np.ndarray]:
         """One-step prediction errors of the current model, e computed recursively (pseudo-linear regression)."""
@@ -357,35 +429,14 @@ class NARMAXPoly(PolynomialModel):
             res = fr.frols(G, len(process), o, n, self.criterion, self.rho_p, self.max_terms)
             proc_sel.append([process[j] for j in res.selected])
             proc_err.append(res.err)
-        lss = [fr.least_squares(records, s, proc_sel[o], o, e_list=zeros, chunk=self.chunk) for o in range(n_out)]
-        thetas = [ls.theta for ls in lss]
+        thetas = [fr.least_squares(records, s, proc_sel[o], o, e_list=zeros, chunk=self.chunk).theta
+                  for o in range(n_out)]
         e_list = fr.fitted_residuals(records, s, proc_sel, thetas, e_list=zeros, chunk=self.chunk)
-        y_max = max(float(np.max(np.abs(r.y))) for r in records)
-        bound = DIVERGENCE_FACTOR * max(y_max, 1e-300)
-        y_var = np.maximum(np.concatenate([r.y.reshape(len(r), -1)[s.max_lag:] for r in records]).var(axis=0), 1e-300)
-
-        def one_step_cost(e_rec) -> float:
-            """Mean one-step error variance of the model, relative to each output's variance (nan if the residual
-            recursion diverged: non-finite or beyond ±bound on the estimation data)."""
-            with np.errstate(over="ignore", invalid="ignore"):
-                if not all(np.isfinite(e).all() and np.abs(e).max(initial=0.0) <= bound for e in e_rec):
-                    return math.nan
-                ms = sum(np.sum(e[s.max_lag:] ** 2, axis=0) for e in e_rec) / sum(len(e) - s.max_lag for e in e_rec)
-            return float(np.mean(ms / y_var))
-
-        # Iteration 0: the process-only model (its one-step error is the fitted residual; no recursion).
-        best = {"it": 0, "terms": [list(t) for t in proc_sel], "lss": lss, "errs": proc_err,
-                "cost": one_step_cost(e_list)}
         # Step 3: noise terms on the residuals, extended least squares until terms and parameters settle.
         # With criterion="err" the process terms of step 2 stay and noise terms are added while ERR >= rho_n.
         # With an information criterion, process and noise terms are re-selected together on every iteration
         # (the coloured residuals of step 2 make the criterion accept spurious process terms that the noise
         # terms then explain).
-        # Every iteration's model is checked by running its residual recursion e(t) = y(t) − ŷ(t|t−1) on the
-        # estimation data (what one-step and k-step prediction do). A noise model whose recursion diverges
-        # (an MA part outside the unit circle, or e²/e³ terms that blow up once e grows) is never returned:
-        # the result is the iteration with the smallest one-step error among those whose recursion stays
-        # bounded, so a larger ELS budget can only give the same or a better one-step fit.
         joint = self.criterion != "err"
         union_proc = process if joint else sorted({t for ts in proc_sel for t in ts})
         cand = union_proc + noise
@@ -411,23 +462,23 @@ class NARMAXPoly(PolynomialModel):
                 errs_all.append(res.err)
                 lss.append(ls)
             thetas = [ls.theta for ls in lss]
-            new_e = self._recursive_residuals(records, s, terms_all, thetas)
-            cost = one_step_cost(new_e)
-            self.els_iterations_ = it + 1
-            if math.isnan(cost):
-                self.els_unstable_.append(it + 1)
-            elif cost < best["cost"]:
-                best = {"it": it + 1, "terms": terms_all, "lss": lss, "errs": errs_all, "cost": cost}
-            # While the recursion diverges (or grows far beyond the fitted residual), continue ELS from the plain
-            # residual y − Pθ computed with the previous e, which is bounded.
+            # The pseudo-linear regression's next e is the recursion e(t) = y(t) − ŷ(t|t−1) of this model. While
+            # that recursion is unstable (an early noise model with an MA root outside the unit circle, or e²/e³
+            # terms that blow up once e grows) it is replaced by the plain residual y − Pθ computed with the
+            # previous e, which is bounded; the iteration is recorded in els_unstable_.
+            new_e, bounded = self._recursion_bounded(records, s, terms_all, thetas, e_list)
             plain = fr.fitted_residuals(records, s, terms_all, thetas, e_list=e_list, chunk=self.chunk)
-            with np.errstate(over="ignore", invalid="ignore"):
-                if math.isnan(cost) or max(float(np.std(e)) for e in new_e) > 2.0 * max(float(np.std(e)) for e in plain):
-                    new_e = plain
+            if not bounded:
+                self.els_unstable_.append(it + 1)
+                new_e = plain
+            elif max(float(np.std(e)) for e in new_e) > 2.0 * max(float(np.std(e)) for e in plain):
+                new_e = plain
+            self.els_iterations_ = it + 1
             cur = (terms_all, thetas)
             done = False
-            if prev is not None and prev[0] == terms_all and not math.isnan(cost):
-                # relative change per parameter, scale-invariant (no absolute floor: units may make θ ~ 1e-12)
+            if prev is not None and prev[0] == terms_all:
+                # relative change per parameter, scale-invariant (no absolute floor: in SI units a parameter can
+                # be ~1e-12 and still matter)
                 change = max((float(np.max(np.abs(a - b) / np.maximum(np.maximum(np.abs(a), np.abs(b)), 1e-300)))
                               if a.size else 0.0) for a, b in zip(cur[1], prev[1]))
                 done = change < self.els_tol
@@ -436,24 +487,31 @@ class NARMAXPoly(PolynomialModel):
             if done:
                 self.els_converged_ = True
                 break
-        # Step 4: the parameters are the least squares of the kept iteration (on the residuals it was fitted with);
-        # its residual recursion was verified bounded on the estimation data above.
-        self.els_best_iteration_ = best["it"]
-        self.els_one_step_cost_ = best["cost"]
-        what = "converged" if self.els_converged_ else f"stopped after els_iter={self.els_iterations_} iterations"
+        # Step 4: final least squares on the residuals of the last iteration.
+        terms_all = terms_all if int(self.els_iter) > 0 else [list(t) for t in proc_sel]
+        errs_all = errs_all if int(self.els_iter) > 0 else proc_err
+        lss = [fr.least_squares(records, s, terms_all[o], o, e_list=e_list, chunk=self.chunk) for o in range(n_out)]
+        # The returned model must predict one step ahead: its residual recursion has to stay bounded on the
+        # estimation data. If it does not, noise terms are removed (not refitted: the process part, hence the free
+        # run, is exactly the ELS estimate) until it does, and the reason is reported.
+        terms_all, lss, errs_all, removed = self._stable_noise_model(records, s, terms_all, lss, errs_all, e_list)
+        what = ("converged" if self.els_converged_ else f"stopped after els_iter={self.els_iterations_} iterations "
+                f"(relative parameter change not yet below els_tol={self.els_tol:g})")
         if self.els_unstable_:
-            what += (f"; iterations {self.els_unstable_} proposed noise models whose residual recursion is unstable "
-                     "on the estimation data (rejected)")
-        what += f"; kept iteration {best['it']}" + (" (process terms only, no noise terms)" if best["it"] == 0 else "")
+            what += (f"; the noise models of iterations {self.els_unstable_} had an unstable residual recursion "
+                     "(ELS continued from the plain residual)")
+        if removed:
+            what += (f"; the final noise model's residual recursion diverged on the estimation data: removed "
+                     f"{', '.join(removed)} (parameters of the other terms unchanged)")
         self.els_status_ = what
-        if self.els_unstable_ and best["it"] == 0 and int(self.els_iter) > 0:
-            warnings.warn(f"{self.name}: every ELS noise model had an unstable residual recursion on the estimation "
-                          "data; returning the process-only model (no noise terms)", DivergenceWarning, stacklevel=3)
+        self.els_removed_terms_ = removed
+        if removed:
+            warnings.warn(f"{self.name}: ELS {what}", UserWarning, stacklevel=3)
         self.terms_, self.theta_, self.stderr_, self.err_ = [], [], [], []
         for o in range(n_out):
-            self.terms_.append(best["terms"][o])
-            self.theta_.append(best["lss"][o].theta)
-            self.stderr_.append(best["lss"][o].stderr)
-            self.err_.append(best["errs"][o])
+            self.terms_.append(terms_all[o])
+            self.theta_.append(lss[o].theta)
+            self.stderr_.append(lss[o].stderr)
+            self.err_.append(errs_all[o])
         self.noise_terms_ = [[fr.term_name(t, s.regressors, s.n_outputs, s.n_inputs) for t in ts if s.is_noise(t)]
                              for ts in self.terms_]

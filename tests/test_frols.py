@@ -393,7 +393,7 @@ def test_narmax_els_iterations_finite_and_one_step_finite_on_real_data(els_iter)
     ds = _cascaded_tanks_est()
     m = NARMAXPoly(ny=4, nu=4, ne=2, degree=3, max_terms=20, els_iter=els_iter)
     with warnings.catch_warnings():
-        warnings.simplefilter("ignore", DivergenceWarning)  # a rejected noise model may be reported
+        warnings.simplefilter("ignore", UserWarning)  # removed noise terms are reported
         m.fit(ds.est)
     assert all(np.isfinite(t).all() for t in m.theta_)
     for rec in [ds.est] + list(ds.tests.values()):
@@ -412,31 +412,31 @@ def test_narmax_els_iterations_finite_and_one_step_finite_on_real_data(els_iter)
 
 
 def test_narmax_more_els_iterations_same_or_better_fit():
-    """Coloured (MA) noise: the one-step error of the estimation fit never grows with the ELS budget, and every
-    budget gives finite parameters and a finite one-step prediction on fresh data."""
+    """Coloured (MA) noise: every ELS budget gives finite parameters and a finite one-step prediction on fresh
+    data, and more iterations give the same or a better validation one-step error (the iterations settle;
+    measured 0.01286 without noise terms, 0.01041 after 1 iteration, 0.010265 from 2 on; innovation var 0.01)."""
     rec = narmax_record(3000, seed=4, sigma=0.1)
     val = narmax_record(3000, seed=5, sigma=0.1)
-    prev = np.inf
-    for it in (1, 2, 3, 5, 10, 20):
+    mse = {}
+    for it in (0, 1, 2, 3, 5, 10, 20):
         m = NARMAXPoly(ny=2, nu=2, ne=2, degree=3, els_iter=it).fit(rec)
         assert all(np.isfinite(t).all() for t in m.theta_)
-        mse = float(np.mean((rec.y - m.predict(rec, 1))[2:] ** 2))
-        assert mse <= prev * (1 + 1e-12), it
-        prev = mse
         yv = m.predict(val, 1)
         assert np.isfinite(yv).all()
-    # the noise term is found and the one-step error approaches the innovation variance (0.1² = 0.01)
+        mse[it] = float(np.mean((val.y - yv)[2:] ** 2))
+        if it >= 2:
+            assert mse[it] <= mse[1] * (1 + 1e-3) < mse[0], (it, mse)
+    assert m.els_converged_ and mse[20] == mse[10]
     assert "e(k-1)" in {r["term"] for r in m.term_table()}
-    assert prev < 1.1 * 0.1 ** 2
+    assert mse[20] < 1.05 * 0.1 ** 2
 
 
 def test_narmax_unstable_noise_model_is_reported_not_kept():
-    """A noise model whose residual recursion diverges on the estimation data is never returned: ELS keeps the
-    best iteration whose recursion is bounded and says why in els_status_."""
+    """A noise model whose residual recursion diverges on the estimation data is never returned: the terms that
+    make it diverge are removed (the process part, hence the free run, unchanged) and els_status_ says so."""
     ds = _cascaded_tanks_est()
     m = NARMAXPoly(ny=4, nu=4, ne=2, degree=3, max_terms=20, els_iter=20)
-    with warnings.catch_warnings(record=True):
-        warnings.simplefilter("always")
+    with pytest.warns(UserWarning, match="residual recursion diverged"):
         m.fit(ds.est)
     from sysid import simulate as sim
 
@@ -444,6 +444,9 @@ def test_narmax_unstable_noise_model_is_reported_not_kept():
     assert np.isfinite(e).all() and np.abs(e).max() < np.abs(ds.est.y).max()
     assert m.els_unstable_, "this record is the reproduction: some ELS iteration proposes an unstable noise model"
     assert "unstable" in m.els_status_
+    # the final model of this budget diverged before the fix: the removed terms are named and the warning says so
+    assert m.els_removed_terms_ and all(t in m.els_status_ for t in m.els_removed_terms_)
+    assert not set(m.els_removed_terms_) & set(m.noise_terms_[0])
 
 
 @pytest.mark.parametrize("cls", [NARXPoly, NARMAXPoly])
