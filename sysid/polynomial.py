@@ -148,7 +148,11 @@ class PolynomialModel(Identifier):
                 raise ConfigError(f"horizon must be a positive integer or None (free run), got {horizon!r}")
             if horizon == 1:
                 yhat, _ = sim.one_step(m, u, y)
-                bad = -1 if np.isfinite(yhat).all() else int(np.flatnonzero(~np.isfinite(yhat).any(axis=1))[0])
+                # a NARMAX residual recursion that leaves the bound (or overflows) is reported, not returned
+                out = ~(np.abs(yhat) <= self.y_bound_).all(axis=1)
+                bad = int(np.flatnonzero(out)[0]) if out.any() else -1
+                if bad >= 0:
+                    yhat[bad:] = np.nan
             else:
                 yhat, bad = sim.k_step(m, u, y, int(horizon), self.y_bound_)
         if bad >= 0:
@@ -374,8 +378,9 @@ class NARMAXPoly(PolynomialModel):
         """Remove noise terms until the residual recursion is bounded (§2.7: one-step prediction needs it).
 
         Order: first every term of degree ≥ 2 in e (e², e·e: a polynomial map of e, unbounded once e grows),
-        then the last-selected noise term (smallest ERR) of each output, one at a time. The remaining parameters
-        are kept as estimated (with their standard errors): the process part, and so the free run, is unchanged.
+        then the last-selected noise term (smallest ERR) of each output, one at a time. The process parameters are
+        kept as estimated (so the free run is unchanged); the remaining noise parameters are re-estimated on what
+        the process part leaves.
         Returns (terms, lss, errs, names of the removed terms)."""
         new_e, ok = self._recursion_bounded(records, s, terms_all, [ls.theta for ls in lss], e_list, kicks=True)
         removed: list[str] = []
@@ -397,14 +402,40 @@ class NARMAXPoly(PolynomialModel):
                 keep = [i for i in range(len(terms)) if i not in drop]
                 terms_all[o] = [terms[i] for i in keep]
                 errs_all[o] = [errs_all[o][i] for i in keep]
-                ls = lss[o]
-                lss[o] = fr.LSResult(theta=ls.theta[keep], stderr=ls.stderr[keep], ssr=ls.ssr, n_samples=ls.n_samples)
+                lss[o] = self._refit_noise(records, s, terms_all[o], lss[o].theta[keep], lss[o].stderr[keep], o,
+                                           e_list)
             first = False
             if not changed:
                 raise DataError(f"{self.name}: the one-step recursion of the process-only model is not finite "
                                 "(non-finite parameters or regressors)")
             new_e, ok = self._recursion_bounded(records, s, terms_all, [ls.theta for ls in lss], e_list, kicks=True)
         return terms_all, lss, errs_all, removed
+
+    def _refit_noise(self, records, s, terms, theta, stderr, o, e_list) -> fr.LSResult:
+        """Least squares of the noise-term parameters alone, the process parameters fixed: the remaining noise
+        terms fit what the process part leaves (y − P_proc θ_proc) once some noise terms are removed."""
+        theta = np.array(theta, dtype=float, copy=True)
+        stderr = np.array(stderr, dtype=float, copy=True)
+        nz = [i for i, t in enumerate(terms) if s.is_noise(t)]
+        if not nz:
+            return fr.LSResult(theta=theta, stderr=stderr, ssr=math.nan, n_samples=0)
+        pr = [i for i in range(len(terms)) if i not in nz]
+        rows_P, rows_r = [], []
+        for X, Y in fr.lagged_chunks(records, s, e_list, self.chunk):
+            P = fr.term_columns(X, terms)
+            rows_P.append(P[:, nz])
+            rows_r.append(Y[:, o] - P[:, pr] @ theta[pr])
+        P, r = np.vstack(rows_P), np.concatenate(rows_r)
+        sol, *_ = np.linalg.lstsq(P, r, rcond=None)
+        if np.isfinite(sol).all():
+            theta[nz] = sol
+            res = r - P @ sol
+            sigma2 = float(res @ res) / max(len(r) - len(nz), 1)
+            try:
+                stderr[nz] = np.sqrt(np.maximum(np.diag(sigma2 * np.linalg.inv(P.T @ P)), 0.0))
+            except np.linalg.LinAlgError:  # pragma: no cover - dependent noise columns
+                pass
+        return fr.LSResult(theta=theta, stderr=stderr, ssr=math.nan, n_samples=len(r))
 
     def _recursive_residuals(self, records, s, terms_all, thetas) -> list[np.ndarray]:
         """One-step prediction errors of the current model, e computed recursively (pseudo-linear regression)."""
@@ -492,8 +523,8 @@ class NARMAXPoly(PolynomialModel):
         errs_all = errs_all if int(self.els_iter) > 0 else proc_err
         lss = [fr.least_squares(records, s, terms_all[o], o, e_list=e_list, chunk=self.chunk) for o in range(n_out)]
         # The returned model must predict one step ahead: its residual recursion has to stay bounded on the
-        # estimation data. If it does not, noise terms are removed (not refitted: the process part, hence the free
-        # run, is exactly the ELS estimate) until it does, and the reason is reported.
+        # estimation data. If it does not, noise terms are removed until it does (the process part, hence the free
+        # run, stays exactly the ELS estimate), and the reason is reported.
         terms_all, lss, errs_all, removed = self._stable_noise_model(records, s, terms_all, lss, errs_all, e_list)
         what = ("converged" if self.els_converged_ else f"stopped after els_iter={self.els_iterations_} iterations "
                 f"(relative parameter change not yet below els_tol={self.els_tol:g})")
@@ -502,7 +533,7 @@ class NARMAXPoly(PolynomialModel):
                      "(ELS continued from the plain residual)")
         if removed:
             what += (f"; the final noise model's residual recursion diverged on the estimation data: removed "
-                     f"{', '.join(removed)} (parameters of the other terms unchanged)")
+                     f"{', '.join(removed)} (process parameters unchanged, the remaining noise parameters re-estimated)")
         self.els_status_ = what
         self.els_removed_terms_ = removed
         if removed:
