@@ -487,3 +487,21 @@ def test_least_squares_rank_check_is_per_column():
     np.testing.assert_allclose(ls.theta[:3], [0.9, 1e-7, 1e-11], rtol=1e-6)
     with pytest.raises(DataError, match="linearly dependent"):
         fr.least_squares([rec], s, [(0,), (1,), (0,)])
+
+
+def test_bouc_wen_in_si_units_is_identified():
+    """The benchmark's reproduction: Bouc–Wen in N and m (u ~ 50 N rms, y ~ 7e-4 m rms) was refused as
+    rank-deficient by a tolerance relative to the largest column; now it fits, close to the normalised fit."""
+    try:
+        from benchmarks.datasets import load_dataset
+
+        ds = load_dataset("bouc-wen")
+    except Exception as exc:  # pragma: no cover - data not vendored in this checkout
+        pytest.skip(f"bouc-wen data not available: {exc}")
+    est = ds.est[:8192]
+    m = NARXPoly(ny=4, nu=4, degree=3).fit(est)
+    assert all(np.isfinite(t).all() for t in m.theta_)
+    test = ds.tests["multisine"]
+    e = test.y[50:] - m.predict(test, None)[50:]
+    # ARX's quick floor on this test is 2.03e-4 m (free run); the nonlinear model must stay below it
+    assert np.sqrt(np.mean(e ** 2)) < 2.03e-4
