@@ -7,7 +7,11 @@
 - **NARMAXPoly** (eq. 2-6/2-7): ELS-FROLS, steps 1–4 of §2.6: (1) structure from n_u, n_y, n_e, n_l;
   (2) process terms by FROLS; (3) noise terms (any term containing an e lag) selected on the residuals by
   ERR ≥ ``rho_n`` (or the same information criterion), re-estimating the parameters and the residuals
-  (extended least squares) until the terms and parameters settle; (4) final least squares.
+  (extended least squares) until the terms and parameters settle; (4) final least squares. The returned noise
+  model's residual recursion e(k) = y(k) − ŷ(k|k−1) (what one-step and k-step prediction run) is checked on the
+  estimation data: bounded, and recovering from output kicks; noise terms that make it diverge are removed (e², e³
+  terms first) and named in ``els_status_`` with a warning — never NaN parameters or a NaN one-step prediction
+  on the estimation data.
 
 MIMO: one model per output over shared regressors (the lags of every output and input); all outputs come from
 the same pass over the data. A list of Records is several experiments: no regressor spans two of them.
@@ -315,6 +319,10 @@ class NARMAXPoly(PolynomialModel):
     while its ERR ≥ rho_n, when ``criterion="err"``; default 1e-5 = rho_p/10 as in the dissertation's Table 5.1;
     otherwise the information criterion decides), ``els_iter``
     (most extended-least-squares iterations) and ``els_tol`` (relative parameter change that ends them).
+
+    After fit: ``els_iterations_``, ``els_converged_``, ``els_unstable_`` (iterations whose noise model had a
+    diverging residual recursion; ELS continued from the plain residual there), ``els_removed_terms_`` (noise terms
+    removed from the final model to keep its recursion bounded) and ``els_status_`` (one line saying all that).
     """
 
     name = "narmax-poly"
@@ -372,6 +380,7 @@ class NARMAXPoly(PolynomialModel):
                 ek = self._recursive_residuals(kicked, s, terms_all, thetas)
                 ok = all(np.isfinite(e).all() for e in ek) and \
                     max(float(np.max(np.abs(e), initial=0.0)) for e in ek) <= lim
+        self._last_plain = plain
         return new_e, ok
 
     def _stable_noise_model(self, records, s, terms_all, lss, errs_all, e_list):
@@ -498,7 +507,7 @@ class NARMAXPoly(PolynomialModel):
             # terms that blow up once e grows) it is replaced by the plain residual y − Pθ computed with the
             # previous e, which is bounded; the iteration is recorded in els_unstable_.
             new_e, bounded = self._recursion_bounded(records, s, terms_all, thetas, e_list)
-            plain = fr.fitted_residuals(records, s, terms_all, thetas, e_list=e_list, chunk=self.chunk)
+            plain = self._last_plain  # y − Pθ with the previous e, computed by the check
             if not bounded:
                 self.els_unstable_.append(it + 1)
                 new_e = plain
@@ -536,6 +545,7 @@ class NARMAXPoly(PolynomialModel):
                      f"{', '.join(removed)} (process parameters unchanged, the remaining noise parameters re-estimated)")
         self.els_status_ = what
         self.els_removed_terms_ = removed
+        del self._last_plain
         if removed:
             warnings.warn(f"{self.name}: ELS {what}", UserWarning, stacklevel=3)
         self.terms_, self.theta_, self.stderr_, self.err_ = [], [], [], []
