@@ -433,6 +433,9 @@ def least_squares(records, structure: Structure, terms, output: int = 0, e_list=
         raise DataError(f"too few samples ({n_rows} usable rows) for {k} parameters")
     if R.shape[0] < k + 1:
         R = np.vstack([R, np.zeros((k + 1 - R.shape[0], k + 1))])
+    if not np.isfinite(R).all():
+        raise DataError("least squares on non-finite or overflowing regressors (e.g. a diverged residual recursion); "
+                        "no parameters estimated")
     Rk = R[:k, :k]
     if k:
         # Scale-invariant rank test: |R_jj| is the norm of column j orthogonalised against the columns before it,

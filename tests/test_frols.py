@@ -487,6 +487,12 @@ def test_least_squares_rank_check_is_per_column():
     np.testing.assert_allclose(ls.theta[:3], [0.9, 1e-7, 1e-11], rtol=1e-6)
     with pytest.raises(DataError, match="linearly dependent"):
         fr.least_squares([rec], s, [(0,), (1,), (0,)])
+    # non-finite regressors (a diverged residual recursion fed to ELS) never give NaN parameters silently
+    s_e = fr.Structure(fr.make_regressors(1, 1, 1), fr.candidate_terms(3, 1))
+    e = np.zeros((n, 1))
+    e[500] = np.inf
+    with pytest.raises(DataError, match="non-finite"):
+        fr.least_squares([rec], s_e, [(0,), (1,), (2,)], e_list=[e])
 
 
 def test_bouc_wen_in_si_units_is_identified():
