@@ -32,8 +32,10 @@ test-all: $(STAMP)
 	$(PY) -m pytest -q -m "slow or not slow"
 
 bench: $(STAMP)
+	mkdir -p benchmarks/results
 	$(PY) -m pytest -q -m "slow or not slow" benchmarks/perf --benchmark-enable --benchmark-only \
 	  --benchmark-json=benchmarks/results/bench.json -p no:randomly
+	$(PY) -m benchmarks.perf.summarise benchmarks/results/bench.json -o benchmarks/results/summary.md
 
 fmus: $(STAMP)
 	$(VENV)/bin/piezotwin export-fmu cantilever -o fmus/cantilever.fmu

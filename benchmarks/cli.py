@@ -2,7 +2,8 @@
 
 Each command lives in its own module under :mod:`benchmarks.commands` with ``register(subparsers)`` and
 ``run(args) -> int``. Any :class:`sysid.errors.InputError` (bad file, unknown parameter, out-of-range value)
-is printed as one line on stderr with exit status 2 — never a traceback.
+is printed as one line on stderr with exit status 2 — never a traceback; so is an OSError about a path the
+user named (an output folder that is a file, no permission ...).
 """
 
 from __future__ import annotations
@@ -70,6 +71,11 @@ def main(argv: list[str] | None = None) -> int:
         except OSError:
             pass
         return 0
+    except OSError as exc:  # a file or folder the user named cannot be read or written (plots, reports ...)
+        if exc.filename is None:
+            raise  # not about a path: a real fault, keep its traceback
+        print(f"piezotwin {args.command}: error: {exc.filename}: {exc.strerror or exc}", file=sys.stderr)
+        return 2
     except KeyboardInterrupt:
         print(f"piezotwin {args.command}: interrupted", file=sys.stderr)
         return 130

@@ -1,15 +1,28 @@
-"""The main job: each stage is a function ``stage(ctx) -> str`` (a one-line account of what it did).
+"""The main job (``piezotwin run``, what ``make run`` starts): each stage is a function ``stage(ctx) -> str``
+(a one-line account of what it did).
 
-A stage whose parts are not built yet raises :class:`StageSkipped`; the job goes on and says so.
+Stages, in order: the dissertation's excitation signals; the twins' datasets (cantilever thesis-multisine →
+thesis-sines, acoustic multisine → 1 ms chirp after the preprocessing recipe; with and without measurement
+noise); figures of the twins (hysteresis loops, spectra, the VNA-style response); every identifier on the twin
+datasets at CPU budgets; every identifier on the recorded lab benchmarks beside the published numbers and
+SysIdentPy; one discrepancy diagnosis; a distance/temperature sweep of the acoustic channel; then
+``report/index.html`` with every figure (relative paths, opens without a server).
+
+A stage whose parts are not built yet raises :class:`StageSkipped`; the job goes on and says so. A stage that
+fails is reported as failed (with the error) and the job goes on; ``piezotwin run`` then exits 1.
+Budgets: the default run is sized for ≤ 10 minutes on 2 cores, ``--quick`` for ≤ 2 minutes.
 """
 
 from __future__ import annotations
 
 import html
 import time
+import traceback
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable
+
+import numpy as np
 
 
 class StageSkipped(Exception):
@@ -20,11 +33,41 @@ class StageSkipped(Exception):
 class Context:
     report_dir: Path
     quick: bool
-    figures: list[tuple[str, str]] = field(default_factory=list)  # (title, relative png path)
+    figures: list[tuple[str, str]] = field(default_factory=list)  # (title, relative png path), in stage order
     sections: list[tuple[str, str]] = field(default_factory=list)  # (title, html)
     data: dict[str, Any] = field(default_factory=dict)
+    verbose: bool = True
+
+    def save_figure(self, fig, name: str, title: str) -> str:
+        """Save a matplotlib figure as ``fig/<name>.png`` under the report folder; returns the relative path."""
+        import matplotlib.pyplot as plt
+
+        d = self.report_dir / "fig"
+        d.mkdir(parents=True, exist_ok=True)
+        rel = f"fig/{name}.png"
+        fig.savefig(self.report_dir / rel, dpi=80)
+        plt.close(fig)
+        self.figures.append((title, rel))
+        return rel
+
+    def section(self, title: str, content_html: str) -> None:
+        self.sections.append((title, content_html))
 
 
+def _plt():
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def _not_built(exc: Exception, what: str) -> StageSkipped:
+    return StageSkipped(f"{what} not built yet ({exc})")
+
+
+# ---------------------------------------------------------------------------------------------- stages
 def _stage_signals(ctx: Context) -> str:
     try:
         from sysid import signals
@@ -37,41 +80,403 @@ def _stage_signals(ctx: Context) -> str:
             f" {info['frequencies_hz'][-1]:g} Hz, crest factor {info['crest_factor']:.2f}")
 
 
+def _twin_dataset_names() -> list[str]:
+    from benchmarks.datasets import twin as twin_ds
+
+    return list(twin_ds.TWIN_DATASETS)
+
+
+def _stage_twin_datasets(ctx: Context) -> str:
+    from benchmarks.datasets import list_datasets, load_dataset
+
+    info = {d["id"]: d for d in list_datasets()}
+    done, skipped = [], []
+    for name in _twin_dataset_names():
+        if not info[name]["available"]:
+            skipped.append(name)
+            continue
+        t0 = time.perf_counter()
+        ds = load_dataset(name, progress=ctx.verbose)
+        ctx.data.setdefault("twin_datasets", {})[name] = ds
+        done.append(f"{name} ({len(ds.est)} -> {', '.join(f'{k} {len(v)}' for k, v in ds.tests.items())} samples, "
+                    f"{time.perf_counter() - t0:.1f} s)")
+    if not done:
+        raise StageSkipped(f"no twin built yet ({', '.join(skipped)} unavailable)")
+    msg = "; ".join(done)
+    if skipped:
+        msg += f"; skipped (twin not built): {', '.join(skipped)}"
+    return msg
+
+
+def _spectrum(x: np.ndarray, fs: float) -> tuple[np.ndarray, np.ndarray]:
+    x = np.asarray(x, dtype=float) - np.mean(x)
+    X = np.fft.rfft(x * np.hanning(x.size))
+    f = np.fft.rfftfreq(x.size, 1.0 / fs)
+    return f, 20 * np.log10(np.abs(X) / x.size + 1e-300)
+
+
+def _stage_cantilever_figures(ctx: Context) -> str:
+    ds = ctx.data.get("twin_datasets", {}).get("cantilever-thesis")
+    if ds is None:
+        raise StageSkipped("no cantilever dataset (cantilever twin not built)")
+    plt = _plt()
+    test = ds.tests["thesis-sines"]
+    segs = test.segments()
+    n = len(segs)
+    cols = 4
+    rows = int(np.ceil(n / cols))
+    fig, axes = plt.subplots(rows, cols, figsize=(11, 2.6 * rows))
+    for ax, seg in zip(np.ravel(axes), segs):
+        f = seg.meta["segment"].get("freq_hz")
+        half = len(seg) // 2 if len(seg) > 4 else 0  # last half: past the start-up transient
+        ax.plot(seg.u[half:], seg.y[half:], lw=0.6)
+        ax.set_title(f"{f:g} Hz", fontsize=9)
+        ax.tick_params(labelsize=7)
+    for ax in np.ravel(axes)[n:]:
+        ax.axis("off")
+    fig.suptitle("cantilever twin: u-y loops for the thesis sines (Figure 4.3 analogue; x: V, y: µm)")
+    fig.tight_layout()
+    ctx.save_figure(fig, "cantilever_loops", "Cantilever twin: hysteresis loops at each thesis sine (u [V] vs y [µm])")
+    est = ds.est
+    fig, ax = plt.subplots(2, 1, figsize=(9, 5), sharex=True)
+    for a, x, lab in ((ax[0], est.u, "input u [V]"), (ax[1], est.y, "output y [µm]")):
+        f, s = _spectrum(x, est.fs)
+        a.plot(f, s, lw=0.5)
+        a.set_ylabel(f"{lab}\n[dB]")
+        a.set_xlim(0, 1500)
+    ax[1].set_xlabel("frequency [Hz]")
+    fig.suptitle("cantilever twin: thesis-multisine spectra (Figure 3.4 analogue)")
+    fig.tight_layout()
+    ctx.save_figure(fig, "cantilever_multisine_spectra", "Cantilever twin: input and output spectra of the thesis multisine")
+    widths = []
+    for seg in segs[:2]:
+        half = len(seg) // 2
+        y, u = seg.y[half:], seg.u[half:]
+        up = np.gradient(u) > 0
+        grid = np.linspace(-0.5, 0.5, 21) * np.ptp(u)
+        try:
+            yu = np.interp(grid, u[up][np.argsort(u[up])], y[up][np.argsort(u[up])])
+            yd = np.interp(grid, u[~up][np.argsort(u[~up])], y[~up][np.argsort(u[~up])])
+            widths.append(float(np.max(np.abs(yu - yd)) / np.ptp(y)))
+        except ValueError:
+            pass
+    w = ", ".join(f"{100 * x:.1f} %" for x in widths)
+    return f"loops for {n} sines, multisine spectra; loop width/span at the two lowest frequencies: {w or 'n/a'}"
+
+
+def _stage_acoustic_figures(ctx: Context) -> str:
+    ds = ctx.data.get("twin_datasets", {}).get("acoustic-thesis")
+    if ds is None:
+        raise StageSkipped("no acoustic dataset (acoustic twin not built)")
+    plt = _plt()
+    fig, axes = plt.subplots(2, 2, figsize=(11, 5.5))
+    for col, (title, rec) in enumerate((("multisine (estimation)", ds.est), ("1 ms chirp (test)", next(iter(ds.tests.values()))))):
+        for row, (x, lab) in enumerate(((rec.u, "input [V]"), (rec.y, "output [V]"))):
+            f, s = _spectrum(x, rec.fs)
+            axes[row, col].plot(f / 1e3, s, lw=0.5)
+            axes[row, col].set_xlim(0, rec.fs / 2e3)
+            axes[row, col].set_ylabel(f"{lab} [dB]", fontsize=8)
+            axes[row, col].axvspan(900, 1350, color="0.9", zorder=0)
+        axes[0, col].set_title(f"{title}, after preprocessing", fontsize=9)
+        axes[1, col].set_xlabel("frequency [kHz]")
+    fig.suptitle("acoustic twin: spectra after the dissertation's preprocessing (Figures 3.12 / 3.14 analogue)")
+    fig.tight_layout()
+    ctx.save_figure(fig, "acoustic_spectra", "Acoustic twin: input/output spectra of the multisine and the 1 ms chirp")
+    from twins.registry import get_twin
+
+    tw = get_twin("acoustic")()
+    vna = tw.generate("vna-sweep", f_start=500e3, f_stop=2.0e6, points=1500)
+    fig, ax = plt.subplots(figsize=(8, 3.2))
+    ax.plot(vna.u / 1e3, vna.y, lw=0.8)
+    ax.axvspan(900, 1350, color="0.9", zorder=0)
+    ax.set_xlabel("frequency [kHz]")
+    ax.set_ylabel(f"magnitude [{vna.units.get('y', 'dB')}]")
+    ax.set_title("acoustic twin: VNA-style magnitude response (Figure 3.9 analogue)")
+    fig.tight_layout()
+    ctx.save_figure(fig, "acoustic_vna", "Acoustic twin: magnitude response, useful band shaded")
+    m = tw.spectrum_metrics()
+    return (f"spectra of {len(ds.est)}/{len(next(iter(ds.tests.values())))} preprocessed samples; peak "
+            f"{m['peak_frequency_hz'] / 1e3:.0f} kHz, -3 dB bandwidth {m['bandwidth_hz'] / 1e3:.0f} kHz")
+
+
+def _score_stage(ctx: Context, datasets: list[str], key: str, title: str, sysidentpy: bool) -> str:
+    from benchmarks import scoring
+    from sysid.registry import available_identifiers
+
+    idents = available_identifiers()
+    if not idents:
+        raise StageSkipped("no identifier built yet")
+    if not datasets:
+        raise StageSkipped("no dataset available")
+    run = scoring.score(idents, datasets, quick=ctx.quick, sysidentpy=sysidentpy, progress=ctx.verbose)
+    ctx.data[key] = run
+    sub = ctx.report_dir / key
+    paths = scoring.write_report(run, sub)
+    for k, p in paths.items():
+        if p.suffix == ".png":
+            ctx.figures.append((f"{title}: {p.stem.replace('_', ' ')}", f"{key}/{p.name}"))
+    failures = scoring.check(run)
+    ctx.data[f"{key}_check"] = failures
+    table = _html_score_table(run)
+    chk = ("<p>Accuracy floors (benchmarks/baselines.json): all met.</p>" if not failures else
+           "<p><b>Below their floor:</b></p><ul>" + "".join(f"<li>{html.escape(f)}</li>" for f in failures) + "</ul>")
+    skipped = "".join(f"<li>{html.escape(' on '.join(x for x in (s.get('identifier'), s.get('dataset')) if x))}: "
+                      f"{html.escape(s['reason'])}</li>" for s in run.skipped)
+    ctx.section(title, table + chk + (f"<p>Skipped:</p><ul>{skipped}</ul>" if skipped else "")
+                + f"<p>JSON: <a href='{key}/score.json'>{key}/score.json</a>, Markdown: <a href='{key}/score.md'>{key}/score.md</a></p>")
+    ok = [r for r in run.rows if r.get("status") == "ok"]
+    best = {}
+    for r in ok:
+        k2 = (r["dataset"], r["test"])
+        if k2 not in best or r["free_run"]["nrmse"] < best[k2]["free_run"]["nrmse"]:
+            best[k2] = r
+    summary = ", ".join(f"{d}/{t}: {r['identifier']} NRMSE {r['free_run']['nrmse']:.3g}" for (d, t), r in best.items())
+    return (f"{len(run.rows)} rows ({len(idents)} identifiers x {len(datasets)} datasets) in {run.seconds:.0f} s; "
+            f"{len(failures)} below floor; best free run: {summary}")
+
+
+def _html_score_table(run) -> str:
+    from benchmarks.scoring import _fmt
+
+    sidp = {(r["dataset"], r["test"]): r for r in run.sysidentpy}
+    head = ("<table class='score'><tr><th>dataset / test</th><th>identifier</th><th>free-run RMSE</th><th>free-run R²</th>"
+            "<th>one-step RMSE</th><th>fit [s]</th><th>params</th><th>SysIdentPy FROLS</th><th>linear baseline</th>"
+            "<th>best published</th><th>SysIdentPy published</th></tr>")
+    rows = [head]
+    for r in run.rows:
+        ref = r.get("references") or {}
+
+        def rv(k: str) -> str:
+            v = ref.get(k)
+            return f"{_fmt(v['value'])} ({html.escape(v['model'])})" if v else ""
+
+        s = sidp.get((r["dataset"], r["test"]))
+        st = "" if s is None else (_fmt(s["free_run"]["rmse"]) if s.get("status") == "ok" else f"skipped: {html.escape(s.get('reason', ''))}")
+        if r.get("status") == "error":
+            cells = [f"{r['dataset']} / {r['test']}", r["identifier"], "error: " + html.escape(r.get("message", "")), "", "", "", ""]
+        else:
+            cells = [f"{r['dataset']} / {r['test']}", r["identifier"], f"{_fmt(r['free_run']['rmse'])} {html.escape(r['units'])}",
+                     _fmt(r["free_run"]["r2"]), _fmt(r["one_step"]["rmse"]), f"{r['fit_seconds']:.2f}", str(r["n_parameters"])]
+        rows.append("<tr>" + "".join(f"<td>{c}</td>" for c in cells + [st, rv("linear_baseline"), rv("best_published"), rv("sysidentpy")]) + "</tr>")
+    rows.append("</table>")
+    return "".join(rows)
+
+
+def _stage_identify_twins(ctx: Context) -> str:
+    names = list(ctx.data.get("twin_datasets", {}))
+    if ctx.quick:
+        names = [n for n in names if not n.endswith("-clean")]
+    if not names:
+        raise StageSkipped("no twin dataset available")
+    msg = _score_stage(ctx, names, "twins", "Identifiers on the twin datasets", sysidentpy=False)
+    _residual_figure(ctx)
+    return msg
+
+
+def _residual_figure(ctx: Context) -> None:
+    """Residual correlation tests (eq. 2-32, Figure 5.6 analogue) of the best one-step model on a twin test."""
+    try:
+        from sysid.residuals import correlation_tests
+    except ImportError:
+        return
+    run = ctx.data.get("twins")
+    if run is None:
+        return
+    ok = [r for r in run.rows if r.get("status") == "ok" and np.isfinite(r["one_step"]["rmse"] or np.nan)]
+    if not ok:
+        return
+    r = min(ok, key=lambda x: x["one_step"]["nrmse"])
+    from benchmarks import scoring
+
+    ds = run.datasets[r["dataset"]]
+    # residual tests on the estimation record (as the dissertation's Figure 5.6), first 20 000 samples
+    rec = ds.est_records[0]
+    rec = rec[: min(len(rec), 20000)]
+    cls_params = dict(r["params"])
+    norm = bool(cls_params.pop(scoring.NORMALISE, False))
+    from sysid.registry import get_identifier
+
+    model = get_identifier(r["identifier"])(**cls_params)
+    if norm:
+        model = scoring.Normalised(model)
+    model.fit(ds.est)
+    yhat = model.predict(rec, horizon=1)
+    skip = max(ds.init_samples, int(getattr(model, "max_lag_", 0)))
+    e = rec.y[skip:] - yhat[skip:]
+    res = correlation_tests(e, rec.u[skip:], max_lag=20)
+    plt = _plt()
+    fig, axes = plt.subplots(1, len(res["tests"]), figsize=(13, 2.8))
+    for ax, t in zip(np.atleast_1d(axes), res["tests"]):
+        ax.stem(t["lags"], t["values"], basefmt=" ", markerfmt=".")
+        ax.axhline(t["band"], color="r", ls="--", lw=0.8)
+        ax.axhline(-t["band"], color="r", ls="--", lw=0.8)
+        ax.set_title(f"{t['name']} ({'pass' if t['passed'] else 'fail'})", fontsize=9)
+        ax.set_ylim(-1, 1)
+    fig.suptitle(f"residual tests (95 % band): {r['identifier']} one-step residuals on the {r['dataset']} estimation data",
+                 fontsize=10)
+    fig.tight_layout()
+    ctx.save_figure(fig, "residual_tests", f"Residual correlation tests (eq. 2-32): {r['identifier']} on the {r['dataset']} estimation data")
+
+
+def _stage_lab(ctx: Context) -> str:
+    from benchmarks import scoring
+    from benchmarks.datasets import lab
+
+    names = list(scoring.QUICK_DATASETS) if ctx.quick else list(lab.LAB_SPECS)
+    return _score_stage(ctx, names, "lab", "Identifiers on recorded lab benchmarks", sysidentpy=True)
+
+
+def _stage_discrepancy(ctx: Context) -> str:
+    try:
+        from twins.discrepancy import diagnose
+        from twins.discrepancy.report import write_report
+        from twins.registry import get_twin
+    except ImportError as exc:
+        raise _not_built(exc, "twins.discrepancy") from None
+    from sysid.errors import ConfigError
+
+    try:
+        cls = get_twin("cantilever")
+    except ConfigError as exc:
+        raise StageSkipped(str(exc)) from None
+    # "measured" data: the twin WITH creep (and noise); the model under test: the twin without creep.
+    truth = cls(None, set(cls.default_effects()) | {"creep"}, seed=1)
+    hold = 5.0 if ctx.quick else 10.0
+    data = truth.generate("steps", hold_s=hold)
+    val = truth.generate("steps", hold_s=hold, level_v=50.0)  # held-out: other step height, same rate
+    start = cls(None, set(cls.default_effects()) - {"creep"}, seed=1)
+    cands = ["creep", "thermal_drift", "input_delay"] if ctx.quick else None
+    res = diagnose(start, data, val, max_rounds=1, candidates=cands, keep_stages=True)
+    sub = ctx.report_dir / "discrepancy"
+    index = write_report(res, sub)
+    for png in sorted(sub.glob("*.png")):
+        ctx.figures.append((f"Discrepancy diagnosis: {png.stem.replace('_', ' ')}", f"discrepancy/{png.name}"))
+    causes = ", ".join(c["effect"] for c in res.get("causes", [])) or "none"
+    b, e = res["baseline"], res["extended"]
+    ctx.section("Discrepancy diagnosis", f"<p>Cantilever twin without creep vs data from the twin with creep (steps): "
+                f"verdict <b>{html.escape(str(res['verdict']))}</b>, causes: {html.escape(causes)}; validation NRMSE "
+                f"{b['nrmse_val']:.4g} → {e['nrmse_val']:.4g}. <a href='discrepancy/{index.name}'>full diagnosis</a></p>")
+    return f"hidden effect creep -> found: {causes}; validation NRMSE {b['nrmse_val']:.4g} -> {e['nrmse_val']:.4g}"
+
+
+def _stage_sweep(ctx: Context) -> str:
+    from sysid.errors import ConfigError
+    from twins.registry import get_twin
+
+    try:
+        cls = get_twin("acoustic")
+    except ConfigError as exc:
+        raise StageSkipped(str(exc)) from None
+    base = cls()
+    if not hasattr(base, "spectrum_metrics"):
+        raise StageSkipped("acoustic twin has no spectrum_metrics yet")
+    plt = _plt()
+    distances = [0.05, 0.1, 0.15, 0.2] if ctx.quick else [0.05, 0.075, 0.1, 0.125, 0.15, 0.2, 0.3]
+    temps = [15.0, 24.0, 35.0] if ctx.quick else [10.0, 15.0, 20.0, 24.0, 30.0, 35.0, 40.0]
+    f = np.linspace(800e3, 1450e3, 600)
+    fig, ax = plt.subplots(1, 3, figsize=(13, 3.4))
+    rows = []
+    for d in distances:
+        tw = base.with_params(distance_m=d)
+        m = tw.spectrum_metrics()
+        rows.append(("distance_m", d, m))
+        h = tw.frequency_response(f, direct_only=True, include_amplifier=False)
+        ax[0].plot(f / 1e3, 20 * np.log10(np.abs(h) + 1e-300), lw=0.8, label=f"{d * 100:g} cm")
+    for t in temps:
+        rows.append(("temperature_c", t, base.with_params(temperature_c=t).spectrum_metrics()))
+    ax[0].set_xlabel("frequency [kHz]")
+    ax[0].set_ylabel("gain [dB]")
+    ax[0].legend(fontsize=7)
+    ax[0].set_title("direct-path response vs distance", fontsize=9)
+    dd = [(v, m) for p, v, m in rows if p == "distance_m"]
+    ax[1].plot([v * 100 for v, _ in dd], [m["peak_gain_db"] for _, m in dd], "o-")
+    ax[1].set_xlabel("distance [cm]")
+    ax[1].set_ylabel("peak gain [dB]")
+    ax2 = ax[1].twinx()
+    ax2.plot([v * 100 for v, _ in dd], [m["time_of_flight_s"] * 1e6 for _, m in dd], "s--", color="C1")
+    ax2.set_ylabel("time of flight [µs]", color="C1")
+    tt = [(v, m) for p, v, m in rows if p == "temperature_c"]
+    ax[2].plot([v for v, _ in tt], [m["peak_frequency_hz"] / 1e3 for _, m in tt], "o-")
+    ax[2].set_xlabel("water temperature [°C]")
+    ax[2].set_ylabel("peak frequency [kHz]")
+    ax3 = ax[2].twinx()
+    ax3.plot([v for v, _ in tt], [m["time_of_flight_s"] * 1e6 for _, m in tt], "s--", color="C1")
+    ax3.set_ylabel("time of flight [µs]", color="C1")
+    fig.suptitle("acoustic twin: distance and temperature sweeps")
+    fig.tight_layout()
+    ctx.save_figure(fig, "acoustic_sweep", "Acoustic twin: response, peak gain and time of flight against distance and temperature")
+    tab = ["<table class='score'><tr><th>parameter</th><th>value</th><th>peak frequency [kHz]</th><th>peak gain [dB]</th>"
+           "<th>-3 dB bandwidth [kHz]</th><th>time of flight [µs]</th></tr>"]
+    for p, v, m in rows:
+        tab.append(f"<tr><td>{p}</td><td>{v:g}</td><td>{m['peak_frequency_hz'] / 1e3:.1f}</td><td>{m['peak_gain_db']:.2f}</td>"
+                   f"<td>{m['bandwidth_hz'] / 1e3:.1f}</td><td>{m['time_of_flight_s'] * 1e6:.2f}</td></tr>")
+    tab.append("</table>")
+    ctx.section("Acoustic channel sweep", "".join(tab))
+    tof = [m["time_of_flight_s"] for _, m in dd]
+    return (f"{len(distances)} distances, {len(temps)} temperatures; time of flight {tof[0] * 1e6:.1f} -> "
+            f"{tof[-1] * 1e6:.1f} µs over {distances[0] * 100:g}-{distances[-1] * 100:g} cm")
+
+
 STAGES: list[tuple[str, Callable[[Context], str]]] = [
     ("excitation signals", _stage_signals),
+    ("twin datasets", _stage_twin_datasets),
+    ("cantilever figures", _stage_cantilever_figures),
+    ("acoustic figures", _stage_acoustic_figures),
+    ("identify twin datasets", _stage_identify_twins),
+    ("score lab benchmarks", _stage_lab),
+    ("discrepancy diagnosis", _stage_discrepancy),
+    ("acoustic sweep", _stage_sweep),
 ]
+
+
+# ---------------------------------------------------------------------------------------------- report
+_CSS = ("body{font-family:sans-serif;max-width:1200px;margin:1em auto;padding:0 1em}"
+        "table{border-collapse:collapse;font-size:12px;margin:.5em 0}td,th{border:1px solid #bbb;padding:3px 6px}"
+        "th{background:#eee}figure{margin:1em 0}img{max-width:100%}.skipped{color:#888}.failed{color:#b00}")
 
 
 def _write_report(ctx: Context, rows: list[dict[str, Any]]) -> Path:
     ctx.report_dir.mkdir(parents=True, exist_ok=True)
-    body = ["<h1>PiezoTwin main job</h1>", "<table border=1 cellpadding=4><tr><th>stage</th><th>status</th><th>result</th><th>s</th></tr>"]
+    mode = "quick" if ctx.quick else "default"
+    body = [f"<h1>PiezoTwin main job</h1><p>Mode: {mode}. Generated {time.strftime('%Y-%m-%d %H:%M:%S UTC', time.gmtime())}.</p>",
+            "<table><tr><th>stage</th><th>status</th><th>result</th><th>s</th></tr>"]
     for r in rows:
-        body.append(f"<tr><td>{html.escape(r['stage'])}</td><td>{r['status']}</td><td>{html.escape(r['message'])}</td>"
-                    f"<td>{r['seconds']:.1f}</td></tr>")
+        body.append(f"<tr class='{r['status']}'><td>{html.escape(r['stage'])}</td><td>{r['status']}</td>"
+                    f"<td>{html.escape(r['message'])}</td><td>{r['seconds']:.1f}</td></tr>")
     body.append("</table>")
     for title, content in ctx.sections:
         body.append(f"<h2>{html.escape(title)}</h2>{content}")
+    if ctx.figures:
+        body.append("<h2>Figures</h2>")
     for title, src in ctx.figures:
         body.append(f"<figure><img src='{html.escape(src)}' alt='{html.escape(title)}'><figcaption>{html.escape(title)}</figcaption></figure>")
     path = ctx.report_dir / "index.html"
-    path.write_text("<!doctype html><html><head><meta charset='utf-8'><title>PiezoTwin report</title></head><body>"
-                    + "\n".join(body) + "</body></html>")
+    path.write_text("<!doctype html><html><head><meta charset='utf-8'><title>PiezoTwin report</title>"
+                    f"<style>{_CSS}</style></head><body>" + "\n".join(body) + "</body></html>")
     return path
 
 
-def run_main_job(report_dir: str | Path = "report", quick: bool = False, verbose: bool = True) -> dict[str, Any]:
-    ctx = Context(report_dir=Path(report_dir), quick=quick)
+def run_main_job(report_dir: str | Path = "report", quick: bool = False, verbose: bool = True,
+                 stages: list[str] | None = None) -> dict[str, Any]:
+    """Run the stages (all, or those named in ``stages``), write ``report_dir/index.html``; return a summary."""
+    ctx = Context(report_dir=Path(report_dir), quick=quick, verbose=verbose)
     rows = []
+    t_all = time.perf_counter()
     for name, fn in STAGES:
+        if stages is not None and name not in stages:
+            continue
         t0 = time.perf_counter()
         try:
             msg, status = fn(ctx), "done"
         except StageSkipped as exc:
             msg, status = f"skipped: {exc}", "skipped"
+        except Exception as exc:  # a broken stage is reported, the job goes on
+            msg, status = f"failed: {type(exc).__name__}: {exc}", "failed"
+            ctx.section(f"Stage '{name}' failed", f"<pre>{html.escape(traceback.format_exc())}</pre>")
         rows.append({"stage": name, "status": status, "message": msg, "seconds": time.perf_counter() - t0})
         if verbose:
             print(f"[{status:>7}] {name}: {msg}", flush=True)
     path = _write_report(ctx, rows)
     if verbose:
-        print(f"report -> {path}")
-    return {"stages": rows, "report": str(path)}
+        print(f"report -> {path} ({time.perf_counter() - t_all:.0f} s)")
+    return {"stages": rows, "report": str(path), "seconds": time.perf_counter() - t_all}

@@ -24,7 +24,7 @@ from typing import Any, ClassVar, Sequence
 import numpy as np
 
 from sysid.errors import ConfigError, DataError
-from sysid.io import json_default
+from sysid.io import json_default, output_file
 from sysid.record import Record
 
 __all__ = ["Identifier", "as_record_list", "load_model"]
@@ -103,10 +103,9 @@ class Identifier(ABC):
 
     def save(self, path: str | Path) -> Path:
         """Save config and learned state as JSON (neural models may override to use torch files)."""
-        path = Path(path)
         payload = {"format": "piezotwin-model/1", "identifier": self.name, "params": self.get_params(), "state": self._state()}
-        path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_text(json.dumps(payload, default=json_default))
+        with output_file(path) as path:
+            path.write_text(json.dumps(payload, default=json_default))
         return path
 
 
@@ -117,6 +116,8 @@ def load_model(path: str | Path) -> Identifier:
     path = Path(path)
     if not path.exists():
         raise DataError(f"{path}: model file not found")
+    if path.is_dir():
+        raise DataError(f"{path}: is a directory, expected a model file")
     loader = None
     try:
         payload = json.loads(path.read_text())
@@ -130,9 +131,16 @@ def load_model(path: str | Path) -> Identifier:
         if loader is None:
             raise DataError(f"{path}: not a piezotwin model file")
         return loader(path)
-    if payload.get("format") != "piezotwin-model/1":
-        raise DataError(f"{path}: not a piezotwin model file (format {payload.get('format')!r})")
+    if not isinstance(payload, dict) or payload.get("format") != "piezotwin-model/1":
+        found = payload.get("format") if isinstance(payload, dict) else type(payload).__name__
+        raise DataError(f"{path}: not a piezotwin model file (format {found!r})")
+    missing = [k for k in ("identifier", "params", "state") if k not in payload]
+    if missing:
+        raise DataError(f"{path}: model file lacks {', '.join(missing)}")
     cls = get_identifier(payload["identifier"])
+    unknown = sorted(set(payload["params"]) - set(cls._param_names())) if isinstance(payload["params"], dict) else ["(not a dict)"]
+    if unknown:
+        raise DataError(f"{path}: model file has options {', '.join(unknown)} that {cls.name} does not take")
     model = cls(**payload["params"])
     model._load_state(payload["state"])
     return model

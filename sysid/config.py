@@ -12,7 +12,7 @@ from typing import Any, Iterable, Mapping
 
 from sysid.errors import ConfigError
 
-__all__ = ["parse_assignments", "coerce", "apply_assignments"]
+__all__ = ["parse_assignments", "coerce", "apply_assignments", "make_rng"]
 
 
 def parse_assignments(items: Iterable[str] | None, what: str = "--set") -> dict[str, str]:
@@ -31,6 +31,17 @@ def parse_assignments(items: Iterable[str] | None, what: str = "--set") -> dict[
                 raise ConfigError(f"{what}: empty name in {pair!r}")
             out[key] = value
     return out
+
+
+def make_rng(seed: Any, what: str = "seed"):
+    """``numpy.random.default_rng(seed)``, refusing a seed numpy cannot take (negative, non-integer) with a
+    one-line :class:`ConfigError` instead of numpy's ValueError."""
+    import numpy as np
+
+    try:
+        return np.random.default_rng(seed)
+    except (TypeError, ValueError):
+        raise ConfigError(f"{what} must be a non-negative integer, got {seed!r}") from None
 
 
 def _parse_bool(text: str, key: str) -> bool:

@@ -43,8 +43,13 @@ DEFAULT_CHUNK = 16384
 # Relative size below which an orthogonalised candidate is treated as linearly dependent on the selected terms
 # (‖w_j‖² / ‖p_j‖²). The Gram update loses ~1e-16·cond² so this is safely above round-off.
 DEPENDENT_TOL = 1e-10
+# Least squares refuses a term whose column, orthogonalised against the terms before it, keeps less than this
+# fraction of its own norm (|R_jj| / ‖R[:, j]‖, the sine of its angle to their span): scale-invariant.
+LS_DEPENDENT_TOL = 1e-12
 # Residual energy fraction 1 − ΣERR below which the fit is exact to round-off: no further term is added.
 EXACT_FIT_TOL = 1e-11
+# Most candidate terms: the Gram matrix is candidates² × 8 B (20 000 candidates: 3.2 GB).
+MAX_CANDIDATES = 20_000
 
 
 # ---------------------------------------------------------------------------------------------------- structure
@@ -53,6 +58,10 @@ def make_regressors(ny: int, nu: int, ne: int = 0, nk: int = 1, n_outputs: int =
     for name, v in (("ny", ny), ("nu", nu), ("ne", ne), ("nk", nk)):
         if int(v) != v or v < 0:
             raise ConfigError(f"{name} must be a non-negative integer, got {v}")
+    count = n_outputs * (ny + ne) + n_inputs * nu
+    if count > MAX_CANDIDATES:  # checked before building the list (ny=1e8 would take minutes to refuse)
+        raise ConfigError(f"ny={ny}, nu={nu}, ne={ne} give {count:.4g} regressors (limit {MAX_CANDIDATES} candidate"
+                          " terms); lower the lags")
     regs = []
     for o in range(n_outputs):
         regs += [("y", o, j) for j in range(1, ny + 1)]
@@ -67,6 +76,10 @@ def candidate_terms(n_regressors: int, degree: int, constant: bool = True) -> li
     """All products of 1..degree regressors (indices non-decreasing, eq. 2-24), plus the constant ``()``."""
     if int(degree) != degree or degree < 1:
         raise ConfigError(f"degree must be an integer >= 1, got {degree}")
+    count = math.comb(n_regressors + int(degree), int(degree)) - 1 + bool(constant)
+    if count > MAX_CANDIDATES:
+        raise ConfigError(f"degree {degree} over {n_regressors} regressors gives {count:.4g} candidate terms (limit "
+                          f"{MAX_CANDIDATES}: the Gram matrix needs {count * count * 8 / 1e9:.3g} GB); lower the degree or the lags")
     terms: list[tuple[int, ...]] = [()] if constant else []
     for d in range(1, degree + 1):
         terms += list(combinations_with_replacement(range(n_regressors), d))
@@ -420,12 +433,25 @@ def least_squares(records, structure: Structure, terms, output: int = 0, e_list=
         raise DataError(f"too few samples ({n_rows} usable rows) for {k} parameters")
     if R.shape[0] < k + 1:
         R = np.vstack([R, np.zeros((k + 1 - R.shape[0], k + 1))])
+    if not np.isfinite(R).all():
+        raise DataError("least squares on non-finite or overflowing regressors (e.g. a diverged residual recursion); "
+                        "no parameters estimated")
     Rk = R[:k, :k]
-    diag = np.abs(np.diag(Rk))
-    if k and (diag.min() <= 1e-13 * diag.max()):
-        raise DataError("the selected regressors are linearly dependent (rank-deficient least squares); "
-                        "the input may not excite the system enough")
+    if k:
+        # Scale-invariant rank test: |R_jj| is the norm of column j orthogonalised against the columns before it,
+        # ‖R[:, j]‖ the column's own norm, so their ratio is the sine of the angle between column j and the span
+        # of the others — independent of units (comparing |R_jj| with max|R_ii| refused Bouc–Wen in N and m,
+        # where u³ ~ 1e6 and y³ ~ 1e-9 are perfectly independent).
+        col_norm = np.linalg.norm(Rk, axis=0)
+        rel = np.abs(np.diag(Rk)) / np.where(col_norm > 0, col_norm, 1.0)
+        if not np.all(rel > LS_DEPENDENT_TOL):
+            j = int(np.argmin(rel))
+            raise DataError(f"the selected regressors are linearly dependent (rank-deficient least squares: term "
+                            f"{j + 1} of {k} is a combination of the others to {rel[j]:.1e} relative); the input may "
+                            "not excite the system enough")
     theta = np.linalg.solve(Rk, R[:k, k]) if k else np.zeros(0)
+    if not np.isfinite(theta).all():
+        raise DataError("least squares gave non-finite parameters (non-finite or overflowing regressors)")
     ssr = float(R[k, k] ** 2)
     dof = max(n_rows - k, 1)
     sigma2 = ssr / dof

@@ -9,6 +9,10 @@
 - ``.mat``: variables chosen by ``u_var`` / ``y_var`` (default ``u`` and ``y``), ``fs`` from ``fs_var`` (default
   ``fs``) or from ``fs``; MATLAB v7.3 files (HDF5) are read with h5py.
 
+An explicit ``fs`` (the CLI's ``--fs``) supplies the rate of a file that has none; when the file has its own
+(``t`` column, ``fs`` array/variable), the two must agree (to the 1 % the ``t`` column is held to, else to
+1e-9 relative) and the explicit value is used; a conflict is an error, never silently resolved.
+
 Every failure raises :class:`~sysid.errors.DataError` with one line naming the file and the problem.
 Missing samples (NaN, empty cells) are refused unless ``fill_missing=True``, which interpolates them linearly
 and records every filled index in ``meta['preprocessing']``.
@@ -20,15 +24,16 @@ import csv
 import json
 import math
 import os
+from contextlib import contextmanager
 from pathlib import Path
-from typing import Any
+from typing import Any, Iterator
 
 import numpy as np
 
 from sysid.errors import DataError
 from sysid.record import Record, check_array
 
-__all__ = ["read_record", "write_record", "json_default", "SUPPORTED_SUFFIXES"]
+__all__ = ["read_record", "write_record", "output_file", "json_default", "SUPPORTED_SUFFIXES"]
 
 SUPPORTED_SUFFIXES = (".npz", ".csv", ".mat")
 _UNIFORM_TOL = 0.01  # relative jitter of the t column accepted as uniform sampling
@@ -42,26 +47,42 @@ def write_record(record: Record, path: str | os.PathLike) -> Path:
     suffix = path.suffix.lower()
     if suffix not in SUPPORTED_SUFFIXES:
         raise DataError(f"{path}: unknown format {suffix or '(no suffix)'!r}; supported: {', '.join(SUPPORTED_SUFFIXES)}")
-    if path.parent and not path.parent.exists():
-        path.parent.mkdir(parents=True, exist_ok=True)
-    if suffix == ".csv":
-        _write_csv(record, path)
-        return path
-    if suffix == ".mat":
-        from scipy.io import savemat
+    with output_file(path):
+        if suffix == ".csv":
+            _write_csv(record, path)
+            return path
+        if suffix == ".mat":
+            from scipy.io import savemat
 
-        mdict = {"u": record.u, "fs": record.fs}
+            mdict = {"u": record.u, "fs": record.fs}
+            if record.y is not None:
+                mdict["y"] = record.y
+            savemat(path, mdict)
+            return path
+        meta = dict(record.meta)
+        meta["units"] = dict(record.units)
+        arrays: dict[str, Any] = {"u": record.u, "fs": np.float64(record.fs), "meta": np.array(json.dumps(meta, default=json_default))}
         if record.y is not None:
-            mdict["y"] = record.y
-        savemat(path, mdict)
-        return path
-    meta = dict(record.meta)
-    meta["units"] = dict(record.units)
-    arrays: dict[str, Any] = {"u": record.u, "fs": np.float64(record.fs), "meta": np.array(json.dumps(meta, default=json_default))}
-    if record.y is not None:
-        arrays["y"] = record.y
-    np.savez(path, **arrays)
+            arrays["y"] = record.y
+        np.savez(path, **arrays)
     return path
+
+
+@contextmanager
+def output_file(path: str | os.PathLike) -> Iterator[Path]:
+    """Context for writing the file ``path``: creates its parent folder; a path that is a folder, or any
+    OSError while writing (no permission, a parent that is a file ...), becomes a one-line DataError."""
+    path = Path(path)
+    if path.is_dir():
+        raise DataError(f"{path}: is a directory, expected a file name to write")
+    parent = next((a for a in path.parents if a.exists()), None)
+    if parent is not None and not parent.is_dir():
+        raise DataError(f"{path}: cannot write: {parent} is a file, not a folder")
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        yield path
+    except OSError as exc:
+        raise DataError(f"{path}: cannot write ({exc.strerror or exc})") from None
 
 
 def _write_csv(record: Record, path: Path) -> None:
@@ -132,6 +153,11 @@ def read_record(
         if file_fs is None:
             raise DataError(f"{src}: no sampling rate in the file (no t column or fs); give --fs / fs=")
         fs = file_fs
+    elif file_fs is not None:
+        where, tol = ("its t column", _UNIFORM_TOL) if suffix == ".csv" else ("its fs", 1e-9)
+        if not math.isclose(float(fs), file_fs, rel_tol=tol):
+            raise DataError(f"{src}: --fs / fs={float(fs):g} Hz contradicts the file's own sampling rate "
+                            f"{file_fs:.10g} Hz (from {where}); leave out --fs or correct the file")
     if require_y and y is None:
         raise DataError(f"{src}: missing output column/variable y")
     meta.setdefault("provenance", {"file": os.path.basename(src)})
@@ -178,25 +204,38 @@ def _fill(x: np.ndarray, name: str, src: str) -> tuple[np.ndarray, list[int]]:
 # ---------------------------------------------------------------------------------------------- npz
 def _read_npz(p: Path, src: str):
     try:
-        with np.load(p, allow_pickle=False) as z:
+        # an open handle, not the path: numpy leaks the file it opened when the zip is corrupt
+        with open(p, "rb") as fh, np.load(fh, allow_pickle=False) as z:
             keys = set(z.files)
             if "u" not in keys:
                 raise DataError(f"{src}: missing array 'u' (found: {', '.join(sorted(keys)) or 'none'})")
             u = z["u"]
             y = z["y"] if "y" in keys else None
-            fs = float(z["fs"]) if "fs" in keys else None
+            fs = _scalar_fs(z["fs"], src) if "fs" in keys else None
             meta: dict[str, Any] = {}
             if "meta" in keys:
                 try:
                     meta = json.loads(str(z["meta"]))
                 except json.JSONDecodeError as exc:
                     raise DataError(f"{src}: 'meta' is not valid JSON ({exc.msg})") from None
+                if not isinstance(meta, dict):
+                    raise DataError(f"{src}: 'meta' must be a JSON object, got {type(meta).__name__}")
     except DataError:
         raise
     except Exception as exc:  # zipfile.BadZipFile, ValueError (pickled object arrays), OSError
         raise DataError(f"{src}: not a readable .npz file ({type(exc).__name__}: {exc})") from None
     units = meta.pop("units", {"u": "", "y": ""}) if isinstance(meta, dict) else {}
     return u, y, fs, units, meta
+
+
+def _scalar_fs(value: Any, src: str) -> float:
+    a = np.asarray(value)
+    if a.size != 1:
+        raise DataError(f"{src}: fs must be a single number, got an array of shape {a.shape}")
+    try:
+        return float(a.reshape(()))
+    except (TypeError, ValueError):
+        raise DataError(f"{src}: fs is not a number ({a.reshape(())!r})") from None
 
 
 # ---------------------------------------------------------------------------------------------- csv
@@ -235,6 +274,8 @@ def _read_csv(p: Path, src: str, u_col: str, y_col: str | None, explicit_y: bool
     index = {name: i for i, name in enumerate(header) if name != ""}
 
     def column(name: str) -> np.ndarray:
+        if header.count(name) > 1:
+            raise DataError(f"{src}: column {name!r} appears {header.count(name)} times in the header; rename the copies")
         i = index[name]
         out = np.empty(len(body))
         for k, row in enumerate(body):
@@ -301,21 +342,31 @@ def _read_mat(p: Path, src: str, u_var: str, y_var: str | None, fs_var: str, exp
         raise DataError(f"{src}: not a readable .mat file ({type(exc).__name__}: {exc})") from None
     if u_var not in variables:
         raise DataError(f"{src}: missing variable {u_var!r} for u (variables: {', '.join(sorted(variables)) or 'none'}); choose with --u-var")
-    u = np.asarray(variables[u_var], dtype=float).squeeze()
+    u = _mat_numeric(variables[u_var], u_var, src)
     y = None
     if y_var is not None:
         if y_var in variables:
-            y = np.asarray(variables[y_var], dtype=float).squeeze()
+            y = _mat_numeric(variables[y_var], y_var, src)
         elif explicit_y:
             raise DataError(f"{src}: missing variable {y_var!r} for y (variables: {', '.join(sorted(variables))}); choose with --y-var")
     fs = None
     if fs_var in variables:
-        fs = float(np.asarray(variables[fs_var]).squeeze())
+        fs = _scalar_fs(variables[fs_var], src)
     if u.ndim == 2 and u.shape[0] < u.shape[1]:
         u = u.T  # MATLAB row vectors / channels-by-samples
     if y is not None and y.ndim == 2 and y.shape[0] < y.shape[1]:
         y = y.T
     return u, y, fs, {"u": "", "y": ""}, {"provenance": {"file": p.name, "u_var": u_var, "y_var": y_var}}
+
+
+def _mat_numeric(value: Any, name: str, src: str) -> np.ndarray:
+    arr = np.asarray(value)
+    if arr.dtype.kind not in "biufc":  # strings, cells, structs (numbers, incl. complex, go on to check_array)
+        try:
+            arr = arr.astype(float)
+        except (TypeError, ValueError):
+            raise DataError(f"{src}: variable {name!r} is not numeric ({arr.dtype})") from None
+    return arr.squeeze()
 
 
 def _read_mat73(p: Path, src: str) -> dict[str, np.ndarray]:

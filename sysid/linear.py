@@ -149,7 +149,9 @@ class ARMAX(_LinearBase):
         for it in range(1, int(self.max_iter) + 1):
             ls = fr.least_squares(records, s, s.terms, 0, e_list=e_list)
             e_list = fr.fitted_residuals(records, s, [s.terms], [ls.theta], e_list=e_list)
-            if theta_prev is not None and np.max(np.abs(ls.theta - theta_prev) / np.maximum(np.abs(ls.theta), 1e-12)) < self.tol:
+            # relative change per parameter, without an absolute floor (in SI units a parameter may be ~1e-12)
+            if theta_prev is not None and np.max(np.abs(ls.theta - theta_prev) / np.maximum(
+                    np.maximum(np.abs(ls.theta), np.abs(theta_prev)), 1e-300)) < self.tol:
                 break
             theta_prev = ls.theta
         return ls.theta, ls.stderr, e_list, it

@@ -204,6 +204,8 @@ def hampel(x: np.ndarray, window: int = 10, n_sigma: float = 3.0):
     _finite(x, "hampel")
     window = _int_param("hampel window (half-width)", window, 1)
     n_sigma = _pos_param("hampel n_sigma", n_sigma)
+    if window >= x.shape[0]:  # the window would be mostly edge padding: its MAD says nothing about the data
+        raise ConfigError(f"hampel window half-width {window} must be smaller than the signal length {x.shape[0]}")
     X = x.reshape(x.shape[0], -1)
     Y = X.copy()
     changes: list[dict[str, Any]] = []
@@ -356,7 +358,7 @@ def decimate(x: np.ndarray, q: int, passband: float = PASSBAND_DEFAULT, atten_db
 def _ratio(fs: float, fs_new: float, max_den: int = 100000) -> tuple[int, int]:
     r = Fraction(fs_new) / Fraction(fs)
     approx = r.limit_denominator(max_den)
-    if abs(float(approx) - float(r)) > 1e-12 * float(r):
+    if abs(float(approx) - float(r)) > 1e-12 * float(r) or approx.numerator > max_den:
         raise ConfigError(f"resample: fs_new/fs = {float(r):.12g} is not a ratio of integers up to {max_den}")
     return approx.numerator, approx.denominator
 

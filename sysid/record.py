@@ -26,9 +26,15 @@ def check_array(values: Any, name: str, source: str = "array", allow_nan: bool =
     ``name`` names the signal and ``source`` the file or object it came from, for the message.
     """
     try:
-        arr = np.asarray(values, dtype=np.float64)
+        arr = np.asarray(values)
+        if not np.iscomplexobj(arr):
+            arr = arr.astype(np.float64, copy=False)
     except (TypeError, ValueError) as exc:
         raise DataError(f"{source}: {name} is not numeric ({exc})") from None
+    if np.iscomplexobj(arr):  # never drop an imaginary part silently
+        if np.any(arr.imag != 0):
+            raise DataError(f"{source}: {name} has complex samples; expected real values")
+        arr = arr.real.astype(np.float64)
     if arr.ndim == 0:
         raise DataError(f"{source}: {name} is a scalar, expected a signal")
     if arr.ndim == 2 and arr.shape[1] == 1:

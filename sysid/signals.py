@@ -21,6 +21,7 @@ from typing import Any, Sequence
 import numpy as np
 import scipy.fft
 
+from sysid.config import make_rng
 from sysid.errors import ConfigError
 
 __all__ = [
@@ -223,7 +224,7 @@ def multisine(
             cand = cand[pick]
     lines = cand
 
-    rng = np.random.default_rng(seed)
+    rng = make_rng(seed)
     detection = np.empty(0, dtype=np.int64)
     if detection_fraction > 0:
         block = max(2, int(round(1.0 / detection_fraction)))
@@ -527,7 +528,7 @@ def aprbs(
         raise ConfigError(f"aprbs min_hold {min_hold} s is shorter than one sample at fs={fs:g} Hz")
     if h1 < h0:
         raise ConfigError(f"aprbs max_hold ({h1} samples) must be >= min_hold ({h0} samples)")
-    rng = np.random.default_rng(seed)
+    rng = make_rng(seed)
     holds = rng.integers(h0, h1 + 1, size=n_total // h0 + 2)
     starts = np.concatenate(([0], np.cumsum(holds)))
     starts = starts[starts < n_total]

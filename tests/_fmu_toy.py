@@ -82,6 +82,7 @@ class EchoParams:
     sat_v: float = pfield(100.0, "V", 1.0, 1000.0, "amplifier saturation voltage")
     amp_gain: float = pfield(30.0, "", 1.0, 1000.0, "amplifier small-signal voltage gain")
     noise_v: float = pfield(1e-4, "V", 0.0, 1.0, "receiver noise RMS")
+    crosstalk: float = pfield(1e-3, "", 0.0, 1.0, "gain of the undelayed electrical path (band-pass)")
 
 
 class EchoTwin(Twin):
@@ -95,6 +96,8 @@ class EchoTwin(Twin):
                            default_on=True),
         "measurement_noise": EffectSpec("measurement_noise", "echo", "receiver noise", "white",
                                         {"rms": "noise_v"}, default_on=True),
+        "crosstalk": EffectSpec("crosstalk", "echo", "electrical path without delay", "lag-0 correlation",
+                                {"c": "crosstalk"}),
     }
     default_fs = 100e6
 
@@ -109,6 +112,8 @@ class EchoTwin(Twin):
         H = p.gain * g * g * np.exp(-s * p.delay_s)
         if self.has("echo"):
             H = H * (1 + p.echo_gain * np.exp(-2 * s * p.delay_s))
+        if self.has("crosstalk"):
+            H = H + p.crosstalk * (1 - np.exp(-s * 2e-7))  # two spikes 200 ns apart, no flight time
         return H
 
     def amplifier(self, x):

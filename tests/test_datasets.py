@@ -222,3 +222,35 @@ def test_twin_dataset_unavailable_twin_is_a_clear_error(monkeypatch):
     monkeypatch.setattr(twins.registry, "get_twin", nope)
     with pytest.raises(ConfigError, match="needs the cantilever twin"):
         load_dataset("cantilever-thesis")
+
+
+def _twin_built(name: str) -> bool:
+    from twins.registry import available_twins
+
+    return name in available_twins()
+
+
+def test_cantilever_twin_dataset_follows_the_dissertation():
+    """§3.1: thesis-multisine of 8 s at 10 kHz (80 000 samples) for estimation, the thesis sines for test."""
+    if not _twin_built("cantilever"):
+        pytest.skip("cantilever twin not built in this checkout")
+    ds = load_dataset("cantilever-thesis")
+    assert ds.fs == 10_000.0 and len(ds.est) == 80_000 and ds.units["y"] in ("um", "µm")
+    freqs = [s.meta["segment"]["freq_hz"] for s in ds.tests["thesis-sines"].segments()]
+    assert freqs == [0.1, 1.0, 10.0, 50.0, 100.0, 150.0, 200.0, 250.0, 300.0, 400.0, 450.0, 500.0]
+    assert np.max(np.abs(ds.est.u)) == pytest.approx(100.0)  # ±100 V
+    clean = load_dataset("cantilever-thesis-clean")
+    assert np.array_equal(clean.est.u, ds.est.u) and not np.array_equal(clean.est.y, ds.est.y)
+    assert "measurement_noise" in ds.est.meta["effects"] and "measurement_noise" not in clean.est.meta["effects"]
+
+
+def test_acoustic_twin_dataset_is_preprocessed():
+    """§3.2: multisine → 1 ms chirp, after the moving average / resampling to 6.75 MHz / band-pass recipe."""
+    if not _twin_built("acoustic"):
+        pytest.skip("acoustic twin not built in this checkout")
+    ds = load_dataset("acoustic-thesis")
+    assert ds.fs == pytest.approx(6.75e6) and len(ds.est) == 20_000
+    assert len(ds.tests["thesis-chirp-1ms"]) == 6750  # one whole 1 ms sweep
+    f = np.fft.rfftfreq(len(ds.est), 1 / ds.fs)
+    p = np.abs(np.fft.rfft(ds.est.u)) ** 2
+    assert p[(f > 900e3) & (f < 1350e3)].sum() > 0.9 * p.sum()  # the excitation lives in the band

@@ -62,7 +62,9 @@ def test_toy_fmu_validates_and_declares_parameters(toy_fmu):
     gain = _var(root, "gain")
     assert gain.get("causality") == "parameter" and gain.get("variability") == "fixed"
     real = gain.find("Real")
-    assert (real.get("unit"), real.get("min"), real.get("max"), float(real.get("start"))) == ("um/V", "0", "10", 3.0)
+    assert real.get("unit") == "um/V"
+    assert (float(real.get("min")), float(real.get("max")), float(real.get("start"))) == (0.0, 10.0, 3.0)
+    assert _var(root, "order").find("Integer").get("max") == "3"
     assert [u.get("name") for u in root.iter("Unit")] == sorted({"um/V", "s", "um", "V", "Hz"})
     assert _var(root, "order").find("Integer").get("start") == "1"
     assert _var(root, "weights").find("String").get("start") == "1.0-0.5"
@@ -108,21 +110,51 @@ def test_toy_start_values_act_as_in_native_twin(toy_fmu, start, change):
     assert not np.allclose(ref, twin.simulate(u, 1000.0))  # the change matters
 
 
-def test_toy_bad_parameter_and_step_refused(toy_fmu):
-    import fmpy
+_ERRORS_CHILD = """
+import json, os, sys
+import numpy as np, fmpy
+from twins.fmu.check import fmu_simulate
+path = sys.argv[1]
+out = {"log": []}
+def log(component, instance, status, category, message):
+    out["log"].append(message.decode() if isinstance(message, bytes) else str(message))
+try:
+    fmpy.simulate_fmu(path, stop_time=0.01, output_interval=1e-3, start_values={"fluid": "honey"},
+                      logger=log, debug_logging=True)
+    out["bad_value"] = "accepted"
+except Exception as exc:
+    out["bad_value"] = str(exc)
+try:
+    fmpy.simulate_fmu(path, stop_time=0.01, output_interval=1.5e-3, logger=log, debug_logging=True)
+    out["bad_step"] = "accepted"
+except Exception as exc:
+    out["bad_step"] = str(exc)
+res = fmpy.simulate_fmu(path, stop_time=0.02, output_interval=2e-3, output=["y"],
+                        start_values={"effect_measurement_noise": False},
+                        input=np.array([(0.0, 1.0), (1.0, 1.0)], dtype=[("time", float), ("u", float)]))
+out["held"] = list(res["y"])
+json.dump(out, open("errors.json", "w"))
+sys.stdout.flush()
+os._exit(0)
+"""
 
+
+def test_toy_bad_parameter_and_step_refused(toy_fmu, tmp_path):
+    """Errors raised in the slave reach the importer as failed FMI calls. Run in a child process: after an
+    FMI error pythonfmu's wrapper left the heap corrupted at exit in 2 of 8 sessions (README, fmu)."""
     twin, path = toy_fmu
-    with pytest.raises(Exception, match="ExitInitializationMode|fmi2"):
-        fmu_simulate(path, _toy_input(10), 1000.0, start_values={"fluid": "honey"})
-    # a communication step that is not a whole number of sampling periods
-    with pytest.raises(Exception, match="DoStep|fmi2"):
-        fmpy.simulate_fmu(str(path), stop_time=0.01, output_interval=1.5e-3)
+    proc = subprocess.run([sys.executable, "-c", _ERRORS_CHILD, str(path)], cwd=tmp_path,
+                          env=dict(os.environ, PYTHONPATH=str(REPO)), capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    out = json.loads((tmp_path / "errors.json").read_text())
+    assert "fmi2ExitInitializationMode failed" in out["bad_value"]
+    assert "fmi2DoStep failed" in out["bad_step"]
+    # the importer's log names the problem (the twin's ConfigError, the step that is not 1/fs)
+    log = "\n".join(out["log"])
+    assert "honey" in log and "not a whole number of sampling periods" in log
     # a whole number of periods: the input is held over the step (n samples of the same u)
-    res = fmpy.simulate_fmu(str(path), stop_time=0.02, output_interval=2e-3, output=["y"],
-                            start_values={"effect_measurement_noise": False},
-                            input=np.array([(0.0, 1.0), (1.0, 1.0)], dtype=[("time", float), ("u", float)]))
     ref = twin.with_effects({"lag"}).simulate(np.ones(20), 1000.0)
-    assert np.allclose(res["y"][1:], ref[1::2], rtol=0, atol=1e-12)
+    assert np.allclose(np.array(out["held"])[1:], ref[1::2], rtol=0, atol=1e-12)
 
 
 def test_shipped_code_runs_without_the_project_on_the_path(toy_fmu, tmp_path):
@@ -175,14 +207,14 @@ def test_response_core_round_trip(echo_fmu):
     assert validate_fmu(str(path)) == []
     _, cfg = _md(path)
     core = cfg["core"]
-    assert core["kind"] == "response" and core["accuracy"]["relative_rms"] < 1e-4
+    assert core["kind"] == "response" and core["accuracy"]["relative_rms"] < 1e-6
     fs = 100e6
     u = _burst(fs, 8000)  # past the first arrival (2000 samples) and the echo (6000)
     y = fmu_simulate(path, u, fs)
     ref = twin.simulate(u, fs)  # with its seeded noise
     quiet = twin.with_effects({"echo"}).simulate(u, fs)
     signal = np.sqrt(np.mean(quiet ** 2))
-    assert relative_rms(y, ref) < 1e-4
+    assert relative_rms(y, ref) < 1e-6
     # the noise drawn per sample in the FMU is the native sequence: the error is far below the noise
     # (independent draws would leave sqrt(2) x noise_v)
     assert np.sqrt(np.mean((y - ref) ** 2)) < 0.05 * twin.params.noise_v < signal
@@ -196,72 +228,108 @@ def test_response_core_parameter_change_refits(echo_fmu):
     y = fmu_simulate(path, u, fs, start_values=start)
     native = twin.with_params(delay_s=10e-6, q=8.0).with_effects({"echo"})
     ref = native.simulate(u, fs)
-    assert relative_rms(y, ref) < 1e-4
+    assert relative_rms(y, ref) < 1e-6
     assert relative_rms(twin.with_effects({"echo"}).simulate(u, fs), ref) > 0.5
 
 
-def test_response_core_step_equals_vectorised_fir():
-    from twins.fmu.response import ResponseCore, fir_apply, impulse_response, sparse_segments
+@pytest.mark.parametrize("effects,head", [({"echo"}, False), ({"echo", "crosstalk"}, True)])
+def test_response_core_equals_direct_convolution(effects, head):
+    """The per-sample core (head FIR + block-FFT tail) is the linear convolution with h, without delay."""
+    from twins.fmu.response import ResponseCore, impulse_response
 
-    twin = EchoTwin(effects={"echo"})
+    twin = EchoTwin(effects=effects)
     fs = 100e6
     h = impulse_response(twin, fs)
-    segs, dropped = sparse_segments(h, energy_tol=1e-8)
-    assert 0 < dropped <= 1e-8 and len(segs) == 2  # direct arrival and echo; the flight time costs nothing
-    u = _burst(fs, 7000)
-    core = ResponseCore(segs, twin.amplifier, None, fs)
-    y = np.array([core.step(float(v)) for v in u])
-    assert np.allclose(y, fir_apply(segs, twin.amplifier(u)), rtol=0, atol=1e-12 * np.max(np.abs(y)))
+    core = ResponseCore(h, twin.amplifier, None, fs)
+    assert core.arrival > 1900 if not head else core.arrival < 100  # 20 us flight time / crosstalk at once
+    assert core.block >= (1024 if not head else 64)
+    assert bool(core.head) == head  # the crosstalk path arrives at once and is kept in the head
+    rng = np.random.default_rng(1)
+    u = rng.standard_normal(5000)  # white input: every tap of h matters
+    ref = np.convolve(twin.amplifier(u), h)[:len(u)]
+    y = core.run(u)
+    # white input: expected error sqrt(dropped energy fraction); x3 for the finite record
+    assert relative_rms(y, ref) < 3 * np.sqrt(core.head_dropped) + 1e-12
+    # reset restarts from rest
+    core.reset()
+    assert np.array_equal(core.run(u[:300]), y[:300])
 
 
 # ------------------------------------------------------------------------------------- cantilever twin
+# The cantilever FMU runs in a child process: a process that ran it through FMPy sometimes aborts at exit
+# (glibc "corrupted double-linked list" in libgfortran's exit handler, after every result was returned;
+# see the README section "fmu"). The child saves its outputs and leaves with os._exit, so the abort cannot
+# take the test session down; the outputs are checked here.
+_CHILD = """
+import json, os, sys
+import numpy as np
+from twins.fmu.check import fmu_simulate
+cases = json.load(open('cases.json'))
+u = np.load('u.npy')
+out = {}
+for name, start in cases.items():
+    out[name] = fmu_simulate(sys.argv[1], u, float(sys.argv[2]), start_values=start)
+np.savez('y.npz', **out)
+sys.stdout.flush()
+os._exit(0)
+"""
+
+
+def _run_isolated(path, u, fs, cases, tmp_path):
+    (tmp_path / "cases.json").write_text(json.dumps(cases))
+    np.save(tmp_path / "u.npy", u)
+    env = dict(os.environ, PYTHONPATH=str(REPO))
+    proc = subprocess.run([sys.executable, "-c", _CHILD, str(path), repr(fs)], cwd=tmp_path, env=env,
+                          capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    with np.load(tmp_path / "y.npz") as z:
+        return {k: z[k] for k in z.files}
+
+
+CANTILEVER_CASES = {
+    "default": ({}, {}, None),
+    "bw_f1": ({"bw_alpha": 0.45, "f1_hz": 900.0}, {"bw_alpha": 0.45, "f1_hz": 900.0}, None),
+    "pi": ({"hysteresis": "prandtl-ishlinskii"}, {"hysteresis": "prandtl-ishlinskii"}, None),
+    "delay_no_noise": ({"effect_input_delay": True, "effect_measurement_noise": False}, {},
+                       "+input_delay-measurement_noise"),
+    "seed3": ({"seed": 3}, {}, "seed"),
+}
+
+
 @pytest.fixture(scope="module")
-def cantilever_fmu(tmp_path_factory):
+def cantilever_runs(tmp_path_factory):
     from twins.cantilever import CantileverTwin
 
     twin = CantileverTwin()  # default configuration, measurement noise on, seed 0
-    return twin, export_fmu(twin, tmp_path_factory.mktemp("cant") / "cantilever.fmu")
+    folder = tmp_path_factory.mktemp("cant")
+    path = export_fmu(twin, folder / "cantilever.fmu")
+    rec = twin.generate("thesis-multisine")
+    u, fs = rec.u[:1000], rec.fs
+    runs = _run_isolated(path, u, fs, {k: v[0] for k, v in CANTILEVER_CASES.items()}, folder)
+    return twin, path, u, fs, runs
 
 
-@pytest.fixture(scope="module")
-def multisine_head():
-    from twins.cantilever import CantileverTwin
-
-    rec = CantileverTwin().generate("thesis-multisine")
-    return rec.u[:1500], rec.fs
-
-
-def test_cantilever_fmu_round_trip(cantilever_fmu, multisine_head):
-    twin, path = cantilever_fmu
+def test_cantilever_fmu_round_trip(cantilever_runs):
+    twin, path, u, fs, runs = cantilever_runs
     assert validate_fmu(str(path)) == []
-    u, fs = multisine_head
     assert fs == 10e3
-    y = fmu_simulate(path, u, fs)
-    ref = twin.simulate(u, fs)
-    assert relative_rms(y, ref) <= 1e-9
+    assert relative_rms(runs["default"], twin.simulate(u, fs)) <= 1e-9
     root, _ = _md(path)
     assert _var(root, "gain_um_per_v").find("Real").get("unit") == "um/V"
     assert _var(root, "hysteresis").find("String").get("start") == "bouc-wen"
 
 
-@pytest.mark.parametrize("start,params,effects", [
-    ({"bw_alpha": 0.45, "f1_hz": 900.0}, {"bw_alpha": 0.45, "f1_hz": 900.0}, None),
-    ({"hysteresis": "prandtl-ishlinskii"}, {"hysteresis": "prandtl-ishlinskii"}, None),
-    ({"effect_input_delay": True, "effect_measurement_noise": False}, {}, "+input_delay-measurement_noise"),
-    ({"seed": 3}, {}, "seed"),
-])
-def test_cantilever_tunable_parameters_match_native(cantilever_fmu, multisine_head, start, params, effects):
-    twin, path = cantilever_fmu
-    u, fs = multisine_head
-    u = u[:600]
+@pytest.mark.parametrize("case", [k for k in CANTILEVER_CASES if k != "default"])
+def test_cantilever_tunable_parameters_match_native(cantilever_runs, case):
+    twin, _, u, fs, runs = cantilever_runs
+    _, params, effects = CANTILEVER_CASES[case]
     native = twin.with_params(**params)
     if effects == "seed":
         native = type(twin)(twin.params, twin.effects, 3)
     elif effects:
         native = native.with_effects((set(twin.effects) | {"input_delay"}) - {"measurement_noise"})
     ref = native.simulate(u, fs)
-    y = fmu_simulate(path, u, fs, start_values=start)
-    assert relative_rms(y, ref) <= 1e-9
+    assert relative_rms(runs[case], ref) <= 1e-9
     assert relative_rms(twin.simulate(u, fs), ref) > 1e-4  # the change is visible
 
 
@@ -283,3 +351,60 @@ def test_cli_export_fmu(tmp_path, capsys):
         assert main(bad) == 2
         err = capsys.readouterr().err.strip()
         assert err.count("\n") == 0 and "Traceback" not in err
+
+
+# --------------------------------------------------------------------------------------- acoustic twin
+@pytest.fixture(scope="module")
+def acoustic_fmu(tmp_path_factory):
+    from twins.acoustic import AcousticTwin
+
+    twin = AcousticTwin()  # default configuration: noise, ADC, amplifier compression on; seed 0
+    return twin, export_fmu(twin, tmp_path_factory.mktemp("ac") / "acoustic.fmu")
+
+
+@pytest.fixture(scope="module")
+def chirp_head(acoustic_fmu):
+    twin, _ = acoustic_fmu
+    rec = twin.generate("thesis-chirp-1ms", duration=8e-5)  # 8000 samples: past the 69 us flight time
+    return rec.u, rec.fs
+
+
+def test_acoustic_fmu_round_trip(acoustic_fmu, chirp_head):
+    twin, path = acoustic_fmu
+    assert validate_fmu(str(path)) == []
+    root, cfg = _md(path)
+    assert cfg["fs"] == 100e6 and cfg["core"]["kind"] == "response"
+    assert cfg["core"]["accuracy"]["relative_rms"] < 1e-9  # measured at export on a chirp, noise-free
+    assert _var(root, "fluid").find("String").get("start") == "water"
+    assert _var(root, "distance_m").find("Real").get("unit") == "m"
+    u, fs = chirp_head
+    ref = twin.simulate(u, fs)  # noise, 8-bit ADC, compression: all as in piezotwin simulate
+    assert np.sqrt(np.mean(ref[7000:] ** 2)) > 10 * twin.params.noise_v  # the arrival is in the window
+    y = fmu_simulate(path, u, fs)
+    assert relative_rms(y, ref) <= 1e-9
+
+
+def test_acoustic_parameter_change_matches_native(acoustic_fmu, chirp_head):
+    twin, path = acoustic_fmu
+    u, fs = chirp_head
+    native = twin.with_params(distance_m=0.09, fluid="seawater").with_effects(twin.effects | {"wall_echo"})
+    ref = native.simulate(u, fs)
+    y = fmu_simulate(path, u, fs, start_values={"distance_m": 0.09, "fluid": "seawater", "effect_wall_echo": True})
+    assert relative_rms(y, ref) <= 1e-9
+    assert relative_rms(twin.simulate(u, fs), ref) > 0.1
+
+
+def test_real_start_values_are_exact_doubles(tmp_path):
+    """A calibrated value must survive the XML: tools that apply the declared start values get the twin."""
+    import fmpy
+
+    twin = ToyTwin.from_options(set_=["gain=3.0000000000000004,tau_s=0.1"])  # 3 + 1 ulp: 17 digits
+    path = export_fmu(twin, tmp_path / "t.fmu", fs=1000.0)
+    root, _ = _md(path)
+    assert float(_var(root, "gain").find("Real").get("start")) == twin.params.gain
+    u = _toy_input(50)
+    res = fmpy.simulate_fmu(str(path), stop_time=0.05, output_interval=1e-3, output=["y"],
+                            apply_default_start_values=True,
+                            input=np.array(list(zip(np.arange(51) * 1e-3, np.append(u, u[-1]))),
+                                           dtype=[("time", float), ("u", float)]))
+    assert np.array_equal(res["y"][1:], twin.simulate(u, 1000.0))

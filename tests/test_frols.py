@@ -374,3 +374,140 @@ def test_narmax_long_record_unstable_early_noise_model_is_survived():
     rows = {r["term"]: r for r in m.term_table()}
     assert set(rows) == {"u(k-1)", "y(k-1)", "u(k-1)^2", "y(k-1)*u(k-1)", "e(k-1)"}
     assert abs(rows["e(k-1)"]["parameter"] - 0.8) < 3 * rows["e(k-1)"]["stderr"]
+
+
+# ------------------------------------------------------------------ benchmark defects (scale, ELS stability)
+def _cascaded_tanks_est():
+    """The Cascaded Tanks estimation record (1024 samples, vendored in benchmarks/data): the real-data case on
+    which ELS with > 2 iterations proposed noise models whose residual recursion diverges."""
+    try:
+        from benchmarks.datasets import load_dataset
+
+        return load_dataset("cascaded-tanks")
+    except Exception as exc:  # pragma: no cover - data not vendored in this checkout
+        pytest.skip(f"cascaded-tanks data not available: {exc}")
+
+
+@pytest.mark.parametrize("els_iter", [2, 5, 20])
+def test_narmax_els_iterations_finite_and_one_step_finite_on_real_data(els_iter):
+    ds = _cascaded_tanks_est()
+    m = NARMAXPoly(ny=4, nu=4, ne=2, degree=3, max_terms=20, els_iter=els_iter)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", UserWarning)  # removed noise terms are reported
+        m.fit(ds.est)
+    assert all(np.isfinite(t).all() for t in m.theta_)
+    for rec in [ds.est] + list(ds.tests.values()):
+        with warnings.catch_warnings():
+            warnings.simplefilter("error", DivergenceWarning)
+            y1 = m.predict(rec, 1)
+        assert np.isfinite(y1).all()
+        # k = 1 through the k-step machinery equals the one-step path; k = N is the free run (noise terms zero)
+        from sysid import simulate as sim
+
+        yk1, bad = sim.k_step(m.compiled(), rec.u.reshape(-1, 1), rec.y.reshape(-1, 1), 1)
+        assert bad == -1
+        np.testing.assert_array_equal(yk1[:, 0], y1)
+        np.testing.assert_array_equal(m.predict(rec, len(rec)), m.predict(rec, None))
+    assert m.els_status_ and m.describe()["els"]["status"] == m.els_status_
+
+
+def test_narmax_more_els_iterations_same_or_better_fit():
+    """Coloured (MA) noise: every ELS budget gives finite parameters and a finite one-step prediction on fresh
+    data, and more iterations give the same or a better validation one-step error (the iterations settle;
+    measured 0.01286 without noise terms, 0.01041 after 1 iteration, 0.010265 from 2 on; innovation var 0.01)."""
+    rec = narmax_record(3000, seed=4, sigma=0.1)
+    val = narmax_record(3000, seed=5, sigma=0.1)
+    mse = {}
+    for it in (0, 1, 2, 3, 5, 10, 20):
+        m = NARMAXPoly(ny=2, nu=2, ne=2, degree=3, els_iter=it).fit(rec)
+        assert all(np.isfinite(t).all() for t in m.theta_)
+        yv = m.predict(val, 1)
+        assert np.isfinite(yv).all()
+        mse[it] = float(np.mean((val.y - yv)[2:] ** 2))
+        if it >= 2:
+            assert mse[it] <= mse[1] * (1 + 1e-3) < mse[0], (it, mse)
+    assert m.els_converged_ and mse[20] == mse[10]
+    assert "e(k-1)" in {r["term"] for r in m.term_table()}
+    assert mse[20] < 1.05 * 0.1 ** 2
+
+
+def test_narmax_unstable_noise_model_is_reported_not_kept():
+    """A noise model whose residual recursion diverges on the estimation data is never returned: the terms that
+    make it diverge are removed (the process part, hence the free run, unchanged) and els_status_ says so."""
+    ds = _cascaded_tanks_est()
+    m = NARMAXPoly(ny=4, nu=4, ne=2, degree=3, max_terms=20, els_iter=20)
+    with pytest.warns(UserWarning, match="residual recursion diverged"):
+        m.fit(ds.est)
+    from sysid import simulate as sim
+
+    _, e = sim.one_step(m.compiled(), ds.est.u.reshape(-1, 1), ds.est.y.reshape(-1, 1))
+    assert np.isfinite(e).all() and np.abs(e).max() < np.abs(ds.est.y).max()
+    assert m.els_unstable_, "this record is the reproduction: some ELS iteration proposes an unstable noise model"
+    assert "unstable" in m.els_status_
+    # the final model of this budget diverged before the fix: the removed terms are named and the warning says so
+    assert m.els_removed_terms_ and all(t in m.els_status_ for t in m.els_removed_terms_)
+    assert not set(m.els_removed_terms_) & set(m.noise_terms_[0])
+
+
+@pytest.mark.parametrize("cls", [NARXPoly, NARMAXPoly])
+def test_selection_is_scale_invariant(cls):
+    """Bouc–Wen in SI units (force ~1e2 N, displacement ~1e-3 m): scaling u by 1e3 and y by 1e-3 selects the
+    same terms and scales every parameter by the units of its term (θ' = θ · s_y / Π s)."""
+    rec = narmax_record(3000, seed=3)
+    su, sy = 1e3, 1e-3
+    scaled = Record(rec.u * su, rec.y * sy, fs=1.0)
+    kw = dict(ny=2, nu=2, degree=3) if cls is NARXPoly else dict(ny=2, nu=2, ne=2, degree=3)
+    a = cls(**kw).fit(rec)
+    b = cls(**kw).fit(scaled)
+    ta, tb = a.term_table(), b.term_table()
+    assert [r["term"] for r in ta] == [r["term"] for r in tb]
+    s = a.structure_
+    for term, ra, rb in zip(a.terms_[0], ta, tb):
+        factor = sy
+        for r in term:
+            kind = s.regressors[r][0]
+            factor /= su if kind == "u" else sy  # y and e are in y's units
+        assert rb["parameter"] == pytest.approx(ra["parameter"] * factor, rel=1e-6, abs=0), ra["term"]
+    np.testing.assert_allclose(b.predict(scaled, None), a.predict(rec, None) * sy, rtol=1e-6, atol=1e-9 * sy)
+
+
+def test_least_squares_rank_check_is_per_column():
+    """Columns of very different size (u³ ~ 1e6, y³ ~ 1e-12) are not dependent; a true duplicate is refused."""
+    rng = np.random.default_rng(0)
+    n = 2000
+    u = 100.0 * rng.uniform(-1, 1, n)
+    y = np.zeros(n)
+    for k in range(1, n):
+        y[k] = 0.9 * y[k - 1] + 1e-7 * u[k - 1] + 1e-11 * u[k - 1] ** 3  # y ~ 1e-4: y³ ~ 1e-12
+    rec = Record(u, y, fs=1.0)
+    s = fr.Structure(fr.make_regressors(1, 1), fr.candidate_terms(2, 3))
+    terms = [(0,), (1,), (1, 1, 1), (0, 0, 0)]
+    ls = fr.least_squares([rec], s, terms)
+    assert np.isfinite(ls.theta).all()
+    np.testing.assert_allclose(ls.theta[:3], [0.9, 1e-7, 1e-11], rtol=1e-6)
+    with pytest.raises(DataError, match="linearly dependent"):
+        fr.least_squares([rec], s, [(0,), (1,), (0,)])
+    # non-finite regressors (a diverged residual recursion fed to ELS) never give NaN parameters silently
+    s_e = fr.Structure(fr.make_regressors(1, 1, 1), fr.candidate_terms(3, 1))
+    e = np.zeros((n, 1))
+    e[500] = np.inf
+    with pytest.raises(DataError, match="non-finite"):
+        fr.least_squares([rec], s_e, [(0,), (1,), (2,)], e_list=[e])
+
+
+def test_bouc_wen_in_si_units_is_identified():
+    """The benchmark's reproduction: Bouc–Wen in N and m (u ~ 50 N rms, y ~ 7e-4 m rms) was refused as
+    rank-deficient by a tolerance relative to the largest column; now it fits, close to the normalised fit."""
+    try:
+        from benchmarks.datasets import load_dataset
+
+        ds = load_dataset("bouc-wen")
+    except Exception as exc:  # pragma: no cover - data not vendored in this checkout
+        pytest.skip(f"bouc-wen data not available: {exc}")
+    est = ds.est[:8192]
+    m = NARXPoly(ny=4, nu=4, degree=3).fit(est)
+    assert all(np.isfinite(t).all() for t in m.theta_)
+    test = ds.tests["multisine"]
+    e = test.y[50:] - m.predict(test, None)[50:]
+    # ARX's quick floor on this test is 2.03e-4 m (free run); the nonlinear model must stay below it
+    assert np.sqrt(np.mean(e ** 2)) < 2.03e-4

@@ -97,3 +97,15 @@ def test_linear_bad_input():
         ARMAX(method="magic").fit(rec)
     with pytest.raises(ConfigError, match="one output"):
         ARMAX().fit(Record(rec.u, np.c_[rec.y, rec.y], fs=1.0))
+
+
+@pytest.mark.parametrize("method", ["pem", "els"])
+def test_armax_is_scale_invariant(method):
+    """u in kN-like units (×1e3) and y in mm-like units (×1e-3): A and C unchanged, B scaled by 1e-6, and the
+    ELS convergence test is relative (no absolute floor that B ~ 1e-6 would fall under)."""
+    rec = _armax(3000)
+    a = ARMAX(ny=2, nu=2, ne=2, method=method).fit(rec).polynomials()
+    b = ARMAX(ny=2, nu=2, ne=2, method=method).fit(Record(rec.u * 1e3, rec.y * 1e-3, fs=1.0)).polynomials()
+    np.testing.assert_allclose(b["A"], a["A"], rtol=1e-6, atol=1e-9)
+    np.testing.assert_allclose(b["C"], a["C"], rtol=1e-6, atol=1e-9)
+    np.testing.assert_allclose(b["B"], np.asarray(a["B"]) * 1e-6, rtol=1e-6)

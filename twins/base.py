@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import math
 from abc import ABC, abstractmethod
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -17,9 +18,10 @@ from typing import Any, ClassVar, Iterable, Mapping
 
 import numpy as np
 
-from sysid.config import coerce, parse_assignments
+from sysid.config import coerce, make_rng, parse_assignments
 from sysid.errors import ConfigError, DataError
 from sysid.io import json_default as _json_default
+from sysid.io import output_file
 from sysid.record import Record
 
 __all__ = ["pfield", "ParamInfo", "param_info", "EffectSpec", "Twin", "PARAMS_FORMAT"]
@@ -116,6 +118,8 @@ class Twin(ABC):
         unknown = sorted(self.effects - set(self.EFFECTS))
         if unknown:
             raise ConfigError(f"unknown effect {unknown[0]!r} for twin {self.name}; valid: {', '.join(self.EFFECTS)}")
+        if seed is not None:
+            make_rng(seed, f"{self.name}: seed")  # refuse a seed numpy cannot take now, not deep in a simulation
         self.seed = seed
         self.validate_params()
 
@@ -134,6 +138,8 @@ class Twin(ABC):
             value = getattr(self.params, name)
             lo, hi = info.range
             if isinstance(value, (int, float)) and not isinstance(value, bool):
+                if math.isnan(value):
+                    raise ConfigError(f"{self.name} parameter {name} is NaN; give a number in [{lo}, {hi}] {info.unit}")
                 if (lo is not None and value < lo) or (hi is not None and value > hi):
                     raise ConfigError(f"{self.name} parameter {name}={value} out of range [{lo}, {hi}] {info.unit}")
             if info.choices is not None and value not in info.choices:
@@ -188,9 +194,8 @@ class Twin(ABC):
     def save_params(self, path: str | Path, extra: Mapping[str, Any] | None = None) -> Path:
         """Write the configuration (and e.g. calibration statistics in ``extra``) as a JSON parameter file."""
         payload = {"format": PARAMS_FORMAT, **self.config(), **(dict(extra) if extra else {})}
-        path = Path(path)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_text(json.dumps(payload, indent=2, default=_json_default))
+        with output_file(path) as path:
+            path.write_text(json.dumps(payload, indent=2, default=_json_default))
         return path
 
     # ------------------------------------------------------------------ configuration from the CLI
@@ -258,6 +263,8 @@ def load_params_file(path: str | Path, twin: str | None = None) -> dict[str, Any
     p = Path(path)
     if not p.exists():
         raise DataError(f"{p}: parameter file not found")
+    if p.is_dir():
+        raise DataError(f"{p}: is a directory, expected a parameter file")
     try:
         data = json.loads(p.read_text())
     except (UnicodeDecodeError, json.JSONDecodeError) as exc:

@@ -16,12 +16,12 @@ from typing import Any, Callable, Sequence
 import numpy as np
 from scipy.optimize import least_squares
 
-from sysid.errors import ConfigError
+from sysid.errors import ConfigError, DataError
 from sysid.metrics import nrmse, r2
 from sysid.record import Record
 from twins.base import Twin, param_info
 
-__all__ = ["CalibrationResult", "calibrate"]
+__all__ = ["CalibrationResult", "calibrate", "check_calibration_data"]
 
 
 @dataclass
@@ -49,6 +49,18 @@ class CalibrationResult:
             "seconds": self.seconds,
             "message": self.message,
         }
+
+
+def check_calibration_data(data: Record, names: Sequence[str], what: str = "calibration") -> None:
+    """Refuse a fit that cannot be made: no output, no parameter named, no more samples than parameters (no
+    residual degrees of freedom for the standard errors), or a constant output (nothing to fit, R² undefined)."""
+    data.require_output()
+    if not names:
+        raise ConfigError(f"{what}: no parameters to fit")
+    if len(data) <= len(names):
+        raise DataError(f"{data.source}: {len(data)} samples are too few to fit {len(names)} parameters")
+    if np.any(np.ptp(data.y, axis=0) == 0):
+        raise DataError(f"{data.source}: output y is constant; nothing to fit")
 
 
 def _bounds(twin: Twin, names: Sequence[str]) -> tuple[np.ndarray, np.ndarray]:
@@ -82,9 +94,9 @@ def calibrate(
     ``simulate(twin, record)`` defaults to ``twin.simulate(record.u, record.fs)``; pass a noise-free variant
     to fit against a deterministic simulation. ``skip`` leading samples are not scored (transients).
     """
-    data.require_output()
-    sim = simulate or (lambda tw, rec: tw.simulate(rec.u, rec.fs))
     names = list(names)
+    check_calibration_data(data, names)
+    sim = simulate or (lambda tw, rec: tw.simulate(rec.u, rec.fs))
     lo, hi = _bounds(twin, names)
     start = np.array([float((x0 or {}).get(n, getattr(twin.params, n))) for n in names])
     start = np.clip(start, lo, hi)

@@ -24,7 +24,7 @@ def run(args: argparse.Namespace) -> int:
     twin = twin_from_args(args.twin, args)
     data = read_data(args, args.data)
     val = read_data(args, args.val) if args.val else None
-    names = [n.strip() for n in args.fit.split(",") if n.strip()] if args.fit else None
+    names = [n.strip() for n in args.fit.split(",") if n.strip()] if args.fit is not None else None
     result = twin.calibrate(data, val=val, names=names)
     summary = result.to_dict()
     if args.output:

@@ -17,7 +17,8 @@ from sysid.record import Record
 def add_data_args(p: argparse.ArgumentParser) -> None:
     """Options of every command that reads a data file (DESIGN.md)."""
     g = p.add_argument_group("data files")
-    g.add_argument("--fs", type=float, help="sampling rate [Hz] when the file has no t column / fs")
+    g.add_argument("--fs", type=float, help="sampling rate [Hz] when the file has no t column / fs (a file that has"
+                   " its own rate must agree with --fs, else it is refused)")
     g.add_argument("--u-col", default="u", help="CSV column(s) of the input (comma-separated for several); default u")
     g.add_argument("--y-col", default="y", help="CSV column(s) of the output; default y")
     g.add_argument("--u-var", default="u", help="MAT variable of the input; default u")

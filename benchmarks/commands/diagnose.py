@@ -55,7 +55,8 @@ def run(args: argparse.Namespace) -> int:
           f" R2 {b['r2_val']:.5f} -> {e['r2_val']:.5f}")
     print(f"  correlation tests {'pass' if b['tests']['passed'] else 'fail'} -> {'pass' if e['tests']['passed'] else 'fail'}")
     for c in result["causes"]:
-        params = ", ".join(f"{k}={v:.4g}" for k, v in c.get("params", {}).items())
+        params = ", ".join(f"{k}={v:.4g}" if isinstance(v, (int, float)) else f"{k}={v}"
+                           for k, v in c.get("params", {}).items())
         print(f"  cause {c['effect']} (confidence {c['confidence']:.2f}) {params}")
         print(f"    {c['evidence']}")
     if not result["causes"]:

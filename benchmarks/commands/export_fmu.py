@@ -59,7 +59,9 @@ def run(args: argparse.Namespace) -> int:
         core = cfg["core"]["kind"]
         extra = ""
         if core == "response" and "accuracy" in cfg["core"]:
-            extra = f", response core relative RMS {cfg['core']['accuracy']['relative_rms']:.2e}"
+            acc = cfg["core"]["accuracy"]
+            extra = (f", response core vs simulate: relative RMS {acc['relative_rms']:.1e} "
+                     f"(linear stage {acc['linear_relative_rms']:.1e}) on a {acc['signal']}")
         print(f"exported {twin.name} ({', '.join(sorted(twin.effects)) or 'no effects'}; fs {cfg['fs']:g} Hz; "
               f"core {core}{extra}) -> {path} ({summary['bytes'] / 1e3:.0f} kB, "
               f"{'valid' if not problems else 'INVALID'})")

@@ -133,8 +133,11 @@ def generate_records(spec: TwinDatasetSpec, use_cache: bool = True, progress: bo
 # preprocessing recipe (100-point moving average, resampling to 6.75 MHz, band-pass).
 _CANTILEVER = dict(twin="cantilever", est=("thesis-multisine", {}), tests={"thesis-sines": ("thesis-sines", {})},
                    fs=10_000.0, init_samples=0)
-_ACOUSTIC = dict(twin="acoustic", est=("thesis-multisine", {"preprocess": True}),
-                 tests={"thesis-chirp-1ms": ("thesis-chirp-1ms", {"preprocess": True})}, fs=6.75e6, init_samples=0)
+# The dissertation truncated to 2000 / 1000 samples because its tools could not take more; here the
+# estimation keeps 20 000 preprocessed samples (10 ms recorded) and the test one whole 1 ms sweep (6750).
+_ACOUSTIC = dict(twin="acoustic", est=("thesis-multisine", {"preprocess": True, "duration": 0.01, "keep": 20000}),
+                 tests={"thesis-chirp-1ms": ("thesis-chirp-1ms", {"preprocess": True, "duration": 0.002, "keep": 6750})},
+                 fs=6.75e6, init_samples=0)
 
 TWIN_DATASETS: dict[str, TwinDatasetSpec] = {
     "cantilever-thesis": TwinDatasetSpec(

@@ -36,7 +36,7 @@ from sysid.metrics import nrmse, r2
 from sysid.record import Record
 from twins.acoustic.amplifier import voltage_gain
 from twins.base import param_info
-from twins.calibration import CalibrationResult
+from twins.calibration import CalibrationResult, check_calibration_data
 
 __all__ = ["calibrate_acoustic", "measured_response_db", "is_frequency_record"]
 
@@ -105,9 +105,9 @@ def calibrate_acoustic(twin, data: Record, val: Record | None = None, names: Ite
                        span: float = 0.15, grid: int = 21, max_nfev: int = 200, **_: Any) -> CalibrationResult:
     """Fit ``names`` (default ``twin.CALIBRATION_PARAMS``) of ``twin`` to ``data`` (see module docstring)."""
     names = list(names) if names is not None else list(twin.CALIBRATION_PARAMS)
-    if not names:
-        raise ConfigError("acoustic calibration: no parameters to fit")
-    data.require_output()
+    check_calibration_data(data, names, "acoustic calibration")
+    if data.u.ndim != 1 or data.y.ndim != 1:
+        raise ConfigError("acoustic calibration: data must be SISO (one drive voltage, one received voltage)")
     freq_mode = is_frequency_record(data)
     if not freq_mode and not set(names) <= MAGNITUDE_PARAMS:
         from twins.calibration import calibrate as output_error

@@ -123,7 +123,7 @@ def apply_recipe(rec: Record, keep: int, start: int = 0) -> Record:
     from sysid.preprocess import apply_steps
 
     out = apply_steps(rec, recipe_steps())
-    if start < 0 or start + keep > len(out):
+    if start < 0 or keep < 1 or start + keep > len(out):
         raise ConfigError(f"truncation start={start}, keep={keep} exceeds the {len(out)} preprocessed samples")
     sliced = out[start:start + keep]
     sliced.meta.setdefault("preprocessing", []).append(

@@ -311,8 +311,10 @@ class AcousticTwin(Twin):
         for k, v in options.items():
             opts[k] = coerce(v, opts[k], k)
         fs, duration = float(opts["fs"]), float(opts["duration"])
-        if fs <= 0 or duration <= 0:
-            raise ConfigError(f"protocol {protocol}: fs and duration must be positive")
+        if not (fs > 0 and duration > 0 and float(opts["awg_rate_hz"]) > 0 and float(opts["warmup_s"]) >= 0):
+            raise ConfigError(f"protocol {protocol}: fs, duration and awg_rate_hz must be positive, warmup_s >= 0")
+        if not opts["preprocess"] and {"start", "keep"} & set(options):
+            raise ConfigError(f"protocol {protocol}: options start/keep cut the preprocessed record; give preprocess=true")
         n = int(round(duration * fs))
         periodic = protocol != "thesis-chirp-100ms"
         warm = int(round(float(opts["warmup_s"]) * fs)) if periodic else 0

@@ -29,7 +29,7 @@ import numpy as np
 
 from sysid.errors import ConfigError
 from sysid.record import Record
-from twins.calibration import CalibrationResult, calibrate
+from twins.calibration import CalibrationResult, calibrate, check_calibration_data
 
 __all__ = ["calibrate_cantilever", "continues"]
 
@@ -71,6 +71,7 @@ def calibrate_cantilever(twin, data: Record, val: Record | None = None, names: I
     if names is None:
         names = PI_FIT if p.hysteresis == "prandtl-ishlinskii" else twin.CALIBRATION_PARAMS
     names = list(names)
+    check_calibration_data(data, names, "cantilever calibration")
     for n in names:
         if n in p.__dataclass_fields__ and not isinstance(getattr(p, n), float):
             kind = type(getattr(p, n)).__name__

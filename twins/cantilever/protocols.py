@@ -19,6 +19,7 @@ from typing import Any
 
 import numpy as np
 
+from sysid.config import make_rng
 from sysid.errors import ConfigError
 
 __all__ = ["PROTOCOLS", "THESIS_SINE_FREQS_HZ", "multisine_local", "thesis_multisine", "thesis_sines", "steps"]
@@ -41,7 +42,7 @@ def multisine_local(fs: float, period_s: float, n_components: int, f_max: float,
     n = int(round(fs * period_s))
     df = 1.0 / period_s
     kmax = min(int(np.floor(f_max / df + 1e-9)), n_components, n // 2 - 1)
-    rng = np.random.default_rng(seed)
+    rng = make_rng(seed, "signal_seed")
     spec = np.zeros(n // 2 + 1, dtype=complex)
     spec[1 : kmax + 1] = np.exp(1j * rng.uniform(0.0, 2.0 * np.pi, kmax))
     x = np.fft.irfft(spec, n)
@@ -53,9 +54,12 @@ def _opt(options: dict[str, Any], key: str, default: Any, kind=float) -> Any:
         return default
     v = options.pop(key)
     try:
-        return kind(v)
+        out = kind(v)
     except (TypeError, ValueError):
         raise ConfigError(f"protocol option {key}: expected {kind.__name__}, got {v!r}") from None
+    if kind is float and not np.isfinite(out):
+        raise ConfigError(f"protocol option {key}: must be finite, got {v!r}")
+    return out
 
 
 def thesis_multisine(options: dict[str, Any]) -> tuple[np.ndarray, float, dict[str, Any]]:
@@ -97,10 +101,14 @@ def thesis_sines(options: dict[str, Any]) -> tuple[np.ndarray, float, dict[str, 
     min_periods = _opt(options, "min_periods", 2, int)
     min_dur = _opt(options, "min_duration_s", 0.5)
     freqs = options.pop("freqs_hz", THESIS_SINE_FREQS_HZ)
+    text = freqs
     if isinstance(freqs, str):
-        freqs = [float(f) for f in freqs.replace(";", "-").split("-") if f]
-    freqs = [float(f) for f in freqs]
-    if fs <= 0 or amp <= 0 or min_periods < 1 or any(f <= 0 or f >= fs / 2 for f in freqs):
+        freqs = [f for f in freqs.replace(";", "-").split("-") if f]
+    try:
+        freqs = [float(f) for f in freqs]
+    except (TypeError, ValueError):
+        raise ConfigError(f"protocol option freqs_hz: expected frequencies in Hz separated by '-', got {text!r}") from None
+    if fs <= 0 or amp <= 0 or min_periods < 1 or not freqs or any(not 0 < f < fs / 2 for f in freqs):
         raise ConfigError("thesis-sines: need fs > 0, amplitude_v > 0, min_periods ≥ 1 and 0 < f < fs/2")
     parts, segs, start = [], [], 0
     for f in freqs:

@@ -74,6 +74,22 @@ def _simulate(twin: Twin, rec: Record) -> np.ndarray:
     return np.asarray(twin.simulate(rec.u, rec.fs), dtype=float)
 
 
+def _continues(est: Record, val: Record) -> bool:
+    """True when ``val`` directly continues ``est`` (same source and fs, ``t0`` at the end of ``est``, as
+    ``Record.split`` makes them): the validation is then simulated as the continuation of the estimation input
+    (still free run, no measured output used), so a system with memory (hysteresis, creep) is not restarted."""
+    if val.fs != est.fs or "t0" not in val.meta or est.source != val.source:
+        return False
+    t_end = float(est.meta.get("t0", 0.0)) + len(est) / est.fs
+    return abs(float(val.meta["t0"]) - t_end) < 0.5 / est.fs
+
+
+def _simulate_val(twin: Twin, est: Record, val: Record) -> np.ndarray:
+    if _continues(est, val):
+        return _simulate(twin, Record(u=np.concatenate([est.u, val.u]), y=None, fs=est.fs))[len(est):]
+    return _simulate(twin, val)
+
+
 def significance(sse0: float, sse1: float, n_eff: float, p_extra: int) -> float:
     """p-value of the F-test that the residual variance fell from sse0 to sse1 by adding ``p_extra`` parameters,
     with ``n_eff`` effective independent samples (see the module docstring)."""
@@ -99,6 +115,17 @@ def _numeric_fields(twin: Twin, fields: Iterable[str]) -> list[str]:
             continue
         out.append(f)
     return out
+
+
+def _choice_fields(twin: Twin, fields: Iterable[str]) -> list[str]:
+    """Effect parameters that take one of a list of values (e.g. a fluid name): scanned, never least-squares fitted."""
+    info = param_info(type(twin.params))
+    return [f for f in fields if f in info and info[f].choices]
+
+
+def _int_fields(twin: Twin, fields: Iterable[str]) -> list[str]:
+    return [f for f in fields if isinstance(getattr(twin.params, f, None), int)
+            and not isinstance(getattr(twin.params, f, None), bool)]
 
 
 def _grid(lo: float, hi: float, n: int, is_int: bool) -> np.ndarray:
@@ -138,6 +165,10 @@ def _guesses(field: str, unit: str, a: dict[str, Any], twin: Twin, current: floa
             out += [k * c * sh, current + k * c * sh]
             if math.isfinite(tau):
                 out += [k * c * tau, k * c * tau / 2]
+                # lateral image source (a wall beside a path of length L): extra path √(L² + 4w²) − L = c·τ
+                L = getattr(twin.params, "distance_m", None)
+                if isinstance(L, (int, float)) and L > 0:
+                    out += [k * math.sqrt(max((L + c * tau) ** 2 - L * L, 0.0)) / 2]
     if any(w in name for w in ("amp", "gain", "coef", "reflect", "level", "scale")) and u in ("", "1", "-", "ratio"):
         out += [coef, abs(coef)]
     return [float(v) for v in out if math.isfinite(v)]
@@ -171,6 +202,7 @@ class Trial:
     significant: bool = False
     seconds: float = 0.0
     n_added: int = 0
+    base: Any = None
 
 
 def _sse(y: np.ndarray, yh: np.ndarray, skip: int) -> float:
@@ -179,10 +211,53 @@ def _sse(y: np.ndarray, yh: np.ndarray, skip: int) -> float:
     return v if math.isfinite(v) else float("inf")
 
 
-def _prescan(tw: Twin, est: Record, fields: list[str], a: dict[str, Any], points: int, skip: int) -> dict[str, float]:
-    """Coordinate-wise scan of each effect parameter over its range and the feature guesses (est SSE)."""
+def _continuation_scan(tw: Twin, est: Record, vals: dict[str, Any], f: str, lo: float, hi: float, points: int,
+                       skip: int, extra: Sequence[float] = ()) -> float:
+    """Scan of ``f`` on the first eighth of the record: a coarse grid over the range, a dense one around the
+    configured value (the prior) and the ``extra`` guesses; the six best points are refined by a bounded 1-D
+    search; the winner is then re-refined on a quarter, a half and the whole record (continuation in the record
+    length: late, phase-amplified arrivals narrow the basins)."""
+    from scipy.optimize import minimize_scalar
+
+    n = len(est)
+
+    def cost_on(part: Record, v: float) -> float:
+        try:
+            return _sse(part.y, _simulate(tw.with_params(**{**vals, f: float(v)}), part), min(skip, len(part) - 1))
+        except (ConfigError, DataError, ValueError, FloatingPointError):
+            return float("inf")
+
+    x0 = float(vals[f])
+    coarse = np.linspace(lo, hi, 6 * points)
+    local = np.linspace(x0 - 0.1 * (hi - lo), x0 + 0.1 * (hi - lo), 6 * points)  # the configured value is the prior
+    first = np.concatenate([coarse, local, [v for v in extra if lo <= v <= hi]])
+    first = first[(first >= lo) & (first <= hi)]
+    part = est[: max(n // 8, min(n, 64))]
+    costs = np.array([cost_on(part, v) for v in first])
+    step = 0.2 * (hi - lo) / (6 * points - 1)
+    cands = []
+    for i in np.argsort(costs)[:4]:
+        v = float(first[i])
+        r = minimize_scalar(lambda x: cost_on(part, x), bounds=(max(lo, v - step), min(hi, v + step)),
+                            method="bounded", options={"maxiter": 14, "xatol": step * 1e-3})
+        cands.append((float(r.fun), float(r.x)) if r.fun < costs[i] else (float(costs[i]), v))
+    best_x = min(cands)[1]
+    for frac in (4, 2, 1):
+        part = est[: max(n // frac, min(n, 64))]
+        r = minimize_scalar(lambda x: cost_on(part, x), bounds=(max(lo, best_x - step / 4), min(hi, best_x + step / 4)),
+                            method="bounded", options={"maxiter": 14, "xatol": step * 1e-4})
+        if r.fun <= cost_on(part, best_x):
+            best_x = float(r.x)
+    return best_x
+
+
+def _prescan(tw: Twin, est: Record, fields: list[str], a: dict[str, Any], points: int, skip: int,
+             choices: Sequence[str] = ()) -> dict[str, Any]:
+    """Coordinate-wise scan of each effect parameter over its range and the feature guesses (est SSE);
+    parameters with a list of values (``choices``) are tried value by value."""
     info = param_info(type(tw.params))
-    best = {f: float(getattr(tw.params, f)) for f in fields}
+    best: dict[str, Any] = {f: float(getattr(tw.params, f)) for f in fields}
+    best.update({f: getattr(tw.params, f) for f in choices})
     y = est.y
 
     def cost(vals: dict[str, float]) -> float:
@@ -192,21 +267,53 @@ def _prescan(tw: Twin, est: Record, fields: list[str], a: dict[str, Any], points
             return float("inf")
 
     best_cost = cost(best)
+    # delay-like parameters whatever their unit (temperature, distance, …): linearise the shift of the simulated
+    # output with respect to each parameter and solve for the shifts the data show. The shifts are measured on
+    # the first eighth of the record (the first arrivals, before late phase-amplified ones), at the three best
+    # peaks of the cross-correlation (a narrow-band signal leaves the carrier cycle ambiguous).
+    lin_guess: dict[str, list[float]] = {}
+    m = max(len(est) // 8, min(len(est), 256))
+    part = est[:m]
+    y0 = _simulate(tw.with_params(**best), part)
+    # window: from the first arrival of the simulated output over a sixteenth of the record
+    big = np.flatnonzero(np.abs(y0) > 0.05 * (np.max(np.abs(y0)) or 1.0))
+    i0 = max(int(big[0]) - 16, 0) if big.size else 0
+    win = slice(i0, min(m, i0 + max(128, len(est) // 16)))
+    shifts = ft.delay_candidates(part.y[win], y0[win], part.fs, max_shift_s=max(32, (win.stop - win.start) // 8) / part.fs)
+    if shifts and max(abs(v) for v in shifts) * est.fs > 0.02:
+        for f in fields:
+            lo, hi = (float(v) for v in info[f].range)
+            dx = 0.002 * (hi - lo)
+            x1 = best[f] + dx if best[f] + dx <= hi else best[f] - dx
+            try:
+                y1 = _simulate(tw.with_params(**{**best, f: x1}), part)
+            except (ConfigError, DataError, ValueError):
+                continue
+            sh = ft.delay_estimate(y1, y0, part.fs, max_shift_s=8 / part.fs)["shift_s"]
+            if abs(sh) * est.fs > 1e-4:
+                lin_guess[f] = [best[f] + t * (x1 - best[f]) / sh for t in shifts]
     # joint start from the feature guesses (e.g. echo delay and amplitude together), when every field has one
     guess = {}
     for f in fields:
         lo, hi = (float(v) for v in info[f].range)
-        g = [v for v in _guesses(f, info[f].unit, a, tw, best[f]) if lo <= v <= hi]
+        g = [v for v in _guesses(f, info[f].unit, a, tw, best[f])[::-1] + lin_guess.get(f, []) if lo <= v <= hi]
         if g:
             guess[f] = g
     if guess:
         import itertools
 
         keys = list(guess)
-        for combo in itertools.islice(itertools.product(*(guess[k][:4] for k in keys)), 64):
+        for combo in itertools.islice(itertools.product(*(guess[k][:8] for k in keys)), 96):
             trial = dict(best)
             trial.update({k: (int(round(v)) if isinstance(getattr(tw.params, k), int) else float(v))
                           for k, v in zip(keys, combo)})
+            c = cost(trial)
+            if c < best_cost:
+                best_cost, best = c, trial
+    for f in choices:
+        for v in info[f].choices or ():
+            trial = dict(best)
+            trial[f] = v
             c = cost(trial)
             if c < best_cost:
                 best_cost, best = c, trial
@@ -214,14 +321,51 @@ def _prescan(tw: Twin, est: Record, fields: list[str], a: dict[str, Any], points
         for f in fields:
             lo, hi = (float(v) for v in info[f].range)
             is_int = isinstance(getattr(tw.params, f), int)
-            cands = list(_grid(lo, hi, points, is_int))
-            cands += [g for g in _guesses(f, info[f].unit, a, tw, best[f]) if lo <= g <= hi]
+            grid = _grid(lo, hi, points, is_int)
+            cands = list(grid) + [g for g in lin_guess.get(f, []) + _guesses(f, info[f].unit, a, tw, best[f])
+                                  if lo <= g <= hi]
+            base_vals = dict(best)
+            costs = []
             for v in cands:
-                trial = dict(best)
+                trial = dict(base_vals)
                 trial[f] = int(round(v)) if is_int else float(v)
+                c = cost(trial)
+                costs.append(c)
+                if c < best_cost:
+                    best_cost, best = c, trial
+            gc = np.array(costs[: len(grid)])
+            n_min = int(np.sum((gc[1:-1] < gc[:-2]) & (gc[1:-1] < gc[2:]))) if gc.size > 2 else 0
+            if n_min >= 2 and not is_int:
+                # a rough landscape (several local minima: phase-sensitive parameters such as a time of flight
+                # through a reverberant gap). Continuation in the record length: the cost of a short prefix
+                # (fewer late, phase-amplified arrivals) has wide basins; scan it densely, then zoom while the
+                # prefix grows to the whole record.
+                x = _continuation_scan(tw, est, base_vals, f, lo, hi, points, skip, lin_guess.get(f, []))
+                trial = dict(base_vals)
+                trial[f] = x
                 c = cost(trial)
                 if c < best_cost:
                     best_cost, best = c, trial
+            if is_int:
+                continue
+            # zoom: rescan finer around the best value (the cost of a delay-like parameter oscillates)
+            geo = lo > 0 and hi / lo > 30
+            step = (np.log(hi / lo) if geo else (hi - lo)) / max(points - 1, 1)
+            for _z in range(2):
+                x = float(best[f])
+                if geo:
+                    zg = np.exp(np.linspace(np.log(x) - step, np.log(x) + step, points))
+                else:
+                    zg = np.linspace(x - step, x + step, points)
+                for v in zg:
+                    if not lo <= v <= hi:
+                        continue
+                    trial = dict(best)
+                    trial[f] = float(v)
+                    c = cost(trial)
+                    if c < best_cost:
+                        best_cost, best = c, trial
+                step /= (points - 1) / 2.0
     return best
 
 
@@ -232,12 +376,19 @@ def _run_trial(base: Twin, effect: str, est: Record, val: Record, core: list[str
     t0 = time.perf_counter()
     spec = base.EFFECTS[effect]
     tw = base.with_effects(set(base.effects) | {effect})
-    eff_fields = _numeric_fields(tw, spec.params.values())
+    # integer parameters (element counts, bit depths) are structural choices of the configuration: kept as given
+    eff_fields = [f for f in _numeric_fields(tw, spec.params.values()) if f not in _int_fields(tw, spec.params.values())]
+    cat_fields = _choice_fields(tw, spec.params.values())
     if start is None:
-        x0 = _prescan(tw, est, eff_fields, a_val, opts["scan_points"], opts["skip"]) if eff_fields else {}
+        x0 = (_prescan(tw, est, eff_fields, a_val, opts["scan_points"], opts["skip"], cat_fields)
+              if (eff_fields or cat_fields) else {})
     else:
         x0 = dict(start)
-    names = list(eff_fields)
+    fixed = {k: v for k, v in x0.items() if k in cat_fields or k in _int_fields(tw, eff_fields)}
+    if fixed:  # categorical and integer parameters stay at their scanned values
+        tw = tw.with_params(**{k: (int(round(v)) if k not in cat_fields else v) for k, v in fixed.items()})
+    x0 = {k: v for k, v in x0.items() if k not in fixed}
+    names = [f for f in eff_fields if f not in fixed]
     if refit_core:
         names += [c for c in _core_for(tw, core) if c not in eff_fields]
     if names:
@@ -247,16 +398,19 @@ def _run_trial(base: Twin, effect: str, est: Record, val: Record, core: list[str
         fit_tw, fitted, stderr = res.twin, res.fitted, res.stderr
     else:
         fit_tw, fitted, stderr = tw, {}, {}
-    yv = _simulate(fit_tw, val)
+    yv = _simulate_val(fit_tw, est, val)
     ye = _simulate(fit_tw, est)
     ok = bool(np.all(np.isfinite(yv)))
-    return Trial(effect=effect, twin=fit_tw, fitted=fitted,
-                 effect_params={f: fitted.get(f, float(getattr(fit_tw.params, f))) for f in eff_fields},
+    eff_all = eff_fields + [c for c in cat_fields if c not in eff_fields]
+    tr = Trial(effect=effect, twin=fit_tw, fitted=fitted,
+                 effect_params={f: fitted.get(f, getattr(fit_tw.params, f)) for f in eff_all},
                  stderr={f: stderr.get(f, float("nan")) for f in eff_fields},
                  sse_est=_sse(est.y, ye, opts["skip"]), sse_val=_sse(val.y, yv, opts["skip"]), yhat_val=yv,
                  nrmse_val=nrmse(val.y, yv, opts["skip"]) if ok else float("inf"),
                  r2_val=r2(val.y, yv, opts["skip"]) if ok else float("-inf"),
                  seconds=time.perf_counter() - t0, n_added=max(len(eff_fields), 1))
+    tr.base = base
+    return tr
 
 
 # ---------------------------------------------------------------------------------------------- stages
@@ -273,14 +427,14 @@ class Stage:
     r2_val: float
     sse_val: float
 
-    def summary(self, noise_free: bool = True) -> dict[str, Any]:
-        return {"effects": sorted(self.twin.effects), "r2_val": self.r2_val, "nrmse_val": self.nrmse_val,
+    def summary(self, also: Iterable[str] = ()) -> dict[str, Any]:
+        return {"effects": sorted(set(self.twin.effects) | set(also)), "r2_val": self.r2_val, "nrmse_val": self.nrmse_val,
                 "tests": ft.tests_summary(self.analysis_val["_tests_full"])}
 
 
 def _stage(twin: Twin, est: Record, val: Record, opts: dict[str, Any]) -> Stage:
     ye = _simulate(twin, est)
-    yv = _simulate(twin, val)
+    yv = _simulate_val(twin, est, val)
     ae = ft.analyse(est.u, est.y, ye, est.fs, est.meta, max_lag=opts["max_lag"], max_echo_s=opts["max_echo_s"])
     av = ft.analyse(val.u, val.y, yv, val.fs, val.meta, max_lag=opts["max_lag"], max_echo_s=opts["max_echo_s"])
     return Stage(twin, ye, yv, ae, av, nrmse(val.y, yv, opts["skip"]), r2(val.y, yv, opts["skip"]),
@@ -302,7 +456,11 @@ def _generic_residual_model(est: Record, val: Record, e_est: np.ndarray, e_val: 
                 cols.append(np.r_[np.zeros(k), x[: x.size - k]])
         return np.column_stack(cols)
     A = design(est)[skip:]
-    c, *_ = np.linalg.lstsq(A, e_est[skip:], rcond=None)
+    # ridge-regularised least squares: lagged copies of a slow input are nearly collinear, and an unregularised
+    # fit would extrapolate wildly to the validation record
+    G = A.T @ A
+    lam = 1e-4 * float(np.mean(np.diag(G))) or 1e-12
+    c = np.linalg.solve(G + lam * np.eye(G.shape[0]), A.T @ e_est[skip:])
     pv = design(val)[skip:] @ c
     ev_ = e_val[skip:]
     sse0 = float(ev_ @ ev_)
@@ -316,7 +474,7 @@ def _generic_residual_model(est: Record, val: Record, e_est: np.ndarray, e_val: 
 def diagnose(twin: Twin, data: Record, val: Record | None = None, max_rounds: int = 3, *,
              candidates: Sequence[str] | None = None, calibrate_baseline: bool = True,
              calibration_params: Sequence[str] | None = None, alpha: float = 0.01, min_rel_gain: float = 0.005,
-             trial_nfev: int = 30, scan_nfev: int = 15, scan_points: int = 13, refine: int = 3, max_lag: int = 20, max_echo_s: float | None = None,
+             trial_nfev: int = 25, scan_nfev: int = 15, scan_points: int = 13, refine: int = 3, max_lag: int = 20, max_echo_s: float | None = None,
              skip: int = 0, split: float = 0.6, generic_lags: int = 10, keep_stages: bool = False) -> dict[str, Any]:
     """Diagnose what ``twin`` gets wrong about ``data`` (issue 8); return the JSON-able result.
 
@@ -355,12 +513,16 @@ def diagnose(twin: Twin, data: Record, val: Record | None = None, max_rounds: in
         raise DataError(f"estimation and validation records have different fs ({data.fs} and {val.fs} Hz)")
     opts = {"trial_nfev": int(trial_nfev), "scan_nfev": int(scan_nfev), "scan_points": int(scan_points), "skip": int(skip), "max_lag": int(max_lag),
             "max_echo_s": max_echo_s}
+    unknown = [e for e in (candidates or []) if e not in twin.EFFECTS]
+    if unknown:
+        raise ConfigError(f"unknown effect {unknown[0]!r} for twin {twin.name}; valid: {', '.join(twin.EFFECTS)}")
     t_start = time.perf_counter()
     core = list(calibration_params if calibration_params is not None else twin.CALIBRATION_PARAMS)
     core = _numeric_fields(twin, core)
 
     # 1. calibrate the current configuration (deterministic prediction)
     current = _deterministic(twin)
+    prior = current
     calib_info: dict[str, Any] = {}
     core0 = _core_for(current, core)
     if calibrate_baseline and core0:
@@ -375,10 +537,7 @@ def diagnose(twin: Twin, data: Record, val: Record | None = None, max_rounds: in
 
     pool = [e for e in (candidates if candidates is not None else twin.EFFECTS)
             if e in twin.EFFECTS and e not in twin.effects and e not in NOISE_EFFECTS
-            and ev.family_of(twin.EFFECTS[e]) != "noise"]
-    unknown = [e for e in (candidates or []) if e not in twin.EFFECTS]
-    if unknown:
-        raise ConfigError(f"unknown effect {unknown[0]!r} for twin {twin.name}; valid: {', '.join(twin.EFFECTS)}")
+            and e not in _unpredictable(twin)]
 
     causes: list[dict[str, Any]] = []
     rounds: list[dict[str, Any]] = []
@@ -394,13 +553,28 @@ def diagnose(twin: Twin, data: Record, val: Record | None = None, max_rounds: in
         a_fit_est["fs"] = data.fs
         n_eff0 = ft.effective_samples(val.y[skip:] - stage.yhat_val[skip:])
         trials: list[Trial] = []
+        # two starting points for the core: the calibrated configuration (which may have bent its core parameters
+        # to mimic the missing effect) and the configuration as given (the prior)
+        cur_core = _core_for(stage.twin, core)
+        prior_base = stage.twin.with_params(**{c: getattr(prior.params, c) for c in cur_core})
+        # the prior is tried only where the calibration moved a core parameter by more than 2 % of its value
+        moved = any(abs(float(getattr(prior.params, c)) - float(getattr(stage.twin.params, c)))
+                    > 0.02 * max(abs(float(getattr(prior.params, c))), 1e-300) for c in cur_core)
+        bases = [stage.twin] + ([prior_base] if moved else [])
         for e in remaining:
-            try:
-                tr = _run_trial(stage.twin, e, data, val, core, a_fit_est, opts, refit_core=False)
-            except (ConfigError, DataError, ValueError, np.linalg.LinAlgError) as exc:  # an effect that cannot run here
-                rounds.append({"round": rnd + 1, "effect": e, "error": str(exc)})
-                continue
-            trials.append(tr)
+            best_tr = None
+            for b in bases:
+                try:
+                    tr = _run_trial(b, e, data, val, core, a_fit_est, opts, refit_core=False)
+                except (ConfigError, DataError, ValueError, np.linalg.LinAlgError) as exc:  # cannot run here
+                    rounds.append({"round": rnd + 1, "effect": e, "error": str(exc)})
+                    continue
+                if best_tr is None or tr.sse_est < best_tr.sse_est:
+                    if best_tr is not None:
+                        tr.seconds += best_tr.seconds
+                    best_tr = tr
+            if best_tr is not None:
+                trials.append(best_tr)
         # stage B: the most promising candidates are refitted together with the core parameters
         trials.sort(key=lambda t: t.sse_val)
         for i, tr in enumerate(trials[: max(int(refine), 0)]):
@@ -408,7 +582,7 @@ def diagnose(twin: Twin, data: Record, val: Record | None = None, max_rounds: in
             if i > 0 and (tr.sse_val > 1.5 * trials[0].sse_val or tr.sse_val >= stage.sse_val * (1 - 1e-9)):
                 continue
             try:
-                trB = _run_trial(stage.twin, tr.effect, data, val, core, a_fit_est, opts, refit_core=True,
+                trB = _run_trial(tr.base, tr.effect, data, val, core, a_fit_est, opts, refit_core=True,
                                  start=tr.effect_params)
             except (ConfigError, DataError, ValueError, np.linalg.LinAlgError):
                 continue
@@ -436,10 +610,12 @@ def diagnose(twin: Twin, data: Record, val: Record | None = None, max_rounds: in
         for tr in trials[1:]:
             # the data cannot tell tr from the leader when the leader's residual is not significantly smaller
             not_better = significance(tr.sse_val, top.sse_val, n_eff_top, 1) > alpha
-            same_group = bool(top_group) and twin.EFFECTS[tr.effect].group == top_group and tr.significant
+            # a catalog ambiguity group: members that explain the data nearly as well (NRMSE within 2×) go together
+            same_group = (bool(top_group) and twin.EFFECTS[tr.effect].group == top_group and tr.significant
+                          and tr.nrmse_val <= 2.0 * top.nrmse_val)
             d_pred = float(np.sqrt(np.mean((tr.yhat_val[skip:] - top.yhat_val[skip:]) ** 2)))
             equal = tr.significant and (tr.sse_val <= top.sse_val * (1 + tol) or not_better) and d_pred < 0.5 * e_rms_top
-            if (same_group and not_better) or equal:
+            if same_group or equal:
                 group.append(tr.effect)
         g1 = top.gain
         g2 = max([t.gain for t in trials if t.effect not in group] + [0.0])
@@ -466,7 +642,7 @@ def diagnose(twin: Twin, data: Record, val: Record | None = None, max_rounds: in
         row = rows[0]
         fams = [ev.family_of(twin.EFFECTS[g]) for g in group]
         text = (f"{row['signature']}; adding {top.effect} and fitting "
-                f"{', '.join(f'{k}={v:.4g}' for k, v in top.effect_params.items()) or 'the core'} lowers the "
+                f"{_fmt_params(top.effect_params) or 'the core'} lowers the "
                 f"validation NRMSE {stage.nrmse_val:.4g} → {top.nrmse_val:.4g} (F-test p = {top.p_value:.2g})")
         cause = {"effect": top.effect, "confidence": row["confidence"], "evidence": text,
                  "params": dict(top.effect_params), "stderr": dict(top.stderr), "family": row["family"],
@@ -482,6 +658,17 @@ def diagnose(twin: Twin, data: Record, val: Record | None = None, max_rounds: in
         causes.append(cause)
         stage = _stage(top.twin, data, val, opts)
 
+    # quantisation: no prediction can follow it, the evidence is the lattice of the measured values
+    for e in [c for c in (candidates if candidates is not None else twin.EFFECTS)
+              if c in twin.EFFECTS and c not in twin.effects and ev.family_of(twin.EFFECTS[c]) == "quantization"]:
+        q = ft.quantization_step(np.concatenate([data.y, val.y]))
+        s = ev.signature_evidence(twin.EFFECTS[e], {"quantization": q}, twin)
+        if q.get("p_value", 1.0) < alpha * 1e-3 and s["score"] > 0.3:
+            causes.append({"effect": e, "confidence": float(s["score"]), "params": _quant_params(twin, e, q["step"]),
+                           "evidence": (s["text"] + "; quantisation error depends on the noise, so adding it cannot "
+                                        "lower the residual (no validation gain expected)"),
+                           "family": "quantization", "round": 0})
+
     # what no catalog entry explains
     e_est = data.y - stage.yhat_est
     e_val = val.y - stage.yhat_val
@@ -495,11 +682,12 @@ def diagnose(twin: Twin, data: Record, val: Record | None = None, max_rounds: in
                                     f"residual variance; {unexplained['description']}"),
                        "params": {}})
     verdict = "discrepancy" if causes else "none"
+    kept_unpredictable = set(twin.effects) & _unpredictable(twin)  # noise/quantisation as configured
     out = {
         "verdict": verdict,
         "causes": causes,
-        "baseline": base.summary(),
-        "extended": stage.summary(),
+        "baseline": base.summary(kept_unpredictable),
+        "extended": stage.summary(kept_unpredictable),
         "gain": {"nrmse_ratio": stage.nrmse_val / base.nrmse_val if base.nrmse_val > 0 else 1.0,
                  "r2_delta": stage.r2_val - base.r2_val},
         "twin": twin.name,
@@ -514,6 +702,23 @@ def diagnose(twin: Twin, data: Record, val: Record | None = None, max_rounds: in
     if keep_stages:
         out["_stages"] = {"baseline": base, "extended": stage, "est": data, "val": val}
     return out
+
+
+def _quant_params(twin: Twin, effect: str, step: float) -> dict[str, float]:
+    """Parameters of a quantisation effect from the measured lattice step: the step itself, or the bit count
+    that gives it over the configured range (LSB = 2·range/2^bits)."""
+    fields = list(twin.EFFECTS[effect].params.values())
+    bits = [f for f in fields if "bit" in f.lower()]
+    rng = [f for f in fields if "range" in f.lower()]
+    if bits and rng:
+        r = float(getattr(twin.params, rng[0]))
+        return {bits[0]: float(np.log2(2 * r / step)), rng[0]: r}
+    floats = [f for f in fields if isinstance(getattr(twin.params, f, None), float)]
+    return {floats[0]: float(step)} if floats else {}
+
+
+def _fmt_params(p: dict[str, Any]) -> str:
+    return ", ".join(f"{k}={v:.4g}" if isinstance(v, (int, float)) else f"{k}={v}" for k, v in p.items())
 
 
 def _public(a: dict[str, Any]) -> dict[str, Any]:

@@ -66,6 +66,14 @@ def sound_speed(twin: Twin) -> float | None:
         val = getattr(twin.params, name, None)
         if isinstance(val, (int, float)) and val > 0:
             return float(val)
+    sm = getattr(twin, "spectrum_metrics", None)  # the acoustic twin's sweep figures carry the sound speed
+    if callable(sm):
+        try:
+            val = sm(points=16).get("sound_speed_m_s")
+            if val:
+                return float(val)
+        except Exception:  # noqa: BLE001
+            return None
     return None
 
 

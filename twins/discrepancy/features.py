@@ -204,6 +204,37 @@ def delay_estimate(y: np.ndarray, ysim: np.ndarray, fs: float, max_shift_s: floa
     return {"shift_s": d / fs, "shift_samples": d, "corr": float(y @ sh) / den, "gain": g}
 
 
+def delay_candidates(y: np.ndarray, ysim: np.ndarray, fs: float, max_shift_s: float | None = None,
+                     k: int = 3) -> list[float]:
+    """Shifts [s] of y relative to ŷ at the ``k`` highest peaks of their cross-correlation, each refined to a
+    fraction of a sample (parabola). For narrow-band signals the carrier cycle is ambiguous: the caller tries
+    each."""
+    y = np.asarray(y, float) - np.mean(y)
+    s = np.asarray(ysim, float) - np.mean(ysim)
+    n = y.size
+    if not np.any(s) or not np.any(y):
+        return []
+    L = n // 4 if max_shift_s is None else int(min(n // 2, max(2, round(max_shift_s * fs))))
+    m = 1 << int(np.ceil(np.log2(2 * n)))
+    xc = np.fft.irfft(np.fft.rfft(y, m) * np.conj(np.fft.rfft(s, m)), m)
+    vals = np.r_[xc[m - L:], xc[: L + 1]]
+    lags = np.arange(-L, L + 1)
+    pk, _ = sps.find_peaks(vals)
+    if pk.size == 0:
+        return []
+    pk = pk[np.argsort(vals[pk])[::-1][:k]]
+    out = []
+    for i in pk:
+        d = float(lags[i])
+        if 0 < i < vals.size - 1:
+            a, b, c = vals[i - 1], vals[i], vals[i + 1]
+            den = a - 2 * b + c
+            if den < 0:
+                d += 0.5 * (a - c) / den
+        out.append(d / fs)
+    return out
+
+
 def io_delay(u: np.ndarray, y: np.ndarray, fs: float, max_shift_s: float | None = None) -> float:
     """Input–output delay [s]: lag of the peak of the envelope of the u–y cross-correlation (≥ 0)."""
     u = _z(u)

@@ -3,7 +3,7 @@
 - :func:`export_fmu` (:mod:`twins.fmu.export`): configured twin -> ``.fmu`` with input ``u``, output ``y``,
   every physical parameter, effect switch, ``seed`` and ``fs`` as FMU parameters (:mod:`twins.fmu.spec`).
 - :mod:`twins.fmu.slave`: the slave that runs inside the importing tool.
-- :mod:`twins.fmu.cores`: per-sample cores (the twin's stepper, or the fitted response core of
+- :mod:`twins.fmu.cores`: per-sample cores (the twin's stepper, or the block-convolution response core of
   :mod:`twins.fmu.response` for the 100 MHz acoustic channel).
 """
 

@@ -16,7 +16,8 @@ __all__ = ["build_core", "choose_core"]
 
 def choose_core(twin, fs: float) -> dict[str, Any]:
     """The core description baked into the FMU: ``{"kind": "stepper"}`` when the twin has a per-sample
-    stepper, else ``{"kind": "response", ...}`` (fitted at export, see :mod:`twins.fmu.response`)."""
+    stepper, else ``{"kind": "response"}`` (built from the twin's impulse response at initialisation, see
+    :mod:`twins.fmu.response`)."""
     make = getattr(twin, "make_stepper", None)
     if make is not None:
         try:
@@ -41,5 +42,5 @@ def build_core(twin, fs: float, core: dict[str, Any], resources: str | Path | No
     if kind == "response":
         from twins.fmu.response import ResponseCore
 
-        return ResponseCore.for_twin(twin, fs, core, resources)
+        return ResponseCore.for_twin(twin, fs, core)
     raise ValueError(f"unknown FMU core kind {kind!r}")

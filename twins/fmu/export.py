@@ -7,7 +7,6 @@ What goes into the FMU (``resources/``):
 - the packages ``twins/`` and ``sysid/`` (Python sources only) and any extra module the twin class lives in,
   so the FMU runs where only CPython 3 with numpy and scipy is installed (pythonfmu puts ``resources/`` first
   on ``sys.path``; a host process that has already imported ``twins`` keeps its own copy);
-- the core's data file when it has one (acoustic: ``*_core.npz``);
 - ``pythonfmu/`` (embedded by pythonfmu itself) and the binaries ``linux64``/``win64`` (no macOS binary).
 """
 
@@ -20,6 +19,7 @@ import re
 import shutil
 import sys
 import tempfile
+import zipfile
 from pathlib import Path
 from typing import Any, Iterable
 
@@ -106,8 +106,7 @@ def export_fmu(twin: Twin, path: str | Path, fs: float | None = None, model_name
         if core["kind"] == "response":
             from twins.fmu.response import prepare_response_core
 
-            core = prepare_response_core(twin, fs, core, stage, f"{model_name}_core.npz")
-            files.append(stage / core["file"])
+            core = prepare_response_core(twin, fs, core)
         cfg = fmu_config(twin, fs, core, model_name)
         cfg["project_version"] = _project_version()
         (stage / CONFIG_NAME).write_text(json.dumps(cfg, indent=1, default=_json_default))
@@ -134,9 +133,19 @@ def export_fmu(twin: Twin, path: str | Path, fs: float | None = None, model_name
         script = script_dir / f"{model_name}_slave.py"
         script.write_text(slave_source(model_name, twin.name))
         try:
-            out = FmuBuilder.build_FMU(script, dest=path, project_files=files)
+            out = FmuBuilder.build_FMU(script, dest=stage / path.name, project_files=files)
         finally:
             sys.modules.pop(script.stem, None)
             if str(script_dir) in sys.path:
                 sys.path.remove(str(script_dir))
-    return Path(out)
+        _deflate(Path(out), path)
+    return path
+
+
+def _deflate(src: Path, dest: Path) -> None:
+    """Copy the FMU (pythonfmu stores its members uncompressed) with deflate compression (FMI allows it)."""
+    tmp = dest.with_name(dest.name + ".part")
+    with zipfile.ZipFile(src) as zin, zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED, compresslevel=9) as zout:
+        for info in zin.infolist():
+            zout.writestr(info.filename, zin.read(info.filename))
+    tmp.replace(dest)

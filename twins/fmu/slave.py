@@ -26,6 +26,7 @@ from pythonfmu.enums import Fmi2Status
 
 from twins.fmu.spec import CONFIG_NAME, FORMAT, decode_value
 
+
 __all__ = ["TwinSlave", "load_fmu_config"]
 
 #: relative tolerance on ``step_size * fs`` being a whole number of samples
@@ -40,6 +41,15 @@ def load_fmu_config(resources: str | Path) -> dict[str, Any]:
     return cfg
 
 
+def _resolve(path: str):
+    """``"module:Qual.Name"`` -> the object."""
+    module, _, qualname = path.partition(":")
+    obj = importlib.import_module(module)
+    for part in qualname.split("."):
+        obj = getattr(obj, part)
+    return obj
+
+
 class _Attrs:
     """Extra XML attributes (unit, min, max) for the element a pythonfmu variable writes."""
 
@@ -50,7 +60,8 @@ class _Attrs:
         node = type(self.var).to_xml(self.var)
         child = node[0]
         for key, value in self.extra.items():
-            child.set(key, f"{value:.16g}" if isinstance(value, float) else str(value))
+            # repr: the shortest text that reads back as the same double (pythonfmu writes 16 digits)
+            child.set(key, repr(float(value)) if isinstance(value, float) else str(value))
         return node
 
 
@@ -78,6 +89,7 @@ class TwinSlave(Fmi2Slave):
         self.version = str(cfg.get("project_version", ""))
         self._values: dict[str, Any] = {}
         self._core = None
+        self._twin_cls = _resolve(cfg["twin_class"])  # import errors surface at instantiation
         self._fs = float(cfg["fs"])
         self.default_experiment = DefaultExperiment(start_time=0.0, step_size=1.0 / self._fs)
         self.u = 0.0
@@ -104,7 +116,7 @@ class TwinSlave(Fmi2Slave):
                 getter=(lambda n=name: self._values[n]), setter=(lambda x, n=name: self._set(n, x)))
             extra = {}
             if v["type"] == "Real":
-                extra = {"unit": v.get("unit"), "min": v.get("min"), "max": v.get("max")}
+                extra = {"start": float(v["start"]), "unit": v.get("unit"), "min": v.get("min"), "max": v.get("max")}
                 if v.get("unit"):
                     self._units.add(v["unit"])
             elif v["type"] == "Integer":
@@ -129,9 +141,20 @@ class TwinSlave(Fmi2Slave):
         return root
 
     def exit_initialization_mode(self):
-        self._start()
+        try:
+            self._start()
+        except BaseException:
+            self._before_raise()
+            raise
 
     def do_step(self, current_time: float, step_size: float) -> bool:
+        try:
+            return self._do_step(current_time, step_size)
+        except BaseException:
+            self._before_raise()
+            raise
+
+    def _do_step(self, current_time: float, step_size: float) -> bool:
         if self._core is None:
             self._start()
         ratio = step_size * self._fs
@@ -155,14 +178,25 @@ class TwinSlave(Fmi2Slave):
         self.log(message, Fmi2Status.error)
         raise RuntimeError(message)
 
+    def _before_raise(self) -> None:
+        """Keep pythonfmu 0.7's error path from freeing live objects.
+
+        On a Python exception its C++ wrapper releases its references to the slave class, the instance and
+        the log queue, and releases them once more when the instance is freed; the second release frees
+        objects still in use and corrupts the heap (the process aborts at exit: "corrupted double-linked
+        list"). One extra reference to each before the exception propagates balances the count (at worst
+        it keeps three small objects alive after an error).
+        """
+        import ctypes
+
+        for obj in (type(self), self, self.log_queue):
+            ctypes.pythonapi.Py_IncRef(ctypes.py_object(obj))
+
     # ------------------------------------------------------------------ model
     def make_twin(self):
         """The twin described by the current parameter values (raises the twin's ConfigError if invalid)."""
         cfg = self._cfg
-        module, _, qualname = cfg["twin_class"].partition(":")
-        cls = importlib.import_module(module)
-        for part in qualname.split("."):
-            cls = getattr(cls, part)
+        cls = self._twin_cls
         defaults = cls.Params()
         values, effects, seed = {}, set(), 0
         for v in cfg["variables"]:

@@ -97,6 +97,16 @@ def _finite(x: Any) -> float | None:
     return float(x) if isinstance(x, (int, float)) and math.isfinite(x) else None
 
 
+def _bound(x: Any, ftype: str, upper: bool) -> float | int | None:
+    """A documented range end as the FMU type writes it (Integer bounds rounded inwards)."""
+    v = _finite(x)
+    if v is None or ftype not in ("Real", "Integer"):
+        return None
+    if ftype == "Real":
+        return v
+    return math.floor(v) if upper else math.ceil(v)
+
+
 def fmu_variables(twin: Twin, fs: float) -> list[dict[str, Any]]:
     """The FMU parameters of ``twin`` (in declaration order), each a dict with keys
     ``name, kind (param|effect|seed|fs), field, type, start, unit, min, max, description``."""
@@ -122,8 +132,8 @@ def fmu_variables(twin: Twin, fs: float) -> list[dict[str, Any]]:
             "name": f.name, "kind": "param", "field": f.name, "type": ftype,
             "start": encode_value(value, ftype),
             "unit": (pi.unit or None) if ftype == "Real" else None,
-            "min": _finite(lo) if ftype in ("Real", "Integer") else None,
-            "max": _finite(hi) if ftype in ("Real", "Integer") else None,
+            "min": _bound(lo, ftype, upper=False),
+            "max": _bound(hi, ftype, upper=True),
             "description": doc,
         })
     for eid, spec in type(twin).EFFECTS.items():
