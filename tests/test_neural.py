@@ -221,3 +221,23 @@ def test_model_trained_for_cuda_loads_and_predicts_on_cpu(plant, tmp_path):
         m2 = load_model(m.save(tmp_path / f"gpu{suffix}"))
         assert m2.device == "cuda"
         np.testing.assert_array_equal(m2.predict(val, None), ref)
+
+
+def test_input_delay_nk_kernels_and_fit(plant):
+    rng = np.random.default_rng(1)
+    sizes = [5, 6, 1]  # n_y = 2, n_u = 3, nk = 4: u(t-4), u(t-5), u(t-6)
+    flat = rng.normal(0, 0.4, count_mlp_parameters(5, [6], 1))
+    un = rng.normal(size=(50, 1))
+    yn = rng.normal(size=(50, 1))
+    fr, _ = free_run_mlp(flat, sizes, 1, yn, un, 2, 3, 1e6, nk=4)
+    ref = yn.copy()
+    for t in range(6, 50):
+        x = np.r_[ref[t - 1, 0], ref[t - 2, 0], un[t - 4, 0], un[t - 5, 0], un[t - 6, 0]][None]
+        ref[t] = mlp_forward_np(flat, sizes, 1, x)[0]
+    np.testing.assert_allclose(fr, ref, rtol=1e-12, atol=1e-12)
+    ks = k_step_mlp(flat, sizes, 1, yn, un, 2, 3, 60, 1e6, nk=4)  # k beyond the record: a free run from the start
+    np.testing.assert_allclose(ks, ref, rtol=1e-12, atol=1e-12)
+    est, val = plant
+    m = NARXMLP(n_y=2, n_u=3, nk=4, hidden=[6], epochs=1, device="cpu").fit(est)
+    assert m.max_lag_ == 6 and m.n_parameters_ == count_mlp_parameters(5, [6], 1)
+    assert m.predict(val, None).shape == val.y.shape and np.isfinite(m.predict(val, 3)).all()

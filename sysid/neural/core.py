@@ -23,12 +23,17 @@ import torch
 from numba import njit
 
 __all__ = [
-    "ACTIVATIONS", "LagData", "FlatMLP", "RMSprop", "mlp_forward_np", "free_run_mlp", "k_step_mlp", "count_mlp_parameters",
+    "regressor_lag", "ACTIVATIONS", "LagData", "FlatMLP", "RMSprop", "mlp_forward_np", "free_run_mlp", "k_step_mlp", "count_mlp_parameters",
 ]
 
 ACTIVATIONS = ("sigmoid", "tanh", "relu")
 ACT_CODE = {"relu": 0, "tanh": 1, "sigmoid": 2}
 PREBUILD_LIMIT = 40_000_000  # elements of Φ (160 MB in float32) above which rows are gathered per batch
+
+
+def regressor_lag(n_y: int, n_u: int, nk: int = 1) -> int:
+    """Samples of history a regressor needs: y(t-1…t-n_y) and u(t-nk … t-nk-n_u+1)."""
+    return max(int(n_y), int(nk) + int(n_u) - 1 if n_u > 0 else 0)
 
 
 def count_mlp_parameters(n_in: int, hidden: Sequence[int], n_out: int) -> int:
@@ -42,9 +47,9 @@ class LagData:
     """Φ and Y (eq. 2-14, 2-15) for a list of normalised ``(u, y)`` pairs, 2-D arrays ``(N, channels)``."""
 
     def __init__(self, pairs: Sequence[tuple[np.ndarray, np.ndarray]], n_y: int, n_u: int,
-                 device: torch.device, dtype: torch.dtype = torch.float32, prebuild: bool | None = None):
-        self.n_y, self.n_u = int(n_y), int(n_u)
-        self.lag = max(self.n_y, self.n_u)
+                 device: torch.device, dtype: torch.dtype = torch.float32, prebuild: bool | None = None, nk: int = 1):
+        self.n_y, self.n_u, self.nk = int(n_y), int(n_u), int(nk)
+        self.lag = regressor_lag(self.n_y, self.n_u, self.nk)
         self.ny_ch = pairs[0][1].shape[1]
         self.nu_ch = pairs[0][0].shape[1]
         self.n_yreg = self.n_y * self.ny_ch
@@ -78,7 +83,7 @@ class LagData:
         self.y = torch.as_tensor(y_all, dtype=dtype, device=device)
         self.row_time = torch.as_tensor(self.row_time_np, dtype=torch.long, device=device)
         self.ylags = torch.arange(1, self.n_y + 1, device=device)
-        self.ulags = torch.arange(1, self.n_u + 1, device=device)
+        self.ulags = torch.arange(self.nk, self.nk + self.n_u, device=device)
         self.Y = self.y[self.row_time]
         if prebuild is None:
             prebuild = self.n_rows * self.n_in <= PREBUILD_LIMIT
@@ -240,7 +245,7 @@ def mlp_forward_np(flat: np.ndarray, sizes: Sequence[int], code: int, x: np.ndar
 
 
 @njit(cache=True)
-def _free_run_kernel(flat, sizes, code, y0, un, n_y, n_u, start, bound):  # pragma: no cover - compiled
+def _free_run_kernel(flat, sizes, code, y0, un, n_y, n_u, nk, start, bound):  # pragma: no cover - compiled
     n, ny_ch = y0.shape
     nu_ch = un.shape[1]
     n_layers = sizes.shape[0] - 1
@@ -259,7 +264,7 @@ def _free_run_kernel(flat, sizes, code, y0, un, n_y, n_u, start, bound):  # prag
             for c in range(ny_ch):
                 a_buf[k] = out[t - i, c]
                 k += 1
-        for i in range(1, n_u + 1):
+        for i in range(nk, nk + n_u):
             for c in range(nu_ch):
                 a_buf[k] = un[t - i, c]
                 k += 1
@@ -299,23 +304,23 @@ def _free_run_kernel(flat, sizes, code, y0, un, n_y, n_u, start, bound):  # prag
 
 
 def free_run_mlp(flat: np.ndarray, sizes: Sequence[int], code: int, yn: np.ndarray, un: np.ndarray,
-                 n_y: int, n_u: int, bound: float) -> tuple[np.ndarray, int]:
-    """Free-run simulation (eq. 2-29/2-30) in normalised units: the first ``max(n_y, n_u)`` samples of ``yn``
+                 n_y: int, n_u: int, bound: float, nk: int = 1) -> tuple[np.ndarray, int]:
+    """Free-run simulation (eq. 2-29/2-30) in normalised units: the first ``regressor_lag`` samples of ``yn``
     are the measured initial conditions, the rest is simulated from ``un``. Returns (ŷ, diverged index or -1)."""
-    lag = max(n_y, n_u)
+    lag = regressor_lag(n_y, n_u, nk)
     return _free_run_kernel(np.ascontiguousarray(flat, dtype=np.float64), np.asarray(sizes, dtype=np.int64), int(code),
                             np.ascontiguousarray(yn, dtype=np.float64), np.ascontiguousarray(un, dtype=np.float64),
-                            int(n_y), int(n_u), int(lag), float(bound))
+                            int(n_y), int(n_u), int(nk), int(lag), float(bound))
 
 
-def lag_matrix_np(series: np.ndarray, lags: int, times: np.ndarray) -> np.ndarray:
-    """``[s(t-1) … s(t-lags)]`` for each t in ``times`` (lag-major, channels side by side)."""
-    idx = times[:, None] - np.arange(1, lags + 1)[None, :]
+def lag_matrix_np(series: np.ndarray, lags: int, times: np.ndarray, first: int = 1) -> np.ndarray:
+    """``[s(t-first) … s(t-first-lags+1)]`` for each t in ``times`` (lag-major, channels side by side)."""
+    idx = times[:, None] - np.arange(first, first + lags)[None, :]
     return series[idx].reshape(times.size, -1)
 
 
 def k_step_mlp(flat: np.ndarray, sizes: Sequence[int], code: int, yn: np.ndarray, un: np.ndarray, n_y: int, n_u: int,
-               k: int, bound: float) -> np.ndarray:
+               k: int, bound: float, nk: int = 1) -> np.ndarray:
     """k-step-ahead prediction ŷ(t | t-k) at every sample t ≥ lag, vectorised over t.
 
     With P_j(t) = ŷ(t | t-j-1), P_0 is the one-step prediction and P_j uses, for lag i, the earlier
@@ -323,9 +328,9 @@ def k_step_mlp(flat: np.ndarray, sizes: Sequence[int], code: int, yn: np.ndarray
     batched passes of the network; only the last n_y arrays P are kept.
     """
     n, ny_ch = yn.shape
-    lag = max(n_y, n_u)
+    lag = regressor_lag(n_y, n_u, nk)
     times = np.arange(lag, n)
-    U = lag_matrix_np(un, n_u, times)
+    U = lag_matrix_np(un, n_u, times, first=nk)
     Ymeas = lag_matrix_np(yn, n_y, times).reshape(times.size, n_y, ny_ch)
     hist: list[np.ndarray] = []  # hist[-i] = P_{j-i} over the full time axis (measured before lag)
     P = None

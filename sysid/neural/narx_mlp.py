@@ -32,7 +32,7 @@ import torch
 from sysid.base import Identifier, as_record_list
 from sysid.errors import ConfigError, DataError, DivergenceWarning
 from sysid.neural.core import (ACT_CODE, ACTIVATIONS, FlatMLP, LagData, RMSprop, count_mlp_parameters, free_run_mlp,
-                               k_step_mlp, lag_matrix_np, mlp_forward_np)
+                               k_step_mlp, lag_matrix_np, mlp_forward_np, regressor_lag)
 from sysid.neural.device import configure_threads, select_device
 from sysid.record import Normaliser, Record
 
@@ -89,6 +89,9 @@ class _NeuralNARXBase(Identifier):
                 raise ConfigError(f"{self.name}: {key}={v!r} must be an integer in [0, {MAX_LAG}]")
         if self.n_y < 1:
             raise ConfigError(f"{self.name}: n_y={self.n_y} must be at least 1 (a NARX model feeds back past outputs)")
+        nk = self.nk
+        if not isinstance(nk, (int, np.integer)) or isinstance(nk, bool) or not 0 <= nk <= 100_000:
+            raise ConfigError(f"{self.name}: nk={nk!r} must be an integer in [0, 100000] (input delay in samples)")
         hidden = list(self.hidden) if isinstance(self.hidden, (list, tuple)) else None
         if hidden is None or not all(isinstance(h, (int, np.integer)) and not isinstance(h, bool) and 1 <= h <= 65536 for h in hidden):
             raise ConfigError(f"{self.name}: hidden={self.hidden!r} must be a list of layer widths ≥ 1, e.g. hidden=25-25-25-25")
@@ -119,8 +122,8 @@ class _NeuralNARXBase(Identifier):
         gen = torch.Generator().manual_seed(int(self.seed))
         self.normaliser_ = fit_normaliser(recs)
         pairs = normalised_pairs(recs, self.normaliser_)
-        lag = max(self.n_y, self.n_u)
-        data_t = LagData(pairs, self.n_y, self.n_u, device)
+        lag = regressor_lag(self.n_y, self.n_u, self.nk)
+        data_t = LagData(pairs, self.n_y, self.n_u, device, nk=self.nk)
         net = FlatMLP(data_t.n_in, self.hidden, ny, self.activation, gen, device)
         self.loss_history_ = []
         self._train(net, data_t, gen)
@@ -188,19 +191,20 @@ class _NeuralNARXBase(Identifier):
         code = ACT_CODE[self.activation]
         self.diverged_at_ = None
         if horizon is None or horizon >= n - lag:
-            yhat, div = free_run_mlp(self.weights_, self.sizes_, code, yn, un, self.n_y, self.n_u, DIVERGENCE_BOUND)
+            yhat, div = free_run_mlp(self.weights_, self.sizes_, code, yn, un, self.n_y, self.n_u, DIVERGENCE_BOUND, self.nk)
             if div >= 0:
                 self.diverged_at_ = int(div)
                 warnings.warn(f"{self.name}: free-run simulation diverged at sample {div} of {n}; the rest is nan",
                               DivergenceWarning, stacklevel=2)
         elif horizon == 1:
             times = np.arange(lag, n)
-            x = np.concatenate([lag_matrix_np(yn, self.n_y, times), lag_matrix_np(un, self.n_u, times)], axis=1)
+            x = np.concatenate([lag_matrix_np(yn, self.n_y, times), lag_matrix_np(un, self.n_u, times, first=self.nk)], axis=1)
             yhat = yn.copy()
             with np.errstate(over="ignore", invalid="ignore"):
                 yhat[lag:] = mlp_forward_np(self.weights_, self.sizes_, code, x)
         else:
-            yhat = k_step_mlp(self.weights_, self.sizes_, code, yn, un, self.n_y, self.n_u, int(horizon), DIVERGENCE_BOUND)
+            yhat = k_step_mlp(self.weights_, self.sizes_, code, yn, un, self.n_y, self.n_u, int(horizon), DIVERGENCE_BOUND,
+                              self.nk)
         if horizon is not None and not np.isfinite(yhat).all():
             bad = np.flatnonzero(~np.isfinite(yhat).all(axis=1))
             self.diverged_at_ = int(bad[0])
@@ -217,7 +221,7 @@ class _NeuralNARXBase(Identifier):
         if hasattr(self, "weights_"):
             d.update({
                 "structure": {"inputs": self.sizes_[0], "hidden": list(self.hidden), "outputs": self.sizes_[-1],
-                              "activation": self.activation, "n_y": self.n_y, "n_u": self.n_u},
+                              "activation": self.activation, "n_y": self.n_y, "n_u": self.n_u, "nk": self.nk},
                 "terms": [],
                 "max_lag": self.max_lag_,
                 "device": self.device_used_,
@@ -250,7 +254,7 @@ class _NeuralNARXBase(Identifier):
         self.loss_history_ = [float(v) for v in state.get("loss_history", [])]
         self.device_used_ = state.get("device_used", "cpu")
         self.fit_seconds_ = float(state.get("fit_seconds", float("nan")))
-        self.max_lag_ = max(self.n_y, self.n_u)
+        self.max_lag_ = regressor_lag(self.n_y, self.n_u, self.nk)
         self.n_parameters_ = int(self.weights_.size)
         self.diverged_at_ = None
 
@@ -282,14 +286,20 @@ class NARXMLP(_NeuralNARXBase):
         Seeds the initial weights and the batch order (deterministic on the CPU).
     device : str
         ``auto`` (CUDA when present), ``cpu`` or ``cuda``.
+    nk : int
+        Input delay in samples: the input regressors are u(t-nk) … u(t-nk-n_u+1). The dissertation's eq. 2-14
+        is nk = 1 (default); a transmission channel with a time of flight of d samples wants nk ≈ d, so that
+        n_u covers the response instead of the dead time.
     """
 
     name = "narx-mlp"
 
     def __init__(self, n_y: int = 10, n_u: int = 10, hidden: Sequence[int] = (25, 25, 25, 25), activation: str = "relu",
-                 lr: float = 1e-4, batch_size: int = 128, epochs: int = 100, seed: int = 0, device: str = "auto"):
+                 lr: float = 1e-4, batch_size: int = 128, epochs: int = 100, seed: int = 0, device: str = "auto",
+                 nk: int = 1):
         self.n_y = n_y
         self.n_u = n_u
+        self.nk = nk
         self.hidden = list(hidden) if isinstance(hidden, (list, tuple)) else hidden
         self.activation = activation
         self.lr = lr
@@ -325,9 +335,10 @@ class NARXMLPSim(_NeuralNARXBase):
 
     def __init__(self, n_y: int = 10, n_u: int = 10, hidden: Sequence[int] = (25, 25, 25, 25), activation: str = "relu",
                  lr: float = 1e-3, batch_size: int = 32, epochs: int = 100, seed: int = 0, device: str = "auto",
-                 window: int = 50, pretrain_epochs: int = 10, pretrain_lr: float = 1e-3):
+                 window: int = 50, pretrain_epochs: int = 10, pretrain_lr: float = 1e-3, nk: int = 1):
         self.n_y = n_y
         self.n_u = n_u
+        self.nk = nk
         self.hidden = list(hidden) if isinstance(hidden, (list, tuple)) else hidden
         self.activation = activation
         self.lr = lr
