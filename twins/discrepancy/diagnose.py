@@ -681,6 +681,7 @@ def diagnose(twin: Twin, data: Record, val: Record | None = None, max_rounds: in
                                     f"and a trend) removes {100 * (1 - gen['nrmse_ratio'] ** 2):.0f} % of the validation "
                                     f"residual variance; {unexplained['description']}"),
                        "params": {}})
+    causes.sort(key=lambda c: -float(c["confidence"]))  # strongest first (stable: round order among equals)
     verdict = "discrepancy" if causes else "none"
     kept_unpredictable = set(twin.effects) & _unpredictable(twin)  # noise/quantisation as configured
     out = {
