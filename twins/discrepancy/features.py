@@ -597,7 +597,8 @@ def analyse(u: np.ndarray, y: np.ndarray, ysim: np.ndarray, fs: float, meta: dic
                             "odd_over_even_db": float(10 * np.log10((odd + 1e-300) / (even + 1e-300)))}
     else:
         out["harmonics"] = harmonics(e, u, fs)
-    period = meta.get("period_samples") or (meta.get("multisine") or {}).get("period_samples")
+    period = (meta.get("period_samples") or (meta.get("multisine") or {}).get("period_samples")
+              or (meta.get("excitation") or {}).get("period_samples"))
     out["lines"] = odd_even_lines(u, y, e, fs, period=int(period) if period else None)
     out["nonlinear"] = nonlinear_correlation(e, u, ysim, max_lag=max_lag)
     out["resonances"] = resonance_peaks(e, y, fs)
