@@ -64,6 +64,12 @@ def main(argv: list[str] | None = None) -> int:
     except InputError as exc:
         print(f"piezotwin {args.command}: error: {exc}", file=sys.stderr)
         return 2
+    except BrokenPipeError:  # output piped into e.g. `head`: stop quietly
+        try:
+            sys.stdout = open(os.devnull, "w")
+        except OSError:
+            pass
+        return 0
     except KeyboardInterrupt:
         print(f"piezotwin {args.command}: interrupted", file=sys.stderr)
         return 130

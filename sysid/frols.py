@@ -178,8 +178,9 @@ def _term_table(terms) -> np.ndarray:
 
 
 @njit(cache=True)
-def _fill_rows(Z, a, n, col, lag, tab, n_out, out):
-    """out[i, j] = Π_d Z[a+i−lag[r], col[r]] over r = tab[j, d] (constant → 1); out[i, M+o] = Z[a+i, o] (= y_o).
+def _fill_rows(Z, a, n, col, lag, tab, n_out, shift, out):
+    """out[i, j] = Π_d Z[a+i−lag[r], col[r]] − shift[j] over r = tab[j, d] (constant → 1);
+    out[i, M+o] = Z[a+i, o] − shift[M+o] (the outputs y_o).
 
     Row-major so that each sample's candidate values are contiguous (the layout the BLAS rank-k update wants).
     """
@@ -194,9 +195,9 @@ def _fill_rows(Z, a, n, col, lag, tab, n_out, out):
                 if r < 0:
                     break
                 v *= Z[t - lag[r], col[r]]
-            out[i, j] = v
+            out[i, j] = v - shift[j]
         for o in range(n_out):
-            out[i, M + o] = Z[t, o]
+            out[i, M + o] = Z[t, o] - shift[M + o]
 
 
 def _signal_matrix(rec, structure: Structure, e) -> np.ndarray:
@@ -210,44 +211,64 @@ def _signal_matrix(rec, structure: Structure, e) -> np.ndarray:
     return np.ascontiguousarray(np.hstack(parts).reshape(N, -1), dtype=np.float64)
 
 
+class GramMatrix(np.ndarray):
+    """The Gram matrix ``[P Y]ᵀ[P Y]`` (an ndarray) carrying, when a constant candidate exists, ``centred``: the
+    same matrix for mean-removed columns, i.e. the exact Schur complement with respect to the constant, computed
+    without the cancellation that forming it from the raw matrix would suffer when signals carry large offsets;
+    and ``constant_index`` (the constant's column or None)."""
+
+    centred: np.ndarray | None = None
+    constant_index: int | None = None
+
+
 def gram_matrix(records, structure: Structure, terms=None, e_list=None, chunk: int = DEFAULT_CHUNK):
     """One pass: ``G = [P Y]ᵀ [P Y]`` over all records (P = candidate columns, Y = outputs) and the row count.
 
     Rows are built ``chunk`` at a time by a compiled loop and added with a BLAS symmetric rank-k update
-    (``dsyrk``), so memory stays at chunk × (M + n_outputs) × 8 bytes whatever N is.
+    (``dsyrk``), so memory stays at chunk × (M + n_outputs) × 8 bytes whatever N is. The rows are shifted by a
+    reference (the column means of the first chunk) before accumulation: S = Σ(p−m)(p−m)ᵀ, s = Σ(p−m); then
+    G = S + m sᵀ + s mᵀ + N m mᵀ and the centred matrix S − s sᵀ/N keep their precision under large offsets.
+    Returns ``(G, n_rows)`` with G a :class:`GramMatrix`.
     """
     terms = structure.terms if terms is None else terms
     M = len(terms)
     n_out = structure.n_outputs
     K = M + n_out
-    G = np.zeros((K, K), order="F")
+    S = np.zeros((K, K), order="F")
     tab = _term_table(terms)
     col = np.array([structure.column_of(r) for r in range(len(structure.regressors))], dtype=np.int64)
     lag = np.array([lg for _, _, lg in structure.regressors], dtype=np.int64)
     L = structure.max_lag
-    n_rows = 0
     buf = np.empty((max(1, int(chunk)), K))
+    ssum = np.zeros(K)
+    shift = None
     with blas_threads():
-        n_rows = _accumulate(records, structure, e_list, chunk, L, col, lag, tab, n_out, buf, G)
-    G = np.triu(G) + np.triu(G, 1).T
-    return np.ascontiguousarray(G), n_rows
-
-
-def _accumulate(records, structure, e_list, chunk, L, col, lag, tab, n_out, buf, G) -> int:
-    n_rows = 0
-    for idx, rec in enumerate(records):
-        Z = _signal_matrix(rec, structure, None if e_list is None else e_list[idx])
-        N = Z.shape[0]
-        for a in range(L, N, chunk):
-            n = min(N, a + chunk) - a
-            b = buf[:n]
-            _fill_rows(Z, a, n, col, lag, tab, n_out, b)
-            # b is C-ordered (n × K): its transpose is a Fortran K × n matrix, so syrk computes bᵀb without a copy
-            G2 = _dsyrk(1.0, b.T, beta=1.0, c=G, trans=0, lower=0, overwrite_c=1)
-            if G2 is not G:  # pragma: no cover - f2py copied (should not happen for a Fortran-ordered G)
-                G[...] = G2
-            n_rows += n
-    return n_rows
+        n_rows = 0
+        for idx, rec in enumerate(records):
+            Z = _signal_matrix(rec, structure, None if e_list is None else e_list[idx])
+            N = Z.shape[0]
+            for a in range(L, N, chunk):
+                n = min(N, a + chunk) - a
+                b = buf[:n]
+                if shift is None:
+                    _fill_rows(Z, a, n, col, lag, tab, n_out, np.zeros(K), b)
+                    shift = b.mean(axis=0)
+                _fill_rows(Z, a, n, col, lag, tab, n_out, shift, b)
+                # b is C-ordered (n × K): its transpose is a Fortran K × n matrix, so syrk computes bᵀb without a copy
+                S2 = _dsyrk(1.0, b.T, beta=1.0, c=S, trans=0, lower=0, overwrite_c=1)
+                if S2 is not S:  # pragma: no cover - f2py copied (should not happen for a Fortran-ordered S)
+                    S[...] = S2
+                ssum += b.sum(axis=0)
+                n_rows += n
+    if shift is None:
+        shift = np.zeros(K)
+    S = np.triu(S) + np.triu(S, 1).T
+    G = S + np.outer(shift, ssum) + np.outer(ssum, shift) + n_rows * np.outer(shift, shift)
+    out = np.ascontiguousarray(G).view(GramMatrix)
+    const = [j for j, t in enumerate(terms) if len(t) == 0]
+    out.constant_index = const[0] if const else None
+    out.centred = (S - np.outer(ssum, ssum) / max(n_rows, 1)) if const else None
+    return out, n_rows
 
 
 # ---------------------------------------------------------------------------------------------------- FROLS
@@ -257,7 +278,8 @@ class FrolsResult:
     err: list[float]               # ERR of each selected term (eq. 2-20)
     criterion_values: list[float]  # information criterion after 1, 2, ... terms (nan for criterion="err")
     n_samples: int
-    ssr: list[float] = field(default_factory=list)  # residual sum of squares after each term
+    ssr: list[float] = field(default_factory=list)  # residual sum of squares after each kept term
+    scored: list[int] = field(default_factory=list)  # every term added in the pass (criterion_values[i] ↔ scored[:i+1])
 
 
 def _info_criterion(name: str, n_theta: int, n_samples: int, e_var: float) -> float:
@@ -299,12 +321,16 @@ def frols(G: np.ndarray, n_candidates: int, output: int = 0, n_samples: int = 0,
     M = n_candidates
     iy = M + output
     keep = list(range(M)) + [iy]
-    A = G[np.ix_(keep, keep)].astype(float, copy=True)
+    centred = getattr(G, "centred", None)
+    const = getattr(G, "constant_index", None)
+    A = np.asarray(G)[np.ix_(keep, keep)].astype(float, copy=True)
     iy = M
     yy = float(A[iy, iy])
     if yy <= 0:
         raise DataError("output is identically zero: nothing to identify")
     diag0 = np.diag(A)[:M].copy()
+    # exact-fit reference: the output's energy about its mean when a constant can absorb the mean
+    exact_ref = yy if centred is None else max(float(np.asarray(centred)[M + output, M + output]), 1e-300)
     avail = np.ones(M, bool) if allowed is None else np.asarray(allowed, bool).copy()
     avail &= diag0 > 0
     max_terms = M if max_terms is None else int(min(max_terms, M))
@@ -313,11 +339,21 @@ def frols(G: np.ndarray, n_candidates: int, output: int = 0, n_samples: int = 0,
     ssr: list[float] = []
     ic: list[float] = []
 
+    def schur(j: int) -> None:
+        colj = A[:, j].copy()
+        A[:, :] -= np.outer(colj, colj / colj[j])
+
     def pivot(j: int) -> float:
         d = A[j, j]
         e = A[j, iy] ** 2 / (d * yy)
-        colj = A[:, j].copy()
-        A[:, :] -= np.outer(colj, colj / d)
+        if j == const and centred is not None:
+            # Schur complement w.r.t. the constant = the centred Gram (exact); re-apply the earlier pivots on it
+            A[:, :] = np.asarray(centred)[np.ix_(keep, keep)]
+            for k in selected:
+                schur(k)
+            diag0[:] = np.where(np.arange(M) == const, diag0, np.diag(np.asarray(centred)[np.ix_(keep, keep)])[:M])
+        else:
+            schur(j)
         avail[j] = False
         selected.append(j)
         errs.append(float(e))
@@ -332,7 +368,7 @@ def frols(G: np.ndarray, n_candidates: int, output: int = 0, n_samples: int = 0,
     n_forced = len(selected)
 
     while len(selected) < max_terms:
-        if 1.0 - sum(errs) < EXACT_FIT_TOL or (ssr and ssr[-1] <= EXACT_FIT_TOL * yy):
+        if ssr and ssr[-1] <= EXACT_FIT_TOL * exact_ref:
             break
         d = np.diag(A)[:M]
         valid = avail & (d > DEPENDENT_TOL * diag0)
@@ -346,12 +382,13 @@ def frols(G: np.ndarray, n_candidates: int, output: int = 0, n_samples: int = 0,
         if criterion == "err" and not continue_err and 1.0 - sum(errs) < rho:
             break
 
+    scored = list(selected)
     if criterion != "err" and len(selected) > n_forced:
         vals = np.asarray(ic[n_forced:])
         best = n_forced + int(np.argmin(vals)) + 1
-        # exact fit (round-off residual) → the IC is -inf or meaningless; keep all terms up to the exact fit
-        selected, errs, ic, ssr = selected[:best], errs[:best], ic, ssr[:best]
-    return FrolsResult(selected=selected, err=errs, criterion_values=ic, n_samples=n_samples, ssr=ssr)
+        # an exact fit (round-off residual, IC → −∞) ends the pass, so the minimiser is the exact model
+        selected, errs, ssr = selected[:best], errs[:best], ssr[:best]
+    return FrolsResult(selected=selected, err=errs, criterion_values=ic, n_samples=n_samples, ssr=ssr, scored=scored)
 
 
 # ---------------------------------------------------------------------------------------------------- final LS

@@ -130,8 +130,9 @@ class ARMAX(_LinearBase):
         self.structure_ = s
         theta, stderr, e_list, iters = self._els(records, s)
         self.els_iterations_ = iters
-        if self.method == "pem":
-            theta, stderr, self.pem_status_ = self._pem(records, s, theta)
+        # PEM: minimise; ELS: keep the ELS estimate but take its standard errors from the prediction-error
+        # gradient (regressors filtered by 1/C) — plain LS errors ignore the estimated e and were ~1.6× too small.
+        theta, stderr, self.pem_status_ = self._pem(records, s, theta, optimise=self.method == "pem")
         self.terms_ = [list(s.terms)]
         self.theta_ = [np.asarray(theta)]
         self.stderr_ = [np.asarray(stderr)]
@@ -164,7 +165,7 @@ class ARMAX(_LinearBase):
                 idx[s.regressors[t[0]][0]].append(j)
         return idx
 
-    def _pem(self, records, s, theta0):
+    def _pem(self, records, s, theta0, optimise: bool = True):
         L = s.max_lag
         idx = self._layout(s)
         proc_idx = idx["y"] + idx["u"] + idx["c"]
@@ -212,14 +213,18 @@ class ARMAX(_LinearBase):
             return np.vstack(cols)
 
         x0 = np.concatenate([np.asarray(theta0)[proc_idx], np.asarray(theta0)[idx["e"]]])
-        if not np.all(np.abs(np.roots(split(x0)[1])) < 1.0):
+        if optimise and not np.all(np.abs(np.roots(split(x0)[1])) < 1.0):
             # ELS gave an unstable noise model: start PEM from C = 1 instead.
             x0[len(proc_idx):] = 0.0
-        sol = _scipy_lsq(residual, x0, jac=jac, method="lm", xtol=1e-12, ftol=1e-12, gtol=1e-12, max_nfev=200 * len(x0))
-        r = sol.fun
-        n, p = r.size, sol.x.size
+        if optimise:
+            sol = _scipy_lsq(residual, x0, jac=jac, method="lm", xtol=1e-12, ftol=1e-12, gtol=1e-12,
+                             max_nfev=200 * len(x0))
+            x, r, J, message = sol.x, sol.fun, sol.jac, str(sol.message)
+        else:
+            x = np.concatenate([np.asarray(theta0)[proc_idx], np.asarray(theta0)[idx["e"]]])
+            r, J, message = residual(x), jac(x), "extended least squares"
+        n, p = r.size, x.size
         sigma2 = float(r @ r) / max(n - p, 1)
-        J = sol.jac
         try:
             cov = sigma2 * np.linalg.inv(J.T @ J)
             se = np.sqrt(np.maximum(np.diag(cov), 0.0))
@@ -228,12 +233,12 @@ class ARMAX(_LinearBase):
         theta = np.empty(len(s.terms))
         stderr = np.empty(len(s.terms))
         order = proc_idx + idx["e"]
-        theta[order] = sol.x
+        theta[order] = x
         stderr[order] = se
-        if not np.all(np.abs(np.roots(split(sol.x)[1])) < 1.0):
-            raise DataError("armax: the prediction-error fit converged to a noise polynomial C with roots outside the "
+        if not np.all(np.abs(np.roots(split(x)[1])) < 1.0):
+            raise DataError(f"armax ({self.method}): the fit gave a noise polynomial C with roots outside the "
                             "unit circle (non-invertible); try method=els or other orders")
-        return theta, stderr, str(sol.message)
+        return theta, stderr, message
 
     def _extra_state(self) -> dict[str, Any]:
         return {}

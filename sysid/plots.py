@@ -45,12 +45,19 @@ def plot_residuals(e: np.ndarray, fs: float, path, title: str = "one-step residu
     fig, ax = plt.subplots(1, 3, figsize=(13, 3.4))
     ax[0].plot(t, e, lw=0.5)
     ax[0].set(xlabel="time [s]", ylabel=f"residual [{unit}]" if unit else "residual", title=title)
-    ax[1].hist(e, bins=60, density=True, alpha=0.7)
-    sd = e.std() or 1.0
-    x = np.linspace(e.min(), e.max(), 200)
-    ax[1].plot(x, np.exp(-0.5 * ((x - e.mean()) / sd) ** 2) / (sd * np.sqrt(2 * np.pi)), "r-", lw=1)
-    ax[1].set(xlabel="residual", ylabel="density", title="histogram vs normal")
-    s = residual_spectrum(e, fs)
+    ef = e[np.isfinite(e)]
+    spread = float(np.ptp(ef)) if ef.size else 0.0
+    if ef.size and spread > 1e-9 * max(1.0, float(np.abs(ef).max())):
+        ax[1].hist(ef, bins=60, density=True, alpha=0.7)
+        sd = float(ef.std())
+        x = np.linspace(ef.min(), ef.max(), 200)
+        ax[1].plot(x, np.exp(-0.5 * ((x - ef.mean()) / sd) ** 2) / (sd * np.sqrt(2 * np.pi)), "r-", lw=1)
+        ax[1].set(xlabel="residual", ylabel="density", title="histogram vs normal")
+    else:  # (numerically) constant residual: nothing to histogram
+        ax[1].set(title=f"constant residual {ef.mean() if ef.size else float('nan'):.4g}")
+    if ef.size < 8:
+        return _save(fig, path)
+    s = residual_spectrum(ef, fs)
     ax[2].semilogy(s["f_hz"], np.maximum(s["psd"], 1e-300), lw=0.8)
     ax[2].set(xlabel="frequency [Hz]", ylabel="PSD", title=f"spectrum (flatness {s['flatness']:.2f})")
     return _save(fig, path)
@@ -70,7 +77,7 @@ def plot_correlation_tests(result: dict[str, Any], path, title: str = "residual 
         ax.set(title=f"{t['name']} ({'pass' if t['passed'] else 'fail'})", xlabel="lag τ")
     np.atleast_1d(axes)[0].set_ylabel("φ(τ)")
     np.atleast_1d(axes)[0].set_ylim(-1, 1)
-    fig.suptitle(f"{title}: band ±{result['band']:.3g} (95 %, N = {result['n']})")
+    fig.suptitle(f"{title}: band ±{result['band']:.3g} (95 %, N = {result['n']})", y=1.06)
     return _save(fig, path)
 
 
@@ -131,12 +138,11 @@ def identification_report(model, record, out_dir, max_lag: int = 20) -> dict[str
     y1 = y1 if y1.ndim == 1 else y1[:, 0]
     yf = yf if yf.ndim == 1 else yf[:, 0]
     e = (y - y1)[L:]
-    files = {
-        "residuals": plot_residuals(e, record.fs, out / "residuals.png", unit=record.units.get("y", "")),
-        "correlation_tests": plot_correlation_tests(correlation_tests(e, u[L:], max_lag=min(max_lag, e.size - 2)),
-                                                    out / "correlation_tests.png"),
-        "scatter_one_step": plot_scatter(y[L:], y1[L:], out / "scatter_one_step.png", "one-step"),
-        "scatter_free_run": plot_scatter(y[L:], yf[L:], out / "scatter_free_run.png", "free run"),
-        "horizons": plot_horizon_residuals(model, record, out / "horizons.png"),
-    }
+    files = {"residuals": plot_residuals(e, record.fs, out / "residuals.png", unit=record.units.get("y", ""))}
+    if np.isfinite(e).all() and e.size > 3:  # a non-finite one-step residual has no correlation to test
+        files["correlation_tests"] = plot_correlation_tests(
+            correlation_tests(e, u[L:], max_lag=min(max_lag, e.size - 2)), out / "correlation_tests.png")
+    files["scatter_one_step"] = plot_scatter(y[L:], y1[L:], out / "scatter_one_step.png", "one-step")
+    files["scatter_free_run"] = plot_scatter(y[L:], yf[L:], out / "scatter_free_run.png", "free run")
+    files["horizons"] = plot_horizon_residuals(model, record, out / "horizons.png")
     return {k: str(v) for k, v in files.items()}

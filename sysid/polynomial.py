@@ -111,7 +111,8 @@ class PolynomialModel(Identifier):
             col = [s.column_of(r) for r in range(len(s.regressors))]
             lag = [lg for _, _, lg in s.regressors]
             self._compiled = sim.CompiledModel(n_out, s.n_inputs, s.has_e, col, lag, terms,
-                                               [len(t) for t in self.terms_], theta, s.max_lag)
+                                               [len(t) for t in self.terms_], theta, s.max_lag,
+                                               kinds=[k for k, _, _ in s.regressors])
         return self._compiled
 
     def _check_fitted(self) -> None:
@@ -300,14 +301,15 @@ class NARMAXPoly(PolynomialModel):
     """Polynomial NARMAX by ELS-FROLS (§2.6 steps 1–4, eq. 2-6/2-7).
 
     Parameters as :class:`NARXPoly`, plus ``ne`` (noise lags e(k−1)..e(k−ne)), ``rho_n`` (a noise term is added
-    while its ERR ≥ rho_n, when ``criterion="err"``; otherwise the information criterion decides), ``els_iter``
+    while its ERR ≥ rho_n, when ``criterion="err"``; default 1e-5 = rho_p/10 as in the dissertation's Table 5.1;
+    otherwise the information criterion decides), ``els_iter``
     (most extended-least-squares iterations) and ``els_tol`` (relative parameter change that ends them).
     """
 
     name = "narmax-poly"
 
     def __init__(self, ny: int = 2, nu: int = 2, ne: int = 2, nk: int = 1, degree: int = 2, criterion: str = "bic",
-                 rho_p: float = 1e-4, rho_n: float = 1e-3, max_terms: int = 40, els_iter: int = 20,
+                 rho_p: float = 1e-4, rho_n: float = 1e-5, max_terms: int = 40, els_iter: int = 20,
                  els_tol: float = 1e-6, constant: bool = True, chunk: int = fr.DEFAULT_CHUNK):
         self.ny = ny
         self.nu = nu
@@ -377,7 +379,15 @@ class NARMAXPoly(PolynomialModel):
                 terms_all.append(terms)
                 errs_all.append(res.err)
                 lss.append(ls)
-            new_e = self._recursive_residuals(records, s, terms_all, [ls.theta for ls in lss])
+            thetas = [ls.theta for ls in lss]
+            new_e = self._recursive_residuals(records, s, terms_all, thetas)
+            # The recursion e(t) = y(t) − ŷ(t|t−1) is unstable while the noise model is (e.g. an early estimate of an
+            # MA coefficient above 1): then take the plain ELS residual y − Pθ with the previous e, which is bounded.
+            plain = fr.fitted_residuals(records, s, terms_all, thetas, e_list=e_list, chunk=self.chunk)
+            with np.errstate(over="ignore", invalid="ignore"):
+                finite = all(np.isfinite(e).all() for e in new_e)
+                if not finite or max(float(np.std(e)) for e in new_e) > 2.0 * max(float(np.std(e)) for e in plain):
+                    new_e = plain
             self.els_iterations_ = it + 1
             cur = (terms_all, [ls.theta for ls in lss])
             done = False

@@ -26,6 +26,7 @@ from typing import Any, Iterable
 
 import numpy as np
 import scipy.fft
+from numba import njit
 from scipy import signal as sps
 
 from sysid.errors import ConfigError, DataError
@@ -120,17 +121,68 @@ def detrend(x: np.ndarray, order: int = 1, return_coefficients: bool = False):
 
 
 # ---------------------------------------------------------------------------------------------- outliers / missing
-def _hampel_1d(x: np.ndarray, k: int, n_sigma: float, chunk: int = 1 << 20):
+@njit(cache=True)
+def _hampel_core(xp: np.ndarray, n: int, k: int, med: np.ndarray, mad: np.ndarray) -> None:  # pragma: no cover - numba
+    """Running median and MAD of the windows ``xp[i : i + 2k + 1]``, ``i = 0..n-1``, in O(window) per sample.
+
+    A sorted copy of the window is updated by one deletion and one insertion per step; the MAD (the median
+    of |x_j - m|) is the k-th smallest deviation, found by walking outward from the median of the sorted
+    window (the deviations on each side are already sorted).
+    """
+    w = 2 * k + 1
+    s = np.sort(xp[:w].copy())
+    for i in range(n):
+        if i > 0:
+            old = xp[i - 1]
+            new = xp[i + w - 1]
+            # delete old (binary search for its position)
+            lo, hi = 0, w
+            while lo < hi:
+                mid = (lo + hi) // 2
+                if s[mid] < old:
+                    lo = mid + 1
+                else:
+                    hi = mid
+            for j in range(lo, w - 1):
+                s[j] = s[j + 1]
+            # insert new into s[0 : w-1]
+            lo, hi = 0, w - 1
+            while lo < hi:
+                mid = (lo + hi) // 2
+                if s[mid] < new:
+                    lo = mid + 1
+                else:
+                    hi = mid
+            for j in range(w - 1, lo, -1):
+                s[j] = s[j - 1]
+            s[lo] = new
+        m = s[k]
+        med[i] = m
+        # k-th smallest of |s_j - m| (0-based; index k itself has deviation 0)
+        left, right = k - 1, k + 1
+        d = 0.0
+        for _ in range(k):
+            if left < 0:
+                d = s[right] - m
+                right += 1
+            elif right >= w:
+                d = m - s[left]
+                left -= 1
+            elif m - s[left] <= s[right] - m:
+                d = m - s[left]
+                left -= 1
+            else:
+                d = s[right] - m
+                right += 1
+        mad[i] = d
+
+
+def _hampel_1d(x: np.ndarray, k: int, n_sigma: float):
     n = x.size
     pad = np.pad(x, k, mode="reflect") if n > k else np.pad(x, k, mode="edge")
-    win = np.lib.stride_tricks.sliding_window_view(pad, 2 * k + 1)
     med = np.empty(n)
     mad = np.empty(n)
-    for a in range(0, n, chunk):
-        w = win[a : a + chunk]
-        m = np.median(w, axis=1)
-        med[a : a + chunk] = m
-        mad[a : a + chunk] = np.median(np.abs(w - m[:, None]), axis=1)
+    _hampel_core(np.ascontiguousarray(pad), n, k, med, mad)
     sigma = 1.482602218505602 * mad  # MAD -> standard deviation of a Gaussian: 1/Phi^-1(3/4)
     out = np.abs(x - med) > n_sigma * sigma
     return out, med, sigma

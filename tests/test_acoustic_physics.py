@@ -216,3 +216,12 @@ def test_even_term_makes_even_harmonics():
     a = 10 ** 2.5 * 0.2
     assert h[1] / h[0] == pytest.approx(0.05 * a / (2 * 105.0), rel=1e-6)  # HD2 = k2 a / (2 A_sat)
     assert h[2] / h[0] < 1e-12
+
+
+def test_compiled_rapp_equals_its_formula():
+    x = np.random.default_rng(0).standard_normal(20000) * 0.4
+    v = 10**2.5 * x
+    for p, k2 in ((2.5, 0.0), (2.3, 0.03)):
+        ref = v / (1 + np.abs(v / 105.0) ** (2 * p)) ** (1 / (2 * p))
+        ref = 2 * (ref + k2 * ref**2 / 105.0)
+        np.testing.assert_allclose(amplifier_voltage(x, 50.0, "rapp", 105.0, p, k2), ref, rtol=1e-12, atol=1e-10)

@@ -104,6 +104,17 @@ def test_fft_convolution_equals_direct_convolution_and_no_wrap():
     assert np.sqrt(np.mean(tail**2)) < 1e-3 * np.max(np.abs(h))
 
 
+def test_overlap_save_blocks_equal_direct_convolution(monkeypatch):
+    import twins.acoustic.twin as tmod
+
+    monkeypatch.setattr(tmod, "_OLS_MIN_BLOCK", 256)  # force many overlap-save blocks on a short record
+    tw = AcousticTwin(effects=[]).with_params(reverb_orders=0)
+    fs = 5e6
+    h = tw.impulse_response(fs)
+    v = np.random.default_rng(1).standard_normal(5 * h.size + 123)
+    np.testing.assert_allclose(tw.linear(v, fs), np.convolve(v, h)[: v.size], atol=1e-10 * np.abs(h).max())
+
+
 def test_simulate_is_measure_of_linear_of_amplifier():
     tw = AcousticTwin(seed=3)
     u = _burst(n=2000)
@@ -265,3 +276,37 @@ def test_sweep_cli_report_and_errors(tmp_path, capsys):
     assert main(["sweep", "acoustic", "nope=1"]) == 2
     assert main(["sweep", "acoustic", "fluid=honey"]) == 2
     assert "valid" in capsys.readouterr().err
+
+
+def test_calibrate_cli_on_a_vna_file(tmp_path, capsys):
+    from benchmarks.cli import main
+    from sysid.io import write_record
+
+    truth = AcousticTwin.from_options(set_=["steel_thickness_m=0.0061"])
+    write_record(truth.generate("vna-sweep", f_start=0.85e6, f_stop=1.4e6, points=400), tmp_path / "vna.npz")
+    assert main(["calibrate", "acoustic", "--data", str(tmp_path / "vna.npz"), "--fit",
+                 "steel_thickness_m,output_gain", "--json", "-o", str(tmp_path / "p.json")]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["parameters"]["steel_thickness_m"]["value"] == pytest.approx(0.0061, rel=1e-4)
+    again = AcousticTwin.from_options(params_file=tmp_path / "p.json")
+    assert again.params.steel_thickness_m == pytest.approx(0.0061, rel=1e-4)
+
+
+def test_fmu_interface_stages():
+    tw = AcousticTwin()
+    h = tw.frequency_response(np.array([0.0, 940e3, 1162e3]))
+    assert h.dtype == complex and h[0] == 0 and np.all(np.abs(h[1:]) > 0.1)
+    assert tw.amplifier(np.array([0.01]))[0] == pytest.approx(2 * 10**2.5 * 0.01, rel=1e-4)
+    with pytest.raises(NotImplementedError):
+        tw.make_stepper(100e6)
+
+
+def test_calibrate_time_of_flight_parameter_by_output_error():
+    """A temperature offset only moves the phase: fitted on the time record (output error), not on |H|."""
+    truth = AcousticTwin(effects=["measurement_noise", "temperature_offset"]).with_params(
+        temperature_offset_k=1.7, reverb_orders=1)
+    rec = truth.generate("thesis-chirp-1ms", duration=0.5e-3, warmup_s=1e-3, fs=20e6)
+    start = AcousticTwin(effects=["temperature_offset"]).with_params(reverb_orders=1, temperature_offset_k=0.0)
+    res = start.calibrate(rec, names=["temperature_offset_k"])
+    assert res.fitted["temperature_offset_k"] == pytest.approx(1.7, abs=0.01)
+    assert "output error" in res.message and res.twin.effects == start.effects

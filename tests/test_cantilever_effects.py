@@ -125,10 +125,11 @@ def test_saturation_compresses_large_amplitudes_only():
     assert d[np.abs(big) < 30].max() < 0.2 * d[np.abs(big) > 90].max()
 
 
-def test_rate_dependent_hysteresis_widens_loops_at_high_rate_only():
+@pytest.mark.parametrize("model", ["bouc-wen", "prandtl-ishlinskii"])
+def test_rate_dependent_hysteresis_widens_loops_at_high_rate_only(model):
     def width(tw_eff, f, fs, periods):
         u = sine(f, periods, fs)
-        y = CantileverTwin(effects=tw_eff).simulate(u, fs)
+        y = CantileverTwin(effects=tw_eff).with_params(hysteresis=model).simulate(u, fs)
         sl = last_period(u.size, fs, f)
         return loop_metrics(u[sl], y[sl], f, fs)["area"]
 
@@ -138,12 +139,13 @@ def test_rate_dependent_hysteresis_widens_loops_at_high_rate_only():
     assert fast[1] > 1.2 * fast[0]
 
 
-def test_asymmetric_hysteresis_only_for_negative_voltage():
+@pytest.mark.parametrize("model", ["bouc-wen", "prandtl-ishlinskii"])
+def test_asymmetric_hysteresis_only_for_negative_voltage(model):
     pos = sine(2.0, 2, 2000.0, amp=50.0, offset=50.0)  # 0 … 100 V, never negative
-    off, on = pair("asymmetric_hysteresis", pos, 2000.0)
+    off, on = pair("asymmetric_hysteresis", pos, 2000.0, hysteresis=model)
     assert np.array_equal(off, on)
     sym = sine(2.0, 2, 2000.0)
-    off, on = pair("asymmetric_hysteresis", sym, 2000.0)
+    off, on = pair("asymmetric_hysteresis", sym, 2000.0, hysteresis=model)
     d = on - off
     assert np.max(np.abs(d[sym < -20])) > 0.02 * np.ptp(off)
     # the negative half of the loop widens more than the positive half
@@ -169,3 +171,18 @@ def test_amplifier_bandwidth_lag_grows_with_frequency():
     assert lag == pytest.approx(math.degrees(math.atan(f / fa)), abs=0.2)
     off, on = pair("amplifier_bandwidth", sine(2.0, 2, 2000.0), 2000.0)
     assert np.max(np.abs(on - off)) < 1e-3 * np.ptp(off)
+
+
+def test_figures_write_pngs(tmp_path):
+    from twins.cantilever.figures import plot_multisine_spectra, plot_sine_loops
+
+    meas = CantileverTwin(effects=["rate_dependent_hysteresis", "second_mode", "sensor_lowpass"])
+    rec = meas.generate("thesis-sines", freqs_hz="1-50-500", min_duration_s=0.1)
+    assert [s["freq_hz"] for s in rec.meta["segments"]] == [1.0, 50.0, 500.0]
+    p = plot_sine_loops(rec, CantileverTwin().noise_free(), tmp_path / "f43.png")
+    assert p.stat().st_size > 10_000
+    ms = meas.generate("thesis-multisine", duration_s=1.0)
+    p = plot_multisine_spectra(ms, tmp_path / "f34.png", twin=meas)
+    assert p.stat().st_size > 10_000
+    with pytest.raises(ValueError, match="segments"):
+        plot_sine_loops(ms, meas, tmp_path / "x.png")

@@ -29,13 +29,7 @@ def test_noise_free_narx_exact_recovery(criterion):
 
 
 def test_degree3_larger_lags_exact():
-    rng = np.random.default_rng(5)
-    n = 3000
-    u = rng.uniform(-1, 1, n)
-    y = np.zeros(n)
-    for k in range(4, n):
-        y[k] = 0.4 * y[k - 1] - 0.2 * y[k - 3] + 0.7 * u[k - 2] + 0.15 * u[k - 1] * u[k - 3] ** 2 + 0.05
-    m = NARXPoly(ny=4, nu=4, degree=3).fit(Record(u, y, fs=1.0))
+    m = NARXPoly(ny=4, nu=4, degree=3).fit(_degree3_record())
     want = {"y(k-1)": 0.4, "y(k-3)": -0.2, "u(k-2)": 0.7, "u(k-1)*u(k-3)^2": 0.15, "1": 0.05}
     got = table(m)
     assert set(got) == set(want)
@@ -104,11 +98,17 @@ def test_zero_start_candidate_column_does_not_change_selection():
     assert max(abs(got[k] - v) for k, v in TRUE_TERMS.items()) < 1e-8
 
 
-def test_k_step_equals_one_step_and_free_run():
-    rec = narx_record(600, seed=7, noise=0.01)
-    m = NARXPoly(ny=2, nu=2, degree=2, criterion="bic").fit(rec)
+@pytest.mark.parametrize("cls", [NARXPoly, NARMAXPoly])
+def test_k_step_equals_one_step_and_free_run(cls):
+    from sysid import simulate as sim
+
+    rec = narmax_record(600, seed=7)
+    m = cls(ny=2, nu=2, degree=2, criterion="bic").fit(rec)
     y1 = m.predict(rec, 1)
-    np.testing.assert_array_equal(m.predict(rec, horizon=1), y1)
+    # the k-step machinery itself at k = 1 (predict(horizon=1) takes the one-step path)
+    yk1, bad = sim.k_step(m.compiled(), rec.u.reshape(-1, 1), rec.y.reshape(-1, 1), 1)
+    assert bad == -1
+    np.testing.assert_array_equal(yk1[:, 0], y1)
     yk = m.predict(rec, len(rec))
     yf = m.predict(rec, None)
     np.testing.assert_array_equal(yk, yf)
@@ -217,18 +217,34 @@ def test_narmax_els_recovers_noise_term_and_whitens_residuals():
         assert np.std(e[2:]) < 0.9 * np.std(e_narx[2:])
 
 
-def test_sysidentpy_cross_check_terms_and_parameters():
+def _degree3_record():
+    rng = np.random.default_rng(5)
+    n = 3000
+    u = rng.uniform(-1, 1, n)
+    y = np.zeros(n)
+    for k in range(4, n):
+        y[k] = 0.4 * y[k - 1] - 0.2 * y[k - 3] + 0.7 * u[k - 2] + 0.15 * u[k - 1] * u[k - 3] ** 2 + 0.05
+    return Record(u, y, fs=1.0)
+
+
+@pytest.mark.parametrize("case", ["degree2-lags2", "degree3-lags4-constant"])
+def test_sysidentpy_cross_check_terms_and_parameters(case):
     pytest.importorskip("sysidentpy", reason="SysIdentPy is not installed: cross-check skipped")
     from sysidentpy.basis_function import Polynomial
     from sysidentpy.model_structure_selection import FROLS
     from sysidentpy.parameter_estimation import LeastSquares
 
-    rec = narx_record(1000, seed=21)
-    ref = FROLS(order_selection=False, n_terms=4, ylag=2, xlag=2, estimator=LeastSquares(),
-                basis_function=Polynomial(degree=2), model_type="NARMAX")
+    if case == "degree2-lags2":
+        rec, lags, degree, true = narx_record(1000, seed=21), 2, 2, TRUE_TERMS
+    else:
+        rec, lags, degree = _degree3_record(), 4, 3
+        true = {"y(k-1)": 0.4, "y(k-3)": -0.2, "u(k-2)": 0.7, "u(k-1)*u(k-3)^2": 0.15, "1": 0.05}
+    n_terms = len(true)
+    ref = FROLS(order_selection=False, n_terms=n_terms, ylag=lags, xlag=lags, estimator=LeastSquares(),
+                basis_function=Polynomial(degree=degree), model_type="NARMAX")
     ref.fit(X=rec.u.reshape(-1, 1), y=rec.y.reshape(-1, 1))
 
-    def code_name(code):
+    def code_name(code):  # SysIdentPy's regressor codes: 1000 + j = y(k-j), 2000 + j = x1(k-j), 0 = none
         facs = []
         for c in sorted((int(c) for c in code if c != 0), key=lambda c: (c // 1000 != 1, c)):
             facs.append(("y" if c // 1000 == 1 else "u") + f"(k-{c % 1000})")
@@ -240,10 +256,121 @@ def test_sysidentpy_cross_check_terms_and_parameters():
 
     ref_terms = [code_name(c) for c in ref.final_model]
     ref_theta = dict(zip(ref_terms, ref.theta.ravel()))
-    m = NARXPoly(ny=2, nu=2, degree=2, criterion="err", rho_p=1e-10, max_terms=4).fit(rec)
+    m = NARXPoly(ny=lags, nu=lags, degree=degree, criterion="err", rho_p=1e-10, max_terms=n_terms).fit(rec)
     ours = m.term_table()
     assert [r["term"] for r in ours] == ref_terms  # same terms, same order of selection
     for r in ours:
         assert abs(r["parameter"] - ref_theta[r["term"]]) <= 1e-6 * abs(ref_theta[r["term"]])
-    np.testing.assert_allclose([r["err"] for r in ours], np.asarray(ref.err[:4]).ravel(), rtol=1e-6)
-    assert set(ref_terms) == set(TRUE_TERMS)
+    np.testing.assert_allclose([r["err"] for r in ours], np.asarray(ref.err[:n_terms]).ravel(), rtol=1e-6)
+    assert set(ref_terms) == set(true)
+    # and our default (BIC, no term count given) finds exactly the true model too
+    assert set(table(NARXPoly(ny=lags, nu=lags, degree=degree).fit(rec))) == set(true)
+
+
+def test_incremental_order_selection_equals_refits():
+    """The criterion of every model size, from the single FROLS pass, equals N ln(SSR_k/N) + k ln N of a
+    separate least-squares refit (numpy lstsq) on the first k selected terms."""
+    rec = narx_record(800, seed=9, noise=0.05)
+    m = NARXPoly(ny=2, nu=2, degree=2, criterion="bic", max_terms=8).fit(rec)
+    s = m.structure_
+    G, n = fr.gram_matrix([rec], s)
+    res = fr.frols(G, len(s.terms), 0, n, "bic", max_terms=8)
+    X = np.vstack([x for x, _ in fr.lagged_chunks([rec], s)])
+    P = fr.term_columns(X, s.terms)
+    y = rec.y[2:]
+    for k in range(1, 9):
+        A = P[:, res.scored[:k]]
+        ssr = np.sum((y - A @ np.linalg.lstsq(A, y, rcond=None)[0]) ** 2)
+        assert res.criterion_values[k - 1] == pytest.approx(n * np.log(ssr / n) + k * np.log(n), rel=1e-9)
+    assert m.n_parameters_ == int(np.argmin(res.criterion_values)) + 1
+
+
+def test_bic_default_finds_true_structure_aic_overfits():
+    sizes = {"bic": [], "aic": []}
+    for seed in range(4):
+        rec = narx_record(5000, seed=seed, noise=0.02)
+        for c in sizes:
+            m = NARXPoly(ny=2, nu=2, degree=2, criterion=c).fit(rec)
+            sizes[c].append(m.n_parameters_)
+            if c == "bic":
+                assert set(table(m)) == set(TRUE_TERMS)
+    assert NARXPoly().criterion == "bic"
+    assert sum(sizes["aic"]) > sum(sizes["bic"])
+
+
+def test_narmax_k_step_limits():
+    rec = narmax_record(800)
+    m = NARMAXPoly(ny=2, nu=2, ne=2, degree=2).fit(rec)
+    y1 = m.predict(rec, 1)
+    # one-step residuals are the recursion e(t) = y(t) - ŷ(t|t-1) used by the noise terms
+    np.testing.assert_array_equal(m.predict(rec, 1), y1)
+    np.testing.assert_array_equal(m.predict(rec, len(rec)), m.predict(rec, None))
+    y3 = m.predict(rec, 3)
+    assert np.std((rec.y - y1)[2:]) < np.std((rec.y - y3)[2:]) <= np.std((rec.y - m.predict(rec, None))[2:]) * 1.01
+
+
+def test_large_offset_keeps_precision_and_matches_sysidentpy():
+    """Output offset 1000× its variation: the centred Gram keeps the orthogonalisation exact (parameters to
+    1e-9 relative) and the selection equals SysIdentPy's Householder FROLS term for term."""
+    rng = np.random.default_rng(0)
+    n, off = 2000, 1e3
+    u = rng.uniform(-1, 1, n)
+    y = np.full(n, off)
+    for k in range(2, n):
+        y[k] = 0.5 * y[k - 1] + 0.9 * u[k - 2] - 0.3 * u[k - 1] ** 2 + 0.5 * off
+    rec = Record(u, y, fs=1.0)
+    G, N = fr.gram_matrix([rec], NARXPoly(ny=2, nu=2).fit(rec).structure_)
+    X = np.vstack([x for x, _ in fr.lagged_chunks([rec], NARXPoly(ny=2, nu=2).fit(rec).structure_)])
+    P = np.c_[fr.term_columns(X, fr.candidate_terms(4, 2)), y[2:]]
+    Pc = P - P.mean(axis=0)
+    np.testing.assert_allclose(G.centred, Pc.T @ Pc, rtol=1e-9, atol=1e-9 * np.abs(Pc.T @ Pc).max())
+    m = NARXPoly(ny=2, nu=2, degree=2, criterion="err", rho_p=1e-14, max_terms=5).fit(rec)
+    got = table(m)
+    for k, v in {"1": 0.5 * off, "y(k-1)": 0.5, "u(k-2)": 0.9, "u(k-1)^2": -0.3}.items():
+        assert abs(got[k] - v) <= 1e-9 * abs(v)
+    pytest.importorskip("sysidentpy", reason="SysIdentPy is not installed: cross-check skipped")
+    from sysidentpy.basis_function import Polynomial
+    from sysidentpy.model_structure_selection import FROLS
+    from sysidentpy.parameter_estimation import LeastSquares
+
+    ref = FROLS(order_selection=False, n_terms=5, ylag=2, xlag=2, estimator=LeastSquares(),
+                basis_function=Polynomial(degree=2))
+    ref.fit(X=u[:, None], y=y[:, None])
+    codes = {(0, 0): "1", (2002, 1001): "y(k-1)*u(k-2)", (1001, 0): "y(k-1)", (2001, 2001): "u(k-1)^2",
+             (2002, 0): "u(k-2)"}
+    assert [r["term"] for r in m.term_table()] == [codes[tuple(int(c) for c in row)] for row in ref.final_model]
+    np.testing.assert_allclose([r["err"] for r in m.term_table()], np.asarray(ref.err[:5]).ravel(), rtol=1e-5, atol=1e-15)
+
+
+def test_mimo_narmax_noise_term_per_output():
+    rng = np.random.default_rng(2)
+    n = 4000
+    u = rng.uniform(-1, 1, (n, 2))
+    e = 0.05 * rng.standard_normal((n, 2))
+    y = np.zeros((n, 2))
+    for k in range(2, n):
+        y[k, 0] = 0.5 * y[k - 1, 0] + 0.8 * u[k - 1, 0] + 0.2 * y[k - 1, 1] * u[k - 1, 1] + 0.7 * e[k - 1, 0] + e[k, 0]
+        y[k, 1] = -0.3 * y[k - 2, 1] + 0.6 * u[k - 1, 1] - 0.25 * u[k - 1, 0] ** 2 + e[k, 1]
+    rec = Record(u, y, fs=1.0)
+    m = NARMAXPoly(ny=2, nu=2, ne=1, degree=2).fit(rec)
+    rows = {(r["output"], r["term"]): r for r in m.term_table()}
+    assert {t for o, t in rows if o == 0} == {"y1(k-1)", "u1(k-1)", "y2(k-1)*u2(k-1)", "e1(k-1)"}
+    assert {t for o, t in rows if o == 1} == {"y2(k-2)", "u2(k-1)", "u1(k-1)^2"}
+    r = rows[(0, "e1(k-1)")]
+    assert abs(r["parameter"] - 0.7) < 3 * r["stderr"]
+    for h in (1, 3, None):
+        assert m.predict(rec, h).shape == (n, 2)
+
+
+def test_narmax_long_record_unstable_early_noise_model_is_survived():
+    """At N = 1e5 the first ELS iteration (on the biased residuals of the process-only fit) proposes a noise
+    model whose one-step recursion is unstable (MA coefficient > 1); ELS must fall back to the bounded residual
+    and still converge to the true structure."""
+    rec = narmax_record(100_000, seed=3)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)
+        m = NARMAXPoly(ny=2, nu=2, ne=3, degree=2).fit(rec)
+    assert m.els_converged_
+    rows = {r["term"]: r for r in m.term_table()}
+    assert set(rows) == {"u(k-1)", "y(k-1)", "u(k-1)^2", "y(k-1)*u(k-1)", "e(k-1)"}
+    assert abs(rows["e(k-1)"]["parameter"] - 0.8) < 3 * rows["e(k-1)"]["stderr"]

@@ -104,3 +104,21 @@ def test_identify_helper_is_generic_over_registry():
     model, summary = identify("arx", rec, rec, ["ny=1,nu=2"])
     assert summary["params"]["ny"] == 1 and summary["terms"]
     assert summary["validation"]["one_step"]["r2"] == pytest.approx(r2(rec.y, model.predict(rec, 1), skip=2))
+
+
+def test_report_plots_survive_a_diverging_free_run(tmp_path):
+    from sysid.plots import identification_report
+    from sysid.polynomial import NARXPoly
+    from sysid.record import Record
+
+    rng = np.random.default_rng(0)
+    n = 400
+    u = rng.uniform(-0.3, 0.3, n)
+    y = np.zeros(n)
+    for k in range(1, n):
+        y[k] = 0.5 * y[k - 1] + u[k - 1] + 0.3 * y[k - 1] ** 2
+    m = NARXPoly(ny=1, nu=1, degree=2).fit(Record(u, y, fs=1.0))
+    big = Record(u + 5.0, y, fs=1.0)
+    files = identification_report(m, big, tmp_path / "rep")
+    assert m.diverged_at_ is not None
+    assert len(files) == 5 and all((tmp_path / "rep" / f"{k}.png").exists() for k in files)

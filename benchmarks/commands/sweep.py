@@ -110,7 +110,7 @@ def write_report(result: dict[str, Any], out: Path) -> list[str]:
         axes = np.atleast_1d(axes)
         for ax, k in zip(axes, keys):
             y = [np.nan if r.get(k) is None else r[k] for r in result["rows"]]
-            ax.plot(x, y, "o-")
+            ax.plot(x, y, "o-" if numeric else "o")
             ax.set_ylabel(k, fontsize=8)
             ax.grid(alpha=0.3)
         if not numeric:

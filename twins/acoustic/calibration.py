@@ -10,6 +10,12 @@ log-magnitude response, which is what the dissertation measured with the VNA (Fi
   (the amplifier's gain G_v and the Thevenin factor 2 are in the model). Scores are then computed on the
   time record by free-run simulation (noise-free twin, R² and NRMSE).
 
+Parameters that do not shape the magnitude response (a temperature or distance offset moves only the
+phase; wall-echo, crosstalk and misalignment parameters are better seen in time) are fitted to a time record
+by free-run output error of the noise-free twin instead (:func:`twins.calibration.calibrate`, bounded by the
+parameters' documented ranges, started from their current values — which must lie within about a period
+of the band centre, ≈ 1 µs of time of flight, of the answer).
+
 Search: a coarse grid over the thickness parameters (the answer is non-unique, notes B.7: the grid picks
 the family nearest the start), then bounded least squares (scipy) within ±``span`` of the start.
 Standard errors: Gauss–Newton s²(JᵀJ)⁻¹ at the optimum, as in :mod:`twins.calibration`.
@@ -35,6 +41,10 @@ from twins.calibration import CalibrationResult
 __all__ = ["calibrate_acoustic", "measured_response_db", "is_frequency_record"]
 
 _THICKNESS = ("pzt_thickness_m", "steel_thickness_m")
+#: parameters fitted on the log-magnitude response; any other name sends a time record to output error
+MAGNITUDE_PARAMS = frozenset({"pzt_thickness_m", "steel_thickness_m", "epoxy_thickness_m", "output_gain", "pzt_qm",
+                              "backing_rayl", "rx_load_ohm", "rx_load_capacitance_f", "source_resistance_ohm",
+                              "aperture_radius_m", "plate_width_m", "plate_height_m"})
 _NOISE_EFFECTS = ("measurement_noise", "adc_quantization")
 
 
@@ -99,6 +109,15 @@ def calibrate_acoustic(twin, data: Record, val: Record | None = None, names: Ite
         raise ConfigError("acoustic calibration: no parameters to fit")
     data.require_output()
     freq_mode = is_frequency_record(data)
+    if not freq_mode and not set(names) <= MAGNITUDE_PARAMS:
+        from twins.calibration import calibrate as output_error
+
+        clean = twin.with_effects(twin.effects - set(_NOISE_EFFECTS))
+        res = output_error(clean, data, names, val=val, max_nfev=max_nfev)
+        fitted = twin.with_params(**{n: getattr(res.twin.params, n) for n in names})
+        res.twin = fitted
+        res.message = f"time-domain output error (noise-free twin): {res.message}"
+        return res
     if freq_mode:
         f, target = np.asarray(data.u, float), np.asarray(data.y, float)
         gated = bool(data.meta.get("protocol_options", {}).get("gated", False))

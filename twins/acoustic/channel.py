@@ -34,7 +34,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
 
 from sysid.errors import ConfigError
 from twins.acoustic.amplifier import amplifier_bandwidth
@@ -232,10 +232,10 @@ def _series(w: np.ndarray, k: np.ndarray, loop: np.ndarray, L: float, c: float, 
                           float(ix), float(iy), bool(misaligned), float(overlap), float(half), tilt)
 
 
-@njit(cache=True, fastmath=False)
+@njit(cache=True, parallel=True)
 def _series_kernel(w, k, loop, L, c, orders, mode, ix, iy, misaligned, overlap, half, tilt):  # pragma: no cover
     out = np.empty(w.shape[0], dtype=np.complex128)
-    for i in range(w.shape[0]):
+    for i in prange(w.shape[0]):
         jw = 1j * w[i]
         term = np.exp(-1j * k[i] * L)
         acc = 0j

@@ -67,8 +67,9 @@ class AcousticParams:
     # ---------------------------------------------------------------- propagation details
     reverb_orders: int = pfield(30, "", -1, 400, "inter-plate round trips summed (0 = gated direct path, "
                                 "−1 = exact 1-D closed form, needs diffraction off)", source="notes B.8")
-    model_max_hz: float = pfield(25e6, "Hz", 1e5, 1e9, "H(f) is computed up to this frequency and set to 0 above "
-                                 "(amplifier LP at 12 MHz; |H| < −60 dB re peak above 25 MHz for the default stack)")
+    model_max_hz: float = pfield(15e6, "Hz", 1e5, 1e9, "H(f) is computed up to this frequency and set to 0 above "
+                                 "(amplifier LP at 12 MHz: |H| < −74 dB re its peak above 15 MHz for the default "
+                                 "stack, below an 8-bit ADC's ≈ −50 dB floor)")
     diffraction: bool = pfield(True, "", doc="aperture-dependent spreading (Gaussian-mode pair coupling)",
                                source="notes B.8")
     # ---------------------------------------------------------------- effects

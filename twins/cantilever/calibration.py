@@ -9,7 +9,8 @@ Stages:
    follows it. Both adjustments are reported in ``CalibrationResult.message``.
 3. **Linear pre-fit**: the core output is exactly linear in the gain d (Γ = d·v − h with h ∝ d, creep ∝ d),
    so one simulation with d = 1 and zero offset gives d and the sensor offset by linear least squares.
-   Bouc–Wen β is started at 1.5/max|u| (the notes' β·U = 1.5 at ±100 V).
+   Bouc–Wen β and γ start at 1.5/max|u| and 0.4/max|u| (the notes' nominal set at ±100 V) unless the
+   caller changed them from the defaults.
 4. **Free-run output error** of the named parameters with scipy.optimize.least_squares (bounded by the
    documented ranges; standard errors from the Gauss–Newton covariance).
 
@@ -70,6 +71,10 @@ def calibrate_cantilever(twin, data: Record, val: Record | None = None, names: I
     if names is None:
         names = PI_FIT if p.hysteresis == "prandtl-ishlinskii" else twin.CALIBRATION_PARAMS
     names = list(names)
+    for n in names:
+        if n in p.__dataclass_fields__ and not isinstance(getattr(p, n), float):
+            kind = type(getattr(p, n)).__name__
+            raise ConfigError(f"cannot fit {n!r}: it is a {kind} setting, not a continuous parameter (use --set)")
     notes = []
     umax = float(np.max(np.abs(data.u)))
     if val is not None:
@@ -87,9 +92,12 @@ def calibrate_cantilever(twin, data: Record, val: Record | None = None, names: I
         fit_twin = fit_twin.with_params(max_substep_s=float(substep_s))
     if prefit:
         x0: dict[str, Any] = {}
-        if "bw_beta" in names and umax > 0:
+        defaults = type(p)()
+        # β·U ≈ 1.5 and γ·U ≈ 0.4 at the notes' nominal set; used only where the caller kept the default
+        # (a --params file or --set value is a better start and is kept)
+        if "bw_beta" in names and umax > 0 and p.bw_beta == defaults.bw_beta:
             x0["bw_beta"] = float(np.clip(1.5 / umax, 1e-4, 0.2))
-        if "bw_gamma" in names and umax > 0:
+        if "bw_gamma" in names and umax > 0 and p.bw_gamma == defaults.bw_gamma:
             x0["bw_gamma"] = float(np.clip(0.4 / umax, -0.1, 0.1))
         unit = fit_twin.with_params(**x0, gain_um_per_v=1.0, offset_um=0.0, initial_state_um=0.0)
         y1 = unit.simulate(data.u, data.fs)

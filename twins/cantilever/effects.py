@@ -62,14 +62,15 @@ EFFECTS: dict[str, EffectSpec] = {
         {"knee": "sat_voltage_v", "sharpness": "sat_sharpness"}),
     "rate_dependent_hysteresis": EffectSpec(
         "rate_dependent_hysteresis", _T,
-        "hysteresis strength grows with the input rate: α (Bouc–Wen) or play thresholds (PI) × (1 + ρ/rate_ref), "
-        "ρ = low-pass (rate_tau) of |v̇|",
+        "hysteretic share grows with the input rate: α (Bouc–Wen) or the play weights (PI, p_0 lowered to keep "
+        "the large-loop slope d) × (1 + ρ/rate_ref), ρ = low-pass (rate_tau) of |v̇|",
         "loop width and phase lag grow with frequency already far below f₁ (10–200 Hz), where D(s) is flat; "
         "residual ∝ |u̇|·loop width",
         {"rate_ref": "rate_ref_v_per_s", "tau": "rate_tau_s"}),
     "asymmetric_hysteresis": EffectSpec(
         "asymmetric_hysteresis", _T,
-        "stronger hysteresis against the poling direction: α or PI weights × (1 + a·max(0, −v)/amp_limit)",
+        "stronger hysteresis against the poling direction: α or the PI play weights (p_0 lowered to keep d) "
+        "× (1 + a·max(0, −v)/amp_limit)",
         "loop wider and flatter for negative voltages than positive; even harmonics in the residual, "
         "residual mean shifts with the sign of u",
         {"factor": "asym_factor"}),

@@ -184,6 +184,10 @@ def run_block(u, noise, out, icfg, fcfg, sc, z, xc, play, buf, vsub, Phi, G0, G1
     drift_tau = fcfg[F_DRIFTTAU]
     q = fcfg[F_Q]
     rate_a = fcfg[F_RATEA]
+    pi_psum = 0.0
+    for i in range(npi):
+        pi_psum += pi_p[i + 1]
+    pi_cmax = 1.0 + 0.95 * pi_p[0] / pi_psum if pi_psum > 0.0 else 1.0
     rho = sc[S_RHO]
     L = buf.shape[0]
     nz = z.shape[0]
@@ -248,9 +252,14 @@ def run_block(u, noise, out, icfg, fcfg, sc, z, xc, play, buf, vsub, Phi, G0, G1
                 h = _bouc_wen(h, w, aeff * d, beta, gamma)
                 gam = d * vb - h
             else:
-                gam = pi_p[0] * vb
+                # rate/asymmetry move weight from the linear operator to the plays (the slope d of large
+                # loops is kept, the loop widens), like α in Bouc–Wen; p_0 stays ≥ 5 % of its value
+                c = scale * ascale
+                if c > pi_cmax:
+                    c = pi_cmax
+                acc_play = 0.0
                 for i in range(npi):
-                    r = pi_r[i] * scale
+                    r = pi_r[i]
                     fp = play[i]
                     lo = vb - r
                     hi = vb + r
@@ -259,7 +268,8 @@ def run_block(u, noise, out, icfg, fcfg, sc, z, xc, play, buf, vsub, Phi, G0, G1
                     elif fp > hi:
                         fp = hi
                     play[i] = fp
-                    gam += pi_p[i + 1] * ascale * fp
+                    acc_play += pi_p[i + 1] * fp
+                gam = (pi_p[0] - (c - 1.0) * pi_psum) * vb + c * acc_play
             f1 = gam + cr0 + (cr1 - cr0) * (m * invM)
             # Φ is block lower-triangular: modes 1 and 2 are uncoupled 2×2 blocks, the sensor sees both
             z0, z1, z2, z3, z4, z5 = z[0], z[1], z[2], z[3], z[4], z[5]

@@ -1,7 +1,10 @@
 """The measured TU/e piezo actuator (benchmarks/data/piezo_tue_150v_1hz) and the twin calibrated to it.
 
 The record: u = drive voltage [V], y = displacement [µm], 5 kHz, 10 s: 3.26 s at 0 V, then a jump to −87 V
-into a 150 V, 1 Hz sine (origin, licence and conversion in the data folder's SOURCE.txt and make_npz.py).
+into a 150 V, 1 Hz sine. It is the single vendored copy shared with the dataset registry
+(``benchmarks/data/piezo_tue_150v_1hz/hysteresis_v_150_1hz.npz``: origin and licence in SOURCE.txt and the
+licence file beside it, how the npz was made — u = CSV column 3, y = column 2, float64 unchanged — in
+PROVENANCE.txt). Only the file is read here, so ``twins`` does not import ``benchmarks``.
 The issue's check: calibrate on the first 5 s, free-run R² on the last 5 s ≥ 0.995 (a static line u → y
 reaches 0.977). The last 5 s are scored as the continuation of the free run over the whole input (see
 :func:`twins.cantilever.calibration.continues`).
@@ -20,7 +23,7 @@ from sysid.record import Record
 __all__ = ["LAB_FILE", "load_lab_record", "lab_split", "static_line_r2", "lab_twin", "calibrate_lab",
            "plot_lab_loops"]
 
-LAB_FILE = Path(__file__).resolve().parents[2] / "benchmarks" / "data" / "piezo_tue_150v_1hz" / "piezo_tue_150v_1hz.npz"
+LAB_FILE = Path(__file__).resolve().parents[2] / "benchmarks" / "data" / "piezo_tue_150v_1hz" / "hysteresis_v_150_1hz.npz"
 SPLIT_S = 5.0
 
 

@@ -98,13 +98,16 @@ class CantileverParams:
     thermal_tau_s: float = pfield(20.0, "s", 0.01, 1e5, "time constant of the thermal drift D·(1 − e^(−t/τ))",
                                   source="assumed")
     rate_ref_v_per_s: float = pfield(2.0e5, "V/s", 10.0, 1e9,
-                                     "rate envelope at which the hysteresis strength doubles: α (BW, capped at 0.98) "
-                                     "or thresholds r_i (PI) × (1 + ρ/rate_ref), ρ = low-pass of |v̇|",
-                                     source=f"{_NOTES} A.4 (rate-dependent PI, Al Janaideh & Krejčí 2013: r_i grows with |u̇|)")
+                                     "rate envelope at which the hysteretic share doubles: α (BW, capped at 0.98) or the "
+                                     "play weights p_i (PI, p_0 lowered to keep d) × (1 + ρ/rate_ref), ρ = low-pass of |v̇|",
+                                     source=f"{_NOTES} A.4 (rate-dependent PI, Al Janaideh & Krejčí 2013, grow r_i "
+                                     "with |u̇|; at full amplitude that parks the largest plays and barely widens the "
+                                     "loop, so the weights are scaled here)")
     rate_tau_s: float = pfield(0.01, "s", 1e-5, 10.0, "time constant of the rate envelope ρ (≈ mean |v̇| above 1/(2πτ))",
                                source="assumed; keeps the loop shape smooth within a period")
     asym_factor: float = pfield(1.0, "1", -0.9, 5.0,
-                                "extra hysteresis strength against the poling direction: × (1 + a·max(0, −v)/amp_limit)",
+                                "extra hysteretic share against the poling direction: α (BW) or play weights (PI, "
+                                "p_0 lowered to keep d) × (1 + a·max(0, −v)/amp_limit)",
                                 source=f"{_NOTES} A.2 (negative field against poling), A.3 asymmetric variants")
 
     # ---------------------------------------------------------------- numerics

@@ -70,13 +70,23 @@ def thesis_multisine(options: dict[str, Any]) -> tuple[np.ndarray, float, dict[s
     period = n_comp / f_max  # 5000 components up to 500 Hz → 0.1 Hz grid → 10 s period
     if period < duration:
         period = duration
-    x = multisine_local(fs, period, n_comp, f_max, seed)
     n = int(round(fs * duration))
-    reps = int(np.ceil(n / x.size))
-    u = np.tile(x, reps)[:n]
+    generator = "twins.cantilever.protocols.multisine_local"
+    try:  # the project's signal library (team signals) when present, else the local irfft version
+        from sysid.signals import multisine
+    except ImportError:
+        multisine = None
+    if multisine is not None:
+        u = multisine(fs=fs, duration=duration, band=(1.0 / period, f_max), components=n_comp, resolution=1.0 / period,
+                      amplitude=1.0, phase="random", seed=seed)
+        generator = "sysid.signals.multisine"
+    else:
+        x = multisine_local(fs, period, n_comp, f_max, seed)
+        u = np.tile(x, int(np.ceil(n / x.size)))[:n]
+    u = np.asarray(u, dtype=float)[:n]
     u = amp * u / np.max(np.abs(u))
     meta = {"protocol": "thesis-multisine", "components": n_comp, "f_max_hz": f_max, "grid_hz": 1.0 / period,
-            "period_s": period, "amplitude_v": amp, "signal_seed": seed,
+            "period_s": period, "amplitude_v": amp, "signal_seed": seed, "generator": generator,
             "crest_factor": float(np.max(np.abs(u)) / np.sqrt(np.mean(u ** 2)))}
     return u, fs, meta
 

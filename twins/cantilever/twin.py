@@ -266,6 +266,8 @@ class CantileverStepper:
 
     def step(self, u: float) -> float:
         """Apply the voltage sample ``u`` [V]; returns the displacement reading y [µm] at this sample."""
+        if not math.isfinite(u):
+            raise DataError(f"cantilever stepper: input sample is not finite ({u!r})")
         self._u[0] = u
         self._n[0] = self.twin.params.noise_um * self._rng.standard_normal() if self._noise_on else 0.0
         _run(self._u, self._n, self._y, self._cfg, self._st)

@@ -1,0 +1,508 @@
+"""Scoring: identifiers × datasets → test accuracy, fit time, parameter count; baselines that fail on regression.
+
+For every identifier (registry id, :mod:`sysid.registry`) and dataset (:mod:`benchmarks.datasets`) the
+identifier is fitted on the estimation data with the settings of :data:`SETTINGS` and predicts every test set
+one step ahead and in free run (``predict(record, horizon=1)`` / ``horizon=None``). Metrics
+(:mod:`sysid.metrics`) skip the first ``max(dataset.init_samples, model.max_lag_)`` samples of each test — the
+official initialisation window, or the model's own initial conditions if it needs more.
+
+Beside each row: the published reference numbers of that test (:mod:`benchmarks.datasets.references`) and
+SysIdentPy's FROLS fitted on the same split (:func:`sysidentpy_frols`; skipped with the reason when SysIdentPy
+is not installed or the run is quick and the estimation set is large).
+
+:func:`check` compares a run against ``benchmarks/baselines.json``: per (identifier, dataset, test) a ceiling
+on free-run RMSE (a floor on accuracy), plus the project's rules — every nonlinear identifier beats the linear
+baseline (ARX in the same run, and the published BLA) on every nonlinear dataset, and the polynomial NARMAX
+beats SysIdentPy's published Silverbox numbers.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import time
+import warnings
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable, Iterable
+
+import numpy as np
+
+from sysid.errors import ConfigError, InputError
+from sysid.metrics import score as metric_score
+from sysid.record import Record
+
+BASELINES_PATH = Path(__file__).resolve().parent / "baselines.json"
+BASELINES_FORMAT = "piezotwin-baselines/1"
+LINEAR_IDENTIFIERS = ("arx", "armax")
+METRICS = ("rmse", "nrmse", "r2")
+
+# ----------------------------------------------------------------------------------------- settings
+# Identifier settings per dataset: "*" applies to every dataset, a dataset's own entry overrides it, and in
+# quick mode the "quick" entries override both. Names are the identifiers' constructor options (`--set`).
+SETTINGS: dict[str, dict[str, dict[str, Any]]] = {
+    "arx": {"*": {"ny": 4, "nu": 4}},
+    "armax": {"*": {"ny": 4, "nu": 4, "ne": 2}},
+    "narx-poly": {"*": {"ny": 2, "nu": 2, "degree": 3}},
+    "narmax-poly": {"*": {"ny": 2, "nu": 2, "ne": 2, "degree": 3}},
+    "narx-mlp": {"*": {}},
+    "narx-mlp-sim": {"*": {}},
+    "rnn": {"*": {}},
+}
+QUICK_SETTINGS: dict[str, dict[str, dict[str, Any]]] = {}
+
+# Datasets of the quick check (small or fast enough for CI) and the sample budget of each part in quick mode:
+# estimation data and tests longer than this are cut to their first QUICK_MAX_SAMPLES samples.
+QUICK_DATASETS = ("silverbox", "wiener-hammerstein", "cascaded-tanks", "bouc-wen", "piezo-tue")
+QUICK_MAX_SAMPLES: dict[str, dict[str, int]] = {}
+
+# SysIdentPy FROLS on the same split: lags and degree per dataset (its defaults otherwise).
+SYSIDENTPY_SETTINGS: dict[str, dict[str, Any]] = {
+    "*": {"ylag": 2, "xlag": 2, "degree": 2, "n_info_values": 10},
+    "silverbox": {"ylag": 2, "xlag": 2, "degree": 3, "n_info_values": 15},
+}
+SYSIDENTPY_QUICK_MAX_EST = 20_000  # quick runs fit SysIdentPy only on estimation sets up to this size
+
+
+def settings_for(identifier: str, dataset: str, quick: bool = False) -> dict[str, Any]:
+    """The constructor options used for ``identifier`` on ``dataset``."""
+    out: dict[str, Any] = {}
+    for table in ((SETTINGS, QUICK_SETTINGS) if quick else (SETTINGS,)):
+        entry = table.get(identifier, {})
+        out.update(entry.get("*", {}))
+        out.update(entry.get(dataset, {}))
+    return out
+
+
+# ----------------------------------------------------------------------------------------- evaluation
+def evaluate(model, record: Record, init_samples: int = 0) -> dict[str, Any]:
+    """One-step and free-run metrics of a fitted ``model`` on ``record`` (skip = max(init, max_lag_))."""
+    skip = max(int(init_samples), int(getattr(model, "max_lag_", 0) or 0))
+    out: dict[str, Any] = {"skip": skip, "n_scored": len(record) - skip}
+    for key, horizon in (("one_step", 1), ("free_run", None)):
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            yhat = np.asarray(model.predict(record, horizon=horizon), dtype=float)
+        s = metric_score(record.y, yhat, skip=skip)
+        out[key] = {m: s[m] for m in METRICS}
+        if key == "free_run":
+            out["diverged"] = bool(not np.isfinite(yhat[skip:]).all())
+            out["warnings"] = sorted({str(w.message).splitlines()[0][:200] for w in caught})
+            out["_yhat_free_run"] = yhat
+    return out
+
+
+@dataclass
+class ScoreRun:
+    """Rows of one scoring run (one per identifier × dataset × test) plus what was skipped and why."""
+
+    quick: bool
+    rows: list[dict[str, Any]] = field(default_factory=list)
+    skipped: list[dict[str, str]] = field(default_factory=list)
+    sysidentpy: list[dict[str, Any]] = field(default_factory=list)
+    predictions: dict[tuple[str, str, str], np.ndarray] = field(default_factory=dict, repr=False)
+    datasets: dict[str, Any] = field(default_factory=dict, repr=False)
+    seconds: float = 0.0
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"format": "piezotwin-score/1", "mode": "quick" if self.quick else "full", "rows": self.rows,
+                "sysidentpy": self.sysidentpy, "skipped": self.skipped, "seconds": self.seconds}
+
+
+def _quick_cut(rec: Record, n: int | None) -> Record:
+    return rec if n is None or len(rec) <= n else rec[:n]
+
+
+def prepare_dataset(ds, quick: bool):
+    """Apply the quick-mode sample budget (QUICK_MAX_SAMPLES) to a loaded Dataset, in place; returns it."""
+    if not quick or ds.name not in QUICK_MAX_SAMPLES:
+        return ds
+    lim = QUICK_MAX_SAMPLES[ds.name]
+    if isinstance(ds.est, Record):
+        ds.est = _quick_cut(ds.est, lim.get("est"))
+    ds.tests = {k: _quick_cut(v, lim.get("test")) for k, v in ds.tests.items()}
+    ds.meta["quick_max_samples"] = lim
+    return ds
+
+
+def score_pair(identifier: str, ds, quick: bool = False, factory: Callable[[str], Any] | None = None,
+               params: dict[str, Any] | None = None) -> tuple[list[dict[str, Any]], dict[str, np.ndarray]]:
+    """Fit ``identifier`` on ``ds.est`` and score every test of ``ds``; returns (rows, free-run predictions)."""
+    from sysid.registry import get_identifier
+
+    cls = (factory or get_identifier)(identifier)
+    params = dict(settings_for(identifier, ds.name, quick) if params is None else params)
+    model = cls(**params)
+    t0 = time.perf_counter()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        model.fit(ds.est)
+    fit_s = time.perf_counter() - t0
+    rows, preds = [], {}
+    for test, rec in ds.tests.items():
+        ev = evaluate(model, rec, ds.init_samples)
+        preds[test] = ev.pop("_yhat_free_run")
+        rows.append({
+            "identifier": identifier, "dataset": ds.name, "test": test, "status": "diverged" if ev["diverged"] else "ok",
+            "params": params, "n_parameters": getattr(model, "n_parameters_", None), "fit_seconds": fit_s,
+            "n_est": sum(len(r) for r in ds.est_records), "n_test": len(rec), "units": ds.units.get("y", ""),
+            **ev, "references": ds.references.get(test, {}),
+        })
+    return rows, preds
+
+
+def score(identifiers: Iterable[str] | None = None, datasets: Iterable[str] | None = None, quick: bool = False,
+          sysidentpy: bool = True, progress: bool = False, factory: Callable[[str], Any] | None = None,
+          log: Callable[[str], None] | None = None) -> ScoreRun:
+    """Score identifiers × datasets. Unavailable identifiers/datasets are skipped with the reason."""
+    from benchmarks.datasets import list_datasets, load_dataset
+    from sysid.registry import IDENTIFIERS, available_identifiers
+
+    t_start = time.perf_counter()
+    run = ScoreRun(quick=quick)
+    log = log or (lambda s: None)
+    if identifiers is None:
+        identifiers = available_identifiers() if factory is None else list(IDENTIFIERS)
+        for missing in sorted(set(IDENTIFIERS) - set(identifiers)):
+            run.skipped.append({"identifier": missing, "reason": "not built yet (module not importable)"})
+    identifiers = list(identifiers)
+    if datasets is None:
+        info = {d["id"]: d for d in list_datasets()}
+        datasets = [n for n in (QUICK_DATASETS if quick else info) if info[n]["available"]]
+        for n, d in info.items():
+            if not d["available"] and (not quick or n in QUICK_DATASETS):
+                run.skipped.append({"dataset": n, "reason": d["description"].rsplit("[", 1)[-1].rstrip("]")})
+    datasets = list(datasets)
+    pairs = [(i, d) for d in datasets for i in identifiers]
+    try:
+        from tqdm import tqdm
+
+        bar = tqdm(total=len(pairs), desc="score", disable=not progress, leave=False)
+    except ImportError:  # pragma: no cover
+        bar = None
+    for dname in datasets:
+        try:
+            ds = prepare_dataset(load_dataset(dname, progress=progress), quick)
+            run.datasets[dname] = ds
+        except InputError as exc:
+            run.skipped.append({"dataset": dname, "reason": str(exc)})
+            if bar:
+                bar.update(len(identifiers))
+            continue
+        for ident in identifiers:
+            if bar:
+                bar.set_postfix_str(f"{ident} on {dname}")
+            try:
+                rows, preds = score_pair(ident, ds, quick=quick, factory=factory)
+            except ConfigError as exc:
+                run.skipped.append({"identifier": ident, "dataset": dname, "reason": str(exc)})
+                rows, preds = [], {}
+            except Exception as exc:  # a crashing identifier is a result (status error), not a crashed run
+                rows = [{"identifier": ident, "dataset": dname, "test": t, "status": "error",
+                         "message": f"{type(exc).__name__}: {exc}"[:300], "references": ds.references.get(t, {})}
+                        for t in ds.tests]
+                preds = {}
+            for r in rows:
+                run.rows.append(r)
+                log(format_row(r))
+            for t, y in preds.items():
+                run.predictions[(ident, dname, t)] = y
+            if bar:
+                bar.update(1)
+        if sysidentpy:
+            run.sysidentpy.extend(sysidentpy_frols(ds, quick=quick))
+    if bar:
+        bar.close()
+    run.seconds = time.perf_counter() - t_start
+    return run
+
+
+def format_row(r: dict[str, Any]) -> str:
+    head = f"{r['identifier']:<12} {r['dataset']:<20} {r['test']:<22}"
+    if r.get("status") == "error":
+        return f"{head} error: {r.get('message', '')}"
+    fr, os_ = r["free_run"], r["one_step"]
+    return (f"{head} free-run RMSE {_fmt(fr['rmse'])} {r['units']} (R2 {_fmt(fr['r2'])})  one-step RMSE "
+            f"{_fmt(os_['rmse'])}  fit {r['fit_seconds']:.2f} s  {r['n_parameters']} params")
+
+
+def _fmt(x: Any) -> str:
+    return "nan" if x is None or (isinstance(x, float) and not math.isfinite(x)) else f"{x:.4g}"
+
+
+# ----------------------------------------------------------------------------------------- SysIdentPy
+def sysidentpy_settings(dataset: str) -> dict[str, Any]:
+    return {**SYSIDENTPY_SETTINGS["*"], **SYSIDENTPY_SETTINGS.get(dataset, {})}
+
+
+def sysidentpy_frols(ds, quick: bool = False, use_cache: bool = True) -> list[dict[str, Any]]:
+    """SysIdentPy's FROLS (polynomial NARX, least squares, AIC order selection) on the same split as ours.
+
+    Returns one row per test with free-run and one-step metrics, or rows with ``status: skipped`` and the
+    reason. Results are cached (SysIdentPy is slow) under the dataset cache, keyed by data and settings.
+    """
+    try:
+        import sysidentpy
+        from sysidentpy.basis_function import Polynomial
+        from sysidentpy.model_structure_selection import FROLS
+        from sysidentpy.parameter_estimation import LeastSquares
+    except ImportError as exc:
+        return [{"dataset": ds.name, "test": t, "status": "skipped", "reason": f"SysIdentPy not installed ({exc})"}
+                for t in ds.tests]
+    cfg = sysidentpy_settings(ds.name)
+    est = ds.est_records
+    if len(est) != 1:
+        return [{"dataset": ds.name, "test": t, "status": "skipped",
+                 "reason": "SysIdentPy fits one record; this dataset has several"} for t in ds.tests]
+    est = est[0]
+    if quick and len(est) > SYSIDENTPY_QUICK_MAX_EST:
+        return [{"dataset": ds.name, "test": t, "status": "skipped",
+                 "reason": f"quick run: estimation set of {len(est)} samples > {SYSIDENTPY_QUICK_MAX_EST}"} for t in ds.tests]
+    h = hashlib.sha256()
+    for rec in [est, *ds.tests.values()]:
+        h.update(np.ascontiguousarray(rec.u).tobytes())
+        h.update(np.ascontiguousarray(rec.y).tobytes())
+    h.update(json.dumps({"cfg": cfg, "version": sysidentpy.__version__, "init": ds.init_samples}, sort_keys=True).encode())
+    from benchmarks.datasets.twin import cache_dir
+
+    cache = cache_dir() / "sysidentpy" / f"{ds.name}-{h.hexdigest()[:16]}.json"
+    if use_cache and cache.exists():
+        return json.loads(cache.read_text())
+    model = FROLS(order_selection=True, n_info_values=cfg["n_info_values"], ylag=cfg["ylag"], xlag=cfg["xlag"],
+                  info_criteria="aic", estimator=LeastSquares(), basis_function=Polynomial(degree=cfg["degree"]))
+    t0 = time.perf_counter()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        model.fit(X=est.u.reshape(-1, 1), y=est.y.reshape(-1, 1))
+    fit_s = time.perf_counter() - t0
+    max_lag = int(model.max_lag)
+    rows = []
+    for t, rec in ds.tests.items():
+        x, y = rec.u.reshape(-1, 1), rec.y.reshape(-1, 1)
+        skip = max(ds.init_samples, max_lag)
+        row = {"dataset": ds.name, "test": t, "status": "ok", "settings": cfg, "fit_seconds": fit_s,
+               "n_parameters": int(len(model.final_model)), "skip": skip, "sysidentpy_version": sysidentpy.__version__}
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            for key, steps in (("free_run", None), ("one_step", 1)):
+                yhat = np.asarray(model.predict(X=x, y=y[:max_lag], steps_ahead=None) if steps is None
+                                  else model.predict(X=x, y=y, steps_ahead=1), dtype=float).reshape(-1)
+                # SysIdentPy returns the series aligned with the input; guard against off-by-one lengths
+                yhat = yhat[: len(rec)] if yhat.size >= len(rec) else np.concatenate([yhat, np.full(len(rec) - yhat.size, np.nan)])
+                s = metric_score(rec.y, yhat, skip=skip)
+                row[key] = {m: s[m] for m in METRICS}
+        rows.append(row)
+    if use_cache:
+        cache.parent.mkdir(parents=True, exist_ok=True)
+        cache.write_text(json.dumps(_clean(rows)))
+    return rows
+
+
+# ----------------------------------------------------------------------------------------- baselines
+def load_baselines(path: str | Path | None = None) -> dict[str, Any]:
+    p = Path(path) if path else BASELINES_PATH
+    if not p.exists():
+        return {"format": BASELINES_FORMAT, "modes": {}, "rules": []}
+    data = json.loads(p.read_text())
+    if data.get("format") != BASELINES_FORMAT:
+        raise ConfigError(f"{p}: not a baselines file (format {data.get('format')!r})")
+    return data
+
+
+def _finite(x: Any) -> bool:
+    return isinstance(x, (int, float)) and math.isfinite(x)
+
+
+def check(run: ScoreRun | dict[str, Any], baselines: dict[str, Any] | None = None) -> list[str]:
+    """Every regression of ``run`` against ``baselines``: one line per failing pair (empty list = pass)."""
+    data = run.to_dict() if isinstance(run, ScoreRun) else run
+    base = baselines if baselines is not None else load_baselines()
+    mode = data["mode"]
+    floors = base.get("modes", {}).get(mode, {})
+    failures: list[str] = []
+    by_key = {(r["identifier"], r["dataset"], r["test"]): r for r in data["rows"]}
+    # 1. per-pair ceilings on free-run RMSE
+    for (ident, dname, test), r in by_key.items():
+        floor = floors.get(ident, {}).get(dname, {}).get(test)
+        if floor is None:
+            continue
+        rmse = (r.get("free_run") or {}).get("rmse")
+        lim = floor["max_rmse"]
+        if r.get("status") == "error":
+            failures.append(f"{ident} on {dname}/{test}: failed to run ({r.get('message', '')}); floor is free-run RMSE <= {lim:.4g}")
+        elif not _finite(rmse):
+            failures.append(f"{ident} on {dname}/{test}: free run diverged or not finite; floor is free-run RMSE <= {lim:.4g}")
+        elif rmse > lim:
+            failures.append(f"{ident} on {dname}/{test}: free-run RMSE {rmse:.4g} {r.get('units', '')} > floor {lim:.4g} "
+                            f"(baseline measured {floor.get('measured', float('nan')):.4g})")
+    # 2. rules
+    for rule in base.get("rules", []):
+        failures.extend(_check_rule(rule, by_key))
+    return failures
+
+
+def _check_rule(rule: dict[str, Any], by_key: dict[tuple[str, str, str], dict[str, Any]]) -> list[str]:
+    out = []
+    kind = rule["rule"]
+    exempt = {(e["identifier"], e["dataset"], e.get("test", "*")) for e in rule.get("exemptions", [])}
+
+    def is_exempt(i: str, d: str, t: str) -> bool:
+        return (i, d, t) in exempt or (i, d, "*") in exempt
+
+    if kind == "beats_linear":
+        linear = rule.get("linear", "arx")
+        datasets = set(rule.get("datasets", []))
+        for (ident, dname, test), r in by_key.items():
+            if ident in LINEAR_IDENTIFIERS or dname not in datasets or is_exempt(ident, dname, test):
+                continue
+            if r.get("status") == "error":
+                continue  # reported by the floors when a floor exists
+            rmse = (r.get("free_run") or {}).get("rmse")
+            lin = by_key.get((linear, dname, test))
+            lin_rmse = (lin or {}).get("free_run", {}).get("rmse") if lin else None
+            bla = (r.get("references") or {}).get("linear_baseline", {}).get("value")
+            if _finite(lin_rmse) and not (_finite(rmse) and rmse < lin_rmse):
+                out.append(f"{ident} on {dname}/{test}: free-run RMSE {_fmt(rmse)} does not beat the linear baseline "
+                           f"({linear} in this run: {_fmt(lin_rmse)})")
+            if _finite(bla) and not (_finite(rmse) and rmse < bla):
+                out.append(f"{ident} on {dname}/{test}: free-run RMSE {_fmt(rmse)} does not beat the published "
+                           f"linear baseline (BLA {_fmt(bla)})")
+    elif kind == "beats_value":
+        ident, dname = rule["identifier"], rule["dataset"]
+        for test, value in rule["tests"].items():
+            r = by_key.get((ident, dname, test))
+            if r is None:
+                continue
+            rmse = (r.get("free_run") or {}).get("rmse")
+            if not (_finite(rmse) and rmse < value):
+                out.append(f"{ident} on {dname}/{test}: free-run RMSE {_fmt(rmse)} does not beat {rule.get('what', 'the reference')} "
+                           f"({_fmt(value)})")
+    else:
+        raise ConfigError(f"baselines: unknown rule {kind!r}")
+    return out
+
+
+def make_floors(run: ScoreRun | dict[str, Any], margin: float = 0.15, previous: dict[str, Any] | None = None) -> dict[str, Any]:
+    """Baselines from a measured run: ceiling = measured free-run RMSE × (1 + margin) for each finite pair.
+
+    Rules of ``previous`` are kept. The run's mode gets new floors; other modes are kept.
+    """
+    data = run.to_dict() if isinstance(run, ScoreRun) else run
+    base = json.loads(json.dumps(previous)) if previous else {"format": BASELINES_FORMAT, "modes": {}, "rules": []}
+    base["format"] = BASELINES_FORMAT
+    floors: dict[str, Any] = {}
+    for r in data["rows"]:
+        rmse = (r.get("free_run") or {}).get("rmse")
+        if r.get("status") != "ok" or not _finite(rmse):
+            continue
+        floors.setdefault(r["identifier"], {}).setdefault(r["dataset"], {})[r["test"]] = {
+            "max_rmse": float(f"{rmse * (1.0 + margin):.4g}"), "measured": float(f"{rmse:.6g}"),
+            "units": r.get("units", ""), "r2_measured": float(f"{r['free_run']['r2']:.6g}"),
+        }
+    base.setdefault("modes", {})[data["mode"]] = floors
+    return base
+
+
+# ----------------------------------------------------------------------------------------- output
+def _clean(obj: Any) -> Any:
+    from benchmarks.commands.common import clean_json
+
+    return clean_json(obj)
+
+
+def markdown_table(run: ScoreRun | dict[str, Any]) -> str:
+    """The score table: one row per identifier × dataset × test, references and SysIdentPy beside it."""
+    data = run.to_dict() if isinstance(run, ScoreRun) else run
+    sidp = {(r["dataset"], r["test"]): r for r in data.get("sysidentpy", [])}
+    lines = ["| dataset / test | identifier | free-run RMSE | free-run R² | one-step RMSE | fit s | params | "
+             "SysIdentPy FROLS (same split) | linear baseline | best published | SysIdentPy published |",
+             "|---|---|---|---|---|---|---|---|---|---|---|"]
+    for r in data["rows"]:
+        ref = r.get("references") or {}
+        u = r.get("units", "")
+        s = sidp.get((r["dataset"], r["test"]))
+        if s is None:
+            stxt = "—"
+        elif s.get("status") == "ok":
+            stxt = f"{_fmt(s['free_run']['rmse'])} ({s['n_parameters']} terms)"
+        else:
+            stxt = f"skipped: {s.get('reason', '')}"
+
+        def refv(k: str) -> str:
+            v = ref.get(k)
+            return f"{_fmt(v['value'])} ({v['model']})" if v else "—"
+
+        if r.get("status") == "error":
+            lines.append(f"| {r['dataset']} / {r['test']} | {r['identifier']} | error | | | | | {stxt} | "
+                         f"{refv('linear_baseline')} | {refv('best_published')} | {refv('sysidentpy')} |")
+            continue
+        fr, os_ = r["free_run"], r["one_step"]
+        lines.append(f"| {r['dataset']} / {r['test']} | {r['identifier']} | {_fmt(fr['rmse'])} {u} | {_fmt(fr['r2'])} | "
+                     f"{_fmt(os_['rmse'])} | {r['fit_seconds']:.2f} | {r['n_parameters']} | {stxt} | "
+                     f"{refv('linear_baseline')} | {refv('best_published')} | {refv('sysidentpy')} |")
+    return "\n".join(lines) + "\n"
+
+
+def write_report(run: ScoreRun, report_dir: str | Path) -> dict[str, Path]:
+    """score.json, score.md and figures (free-run NRMSE bars; measured vs free-run for each dataset test)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    out = Path(report_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    paths: dict[str, Path] = {}
+    paths["json"] = out / "score.json"
+    paths["json"].write_text(json.dumps(_clean(run.to_dict()), indent=2))
+    paths["markdown"] = out / "score.md"
+    paths["markdown"].write_text(markdown_table(run))
+    ok = [r for r in run.rows if r.get("status") in ("ok", "diverged")]
+    if ok:
+        labels = sorted({f"{r['dataset']}/{r['test']}" for r in ok})
+        idents = sorted({r["identifier"] for r in ok})
+        fig, ax = plt.subplots(figsize=(max(6, 0.9 * len(labels) + 2), 4))
+        w = 0.8 / max(1, len(idents))
+        for k, ident in enumerate(idents):
+            vals = []
+            for lab in labels:
+                r = next((x for x in ok if x["identifier"] == ident and f"{x['dataset']}/{x['test']}" == lab), None)
+                v = r["free_run"]["nrmse"] if r else None
+                vals.append(v if _finite(v) else np.nan)
+            ax.bar(np.arange(len(labels)) + k * w, vals, w, label=ident)
+        ax.set_xticks(np.arange(len(labels)) + 0.4 - w / 2, labels, rotation=30, ha="right", fontsize=8)
+        ax.set_yscale("log")
+        ax.set_ylabel("free-run NRMSE (log)")
+        ax.set_title("test accuracy, free-run simulation")
+        ax.legend(fontsize=8)
+        fig.tight_layout()
+        paths["nrmse"] = out / "score_nrmse.png"
+        fig.savefig(paths["nrmse"], dpi=90)
+        plt.close(fig)
+    # measured vs free-run predictions: one figure per dataset (first test), first 2000 scored samples
+    if run.predictions and run.datasets:
+        for dname, ds in run.datasets.items():
+            test = next(iter(ds.tests))
+            rec = ds.tests[test]
+            keys = [k for k in run.predictions if k[1] == dname and k[2] == test]
+            if not keys:
+                continue
+            n0 = ds.init_samples
+            n1 = min(len(rec), n0 + 2000)
+            t = np.arange(n0, n1) / rec.fs
+            fig, ax = plt.subplots(figsize=(8, 3.2))
+            ax.plot(t, rec.y[n0:n1], "k", lw=1.2, label="measured")
+            for k in sorted(keys):
+                y = run.predictions[k][n0:n1]
+                ax.plot(t, y, lw=0.8, label=k[0])
+            ax.set_xlabel("time [s]")
+            ax.set_ylabel(f"y [{ds.units.get('y', '')}]")
+            ax.set_title(f"{dname} / {test}: free-run simulation")
+            ax.legend(fontsize=7, ncol=3)
+            fig.tight_layout()
+            p = out / f"freerun_{dname}_{test}.png"
+            fig.savefig(p, dpi=80)
+            plt.close(fig)
+            paths[f"freerun_{dname}"] = p
+    return paths

@@ -1,0 +1,312 @@
+"""Building blocks shared by the neural identifiers.
+
+- :class:`LagData` — the regression matrix Φ and targets Y of dissertation eq. 2-14 / 2-15 for one or several
+  records (no regressor spans two records), kept as tensors on the training device. Row ``r`` holds, for a
+  target time ``t``, ``[y(t-1) … y(t-n_y), u(t-1) … u(t-n_u)]`` (lag-major; all channels of one lag side by
+  side). Small problems pre-build Φ once; very long lags (Φ larger than ``PREBUILD_LIMIT`` elements) gather
+  rows on demand from the series instead, so lags up to 1024 fit in memory.
+- :class:`FlatMLP` — the feed-forward network of eq. 2-10 (Glorot-uniform weights, zero biases: the Keras
+  defaults the dissertation used), with all parameters in one flat tensor so that the optimiser is four
+  tensor operations per step.
+- :class:`RMSprop` — eq. 2-25 / 2-26 on that flat tensor: ``v ← α v + (1-α) g²``,
+  ``θ ← θ − η g / sqrt(v + ε)`` with the Keras defaults α = 0.9, ε = 1e-7.
+- :func:`mlp_forward_np`, :func:`free_run_mlp` (numba-compiled recursion of eq. 2-29/2-30), :func:`k_step_mlp`
+  — prediction in float64 on the CPU from exported weights.
+"""
+
+from __future__ import annotations
+
+from typing import Sequence
+
+import numpy as np
+import torch
+from numba import njit
+
+__all__ = [
+    "ACTIVATIONS", "LagData", "FlatMLP", "RMSprop", "mlp_forward_np", "free_run_mlp", "k_step_mlp", "count_mlp_parameters",
+]
+
+ACTIVATIONS = ("sigmoid", "tanh", "relu")
+ACT_CODE = {"relu": 0, "tanh": 1, "sigmoid": 2}
+PREBUILD_LIMIT = 40_000_000  # elements of Φ (160 MB in float32) above which rows are gathered per batch
+
+
+def count_mlp_parameters(n_in: int, hidden: Sequence[int], n_out: int) -> int:
+    """Weights + biases of a dense network (Table 4.2: 20 inputs, 4 × 25, 1 output → 2501)."""
+    sizes = [int(n_in), *[int(h) for h in hidden], int(n_out)]
+    return int(sum(a * b + b for a, b in zip(sizes[:-1], sizes[1:])))
+
+
+# ---------------------------------------------------------------------------------------------- data
+class LagData:
+    """Φ and Y (eq. 2-14, 2-15) for a list of normalised ``(u, y)`` pairs, 2-D arrays ``(N, channels)``."""
+
+    def __init__(self, pairs: Sequence[tuple[np.ndarray, np.ndarray]], n_y: int, n_u: int,
+                 device: torch.device, dtype: torch.dtype = torch.float32, prebuild: bool | None = None):
+        self.n_y, self.n_u = int(n_y), int(n_u)
+        self.lag = max(self.n_y, self.n_u)
+        self.ny_ch = pairs[0][1].shape[1]
+        self.nu_ch = pairs[0][0].shape[1]
+        self.n_yreg = self.n_y * self.ny_ch
+        self.n_in = self.n_yreg + self.n_u * self.nu_ch
+        ucat, ycat, row_time, seg, seg_bounds = [], [], [], [], []
+        offset = rows = 0
+        for k, (u, y) in enumerate(pairs):
+            n = u.shape[0]
+            if n <= self.lag:
+                continue
+            ucat.append(u)
+            ycat.append(y)
+            t = np.arange(self.lag, n) + offset
+            row_time.append(t)
+            seg.append(np.full(t.size, k))
+            seg_bounds.append((rows, rows + t.size))
+            rows += t.size
+            offset += n
+        if not row_time:
+            from sysid.errors import DataError
+
+            raise DataError(f"records too short for lag {self.lag}: need more than {self.lag} samples")
+        u_all = np.concatenate(ucat)
+        y_all = np.concatenate(ycat)
+        self.row_time_np = np.concatenate(row_time)
+        self.seg_bounds = seg_bounds  # row ranges [a, b) of each record
+        self.n_rows = int(self.row_time_np.size)
+        self.device = device
+        self.dtype = dtype
+        self.u = torch.as_tensor(u_all, dtype=dtype, device=device)
+        self.y = torch.as_tensor(y_all, dtype=dtype, device=device)
+        self.row_time = torch.as_tensor(self.row_time_np, dtype=torch.long, device=device)
+        self.ylags = torch.arange(1, self.n_y + 1, device=device)
+        self.ulags = torch.arange(1, self.n_u + 1, device=device)
+        self.Y = self.y[self.row_time]
+        if prebuild is None:
+            prebuild = self.n_rows * self.n_in <= PREBUILD_LIMIT
+        self.X = self._gather(self.row_time) if prebuild else None
+
+    def _gather(self, t: torch.Tensor) -> torch.Tensor:
+        yp = self.y[t[:, None] - self.ylags[None, :]].reshape(t.shape[0], -1)
+        up = self.u[t[:, None] - self.ulags[None, :]].reshape(t.shape[0], -1)
+        return torch.cat([yp, up], dim=1)
+
+    def x(self, rows: torch.Tensor) -> torch.Tensor:
+        """Regressor rows (eq. 2-14) for the given row indices."""
+        return self.X[rows] if self.X is not None else self._gather(self.row_time[rows])
+
+    def window_starts(self, window: int) -> np.ndarray:
+        """Every row that can start a window of ``window`` consecutive targets inside one record."""
+        out = [np.arange(a, b - window + 1) for a, b in self.seg_bounds if b - a >= window]
+        return np.concatenate(out) if out else np.zeros(0, dtype=np.int64)
+
+
+# ---------------------------------------------------------------------------------------------- network
+class FlatMLP(torch.nn.Module):
+    """Dense network of eq. 2-10 with hidden widths ``hidden`` and activation ``activation`` (linear output).
+
+    Every weight matrix and bias is a leaf tensor whose storage is a slice of one flat buffer ``flat`` (and
+    whose gradient is a slice of ``flat.grad``), so the forward pass is plain ``addmm`` calls and the
+    optimiser updates all 2501 weights of the 4 × 25 net with a handful of whole-buffer operations.
+    """
+
+    def __init__(self, n_in: int, hidden: Sequence[int], n_out: int, activation: str, generator: torch.Generator,
+                 device: torch.device, dtype: torch.dtype = torch.float32):
+        super().__init__()
+        sizes = [int(n_in), *[int(h) for h in hidden], int(n_out)]
+        self.sizes = sizes
+        self.activation = activation
+        self.act = {"relu": torch.relu, "tanh": torch.tanh, "sigmoid": torch.sigmoid}[activation]
+        n_total = count_mlp_parameters(n_in, hidden, n_out)
+        # Glorot-uniform init (Keras default) drawn on the CPU generator so the draw is device-independent.
+        init = torch.zeros(n_total, dtype=torch.float64)
+        o = 0
+        for a, b in zip(sizes[:-1], sizes[1:]):
+            lim = (6.0 / (a + b)) ** 0.5
+            init[o:o + a * b] = (torch.rand(a * b, generator=generator, dtype=torch.float64) * 2 - 1) * lim
+            o += a * b + b  # biases stay zero
+        self.flat = torch.nn.Parameter(init.to(device=device, dtype=dtype))
+        self.flat.grad = torch.zeros_like(self.flat)
+        self.layers: list[tuple[torch.Tensor, torch.Tensor]] = []
+        o = 0
+        for a, b in zip(sizes[:-1], sizes[1:]):
+            W = torch.empty(0, dtype=dtype, device=device)
+            W.data = self.flat.data[o:o + a * b].view(b, a)
+            W.requires_grad_(True)
+            W.grad = self.flat.grad[o:o + a * b].view(b, a)
+            o += a * b
+            bias = torch.empty(0, dtype=dtype, device=device)
+            bias.data = self.flat.data[o:o + b]
+            bias.requires_grad_(True)
+            bias.grad = self.flat.grad[o:o + b]
+            o += b
+            self.layers.append((W, bias))
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        last = len(self.layers) - 1
+        act = self.act
+        for i, (W, b) in enumerate(self.layers):
+            x = torch.addmm(b, x, W.t())
+            if i < last:
+                x = act(x)
+        return x
+
+    def check_grad_storage(self) -> bool:
+        """True while every layer's gradient still lives in ``flat.grad`` (autograd accumulates in place)."""
+        g = self.flat.grad
+        return all(W.grad is not None and W.grad.untyped_storage().data_ptr() == g.untyped_storage().data_ptr()
+                   for W, _ in self.layers)
+
+    def weights_np(self) -> np.ndarray:
+        return self.flat.detach().to("cpu", torch.float64).numpy().copy()
+
+
+class RMSprop:
+    """RMSprop of eq. 2-25/2-26 on one flat parameter tensor (α = 0.9, ε = 1e-7: Keras defaults)."""
+
+    def __init__(self, param: torch.nn.Parameter, lr: float, alpha: float = 0.9, eps: float = 1e-7):
+        self.p = param
+        self.lr, self.alpha, self.eps = float(lr), float(alpha), float(eps)
+        self.v = torch.zeros_like(param)
+        self._tmp = torch.empty_like(param)
+        if param.grad is None:
+            param.grad = torch.zeros_like(param)
+
+    def zero_grad(self) -> None:
+        self.p.grad.zero_()
+
+    @torch.no_grad()
+    def step(self) -> None:
+        g = self.p.grad
+        p = self.p.data
+        self.v.mul_(self.alpha).addcmul_(g, g, value=1.0 - self.alpha)            # eq. 2-25
+        torch.add(self.v, self.eps, out=self._tmp).sqrt_()
+        p.addcdiv_(g, self._tmp, value=-self.lr)                                   # eq. 2-26
+
+
+# ---------------------------------------------------------------------------------------------- prediction
+def _act_np(x: np.ndarray, code: int) -> np.ndarray:
+    if code == 0:
+        return np.maximum(x, 0.0)
+    if code == 1:
+        return np.tanh(x)
+    return 1.0 / (1.0 + np.exp(-x))
+
+
+def mlp_forward_np(flat: np.ndarray, sizes: Sequence[int], code: int, x: np.ndarray) -> np.ndarray:
+    """Batched float64 forward pass of the flat network: ``x`` (B, n_in) → (B, n_out)."""
+    o = 0
+    last = len(sizes) - 2
+    for i, (a, b) in enumerate(zip(sizes[:-1], sizes[1:])):
+        W = flat[o:o + a * b].reshape(b, a)
+        o += a * b
+        x = x @ W.T + flat[o:o + b]
+        o += b
+        if i < last:
+            x = _act_np(x, code)
+    return x
+
+
+@njit(cache=True)
+def _free_run_kernel(flat, sizes, code, y0, un, n_y, n_u, start, bound):  # pragma: no cover - compiled
+    n, ny_ch = y0.shape
+    nu_ch = un.shape[1]
+    n_layers = sizes.shape[0] - 1
+    out = y0.copy()
+    width = 0
+    for i in range(sizes.shape[0]):
+        if sizes[i] > width:
+            width = sizes[i]
+    a_buf = np.empty(width)
+    b_buf = np.empty(width)
+    diverged = -1
+    for t in range(start, n):
+        # regressor: y(t-1..t-n_y) (all channels per lag), then u(t-1..t-n_u)
+        k = 0
+        for i in range(1, n_y + 1):
+            for c in range(ny_ch):
+                a_buf[k] = out[t - i, c]
+                k += 1
+        for i in range(1, n_u + 1):
+            for c in range(nu_ch):
+                a_buf[k] = un[t - i, c]
+                k += 1
+        o = 0
+        for layer in range(n_layers):
+            na = sizes[layer]
+            nb = sizes[layer + 1]
+            for j in range(nb):
+                s = flat[o + na * nb + j]
+                base = o + j * na
+                for m in range(na):
+                    s += flat[base + m] * a_buf[m]
+                if layer < n_layers - 1:
+                    if code == 0:
+                        s = s if s > 0.0 else 0.0
+                    elif code == 1:
+                        s = np.tanh(s)
+                    else:
+                        s = 1.0 / (1.0 + np.exp(-s))
+                b_buf[j] = s
+            o += na * nb + nb
+            for j in range(nb):
+                a_buf[j] = b_buf[j]
+        bad = False
+        for c in range(ny_ch):
+            v = a_buf[c]
+            if not np.isfinite(v) or abs(v) > bound:
+                bad = True
+            out[t, c] = v
+        if bad:
+            diverged = t
+            for tt in range(t, n):
+                for c in range(ny_ch):
+                    out[tt, c] = np.nan
+            break
+    return out, diverged
+
+
+def free_run_mlp(flat: np.ndarray, sizes: Sequence[int], code: int, yn: np.ndarray, un: np.ndarray,
+                 n_y: int, n_u: int, bound: float) -> tuple[np.ndarray, int]:
+    """Free-run simulation (eq. 2-29/2-30) in normalised units: the first ``max(n_y, n_u)`` samples of ``yn``
+    are the measured initial conditions, the rest is simulated from ``un``. Returns (ŷ, diverged index or -1)."""
+    lag = max(n_y, n_u)
+    return _free_run_kernel(np.ascontiguousarray(flat, dtype=np.float64), np.asarray(sizes, dtype=np.int64), int(code),
+                            np.ascontiguousarray(yn, dtype=np.float64), np.ascontiguousarray(un, dtype=np.float64),
+                            int(n_y), int(n_u), int(lag), float(bound))
+
+
+def lag_matrix_np(series: np.ndarray, lags: int, times: np.ndarray) -> np.ndarray:
+    """``[s(t-1) … s(t-lags)]`` for each t in ``times`` (lag-major, channels side by side)."""
+    idx = times[:, None] - np.arange(1, lags + 1)[None, :]
+    return series[idx].reshape(times.size, -1)
+
+
+def k_step_mlp(flat: np.ndarray, sizes: Sequence[int], code: int, yn: np.ndarray, un: np.ndarray, n_y: int, n_u: int,
+               k: int, bound: float) -> np.ndarray:
+    """k-step-ahead prediction ŷ(t | t-k) at every sample t ≥ lag, vectorised over t.
+
+    With P_j(t) = ŷ(t | t-j-1), P_0 is the one-step prediction and P_j uses, for lag i, the earlier
+    prediction P_{j-i}(t-i) when i ≤ j and the measurement y(t-i) otherwise; P_{k-1} is returned. Costs k
+    batched passes of the network; only the last n_y arrays P are kept.
+    """
+    n, ny_ch = yn.shape
+    lag = max(n_y, n_u)
+    times = np.arange(lag, n)
+    U = lag_matrix_np(un, n_u, times)
+    Ymeas = lag_matrix_np(yn, n_y, times).reshape(times.size, n_y, ny_ch)
+    hist: list[np.ndarray] = []  # hist[-i] = P_{j-i} over the full time axis (measured before lag)
+    P = None
+    with np.errstate(over="ignore", invalid="ignore"):
+        for j in range(k):
+            Yreg = Ymeas.copy()
+            for i in range(1, min(j, n_y) + 1):
+                Pji = hist[-i]
+                Yreg[:, i - 1, :] = Pji[times - i]
+            x = np.concatenate([Yreg.reshape(times.size, -1), U], axis=1)
+            pred = mlp_forward_np(flat, sizes, code, x)
+            pred[~np.isfinite(pred) | (np.abs(pred) > bound)] = np.nan
+            P = yn.copy()
+            P[lag:] = pred
+            hist.append(P)
+            if len(hist) > n_y:
+                hist.pop(0)
+    return P

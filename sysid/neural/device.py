@@ -1,0 +1,52 @@
+"""Device and thread selection for the neural identifiers.
+
+``device="auto"`` picks CUDA when ``torch.cuda.is_available()`` and the CPU otherwise; ``"cpu"`` and
+``"cuda"`` (or ``"cuda:N"``) force one. The environment variable ``PIEZOTWIN_DEVICE`` overrides ``auto``.
+Training data, parameters and optimiser state all live on the chosen device; predictions are computed on
+the CPU in float64 from the trained weights, so a model trained on a GPU predicts the same on any machine.
+
+Threads: the networks of the dissertation are small (a 4 × 25 MLP has 2501 weights), so one CPU thread per
+process is fastest — extra threads only add synchronisation per tiny matrix product (measured: one epoch on
+80 000 samples takes 0.35 s with 1 thread and 5 s with 2 threads on a shared 2-core machine).
+``PIEZOTWIN_TORCH_THREADS`` overrides the choice.
+"""
+
+from __future__ import annotations
+
+import os
+
+import torch
+
+from sysid.errors import ConfigError
+
+__all__ = ["select_device", "configure_threads"]
+
+
+def select_device(device: str = "auto") -> torch.device:
+    """Resolve ``"auto" | "cpu" | "cuda" | "cuda:N"`` to a :class:`torch.device`; refuse CUDA when absent."""
+    name = str(device or "auto").strip().lower()
+    if name == "auto":
+        name = os.environ.get("PIEZOTWIN_DEVICE", "").strip().lower() or ("cuda" if torch.cuda.is_available() else "cpu")
+    if name == "cpu":
+        return torch.device("cpu")
+    if name.startswith("cuda"):
+        if not torch.cuda.is_available():
+            raise ConfigError(f"device={device!r}: CUDA is not available on this machine (use device=cpu or auto)")
+        try:
+            dev = torch.device(name)
+        except RuntimeError:
+            raise ConfigError(f"device={device!r}: not a valid CUDA device name") from None
+        if dev.index is not None and dev.index >= torch.cuda.device_count():
+            raise ConfigError(f"device={device!r}: only {torch.cuda.device_count()} CUDA device(s) present")
+        return dev
+    raise ConfigError(f"device={device!r}: expected auto, cpu, cuda or cuda:N")
+
+
+def configure_threads(n: int | None = None) -> int:
+    """Set torch's intra-op threads (default 1, or ``PIEZOTWIN_TORCH_THREADS``); return the number set."""
+    if n is None:
+        n = int(os.environ.get("PIEZOTWIN_TORCH_THREADS", "1") or 1)
+    n = max(1, int(n))
+    if torch.get_num_threads() != n:
+        torch.set_num_threads(n)
+    return n

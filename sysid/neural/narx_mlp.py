@@ -1,0 +1,386 @@
+"""Neural NARX: the dissertation's multilayer perceptron (§2.5, ch. 4 and 5.2) and its simulation-error variant.
+
+:class:`NARXMLP` (registry id ``narx-mlp``) is the model of Tables 4.1 and 5.3: a dense network (eq. 2-10) fed
+with the regressor of eq. 2-14 — ``n_y`` past outputs and ``n_u`` past inputs (lags 1 … 1024) — trained
+one-step-ahead (series-parallel) on the targets of eq. 2-15 with MSE loss (eq. 2-27) and RMSprop (eq.
+2-25/2-26), on data normalised to zero mean and unit variance. Defaults are Table 4.1: 4 hidden layers of
+25 ReLU units, lags 10, learning rate 1e-4, batches of 128 pairs, 100 epochs (Table 5.3 used 75).
+
+:class:`NARXMLPSim` (``narx-mlp-sim``) is the same network trained on *simulation* error (parallel
+configuration): many windows of ``window`` samples, each started from measured samples (multiple
+shooting), are simulated in parallel as one batch by feeding the network its own predictions, and the loss
+is back-propagated through the whole recursion (truncated back-propagation through time). This is the
+remedy the dissertation's poor free-run validation (R² 0.55 ± 0.05, Fig. 5.13) calls for. By default it
+starts from a short one-step training (``pretrain_epochs``), which puts the recursion in a stable region.
+
+Training runs on ``device`` (auto: CUDA when present); prediction always runs on the CPU in float64 from
+the trained weights (``weights_``), with the free run compiled by numba, so a saved model predicts the same
+after loading on any machine.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+import warnings
+from pathlib import Path
+from typing import Any, Sequence
+
+import numpy as np
+import torch
+
+from sysid.base import Identifier, as_record_list
+from sysid.errors import ConfigError, DataError, DivergenceWarning
+from sysid.neural.core import (ACT_CODE, ACTIVATIONS, FlatMLP, LagData, RMSprop, count_mlp_parameters, free_run_mlp,
+                               k_step_mlp, lag_matrix_np, mlp_forward_np)
+from sysid.neural.device import configure_threads, select_device
+from sysid.record import Normaliser, Record
+
+__all__ = ["NARXMLP", "NARXMLPSim"]
+
+MAX_LAG = 1024
+# A simulated output beyond this many standard deviations of the estimation output is a divergence.
+DIVERGENCE_BOUND = 1e3
+
+
+def _as2d(a: np.ndarray) -> np.ndarray:
+    return a[:, None] if a.ndim == 1 else a
+
+
+def normalised_pairs(recs: Sequence[Record], norm: Normaliser | None) -> list[tuple[np.ndarray, np.ndarray]]:
+    out = []
+    for r in recs:
+        u = norm.transform_u(r.u) if norm is not None else r.u
+        y = norm.transform_y(r.y) if norm is not None else r.y
+        out.append((_as2d(np.asarray(u, dtype=float)), _as2d(np.asarray(y, dtype=float))))
+    return out
+
+
+def fit_normaliser(recs: Sequence[Record]) -> Normaliser:
+    """Scale from all estimation records together (one mean and SD per channel)."""
+    joined = Record(u=np.concatenate([r.u for r in recs]), y=np.concatenate([r.y for r in recs]), fs=recs[0].fs)
+    return Normaliser().fit(joined)
+
+
+def check_channels(recs: Sequence[Record]) -> tuple[int, int]:
+    nu, ny = recs[0].n_inputs, recs[0].n_outputs
+    for r in recs[1:]:
+        if (r.n_inputs, r.n_outputs) != (nu, ny):
+            raise DataError(f"{r.source}: {r.n_inputs} inputs / {r.n_outputs} outputs, but the first record has {nu} / {ny}")
+    return nu, ny
+
+
+def _check_storage(net: FlatMLP) -> None:
+    """Once per epoch: the layer gradients must still be the slices of the flat buffer the optimiser reads."""
+    if not net.check_grad_storage():  # pragma: no cover - would be a torch behaviour change
+        raise RuntimeError("neural training: layer gradients left the flat buffer; the optimiser would not see them")
+
+
+class _NeuralNARXBase(Identifier):
+    """Shared fit/predict/persistence of the two NARX-MLP identifiers (training differs)."""
+
+    name = "narx-mlp-base"
+
+    # ------------------------------------------------------------------ checks
+    def _check_params(self) -> None:
+        for key in ("n_y", "n_u"):
+            v = getattr(self, key)
+            if not isinstance(v, (int, np.integer)) or isinstance(v, bool) or not 0 <= v <= MAX_LAG:
+                raise ConfigError(f"{self.name}: {key}={v!r} must be an integer in [0, {MAX_LAG}]")
+        if self.n_y < 1:
+            raise ConfigError(f"{self.name}: n_y={self.n_y} must be at least 1 (a NARX model feeds back past outputs)")
+        hidden = list(self.hidden) if isinstance(self.hidden, (list, tuple)) else None
+        if hidden is None or not all(isinstance(h, (int, np.integer)) and not isinstance(h, bool) and 1 <= h <= 65536 for h in hidden):
+            raise ConfigError(f"{self.name}: hidden={self.hidden!r} must be a list of layer widths ≥ 1, e.g. hidden=25-25-25-25")
+        self.hidden = [int(h) for h in hidden]
+        if self.activation not in ACTIVATIONS:
+            raise ConfigError(f"{self.name}: activation={self.activation!r} not one of: {', '.join(ACTIVATIONS)}")
+        if not (isinstance(self.lr, (int, float)) and 0 < self.lr < 10):
+            raise ConfigError(f"{self.name}: lr={self.lr!r} must be a positive number below 10")
+        for key in ("batch_size", "epochs"):
+            v = getattr(self, key)
+            if not isinstance(v, (int, np.integer)) or isinstance(v, bool) or v < (1 if key == "batch_size" else 0):
+                raise ConfigError(f"{self.name}: {key}={v!r} must be a positive integer")
+        if not isinstance(self.seed, (int, np.integer)) or isinstance(self.seed, bool):
+            raise ConfigError(f"{self.name}: seed={self.seed!r} must be an integer")
+        select_device(self.device)
+
+    # ------------------------------------------------------------------ fit
+    def fit(self, data: Record | Sequence[Record]) -> "_NeuralNARXBase":
+        """Train on one Record or a list of them (no regressor spans two records). Returns self."""
+        self._check_params()
+        recs = as_record_list(data)
+        nu, ny = check_channels(recs)
+        t0 = time.perf_counter()
+        configure_threads()
+        device = select_device(self.device)
+        torch.manual_seed(int(self.seed))
+        gen = torch.Generator().manual_seed(int(self.seed))
+        self.normaliser_ = fit_normaliser(recs)
+        pairs = normalised_pairs(recs, self.normaliser_)
+        lag = max(self.n_y, self.n_u)
+        data_t = LagData(pairs, self.n_y, self.n_u, device)
+        net = FlatMLP(data_t.n_in, self.hidden, ny, self.activation, gen, device)
+        self.loss_history_ = []
+        self._train(net, data_t, gen)
+        self.weights_ = net.weights_np()
+        self.sizes_ = list(net.sizes)
+        self.n_inputs_, self.n_outputs_ = nu, ny
+        self.max_lag_ = lag
+        self.n_parameters_ = count_mlp_parameters(data_t.n_in, self.hidden, ny)
+        self.device_used_ = str(device)
+        self.fit_seconds_ = time.perf_counter() - t0
+        self.diverged_at_ = None
+        if not np.isfinite(self.weights_).all():
+            warnings.warn(f"{self.name}: training diverged (non-finite weights); predictions will be nan", DivergenceWarning,
+                          stacklevel=2)
+        return self
+
+    def _train_one_step(self, net: FlatMLP, data: LagData, gen: torch.Generator, epochs: int, lr: float) -> None:
+        """Series-parallel training (eq. 2-14/2-15): shuffled mini-batches of regressor rows, MSE, RMSprop."""
+        opt = RMSprop(net.flat, lr)
+        M, B = data.n_rows, int(self.batch_size)
+        dev = data.device
+        for _ in range(int(epochs)):
+            perm = torch.randperm(M, generator=gen).to(dev)
+            total = torch.zeros((), device=dev)
+            if data.X is not None:
+                batches = zip(data.X[perm].split(B), data.Y[perm].split(B))
+            else:
+                batches = ((data.x(idx), data.Y[idx]) for idx in perm.split(B))
+            for xb, yb in batches:
+                d = net(xb) - yb
+                loss = (d * d).mean()
+                opt.zero_grad()
+                loss.backward()
+                opt.step()
+                total += loss.detach() * xb.shape[0]
+            _check_storage(net)
+            self.loss_history_.append(float(total.item()) / M)  # one device sync per epoch
+
+    def _train(self, net: FlatMLP, data: LagData, gen: torch.Generator) -> None:  # pragma: no cover - abstract
+        raise NotImplementedError
+
+    # ------------------------------------------------------------------ predict
+    def _check_fitted(self) -> None:
+        if not hasattr(self, "weights_"):
+            raise ConfigError(f"{self.name}: model is not fitted; call fit() first")
+
+    def predict(self, record: Record, horizon: int | None = 1) -> np.ndarray:
+        """One-step (``horizon=1``), k-step-ahead at every sample (``horizon=k``) or free-run (``None``).
+
+        Returns an array shaped like ``record.y``; its first ``max_lag_`` samples are the measurement (initial
+        conditions, eq. 2-29). A diverging free run is stopped: the rest is ``nan``, ``diverged_at_`` holds
+        the index and a :class:`DivergenceWarning` is issued.
+        """
+        self._check_fitted()
+        record.require_output()
+        if (record.n_inputs, record.n_outputs) != (self.n_inputs_, self.n_outputs_):
+            raise DataError(f"{record.source}: {record.n_inputs} inputs / {record.n_outputs} outputs, model has "
+                            f"{self.n_inputs_} / {self.n_outputs_}")
+        lag = self.max_lag_
+        n = len(record)
+        if n <= lag:
+            raise DataError(f"{record.source}: {n} samples, need more than the model's lag {lag}")
+        if horizon is not None and (not isinstance(horizon, (int, np.integer)) or isinstance(horizon, bool) or horizon < 1):
+            raise ConfigError(f"{self.name}: horizon must be a positive integer or None (free run), got {horizon!r}")
+        (un, yn), = normalised_pairs([record], self.normaliser_)
+        code = ACT_CODE[self.activation]
+        self.diverged_at_ = None
+        if horizon is None or horizon >= n - lag:
+            yhat, div = free_run_mlp(self.weights_, self.sizes_, code, yn, un, self.n_y, self.n_u, DIVERGENCE_BOUND)
+            if div >= 0:
+                self.diverged_at_ = int(div)
+                warnings.warn(f"{self.name}: free-run simulation diverged at sample {div} of {n}; the rest is nan",
+                              DivergenceWarning, stacklevel=2)
+        elif horizon == 1:
+            times = np.arange(lag, n)
+            x = np.concatenate([lag_matrix_np(yn, self.n_y, times), lag_matrix_np(un, self.n_u, times)], axis=1)
+            yhat = yn.copy()
+            with np.errstate(over="ignore", invalid="ignore"):
+                yhat[lag:] = mlp_forward_np(self.weights_, self.sizes_, code, x)
+        else:
+            yhat = k_step_mlp(self.weights_, self.sizes_, code, yn, un, self.n_y, self.n_u, int(horizon), DIVERGENCE_BOUND)
+        if horizon is not None and not np.isfinite(yhat).all():
+            bad = np.flatnonzero(~np.isfinite(yhat).all(axis=1))
+            self.diverged_at_ = int(bad[0])
+            yhat[bad] = np.nan
+            warnings.warn(f"{self.name}: {bad.size} non-finite {horizon}-step predictions, first at sample {bad[0]}",
+                          DivergenceWarning, stacklevel=2)
+        out = self.normaliser_.inverse_y(yhat)
+        out[:lag] = _as2d(record.y)[:lag]  # initial conditions copied exactly, not through the scaling round trip
+        return out[:, 0] if record.y.ndim == 1 else out
+
+    # ------------------------------------------------------------------ description / persistence
+    def describe(self) -> dict[str, Any]:
+        d = super().describe()
+        if hasattr(self, "weights_"):
+            d.update({
+                "structure": {"inputs": self.sizes_[0], "hidden": list(self.hidden), "outputs": self.sizes_[-1],
+                              "activation": self.activation, "n_y": self.n_y, "n_u": self.n_u},
+                "terms": [],
+                "max_lag": self.max_lag_,
+                "device": self.device_used_,
+                "final_loss": self.loss_history_[-1] if self.loss_history_ else None,
+                "epochs_run": len(self.loss_history_),
+            })
+        return d
+
+    def _state(self) -> dict[str, Any]:
+        self._check_fitted()
+        return {
+            "weights": np.asarray(self.weights_, dtype=float).tolist(),
+            "sizes": list(map(int, self.sizes_)),
+            "normaliser": self.normaliser_.to_dict(),
+            "n_inputs": int(self.n_inputs_),
+            "n_outputs": int(self.n_outputs_),
+            "loss_history": [float(v) for v in self.loss_history_],
+            "device_used": self.device_used_,
+            "fit_seconds": float(self.fit_seconds_),
+        }
+
+    def _load_state(self, state: dict[str, Any]) -> None:
+        self._check_params()
+        self.weights_ = np.asarray(state["weights"], dtype=np.float64)
+        self.sizes_ = [int(s) for s in state["sizes"]]
+        if int(np.sum([a * b + b for a, b in zip(self.sizes_[:-1], self.sizes_[1:])])) != self.weights_.size:
+            raise DataError(f"{self.name}: saved weights ({self.weights_.size}) do not match layer sizes {self.sizes_}")
+        self.normaliser_ = Normaliser.from_dict(state["normaliser"])
+        self.n_inputs_, self.n_outputs_ = int(state["n_inputs"]), int(state["n_outputs"])
+        self.loss_history_ = [float(v) for v in state.get("loss_history", [])]
+        self.device_used_ = state.get("device_used", "cpu")
+        self.fit_seconds_ = float(state.get("fit_seconds", float("nan")))
+        self.max_lag_ = max(self.n_y, self.n_u)
+        self.n_parameters_ = int(self.weights_.size)
+        self.diverged_at_ = None
+
+    def save(self, path: str | Path) -> Path:
+        """``.pt`` → torch file (read back by :func:`sysid.base.load_model` via ``sysid.neural.persist``); else JSON."""
+        from sysid.neural.persist import save_torch
+
+        path = Path(path)
+        if path.suffix.lower() == ".pt":
+            return save_torch(self, path)
+        return super().save(path)
+
+
+class NARXMLP(_NeuralNARXBase):
+    """NARX multilayer perceptron trained one-step-ahead (series-parallel), as in the dissertation.
+
+    Parameters
+    ----------
+    n_y, n_u : int
+        Output and input lags (eq. 2-9/2-14), 0 … 1024 (n_y ≥ 1). Table 4.1: 10 and 10.
+    hidden : list of int
+        Hidden layer widths, e.g. ``[25, 25, 25, 25]`` (``--set hidden=25-25-25-25``).
+    activation : str
+        ``sigmoid`` (eq. 2-11), ``tanh`` (2-12) or ``relu`` (2-13) in every hidden layer; linear output.
+    lr, batch_size, epochs : float, int, int
+        RMSprop learning rate η (eq. 2-26), input/output pairs per mini-batch and passes over the data
+        (Table 4.1: 1e-4, 128, 100).
+    seed : int
+        Seeds the initial weights and the batch order (deterministic on the CPU).
+    device : str
+        ``auto`` (CUDA when present), ``cpu`` or ``cuda``.
+    """
+
+    name = "narx-mlp"
+
+    def __init__(self, n_y: int = 10, n_u: int = 10, hidden: Sequence[int] = (25, 25, 25, 25), activation: str = "relu",
+                 lr: float = 1e-4, batch_size: int = 128, epochs: int = 100, seed: int = 0, device: str = "auto"):
+        self.n_y = n_y
+        self.n_u = n_u
+        self.hidden = list(hidden) if isinstance(hidden, (list, tuple)) else hidden
+        self.activation = activation
+        self.lr = lr
+        self.batch_size = batch_size
+        self.epochs = epochs
+        self.seed = seed
+        self.device = device
+
+    def _train(self, net: FlatMLP, data: LagData, gen: torch.Generator) -> None:
+        self._train_one_step(net, data, gen, self.epochs, self.lr)
+
+
+class NARXMLPSim(_NeuralNARXBase):
+    """The NARX-MLP trained by simulation (output) error over windows — the parallel configuration.
+
+    Extra parameters (the rest as :class:`NARXMLP`):
+
+    window : int
+        Steps T of each simulated window; the loss is the MSE of the T free-run predictions and is
+        back-propagated through the recursion (truncated BPTT).
+    batch_size : int
+        Windows simulated in parallel per gradient step.
+    pretrain_epochs : int
+        One-step (series-parallel) epochs before the simulation-error epochs (0 to start from scratch).
+    pretrain_lr : float
+        Learning rate of the one-step pretraining.
+
+    Each epoch draws ``ceil(rows / window)`` window starts at random positions (so that on average every
+    sample is a target once per epoch); each window starts from the measured ``y(s-1) … y(s-n_y)``.
+    """
+
+    name = "narx-mlp-sim"
+
+    def __init__(self, n_y: int = 10, n_u: int = 10, hidden: Sequence[int] = (25, 25, 25, 25), activation: str = "relu",
+                 lr: float = 1e-3, batch_size: int = 32, epochs: int = 100, seed: int = 0, device: str = "auto",
+                 window: int = 50, pretrain_epochs: int = 10, pretrain_lr: float = 1e-3):
+        self.n_y = n_y
+        self.n_u = n_u
+        self.hidden = list(hidden) if isinstance(hidden, (list, tuple)) else hidden
+        self.activation = activation
+        self.lr = lr
+        self.batch_size = batch_size
+        self.epochs = epochs
+        self.seed = seed
+        self.device = device
+        self.window = window
+        self.pretrain_epochs = pretrain_epochs
+        self.pretrain_lr = pretrain_lr
+
+    def _check_params(self) -> None:
+        super()._check_params()
+        if not isinstance(self.window, (int, np.integer)) or isinstance(self.window, bool) or not 1 <= self.window <= 100_000:
+            raise ConfigError(f"{self.name}: window={self.window!r} must be an integer in [1, 100000]")
+        if not isinstance(self.pretrain_epochs, (int, np.integer)) or self.pretrain_epochs < 0:
+            raise ConfigError(f"{self.name}: pretrain_epochs={self.pretrain_epochs!r} must be a non-negative integer")
+        if not (isinstance(self.pretrain_lr, (int, float)) and 0 < self.pretrain_lr < 10):
+            raise ConfigError(f"{self.name}: pretrain_lr={self.pretrain_lr!r} must be a positive number below 10")
+
+    def _train(self, net: FlatMLP, data: LagData, gen: torch.Generator) -> None:
+        if self.pretrain_epochs:
+            self._train_one_step(net, data, gen, self.pretrain_epochs, self.pretrain_lr)
+        T = int(self.window)
+        starts = data.window_starts(T)
+        if starts.size == 0:
+            raise DataError(f"{self.name}: no record has {T + data.lag} samples for one window; lower window")
+        dev = data.device
+        starts_t = torch.as_tensor(starts, device=dev)
+        steps = torch.arange(T, device=dev)
+        n_win = max(1, math.ceil(data.n_rows / T))
+        opt = RMSprop(net.flat, self.lr)
+        B = int(self.batch_size)
+        nyr, ch = data.n_yreg, data.ny_ch
+        for _ in range(int(self.epochs)):
+            pick = torch.randint(0, starts.size, (n_win,), generator=gen).to(dev)
+            total = torch.zeros((), device=dev)
+            for sel in pick.split(B):
+                s = starts_t[sel]
+                rows = (s[:, None] + steps[None, :]).reshape(-1)
+                Xw = data.x(rows).view(s.shape[0], T, data.n_in)
+                target = data.Y[rows].view(s.shape[0], T, ch)
+                yreg = Xw[:, 0, :nyr]  # measured y(s-1) … y(s-n_y): the shooting node
+                preds = []
+                for j in range(T):
+                    yh = net(torch.cat([yreg, Xw[:, j, nyr:]], dim=1))
+                    preds.append(yh)
+                    yreg = torch.cat([yh, yreg[:, :nyr - ch]], dim=1) if nyr > ch else yh
+                d = torch.stack(preds, dim=1) - target
+                loss = (d * d).mean()
+                opt.zero_grad()
+                loss.backward()
+                opt.step()
+                total += loss.detach() * s.shape[0]
+            _check_storage(net)
+            self.loss_history_.append(float(total.item()) / n_win)
