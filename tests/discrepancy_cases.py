@@ -114,11 +114,11 @@ def check_case(out: dict, effect: str | None, params: dict, checked: list[str]) 
     top = out["causes"][0] if out["causes"] else {}
     found = bool(top) and (top["effect"] == effect or effect in top.get("group", []))
     errs = {}
+    # a group names the leader's parameters; the hidden member's own fitted values are in its trial row
+    row = top.get("params", {}) if top.get("effect") == effect else next(
+        (c["params"] for r in out.get("rounds", [])[:1] for c in r.get("candidates", []) if c["effect"] == effect), {})
     for k in checked:
-        if top.get("effect") != effect:
-            errs[k] = float("nan")
-            continue
-        got = top["params"].get(k)
+        got = row.get(k)
         want = params[k]
         if isinstance(want, str):
             errs[k] = 0.0 if got == want else 1.0

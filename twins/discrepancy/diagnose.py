@@ -530,8 +530,15 @@ def diagnose(twin: Twin, data: Record, val: Record | None = None, max_rounds: in
             res = current.calibrate(data, val=val, names=core0)
         except TypeError:
             res = ls_calibrate(current, data, core0, val=val, simulate=_simulate)
-        current = _deterministic(res.twin)
+        fitted = _deterministic(res.twin)
         calib_info = {"fitted": res.fitted, "stderr": res.stderr}
+        # keep the calibration only if it improves on the configuration as given (an unconverged fit would
+        # otherwise hand every trial that restarts from the prior a spurious gain)
+        if _sse(data.y, _simulate(fitted, data), skip) <= _sse(data.y, _simulate(current, data), skip):
+            current = fitted
+        else:
+            calib_info["kept"] = False
+            calib_info["note"] = "calibration did not improve on the given configuration; the given one is used"
     base = _stage(current, data, val, opts)
     stage = base
 
@@ -681,6 +688,7 @@ def diagnose(twin: Twin, data: Record, val: Record | None = None, max_rounds: in
                                     f"and a trend) removes {100 * (1 - gen['nrmse_ratio'] ** 2):.0f} % of the validation "
                                     f"residual variance; {unexplained['description']}"),
                        "params": {}})
+    causes.sort(key=lambda c: -float(c["confidence"]))  # strongest first (stable: round order among equals)
     verdict = "discrepancy" if causes else "none"
     kept_unpredictable = set(twin.effects) & _unpredictable(twin)  # noise/quantisation as configured
     out = {

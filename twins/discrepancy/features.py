@@ -49,12 +49,15 @@ def _z(x: np.ndarray) -> np.ndarray:
 
 
 # ---------------------------------------------------------------------------------------------- statistics
-def effective_samples(e: np.ndarray, max_lag: int = 50) -> float:
+def effective_samples(e: np.ndarray, max_lag: int | None = None) -> float:
     """Effective number of independent samples of a residual for variance statistics.
 
     N_eff = N / (1 + 2 Σ_{k=1..K} ρ_k²) (Bartlett's variance of a sample variance of a Gaussian process with
-    autocorrelation ρ_k); white noise gives N_eff ≈ N, a strongly coloured residual far fewer.
+    autocorrelation ρ_k), K = min(N/10, 500) by default so that slow correlations (quantisation error of a slow
+    signal, drifts) count; white noise gives N_eff ≈ N − 2K, a strongly coloured residual far fewer.
     """
+    if max_lag is None:
+        max_lag = int(min(max(np.asarray(e).size // 10, 1), 500))
     e = np.asarray(e, dtype=float)
     n = e.size
     if n < 4:
@@ -66,8 +69,6 @@ def effective_samples(e: np.ndarray, max_lag: int = 50) -> float:
     if ac[0] <= 0:
         return float(n)
     rho = ac[1:] / ac[0]
-    # only the lags whose autocorrelation stands above the white-noise band count
-    rho = np.where(np.abs(rho) > 2.0 / np.sqrt(n), rho, 0.0)
     return float(n / (1.0 + 2.0 * np.sum(rho ** 2)))
 
 
@@ -596,7 +597,8 @@ def analyse(u: np.ndarray, y: np.ndarray, ysim: np.ndarray, fs: float, meta: dic
                             "odd_over_even_db": float(10 * np.log10((odd + 1e-300) / (even + 1e-300)))}
     else:
         out["harmonics"] = harmonics(e, u, fs)
-    period = meta.get("period_samples") or (meta.get("multisine") or {}).get("period_samples")
+    period = (meta.get("period_samples") or (meta.get("multisine") or {}).get("period_samples")
+              or (meta.get("excitation") or {}).get("period_samples"))
     out["lines"] = odd_even_lines(u, y, e, fs, period=int(period) if period else None)
     out["nonlinear"] = nonlinear_correlation(e, u, ysim, max_lag=max_lag)
     out["resonances"] = resonance_peaks(e, y, fs)
