@@ -51,7 +51,6 @@ def _staircase(rng, fs, duration, level):
 
 
 # ------------------------------------------------------------------------------------------ cantilever
-@pytest.mark.slow
 def test_cantilever_creep_injected_as_sum_of_lags():
     """Creep = Σ g·d/(τ_i s + 1) on the input, τ_i = 0.05·10^i s (4 decades), g = 0.024 per decade (defaults:
     0.1 s and 0.015), added to the creep-free twin's output, on a random staircase."""
@@ -79,7 +78,6 @@ def test_cantilever_creep_injected_as_sum_of_lags():
     assert "logarithmic" in top["evidence"] or "drift" in top["evidence"]
 
 
-@pytest.mark.slow
 def test_cantilever_delay_injected_as_shift():
     """A 0.27 ms (2.7-sample) transport delay applied by shifting a swept triangle input (not a protocol)."""
     fs = 10_000.0
