@@ -241,3 +241,22 @@ def test_input_delay_nk_kernels_and_fit(plant):
     m = NARXMLP(n_y=2, n_u=3, nk=4, hidden=[6], epochs=1, device="cpu").fit(est)
     assert m.max_lag_ == 6 and m.n_parameters_ == count_mlp_parameters(5, [6], 1)
     assert m.predict(val, None).shape == val.y.shape and np.isfinite(m.predict(val, 3)).all()
+
+
+def test_sim_warm_start_is_the_one_step_model_and_tail_selection(plant):
+    """pretrain = NARXMLP's epochs/lr/batch and seed: with 0 simulation epochs the weights equal the one-step
+    model's exactly. select_tail: the kept weights are the best free-run R² on the held-out estimation tail."""
+    est, _ = plant
+    est = est[:2000]
+    kw = dict(n_y=4, n_u=4, hidden=[8], activation="tanh", seed=3, device="cpu")
+    osa = NARXMLP(**kw, epochs=3, lr=1e-3, batch_size=64).fit(est)
+    warm = NARXMLPSim(**kw, epochs=0, pretrain_epochs=3, pretrain_lr=1e-3, pretrain_batch_size=64, batch_size=4).fit(est)
+    np.testing.assert_array_equal(warm.weights_, osa.weights_)
+    sim = NARXMLPSim(**kw, epochs=4, lr=3e-3, window=20, pretrain_epochs=3, pretrain_lr=1e-3, select_tail=0.25).fit(est)
+    assert 0 <= sim.selected_epoch_ <= 4
+    tail = est[1500 - sim.max_lag_:]  # the held-out 500 samples with their initial conditions
+    assert r2(tail.y, sim.predict(tail, None), sim.max_lag_) == pytest.approx(sim.selection_r2_, abs=1e-9)
+    with pytest.raises(ConfigError, match="select_tail"):
+        NARXMLPSim(**kw, select_tail=0.7).fit(est)
+    with pytest.raises(ConfigError, match="pretrain_batch_size"):
+        NARXMLPSim(**kw, pretrain_batch_size=0).fit(est)

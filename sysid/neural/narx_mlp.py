@@ -140,10 +140,11 @@ class _NeuralNARXBase(Identifier):
                           stacklevel=2)
         return self
 
-    def _train_one_step(self, net: FlatMLP, data: LagData, gen: torch.Generator, epochs: int, lr: float) -> None:
+    def _train_one_step(self, net: FlatMLP, data: LagData, gen: torch.Generator, epochs: int, lr: float,
+                        batch_size: int | None = None) -> None:
         """Series-parallel training (eq. 2-14/2-15): shuffled mini-batches of regressor rows, MSE, RMSprop."""
         opt = RMSprop(net.flat, lr)
-        M, B = data.n_rows, int(self.batch_size)
+        M, B = data.n_rows, int(self.batch_size if batch_size is None else batch_size)
         dev = data.device
         for _ in range(int(epochs)):
             perm = torch.randperm(M, generator=gen).to(dev)
@@ -326,6 +327,14 @@ class NARXMLPSim(_NeuralNARXBase):
         One-step (series-parallel) epochs before the simulation-error epochs (0 to start from scratch).
     pretrain_lr : float
         Learning rate of the one-step pretraining.
+    pretrain_batch_size : int or None
+        Mini-batch of the one-step pretraining (None: ``batch_size``). With the same epochs, learning rate and
+        batch as a :class:`NARXMLP` of the same seed, the pretrained net IS that one-step model (warm start).
+    select_tail : float
+        Fraction (0 … 0.5) of the last estimation record held out of training; the weights kept are those,
+        after pretraining or after any simulation-error epoch, with the best free-run R² on that tail (early
+        stopping / model selection on estimation data only; ``selected_epoch_`` 0 means the pretrained net).
+        0 (default): no hold-out, the last epoch is kept.
 
     Each epoch draws ``ceil(rows / window)`` window starts at random positions (so that on average every
     sample is a target once per epoch); each window starts from the measured ``y(s-1) … y(s-n_y)``.
@@ -335,7 +344,8 @@ class NARXMLPSim(_NeuralNARXBase):
 
     def __init__(self, n_y: int = 10, n_u: int = 10, hidden: Sequence[int] = (25, 25, 25, 25), activation: str = "relu",
                  lr: float = 1e-3, batch_size: int = 32, epochs: int = 100, seed: int = 0, device: str = "auto",
-                 window: int = 50, pretrain_epochs: int = 10, pretrain_lr: float = 1e-3, nk: int = 1):
+                 window: int = 50, pretrain_epochs: int = 10, pretrain_lr: float = 1e-3, nk: int = 1,
+                 select_tail: float = 0.0, pretrain_batch_size: int | None = None):
         self.n_y = n_y
         self.n_u = n_u
         self.nk = nk
@@ -349,9 +359,17 @@ class NARXMLPSim(_NeuralNARXBase):
         self.window = window
         self.pretrain_epochs = pretrain_epochs
         self.pretrain_lr = pretrain_lr
+        self.select_tail = select_tail
+        self.pretrain_batch_size = pretrain_batch_size
 
     def _check_params(self, check_device: bool = True) -> None:
         super()._check_params(check_device)
+        if not (isinstance(self.select_tail, (int, float)) and not isinstance(self.select_tail, bool)
+                and 0 <= self.select_tail < 0.5):
+            raise ConfigError(f"{self.name}: select_tail={self.select_tail!r} must be a fraction in [0, 0.5)")
+        pb = self.pretrain_batch_size
+        if pb is not None and (not isinstance(pb, (int, np.integer)) or isinstance(pb, bool) or pb < 1):
+            raise ConfigError(f"{self.name}: pretrain_batch_size={pb!r} must be a positive integer (or None: batch_size)")
         if not isinstance(self.window, (int, np.integer)) or isinstance(self.window, bool) or not 1 <= self.window <= 100_000:
             raise ConfigError(f"{self.name}: window={self.window!r} must be an integer in [1, 100000]")
         if not isinstance(self.pretrain_epochs, (int, np.integer)) or self.pretrain_epochs < 0:
@@ -359,9 +377,45 @@ class NARXMLPSim(_NeuralNARXBase):
         if not (isinstance(self.pretrain_lr, (int, float)) and 0 < self.pretrain_lr < 10):
             raise ConfigError(f"{self.name}: pretrain_lr={self.pretrain_lr!r} must be a positive number below 10")
 
+    def fit(self, data: Record | Sequence[Record]) -> "NARXMLPSim":
+        """As :meth:`NARXMLP.fit`; with ``select_tail`` > 0 the last fraction of the last estimation record is
+        held out of training and the weights kept are those (after pretraining or after any simulation-error
+        epoch) with the best free-run R² on it — early stopping on estimation data only."""
+        self._check_params()
+        recs = as_record_list(data)
+        self._tail = None
+        self.selected_epoch_, self.selection_r2_ = None, None
+        if self.select_tail:
+            last = recs[-1]
+            n_hold = int(round(self.select_tail * len(last)))
+            lag = regressor_lag(self.n_y, self.n_u, self.nk)
+            cut = len(last) - n_hold
+            if n_hold < 1 or cut - lag < max(1, int(self.window)) or cut < lag + 1:
+                raise DataError(f"{self.name}: select_tail={self.select_tail} leaves {cut} training / {n_hold} held-out "
+                                f"samples of {last.source}, need more than the lag {lag} and one window in each")
+            self._tail = last[cut - lag:]  # the held-out samples with their lag of measured initial conditions
+            recs = [*recs[:-1], last[:cut]]
+        try:
+            return super().fit(recs)
+        finally:
+            self._tail = None
+
+    def _tail_r2(self, net: FlatMLP) -> float:
+        """Free-run R² (normalised units; R² is scale-free) on the held-out tail, after the initial conditions."""
+        from sysid.metrics import r2
+
+        (un, yn), = normalised_pairs([self._tail], self.normaliser_)
+        yh, div = free_run_mlp(net.weights_np(), list(net.sizes), ACT_CODE[self.activation], yn, un, self.n_y, self.n_u,
+                               DIVERGENCE_BOUND, self.nk)
+        lag = regressor_lag(self.n_y, self.n_u, self.nk)
+        return -np.inf if div >= 0 or not np.isfinite(yh).all() else float(r2(yn, yh, lag))
+
     def _train(self, net: FlatMLP, data: LagData, gen: torch.Generator) -> None:
         if self.pretrain_epochs:
-            self._train_one_step(net, data, gen, self.pretrain_epochs, self.pretrain_lr)
+            self._train_one_step(net, data, gen, self.pretrain_epochs, self.pretrain_lr, self.pretrain_batch_size)
+        best = None
+        if self._tail is not None:
+            best = (self._tail_r2(net), 0, net.flat.detach().clone())
         T = int(self.window)
         starts = data.window_starts(T)
         if starts.size == 0:
@@ -395,3 +449,11 @@ class NARXMLPSim(_NeuralNARXBase):
                 total += loss.detach() * s.shape[0]
             _check_storage(net)
             self.loss_history_.append(float(total.item()) / n_win)
+            if best is not None:
+                score = self._tail_r2(net)
+                if score > best[0]:
+                    best = (score, len(self.loss_history_) - int(self.pretrain_epochs), net.flat.detach().clone())
+        if best is not None:
+            with torch.no_grad():
+                net.flat.copy_(best[2])
+            self.selection_r2_, self.selected_epoch_ = float(best[0]), int(best[1])
