@@ -232,11 +232,12 @@ class TwinSlave(Fmi2Slave):
     def _before_raise(self) -> None:
         """Keep pythonfmu 0.7's error path from freeing live objects.
 
-        On a Python exception its C++ wrapper releases its references to the slave class, the instance and
-        the log queue, and releases them once more when the instance is freed; the second release frees
-        objects still in use and corrupts the heap (the process aborts at exit: "corrupted double-linked
-        list"). One extra reference to each before the exception propagates balances the count (at worst
-        it keeps three small objects alive after an error).
+        On a Python exception its C++ wrapper (``handle_py_exception``) releases its references to the slave
+        class, the instance and the log queue, and releases them once more when the instance is freed
+        (``cleanPyObject`` twice); the second release would free objects still in use. One extra reference
+        to each before the exception propagates balances the count (at worst it keeps three small objects
+        alive after an error). The abort at exit seen with these FMUs had another cause: see
+        :func:`release_wrapper_state`.
         """
         import ctypes
 
