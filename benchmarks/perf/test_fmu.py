@@ -3,7 +3,7 @@
 Run by ``make bench``. One fmpy co-simulation step = fmpy's own loop (input interpolation, setReal,
 doStep, getReal, recording) + pythonfmu's C->Python call + the twin's per-sample core; the cores are also
 timed alone. The FMUs are built once per session in a temporary folder. The FMUs run in this process (a
-child process would time the imports too); see the README's known problem about an abort at exit.
+child process would time the imports too). The former abort at exit is fixed in the slave (README, fmu).
 """
 
 import numpy as np

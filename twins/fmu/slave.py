@@ -16,6 +16,8 @@ from __future__ import annotations
 import importlib
 import json
 import math
+import os
+import sys
 from pathlib import Path
 from typing import Any
 from xml.etree.ElementTree import Element, SubElement
@@ -27,10 +29,58 @@ from pythonfmu.enums import Fmi2Status
 from twins.fmu.spec import CONFIG_NAME, FORMAT, decode_value
 
 
-__all__ = ["TwinSlave", "load_fmu_config"]
+__all__ = ["TwinSlave", "load_fmu_config", "release_wrapper_state"]
 
 #: relative tolerance on ``step_size * fs`` being a whole number of samples
 STEP_TOLERANCE = 1e-6
+
+
+def release_wrapper_state(resources: str | Path) -> bool:
+    """Drop the global ``PyState`` reference of the pythonfmu 0.7 wrapper binary that is running this slave.
+
+    Why: the wrapper (``binaries/linux64/<model>.so``) keeps a global ``std::shared_ptr<PyState>``. At process
+    exit glibc runs its C++ static destructor (an ``atexit`` handler, which frees the ``PyState``) and then
+    the library's ``__attribute__((destructor))`` ``onLibraryUnload``, which assigns ``nullptr`` to the
+    already destroyed pointer and so releases the freed control block a second time: a 4-byte decrement
+    inside a freed 144-byte heap chunk. glibc notices at the next heap consolidation, usually in
+    libgfortran's exit handler ("corrupted double-linked list", exit status 134). It happens whenever the
+    wrapper is still mapped at exit, which is the rule once a library loaded later (numba's llvmlite,
+    scipy) binds one of its ``STB_GNU_UNIQUE`` symbols, so ``dlclose`` cannot unmap it.
+    (At ``dlclose`` the order is the safe one: ``onLibraryUnload`` first, then the static destructor.)
+
+    Fix: call the wrapper's exported ``finalizePythonInterpreter()`` once the instance exists. It resets the
+    pointer properly (the ``PyState`` is destroyed now and its worker thread, finished long ago in a
+    Python host, is joined); both exit-time destructors then find ``nullptr`` and do nothing. The instance
+    does not use the ``PyState``; a later instantiation by the same binary creates a new one (and this
+    runs again). Done only where the importing tool is itself a Python program (``sys.orig_argv`` is set,
+    so the wrapper did not start the interpreter): in a C host the ``PyState`` owns the interpreter and
+    destroying it would finalise Python. Returns True if the reference was dropped.
+    """
+    if sys.platform != "linux" or not getattr(sys, "orig_argv", None):
+        return False
+    import ctypes
+
+    folder = Path(resources).parent / "binaries" / "linux64"
+    mode = getattr(os, "RTLD_NOLOAD", 4) | getattr(os, "RTLD_LAZY", 1)
+    for binary in sorted(folder.glob("*.so")):
+        try:  # RTLD_NOLOAD: a handle only for the binary already loaded by the importing tool
+            lib = ctypes.CDLL(str(binary), mode=mode)
+        except OSError:
+            continue
+        try:
+            finalize = lib.finalizePythonInterpreter
+        except AttributeError:
+            return False  # not the pythonfmu 0.7 wrapper
+        finalize.restype, finalize.argtypes = None, []
+        finalize()
+        try:
+            import _ctypes
+
+            _ctypes.dlclose(lib._handle)  # give back the reference RTLD_NOLOAD took: unloading stays possible
+        except (ImportError, AttributeError, OSError):
+            pass
+        return True
+    return False
 
 
 def load_fmu_config(resources: str | Path) -> dict[str, Any]:
@@ -90,6 +140,7 @@ class TwinSlave(Fmi2Slave):
         self._values: dict[str, Any] = {}
         self._core = None
         self._twin_cls = _resolve(cfg["twin_class"])  # import errors surface at instantiation
+        release_wrapper_state(self.resources)  # pythonfmu 0.7: double release of its PyState at exit
         self._fs = float(cfg["fs"])
         self.default_experiment = DefaultExperiment(start_time=0.0, step_size=1.0 / self._fs)
         self.u = 0.0
@@ -181,11 +232,12 @@ class TwinSlave(Fmi2Slave):
     def _before_raise(self) -> None:
         """Keep pythonfmu 0.7's error path from freeing live objects.
 
-        On a Python exception its C++ wrapper releases its references to the slave class, the instance and
-        the log queue, and releases them once more when the instance is freed; the second release frees
-        objects still in use and corrupts the heap (the process aborts at exit: "corrupted double-linked
-        list"). One extra reference to each before the exception propagates balances the count (at worst
-        it keeps three small objects alive after an error).
+        On a Python exception its C++ wrapper (``handle_py_exception``) releases its references to the slave
+        class, the instance and the log queue, and releases them once more when the instance is freed
+        (``cleanPyObject`` twice); the second release would free objects still in use. One extra reference
+        to each before the exception propagates balances the count (at worst it keeps three small objects
+        alive after an error). The abort at exit seen with these FMUs had another cause: see
+        :func:`release_wrapper_state`.
         """
         import ctypes
 
