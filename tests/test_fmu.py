@@ -516,3 +516,10 @@ def test_stepper_retune_refuses_layout_change():
     with pytest.raises(ConfigError, match="state layout would change"):
         stepper.retune(twin.with_effects(twin.effects | {"saturation"}))
     assert stepper.twin is twin  # refused: nothing replaced
+
+
+def test_cantilever_invalid_tunable_value_fails_the_step(cantilever_runs):
+    """An out-of-range value set mid-run is refused by the next doStep, with the twin's reason."""
+    _, path, u, fs, _ = cantilever_runs
+    with pytest.raises(Exception, match="fmi2DoStep failed"):
+        _fmu_run_with_change(path, u[:20], fs, 10, {"f1_hz": 1e9})
