@@ -416,3 +416,110 @@ def test_real_start_values_are_exact_doubles(tmp_path):
                             input=np.array(list(zip(np.arange(51) * 1e-3, np.append(u, u[-1]))),
                                            dtype=[("time", float), ("u", float)]))
     assert np.array_equal(res["y"][1:], twin.simulate(u, 1000.0))
+
+
+# ------------------------------------------------------------------------- tunable parameters (mid-run)
+def _fmu_run_with_change(path, u, fs, k, change):
+    """Step the FMU through ``u`` with fmpy's FMU2Slave, setting ``change`` (name -> float) between
+    communication steps ``k - 1`` and ``k``; returns the outputs aligned with ``simulate``."""
+    import shutil
+
+    from fmpy import extract, read_model_description
+    from fmpy.fmi2 import FMU2Slave
+
+    md = read_model_description(str(path))
+    refs = {v.name: v.valueReference for v in md.modelVariables}
+    folder = extract(str(path))
+    slave = FMU2Slave(guid=md.guid, unzipDirectory=folder, modelIdentifier=md.coSimulation.modelIdentifier,
+                      instanceName="tune")
+    try:
+        slave.instantiate()
+        slave.setupExperiment(startTime=0.0)
+        slave.enterInitializationMode()
+        slave.exitInitializationMode()
+        h, y = 1.0 / fs, np.empty(len(u))
+        for i, ui in enumerate(u):
+            if i == k:
+                slave.setReal([refs[n] for n in change], list(change.values()))
+            slave.setReal([refs["u"]], [float(ui)])
+            slave.doStep(currentCommunicationPoint=i * h, communicationStepSize=h)
+            y[i] = slave.getReal([refs["y"]])[0]
+        slave.terminate()
+    finally:
+        slave.freeInstance()
+        shutil.rmtree(folder, ignore_errors=True)
+    return y
+
+
+def _native_with_change(twin, u, fs, k, change):
+    stepper = twin.make_stepper(fs)
+    y = np.empty(len(u))
+    for i, ui in enumerate(u):
+        if i == k:
+            stepper.retune(twin.with_params(**change))
+        y[i] = stepper.step(float(ui))
+    return y
+
+
+@pytest.mark.parametrize("change", [
+    {"gain_um_per_v": 0.4, "bw_beta": 0.03},  # hysteresis
+    {"f1_hz": 900.0, "creep_per_decade": 0.03, "noise_um": 0.02, "offset_um": 1.5},  # modes, creep, sensor
+])
+def test_cantilever_tunable_change_mid_run_matches_native(cantilever_runs, change):
+    """A tunable parameter set between communication steps acts from the next step on, with the state
+    (hysteresis, modes, creep, sensor, noise generator) carried over: exactly as the native stepper's retune."""
+    twin, path, u, fs, _ = cantilever_runs
+    n, k = 400, 150
+    u = u[:n]
+    y = _fmu_run_with_change(path, u, fs, k, change)
+    ref = _native_with_change(twin, u, fs, k, change)
+    assert np.array_equal(y, ref)
+    plain = twin.simulate(u, fs)
+    assert np.array_equal(y[:k], plain[:k])  # nothing changes before the step
+    assert relative_rms(y[k:], plain[k:]) > 1e-3  # the change is visible afterwards
+    # carried state, not a restart: the same change made at t = 0 gives a different tail
+    restarted = twin.with_params(**change).simulate(u, fs)
+    assert relative_rms(y[k:], restarted[k:]) > 1e-3
+
+
+def test_cantilever_variability_declared(cantilever_runs):
+    from twins.cantilever import CantileverTwin
+
+    _, path, *_ = cantilever_runs
+    root, cfg = _md(path)
+    assert validate_fmu(str(path)) == []
+    tunable = {sv.get("name") for sv in root.iter("ScalarVariable") if sv.get("variability") == "tunable"}
+    assert tunable == set(CantileverTwin.TUNABLE_PARAMS)
+    assert {"gain_um_per_v", "f1_hz", "bw_alpha", "noise_um", "creep_per_decade"} <= tunable
+    for name in ("input_delay_s", "max_substep_s", "initial_state_um", "creep_elements", "pi_operators",
+                 "hysteresis", "seed", "fs", "effect_creep", "effect_input_delay", "effect_measurement_noise"):
+        assert _var(root, name).get("variability") == "fixed", name
+
+
+def test_acoustic_parameters_stay_fixed(acoustic_fmu):
+    _, path = acoustic_fmu
+    root, _ = _md(path)
+    params = [sv for sv in root.iter("ScalarVariable") if sv.get("causality") == "parameter"]
+    assert params and all(sv.get("variability") == "fixed" for sv in params)
+
+
+def test_stepper_retune_refuses_layout_change():
+    from sysid.errors import ConfigError
+    from twins.cantilever import CantileverTwin
+
+    twin = CantileverTwin()
+    stepper = twin.make_stepper(10e3)
+    stepper.step(1.0)
+    for bad in ({"creep_elements": 3}, {"hysteresis": "prandtl-ishlinskii"}, {"max_substep_s": 1e-6}):
+        with pytest.raises(ConfigError, match="state layout would change"):
+            stepper.retune(twin.with_params(**bad))
+    with pytest.raises(ConfigError, match="state layout would change"):
+        stepper.retune(twin.with_effects(twin.effects | {"saturation"}))
+    assert stepper.twin is twin  # refused: nothing replaced
+
+
+def test_cantilever_invalid_tunable_value_fails_the_step(cantilever_runs):
+    """An out-of-range value set mid-run is refused by the next doStep, with the twin's reason."""
+    _, path, u, fs, _ = cantilever_runs
+    with pytest.raises(Exception, match="fmi2DoStep failed"):
+        _fmu_run_with_change(path, u[:20], fs, 10, {"f1_hz": 1e9})

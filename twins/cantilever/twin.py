@@ -49,6 +49,15 @@ class CantileverTwin(Twin):
     #: fitted by ``piezotwin calibrate`` (Bouc–Wen; with hysteresis=prandtl-ishlinskii the PI weights replace α, β, γ)
     CALIBRATION_PARAMS = ("gain_um_per_v", "bw_alpha", "bw_beta", "bw_gamma", "f1_hz", "zeta1", "creep_per_decade",
                           "offset_um", "initial_state_um")
+    #: parameters that may change while a simulation runs (FMU ``tunable``, :meth:`CantileverStepper.retune`):
+    #: every real-valued field except the three that are not a property of the running physics:
+    #: ``input_delay_s`` (sets the length of the delay buffer, a state), ``max_substep_s`` (sets the number
+    #: of sub-steps, the length of a state array) and ``initial_state_um`` (an initial condition, used only
+    #: at rest). Integers (``pi_operators``, ``creep_elements``: array lengths) and ``hysteresis`` (which
+    #: operator's state is live) are structural as well.
+    TUNABLE_PARAMS = tuple(f.name for f in dataclasses.fields(CantileverParams)
+                           if f.type in ("float", float)
+                           and f.name not in ("input_delay_s", "max_substep_s", "initial_state_um"))
 
     def __init__(self, params: Any = None, effects: Iterable[str] | None = None, seed: int | None = 0):
         super().__init__(params, effects, seed)
@@ -263,6 +272,37 @@ class CantileverStepper:
         """Back to rest at 0 V, time 0, noise sequence restarted."""
         self._st = self.twin._fresh_state(self._cfg)
         self._rng = np.random.default_rng(self.twin.seed)
+
+    def retune(self, twin: CantileverTwin) -> None:
+        """Continue with the parameters of ``twin`` from the next :meth:`step` on, keeping the dynamic state.
+
+        The hysteresis, creep, modal, sensor, delay-buffer and drift states and the noise generator carry
+        over unchanged (the new seed is not applied); only the discretisation (``_config``) is rebuilt.
+        Refused with a ConfigError when the new configuration would change the state layout or the
+        integer configuration (sub-step count, delay samples, hysteresis operator, number of play
+        operators or creep elements, effect flags of the kernel).
+        """
+        if not isinstance(twin, CantileverTwin):
+            raise ConfigError(f"cantilever stepper: retune needs a CantileverTwin, got {type(twin).__name__}")
+        cfg = twin._config(self.fs)
+        old = self._cfg
+        changed = [name for name, i in (("substeps", K.I_M), ("delay samples", K.I_DELAY), ("hysteresis", K.I_HYST),
+                                        ("pi_operators", K.I_NPI), ("creep elements", K.I_NCR),
+                                        ("saturation", K.I_SAT), ("amplifier_bandwidth", K.I_AMPLP),
+                                        ("rate_dependent_hysteresis", K.I_RATE),
+                                        ("asymmetric_hysteresis", K.I_ASYM), ("thermal_drift", K.I_DRIFT),
+                                        ("sensor_quantization", K.I_QUANT))
+                   if cfg["icfg"][i] != old["icfg"][i]]
+        fresh = twin._fresh_state(cfg)
+        changed += [f"state {k} shape" for k in fresh if fresh[k].shape != self._st[k].shape]
+        for key in ("cr_a", "pi_r", "pi_p"):
+            if cfg[key].shape != old[key].shape:
+                changed.append(f"{key} shape")
+        if changed:
+            raise ConfigError("cantilever stepper: cannot retune while running, the state layout would change "
+                              f"({', '.join(dict.fromkeys(changed))}); set it before the start")
+        self.twin, self._cfg = twin, cfg
+        self._noise_on = twin.has("measurement_noise") and twin.params.noise_um > 0
 
     def step(self, u: float) -> float:
         """Apply the voltage sample ``u`` [V]; returns the displacement reading y [µm] at this sample."""

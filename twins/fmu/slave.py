@@ -138,6 +138,8 @@ class TwinSlave(Fmi2Slave):
         self.description = f"PiezoTwin {cfg['twin']} twin: {cfg['description']}"
         self.version = str(cfg.get("project_version", ""))
         self._values: dict[str, Any] = {}
+        self._tunable = {v["name"] for v in cfg["variables"] if v.get("tunable")}
+        self._retune = False  # a tunable parameter changed since the last step
         self._core = None
         self._twin_cls = _resolve(cfg["twin_class"])  # import errors surface at instantiation
         release_wrapper_state(self.resources)  # pythonfmu 0.7: double release of its PyState at exit
@@ -162,7 +164,8 @@ class TwinSlave(Fmi2Slave):
             name = v["name"]
             self._values[name] = v["start"]
             var = _TYPES[v["type"]](
-                name, causality=Fmi2Causality.parameter, variability=Fmi2Variability.fixed,
+                name, causality=Fmi2Causality.parameter,
+                variability=Fmi2Variability.tunable if v.get("tunable") else Fmi2Variability.fixed,
                 description=v["description"],
                 getter=(lambda n=name: self._values[n]), setter=(lambda x, n=name: self._set(n, x)))
             extra = {}
@@ -177,8 +180,11 @@ class TwinSlave(Fmi2Slave):
     # ------------------------------------------------------------------ FMI
     def _set(self, name: str, value: Any) -> None:
         if self._core is not None:
-            self.log(f"parameter {name} is fixed after initialisation; change ignored", Fmi2Status.warning)
-            return
+            if name not in self._tunable:
+                self.log(f"parameter {name} is fixed after initialisation; change ignored", Fmi2Status.warning)
+                return
+            if value != self._values[name]:
+                self._retune = True  # applied at the next doStep (several changes may come together)
         self._values[name] = value
 
     def to_xml(self, model_options=dict()) -> Element:  # noqa: B006 (signature of the base class)
@@ -216,6 +222,13 @@ class TwinSlave(Fmi2Slave):
         u = float(self.u)
         if not math.isfinite(u):
             return self._fail(f"input u={u!r} at t={current_time!r} s is not finite")
+        if self._retune:
+            try:  # the new parameters act from this step on; the core keeps its dynamic state
+                self._core.retune(self.make_twin())
+            except Exception as exc:
+                return self._fail(f"tunable parameter change at t={current_time!r} s refused: "
+                                  f"{type(exc).__name__}: {exc}")
+            self._retune = False
         step = self._core.step
         y = 0.0
         for _ in range(n):

@@ -17,10 +17,13 @@ list / tuple of numbers   String      written with dashes as on the command line
 
 Effect switches are Boolean parameters ``effect_<id>``; ``seed`` (Integer) seeds the measurement noise as
 in ``simulate``; ``fs`` [Hz] is the sampling rate, whose period is the FMU's communication step.
-All of them have causality ``parameter`` and variability ``fixed``: they are set before initialisation
-(fmpy ``start_values``, a tool's parameter dialog). ``tunable`` would promise changes *between*
-communication steps, which a twin with internal state (hysteresis, creep, echoes in flight) cannot honour
-without redefining its state, so it is not claimed.
+All of them have causality ``parameter``. Variability ``tunable`` (a change between communication
+steps acts from the next step on, the dynamic state carried over) is declared only for the fields a twin
+lists in ``TUNABLE_PARAMS`` and only with the ``stepper`` core, whose ``retune(twin)`` keeps the state
+(cantilever: :meth:`twins.cantilever.twin.CantileverStepper.retune`). Everything else is ``fixed``, set
+before initialisation (fmpy ``start_values``, a tool's parameter dialog): integer counts, model choices,
+effect switches, ``seed`` and ``fs`` change the state's layout or meaning, and the ``response`` core
+(acoustic) would need a new impulse response that keeps the input history, which it does not build.
 """
 
 from __future__ import annotations
@@ -107,10 +110,12 @@ def _bound(x: Any, ftype: str, upper: bool) -> float | int | None:
     return math.floor(v) if upper else math.ceil(v)
 
 
-def fmu_variables(twin: Twin, fs: float) -> list[dict[str, Any]]:
+def fmu_variables(twin: Twin, fs: float, tunable: bool = False) -> list[dict[str, Any]]:
     """The FMU parameters of ``twin`` (in declaration order), each a dict with keys
-    ``name, kind (param|effect|seed|fs), field, type, start, unit, min, max, description``."""
+    ``name, kind (param|effect|seed|fs), field, type, start, unit, min, max, description, tunable``
+    (``tunable``: only if ``tunable`` is true, for the Real fields in the twin's ``TUNABLE_PARAMS``)."""
     out: list[dict[str, Any]] = []
+    live = set(getattr(type(twin), "TUNABLE_PARAMS", ())) if tunable else set()
     info = param_info(type(twin).Params)
     for f in dataclasses.fields(type(twin).Params):
         if f.name in RESERVED or f.name.startswith("effect_"):
@@ -135,17 +140,20 @@ def fmu_variables(twin: Twin, fs: float) -> list[dict[str, Any]]:
             "min": _bound(lo, ftype, upper=False),
             "max": _bound(hi, ftype, upper=True),
             "description": doc,
+            "tunable": ftype == "Real" and f.name in live,
         })
     for eid, spec in type(twin).EFFECTS.items():
         out.append({"name": f"effect_{eid}", "kind": "effect", "field": eid, "type": "Boolean",
                     "start": eid in twin.effects, "unit": None, "min": None, "max": None,
-                    "description": f"effect switch: {spec.description}"})
+                    "description": f"effect switch: {spec.description}", "tunable": False})
     out.append({"name": "seed", "kind": "seed", "field": "seed", "type": "Integer",
                 "start": int(twin.seed if twin.seed is not None else 0), "unit": None, "min": 0, "max": None,
-                "description": "seed of the measurement noise (the same draws as piezotwin simulate --seed)"})
+                "description": "seed of the measurement noise (the same draws as piezotwin simulate --seed)",
+                "tunable": False})
     out.append({"name": "fs", "kind": "fs", "field": "fs", "type": "Real", "start": float(fs), "unit": "Hz",
                 "min": None, "max": None,
-                "description": "sampling rate; the communication step must be a whole number of periods 1/fs"})
+                "description": "sampling rate; the communication step must be a whole number of periods 1/fs",
+                "tunable": False})
     return out
 
 
@@ -166,6 +174,6 @@ def fmu_config(twin: Twin, fs: float, core: dict[str, Any], model_name: str,
         "config": twin.config(),
         "fs": float(fs),
         "units": {"u": u.get("u", ""), "y": u.get("y", "")},
-        "variables": fmu_variables(twin, fs),
+        "variables": fmu_variables(twin, fs, tunable=core.get("kind") == "stepper"),
         "core": core,
     }
