@@ -12,7 +12,7 @@ from typing import Any, Iterable, Mapping
 
 from sysid.errors import ConfigError
 
-__all__ = ["parse_assignments", "coerce", "apply_assignments", "make_rng"]
+__all__ = ["parse_assignments", "coerce", "apply_assignments", "positive", "make_rng"]
 
 
 def parse_assignments(items: Iterable[str] | None, what: str = "--set") -> dict[str, str]:
@@ -154,3 +154,18 @@ def apply_assignments(
                 raise ConfigError(f"{what} {key}={value!r} not one of: {', '.join(map(str, opts))}")
         out[key] = value
     return out
+
+
+def positive(name: str, value: Any, integer: bool = False) -> float:
+    """``value`` as a positive finite float (an integral one if ``integer``), else a one-line ConfigError."""
+    import math
+
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise ConfigError(f"{name} must be a number, got {value!r}") from None
+    if not math.isfinite(v) or v <= 0:
+        raise ConfigError(f"{name} must be positive and finite, got {value!r}")
+    if integer and v != int(v):
+        raise ConfigError(f"{name} must be an integer, got {value!r}")
+    return v

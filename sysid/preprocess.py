@@ -29,6 +29,7 @@ import scipy.fft
 from numba import njit
 from scipy import signal as sps
 
+from sysid.config import positive
 from sysid.errors import ConfigError, DataError
 from sysid.record import Record
 
@@ -77,14 +78,6 @@ def _int_param(name: str, value: Any, lo: int) -> int:
     return int(v)
 
 
-def _pos_param(name: str, value: Any) -> float:
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise ConfigError(f"{name} must be a number, got {value!r}") from None
-    if not math.isfinite(v) or v <= 0:
-        raise ConfigError(f"{name} must be positive and finite, got {value!r}")
-    return v
 
 
 # ---------------------------------------------------------------------------------------------- offset / trend
@@ -203,7 +196,7 @@ def hampel(x: np.ndarray, window: int = 10, n_sigma: float = 3.0):
     x = _as_float(x)
     _finite(x, "hampel")
     window = _int_param("hampel window (half-width)", window, 1)
-    n_sigma = _pos_param("hampel n_sigma", n_sigma)
+    n_sigma = positive("hampel n_sigma", n_sigma)
     if window >= x.shape[0]:  # the window would be mostly edge padding: its MAD says nothing about the data
         raise ConfigError(f"hampel window half-width {window} must be smaller than the signal length {x.shape[0]}")
     X = x.reshape(x.shape[0], -1)
@@ -322,7 +315,7 @@ def antialias_filter(up: int, down: int, passband: float = PASSBAND_DEFAULT, att
     """
     if not 0.0 < passband < 1.0:
         raise ConfigError(f"passband must lie in (0, 1) (fraction of the new Nyquist frequency), got {passband}")
-    atten_db = _pos_param("atten_db", atten_db)
+    atten_db = positive("atten_db", atten_db)
     if atten_db < 21:
         raise ConfigError(f"atten_db must be >= 21 dB for a Kaiser design, got {atten_db}")
     m = max(up, down)
@@ -370,8 +363,8 @@ def resample(x: np.ndarray, fs: float, fs_new: float, passband: float = PASSBAND
     relative to the lower of the two Nyquist frequencies). Output length ``ceil(N * up / down)``."""
     x = _as_float(x)
     _finite(x, "resample")
-    fs = _pos_param("fs", fs)
-    fs_new = _pos_param("new sampling rate", fs_new)
+    fs = positive("fs", fs)
+    fs_new = positive("new sampling rate", fs_new)
     up, down = _ratio(fs, fs_new)
     if up == down:
         return (x.copy(), np.ones(1)) if return_filter else x.copy()
@@ -386,7 +379,7 @@ def resample(x: np.ndarray, fs: float, fs_new: float, passband: float = PASSBAND
 def bandpass_design(fs: float, fmin: float, fmax: float, order: int = 5) -> np.ndarray:
     """Second-order sections of the digital Butterworth band-pass (order ``order`` prototype, i.e. ``2*order``
     poles) with -3 dB edges ``fmin``, ``fmax`` [Hz] (bilinear transform with pre-warping)."""
-    fs = _pos_param("fs", fs)
+    fs = positive("fs", fs)
     order = _int_param("band-pass order", order, 1)
     try:
         fmin, fmax = float(fmin), float(fmax)
@@ -507,7 +500,7 @@ def suggest_rate(y: np.ndarray, fs: float | None = None, max_lag: int | None = N
         "rule": "tau_m/20 <= Ts <= tau_m/10, tau_m = min(first minimum of r_yy, of r_y2y2) (Billings & Aguirre 1995)",
     }
     if fs is not None:
-        fs = _pos_param("fs", fs)
+        fs = positive("fs", fs)
         out["fs"] = fs
         out["fs_suggested"] = fs / out["factor"]
         out["tau_linear_s"] = tau_l / fs
@@ -628,7 +621,7 @@ def apply_steps(record: Record, steps: Iterable[Any]) -> Record:
             else:
                 if "fs_new" not in params:
                     raise ConfigError("preprocessing step resample needs fs_new")
-                fs_new = _pos_param("new sampling rate", params["fs_new"])
+                fs_new = positive("new sampling rate", params["fs_new"])
                 fn = lambda x: resample(x, fs, fs_new, params.get("passband", PASSBAND_DEFAULT),  # noqa: E731
                                         params.get("atten_db", ATTEN_DB_DEFAULT), return_filter=True)
             for t in targets:

@@ -21,7 +21,7 @@ from typing import Any, Sequence
 import numpy as np
 import scipy.fft
 
-from sysid.config import make_rng
+from sysid.config import make_rng, positive
 from sysid.errors import ConfigError
 
 __all__ = [
@@ -52,16 +52,6 @@ def crest_factor(u: np.ndarray) -> float:
     return float(np.max(np.abs(u))) / rms
 
 
-def _positive(name: str, value: Any, integer: bool = False) -> float:
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise ConfigError(f"{name} must be a number, got {value!r}") from None
-    if not math.isfinite(v) or v <= 0:
-        raise ConfigError(f"{name} must be positive and finite, got {value!r}")
-    if integer and v != int(v):
-        raise ConfigError(f"{name} must be an integer, got {value!r}")
-    return v
 
 
 def _n_samples(fs: float, duration: float, what: str = "duration") -> int:
@@ -152,13 +142,13 @@ def multisine(
     -------
     u : ndarray, or (u, info)
     """
-    fs = _positive("fs", fs)
+    fs = positive("fs", fs)
     if phase not in PHASES:
         raise ConfigError(f"phase must be one of {', '.join(PHASES)}, got {phase!r}")
     if grid not in GRIDS:
         raise ConfigError(f"grid must be one of {', '.join(GRIDS)}, got {grid!r}")
-    amplitude = _positive("amplitude", amplitude)
-    periods = int(_positive("periods", periods, integer=True))
+    amplitude = positive("amplitude", amplitude)
+    periods = int(positive("periods", periods, integer=True))
     try:
         detection_fraction = float(detection_fraction)
     except (TypeError, ValueError):
@@ -168,17 +158,17 @@ def multisine(
 
     # ---- period and total length
     if resolution is not None:
-        resolution = _positive("resolution", resolution)
+        resolution = positive("resolution", resolution)
         n0 = _integer_ratio(fs, resolution, "resolution must divide fs (samples per period fs/resolution)")
         if duration is not None:
-            n_total = _n_samples(fs, _positive("duration", duration))
+            n_total = _n_samples(fs, positive("duration", duration))
             if periods != 1 and n_total != periods * n0:
                 raise ConfigError(f"periods={periods} disagrees with duration {duration} s and resolution {resolution:g} Hz;"
                                   " give two of the three")
         else:
             n_total = periods * n0
     elif duration is not None:
-        n_total = _n_samples(fs, _positive("duration", duration))
+        n_total = _n_samples(fs, positive("duration", duration))
         if n_total % periods:
             raise ConfigError(f"duration {duration} s ({n_total} samples) is not divisible into {periods} periods")
         n0 = n_total // periods
@@ -214,7 +204,7 @@ def multisine(
     if cand.size == 0:
         raise ConfigError(f"no {grid} grid line of spacing {df:g} Hz lies in the band [{fmin:g}, {fmax:g}] Hz")
     if components is not None:
-        nf = int(_positive("components", components, integer=True))
+        nf = int(positive("components", components, integer=True))
         if nf > cand.size:
             raise ConfigError(
                 f"components={nf} do not fit the resolution: the band [{fmin:g}, {fmax:g}] Hz holds {cand.size}"
@@ -302,10 +292,10 @@ def chirp(
     Frequencies must lie below ``fs/2``. The phase is evaluated in cycles from the sample index, so 10^7
     samples keep ~1e-9 rad accuracy.
     """
-    fs = _positive("fs", fs)
-    duration = _positive("duration", duration)
-    amplitude = _positive("amplitude", amplitude)
-    periods = int(_positive("periods", periods, integer=True))
+    fs = positive("fs", fs)
+    duration = positive("duration", duration)
+    amplitude = positive("amplitude", amplitude)
+    periods = int(positive("periods", periods, integer=True))
     if method not in ("linear", "log"):
         raise ConfigError(f"chirp method must be 'linear' or 'log', got {method!r}")
     for name, f in (("f0", f0), ("f1", f1)):
@@ -352,12 +342,12 @@ def chirp(
 def sine(fs: float, duration: float, freq: float, amplitude: float = 1.0, phase: float = 0.0) -> np.ndarray:
     r"""Single sine of eq. (2-3): :math:`u(t) = A\cos(2\pi f t + k_0)` (the dissertation's :math:`f_0` is
     an angular frequency there); ``phase`` = :math:`k_0` [rad]; use ``phase=-pi/2`` for a sine starting at 0."""
-    fs = _positive("fs", fs)
-    amplitude = _positive("amplitude", amplitude)
-    freq = _positive("freq", freq)
+    fs = positive("fs", fs)
+    amplitude = positive("amplitude", amplitude)
+    freq = positive("freq", freq)
     if freq >= fs / 2:
         raise ConfigError(f"sine freq ({freq:g} Hz) must be below the Nyquist frequency fs/2 = {fs / 2:g} Hz")
-    n = _n_samples(fs, _positive("duration", duration))
+    n = _n_samples(fs, positive("duration", duration))
     k = np.arange(n, dtype=np.float64)
     cycles = k * (freq / fs)
     cycles -= np.floor(cycles)
@@ -382,8 +372,8 @@ def stepped_sine(
     and ``stop`` (sample indices of the measurement window, stop exclusive) and ``cycles``; a Record can use
     them as ``meta['segments']``.
     """
-    fs = _positive("fs", fs)
-    amplitude = _positive("amplitude", amplitude)
+    fs = positive("fs", fs)
+    amplitude = positive("amplitude", amplitude)
     try:
         freqs = [float(f) for f in np.atleast_1d(freqs)]
     except (TypeError, ValueError):
@@ -392,7 +382,7 @@ def stepped_sine(
         raise ConfigError("stepped_sine needs at least one frequency")
     if float(settle) < 0 or not math.isfinite(float(settle)):
         raise ConfigError(f"settle must be >= 0 s, got {settle}")
-    cycles = int(_positive("cycles", cycles, integer=True))
+    cycles = int(positive("cycles", cycles, integer=True))
     parts, steps = [], []
     acc = 0.0  # phase in cycles at the start of the step
     pos = 0
@@ -402,7 +392,7 @@ def stepped_sine(
         n_set = int(round(float(settle) * fs))
         n_cyc = cycles
         if dwell is not None:
-            n_cyc = max(n_cyc, int(math.ceil(_positive("dwell", dwell) * f - 1e-9)))
+            n_cyc = max(n_cyc, int(math.ceil(positive("dwell", dwell) * f - 1e-9)))
         n_meas = int(round(n_cyc * fs / f))
         n = n_set + n_meas
         k = np.arange(n, dtype=np.float64)
@@ -474,19 +464,19 @@ def prbs(
     periods, or ``duration`` seconds (the sequence repeated and cut). ``seed`` is the nonzero initial register
     state (it shifts the sequence). Orders 2..31.
     """
-    fs = _positive("fs", fs)
-    order = int(_positive("order", order, integer=True))
+    fs = positive("fs", fs)
+    order = int(positive("order", order, integer=True))
     if order not in PRBS_TAPS:
         raise ConfigError(f"prbs order must lie in 2..31, got {order}")
-    bit_samples = int(_positive("bit_samples", bit_samples, integer=True))
-    amplitude = _positive("amplitude", amplitude)
-    periods = int(_positive("periods", periods, integer=True))
+    bit_samples = int(positive("bit_samples", bit_samples, integer=True))
+    amplitude = positive("amplitude", amplitude)
+    periods = int(positive("periods", periods, integer=True))
     seed = int(seed)
     if not 0 < seed < 2**order:
         raise ConfigError(f"prbs seed (initial register) must lie in 1..{2**order - 1}, got {seed}")
     period_bits = 2**order - 1
     if duration is not None:
-        n_total = _n_samples(fs, _positive("duration", duration))
+        n_total = _n_samples(fs, positive("duration", duration))
         n_bits = -(-n_total // bit_samples)
     else:
         n_bits = periods * period_bits
@@ -517,13 +507,13 @@ def aprbs(
     (whole samples). ``min_hold`` should be about the dominant time constant of the system (defaults: 10 and
     100 samples). ``info['changes']`` gives the sample index of each new level.
     """
-    fs = _positive("fs", fs)
-    n_total = _n_samples(fs, _positive("duration", duration))
+    fs = positive("fs", fs)
+    n_total = _n_samples(fs, positive("duration", duration))
     low, high = float(low), float(high)
     if not (math.isfinite(low) and math.isfinite(high)) or low >= high:
         raise ConfigError(f"aprbs needs low < high, got low={low:g}, high={high:g}")
-    h0 = 10 if min_hold is None else int(round(_positive("min_hold", min_hold) * fs))
-    h1 = 10 * h0 if max_hold is None else int(round(_positive("max_hold", max_hold) * fs))
+    h0 = 10 if min_hold is None else int(round(positive("min_hold", min_hold) * fs))
+    h1 = 10 * h0 if max_hold is None else int(round(positive("max_hold", max_hold) * fs))
     if h0 < 1:
         raise ConfigError(f"aprbs min_hold {min_hold} s is shorter than one sample at fs={fs:g} Hz")
     if h1 < h0:
@@ -535,7 +525,7 @@ def aprbs(
     if levels is None:
         vals = rng.uniform(low, high, size=starts.size)
     else:
-        nl = int(_positive("levels", levels, integer=True))
+        nl = int(positive("levels", levels, integer=True))
         if nl < 2:
             raise ConfigError(f"aprbs levels must be >= 2, got {nl}")
         vals = low + (high - low) * rng.integers(0, nl, size=starts.size) / (nl - 1)
@@ -575,7 +565,7 @@ def thesis_acoustic_multisine(seed: int = 0, truncate: int | None = None, return
                     phase="random", seed=seed, return_info=True)
     u, info = out
     if truncate is not None:
-        t = int(_positive("truncate", truncate, integer=True))
+        t = int(positive("truncate", truncate, integer=True))
         if t > u.size:
             raise ConfigError(f"truncate={t} exceeds the signal length {u.size}")
         u = u[:t].copy()
