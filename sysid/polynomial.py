@@ -28,7 +28,7 @@ import numpy as np
 
 from sysid import frols as fr
 from sysid import simulate as sim
-from sysid.base import Identifier, as_record_list
+from sysid.base import Identifier, as_record_list, check_records
 from sysid.errors import ConfigError, DataError, DivergenceWarning
 from sysid.record import Record
 
@@ -42,38 +42,6 @@ RECURSION_GROWTH = 10.0
 # Robustness check of the returned noise model: KICKS output disturbances of KICK_SIZE × the largest fitted residual.
 KICKS = 8
 KICK_SIZE = 3.0
-
-
-def check_records(records: Sequence[Record], max_lag: int, min_rows: int, what: str) -> None:
-    """Refuse data that cannot be identified: NaN/inf, too few samples for the lags, constant input."""
-    n_in, n_out = records[0].n_inputs, records[0].n_outputs
-    rows = 0
-    for rec in records:
-        if rec.n_inputs != n_in or rec.n_outputs != n_out:
-            raise DataError(f"{rec.source}: {rec.n_inputs} inputs / {rec.n_outputs} outputs, but the first record has "
-                            f"{n_in} / {n_out}")
-        for name, arr in (("u", rec.u), ("y", rec.y)):
-            if not np.isfinite(arr).all():
-                i = int(np.flatnonzero(~np.isfinite(arr.reshape(arr.shape[0], -1)).any(axis=1))[0])
-                raise DataError(f"{rec.source}: {name} has non-finite (NaN/inf) samples, first at index {i}")
-        if len(rec) <= max_lag:
-            raise DataError(f"{rec.source}: {len(rec)} samples are too few for the lags of {what} "
-                            f"(max lag {max_lag}; need more than {max_lag} samples per record)")
-        rows += len(rec) - max_lag
-    if rows < min_rows:
-        raise DataError(f"{what}: {rows} usable samples (after the max lag {max_lag}) are too few for "
-                        f"{min_rows - 1} candidate parameters; give more data or smaller lags/degree")
-    u_all = np.concatenate([r.u.reshape(len(r), -1) for r in records])
-    for ch in range(u_all.shape[1]):
-        if np.ptp(u_all[:, ch]) == 0.0:
-            name = "u" if u_all.shape[1] == 1 else f"u{ch + 1}"
-            raise DataError(f"{records[0].source}: input {name} is constant ({u_all[0, ch]:g}); "
-                            "a constant input does not excite the system, nothing to identify")
-    y_all = np.concatenate([r.y.reshape(len(r), -1) for r in records])
-    for ch in range(y_all.shape[1]):
-        if np.ptp(y_all[:, ch]) == 0.0:
-            name = "y" if y_all.shape[1] == 1 else f"y{ch + 1}"
-            raise DataError(f"{records[0].source}: output {name} is constant ({y_all[0, ch]:g}); nothing to identify")
 
 
 class PolynomialModel(Identifier):

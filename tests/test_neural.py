@@ -87,7 +87,7 @@ def test_divergence_gives_nan_and_warning():
     flat = np.array([3.0, 0.0])  # y(t) = 3 y(t-1): unstable
     m = NARXMLP(n_y=1, n_u=0, hidden=[], epochs=0)
     m._check_params = lambda: None  # allow the linear (no hidden layer) test network
-    rec = Record(u=np.zeros(200), y=np.r_[1.0, np.zeros(199)], fs=1.0)
+    rec = Record(u=np.sin(np.arange(200.0)), y=np.r_[1.0, np.zeros(199)], fs=1.0)  # n_u = 0: u unused
     m.fit(rec)
     m.weights_, m.sizes_ = flat, sizes
     with pytest.warns(DivergenceWarning):
@@ -260,3 +260,17 @@ def test_sim_warm_start_is_the_one_step_model_and_tail_selection(plant):
         NARXMLPSim(**kw, select_tail=0.7).fit(est)
     with pytest.raises(ConfigError, match="pretrain_batch_size"):
         NARXMLPSim(**kw, pretrain_batch_size=0).fit(est)
+
+
+@pytest.mark.parametrize("cls", [NARXMLP, RNNStateSpace])
+def test_unidentifiable_data_refused_like_the_polynomial_models(cls):
+    """The identifiers share one data check: a constant input or output, or too few samples, is refused."""
+    from sysid.errors import DataError
+
+    t = np.arange(300.0)
+    with pytest.raises(DataError, match="input u is constant"):
+        cls(epochs=1).fit(Record(u=np.ones(300), y=np.sin(t), fs=1.0, source="flat.npz"))
+    with pytest.raises(DataError, match="output y is constant"):
+        cls(epochs=1).fit(Record(u=np.sin(t), y=np.zeros(300), fs=1.0, source="flat.npz"))
+    with pytest.raises(DataError, match="too few"):
+        cls(epochs=1).fit(Record(u=np.sin(t[:5]), y=np.cos(t[:5]), fs=1.0, source="short.npz"))

@@ -29,7 +29,7 @@ from typing import Any, Sequence
 import numpy as np
 import torch
 
-from sysid.base import Identifier, as_record_list
+from sysid.base import Identifier, as_record_list, check_records
 from sysid.errors import ConfigError, DataError, DivergenceWarning
 from sysid.neural.core import (ACT_CODE, ACTIVATIONS, FlatMLP, LagData, RMSprop, count_mlp_parameters, free_run_mlp,
                                k_step_mlp, lag_matrix_np, mlp_forward_np, regressor_lag)
@@ -62,12 +62,11 @@ def fit_normaliser(recs: Sequence[Record]) -> Normaliser:
     return Normaliser().fit(joined)
 
 
-def check_channels(recs: Sequence[Record]) -> tuple[int, int]:
-    nu, ny = recs[0].n_inputs, recs[0].n_outputs
-    for r in recs[1:]:
-        if (r.n_inputs, r.n_outputs) != (nu, ny):
-            raise DataError(f"{r.source}: {r.n_inputs} inputs / {r.n_outputs} outputs, but the first record has {nu} / {ny}")
-    return nu, ny
+def check_channels(recs: Sequence[Record], max_lag: int, what: str) -> tuple[int, int]:
+    """The shared identifier data checks (channels, NaN/inf, length vs lags, constant input/output), then
+    the numbers of inputs and outputs."""
+    check_records(recs, max_lag, 1, what)
+    return recs[0].n_inputs, recs[0].n_outputs
 
 
 def _check_storage(net: FlatMLP) -> None:
@@ -114,7 +113,8 @@ class _NeuralNARXBase(Identifier):
         """Train on one Record or a list of them (no regressor spans two records). Returns self."""
         self._check_params()
         recs = as_record_list(data)
-        nu, ny = check_channels(recs)
+        lag = regressor_lag(self.n_y, self.n_u, self.nk)
+        nu, ny = check_channels(recs, lag, self.name)
         t0 = time.perf_counter()
         configure_threads()
         device = select_device(self.device)
@@ -122,7 +122,6 @@ class _NeuralNARXBase(Identifier):
         gen = torch.Generator().manual_seed(int(self.seed))
         self.normaliser_ = fit_normaliser(recs)
         pairs = normalised_pairs(recs, self.normaliser_)
-        lag = regressor_lag(self.n_y, self.n_u, self.nk)
         data_t = LagData(pairs, self.n_y, self.n_u, device, nk=self.nk)
         net = FlatMLP(data_t.n_in, self.hidden, ny, self.activation, gen, device)
         self.loss_history_ = []

@@ -139,7 +139,7 @@ class RNNStateSpace(Identifier):
     def fit(self, data: Record | Sequence[Record]) -> "RNNStateSpace":
         self._check_params()
         recs = as_record_list(data)
-        nu, ny = check_channels(recs)
+        nu, ny = check_channels(recs, int(self.n_enc), self.name)
         t0 = time.perf_counter()
         configure_threads()
         device = select_device(self.device)
