@@ -69,6 +69,19 @@ def check_channels(recs: Sequence[Record], max_lag: int, what: str) -> tuple[int
     return recs[0].n_inputs, recs[0].n_outputs
 
 
+def check_predict_input(model: Identifier, record: Record, horizon: int | None) -> None:
+    """Checks shared by the neural models' ``predict``: an output to compare with, the fitted channel counts,
+    more samples than the model's lag, and a horizon that is a positive integer or ``None`` (free run)."""
+    record.require_output()
+    if (record.n_inputs, record.n_outputs) != (model.n_inputs_, model.n_outputs_):
+        raise DataError(f"{record.source}: {record.n_inputs} inputs / {record.n_outputs} outputs, model has "
+                        f"{model.n_inputs_} / {model.n_outputs_}")
+    if len(record) <= model.max_lag_:
+        raise DataError(f"{record.source}: {len(record)} samples, need more than the model's lag {model.max_lag_}")
+    if horizon is not None and (not isinstance(horizon, (int, np.integer)) or isinstance(horizon, bool) or horizon < 1):
+        raise ConfigError(f"{model.name}: horizon must be a positive integer or None (free run), got {horizon!r}")
+
+
 def _check_storage(net: FlatMLP) -> None:
     """Once per epoch: the layer gradients must still be the slices of the flat buffer the optimiser reads."""
     if not net.check_grad_storage():  # pragma: no cover - would be a torch behaviour change
@@ -177,16 +190,9 @@ class _NeuralNARXBase(Identifier):
         the index and a :class:`DivergenceWarning` is issued.
         """
         self._check_fitted()
-        record.require_output()
-        if (record.n_inputs, record.n_outputs) != (self.n_inputs_, self.n_outputs_):
-            raise DataError(f"{record.source}: {record.n_inputs} inputs / {record.n_outputs} outputs, model has "
-                            f"{self.n_inputs_} / {self.n_outputs_}")
+        check_predict_input(self, record, horizon)
         lag = self.max_lag_
         n = len(record)
-        if n <= lag:
-            raise DataError(f"{record.source}: {n} samples, need more than the model's lag {lag}")
-        if horizon is not None and (not isinstance(horizon, (int, np.integer)) or isinstance(horizon, bool) or horizon < 1):
-            raise ConfigError(f"{self.name}: horizon must be a positive integer or None (free run), got {horizon!r}")
         (un, yn), = normalised_pairs([record], self.normaliser_)
         code = ACT_CODE[self.activation]
         self.diverged_at_ = None

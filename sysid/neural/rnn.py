@@ -31,7 +31,7 @@ from sysid.base import Identifier, as_record_list
 from sysid.errors import ConfigError, DataError, DivergenceWarning
 from sysid.neural.core import LagData, lag_matrix_np
 from sysid.neural.device import configure_threads, select_device
-from sysid.neural.narx_mlp import MAX_LAG, _as2d, check_channels, fit_normaliser, normalised_pairs
+from sysid.neural.narx_mlp import MAX_LAG, _as2d, check_channels, check_predict_input, fit_normaliser, normalised_pairs
 from sysid.record import Normaliser, Record
 
 __all__ = ["RNNStateSpace"]
@@ -199,16 +199,9 @@ class RNNStateSpace(Identifier):
         """Free run (``None``) or k-step-ahead at every sample (``horizon=k``; 1 = one step). Shaped like y."""
         if not hasattr(self, "state_dict_"):
             raise ConfigError(f"{self.name}: model is not fitted; call fit() first")
-        record.require_output()
-        if (record.n_inputs, record.n_outputs) != (self.n_inputs_, self.n_outputs_):
-            raise DataError(f"{record.source}: {record.n_inputs} inputs / {record.n_outputs} outputs, model has "
-                            f"{self.n_inputs_} / {self.n_outputs_}")
+        check_predict_input(self, record, horizon)
         lag = self.max_lag_
         n = len(record)
-        if n <= lag:
-            raise DataError(f"{record.source}: {n} samples, need more than the model's lag {lag}")
-        if horizon is not None and (not isinstance(horizon, (int, np.integer)) or isinstance(horizon, bool) or horizon < 1):
-            raise ConfigError(f"{self.name}: horizon must be a positive integer or None (free run), got {horizon!r}")
         configure_threads()
         (un, yn), = normalised_pairs([record], self.normaliser_)
         net = self._cpu_net()
