@@ -34,6 +34,7 @@ from sysid.errors import ConfigError, DataError, DivergenceWarning
 from sysid.neural.core import (ACT_CODE, ACTIVATIONS, FlatMLP, LagData, RMSprop, count_mlp_parameters, free_run_mlp,
                                k_step_mlp, lag_matrix_np, mlp_forward_np, regressor_lag)
 from sysid.neural.device import configure_threads, select_device
+from sysid.neural.persist import TorchFileSave
 from sysid.record import Normaliser, Record
 
 __all__ = ["NARXMLP", "NARXMLPSim"]
@@ -88,7 +89,7 @@ def _check_storage(net: FlatMLP) -> None:
         raise RuntimeError("neural training: layer gradients left the flat buffer; the optimiser would not see them")
 
 
-class _NeuralNARXBase(Identifier):
+class _NeuralNARXBase(TorchFileSave, Identifier):
     """Shared fit/predict/persistence of the two NARX-MLP identifiers (training differs)."""
 
     name = "narx-mlp-base"
@@ -264,14 +265,6 @@ class _NeuralNARXBase(Identifier):
         self.n_parameters_ = int(self.weights_.size)
         self.diverged_at_ = None
 
-    def save(self, path: str | Path) -> Path:
-        """``.pt`` → torch file (read back by :func:`sysid.base.load_model` via ``sysid.neural.persist``); else JSON."""
-        from sysid.neural.persist import save_torch
-
-        path = Path(path)
-        if path.suffix.lower() == ".pt":
-            return save_torch(self, path)
-        return super().save(path)
 
 
 class NARXMLP(_NeuralNARXBase):

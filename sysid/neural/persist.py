@@ -17,9 +17,20 @@ import torch
 
 from sysid.errors import DataError
 
-__all__ = ["save_torch", "load"]
+__all__ = ["save_torch", "load", "TorchFileSave"]
 
 FORMAT = "piezotwin-model/1"
+
+
+class TorchFileSave:
+    """Mixin for the neural identifiers: ``save(path)`` writes a torch file for ``.pt`` (read back by
+    :func:`sysid.base.load_model` through :func:`load`), and the base class's JSON otherwise."""
+
+    def save(self, path: str | Path) -> Path:
+        path = Path(path)
+        if path.suffix.lower() == ".pt":
+            return save_torch(self, path)
+        return super().save(path)  # type: ignore[misc]
 
 
 def _to_torch(obj: Any) -> Any:

@@ -31,6 +31,7 @@ from sysid.base import Identifier, as_record_list
 from sysid.errors import ConfigError, DataError, DivergenceWarning
 from sysid.neural.core import LagData, lag_matrix_np
 from sysid.neural.device import configure_threads, select_device
+from sysid.neural.persist import TorchFileSave
 from sysid.neural.narx_mlp import MAX_LAG, _as2d, check_channels, check_predict_input, fit_normaliser, normalised_pairs
 from sysid.record import Normaliser, Record
 
@@ -67,7 +68,7 @@ class _Net(torch.nn.Module):
         return self.readout(out)
 
 
-class RNNStateSpace(Identifier):
+class RNNStateSpace(TorchFileSave, Identifier):
     """GRU/LSTM state-space model with a learned initial-state encoder, trained on simulation error.
 
     Parameters
@@ -275,10 +276,3 @@ class RNNStateSpace(Identifier):
         self.diverged_at_ = None
         self._net64 = None
 
-    def save(self, path: str | Path) -> Path:
-        from sysid.neural.persist import save_torch
-
-        path = Path(path)
-        if path.suffix.lower() == ".pt":
-            return save_torch(self, path)
-        return super().save(path)
