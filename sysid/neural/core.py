@@ -7,7 +7,10 @@
   rows on demand from the series instead, so lags up to 1024 fit in memory.
 - :class:`FlatMLP` — the feed-forward network of eq. 2-10 (Glorot-uniform weights, zero biases: the Keras
   defaults the dissertation used), with all parameters in one flat tensor so that the optimiser is four
-  tensor operations per step.
+  tensor operations per step. Optional linear bypass (``linear=True``): output = L x + MLP(x), a linear
+  model of the regressor plus a neural correction (a linear model refined by a network, as in BLA-initialised
+  networks, Schoukens & Ljung 2019, and the linear skip of SUBNET, Beintema et al.). ``L`` is stored after the
+  network's parameters in the same flat buffer (``n_out × n_in`` more entries).
 - :class:`RMSprop` — eq. 2-25 / 2-26 on that flat tensor: ``v ← α v + (1-α) g²``,
   ``θ ← θ − η g / sqrt(v + ε)`` with the Keras defaults α = 0.9, ε = 1e-7.
 - :func:`mlp_forward_np`, :func:`free_run_mlp` (numba-compiled recursion of eq. 2-29/2-30), :func:`k_step_mlp`
@@ -24,6 +27,7 @@ from numba import njit
 
 __all__ = [
     "regressor_lag", "ACTIVATIONS", "LagData", "FlatMLP", "RMSprop", "mlp_forward_np", "free_run_mlp", "k_step_mlp", "count_mlp_parameters",
+    "n_mlp_weights", "least_squares_linear",
 ]
 
 ACTIVATIONS = ("sigmoid", "tanh", "relu")
@@ -36,10 +40,16 @@ def regressor_lag(n_y: int, n_u: int, nk: int = 1) -> int:
     return max(int(n_y), int(nk) + int(n_u) - 1 if n_u > 0 else 0)
 
 
-def count_mlp_parameters(n_in: int, hidden: Sequence[int], n_out: int) -> int:
-    """Weights + biases of a dense network (Table 4.2: 20 inputs, 4 × 25, 1 output → 2501)."""
+def count_mlp_parameters(n_in: int, hidden: Sequence[int], n_out: int, linear: bool = False) -> int:
+    """Weights + biases of a dense network (Table 4.2: 20 inputs, 4 × 25, 1 output → 2501), plus the
+    ``n_out × n_in`` matrix of the linear bypass when ``linear``."""
     sizes = [int(n_in), *[int(h) for h in hidden], int(n_out)]
-    return int(sum(a * b + b for a, b in zip(sizes[:-1], sizes[1:])))
+    return int(sum(a * b + b for a, b in zip(sizes[:-1], sizes[1:]))) + (int(n_in) * int(n_out) if linear else 0)
+
+
+def n_mlp_weights(sizes: Sequence[int]) -> int:
+    """Entries of the flat buffer that belong to the dense layers (the linear bypass, if any, follows them)."""
+    return int(sum(int(a) * int(b) + int(b) for a, b in zip(sizes[:-1], sizes[1:])))
 
 
 # ---------------------------------------------------------------------------------------------- data
@@ -104,6 +114,30 @@ class LagData:
         return np.concatenate(out) if out else np.zeros(0, dtype=np.int64)
 
 
+def least_squares_linear(pairs: Sequence[tuple[np.ndarray, np.ndarray]], n_y: int, n_u: int, nk: int = 1,
+                         chunk: int = 20_000) -> tuple[np.ndarray, np.ndarray]:
+    """Least-squares linear model of the NARX regressor: ``y(t) ≈ L φ(t) + c`` over every regressor row of the
+    (normalised) ``(u, y)`` pairs, φ(t) as in :class:`LagData` (eq. 2-14/2-15).
+
+    This is the ARX model of the same lags with an intercept: least squares is affine invariant, so it predicts
+    what an ARX fitted on the raw data with an intercept predicts. Solved in float64 from the normal equations
+    accumulated over row chunks, columns scaled to a unit diagonal, with ``numpy.linalg.lstsq`` (minimum-norm
+    solution if the regressor is rank deficient). Returns (L (n_out, n_in), c (n_out,)).
+    """
+    lag = regressor_lag(n_y, n_u, nk)
+    G = b = None
+    for u, y in pairs:
+        for a0 in range(lag, y.shape[0], chunk):
+            times = np.arange(a0, min(a0 + chunk, y.shape[0]))
+            X = np.concatenate([lag_matrix_np(y, n_y, times), lag_matrix_np(u, n_u, times, first=nk),
+                                np.ones((times.size, 1))], axis=1)
+            G = X.T @ X if G is None else G + X.T @ X
+            b = X.T @ y[times] if b is None else b + X.T @ y[times]
+    d = np.sqrt(np.maximum(np.diag(G), 1e-300))
+    theta = np.linalg.lstsq(G / d[:, None] / d[None, :], b / d[:, None], rcond=None)[0] / d[:, None]
+    return theta[:-1].T.copy(), theta[-1].copy()
+
+
 # ---------------------------------------------------------------------------------------------- network
 class FlatMLP(torch.nn.Module):
     """Dense network of eq. 2-10 with hidden widths ``hidden`` and activation ``activation`` (linear output).
@@ -114,13 +148,14 @@ class FlatMLP(torch.nn.Module):
     """
 
     def __init__(self, n_in: int, hidden: Sequence[int], n_out: int, activation: str, generator: torch.Generator,
-                 device: torch.device, dtype: torch.dtype = torch.float32):
+                 device: torch.device, dtype: torch.dtype = torch.float32, linear: bool = False):
         super().__init__()
         sizes = [int(n_in), *[int(h) for h in hidden], int(n_out)]
         self.sizes = sizes
+        self.linear = bool(linear)
         self.activation = activation
         self.act = {"relu": torch.relu, "tanh": torch.tanh, "sigmoid": torch.sigmoid}[activation]
-        n_total = count_mlp_parameters(n_in, hidden, n_out)
+        n_total = count_mlp_parameters(n_in, hidden, n_out, self.linear)
         # Glorot-uniform init (Keras default) drawn on the CPU generator so the draw is device-independent.
         init = torch.zeros(n_total, dtype=torch.float64)
         o = 0
@@ -144,19 +179,41 @@ class FlatMLP(torch.nn.Module):
             bias.grad = self.flat.grad[o:o + b]
             o += b
             self.layers.append((W, bias))
+        self.L: torch.Tensor | None = None
+        if self.linear:  # the bypass starts at zero; init_linear() sets it (e.g. to least squares)
+            L = torch.empty(0, dtype=dtype, device=device)
+            L.data = self.flat.data[o:o + n_in * n_out].view(n_out, n_in)
+            L.requires_grad_(True)
+            L.grad = self.flat.grad[o:o + n_in * n_out].view(n_out, n_in)
+            self.L = L
+
+    @torch.no_grad()
+    def init_linear(self, L: np.ndarray, c: np.ndarray) -> None:
+        """Start from a linear model: bypass ``L`` (n_out × n_in), output bias ``c`` and the output layer's
+        weights zero, so that the network computes exactly ``L x + c`` until training adds a correction."""
+        if self.L is None:
+            raise ValueError("init_linear needs a network built with linear=True")
+        self.L.copy_(torch.as_tensor(np.asarray(L), dtype=self.L.dtype))
+        W, b = self.layers[-1]
+        W.zero_()
+        b.copy_(torch.as_tensor(np.asarray(c), dtype=b.dtype))
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         last = len(self.layers) - 1
         act = self.act
+        x0 = x
         for i, (W, b) in enumerate(self.layers):
             x = torch.addmm(b, x, W.t())
             if i < last:
                 x = act(x)
+        if self.L is not None:
+            x = torch.addmm(x, x0, self.L.t())
         return x
 
     @torch.no_grad()
-    def mse_grad_(self, x: torch.Tensor, y: torch.Tensor) -> torch.Tensor:
+    def mse_grad_(self, x: torch.Tensor, y: torch.Tensor, linear_grad: bool = True) -> torch.Tensor:
         """MSE loss of a batch and its gradient written into ``flat.grad`` (overwritten, not accumulated).
+        ``linear_grad=False`` writes a zero gradient for the linear bypass (kept fixed by the optimiser).
 
         Hand-written back-propagation for this plain dense network — the same derivatives autograd computes
         (checked in the tests), without the autograd engine's per-operation overhead, which dominates for
@@ -170,9 +227,16 @@ class FlatMLP(torch.nn.Module):
             if i < last:
                 a = self.act(a)
             acts.append(a)
+        if self.L is not None:
+            a = torch.addmm(a, x, self.L.t())
         diff = a - y
         loss = diff.pow(2).mean()
         delta = diff.mul_(2.0 / diff.numel())
+        if self.L is not None:  # d loss / d L = delta^T x (the bypass is linear in L)
+            if linear_grad:
+                torch.mm(delta.t(), x, out=self.L.grad)
+            else:
+                self.L.grad.zero_()
         for i in range(last, -1, -1):
             W, b = self.layers[i]
             torch.mm(delta.t(), acts[i], out=W.grad)
@@ -191,8 +255,9 @@ class FlatMLP(torch.nn.Module):
     def check_grad_storage(self) -> bool:
         """True while every layer's gradient still lives in ``flat.grad`` (autograd accumulates in place)."""
         g = self.flat.grad
+        leaves = [W for W, _ in self.layers] + ([self.L] if self.L is not None else [])
         return all(W.grad is not None and W.grad.untyped_storage().data_ptr() == g.untyped_storage().data_ptr()
-                   for W, _ in self.layers)
+                   for W in leaves)
 
     def weights_np(self) -> np.ndarray:
         return self.flat.detach().to("cpu", torch.float64).numpy().copy()
@@ -230,10 +295,12 @@ def _act_np(x: np.ndarray, code: int) -> np.ndarray:
     return 1.0 / (1.0 + np.exp(-x))
 
 
-def mlp_forward_np(flat: np.ndarray, sizes: Sequence[int], code: int, x: np.ndarray) -> np.ndarray:
-    """Batched float64 forward pass of the flat network: ``x`` (B, n_in) → (B, n_out)."""
+def mlp_forward_np(flat: np.ndarray, sizes: Sequence[int], code: int, x: np.ndarray, linear: bool = False) -> np.ndarray:
+    """Batched float64 forward pass of the flat network: ``x`` (B, n_in) → (B, n_out); with ``linear`` the
+    bypass ``x Lᵀ`` (L stored after the layers) is added."""
     o = 0
     last = len(sizes) - 2
+    x0 = x
     for i, (a, b) in enumerate(zip(sizes[:-1], sizes[1:])):
         W = flat[o:o + a * b].reshape(b, a)
         o += a * b
@@ -241,11 +308,13 @@ def mlp_forward_np(flat: np.ndarray, sizes: Sequence[int], code: int, x: np.ndar
         o += b
         if i < last:
             x = _act_np(x, code)
+    if linear:
+        x = x + x0 @ flat[o:o + sizes[0] * sizes[-1]].reshape(sizes[-1], sizes[0]).T
     return x
 
 
 @njit(cache=True)
-def _free_run_kernel(flat, sizes, code, y0, un, n_y, n_u, nk, start, bound):  # pragma: no cover - compiled
+def _free_run_kernel(flat, sizes, code, y0, un, n_y, n_u, nk, start, bound, linear):  # pragma: no cover - compiled
     n, ny_ch = y0.shape
     nu_ch = un.shape[1]
     n_layers = sizes.shape[0] - 1
@@ -256,6 +325,12 @@ def _free_run_kernel(flat, sizes, code, y0, un, n_y, n_u, nk, start, bound):  # 
             width = sizes[i]
     a_buf = np.empty(width)
     b_buf = np.empty(width)
+    n_in = sizes[0]
+    n_out = sizes[n_layers]
+    x_buf = np.empty(n_in)
+    lin0 = 0  # offset of the bypass L (n_out × n_in) after the layers
+    for layer in range(n_layers):
+        lin0 += sizes[layer] * sizes[layer + 1] + sizes[layer + 1]
     diverged = -1
     for t in range(start, n):
         # regressor: y(t-1..t-n_y) (all channels per lag), then u(t-1..t-n_u)
@@ -268,6 +343,9 @@ def _free_run_kernel(flat, sizes, code, y0, un, n_y, n_u, nk, start, bound):  # 
             for c in range(nu_ch):
                 a_buf[k] = un[t - i, c]
                 k += 1
+        if linear:
+            for m in range(n_in):
+                x_buf[m] = a_buf[m]
         o = 0
         for layer in range(n_layers):
             na = sizes[layer]
@@ -288,6 +366,13 @@ def _free_run_kernel(flat, sizes, code, y0, un, n_y, n_u, nk, start, bound):  # 
             o += na * nb + nb
             for j in range(nb):
                 a_buf[j] = b_buf[j]
+        if linear:
+            for j in range(n_out):
+                s = 0.0
+                base = lin0 + j * n_in
+                for m in range(n_in):
+                    s += flat[base + m] * x_buf[m]
+                a_buf[j] += s
         bad = False
         for c in range(ny_ch):
             v = a_buf[c]
@@ -304,13 +389,14 @@ def _free_run_kernel(flat, sizes, code, y0, un, n_y, n_u, nk, start, bound):  # 
 
 
 def free_run_mlp(flat: np.ndarray, sizes: Sequence[int], code: int, yn: np.ndarray, un: np.ndarray,
-                 n_y: int, n_u: int, bound: float, nk: int = 1) -> tuple[np.ndarray, int]:
+                 n_y: int, n_u: int, bound: float, nk: int = 1, linear: bool = False) -> tuple[np.ndarray, int]:
     """Free-run simulation (eq. 2-29/2-30) in normalised units: the first ``regressor_lag`` samples of ``yn``
-    are the measured initial conditions, the rest is simulated from ``un``. Returns (ŷ, diverged index or -1)."""
+    are the measured initial conditions, the rest is simulated from ``un``. Returns (ŷ, diverged index or -1).
+    ``linear``: the network has the linear bypass (see :class:`FlatMLP`)."""
     lag = regressor_lag(n_y, n_u, nk)
     return _free_run_kernel(np.ascontiguousarray(flat, dtype=np.float64), np.asarray(sizes, dtype=np.int64), int(code),
                             np.ascontiguousarray(yn, dtype=np.float64), np.ascontiguousarray(un, dtype=np.float64),
-                            int(n_y), int(n_u), int(nk), int(lag), float(bound))
+                            int(n_y), int(n_u), int(nk), int(lag), float(bound), bool(linear))
 
 
 def lag_matrix_np(series: np.ndarray, lags: int, times: np.ndarray, first: int = 1) -> np.ndarray:
@@ -320,7 +406,7 @@ def lag_matrix_np(series: np.ndarray, lags: int, times: np.ndarray, first: int =
 
 
 def k_step_mlp(flat: np.ndarray, sizes: Sequence[int], code: int, yn: np.ndarray, un: np.ndarray, n_y: int, n_u: int,
-               k: int, bound: float, nk: int = 1) -> np.ndarray:
+               k: int, bound: float, nk: int = 1, linear: bool = False) -> np.ndarray:
     """k-step-ahead prediction ŷ(t | t-k) at every sample t ≥ lag, vectorised over t.
 
     With P_j(t) = ŷ(t | t-j-1), P_0 is the one-step prediction and P_j uses, for lag i, the earlier
@@ -341,7 +427,7 @@ def k_step_mlp(flat: np.ndarray, sizes: Sequence[int], code: int, yn: np.ndarray
                 Pji = hist[-i]
                 Yreg[:, i - 1, :] = Pji[times - i]
             x = np.concatenate([Yreg.reshape(times.size, -1), U], axis=1)
-            pred = mlp_forward_np(flat, sizes, code, x)
+            pred = mlp_forward_np(flat, sizes, code, x, linear)
             pred[~np.isfinite(pred) | (np.abs(pred) > bound)] = np.nan
             P = yn.copy()
             P[lag:] = pred

@@ -32,7 +32,7 @@ import torch
 from sysid.base import Identifier, as_record_list, check_records
 from sysid.errors import ConfigError, DataError, DivergenceWarning
 from sysid.neural.core import (ACT_CODE, ACTIVATIONS, FlatMLP, LagData, RMSprop, count_mlp_parameters, free_run_mlp,
-                               k_step_mlp, lag_matrix_np, mlp_forward_np, regressor_lag)
+                               k_step_mlp, lag_matrix_np, least_squares_linear, mlp_forward_np, regressor_lag)
 from sysid.neural.device import configure_threads, select_device
 from sysid.neural.persist import TorchFileSave
 from sysid.record import Normaliser, Record
@@ -119,14 +119,51 @@ class _NeuralNARXBase(TorchFileSave, Identifier):
                 raise ConfigError(f"{self.name}: {key}={v!r} must be a positive integer")
         if not isinstance(self.seed, (int, np.integer)) or isinstance(self.seed, bool):
             raise ConfigError(f"{self.name}: seed={self.seed!r} must be an integer")
+        if not isinstance(self.linear, (bool, np.bool_)):
+            raise ConfigError(f"{self.name}: linear={self.linear!r} must be true or false")
+        if not (isinstance(self.select_tail, (int, float)) and not isinstance(self.select_tail, bool)
+                and 0 <= self.select_tail < 0.5):
+            raise ConfigError(f"{self.name}: select_tail={self.select_tail!r} must be a fraction in [0, 0.5)")
         if check_device:  # a saved model trained on a GPU must still load (and predict) on a CPU machine
             select_device(self.device)
 
     # ------------------------------------------------------------------ fit
     def fit(self, data: Record | Sequence[Record]) -> "_NeuralNARXBase":
-        """Train on one Record or a list of them (no regressor spans two records). Returns self."""
+        """Train on one Record or a list of them (no regressor spans two records). Returns self.
+
+        With ``select_tail`` > 0 the last fraction of the last estimation record is held out of training and
+        the weights kept are those (at the start of the selected training stage or after any of its epochs)
+        with the best free-run R² on it — early stopping / model selection on estimation data only."""
         self._check_params()
         recs = as_record_list(data)
+        self._tail = None
+        self.selected_epoch_, self.selection_r2_ = None, None
+        if self.select_tail:
+            last = recs[-1]
+            n_hold = int(round(self.select_tail * len(last)))
+            lag = regressor_lag(self.n_y, self.n_u, self.nk)
+            cut = len(last) - n_hold
+            if n_hold < 1 or cut - lag < max(1, int(getattr(self, "window", 1))) or cut < lag + 1:
+                raise DataError(f"{self.name}: select_tail={self.select_tail} leaves {cut} training / {n_hold} held-out "
+                                f"samples of {last.source}, need more than the lag {lag} and one window in each")
+            self._tail = last[cut - lag:]  # the held-out samples with their lag of measured initial conditions
+            recs = [*recs[:-1], last[:cut]]
+        try:
+            return self._fit(recs)
+        finally:
+            self._tail = None
+
+    def _tail_r2(self, net: FlatMLP) -> float:
+        """Free-run R² (normalised units; R² is scale-free) on the held-out tail, after the initial conditions."""
+        from sysid.metrics import r2
+
+        (un, yn), = normalised_pairs([self._tail], self.normaliser_)
+        yh, div = free_run_mlp(net.weights_np(), list(net.sizes), ACT_CODE[self.activation], yn, un, self.n_y, self.n_u,
+                               DIVERGENCE_BOUND, self.nk, self.linear)
+        lag = regressor_lag(self.n_y, self.n_u, self.nk)
+        return -np.inf if div >= 0 or not np.isfinite(yh).all() else float(r2(yn, yh, lag))
+
+    def _fit(self, recs: list[Record]) -> "_NeuralNARXBase":
         lag = regressor_lag(self.n_y, self.n_u, self.nk)
         nu, ny = check_channels(recs, lag, self.name)
         t0 = time.perf_counter()
@@ -137,14 +174,16 @@ class _NeuralNARXBase(TorchFileSave, Identifier):
         self.normaliser_ = fit_normaliser(recs)
         pairs = normalised_pairs(recs, self.normaliser_)
         data_t = LagData(pairs, self.n_y, self.n_u, device, nk=self.nk)
-        net = FlatMLP(data_t.n_in, self.hidden, ny, self.activation, gen, device)
+        net = FlatMLP(data_t.n_in, self.hidden, ny, self.activation, gen, device, linear=self.linear)
+        if self.linear:  # start at the least-squares ARX of the same regressor; the network adds a correction
+            net.init_linear(*least_squares_linear(pairs, self.n_y, self.n_u, self.nk))
         self.loss_history_ = []
         self._train(net, data_t, gen)
         self.weights_ = net.weights_np()
         self.sizes_ = list(net.sizes)
         self.n_inputs_, self.n_outputs_ = nu, ny
         self.max_lag_ = lag
-        self.n_parameters_ = count_mlp_parameters(data_t.n_in, self.hidden, ny)
+        self.n_parameters_ = count_mlp_parameters(data_t.n_in, self.hidden, ny, self.linear)
         self.device_used_ = str(device)
         self.fit_seconds_ = time.perf_counter() - t0
         self.diverged_at_ = None
@@ -154,12 +193,14 @@ class _NeuralNARXBase(TorchFileSave, Identifier):
         return self
 
     def _train_one_step(self, net: FlatMLP, data: LagData, gen: torch.Generator, epochs: int, lr: float,
-                        batch_size: int | None = None) -> None:
-        """Series-parallel training (eq. 2-14/2-15): shuffled mini-batches of regressor rows, MSE, RMSprop."""
+                        batch_size: int | None = None, select: bool = False) -> None:
+        """Series-parallel training (eq. 2-14/2-15): shuffled mini-batches of regressor rows, MSE, RMSprop.
+        ``select`` (with a held-out tail): keep the weights, initial or after an epoch, of best tail free-run R²."""
+        best = (self._tail_r2(net), 0, net.flat.detach().clone()) if select and self._tail is not None else None
         opt = RMSprop(net.flat, lr)
         M, B = data.n_rows, int(self.batch_size if batch_size is None else batch_size)
         dev = data.device
-        for _ in range(int(epochs)):
+        for ep in range(int(epochs)):
             perm = torch.randperm(M, generator=gen).to(dev)
             losses: list[torch.Tensor] = []
             if data.X is not None:
@@ -167,13 +208,24 @@ class _NeuralNARXBase(TorchFileSave, Identifier):
             else:
                 batches = ((data.x(idx), data.Y[idx]) for idx in perm.split(B))
             for xb, yb in batches:
-                loss = net.mse_grad_(xb, yb)  # forward, MSE and hand-written back-propagation
+                # forward, MSE and hand-written back-propagation; the linear bypass stays at its least-squares
+                # start here (it is already the one-step optimum of the linear part, and RMSprop's steps of
+                # about lr per weight would move the ARX poles of a finely sampled system by that much)
+                loss = net.mse_grad_(xb, yb, linear_grad=False)
                 opt.step()
                 losses.append(loss)
             # mean of the batch losses weighted by batch size; one device sync per epoch
             sizes = torch.full((len(losses),), float(B), device=dev)
             sizes[-1] = M - B * (len(losses) - 1)
             self.loss_history_.append(float((torch.stack(losses) * sizes).sum().item()) / M)
+            if best is not None:
+                score = self._tail_r2(net)
+                if score > best[0]:
+                    best = (score, ep + 1, net.flat.detach().clone())
+        if best is not None:
+            with torch.no_grad():
+                net.flat.copy_(best[2])
+            self.selection_r2_, self.selected_epoch_ = float(best[0]), int(best[1])
 
     def _train(self, net: FlatMLP, data: LagData, gen: torch.Generator) -> None:  # pragma: no cover - abstract
         raise NotImplementedError
@@ -198,7 +250,8 @@ class _NeuralNARXBase(TorchFileSave, Identifier):
         code = ACT_CODE[self.activation]
         self.diverged_at_ = None
         if horizon is None or horizon >= n - lag:
-            yhat, div = free_run_mlp(self.weights_, self.sizes_, code, yn, un, self.n_y, self.n_u, DIVERGENCE_BOUND, self.nk)
+            yhat, div = free_run_mlp(self.weights_, self.sizes_, code, yn, un, self.n_y, self.n_u, DIVERGENCE_BOUND, self.nk,
+                                     self.linear)
             if div >= 0:
                 self.diverged_at_ = int(div)
                 warnings.warn(f"{self.name}: free-run simulation diverged at sample {div} of {n}; the rest is nan",
@@ -208,10 +261,10 @@ class _NeuralNARXBase(TorchFileSave, Identifier):
             x = np.concatenate([lag_matrix_np(yn, self.n_y, times), lag_matrix_np(un, self.n_u, times, first=self.nk)], axis=1)
             yhat = yn.copy()
             with np.errstate(over="ignore", invalid="ignore"):
-                yhat[lag:] = mlp_forward_np(self.weights_, self.sizes_, code, x)
+                yhat[lag:] = mlp_forward_np(self.weights_, self.sizes_, code, x, self.linear)
         else:
             yhat = k_step_mlp(self.weights_, self.sizes_, code, yn, un, self.n_y, self.n_u, int(horizon), DIVERGENCE_BOUND,
-                              self.nk)
+                              self.nk, self.linear)
         if horizon is not None and not np.isfinite(yhat).all():
             bad = np.flatnonzero(~np.isfinite(yhat).all(axis=1))
             self.diverged_at_ = int(bad[0])
@@ -228,7 +281,8 @@ class _NeuralNARXBase(TorchFileSave, Identifier):
         if hasattr(self, "weights_"):
             d.update({
                 "structure": {"inputs": self.sizes_[0], "hidden": list(self.hidden), "outputs": self.sizes_[-1],
-                              "activation": self.activation, "n_y": self.n_y, "n_u": self.n_u, "nk": self.nk},
+                              "activation": self.activation, "n_y": self.n_y, "n_u": self.n_u, "nk": self.nk,
+                              "linear": bool(self.linear)},
                 "terms": [],
                 "max_lag": self.max_lag_,
                 "device": self.device_used_,
@@ -254,8 +308,10 @@ class _NeuralNARXBase(TorchFileSave, Identifier):
         self._check_params(check_device=False)
         self.weights_ = np.asarray(state["weights"], dtype=np.float64)
         self.sizes_ = [int(s) for s in state["sizes"]]
-        if int(np.sum([a * b + b for a, b in zip(self.sizes_[:-1], self.sizes_[1:])])) != self.weights_.size:
-            raise DataError(f"{self.name}: saved weights ({self.weights_.size}) do not match layer sizes {self.sizes_}")
+        expected = count_mlp_parameters(self.sizes_[0], self.sizes_[1:-1], self.sizes_[-1], self.linear)
+        if expected != self.weights_.size:
+            raise DataError(f"{self.name}: saved weights ({self.weights_.size}) do not match layer sizes {self.sizes_}"
+                            f"{' with the linear bypass' if self.linear else ''} ({expected})")
         self.normaliser_ = Normaliser.from_dict(state["normaliser"])
         self.n_inputs_, self.n_outputs_ = int(state["n_inputs"]), int(state["n_outputs"])
         self.loss_history_ = [float(v) for v in state.get("loss_history", [])]
@@ -289,13 +345,23 @@ class NARXMLP(_NeuralNARXBase):
         Input delay in samples: the input regressors are u(t-nk) … u(t-nk-n_u+1). The dissertation's eq. 2-14
         is nk = 1 (default); a transmission channel with a time of flight of d samples wants nk ≈ d, so that
         n_u covers the response instead of the dead time.
+    linear : bool
+        Linear bypass: ŷ = L φ + MLP(φ) (φ the regressor of eq. 2-14), with L and the output bias started at the
+        least-squares ARX of the same lags and the network's output layer at zero, so training starts from the
+        ARX model and learns a nonlinear correction. False (default): the dissertation's plain network.
+    select_tail : float
+        Fraction (0 … 0.5) of the last estimation record held out of training; the weights kept are those,
+        initial or after any epoch, with the best free-run R² on that tail (``selected_epoch_`` 0 = the initial
+        weights, i.e. the ARX model with ``linear``). 0 (default): no hold-out, the last epoch is kept.
     """
 
     name = "narx-mlp"
 
     def __init__(self, n_y: int = 10, n_u: int = 10, hidden: Sequence[int] = (25, 25, 25, 25), activation: str = "relu",
                  lr: float = 1e-4, batch_size: int = 128, epochs: int = 100, seed: int = 0, device: str = "auto",
-                 nk: int = 1):
+                 nk: int = 1, linear: bool = False, select_tail: float = 0.0):
+        self.linear = linear
+        self.select_tail = select_tail
         self.n_y = n_y
         self.n_u = n_u
         self.nk = nk
@@ -308,7 +374,7 @@ class NARXMLP(_NeuralNARXBase):
         self.device = device
 
     def _train(self, net: FlatMLP, data: LagData, gen: torch.Generator) -> None:
-        self._train_one_step(net, data, gen, self.epochs, self.lr)
+        self._train_one_step(net, data, gen, self.epochs, self.lr, select=True)
 
 
 class NARXMLPSim(_NeuralNARXBase):
@@ -333,6 +399,8 @@ class NARXMLPSim(_NeuralNARXBase):
         after pretraining or after any simulation-error epoch, with the best free-run R² on that tail (early
         stopping / model selection on estimation data only; ``selected_epoch_`` 0 means the pretrained net).
         0 (default): no hold-out, the last epoch is kept.
+    linear : bool
+        Linear bypass started at the least-squares ARX, as for :class:`NARXMLP`.
 
     Each epoch draws ``ceil(rows / window)`` window starts at random positions (so that on average every
     sample is a target once per epoch); each window starts from the measured ``y(s-1) … y(s-n_y)``.
@@ -343,7 +411,8 @@ class NARXMLPSim(_NeuralNARXBase):
     def __init__(self, n_y: int = 10, n_u: int = 10, hidden: Sequence[int] = (25, 25, 25, 25), activation: str = "relu",
                  lr: float = 1e-3, batch_size: int = 32, epochs: int = 100, seed: int = 0, device: str = "auto",
                  window: int = 50, pretrain_epochs: int = 10, pretrain_lr: float = 1e-3, nk: int = 1,
-                 select_tail: float = 0.0, pretrain_batch_size: int | None = None):
+                 select_tail: float = 0.0, pretrain_batch_size: int | None = None, linear: bool = False):
+        self.linear = linear
         self.n_y = n_y
         self.n_u = n_u
         self.nk = nk
@@ -362,9 +431,6 @@ class NARXMLPSim(_NeuralNARXBase):
 
     def _check_params(self, check_device: bool = True) -> None:
         super()._check_params(check_device)
-        if not (isinstance(self.select_tail, (int, float)) and not isinstance(self.select_tail, bool)
-                and 0 <= self.select_tail < 0.5):
-            raise ConfigError(f"{self.name}: select_tail={self.select_tail!r} must be a fraction in [0, 0.5)")
         pb = self.pretrain_batch_size
         if pb is not None and (not isinstance(pb, (int, np.integer)) or isinstance(pb, bool) or pb < 1):
             raise ConfigError(f"{self.name}: pretrain_batch_size={pb!r} must be a positive integer (or None: batch_size)")
@@ -374,39 +440,6 @@ class NARXMLPSim(_NeuralNARXBase):
             raise ConfigError(f"{self.name}: pretrain_epochs={self.pretrain_epochs!r} must be a non-negative integer")
         if not (isinstance(self.pretrain_lr, (int, float)) and 0 < self.pretrain_lr < 10):
             raise ConfigError(f"{self.name}: pretrain_lr={self.pretrain_lr!r} must be a positive number below 10")
-
-    def fit(self, data: Record | Sequence[Record]) -> "NARXMLPSim":
-        """As :meth:`NARXMLP.fit`; with ``select_tail`` > 0 the last fraction of the last estimation record is
-        held out of training and the weights kept are those (after pretraining or after any simulation-error
-        epoch) with the best free-run R² on it — early stopping on estimation data only."""
-        self._check_params()
-        recs = as_record_list(data)
-        self._tail = None
-        self.selected_epoch_, self.selection_r2_ = None, None
-        if self.select_tail:
-            last = recs[-1]
-            n_hold = int(round(self.select_tail * len(last)))
-            lag = regressor_lag(self.n_y, self.n_u, self.nk)
-            cut = len(last) - n_hold
-            if n_hold < 1 or cut - lag < max(1, int(self.window)) or cut < lag + 1:
-                raise DataError(f"{self.name}: select_tail={self.select_tail} leaves {cut} training / {n_hold} held-out "
-                                f"samples of {last.source}, need more than the lag {lag} and one window in each")
-            self._tail = last[cut - lag:]  # the held-out samples with their lag of measured initial conditions
-            recs = [*recs[:-1], last[:cut]]
-        try:
-            return super().fit(recs)
-        finally:
-            self._tail = None
-
-    def _tail_r2(self, net: FlatMLP) -> float:
-        """Free-run R² (normalised units; R² is scale-free) on the held-out tail, after the initial conditions."""
-        from sysid.metrics import r2
-
-        (un, yn), = normalised_pairs([self._tail], self.normaliser_)
-        yh, div = free_run_mlp(net.weights_np(), list(net.sizes), ACT_CODE[self.activation], yn, un, self.n_y, self.n_u,
-                               DIVERGENCE_BOUND, self.nk)
-        lag = regressor_lag(self.n_y, self.n_u, self.nk)
-        return -np.inf if div >= 0 or not np.isfinite(yh).all() else float(r2(yn, yh, lag))
 
     def _train(self, net: FlatMLP, data: LagData, gen: torch.Generator) -> None:
         if self.pretrain_epochs:

@@ -4,7 +4,14 @@ Model (discrete time, normalised units)::
 
     h(t0)   = E([y(t0-1) … y(t0-n_enc), u(t0-1) … u(t0-n_enc)])      encoder: MLP, tanh output
     h(t+1)  = GRU(u(t), h(t))            (or an LSTM cell; its cell state also comes from the encoder)
-    ŷ(t+1)  = C h(t+1) + d
+    ŷ(t+1)  = C h(t+1) + d  [+ ŷ_lin(t+1)]
+
+With ``linear_order`` = k > 0 a linear path is added: ŷ_lin is the free-run simulation of an ARX model of
+orders (k, k) with intercept, ŷ_lin(t) = Σ_i A_i ŷ_lin(t-i) + Σ_i B_i u(t-i) + c, started from the measured
+y(t0-1) … y(t0-k) of the encoder window. It is initialised at the least-squares ARX of the estimation data and
+the readout (C, d) at zero, so training starts from the ARX model's simulation and the recurrent network learns
+the nonlinear correction (a linear model refined by a network: BLA-initialised networks, Schoukens & Ljung
+2019; the linear skip of SUBNET, Beintema et al.).
 
 The encoder estimates the initial state from ``n_enc`` past measured samples (the same regressor as a NARX
 with n_y = n_u = n_enc, eq. 2-14); afterwards the model runs on the input alone, so every prediction is a
@@ -29,7 +36,7 @@ import torch
 
 from sysid.base import Identifier, as_record_list
 from sysid.errors import ConfigError, DataError, DivergenceWarning
-from sysid.neural.core import LagData, lag_matrix_np
+from sysid.neural.core import LagData, lag_matrix_np, least_squares_linear
 from sysid.neural.device import configure_threads, select_device
 from sysid.neural.persist import TorchFileSave
 from sysid.neural.narx_mlp import MAX_LAG, _as2d, check_channels, check_predict_input, fit_normaliser, normalised_pairs
@@ -41,10 +48,13 @@ CELLS = ("gru", "lstm")
 
 
 class _Net(torch.nn.Module):
-    def __init__(self, n_enc_in: int, enc_hidden: Sequence[int], n_state: int, nu: int, ny: int, cell: str):
+    def __init__(self, n_enc_in: int, enc_hidden: Sequence[int], n_state: int, nu: int, ny: int, cell: str,
+                 linear_order: int = 0, n_enc: int = 0):
         super().__init__()
         self.cell = cell
         self.n_state = n_state
+        self.nu, self.ny, self.k, self.n_enc = nu, ny, int(linear_order), int(n_enc)
+
         n_init = n_state * (2 if cell == "lstm" else 1)
         layers: list[torch.nn.Module] = []
         a = n_enc_in
@@ -56,6 +66,8 @@ class _Net(torch.nn.Module):
         rnn_cls = torch.nn.GRU if cell == "gru" else torch.nn.LSTM
         self.rnn = rnn_cls(nu, n_state, batch_first=True)
         self.readout = torch.nn.Linear(n_state, ny)
+        # ARX path on [y(t-1) … y(t-k), u(t-1) … u(t-k)] (lag-major, as the NARX regressor of eq. 2-14)
+        self.arx = torch.nn.Linear(self.k * (ny + nu), ny) if self.k else None
 
     def forward(self, x0: torch.Tensor, useq: torch.Tensor) -> torch.Tensor:
         """``x0`` (B, n_enc_in) past regressor, ``useq`` (B, T, nu) inputs u(t0-1) … u(t0+T-2) → ŷ (B, T, ny)."""
@@ -65,7 +77,37 @@ class _Net(torch.nn.Module):
         else:
             h0 = z.unsqueeze(0).contiguous()
         out, _ = self.rnn(useq, h0)
-        return self.readout(out)
+        y = self.readout(out)
+        return y if self.arx is None else y + self.linear_path(x0, useq)
+
+    def linear_path(self, x0: torch.Tensor, useq: torch.Tensor) -> torch.Tensor:
+        """Free-run simulation of the ARX path over the window: ŷ_lin (B, T, ny) for targets t0 … t0+T-1."""
+        k, ny, nu = self.k, self.ny, self.nu
+        B, T = useq.shape[0], useq.shape[1]
+        nyr = self.n_enc * ny
+        # u(t0-k) … u(t0-2) from the encoder window (lags k … 2), then u(t0-1) … u(t0+T-2)
+        upast = x0[:, nyr:nyr + k * nu].reshape(B, k, nu).flip(1)[:, : k - 1]
+        ufull = torch.cat([upast, useq], dim=1)                      # ufull[:, m] = u(t0-k+m)
+        win = ufull.unfold(1, k, 1)[:, :T]                            # (B, T, nu, k): u(t0+j-k) … u(t0+j-1)
+        ureg = win.flip(-1).permute(0, 1, 3, 2).reshape(B, T, k * nu)  # lag-major u(t0+j-1) … u(t0+j-k)
+        W = self.arx.weight
+        v = torch.matmul(ureg, W[:, k * ny:].t()) + self.arx.bias      # input part and intercept, all steps at once
+        Ay = W[:, : k * ny]
+        hist = x0[:, : k * ny]                                        # measured y(t0-1) … y(t0-k)
+        outs = []
+        for j in range(T):
+            yl = torch.addmm(v[:, j], hist, Ay.t())
+            outs.append(yl)
+            hist = torch.cat([yl, hist[:, : (k - 1) * ny]], dim=1) if k > 1 else yl
+        return torch.stack(outs, dim=1)
+
+    @torch.no_grad()
+    def init_linear(self, L: np.ndarray, c: np.ndarray) -> None:
+        """ARX path at (L, c) (from :func:`least_squares_linear`), readout at zero: ŷ = the ARX simulation."""
+        self.arx.weight.copy_(torch.as_tensor(L, dtype=self.arx.weight.dtype))
+        self.arx.bias.copy_(torch.as_tensor(c, dtype=self.arx.bias.dtype))
+        self.readout.weight.zero_()
+        self.readout.bias.zero_()
 
 
 class RNNStateSpace(TorchFileSave, Identifier):
@@ -85,6 +127,9 @@ class RNNStateSpace(TorchFileSave, Identifier):
         Simulated window length T, windows per batch, epochs (each draws rows/T windows) and Adam step size.
     clip : float
         Gradient-norm clipping (0: off).
+    linear_order : int
+        Order k (0 … n_enc) of the linear ARX path added to the output, started at the least-squares ARX(k, k)
+        with intercept and trained with the rest; 0 (default): no linear path.
     seed, device :
         As for the NARX-MLP.
     """
@@ -93,7 +138,8 @@ class RNNStateSpace(TorchFileSave, Identifier):
 
     def __init__(self, n_state: int = 32, n_enc: int = 20, enc_hidden: Sequence[int] = (64,), cell: str = "gru",
                  window: int = 100, batch_size: int = 32, epochs: int = 30, lr: float = 3e-3, clip: float = 1.0,
-                 seed: int = 0, device: str = "auto"):
+                 seed: int = 0, device: str = "auto", linear_order: int = 0):
+        self.linear_order = linear_order
         self.n_state = n_state
         self.n_enc = n_enc
         self.enc_hidden = list(enc_hidden) if isinstance(enc_hidden, (list, tuple)) else enc_hidden
@@ -118,6 +164,7 @@ class RNNStateSpace(TorchFileSave, Identifier):
         pos_int("window", 1, 100_000)
         pos_int("batch_size", 1, 1_000_000)
         pos_int("epochs", 0, 1_000_000)
+        pos_int("linear_order", 0, int(self.n_enc))
         eh = self.enc_hidden
         if not isinstance(eh, (list, tuple)) or not all(isinstance(w, (int, np.integer)) and not isinstance(w, bool) and w >= 1 for w in eh):
             raise ConfigError(f"{self.name}: enc_hidden={eh!r} must be a list of widths, e.g. enc_hidden=64 or 64-64")
@@ -134,7 +181,8 @@ class RNNStateSpace(TorchFileSave, Identifier):
             select_device(self.device)
 
     def _build(self, nu: int, ny: int) -> _Net:
-        return _Net(self.n_enc * (nu + ny), self.enc_hidden, int(self.n_state), nu, ny, self.cell)
+        return _Net(self.n_enc * (nu + ny), self.enc_hidden, int(self.n_state), nu, ny, self.cell,
+                    int(self.linear_order), int(self.n_enc))
 
     # ------------------------------------------------------------------ fit
     def fit(self, data: Record | Sequence[Record]) -> "RNNStateSpace":
@@ -153,7 +201,10 @@ class RNNStateSpace(TorchFileSave, Identifier):
         starts = data_t.window_starts(T)
         if starts.size == 0:
             raise DataError(f"{self.name}: no record has {T + self.n_enc} samples for one window; lower window or n_enc")
-        net = self._build(nu, ny).to(device)
+        net = self._build(nu, ny)
+        if self.linear_order:
+            net.init_linear(*least_squares_linear(pairs, int(self.linear_order), int(self.linear_order)))
+        net = net.to(device)
         opt = torch.optim.Adam(net.parameters(), lr=float(self.lr))
         starts_t = torch.as_tensor(starts, device=device)
         steps = torch.arange(T, device=device)
@@ -243,7 +294,7 @@ class RNNStateSpace(TorchFileSave, Identifier):
         d = super().describe()
         if hasattr(self, "state_dict_"):
             d.update({"structure": {"cell": self.cell, "n_state": self.n_state, "n_enc": self.n_enc,
-                                    "enc_hidden": list(self.enc_hidden)},
+                                    "enc_hidden": list(self.enc_hidden), "linear_order": int(self.linear_order)},
                       "terms": [], "max_lag": self.max_lag_, "device": self.device_used_,
                       "final_loss": self.loss_history_[-1] if self.loss_history_ else None})
         return d
