@@ -64,17 +64,19 @@ SETTINGS: dict[str, dict[str, dict[str, Any]]] = {
     # each dataset costs seconds on 2 cores; small data get more epochs.
     "narx-mlp": {
         "*": {"n_y": 10, "n_u": 10, "hidden": [25, 25, 25, 25], "epochs": 10},
-        "cascaded-tanks": {"epochs": 200},
-        "piezo-tue": {"n_y": 1, "n_u": 2, "hidden": [25, 25], "epochs": 20},
-        "wiener-hammerstein": {"epochs": 5},
+        "cascaded-tanks": {"epochs": 200, "linear": True},
+        "piezo-tue": {"n_y": 1, "n_u": 2, "hidden": [25, 25], "epochs": 20, "linear": True, "lr": 3e-5},
+        "wiener-hammerstein": {"epochs": 5, "linear": True},
     },
     "narx-mlp-sim": {
         "*": {"n_y": 10, "n_u": 10, "hidden": [25, 25, 25, 25], "epochs": 2},
         "cascaded-tanks": {"epochs": 100},
-        "piezo-tue": {"n_y": 2, "n_u": 2, "hidden": [25, 25], "epochs": 5},
+        "piezo-tue": {"n_y": 2, "n_u": 2, "hidden": [25, 25], "epochs": 5, "linear": True, "pretrain_epochs": 20,
+                      "pretrain_lr": 3e-5, "lr": 1e-4},
         "wiener-hammerstein": {"epochs": 1},
+        "bouc-wen": {"linear": True},
     },
-    "rnn": {"*": {}},
+    "rnn": {"*": {}, "cascaded-tanks": {"linear_order": 4}, "piezo-tue": {"linear_order": 4}},
 }
 # The acoustic channel delays the input by its time of flight (~76 µs = ~510 samples at 6.75 MHz, found by
 # cross-correlation of u and y): the polynomial and linear models take the input from nk = 505 samples back.
@@ -91,10 +93,10 @@ SETTINGS["narx-poly"]["acoustic-thesis-clean"].update(degree=2)
 SETTINGS["narmax-poly"] = {k: {**v, "ne": 2, "els_iter": 2} for k, v in SETTINGS["narx-poly"].items()}
 SETTINGS["narmax-poly"]["cascaded-tanks"][NORMALISE] = False  # measured: 0.79 V raw vs 3.4 V normalised
 QUICK_SETTINGS: dict[str, dict[str, dict[str, Any]]] = {
-    "narx-mlp": {"*": {"epochs": 5}, "cascaded-tanks": {"epochs": 100}, "piezo-tue": {"epochs": 10},
+    "narx-mlp": {"*": {"epochs": 5}, "cascaded-tanks": {"epochs": 100}, "piezo-tue": {"epochs": 20},
                  "wiener-hammerstein": {"epochs": 3}},
-    "narx-mlp-sim": {"*": {"epochs": 1}, "cascaded-tanks": {"epochs": 50}, "piezo-tue": {"epochs": 2}},
-    "rnn": {"*": {"epochs": 8}, "wiener-hammerstein": {"epochs": 16}},
+    "narx-mlp-sim": {"*": {"epochs": 1}, "cascaded-tanks": {"epochs": 50}, "piezo-tue": {"epochs": 5}},
+    "rnn": {"*": {"epochs": 8}, "wiener-hammerstein": {"epochs": 16}, "piezo-tue": {"epochs": 30}},
 }
 
 # Datasets of the quick check (small or fast enough for CI) and the sample budget of each part in quick mode:

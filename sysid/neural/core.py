@@ -211,9 +211,15 @@ class FlatMLP(torch.nn.Module):
         return x
 
     @torch.no_grad()
-    def mse_grad_(self, x: torch.Tensor, y: torch.Tensor, linear_grad: bool = True) -> torch.Tensor:
+    def freeze_linear(self) -> None:
+        """Keep the linear bypass fixed in training: its gradient stays zero (so RMSprop does not move it)."""
+        self.L.requires_grad_(False)
+        self.L.grad.zero_()
+
+    @torch.no_grad()
+    def mse_grad_(self, x: torch.Tensor, y: torch.Tensor) -> torch.Tensor:
         """MSE loss of a batch and its gradient written into ``flat.grad`` (overwritten, not accumulated).
-        ``linear_grad=False`` writes a zero gradient for the linear bypass (kept fixed by the optimiser).
+        A frozen linear bypass (:meth:`freeze_linear`) gets a zero gradient.
 
         Hand-written back-propagation for this plain dense network — the same derivatives autograd computes
         (checked in the tests), without the autograd engine's per-operation overhead, which dominates for
@@ -233,7 +239,7 @@ class FlatMLP(torch.nn.Module):
         loss = diff.pow(2).mean()
         delta = diff.mul_(2.0 / diff.numel())
         if self.L is not None:  # d loss / d L = delta^T x (the bypass is linear in L)
-            if linear_grad:
+            if self.L.requires_grad:
                 torch.mm(delta.t(), x, out=self.L.grad)
             else:
                 self.L.grad.zero_()
