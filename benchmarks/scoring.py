@@ -67,6 +67,8 @@ SETTINGS: dict[str, dict[str, dict[str, Any]]] = {
         "cascaded-tanks": {"epochs": 200, "linear": True},
         "piezo-tue": {"n_y": 1, "n_u": 2, "hidden": [25, 25], "epochs": 20, "linear": True, "lr": 3e-5},
         "wiener-hammerstein": {"epochs": 5, "linear": True},
+        "cantilever-thesis": {"linear": True},
+        "cantilever-thesis-clean": {"linear": True},
     },
     "narx-mlp-sim": {
         "*": {"n_y": 10, "n_u": 10, "hidden": [25, 25, 25, 25], "epochs": 2},
@@ -76,7 +78,8 @@ SETTINGS: dict[str, dict[str, dict[str, Any]]] = {
         "wiener-hammerstein": {"epochs": 1},
         "bouc-wen": {"linear": True},
     },
-    "rnn": {"*": {}, "cascaded-tanks": {"linear_order": 4}, "piezo-tue": {"linear_order": 4}},
+    "rnn": {"*": {}, "cascaded-tanks": {"linear_order": 4}, "piezo-tue": {"linear_order": 4},
+            "cantilever-thesis": {"linear_order": 4}, "cantilever-thesis-clean": {"linear_order": 4}},
 }
 # The acoustic channel delays the input by its time of flight (~76 µs = ~510 samples at 6.75 MHz, found by
 # cross-correlation of u and y): the polynomial and linear models take the input from nk = 505 samples back.
