@@ -73,12 +73,18 @@ SETTINGS: dict[str, dict[str, dict[str, Any]]] = {
     # of the 1 Hz sine at 5 kHz; the networks' one-step fit is too coarse for the hysteresis there): the candidate
     # with the best validation RMSE among those tried (lr, epochs, lags, activation, window) — narx-mlp
     # lr 3e-5 x 20 epochs 1.50 um, narx-mlp-sim pretrain lr 3e-5 x 20 + lr 1e-4 x 5 epochs 1.70 um (ARX 1.74),
-    # rnn 30 epochs also in quick mode 1.27 um (8 epochs: 1.52).
+    # rnn 30 epochs also in quick mode 1.27 um (8 epochs: 1.52). narx-mlp WH: 10 epochs in both modes (validation
+    # mean over seeds 0-2: 3 epochs 39.7, 5: 39.0, 10: 36.8 mV). Seed sensitivity (quick test RMSE, seeds 0/1/2):
+    # narx-mlp WH 33.9/38.1/38.4 mV (BLA 44.4), cascaded tanks 0.67/0.64/0.63 V, rnn piezo 0.99/0.97/0.99 um,
+    # narx-mlp-sim piezo 0.42/0.58/0.53 um all beat the baselines; narx-mlp piezo 0.87/1.21/0.92 um does NOT for
+    # seed 1 (ARX 1.09 um) and its validation RMSE (mean 1.71 um) is at the ARX level (1.74): a fragile pass.
+    # Likewise narx-mlp on cantilever-thesis (full): 3.14/3.28/4.49 um vs ARX 3.58 um. Both stay exempt from the
+    # beats-linear rule in benchmarks/baselines.json, with these numbers.
     "narx-mlp": {
         "*": {"n_y": 10, "n_u": 10, "hidden": [25, 25, 25, 25], "epochs": 10},
         "cascaded-tanks": {"epochs": 200, "linear": True},
         "piezo-tue": {"n_y": 1, "n_u": 2, "hidden": [25, 25], "epochs": 20, "linear": True, "lr": 3e-5},
-        "wiener-hammerstein": {"epochs": 5, "linear": True},
+        "wiener-hammerstein": {"linear": True},
         "cantilever-thesis": {"linear": True},
         "cantilever-thesis-clean": {"linear": True},
     },
@@ -113,7 +119,7 @@ SETTINGS["narmax-poly"] = {k: {**v, "ne": 2, "els_iter": 2} for k, v in SETTINGS
 SETTINGS["narmax-poly"]["cascaded-tanks"].update({"ne": 1, "els_iter": 1, NORMALISE: True})
 QUICK_SETTINGS: dict[str, dict[str, dict[str, Any]]] = {
     "narx-mlp": {"*": {"epochs": 5}, "cascaded-tanks": {"epochs": 100}, "piezo-tue": {"epochs": 20},
-                 "wiener-hammerstein": {"epochs": 3}},
+                 "wiener-hammerstein": {"epochs": 10}},
     "narx-mlp-sim": {"*": {"epochs": 1}, "cascaded-tanks": {"epochs": 50}, "piezo-tue": {"epochs": 5}},
     "rnn": {"*": {"epochs": 8}, "wiener-hammerstein": {"epochs": 16}, "piezo-tue": {"epochs": 30}},
 }
