@@ -27,7 +27,7 @@ from numba import njit
 
 __all__ = [
     "regressor_lag", "ACTIVATIONS", "LagData", "FlatMLP", "RMSprop", "mlp_forward_np", "free_run_mlp", "k_step_mlp", "count_mlp_parameters",
-    "n_mlp_weights", "least_squares_linear",
+    "n_mlp_weights", "least_squares_linear", "merge_ensemble",
 ]
 
 ACTIVATIONS = ("sigmoid", "tanh", "relu")
@@ -50,6 +50,53 @@ def count_mlp_parameters(n_in: int, hidden: Sequence[int], n_out: int, linear: b
 def n_mlp_weights(sizes: Sequence[int]) -> int:
     """Entries of the flat buffer that belong to the dense layers (the linear bypass, if any, follows them)."""
     return int(sum(int(a) * int(b) + int(b) for a, b in zip(sizes[:-1], sizes[1:])))
+
+
+def merge_ensemble(members: Sequence[np.ndarray], sizes: Sequence[int], linear: bool = False) -> tuple[np.ndarray, list[int]]:
+    """One dense network computing the MEAN of k networks of the same layer sizes (flat layout of
+    :class:`FlatMLP`), so every prediction path of a single network (numba free run, k-step, save/load) serves
+    an ensemble unchanged. In free run the mean is what is fed back: one model, not k simulations.
+
+    Hidden layer ``l`` of the merged net is the members' layers side by side (width k·h_l): the first layer's
+    weights and biases stacked, deeper layers block-diagonal (zeros between members, so member i's units see
+    only member i's units), the output weights side by side divided by k and the output bias the members'
+    mean; the linear bypass L (``linear``) is the members' mean (in the NARX-MLP it is the same fixed
+    least-squares ARX in every member, so it is that L). Exact up to float64 rounding.
+    Returns (flat weights, merged sizes ``[n_in, k·h_1, …, k·h_L, n_out]``).
+    """
+    members = [np.asarray(m, dtype=np.float64) for m in members]
+    k = len(members)
+    sizes = [int(v) for v in sizes]
+    n_layers = len(sizes) - 1
+    if k < 1:
+        raise ValueError("merge_ensemble needs at least one member")
+    n_w = count_mlp_parameters(sizes[0], sizes[1:-1], sizes[-1], linear)
+    if any(m.shape != (n_w,) for m in members):
+        raise ValueError(f"merge_ensemble: every member needs {n_w} weights for sizes {sizes}")
+    merged_sizes = [sizes[0], *[k * h for h in sizes[1:-1]], sizes[-1]]
+    parts: list[np.ndarray] = []
+    o = 0
+    for layer in range(n_layers):
+        a, b = sizes[layer], sizes[layer + 1]
+        Ws = [m[o:o + a * b].reshape(b, a) for m in members]
+        bs = [m[o + a * b:o + a * b + b] for m in members]
+        o += a * b + b
+        if n_layers == 1:  # no hidden layer: the mean of affine maps
+            W, bias = sum(Ws) / k, sum(bs) / k
+        elif layer == 0:
+            W, bias = np.concatenate(Ws, axis=0), np.concatenate(bs)
+        elif layer < n_layers - 1:
+            W = np.zeros((k * b, k * a))
+            for i, Wi in enumerate(Ws):
+                W[i * b:(i + 1) * b, i * a:(i + 1) * a] = Wi
+            bias = np.concatenate(bs)
+        else:
+            W, bias = np.concatenate(Ws, axis=1) / k, sum(bs) / k
+        parts += [W.reshape(-1), bias]
+    if linear:
+        Ls = [m[o:o + sizes[0] * sizes[-1]] for m in members]
+        parts.append(Ls[0].copy() if all(np.array_equal(L, Ls[0]) for L in Ls) else sum(Ls) / k)
+    return np.concatenate(parts), merged_sizes
 
 
 # ---------------------------------------------------------------------------------------------- data

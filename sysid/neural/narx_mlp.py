@@ -32,7 +32,7 @@ import torch
 from sysid.base import Identifier, as_record_list, check_records
 from sysid.errors import ConfigError, DataError, DivergenceWarning
 from sysid.neural.core import (ACT_CODE, ACTIVATIONS, FlatMLP, LagData, RMSprop, count_mlp_parameters, free_run_mlp,
-                               k_step_mlp, lag_matrix_np, least_squares_linear, mlp_forward_np, regressor_lag)
+                               k_step_mlp, lag_matrix_np, least_squares_linear, merge_ensemble, mlp_forward_np, regressor_lag)
 from sysid.neural.device import configure_threads, select_device
 from sysid.neural.persist import TorchFileSave
 from sysid.record import Normaliser, Record
@@ -42,6 +42,8 @@ __all__ = ["NARXMLP", "NARXMLPSim"]
 MAX_LAG = 1024
 # A simulated output beyond this many standard deviations of the estimation output is a divergence.
 DIVERGENCE_BOUND = 1e3
+# Most members of an ensemble (``ensemble=k``): k trainings, and a merged network k times as wide.
+MAX_ENSEMBLE = 64
 
 
 def _as2d(a: np.ndarray) -> np.ndarray:
@@ -124,6 +126,9 @@ class _NeuralNARXBase(TorchFileSave, Identifier):
         if not (isinstance(self.select_tail, (int, float)) and not isinstance(self.select_tail, bool)
                 and 0 <= self.select_tail < 0.5):
             raise ConfigError(f"{self.name}: select_tail={self.select_tail!r} must be a fraction in [0, 0.5)")
+        k = getattr(self, "ensemble", 1)
+        if not isinstance(k, (int, np.integer)) or isinstance(k, bool) or not 1 <= k <= MAX_ENSEMBLE:
+            raise ConfigError(f"{self.name}: ensemble={k!r} must be an integer in [1, {MAX_ENSEMBLE}] (networks averaged)")
         if check_device:  # a saved model trained on a GPU must still load (and predict) on a CPU machine
             select_device(self.device)
 
@@ -163,35 +168,55 @@ class _NeuralNARXBase(TorchFileSave, Identifier):
         lag = regressor_lag(self.n_y, self.n_u, self.nk)
         return -np.inf if div >= 0 or not np.isfinite(yh).all() else float(r2(yn, yh, lag))
 
+    def member_seeds(self) -> list[int]:
+        """Seeds of the ensemble's members: ``seed·k + i`` for i = 0 … k-1 (k = ``ensemble``), so that
+        ``ensemble=1`` is the single network of seed ``seed`` and different base seeds never share a member."""
+        k = int(getattr(self, "ensemble", 1))
+        return [int(self.seed) * k + i for i in range(k)]
+
     def _fit(self, recs: list[Record]) -> "_NeuralNARXBase":
         lag = regressor_lag(self.n_y, self.n_u, self.nk)
         nu, ny = check_channels(recs, lag, self.name)
         t0 = time.perf_counter()
         configure_threads()
         device = select_device(self.device)
-        torch.manual_seed(int(self.seed))
-        gen = torch.Generator().manual_seed(int(self.seed))
         self.normaliser_ = fit_normaliser(recs)
         pairs = normalised_pairs(recs, self.normaliser_)
         data_t = LagData(pairs, self.n_y, self.n_u, device, nk=self.nk)
-        net = FlatMLP(data_t.n_in, self.hidden, ny, self.activation, gen, device, linear=self.linear)
-        if self.linear:
-            # The bypass is the least-squares ARX of the same regressor, kept fixed: the network (output layer
-            # started at zero) learns the correction. Training L as well (quick data, free-run RMSE, L trained vs
-            # fixed): one-step training worse on all three datasets tried (cascaded tanks 0.71 vs 0.67 V,
-            # Wiener-Hammerstein 41.7 vs 36.2 mV, piezo 1.23 vs 1.16 um); simulation-error training worse on three
-            # of four (cascaded tanks 5.9 vs 0.65 V, WH 170 vs 27 mV, Bouc-Wen multisine 1.6e-4 vs 5.5e-5 m), better
-            # on the piezo (1.5 vs 4.4 um). RMSprop moves every weight by about lr per step whatever its gradient,
-            # which shifts the poles of a finely sampled ARX that far.
-            net.init_linear(*least_squares_linear(pairs, self.n_y, self.n_u, self.nk))
-            net.freeze_linear()
-        self.loss_history_ = []
-        self._train(net, data_t, gen)
-        self.weights_ = net.weights_np()
-        self.sizes_ = list(net.sizes)
+        lin = least_squares_linear(pairs, self.n_y, self.n_u, self.nk) if self.linear else None
+        members, histories, selections = [], [], []
+        for seed in self.member_seeds():
+            torch.manual_seed(seed)
+            gen = torch.Generator().manual_seed(seed)
+            net = FlatMLP(data_t.n_in, self.hidden, ny, self.activation, gen, device, linear=self.linear)
+            if self.linear:
+                # The bypass is the least-squares ARX of the same regressor, kept fixed: the network (output layer
+                # started at zero) learns the correction. Training L as well (quick data, free-run RMSE, L trained
+                # vs fixed): one-step training worse on all three datasets tried (cascaded tanks 0.71 vs 0.67 V,
+                # Wiener-Hammerstein 41.7 vs 36.2 mV, piezo 1.23 vs 1.16 um); simulation-error training worse on
+                # three of four (cascaded tanks 5.9 vs 0.65 V, WH 170 vs 27 mV, Bouc-Wen multisine 1.6e-4 vs
+                # 5.5e-5 m), better on the piezo (1.5 vs 4.4 um). RMSprop moves every weight by about lr per step
+                # whatever its gradient, which shifts the poles of a finely sampled ARX that far.
+                net.init_linear(*lin)
+                net.freeze_linear()
+            self.loss_history_ = []
+            self.selected_epoch_, self.selection_r2_ = None, None
+            self._train(net, data_t, gen)
+            members.append(net.weights_np())
+            histories.append(self.loss_history_)
+            selections.append((self.selected_epoch_, self.selection_r2_))
+        sizes = [data_t.n_in, *self.hidden, ny]
+        if len(members) == 1:
+            self.weights_, self.sizes_ = members[0], sizes
+        else:
+            self.weights_, self.sizes_ = merge_ensemble(members, sizes, self.linear)
+            # per-epoch mean training loss of the members; per-member selections (held-out tail)
+            self.loss_history_ = [float(np.mean(v)) for v in zip(*histories)]
+            self.selected_epoch_ = [s[0] for s in selections] if self._tail is not None else None
+            self.selection_r2_ = [s[1] for s in selections] if self._tail is not None else None
         self.n_inputs_, self.n_outputs_ = nu, ny
         self.max_lag_ = lag
-        self.n_parameters_ = count_mlp_parameters(data_t.n_in, self.hidden, ny, self.linear)
+        self.n_parameters_ = self._real_n_parameters(data_t.n_in, ny)
         self.device_used_ = str(device)
         self.fit_seconds_ = time.perf_counter() - t0
         self.diverged_at_ = None
@@ -199,6 +224,13 @@ class _NeuralNARXBase(TorchFileSave, Identifier):
             warnings.warn(f"{self.name}: training diverged (non-finite weights); predictions will be nan", DivergenceWarning,
                           stacklevel=2)
         return self
+
+    def _real_n_parameters(self, n_in: int, n_out: int) -> int:
+        """Trained parameters: k × those of one member's dense layers, plus the linear bypass L once (it is the
+        same least-squares ARX, fixed, in every member). The zeros between members in the merged network
+        (:func:`merge_ensemble`) are not parameters and are not counted."""
+        k = int(getattr(self, "ensemble", 1))
+        return k * count_mlp_parameters(n_in, self.hidden, n_out, False) + (int(n_in) * int(n_out) if self.linear else 0)
 
     def _train_one_step(self, net: FlatMLP, data: LagData, gen: torch.Generator, epochs: int, lr: float,
                         batch_size: int | None = None, select: bool = False) -> None:
@@ -287,7 +319,7 @@ class _NeuralNARXBase(TorchFileSave, Identifier):
             d.update({
                 "structure": {"inputs": self.sizes_[0], "hidden": list(self.hidden), "outputs": self.sizes_[-1],
                               "activation": self.activation, "n_y": self.n_y, "n_u": self.n_u, "nk": self.nk,
-                              "linear": bool(self.linear)},
+                              "linear": bool(self.linear), "ensemble": int(getattr(self, "ensemble", 1))},
                 "terms": [],
                 "max_lag": self.max_lag_,
                 "device": self.device_used_,
@@ -322,8 +354,12 @@ class _NeuralNARXBase(TorchFileSave, Identifier):
         self.loss_history_ = [float(v) for v in state.get("loss_history", [])]
         self.device_used_ = state.get("device_used", "cpu")
         self.fit_seconds_ = float(state.get("fit_seconds", float("nan")))
+        k = int(getattr(self, "ensemble", 1))
+        if self.sizes_[1:-1] != [k * h for h in self.hidden]:
+            raise DataError(f"{self.name}: saved layer sizes {self.sizes_} do not match hidden={self.hidden} with "
+                            f"ensemble={k} (merged hidden widths are k × hidden)")
         self.max_lag_ = regressor_lag(self.n_y, self.n_u, self.nk)
-        self.n_parameters_ = int(self.weights_.size)
+        self.n_parameters_ = self._real_n_parameters(self.sizes_[0], self.sizes_[-1])
         self.diverged_at_ = None
 
 
@@ -358,15 +394,25 @@ class NARXMLP(_NeuralNARXBase):
         Fraction (0 … 0.5) of the last estimation record held out of training; the weights kept are those,
         initial or after any epoch, with the best free-run R² on that tail (``selected_epoch_`` 0 = the initial
         weights, i.e. the ARX model with ``linear``). 0 (default): no hold-out, the last epoch is kept.
+    ensemble : int
+        Number k of networks averaged (1 … 64; default 1 = the single network of ``seed``). Member i is trained
+        exactly as a single model of seed ``seed·k + i`` (its own initial weights, batch order and, with
+        ``select_tail``, its own selected epoch: ``selected_epoch_`` becomes a list); the prediction is the
+        members' mean at every step — in free run the mean is fed back (one model, not k simulations). After
+        training the members are merged into ONE network of hidden widths k·h with block-diagonal weights
+        (:func:`sysid.neural.core.merge_ensemble`), so prediction and saved files use the single-network code;
+        ``n_parameters_`` counts k × a member's parameters plus the linear bypass once, not the zero blocks.
+        Reduces the seed-to-seed spread of the free run at k times the training cost.
     """
 
     name = "narx-mlp"
 
     def __init__(self, n_y: int = 10, n_u: int = 10, hidden: Sequence[int] = (25, 25, 25, 25), activation: str = "relu",
                  lr: float = 1e-4, batch_size: int = 128, epochs: int = 100, seed: int = 0, device: str = "auto",
-                 nk: int = 1, linear: bool = False, select_tail: float = 0.0):
+                 nk: int = 1, linear: bool = False, select_tail: float = 0.0, ensemble: int = 1):
         self.linear = linear
         self.select_tail = select_tail
+        self.ensemble = ensemble
         self.n_y = n_y
         self.n_u = n_u
         self.nk = nk
@@ -406,6 +452,9 @@ class NARXMLPSim(_NeuralNARXBase):
         0 (default): no hold-out, the last epoch is kept.
     linear : bool
         Linear bypass started at the least-squares ARX, as for :class:`NARXMLP`.
+    ensemble : int
+        k networks (seeds ``seed·k + i``) trained alike and averaged, merged into one network, as for
+        :class:`NARXMLP`.
 
     Each epoch draws ``ceil(rows / window)`` window starts at random positions (so that on average every
     sample is a target once per epoch); each window starts from the measured ``y(s-1) … y(s-n_y)``.
@@ -416,8 +465,10 @@ class NARXMLPSim(_NeuralNARXBase):
     def __init__(self, n_y: int = 10, n_u: int = 10, hidden: Sequence[int] = (25, 25, 25, 25), activation: str = "relu",
                  lr: float = 1e-3, batch_size: int = 32, epochs: int = 100, seed: int = 0, device: str = "auto",
                  window: int = 50, pretrain_epochs: int = 10, pretrain_lr: float = 1e-3, nk: int = 1,
-                 select_tail: float = 0.0, pretrain_batch_size: int | None = None, linear: bool = False):
+                 select_tail: float = 0.0, pretrain_batch_size: int | None = None, linear: bool = False,
+                 ensemble: int = 1):
         self.linear = linear
+        self.ensemble = ensemble
         self.n_y = n_y
         self.n_u = n_u
         self.nk = nk
