@@ -78,7 +78,7 @@ SETTINGS: dict[str, dict[str, dict[str, Any]]] = {
     # narx-mlp WH 33.9/38.1/38.4 mV (BLA 44.4), cascaded tanks 0.67/0.64/0.63 V, rnn piezo 0.99/0.97/0.99 um,
     # narx-mlp-sim piezo 0.42/0.58/0.53 um all beat the baselines; narx-mlp piezo 0.87/1.21/0.92 um does NOT for
     # seed 1 (ARX 1.09 um) and its validation RMSE (mean 1.71 um) is at the ARX level (1.74): a fragile pass.
-    # Likewise narx-mlp on cantilever-thesis (full): 3.14/3.28/4.49 um vs ARX 3.58 um.
+    # Likewise narx-mlp on cantilever-thesis (full, lags 10): 3.14/3.28/4.49 um vs ARX 3.58 um (lags 2 + tanh below).
     # Ensembles (ensemble=k: k networks of seeds seed*k+i averaged, merged into one network), test free-run RMSE
     # for base seeds 0-4. piezo-tue (ARX 1.087 um): k=1 0.866/1.214/0.915/0.958/0.835, k=3 0.861/0.882/0.811/
     # 0.920/0.970, k=5 0.857/0.855/0.935/0.919/0.861 um — every base seed beats ARX from k=3 on; hold-out
@@ -86,14 +86,30 @@ SETTINGS: dict[str, dict[str, dict[str, Any]]] = {
     # 1.77 um, ARX 1.74), so the smallest robust k, 3, is set (fit 3 x 0.5 s CPU). cantilever-thesis (full, ARX
     # 3.578 um): k=1 3.14/3.28/4.49/4.23/4.32, k=3 3.34/4.07/4.26/3.51/3.50, k=5 3.60/3.99/3.51/4.02/4.10 um —
     # the members are worse than ARX on average (median of 25 seeds 4.07 um), averaging does not remove that
-    # bias: no ensemble set there, it stays exempt from the beats-linear rule in benchmarks/baselines.json.
+    # bias: no ensemble set there.
+    # cantilever-thesis / -clean (full): lags 2, tanh, linear bypass. Rule, fixed before looking at the test: among
+    # the candidates tried, the one with the lowest mean validation free-run RMSE whose seeds 0-4 ALL beat ARX (the
+    # scoring ARX, ny=nu=4) on both validation records. Validation = the same twin with another noise seed (101)
+    # and sines the tests do not use: 0.5-5-30-75-125-175-225-275-350-425-475 Hz at 80 V ("v80") and
+    # 2-20-60-110-160-210-260-320-380-440-490 Hz at 95 V ("v95"; tests: 0.1 ... 500 Hz at 100 V); fitted on the
+    # dataset's estimation multisine. ARX validation RMSE v80 / v95: 2.82 / 3.13 um (clean twin 2.86 / 3.16).
+    # Candidates (linear bypass, 10 epochs unless said), seeds 0-4, mean v80 / v95 um, robust = every seed below ARX:
+    #   lags 10 (former setting) 2.90 / 3.14 no (seeds 2-4 above); tanh 2.48 / 2.81 yes; 3 epochs 2.95 / 3.23 no;
+    #   20 epochs 3.01 / 3.21 no; select_tail 0.2 2.88 / 3.15 no; hidden 25-25 3.12 / 3.35 no; lags 4 2.37 / 2.88
+    #   yes; lags 3 2.26 / 2.78 yes (5 epochs 2.28 / 2.80, 20 epochs 2.22 / 2.73, tanh 2.31 / 2.75); lags 2
+    #   2.15 / 2.51 yes (20 epochs 2.11 / 2.38); lags 2 + tanh 2.08 / 2.28 yes (seed range 2.06-2.11 / 2.26-2.31)
+    #   -> chosen. Fewer lagged outputs = fewer noisy regressors in the equation-error fit and less to extrapolate
+    # from the multisine to the sines. Its fixed ARX(2,2) bypass alone: validation 2.19 / 2.61, test 3.30 um, so
+    # the network's correction is part of the gain. Clean twin: lags 10 2.68 / 3.03 not robust (seeds 3-4 above
+    # 2.86 on v80), lags 2 + tanh 2.08 / 2.27 robust -> the same setting. Checked on the test only afterwards,
+    # seeds 0-4: 2.84 / 2.75 / 2.80 / 2.84 / 2.89 um vs ARX 3.58 (clean 2.84 / 2.74 / 2.80 / 2.84 / 2.88 vs 3.66).
     "narx-mlp": {
         "*": {"n_y": 10, "n_u": 10, "hidden": [25, 25, 25, 25], "epochs": 10},
         "cascaded-tanks": {"epochs": 200, "linear": True},
         "piezo-tue": {"n_y": 1, "n_u": 2, "hidden": [25, 25], "epochs": 20, "linear": True, "lr": 3e-5, "ensemble": 3},
         "wiener-hammerstein": {"linear": True},
-        "cantilever-thesis": {"linear": True},
-        "cantilever-thesis-clean": {"linear": True},
+        "cantilever-thesis": {"n_y": 2, "n_u": 2, "activation": "tanh", "linear": True},
+        "cantilever-thesis-clean": {"n_y": 2, "n_u": 2, "activation": "tanh", "linear": True},
     },
     "narx-mlp-sim": {
         "*": {"n_y": 10, "n_u": 10, "hidden": [25, 25, 25, 25], "epochs": 2},
