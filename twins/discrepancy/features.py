@@ -22,6 +22,8 @@ What is measured, and which physical effect it points to:
   orthogonal to the linear terms (even- versus odd-order static nonlinearity);
 - :func:`resonance_peaks` — narrow peaks of the residual spectrum (unmodelled resonances);
 - :func:`quantization_step` — a lattice in the measured values (sensor / ADC quantisation);
+- :func:`saturation_rails` — flat tops where the measurement saturates (an ADC or sensor at the end of its
+  range) while the prediction goes beyond: the samples there are censored, not errors of the model;
 - :func:`hysteresis_by_segment` — loop width and phase lag, measured versus simulated, per sine segment;
 - :func:`correlation_tests` — the five tests of eq. 2-32 (``sysid.residuals``), with the failing lags.
 """
@@ -37,7 +39,7 @@ from scipy import stats
 __all__ = [
     "trend", "step_drift", "lag_regression", "delay_estimate", "band_powers", "harmonics", "odd_even_lines",
     "nonlinear_correlation", "resonance_peaks", "quantization_step", "hysteresis_by_segment",
-    "correlation_tests", "effective_samples", "analyse",
+    "correlation_tests", "effective_samples", "analyse", "saturation_rails", "clip_to_rails",
 ]
 
 
@@ -435,6 +437,56 @@ def quantization_step(y: np.ndarray, max_levels: int = 200000) -> dict[str, floa
     levels = int(np.unique(np.round((y - y.min()) / q)).size) if np.ptp(y) / q < max_levels else -1
     return {"step": q, "coherence": coh * float(on), "p_value": p if on > 0.9 else 1.0, "on_lattice": float(on),
             "distinct_levels": levels}
+
+
+def saturation_rails(y: np.ndarray, ysim: np.ndarray, min_count: int = 5, min_share: float = 0.002,
+                     k_rms: float = 2.0) -> dict[str, Any]:
+    """Saturation rails of a measured record: the levels where the measuring chain clipped it.
+
+    A side (top or bottom) is a rail when (a) the measured extreme value is taken *exactly* by at least
+    ``max(min_count, min_share·N)`` samples (a flat top: an analogue signal, or a quantised one that does not
+    clip, reaches its extreme at a few isolated samples) and (b) on those samples the prediction lies beyond
+    the extreme by a median of more than ``k_rms`` times the residual RMS of the other samples (the model says
+    the signal went further than the instrument could show). Such samples are censored: the measurement only
+    says "at least this far"; a prediction clipped to the rails is what the instrument would have shown.
+
+    Returns ``{"lo", "hi"}`` (None where that side has no rail), the sample counts and the median excess.
+    """
+    y = np.asarray(y, dtype=float)
+    s = np.asarray(ysim, dtype=float)
+    n = y.size
+    out: dict[str, Any] = {"lo": None, "hi": None, "n_lo": 0, "n_hi": 0}
+    if n < 8 or not np.all(np.isfinite(s)):
+        return out
+    need = max(int(min_count), int(np.ceil(min_share * n)))
+    sides = {}
+    for side, level, sign in (("hi", float(np.max(y)), 1.0), ("lo", float(np.min(y)), -1.0)):
+        at = y == level
+        if int(at.sum()) >= need:
+            sides[side] = (level, sign, at)
+    if not sides:
+        return out
+    at_any = np.zeros(n, dtype=bool)
+    for _, _, at in sides.values():
+        at_any |= at
+    rest = ~at_any
+    rms = float(np.sqrt(np.mean((y[rest] - s[rest]) ** 2))) if rest.any() else 0.0
+    for side, (level, sign, at) in sides.items():
+        excess = float(np.median(sign * (s[at] - level)))
+        if excess > k_rms * rms:
+            out[side] = level
+            out[f"n_{side}"] = int(at.sum())
+            out[f"excess_{side}"] = excess
+    return out
+
+
+def clip_to_rails(ysim: np.ndarray, rails: dict[str, Any] | None) -> np.ndarray:
+    """The prediction as the saturating instrument would show it (:func:`saturation_rails`)."""
+    if not rails or (rails.get("lo") is None and rails.get("hi") is None):
+        return ysim
+    lo = -np.inf if rails.get("lo") is None else float(rails["lo"])
+    hi = np.inf if rails.get("hi") is None else float(rails["hi"])
+    return np.clip(ysim, lo, hi)
 
 
 # ---------------------------------------------------------------------------------------------- hysteresis
