@@ -14,7 +14,12 @@ What is measured, and which physical effect it points to:
   physics notes B.8) of amplitude ≈ the regression coefficient; a derivative-shaped peak at lag 0 is a delay;
 - :func:`delay_estimate` — the sub-sample shift that best aligns the simulated output with the measured one
   (and the input–output delay from the cross-correlation of u and y);
+- :func:`early_input_correlation` — residual–input cross-correlation at lags before the model's first arrival
+  (a time of flight): a physical path there is electrical (crosstalk), the acoustic path has nothing yet;
 - :func:`band_powers` — residual power inside and outside the band the input excites;
+- :func:`product_bands` — for a band-pass input narrower than an octave, residual power where even-order
+  products fall (difference band 0…B and sum band 2f₀…2f₁: outside the excited band) versus the excited band
+  and the third-order skirts (the detection-line principle for a band instead of a line grid);
 - :func:`harmonics` — residual power at the harmonics of a sine input (odd versus even);
 - :func:`odd_even_lines` — power on the non-excited odd and even lines of a periodic (odd) multisine
   (odd-order versus even-order distortion, Pintelon & Schoukens' detection lines);
@@ -40,6 +45,7 @@ __all__ = [
     "trend", "step_drift", "lag_regression", "delay_estimate", "band_powers", "harmonics", "odd_even_lines",
     "nonlinear_correlation", "resonance_peaks", "quantization_step", "hysteresis_by_segment",
     "correlation_tests", "effective_samples", "analyse", "saturation_rails", "clip_to_rails",
+    "early_input_correlation", "product_bands",
 ]
 
 
@@ -250,6 +256,36 @@ def io_delay(u: np.ndarray, y: np.ndarray, fs: float, max_shift_s: float | None 
     return float(np.argmax(env) / fs)
 
 
+def early_input_correlation(e: np.ndarray, u: np.ndarray, ysim: np.ndarray, fs: float) -> dict[str, Any]:
+    """Residual–input correlation before the model's first arrival (electrical paths, e.g. crosstalk).
+
+    ``first_arrival_s`` is :func:`io_delay` of the simulated output (the lag of the u–ŷ correlation envelope's
+    peak: a time of flight). The normalised cross-correlation r(k) = Σe(t)u(t−k)/√(Σe²Σu²) is searched for its
+    largest |r| at lags 0 ≤ k < first arrival / 2, where no acoustic (delayed) path of the model contributes.
+    Its null level is the RMS of r at the *negative* lags −first…−first/2 (the residual cannot depend on
+    future input; there r only carries chance and u's own correlation), so ``ratio`` = peak / null RMS is about
+    3–4 for a residual unrelated to u and grows with an early electrical path. Records whose model has no
+    delay (first arrival < 8 samples) give ``valid: False``.
+    """
+    e = np.asarray(e, float) - np.mean(e)
+    u = np.asarray(u, float) - np.mean(u)
+    n = e.size
+    k_first = int(round(io_delay(u, ysim, fs) * fs))
+    if k_first < 8 or n < 4 * k_first or not np.any(e) or not np.any(u):
+        return {"valid": False, "first_arrival_s": k_first / fs, "ratio": 0.0, "r_max": 0.0, "lag_s": 0.0}
+    m = 1 << int(np.ceil(np.log2(2 * n)))
+    xc = np.fft.irfft(np.fft.rfft(e, m) * np.conj(np.fft.rfft(u, m)), m) / np.sqrt(float(e @ e) * float(u @ u))
+    early = np.abs(xc[: k_first // 2])
+    null = xc[m - k_first: m - k_first // 2]
+    null_rms = float(np.sqrt(np.mean(null ** 2))) or 1e-300
+    late = np.abs(xc[k_first // 2: min(3 * k_first, n // 2)])
+    k = int(np.argmax(early))
+    return {"valid": True, "first_arrival_s": k_first / fs, "lag_s": k / fs, "lag_samples": k,
+            "r_max": float(early[k]), "null_rms": null_rms, "ratio": float(early[k] / null_rms),
+            "r_late": float(late.max()) if late.size else 0.0,
+            "early_over_late": float(early[k] / (late.max() if late.size and late.max() > 0 else 1e-300))}
+
+
 # ---------------------------------------------------------------------------------------------- frequency domain
 def _psd(x: np.ndarray, fs: float) -> tuple[np.ndarray, np.ndarray]:
     n = len(x)
@@ -287,6 +323,41 @@ def band_powers(e: np.ndarray, u: np.ndarray, y: np.ndarray, fs: float) -> dict[
     dens_out = pout / max(outside.sum(), 1)
     return {"band_hz": [f0, f1], "in_band_db": 10 * np.log10(pin / yin), "out_band_db": 10 * np.log10(pout / yout),
             "out_minus_in_db": float(10 * np.log10(dens_out / dens_in)), "in_share": pin / (pin + pout)}
+
+
+def product_bands(e: np.ndarray, u: np.ndarray, fs: float) -> dict[str, Any]:
+    """Where the residual's power lies relative to the intermodulation bands of a band-pass input.
+
+    For an input exciting [f₀, f₁] with f₁ < 2f₀ (less than an octave), second-order (even) products fall in
+    the difference band (0, f₁−f₀] and the sum band [2f₀, 2f₁] — both outside the excited band — while
+    third-order (odd) products fall in the excited band and its skirts [2f₀−f₁, f₀) ∪ (f₁, 2f₁−f₀]. Mean
+    residual PSD densities are compared in dB with the quietest of these bands (the floor): ``even_db`` (the
+    larger of the difference and sum band), ``in_db`` (the excited band) and ``skirt_db``. An even-order
+    distortion raises ``even_db`` alone; an odd one or a linear error raises ``in_db``. ``valid`` is False for
+    an input wider than an octave or bands that the sampling rate cannot hold.
+    """
+    f0, f1 = excited_band(u, fs)
+    nyq = fs / 2.0
+    if not (0 < f0 < f1 < 2 * f0) or 2 * f0 >= 0.98 * nyq:
+        return {"valid": False, "even_db": 0.0, "in_db": 0.0, "skirt_db": 0.0}
+    f, p = _psd(e, fs)
+    b = f1 - f0
+    guard = 0.02 * b
+
+    def dens(lo: float, hi: float) -> float:
+        sel = (f >= lo) & (f <= hi)
+        return float(np.mean(p[sel])) if sel.sum() >= 2 else float("nan")
+
+    bands = {"in": dens(f0 + guard, f1 - guard), "diff": dens(max(0.05 * b, f[1] if f.size > 1 else 0.0), b - guard),
+             "sum": dens(2 * f0 + guard, min(2 * f1, 0.98 * nyq)),
+             "skirt": np.nanmean([dens(2 * f0 - f1 + guard, f0 - guard), dens(f1 + guard, min(2 * f1 - f0, 2 * f0) - guard)])}
+    vals = [v for v in bands.values() if np.isfinite(v) and v > 0]
+    if len(vals) < 3:
+        return {"valid": False, "even_db": 0.0, "in_db": 0.0, "skirt_db": 0.0}
+    floor = min(vals)
+    db = {k: (float(10 * np.log10(v / floor)) if np.isfinite(v) and v > 0 else 0.0) for k, v in bands.items()}
+    return {"valid": True, "band_hz": [f0, f1], "even_db": max(db["diff"], db["sum"]), "diff_db": db["diff"],
+            "sum_db": db["sum"], "in_db": db["in"], "skirt_db": db["skirt"]}
 
 
 def harmonics(e: np.ndarray, u: np.ndarray, fs: float, n_harm: int = 5) -> dict[str, Any]:
@@ -640,6 +711,8 @@ def analyse(u: np.ndarray, y: np.ndarray, ysim: np.ndarray, fs: float, meta: dic
     out["echo"] = lag_regression(e, ysim, fs, max_lag_s=max_echo_s, min_lag=_min_echo_lag(ysim, fs))
     out["input_lag"] = lag_regression(e, u, fs, max_lag_s=max_lag / fs * 5)
     out["bands"] = band_powers(e, u, y, fs)
+    out["products"] = product_bands(e, u, fs)
+    out["early_input"] = early_input_correlation(e, u, ysim, fs)
     segs = [sg for sg in _segments(meta, e.size) if sg["freq_hz"] * (sg["stop"] - sg["start"]) / fs >= 2]
     if segs:  # sine segments: harmonics per segment, odd and even powers summed over segments
         hs = [harmonics(e[sg["start"]:sg["stop"]], u[sg["start"]:sg["stop"]], fs) for sg in segs]
