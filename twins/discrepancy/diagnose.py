@@ -590,7 +590,8 @@ def _diagnose(twin: Twin, data: Record, val: Record | None = None, max_rounds: i
     saturation = {"estimation": ft.saturation_rails(data.y, _simulate(current, data)),
                   "validation": ft.saturation_rails(val.y, _simulate_val(current, data, val))}
     data, val = _with_rails(data, saturation["estimation"]), _with_rails(val, saturation["validation"])
-    railed = any(r["lo"] is not None or r["hi"] is not None for r in saturation.values())
+    # the calibration is fitted to the estimation record: only rails there need the rail-aware output error
+    railed = saturation["estimation"]["lo"] is not None or saturation["estimation"]["hi"] is not None
     # 1. calibrate the current configuration (deterministic prediction)
     prior = current
     calib_info: dict[str, Any] = {}
