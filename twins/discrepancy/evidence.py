@@ -276,6 +276,11 @@ def describe_generic(a: dict[str, Any]) -> str:
         parts.append(f"a delayed copy of the output at {_us(ec['lag_s'])} (amplitude {ec['coef']:+.3f})")
     if abs(a["delay"]["shift_samples"]) > 0.2:
         parts.append(f"a timing shift of {a['delay']['shift_samples']:+.2f} samples")
+    ei = a.get("early_input", {})
+    if ei.get("valid") and ei["ratio"] > 8 and ei["early_over_late"] > 1:
+        parts.append(f"a path without acoustic delay: the residual correlates with the input at {_us(ei['lag_s'])} "
+                     f"(|r| = {ei['r_max']:.3f}, {ei['ratio']:.0f}× chance), before the first arrival at "
+                     f"{_us(ei['first_arrival_s'])}")
     nl = a["nonlinear"]
     if max(nl["u2"], nl["y2"]) > 3 * nl["band"]:
         parts.append(f"even-order correlation |r| = {max(nl['u2'], nl['y2']):.3f}")
