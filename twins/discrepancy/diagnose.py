@@ -164,6 +164,9 @@ def _guesses(field: str, unit: str, a: dict[str, Any], twin: Twin, current: floa
     sh = a["delay"]["shift_s"]
     tau = a["echo"].get("lag_s", float("nan"))
     coef = a["echo"].get("coef", 0.0)
+    # echo delays: the main peak, then the strongest peaks at shorter lags (below the signal's correlation length,
+    # where the main search does not look: an echo that close is confounded with shape errors but still a guess)
+    taus = [tau] + [t for t in a["echo"].get("short_lags_s", []) if math.isfinite(t)]
     out: list[float] = []
     if u in ("s", "sec", "seconds"):
         out += [sh, abs(sh), current + sh]
@@ -182,12 +185,15 @@ def _guesses(field: str, unit: str, a: dict[str, Any], twin: Twin, current: floa
         k = 1e3 if u == "mm" else 1.0
         if c:
             out += [k * c * sh, current + k * c * sh]
-            if math.isfinite(tau):
-                out += [k * c * tau, k * c * tau / 2]
+            for j, t in enumerate(taus):
+                if not math.isfinite(t):
+                    continue
+                if j == 0:
+                    out += [k * c * t, k * c * t / 2]
                 # lateral image source (a wall beside a path of length L): extra path √(L² + 4w²) − L = c·τ
                 L = getattr(twin.params, "distance_m", None)
                 if isinstance(L, (int, float)) and L > 0:
-                    out += [k * math.sqrt(max((L + c * tau) ** 2 - L * L, 0.0)) / 2]
+                    out += [k * math.sqrt(max((L + c * t) ** 2 - L * L, 0.0)) / 2]
     if any(w in name for w in ("amp", "gain", "coef", "reflect", "level", "scale")) and u in ("", "1", "-", "ratio"):
         out += [coef, abs(coef)]
     return [float(v) for v in out if math.isfinite(v)]
@@ -389,16 +395,38 @@ def _prescan(tw: Twin, est: Record, fields: list[str], a: dict[str, Any], points
 
 
 def _run_trial(base: Twin, effect: str, est: Record, val: Record, core: list[str], a_val: dict[str, Any],
-               opts: dict[str, Any], refit_core: bool, start: dict[str, float] | None = None) -> Trial:
+               opts: dict[str, Any], refit_core: bool, start: dict[str, float] | None = None,
+               choice: dict[str, Any] | None = None) -> Trial:
     """Add ``effect`` to ``base`` and fit it to ``est``: stage A (``refit_core=False``) fits the effect's own
-    parameters after a pre-scan with the core held at its calibration; stage B also refits the core."""
+    parameters after a pre-scan with the core held at its calibration; stage B also refits the core.
+
+    An effect with both a list-valued parameter (a model variant, e.g. Rapp or cubic compression) and numeric
+    ones is fitted once per variant (at most 8 combinations) and the variant with the smallest estimation SSE
+    is kept: the variants are different structures, each with its own optimum of the numeric parameters
+    (choosing the variant at the configured numeric values picks the wrong one when they are far off)."""
     t0 = time.perf_counter()
     spec = base.EFFECTS[effect]
     tw = base.with_effects(set(base.effects) | {effect})
     # integer parameters (element counts, bit depths) are structural choices of the configuration: kept as given
     eff_fields = [f for f in _numeric_fields(tw, spec.params.values()) if f not in _int_fields(tw, spec.params.values())]
     cat_fields = _choice_fields(tw, spec.params.values())
-    if start is None:
+    if start is None and choice is None and cat_fields and eff_fields:
+        import itertools
+
+        info = param_info(type(tw.params))
+        best: Trial | None = None
+        for combo in itertools.islice(itertools.product(*(info[c].choices for c in cat_fields)), 8):
+            tr = _run_trial(base, effect, est, val, core, a_val, opts, refit_core, choice=dict(zip(cat_fields, combo)))
+            if best is None or tr.sse_est < best.sse_est:
+                best = tr
+        assert best is not None
+        best.seconds = time.perf_counter() - t0
+        return best
+    if choice is not None:
+        tw = tw.with_params(**choice)
+        x0 = {**(_prescan(tw, est, eff_fields, a_val, opts["scan_points"], opts["skip"], ()) if eff_fields else {}),
+              **choice}
+    elif start is None:
         x0 = (_prescan(tw, est, eff_fields, a_val, opts["scan_points"], opts["skip"], cat_fields)
               if (eff_fields or cat_fields) else {})
     else:

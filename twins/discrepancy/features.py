@@ -169,7 +169,13 @@ def lag_regression(e: np.ndarray, ref: np.ndarray, fs: float, max_lag_s: float |
         den = y0 - 2 * y1 + y2
         if den < 0:
             kk = k + 0.5 * (y0 - y2) / den
-    return {"lag_s": kk / fs, "lag_samples": int(k), "coef": float(c[k]), "envelope": float(env[k]), "z": zscore}
+    # the strongest envelope peaks at lags 4 … min_lag − 1 (candidates the search above skips)
+    short = []
+    if lo > 5:
+        pk, _ = sps.find_peaks(env[4:lo])
+        short = [float((p + 4) / fs) for p in pk[np.argsort(env[4:lo][pk])[::-1][:3]]]
+    return {"lag_s": kk / fs, "lag_samples": int(k), "coef": float(c[k]), "envelope": float(env[k]), "z": zscore,
+            "short_lags_s": short}
 
 
 def _shift(x: np.ndarray, d: float) -> np.ndarray:
