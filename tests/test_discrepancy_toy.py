@@ -173,3 +173,55 @@ def test_hysteresis_segments_loop_width():
     assert abs(res[0]["lag_deg_measured"] - 10) < 0.5 and abs(res[0]["lag_deg_simulated"]) < 0.5
     # ellipse: vertical gap at u=0 is 2 sin(10°), span 2 → width sin(10°)
     assert abs(res[0]["width_measured"] - np.sin(np.radians(10))) < 0.01
+
+
+def test_saturation_rails_features():
+    """Flat tops beyond which the prediction goes are rails; a quantised signal that does not clip, or a hold
+    that the prediction matches, is not."""
+    fs = 1000.0
+    t = np.arange(4000) / fs
+    truth = 3.0 * np.sin(2 * np.pi * 5 * t)
+    y = np.clip(truth, -2.0, 1.8)  # an instrument clipping asymmetrically
+    r = ft.saturation_rails(y, truth)
+    assert r["hi"] == 1.8 and r["lo"] == -2.0 and r["n_hi"] > 100
+    assert np.allclose(ft.clip_to_rails(truth, r), y)
+    q = np.round(truth / 0.05) * 0.05  # quantised, not clipped: the top level is hit, the prediction agrees
+    assert ft.saturation_rails(q, truth)["hi"] is None
+    hold = np.r_[np.zeros(500), np.full(1500, 2.0)]  # a step hold: flat top, but the prediction sits on it
+    assert ft.saturation_rails(hold, hold + 0.01 * np.sin(np.arange(2000)))["hi"] is None
+
+
+def test_diagnose_censors_a_clipping_validation_record():
+    """Compression hidden; the validation record clipped at 80 % of its peak by an instrument (np.clip here):
+    the clipped samples are censored and compression is still named with its parameter."""
+    truth = ToyTwin(ToyParams(u_sat=1.2, noise_sd=0.01), {"compression", "measurement_noise"}, 3)
+    est, val = _records(truth, 3)
+    top = 0.8 * np.max(val.y)
+    val = Record(u=val.u, y=np.clip(val.y, None, top), fs=val.fs)
+    out = diagnose(ToyTwin(ToyParams(), {"measurement_noise"}), est, val, max_rounds=1)
+    assert out["saturation"]["validation"]["hi"] == top and out["saturation"]["estimation"]["hi"] is None
+    assert out["causes"][0]["effect"] == "compression", out["causes"]
+    assert abs(out["causes"][0]["params"]["u_sat"] - 1.2) < 0.12
+
+
+def test_features_product_bands_and_early_input():
+    """Even-order products of a sub-octave band-pass input fall outside the band; an odd (cubic) one inside.
+    A zero-delay path is seen before the first arrival of a delayed response."""
+    fs, n = 5e6, 20000
+    rng = np.random.default_rng(4)
+    sos = sps.butter(4, (0.95e6, 1.3e6), btype="bandpass", fs=fs, output="sos")
+    u = sps.sosfilt(sos, rng.standard_normal(n))
+    u /= np.std(u)
+    noise = 0.01 * rng.standard_normal(n)
+    even = ft.product_bands(0.1 * (u ** 2 - 1) + noise, u, fs)
+    odd = ft.product_bands(0.1 * u ** 3 + noise, u, fs)
+    white = ft.product_bands(noise, u, fs)
+    assert even["valid"] and even["even_db"] > even["in_db"] + 10
+    assert odd["in_db"] > odd["even_db"] + 10
+    assert max(white["even_db"], white["in_db"]) < 2.0
+    k = 400  # an "acoustic" arrival 80 µs after the input
+    ysim = np.r_[np.zeros(k), u[:-k]]
+    direct = ft.early_input_correlation(0.2 * u + noise, u, ysim, fs)
+    none = ft.early_input_correlation(noise, u, ysim, fs)
+    assert direct["valid"] and direct["lag_samples"] <= 1 and direct["ratio"] > 20 and direct["early_over_late"] > 2
+    assert none["ratio"] < 6

@@ -109,6 +109,15 @@ def _delay(a: dict, twin: Twin) -> tuple[float, str]:
 
 
 def _crosstalk(a: dict, twin: Twin) -> tuple[float, str]:
+    ei = a.get("early_input", {})
+    if ei.get("valid"):
+        # before the first (acoustic) arrival only an electrical path can correlate the residual with the input:
+        # the early peak must stand out of the chance level (negative lags) and exceed the correlation after it
+        score = _clip01((ei["ratio"] - 4.0) / 8.0) * _clip01((ei["early_over_late"] - 0.8) / 0.4)
+        return score, (f"residual correlates with the input at {_us(ei['lag_s'])} lag, before the model's first "
+                       f"arrival at {_us(ei['first_arrival_s'])}: |r| = {ei['r_max']:.3f}, {ei['ratio']:.1f}× the "
+                       f"chance level and {ei['early_over_late']:.2f}× the largest correlation after it: a path "
+                       "without acoustic delay (electrical crosstalk)")
     il = a["input_lag"]
     z = il.get("z", 0.0)
     near = il.get("lag_samples", 99) <= 3
@@ -154,6 +163,15 @@ def _even(a: dict, twin: Twin) -> tuple[float, str]:
     if db is not None:
         score = max(score, _clip01((-db - 3.0) / 15.0)) if db < 0 else score * 0.3
         txt = f"; {txt}: even-order distortion dominates by {-db:.1f} dB" if db < 0 else f"; {txt}"
+    pb = a.get("products", {})
+    if db is None and pb.get("valid"):
+        # band-pass input under an octave: even-order products land outside the band and its third-order skirts
+        x = pb["even_db"] - max(pb["in_db"], pb["skirt_db"])
+        score = max(score, _clip01((x - 3.0) / 10.0))
+        txt += (f"; residual density in the even-order product bands (difference 0–{(pb['band_hz'][1] - pb['band_hz'][0]) / 1e3:.0f} kHz "
+                f"{pb['diff_db']:.1f} dB, sum {2 * pb['band_hz'][0] / 1e3:.0f}–{2 * pb['band_hz'][1] / 1e3:.0f} kHz "
+                f"{pb['sum_db']:.1f} dB) vs the excited band {pb['in_db']:.1f} dB and the odd skirts "
+                f"{pb['skirt_db']:.1f} dB above the quietest band")
     return score, (f"residual correlates with the square of the input/output (|r| = {c2:.3f}, band {band:.3f}) "
                    f"more than with the cube (|r| = {c3:.3f}){txt}: even-order (asymmetric) distortion")
 
@@ -233,10 +251,17 @@ _SCORERS: dict[str, Callable[[dict, Twin], tuple[float, str]]] = {
 }
 
 
-def signature_evidence(spec: EffectSpec, analysis: dict[str, Any], twin: Twin) -> dict[str, Any]:
-    """Signature score in [0, 1] and sentence for one catalog effect, from the validation residual analysis."""
+def signature_evidence(spec: EffectSpec, analysis: dict[str, Any], twin: Twin,
+                       also: dict[str, Any] | None = None) -> dict[str, Any]:
+    """Signature score in [0, 1] and sentence for one catalog effect, from the validation residual analysis
+    (and, when ``also`` is given, the estimation one: the clearer of the two is kept; the estimation record
+    may show a signature the validation input cannot, e.g. intermodulation of a multisine versus a chirp)."""
     fam = family_of(spec)
     score, text = _SCORERS.get(fam, _generic)(analysis, twin)
+    if also is not None:
+        s2, t2 = _SCORERS.get(fam, _generic)(also, twin)
+        if s2 > score:
+            score, text = s2, t2 + " (estimation record)"
     return {"family": fam, "score": float(score), "text": text}
 
 
@@ -251,6 +276,11 @@ def describe_generic(a: dict[str, Any]) -> str:
         parts.append(f"a delayed copy of the output at {_us(ec['lag_s'])} (amplitude {ec['coef']:+.3f})")
     if abs(a["delay"]["shift_samples"]) > 0.2:
         parts.append(f"a timing shift of {a['delay']['shift_samples']:+.2f} samples")
+    ei = a.get("early_input", {})
+    if ei.get("valid") and ei["ratio"] > 8 and ei["early_over_late"] > 1:
+        parts.append(f"a path without acoustic delay: the residual correlates with the input at {_us(ei['lag_s'])} "
+                     f"(|r| = {ei['r_max']:.3f}, {ei['ratio']:.0f}× chance), before the first arrival at "
+                     f"{_us(ei['first_arrival_s'])}")
     nl = a["nonlinear"]
     if max(nl["u2"], nl["y2"]) > 3 * nl["band"]:
         parts.append(f"even-order correlation |r| = {max(nl['u2'], nl['y2']):.3f}")

@@ -14,7 +14,12 @@ What is measured, and which physical effect it points to:
   physics notes B.8) of amplitude ≈ the regression coefficient; a derivative-shaped peak at lag 0 is a delay;
 - :func:`delay_estimate` — the sub-sample shift that best aligns the simulated output with the measured one
   (and the input–output delay from the cross-correlation of u and y);
+- :func:`early_input_correlation` — residual–input cross-correlation at lags before the model's first arrival
+  (a time of flight): a physical path there is electrical (crosstalk), the acoustic path has nothing yet;
 - :func:`band_powers` — residual power inside and outside the band the input excites;
+- :func:`product_bands` — for a band-pass input narrower than an octave, residual power where even-order
+  products fall (difference band 0…B and sum band 2f₀…2f₁: outside the excited band) versus the excited band
+  and the third-order skirts (the detection-line principle for a band instead of a line grid);
 - :func:`harmonics` — residual power at the harmonics of a sine input (odd versus even);
 - :func:`odd_even_lines` — power on the non-excited odd and even lines of a periodic (odd) multisine
   (odd-order versus even-order distortion, Pintelon & Schoukens' detection lines);
@@ -22,6 +27,8 @@ What is measured, and which physical effect it points to:
   orthogonal to the linear terms (even- versus odd-order static nonlinearity);
 - :func:`resonance_peaks` — narrow peaks of the residual spectrum (unmodelled resonances);
 - :func:`quantization_step` — a lattice in the measured values (sensor / ADC quantisation);
+- :func:`saturation_rails` — flat tops where the measurement saturates (an ADC or sensor at the end of its
+  range) while the prediction goes beyond: the samples there are censored, not errors of the model;
 - :func:`hysteresis_by_segment` — loop width and phase lag, measured versus simulated, per sine segment;
 - :func:`correlation_tests` — the five tests of eq. 2-32 (``sysid.residuals``), with the failing lags.
 """
@@ -37,7 +44,8 @@ from scipy import stats
 __all__ = [
     "trend", "step_drift", "lag_regression", "delay_estimate", "band_powers", "harmonics", "odd_even_lines",
     "nonlinear_correlation", "resonance_peaks", "quantization_step", "hysteresis_by_segment",
-    "correlation_tests", "effective_samples", "analyse",
+    "correlation_tests", "effective_samples", "analyse", "saturation_rails", "clip_to_rails",
+    "early_input_correlation", "product_bands",
 ]
 
 
@@ -161,7 +169,13 @@ def lag_regression(e: np.ndarray, ref: np.ndarray, fs: float, max_lag_s: float |
         den = y0 - 2 * y1 + y2
         if den < 0:
             kk = k + 0.5 * (y0 - y2) / den
-    return {"lag_s": kk / fs, "lag_samples": int(k), "coef": float(c[k]), "envelope": float(env[k]), "z": zscore}
+    # the strongest envelope peaks at lags 4 … min_lag − 1 (candidates the search above skips)
+    short = []
+    if lo > 5:
+        pk, _ = sps.find_peaks(env[4:lo])
+        short = [float((p + 4) / fs) for p in pk[np.argsort(env[4:lo][pk])[::-1][:3]]]
+    return {"lag_s": kk / fs, "lag_samples": int(k), "coef": float(c[k]), "envelope": float(env[k]), "z": zscore,
+            "short_lags_s": short}
 
 
 def _shift(x: np.ndarray, d: float) -> np.ndarray:
@@ -248,6 +262,36 @@ def io_delay(u: np.ndarray, y: np.ndarray, fs: float, max_shift_s: float | None 
     return float(np.argmax(env) / fs)
 
 
+def early_input_correlation(e: np.ndarray, u: np.ndarray, ysim: np.ndarray, fs: float) -> dict[str, Any]:
+    """Residual–input correlation before the model's first arrival (electrical paths, e.g. crosstalk).
+
+    ``first_arrival_s`` is :func:`io_delay` of the simulated output (the lag of the u–ŷ correlation envelope's
+    peak: a time of flight). The normalised cross-correlation r(k) = Σe(t)u(t−k)/√(Σe²Σu²) is searched for its
+    largest |r| at lags 0 ≤ k < first arrival / 2, where no acoustic (delayed) path of the model contributes.
+    Its null level is the RMS of r at the *negative* lags −first…−first/2 (the residual cannot depend on
+    future input; there r only carries chance and u's own correlation), so ``ratio`` = peak / null RMS is about
+    3–4 for a residual unrelated to u and grows with an early electrical path. Records whose model has no
+    delay (first arrival < 8 samples) give ``valid: False``.
+    """
+    e = np.asarray(e, float) - np.mean(e)
+    u = np.asarray(u, float) - np.mean(u)
+    n = e.size
+    k_first = int(round(io_delay(u, ysim, fs) * fs))
+    if k_first < 8 or n < 4 * k_first or not np.any(e) or not np.any(u):
+        return {"valid": False, "first_arrival_s": k_first / fs, "ratio": 0.0, "r_max": 0.0, "lag_s": 0.0}
+    m = 1 << int(np.ceil(np.log2(2 * n)))
+    xc = np.fft.irfft(np.fft.rfft(e, m) * np.conj(np.fft.rfft(u, m)), m) / np.sqrt(float(e @ e) * float(u @ u))
+    early = np.abs(xc[: k_first // 2])
+    null = xc[m - k_first: m - k_first // 2]
+    null_rms = float(np.sqrt(np.mean(null ** 2))) or 1e-300
+    late = np.abs(xc[k_first // 2: min(3 * k_first, n // 2)])
+    k = int(np.argmax(early))
+    return {"valid": True, "first_arrival_s": k_first / fs, "lag_s": k / fs, "lag_samples": k,
+            "r_max": float(early[k]), "null_rms": null_rms, "ratio": float(early[k] / null_rms),
+            "r_late": float(late.max()) if late.size else 0.0,
+            "early_over_late": float(early[k] / (late.max() if late.size and late.max() > 0 else 1e-300))}
+
+
 # ---------------------------------------------------------------------------------------------- frequency domain
 def _psd(x: np.ndarray, fs: float) -> tuple[np.ndarray, np.ndarray]:
     n = len(x)
@@ -285,6 +329,41 @@ def band_powers(e: np.ndarray, u: np.ndarray, y: np.ndarray, fs: float) -> dict[
     dens_out = pout / max(outside.sum(), 1)
     return {"band_hz": [f0, f1], "in_band_db": 10 * np.log10(pin / yin), "out_band_db": 10 * np.log10(pout / yout),
             "out_minus_in_db": float(10 * np.log10(dens_out / dens_in)), "in_share": pin / (pin + pout)}
+
+
+def product_bands(e: np.ndarray, u: np.ndarray, fs: float) -> dict[str, Any]:
+    """Where the residual's power lies relative to the intermodulation bands of a band-pass input.
+
+    For an input exciting [f₀, f₁] with f₁ < 2f₀ (less than an octave), second-order (even) products fall in
+    the difference band (0, f₁−f₀] and the sum band [2f₀, 2f₁] — both outside the excited band — while
+    third-order (odd) products fall in the excited band and its skirts [2f₀−f₁, f₀) ∪ (f₁, 2f₁−f₀]. Mean
+    residual PSD densities are compared in dB with the quietest of these bands (the floor): ``even_db`` (the
+    larger of the difference and sum band), ``in_db`` (the excited band) and ``skirt_db``. An even-order
+    distortion raises ``even_db`` alone; an odd one or a linear error raises ``in_db``. ``valid`` is False for
+    an input wider than an octave or bands that the sampling rate cannot hold.
+    """
+    f0, f1 = excited_band(u, fs)
+    nyq = fs / 2.0
+    if not (0 < f0 < f1 < 2 * f0) or 2 * f0 >= 0.98 * nyq:
+        return {"valid": False, "even_db": 0.0, "in_db": 0.0, "skirt_db": 0.0}
+    f, p = _psd(e, fs)
+    b = f1 - f0
+    guard = 0.02 * b
+
+    def dens(lo: float, hi: float) -> float:
+        sel = (f >= lo) & (f <= hi)
+        return float(np.mean(p[sel])) if sel.sum() >= 2 else float("nan")
+
+    bands = {"in": dens(f0 + guard, f1 - guard), "diff": dens(max(0.05 * b, f[1] if f.size > 1 else 0.0), b - guard),
+             "sum": dens(2 * f0 + guard, min(2 * f1, 0.98 * nyq)),
+             "skirt": np.nanmean([dens(2 * f0 - f1 + guard, f0 - guard), dens(f1 + guard, min(2 * f1 - f0, 2 * f0) - guard)])}
+    vals = [v for v in bands.values() if np.isfinite(v) and v > 0]
+    if len(vals) < 3:
+        return {"valid": False, "even_db": 0.0, "in_db": 0.0, "skirt_db": 0.0}
+    floor = min(vals)
+    db = {k: (float(10 * np.log10(v / floor)) if np.isfinite(v) and v > 0 else 0.0) for k, v in bands.items()}
+    return {"valid": True, "band_hz": [f0, f1], "even_db": max(db["diff"], db["sum"]), "diff_db": db["diff"],
+            "sum_db": db["sum"], "in_db": db["in"], "skirt_db": db["skirt"]}
 
 
 def harmonics(e: np.ndarray, u: np.ndarray, fs: float, n_harm: int = 5) -> dict[str, Any]:
@@ -435,6 +514,56 @@ def quantization_step(y: np.ndarray, max_levels: int = 200000) -> dict[str, floa
     levels = int(np.unique(np.round((y - y.min()) / q)).size) if np.ptp(y) / q < max_levels else -1
     return {"step": q, "coherence": coh * float(on), "p_value": p if on > 0.9 else 1.0, "on_lattice": float(on),
             "distinct_levels": levels}
+
+
+def saturation_rails(y: np.ndarray, ysim: np.ndarray, min_count: int = 5, min_share: float = 0.002,
+                     k_rms: float = 2.0) -> dict[str, Any]:
+    """Saturation rails of a measured record: the levels where the measuring chain clipped it.
+
+    A side (top or bottom) is a rail when (a) the measured extreme value is taken *exactly* by at least
+    ``max(min_count, min_share·N)`` samples (a flat top: an analogue signal, or a quantised one that does not
+    clip, reaches its extreme at a few isolated samples) and (b) on those samples the prediction lies beyond
+    the extreme by a median of more than ``k_rms`` times the residual RMS of the other samples (the model says
+    the signal went further than the instrument could show). Such samples are censored: the measurement only
+    says "at least this far"; a prediction clipped to the rails is what the instrument would have shown.
+
+    Returns ``{"lo", "hi"}`` (None where that side has no rail), the sample counts and the median excess.
+    """
+    y = np.asarray(y, dtype=float)
+    s = np.asarray(ysim, dtype=float)
+    n = y.size
+    out: dict[str, Any] = {"lo": None, "hi": None, "n_lo": 0, "n_hi": 0}
+    if n < 8 or not np.all(np.isfinite(s)):
+        return out
+    need = max(int(min_count), int(np.ceil(min_share * n)))
+    sides = {}
+    for side, level, sign in (("hi", float(np.max(y)), 1.0), ("lo", float(np.min(y)), -1.0)):
+        at = y == level
+        if int(at.sum()) >= need:
+            sides[side] = (level, sign, at)
+    if not sides:
+        return out
+    at_any = np.zeros(n, dtype=bool)
+    for _, _, at in sides.values():
+        at_any |= at
+    rest = ~at_any
+    rms = float(np.sqrt(np.mean((y[rest] - s[rest]) ** 2))) if rest.any() else 0.0
+    for side, (level, sign, at) in sides.items():
+        excess = float(np.median(sign * (s[at] - level)))
+        if excess > k_rms * rms:
+            out[side] = level
+            out[f"n_{side}"] = int(at.sum())
+            out[f"excess_{side}"] = excess
+    return out
+
+
+def clip_to_rails(ysim: np.ndarray, rails: dict[str, Any] | None) -> np.ndarray:
+    """The prediction as the saturating instrument would show it (:func:`saturation_rails`)."""
+    if not rails or (rails.get("lo") is None and rails.get("hi") is None):
+        return ysim
+    lo = -np.inf if rails.get("lo") is None else float(rails["lo"])
+    hi = np.inf if rails.get("hi") is None else float(rails["hi"])
+    return np.clip(ysim, lo, hi)
 
 
 # ---------------------------------------------------------------------------------------------- hysteresis
@@ -588,6 +717,8 @@ def analyse(u: np.ndarray, y: np.ndarray, ysim: np.ndarray, fs: float, meta: dic
     out["echo"] = lag_regression(e, ysim, fs, max_lag_s=max_echo_s, min_lag=_min_echo_lag(ysim, fs))
     out["input_lag"] = lag_regression(e, u, fs, max_lag_s=max_lag / fs * 5)
     out["bands"] = band_powers(e, u, y, fs)
+    out["products"] = product_bands(e, u, fs)
+    out["early_input"] = early_input_correlation(e, u, ysim, fs)
     segs = [sg for sg in _segments(meta, e.size) if sg["freq_hz"] * (sg["stop"] - sg["start"]) / fs >= 2]
     if segs:  # sine segments: harmonics per segment, odd and even powers summed over segments
         hs = [harmonics(e[sg["start"]:sg["stop"]], u[sg["start"]:sg["stop"]], fs) for sg in segs]
