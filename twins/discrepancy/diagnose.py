@@ -187,18 +187,32 @@ def _guesses(field: str, unit: str, a: dict[str, Any], twin: Twin, current: floa
         k = 1e3 if u == "mm" else 1.0
         if c:
             out += [k * c * sh, current + k * c * sh]
-            for j, t in enumerate(taus):
-                if not math.isfinite(t):
-                    continue
-                if j == 0:
-                    out += [k * c * t, k * c * t / 2]
-                # lateral image source (a wall beside a path of length L): extra path √(L² + 4w²) − L = c·τ
-                L = getattr(twin.params, "distance_m", None)
-                if isinstance(L, (int, float)) and L > 0:
-                    out += [k * math.sqrt(max((L + c * t) ** 2 - L * L, 0.0)) / 2]
+            out += _echo_path_guesses(unit, a, twin)
     if any(w in name for w in ("amp", "gain", "coef", "reflect", "level", "scale")) and u in ("", "1", "-", "ratio"):
         out += [coef, abs(coef)]
     return [float(v) for v in out if math.isfinite(v)]
+
+
+def _echo_path_guesses(unit: str, a: dict[str, Any], twin: Twin) -> list[float]:
+    """Lengths [m or mm] that the measured echo delays τ (main peak of the residual–output lag regression, then
+    the strongest shorter-lag peaks) imply for a path-length parameter: an extra path c·τ, a round trip c·τ/2,
+    and a lateral image source (a wall at distance w beside a path of length L: √(L² + 4w²) − L = c·τ)."""
+    u = (unit or "").strip().lower()
+    c = ev.sound_speed(twin)
+    if u not in ("m", "mm") or not c:
+        return []
+    k = 1e3 if u == "mm" else 1.0
+    taus = [a["echo"].get("lag_s", float("nan"))] + [t for t in a["echo"].get("short_lags_s", []) if math.isfinite(t)]
+    L = getattr(twin.params, "distance_m", None)
+    out: list[float] = []
+    for j, t in enumerate(taus):
+        if not math.isfinite(t) or t <= 0:
+            continue
+        if j == 0:
+            out += [k * c * t, k * c * t / 2]
+        if isinstance(L, (int, float)) and L > 0:
+            out += [k * math.sqrt(max((L + c * t) ** 2 - L * L, 0.0)) / 2]
+    return [float(v) for v in out if math.isfinite(v) and v > 0]
 
 
 def _core_for(twin: Twin, core: Sequence[str]) -> list[str]:
@@ -393,6 +407,36 @@ def _prescan(tw: Twin, est: Record, fields: list[str], a: dict[str, Any], points
                     if c < best_cost:
                         best_cost, best = c, trial
                 step /= (points - 1) / 2.0
+    # echo-delay basins: the cost of a path length oscillates with the carrier period, so a guess from the measured
+    # echo delay (accurate to a fraction of a period, a few % in τ) may sit on a slope or a ridge of its basin and
+    # lose to a wrong basin's minimum that the grid/zoom above happened to refine. Each delay-consistent length is
+    # therefore refined within ±5 % before the basins are compared (by estimation SSE, at the current amplitudes:
+    # at a fixed amplitude of the right sign, the ordering of the basins is that of their correlation with the
+    # residual, the same as with each basin's own optimal amplitude).
+    for f in fields:
+        lo, hi = (float(v) for v in info[f].range)
+        if isinstance(getattr(tw.params, f), int):
+            continue
+        gs = sorted({round(g, 12) for g in _echo_path_guesses(info[f].unit, a, tw) if lo <= g <= hi})
+        for g in gs:
+            grid = np.clip(g * (1.0 + np.linspace(-0.05, 0.05, 41)), lo, hi)
+            costs = []
+            for v in grid:
+                trial = dict(best)
+                trial[f] = float(v)
+                costs.append(cost(trial))
+            i = int(np.argmin(costs))
+            x, cx = float(grid[i]), float(costs[i])
+            h = float(grid[1] - grid[0]) if grid.size > 1 else 0.0
+            if h > 0:
+                from scipy.optimize import minimize_scalar
+
+                r = minimize_scalar(lambda v: cost({**best, f: float(v)}), bounds=(max(lo, x - h), min(hi, x + h)),
+                                    method="bounded", options={"maxiter": 12, "xatol": h * 1e-3})
+                if r.fun < cx:
+                    x, cx = float(r.x), float(r.fun)
+            if cx < best_cost:
+                best_cost, best = cx, {**best, f: x}
     return best
 
 
