@@ -388,8 +388,8 @@ class NARXMLP(_NeuralNARXBase):
         n_u covers the response instead of the dead time.
     linear : bool
         Linear bypass: ŷ = L φ + MLP(φ) (φ the regressor of eq. 2-14), with L and the output bias started at the
-        least-squares ARX of the same lags and the network's output layer at zero, so training starts from the
-        ARX model and learns a nonlinear correction. False (default): the dissertation's plain network.
+        least-squares ARX of the same lags (L kept fixed in training) and the network's output layer at zero, so
+        training starts from the ARX model and learns a nonlinear correction. False (default): the dissertation's plain network.
     select_tail : float
         Fraction (0 … 0.5) of the last estimation record held out of training; the weights kept are those,
         initial or after any epoch, with the best free-run R² on that tail (``selected_epoch_`` 0 = the initial

@@ -8,9 +8,9 @@ Model (discrete time, normalised units)::
 
 With ``linear_order`` = k > 0 a linear path is added: ŷ_lin is the free-run simulation of an ARX model of
 orders (k, k) with intercept, ŷ_lin(t) = Σ_i A_i ŷ_lin(t-i) + Σ_i B_i u(t-i) + c, started from the measured
-y(t0-1) … y(t0-k) of the encoder window. It is initialised at the least-squares ARX of the estimation data and
-the readout (C, d) at zero, so training starts from the ARX model's simulation and the recurrent network learns
-the nonlinear correction (a linear model refined by a network: BLA-initialised networks, Schoukens & Ljung
+y(t0-1) … y(t0-k) of the encoder window. It is the least-squares ARX of the estimation data, kept fixed, and
+the readout (C, d) starts at zero, so training starts from the ARX model's simulation and the recurrent network
+learns the nonlinear correction (a linear model refined by a network: BLA-initialised networks, Schoukens & Ljung
 2019; the linear skip of SUBNET, Beintema et al.).
 
 The encoder estimates the initial state from ``n_enc`` past measured samples (the same regressor as a NARX
@@ -129,7 +129,8 @@ class RNNStateSpace(TorchFileSave, Identifier):
         Gradient-norm clipping (0: off).
     linear_order : int
         Order k (0 … n_enc) of the linear ARX path added to the output, started at the least-squares ARX(k, k)
-        with intercept and trained with the rest; 0 (default): no linear path.
+        with intercept and kept fixed in training (the recurrent network learns the residual of its simulation);
+        0 (default): no linear path.
     seed, device :
         As for the NARX-MLP.
     """
