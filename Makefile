@@ -7,7 +7,7 @@ STAMP  := $(VENV)/.installed
 # on a 2-core machine (measured 9 ms vs <1 ms per 8x8 expm when both cores are busy).
 export OPENBLAS_NUM_THREADS ?= 1
 
-.PHONY: run run-quick test test-all bench fmus install clean
+.PHONY: run run-quick test test-all bench fmus install clean floors
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -43,3 +43,15 @@ fmus: $(STAMP)
 
 clean:
 	rm -rf $(VENV) report .pytest_cache .benchmarks
+
+# Accuracy floors of the quick check, measured as CI meets them on any x86-64 CPU: the quick run with torch's
+# generic, AVX2 and native kernels, each with 1 and 2 BLAS threads; the worst value of each pair sets its floor
+# (docs/regression-check.md). FLOORS_ARGS narrows it, e.g. FLOORS_ARGS="--identifiers oe,bj".
+floors: $(STAMP)
+	mkdir -p .floors
+	for isa in default avx2 native; do for th in 1 2; do \
+	  if [ $$isa = native ]; then e="env -u ATEN_CPU_CAPABILITY"; else e="env ATEN_CPU_CAPABILITY=$$isa"; fi; \
+	  $$e OPENBLAS_NUM_THREADS=$$th $(VENV)/bin/piezotwin score --quick --json $(FLOORS_ARGS) \
+	    > .floors/run_$${isa}_$${th}.json || exit 1; \
+	done; done
+	$(VENV)/bin/piezotwin score --quick --update-baselines --from-runs .floors/run_*.json

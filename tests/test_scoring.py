@@ -32,8 +32,10 @@ def test_check_names_every_pair_above_its_ceiling():
     assert any("narx-poly on silverbox/arrow" in f and "0.006 " in f for f in fails)
     assert not any("silverbox/multisine" in f for f in fails)
     assert any("arx on cascaded-tanks/test" in f and "diverged" in f for f in fails)
-    # the same run in full mode has no floors: nothing to fail
-    assert scoring.check({**run, "mode": "full"}, base) == []
+    # the same run in full mode has no floors: every scored pair fails, named, instead of passing silently
+    fails = scoring.check({**run, "mode": "full"}, base)
+    assert len(fails) == 3 and all("no full floor" in f for f in fails)
+    assert any(f.startswith("narx-poly on silverbox/arrow") for f in fails)
 
 
 def test_rules_beat_linear_and_published():
@@ -47,13 +49,13 @@ def test_rules_beat_linear_and_published():
             _row("narmax-poly", "wiener-hammerstein", "test", 50e-3, refs=bla),  # beats ARX, not the BLA
             _row("narmax-poly", "silverbox", "multisine", 3e-3),
             _row("narmax-poly", "silverbox", "arrow", 4.2e-3)]  # does not beat 4.15 mV
-    fails = scoring.check({"mode": "quick", "rows": rows}, base)
+    fails = scoring.check_rules({"mode": "quick", "rows": rows}, base)
     assert len(fails) == 2
     assert any("narmax-poly on wiener-hammerstein/test" in f and "BLA" in f for f in fails)
     assert any("narmax-poly on silverbox/arrow" in f and "SysIdentPy" in f for f in fails)
     # an explicit, documented exemption removes exactly that pair
     base["rules"][0]["exemptions"] = [{"identifier": "narmax-poly", "dataset": "wiener-hammerstein", "why": "test"}]
-    assert len(scoring.check({"mode": "quick", "rows": rows}, base)) == 1
+    assert len(scoring.check_rules({"mode": "quick", "rows": rows}, base)) == 1
 
 
 def test_scores_match_an_independent_computation():
@@ -89,6 +91,97 @@ def test_make_floors_adds_margin_and_keeps_rules():
     assert new["modes"]["quick"] == {"arx": {"cascaded-tanks": {"test": {"max_rmse": 1.1, "measured": 1.0, "units": "V",
                                                                           "r2_measured": 0.0}}}}
     assert new["modes"]["full"] == {"a": {}} and new["rules"] == prev["rules"]
+    # the diverged pair cannot get a floor: it is dropped, with the reason, and so stays visible
+    (drop,) = new["dropped"]["quick"]
+    assert (drop["identifier"], drop["dataset"], drop["test"]) == ("x", "d", "t") and "diverged" in drop["reason"]
+    (prov,) = new["provenance"]["quick"]
+    assert prov["margin"] == 0.1 and prov["identifiers"] == ["arx", "x"]
+
+
+def _seeded_row(ident, rmse_by_seed):
+    seeds = list(range(len(rmse_by_seed)))
+    k = sorted(seeds, key=lambda i: rmse_by_seed[i])[(len(seeds) - 1) // 2]
+    return {**_row(ident, "silverbox", "arrow", rmse_by_seed[k]), "seed": k, "seeds": seeds,
+            "free_run_rmse_by_seed": rmse_by_seed}
+
+
+def test_floors_from_several_runs_take_the_worst_and_a_seeded_margin():
+    """Runs measured with different CPU kernels / thread counts: the worst value of each pair sets the floor;
+    pairs scored over several seeds get the wider seeded margin."""
+    runs = [{"mode": "quick", "environment": {"ATEN_CPU_CAPABILITY": isa},
+             "rows": [_row("arx", "cascaded-tanks", "test", 1.0 + d), _seeded_row("narx-mlp", [3e-3 + d / 1e3, 2e-3, 4e-3])]}
+            for isa, d in (("default", 0.0), ("avx2", 0.2))]
+    new = scoring.make_floors(runs, margin=0.1, seeded_margin=0.5)
+    arx = new["modes"]["quick"]["arx"]["cascaded-tanks"]["test"]
+    assert (arx["measured"], arx["measured_min"], arx["runs"]) == (1.2, 1.0, 2)
+    assert arx["max_rmse"] == pytest.approx(1.2 * 1.1)
+    mlp = new["modes"]["quick"]["narx-mlp"]["silverbox"]["arrow"]
+    assert mlp["measured"] == pytest.approx(3.2e-3) and mlp["max_rmse"] == pytest.approx(3.2e-3 * 1.5)
+    assert [r["ATEN_CPU_CAPABILITY"] for r in new["provenance"]["quick"][0]["runs"]] == ["default", "avx2"]
+    # a later update of one pair keeps the others
+    again = scoring.make_floors({"mode": "quick", "rows": [_row("arx", "cascaded-tanks", "test", 2.0)]}, previous=new)
+    assert again["modes"]["quick"]["narx-mlp"] == new["modes"]["quick"]["narx-mlp"]
+    assert again["modes"]["quick"]["arx"]["cascaded-tanks"]["test"]["measured"] == 2.0
+    assert len(again["provenance"]["quick"]) == 2
+
+
+def test_check_fails_for_missing_floors_unscored_floors_and_unknown_names():
+    f = {"max_rmse": 2.0, "measured": 1.0}
+    base = {"format": scoring.BASELINES_FORMAT, "rules": [], "modes": {"quick": {
+        "arx": {"cascaded-tanks": {"test": f}, "silverbox": {"arrow": f}},
+        "nosuch-ident": {"cascaded-tanks": {"test": f}},
+        "narx-poly": {"nosuch-data": {"test": f}}}},
+        "dropped": {"quick": [{"identifier": "armax", "dataset": "cascaded-tanks", "test": "*", "reason": "unstable"}]}}
+    run = {"mode": "quick", "selection": {"identifiers": ["arx", "armax", "narx-poly"], "datasets": ["cascaded-tanks", "silverbox"]},
+           "skipped": [{"dataset": "silverbox", "reason": "data not found"}],
+           "rows": [_row("arx", "cascaded-tanks", "test", 1.0), _row("armax", "cascaded-tanks", "test", 9.0),
+                    _row("narx-poly", "cascaded-tanks", "test", 0.5)]}
+    fails = scoring.check(run, base)
+    assert len(fails) == 4, fails
+    assert any(x.startswith("narx-poly on cascaded-tanks/test: no quick floor") for x in fails)
+    assert any(x.startswith("arx on silverbox/arrow: has a floor but was not scored (skipped: data not found)") for x in fails)
+    assert any("'nosuch-ident'" in x for x in fails) and any("'nosuch-data'" in x for x in fails)
+    assert not any(x.startswith("armax") for x in fails)  # dropped on purpose, with its reason
+
+
+def test_seeded_identifier_is_scored_by_its_median_seed():
+    """A toy identifier whose error grows with its seed: the row is the run of seed 2 (median of 0-4), its
+    metrics equal an independent fit of that seed, and every seed's free-run RMSE is listed."""
+    class ToySeeded(ToyARX):
+        def __init__(self, ny=2, nu=2, seed=0):
+            super().__init__(ny, nu, degrade=0.2 * (seed + 1))
+            self.seed = seed
+
+    ds = load_dataset("cascaded-tanks")
+    rows, _ = scoring.score_pair("toy", ds, quick=True, factory=lambda n: ToySeeded, params={"ny": 2, "nu": 2})
+    (r,) = rows
+    assert r["seed"] == 2 and r["seeds"] == list(scoring.QUICK_SEEDS)
+    by_seed = r["free_run_rmse_by_seed"]
+    assert by_seed == sorted(by_seed) and by_seed[0] < by_seed[-1]
+    ref = ToySeeded(2, 2, seed=2).fit(ds.est).predict(ds.tests["test"], horizon=None)
+    y, skip = ds.tests["test"].y, r["skip"]
+    assert r["free_run"]["rmse"] == pytest.approx(np.sqrt(np.mean((y[skip:] - ref[skip:]) ** 2)), rel=1e-12)
+    # a deterministic identifier, or a seed fixed by the settings, is fitted once
+    (r1,), _ = scoring.score_pair("toy", ds, quick=True, factory=lambda n: ToySeeded, params={"ny": 2, "nu": 2, "seed": 1})
+    assert "seeds" not in r1 and r1["free_run"]["rmse"] == pytest.approx(by_seed[1], rel=1e-12)
+
+
+@pytest.mark.parametrize("content, what", [("{not json", "not JSON"), ("[]", "not a baselines file"),
+                                           ('{"format": "other"}', "not a baselines file"),
+                                           (None, "not found"),
+                                           ('{"format": "piezotwin-baselines/1", "modes": {"quick": {"arx": {"d": {"t": '
+                                            '{"max_rmse": "x"}}}}}}', "max_rmse")])
+def test_unreadable_baselines_exit_2_with_one_line(tmp_path, capsys, content, what):
+    path = tmp_path / "b.json"
+    if content is not None:
+        path.write_text(content)
+    with pytest.raises(scoring.ConfigError, match=what):
+        scoring.load_baselines(path)
+    capsys.readouterr()
+    assert main(["score", "--quick", "--check", "--identifiers", "arx", "--datasets", "cascaded-tanks",
+                 "--no-sysidentpy", "--baselines", str(path)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and what in err and "Traceback" not in err
 
 
 # ------------------------------------------------------------------------------------- the real floors
@@ -157,6 +250,68 @@ def test_score_cli_check_exit_codes(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "narx-poly on cascaded-tanks/test" in err
     assert main(["score", "--identifiers", "nosuch"]) == 2
+
+
+def test_every_quick_pair_has_a_floor_or_a_reason():
+    """The quick check covers every available identifier on every quick dataset (the twins included): each
+    pair has a floor, or is listed under 'dropped' with the reason."""
+    from sysid.registry import available_identifiers
+
+    base = scoring.load_baselines()
+    assert {"cantilever-thesis", "acoustic-thesis"} <= set(scoring.QUICK_DATASETS)
+    floors, dropped = base["modes"]["quick"], scoring.dropped_pairs(base, "quick")
+    missing = [(i, d) for i in available_identifiers() for d in scoring.QUICK_DATASETS
+               if d not in floors.get(i, {}) and not any(k[:2] == (i, d) for k in dropped)]
+    assert not missing
+    assert all(reason for reason in dropped.values())
+
+
+def test_a_regression_injected_by_a_setting_fails_the_check():
+    """narx-poly weakened by its own options (degree 1, one lag: a linear model) must miss its floor."""
+    if not _available("narx-poly"):
+        pytest.skip("narx-poly not built in this checkout")
+    ds = scoring.prepare_dataset(load_dataset("cascaded-tanks"), True)
+    weak = {**scoring.settings_for("narx-poly", "cascaded-tanks", quick=True), "degree": 1, "ny": 1, "nu": 1}
+    rows, _ = scoring.score_pair("narx-poly", ds, quick=True, params=weak)
+    fails = scoring.check({"mode": "quick", "rows": rows})
+    assert any(f.startswith("narx-poly on cascaded-tanks/test: free-run RMSE") and "> floor" in f for f in fails)
+
+
+def test_floors_tightened_by_half_fail_and_name_every_pair(tmp_path, capsys):
+    """The real floors of two identifiers × two datasets, each ceiling halved: the check exits 1 and names all."""
+    base = scoring.load_baselines()
+    idents, dsets = ["arx", "narx-poly"], ["cascaded-tanks", "piezo-tue"]
+    for i in idents:
+        for d in dsets:
+            for f in base["modes"]["quick"][i][d].values():
+                f["max_rmse"] *= 0.5
+    path = tmp_path / "tight.json"
+    path.write_text(json.dumps(base))
+    capsys.readouterr()
+    code = main(["score", "--quick", "--check", "--identifiers", ",".join(idents), "--datasets", ",".join(dsets),
+                 "--no-sysidentpy", "--json", "--baselines", str(path)])
+    err = capsys.readouterr().err
+    assert code == 1
+    for i in idents:
+        for d in dsets:
+            assert f"{i} on {d}/test: free-run RMSE" in err
+
+
+def test_update_baselines_from_saved_runs(tmp_path, capsys):
+    runs = []
+    for k, isa in enumerate(("default", "avx2")):
+        p = tmp_path / f"run{k}.json"
+        p.write_text(json.dumps({"format": "piezotwin-score/1", "mode": "quick", "environment": {"ATEN_CPU_CAPABILITY": isa},
+                                 "rows": [_row("arx", "cascaded-tanks", "test", 1.0 + k)]}))
+        runs.append(str(p))
+    out = tmp_path / "b.json"
+    assert main(["score", "--quick", "--update-baselines", "--margin", "0.1", "--baselines", str(out), "--from-runs", *runs]) == 0
+    f = json.loads(out.read_text())["modes"]["quick"]["arx"]["cascaded-tanks"]["test"]
+    assert f["measured"] == 2.0 and f["max_rmse"] == pytest.approx(2.2)
+    assert main(["score", "--quick", "--update-baselines", "--margin", "nan", "--baselines", str(out), "--from-runs", *runs]) == 2
+    (tmp_path / "bad.json").write_text("[1]")
+    assert main(["score", "--quick", "--update-baselines", "--baselines", str(out), "--from-runs", str(tmp_path / "bad.json")]) == 2
+    assert json.loads(out.read_text())["modes"]["quick"]["arx"]["cascaded-tanks"]["test"]["measured"] == 2.0
 
 
 @pytest.mark.slow

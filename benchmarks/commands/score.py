@@ -29,6 +29,11 @@ def register(sub) -> None:
     p.add_argument("--baselines", metavar="FILE", help="baselines file (default benchmarks/baselines.json)")
     p.add_argument("--update-baselines", action="store_true", help="write floors measured in this run to the baselines file")
     p.add_argument("--margin", type=float, default=0.15, help="margin of --update-baselines (default 0.15 = 15 %%)")
+    p.add_argument("--seeded-margin", type=float, default=0.5,
+                   help="margin of --update-baselines for identifiers scored over several training seeds (default 0.5)")
+    p.add_argument("--from-runs", nargs="+", metavar="RUN.json",
+                   help="with --update-baselines: set floors from these saved `score --json` runs (e.g. one per CPU "
+                        "kernel set and BLAS thread count; the worst value of each pair counts) instead of scoring now")
     p.add_argument("--no-sysidentpy", action="store_true", help="do not run SysIdentPy's FROLS beside the rows")
     p.add_argument("--report", metavar="DIR", help="write score.json, score.md and figures to DIR")
     p.add_argument("--json", action="store_true", help="print the results as JSON")
@@ -49,9 +54,21 @@ def run(args: argparse.Namespace) -> int:
     for d in dsets or []:
         if d not in dataset_names():
             raise ConfigError(f"unknown dataset {d!r}; valid: {', '.join(dataset_names())}")
-    if args.margin < 0:
-        raise ConfigError(f"--margin must be >= 0, got {args.margin}")
-    baselines = scoring.load_baselines(args.baselines)
+    import math
+
+    for name in ("margin", "seeded_margin"):
+        v = getattr(args, name)
+        if not (math.isfinite(v) and v >= 0):
+            raise ConfigError(f"--{name.replace('_', '-')} must be a finite number >= 0, got {v}")
+    from pathlib import Path
+
+    bpath = Path(args.baselines) if args.baselines else scoring.BASELINES_PATH
+    # --check needs the floors; --update-baselines may start a new file
+    baselines = scoring.load_baselines(bpath) if args.check or bpath.exists() else None
+    if args.from_runs:
+        if not args.update_baselines or args.check:
+            raise ConfigError("--from-runs goes with --update-baselines (and without --check)")
+        return _floors_from_runs(args, bpath, baselines)
     quiet = args.json
     res = scoring.score(idents, dsets, quick=args.quick, sysidentpy=not args.no_sysidentpy, progress=not quiet,
                         log=None if quiet else (lambda s: print(s, flush=True)))
@@ -63,13 +80,9 @@ def run(args: argparse.Namespace) -> int:
         paths = scoring.write_report(res, args.report)
         out["report"] = {k: str(v) for k, v in paths.items()}
     if args.update_baselines:
-        import json
-        from pathlib import Path
-
-        new = scoring.make_floors(res, margin=args.margin, previous=baselines)
-        path = Path(args.baselines) if args.baselines else scoring.BASELINES_PATH
-        path.write_text(json.dumps(new, indent=2) + "\n")
-        out["baselines_written"] = str(path)
+        new = scoring.make_floors(res, margin=args.margin, previous=baselines, seeded_margin=args.seeded_margin)
+        _write_json(bpath, new)
+        out["baselines_written"] = str(bpath)
     if args.json:
         emit_json(out)
     else:
@@ -96,4 +109,50 @@ def run(args: argparse.Namespace) -> int:
             return 1
         if not args.json:
             print("score --check: every pair meets its floor")
+    return 0
+
+
+def _write_json(path, obj) -> None:
+    """Write ``obj`` as JSON atomically: a temporary file beside ``path``, then a rename."""
+    import json
+    import os
+    import tempfile
+
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        with os.fdopen(fd, "w") as fh:
+            fh.write(json.dumps(obj, indent=2) + "\n")
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        os.unlink(tmp)
+        raise
+
+
+def _floors_from_runs(args: argparse.Namespace, bpath, baselines) -> int:
+    """``--update-baselines --from-runs RUN.json ...``: floors from saved runs (the worst value of each pair)."""
+    import json
+    from pathlib import Path
+
+    from benchmarks import scoring
+    from sysid.errors import ConfigError
+
+    runs = []
+    for name in args.from_runs:
+        try:
+            data = json.loads(Path(name).read_text())
+        except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+            raise ConfigError(f"{name}: cannot read a score run ({exc})") from None
+        if not isinstance(data, dict) or data.get("format") != "piezotwin-score/1" or not isinstance(data.get("rows"), list):
+            raise ConfigError(f"{name}: not a `piezotwin score --json` run")
+        runs.append(data)
+    new = scoring.make_floors(runs, margin=args.margin, previous=baselines, seeded_margin=args.seeded_margin)
+    _write_json(bpath, new)
+    mode = runs[0]["mode"]
+    n = sum(len(t) for d in new["modes"][mode].values() for t in d.values())
+    dropped = new.get("dropped", {}).get(mode, [])
+    print(f"baselines -> {bpath}: {n} {mode} floors from {len(runs)} runs, {len(dropped)} pairs dropped")
+    for e in dropped:
+        print(f"  dropped {e['identifier']} on {e['dataset']}/{e.get('test', '*')}: {e['reason']}")
     return 0

@@ -33,7 +33,7 @@ from sysid.base import Identifier, as_record_list, check_records
 from sysid.errors import ConfigError, DataError, DivergenceWarning
 from sysid.neural.core import (ACT_CODE, ACTIVATIONS, FlatMLP, LagData, RMSprop, count_mlp_parameters, free_run_mlp,
                                k_step_mlp, lag_matrix_np, least_squares_linear, merge_ensemble, mlp_forward_np, regressor_lag)
-from sysid.neural.device import configure_threads, select_device
+from sysid.neural.device import configure_threads, select_device, train_dtype
 from sysid.neural.persist import TorchFileSave
 from sysid.record import Normaliser, Record
 
@@ -129,6 +129,7 @@ class _NeuralNARXBase(TorchFileSave, Identifier):
         k = getattr(self, "ensemble", 1)
         if not isinstance(k, (int, np.integer)) or isinstance(k, bool) or not 1 <= k <= MAX_ENSEMBLE:
             raise ConfigError(f"{self.name}: ensemble={k!r} must be an integer in [1, {MAX_ENSEMBLE}] (networks averaged)")
+        train_dtype(getattr(self, "dtype", "float32"), self.name)
         if check_device:  # a saved model trained on a GPU must still load (and predict) on a CPU machine
             select_device(self.device)
 
@@ -182,13 +183,14 @@ class _NeuralNARXBase(TorchFileSave, Identifier):
         device = select_device(self.device)
         self.normaliser_ = fit_normaliser(recs)
         pairs = normalised_pairs(recs, self.normaliser_)
-        data_t = LagData(pairs, self.n_y, self.n_u, device, nk=self.nk)
+        dtype = train_dtype(getattr(self, "dtype", "float32"), self.name)
+        data_t = LagData(pairs, self.n_y, self.n_u, device, dtype=dtype, nk=self.nk)
         lin = least_squares_linear(pairs, self.n_y, self.n_u, self.nk) if self.linear else None
         members, histories, selections = [], [], []
         for seed in self.member_seeds():
             torch.manual_seed(seed)
             gen = torch.Generator().manual_seed(seed)
-            net = FlatMLP(data_t.n_in, self.hidden, ny, self.activation, gen, device, linear=self.linear)
+            net = FlatMLP(data_t.n_in, self.hidden, ny, self.activation, gen, device, dtype=dtype, linear=self.linear)
             if self.linear:
                 # The bypass is the least-squares ARX of the same regressor, kept fixed: the network (output layer
                 # started at zero) learns the correction. Training L as well (quick data, free-run RMSE, L trained
@@ -403,13 +405,18 @@ class NARXMLP(_NeuralNARXBase):
         (:func:`sysid.neural.core.merge_ensemble`), so prediction and saved files use the single-network code;
         ``n_parameters_`` counts k × a member's parameters plus the linear bypass once, not the zero blocks.
         Reduces the seed-to-seed spread of the free run at k times the training cost.
+    dtype : str
+        Training precision, ``float32`` (default, fastest) or ``float64``. With float64 one-step training gives the
+        same weights on CPUs with different vector instruction sets to about 12 digits; simulation-error training
+        can amplify any rounding difference (see :mod:`sysid.neural.device`). Prediction is float64 either way.
     """
 
     name = "narx-mlp"
 
     def __init__(self, n_y: int = 10, n_u: int = 10, hidden: Sequence[int] = (25, 25, 25, 25), activation: str = "relu",
                  lr: float = 1e-4, batch_size: int = 128, epochs: int = 100, seed: int = 0, device: str = "auto",
-                 nk: int = 1, linear: bool = False, select_tail: float = 0.0, ensemble: int = 1):
+                 nk: int = 1, linear: bool = False, select_tail: float = 0.0, ensemble: int = 1, dtype: str = "float32"):
+        self.dtype = dtype
         self.linear = linear
         self.select_tail = select_tail
         self.ensemble = ensemble
@@ -455,6 +462,8 @@ class NARXMLPSim(_NeuralNARXBase):
     ensemble : int
         k networks (seeds ``seed·k + i``) trained alike and averaged, merged into one network, as for
         :class:`NARXMLP`.
+    dtype : str
+        Training precision ``float32`` (default) or ``float64``, as for :class:`NARXMLP`.
 
     Each epoch draws ``ceil(rows / window)`` window starts at random positions (so that on average every
     sample is a target once per epoch); each window starts from the measured ``y(s-1) … y(s-n_y)``.
@@ -466,7 +475,8 @@ class NARXMLPSim(_NeuralNARXBase):
                  lr: float = 1e-3, batch_size: int = 32, epochs: int = 100, seed: int = 0, device: str = "auto",
                  window: int = 50, pretrain_epochs: int = 10, pretrain_lr: float = 1e-3, nk: int = 1,
                  select_tail: float = 0.0, pretrain_batch_size: int | None = None, linear: bool = False,
-                 ensemble: int = 1):
+                 ensemble: int = 1, dtype: str = "float32"):
+        self.dtype = dtype
         self.linear = linear
         self.ensemble = ensemble
         self.n_y = n_y
@@ -516,7 +526,7 @@ class NARXMLPSim(_NeuralNARXBase):
         nyr, ch = data.n_yreg, data.ny_ch
         for _ in range(int(self.epochs)):
             pick = torch.randint(0, starts.size, (n_win,), generator=gen).to(dev)
-            total = torch.zeros((), device=dev)
+            total = torch.zeros((), device=dev, dtype=data.dtype)
             for sel in pick.split(B):
                 s = starts_t[sel]
                 rows = (s[:, None] + steps[None, :]).reshape(-1)

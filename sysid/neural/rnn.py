@@ -37,7 +37,7 @@ import torch
 from sysid.base import Identifier, as_record_list
 from sysid.errors import ConfigError, DataError, DivergenceWarning
 from sysid.neural.core import LagData, lag_matrix_np, least_squares_linear
-from sysid.neural.device import configure_threads, select_device
+from sysid.neural.device import configure_threads, select_device, train_dtype
 from sysid.neural.persist import TorchFileSave
 from sysid.neural.narx_mlp import MAX_LAG, _as2d, check_channels, check_predict_input, fit_normaliser, normalised_pairs
 from sysid.record import Normaliser, Record
@@ -131,15 +131,16 @@ class RNNStateSpace(TorchFileSave, Identifier):
         Order k (0 … n_enc) of the linear ARX path added to the output, started at the least-squares ARX(k, k)
         with intercept and kept fixed in training (the recurrent network learns the residual of its simulation);
         0 (default): no linear path.
-    seed, device :
-        As for the NARX-MLP.
+    seed, device, dtype :
+        As for the NARX-MLP (``dtype``: training precision, ``float32`` or ``float64``).
     """
 
     name = "rnn"
 
     def __init__(self, n_state: int = 32, n_enc: int = 20, enc_hidden: Sequence[int] = (64,), cell: str = "gru",
                  window: int = 100, batch_size: int = 32, epochs: int = 30, lr: float = 3e-3, clip: float = 1.0,
-                 seed: int = 0, device: str = "auto", linear_order: int = 0):
+                 seed: int = 0, device: str = "auto", linear_order: int = 0, dtype: str = "float32"):
+        self.dtype = dtype
         self.linear_order = linear_order
         self.n_state = n_state
         self.n_enc = n_enc
@@ -178,6 +179,7 @@ class RNNStateSpace(TorchFileSave, Identifier):
             raise ConfigError(f"{self.name}: clip={self.clip!r} must be ≥ 0")
         if not isinstance(self.seed, (int, np.integer)) or isinstance(self.seed, bool):
             raise ConfigError(f"{self.name}: seed={self.seed!r} must be an integer")
+        train_dtype(getattr(self, "dtype", "float32"), self.name)
         if check_device:  # a saved model trained on a GPU must still load (and predict) on a CPU machine
             select_device(self.device)
 
@@ -197,7 +199,8 @@ class RNNStateSpace(TorchFileSave, Identifier):
         gen = torch.Generator().manual_seed(int(self.seed))
         self.normaliser_ = fit_normaliser(recs)
         pairs = normalised_pairs(recs, self.normaliser_)
-        data_t = LagData(pairs, self.n_enc, self.n_enc, device)
+        dtype = train_dtype(getattr(self, "dtype", "float32"), self.name)
+        data_t = LagData(pairs, self.n_enc, self.n_enc, device, dtype=dtype)
         T = int(self.window)
         starts = data_t.window_starts(T)
         if starts.size == 0:
@@ -210,7 +213,7 @@ class RNNStateSpace(TorchFileSave, Identifier):
             # move the poles of a finely sampled ARX that far.
             net.init_linear(*least_squares_linear(pairs, int(self.linear_order), int(self.linear_order)))
             net.arx.requires_grad_(False)
-        net = net.to(device)
+        net = net.to(device=device, dtype=dtype)
         opt = torch.optim.Adam([p for p in net.parameters() if p.requires_grad], lr=float(self.lr))
         starts_t = torch.as_tensor(starts, device=device)
         steps = torch.arange(T, device=device)
@@ -218,7 +221,7 @@ class RNNStateSpace(TorchFileSave, Identifier):
         self.loss_history_ = []
         for _ in range(int(self.epochs)):
             pick = torch.randint(0, starts.size, (n_win,), generator=gen).to(device)
-            total = torch.zeros((), device=device)
+            total = torch.zeros((), device=device, dtype=dtype)
             for sel in pick.split(int(self.batch_size)):
                 s = starts_t[sel]
                 rows = (s[:, None] + steps[None, :]).reshape(-1)
