@@ -16,6 +16,7 @@ Budgets: the default run is sized for ≤ 10 minutes on 2 cores, ``--quick`` for
 from __future__ import annotations
 
 import html
+import logging
 import time
 import traceback
 from dataclasses import dataclass, field
@@ -27,6 +28,9 @@ import numpy as np
 
 class StageSkipped(Exception):
     """Raised by a stage whose prerequisites are not available; the message says why."""
+
+
+log = logging.getLogger(__name__)
 
 
 @dataclass
@@ -474,9 +478,7 @@ def run_main_job(report_dir: str | Path = "report", quick: bool = False, verbose
             msg, status = f"failed: {type(exc).__name__}: {exc}", "failed"
             ctx.section(f"Stage '{name}' failed", f"<pre>{html.escape(traceback.format_exc())}</pre>")
         rows.append({"stage": name, "status": status, "message": msg, "seconds": time.perf_counter() - t0})
-        if verbose:
-            print(f"[{status:>7}] {name}: {msg}", flush=True)
+        log.log(logging.WARNING if status == "failed" else logging.INFO, "[%7s] %s: %s", status, name, msg)
     path = _write_report(ctx, rows)
-    if verbose:
-        print(f"report -> {path} ({time.perf_counter() - t_all:.0f} s)")
+    log.info("report -> %s (%.0f s)", path, time.perf_counter() - t_all)
     return {"stages": rows, "report": str(path), "seconds": time.perf_counter() - t_all}

@@ -323,12 +323,9 @@ def score(identifiers: Iterable[str] | None = None, datasets: Iterable[str] | No
                 run.skipped.append({"dataset": n, "reason": d["description"].rsplit("[", 1)[-1].rstrip("]")})
     datasets = list(datasets)
     pairs = [(i, d) for d in datasets for i in identifiers]
-    try:
-        from tqdm import tqdm
+    from sysid.progress import progress as _bar
 
-        bar = tqdm(total=len(pairs), desc="score", disable=not progress, leave=False)
-    except ImportError:  # pragma: no cover
-        bar = None
+    bar = _bar(total=len(pairs), desc="score", show=progress)
     for dname in datasets:
         try:
             ds = prepare_dataset(load_dataset(dname, progress=progress), quick)

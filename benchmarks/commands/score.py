@@ -53,7 +53,8 @@ def run(args: argparse.Namespace) -> int:
         raise ConfigError(f"--margin must be >= 0, got {args.margin}")
     baselines = scoring.load_baselines(args.baselines)
     quiet = args.json
-    res = scoring.score(idents, dsets, quick=args.quick, sysidentpy=not args.no_sysidentpy, progress=not quiet,
+    res = scoring.score(idents, dsets, quick=args.quick, sysidentpy=not args.no_sysidentpy,
+                        progress=not (quiet or getattr(args, "quiet", False)),
                         log=None if quiet else (lambda s: print(s, flush=True)))
     out = scoring._clean(res.to_dict())
     if args.check:

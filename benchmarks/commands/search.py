@@ -66,7 +66,7 @@ def run(args: argparse.Namespace) -> int:
     spec = SweepSpec(identifier=args.identifier, grid=parse_grid(args.grid, args.identifier), repeats=args.repeats,
                      seed=args.seed, fixed=parse_assignments(args.set_), sampler=args.sampler)
     summary = run_sweep(spec, est if len(est) > 1 else est[0], val, storage=args.storage, study=args.study,
-                        trials=args.trials, workers=args.workers, progress=not args.no_progress)
+                        trials=args.trials, workers=args.workers, progress=not (args.no_progress or getattr(args, "quiet", False)))
     url = storage_url(args.storage, args.study)
     summary.update({"identifier": args.identifier, "study": args.study, "storage": url, "sampler": args.sampler,
                     "repeats": args.repeats, "grid": spec.grid})

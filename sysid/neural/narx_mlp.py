@@ -35,6 +35,7 @@ from sysid.neural.core import (ACT_CODE, ACTIVATIONS, FlatMLP, LagData, RMSprop,
                                k_step_mlp, lag_matrix_np, least_squares_linear, merge_ensemble, mlp_forward_np, regressor_lag)
 from sysid.neural.device import configure_threads, select_device
 from sysid.neural.persist import TorchFileSave
+from sysid.progress import progress
 from sysid.record import Normaliser, Record
 
 __all__ = ["NARXMLP", "NARXMLPSim"]
@@ -240,7 +241,7 @@ class _NeuralNARXBase(TorchFileSave, Identifier):
         opt = RMSprop(net.flat, lr)
         M, B = data.n_rows, int(self.batch_size if batch_size is None else batch_size)
         dev = data.device
-        for ep in range(int(epochs)):
+        for ep in progress(range(int(epochs)), desc=f"{self.name} one-step", unit="epoch"):
             perm = torch.randperm(M, generator=gen).to(dev)
             losses: list[torch.Tensor] = []
             if data.X is not None:
@@ -514,7 +515,7 @@ class NARXMLPSim(_NeuralNARXBase):
         opt = RMSprop(net.flat, self.lr)
         B = int(self.batch_size)
         nyr, ch = data.n_yreg, data.ny_ch
-        for _ in range(int(self.epochs)):
+        for _ in progress(range(int(self.epochs)), desc=f"{self.name} simulation", unit="epoch"):
             pick = torch.randint(0, starts.size, (n_win,), generator=gen).to(dev)
             total = torch.zeros((), device=dev)
             for sel in pick.split(B):

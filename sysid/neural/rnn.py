@@ -39,6 +39,7 @@ from sysid.errors import ConfigError, DataError, DivergenceWarning
 from sysid.neural.core import LagData, lag_matrix_np, least_squares_linear
 from sysid.neural.device import configure_threads, select_device
 from sysid.neural.persist import TorchFileSave
+from sysid.progress import progress
 from sysid.neural.narx_mlp import MAX_LAG, _as2d, check_channels, check_predict_input, fit_normaliser, normalised_pairs
 from sysid.record import Normaliser, Record
 
@@ -216,7 +217,7 @@ class RNNStateSpace(TorchFileSave, Identifier):
         steps = torch.arange(T, device=device)
         n_win = max(1, math.ceil(data_t.n_rows / T))
         self.loss_history_ = []
-        for _ in range(int(self.epochs)):
+        for _ in progress(range(int(self.epochs)), desc=self.name, unit="epoch"):
             pick = torch.randint(0, starts.size, (n_win,), generator=gen).to(device)
             total = torch.zeros((), device=device)
             for sel in pick.split(int(self.batch_size)):

@@ -378,7 +378,7 @@ def run_sweep(spec: SweepSpec, est: Record | Sequence[Record], val: Record | Seq
               study: str = "piezotwin-search", trials: int | None = None, workers: int = 1, progress: bool = True,
               ) -> dict[str, Any]:
     """Run (or resume) a sweep; returns :func:`summarise` of everything the study holds."""
-    from tqdm import tqdm
+    from sysid.progress import progress as progress_bar
 
     url = storage_url(storage, study)
     st = open_study(spec, url, study)
@@ -395,8 +395,8 @@ def run_sweep(spec: SweepSpec, est: Record | Sequence[Record], val: Record | Seq
     if spec.sampler != "grid":
         _requeue_failed(st, spec)  # grid sweeps rerun failed configurations by themselves
     done0 = len(_done_keys(st))
-    bar = tqdm(total=target, initial=min(done0, target), unit="config", desc=f"{spec.identifier} sweep",
-               disable=not progress, file=sys.stderr, dynamic_ncols=True)
+    bar = progress_bar(total=target, initial=min(done0, target), unit="config", desc=f"{spec.identifier} sweep",
+                       show=progress, leave=True)
     try:
         if workers <= 1:
             def tick() -> None:
