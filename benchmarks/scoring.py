@@ -633,8 +633,10 @@ def write_report(run: ScoreRun, report_dir: str | Path) -> dict[str, Path]:
         paths["nrmse"] = out / "score_nrmse.png"
         fig.savefig(paths["nrmse"], dpi=90)
         plt.close(fig)
-    # measured vs free-run predictions: one figure per dataset (first test), first 1000 scored samples
+    # measured vs free-run predictions: one figure per dataset (first test), the whole scored record and a zoom
     if run.predictions and run.datasets:
+        from sysid.plots import plot_measured_vs_predicted
+
         for dname, ds in run.datasets.items():
             test = next(iter(ds.tests))
             rec = ds.tests[test]
@@ -642,20 +644,9 @@ def write_report(run: ScoreRun, report_dir: str | Path) -> dict[str, Path]:
             if not keys:
                 continue
             n0 = ds.init_samples
-            n1 = min(len(rec), n0 + 1000)
-            t = np.arange(n0, n1) / rec.fs
-            fig, ax = plt.subplots(figsize=(8, 3.2))
-            ax.plot(t, rec.y[n0:n1], "k", lw=1.2, label="measured")
-            for k in sorted(keys):
-                y = run.predictions[k][n0:n1]
-                ax.plot(t, y, lw=0.8, label=k[0])
-            ax.set_xlabel("time [s]")
-            ax.set_ylabel(f"y [{ds.units.get('y', '')}]")
-            ax.set_title(f"{dname} / {test}: free-run simulation")
-            ax.legend(fontsize=7, ncol=3)
-            fig.tight_layout()
-            p = out / f"freerun_{dname}_{test}.png"
-            fig.savefig(p, dpi=80)
-            plt.close(fig)
+            t = np.arange(n0, len(rec)) / rec.fs
+            preds = {k[0]: np.asarray(run.predictions[k])[n0:] for k in sorted(keys)}
+            p = plot_measured_vs_predicted(t, rec.y[n0:], preds, out / f"freerun_{dname}_{test}.png",
+                                           title=f"{dname} / {test}: free-run simulation", unit=ds.units.get("y", ""))
             paths[f"freerun_{dname}"] = p
     return paths

@@ -72,8 +72,8 @@ def collect(files: Iterable[str | os.PathLike] = (), records: Iterable[Any] = ()
         else:
             data.append({"file": key, "bytes": None, "sha256": None})
     argv = list(sys.argv if command is None else command)
-    if argv and argv[0].endswith(("piezotwin", "__main__.py")):
-        argv[0] = "piezotwin"
+    if argv and Path(argv[0]).name == "piezotwin":
+        argv[0] = "piezotwin"  # the console script, not its install path
     return {
         "package": "piezotwin",
         "version": _version(),
