@@ -136,7 +136,7 @@ def _stage_cantilever_figures(ctx: Context) -> str:
         f = seg.meta["segment"].get("freq_hz")
         last = whole_periods(len(seg), seg.fs, f)  # the last whole period: a closed loop (0.1 Hz: the whole 10 s)
         ax.plot(seg.u[last], seg.y[last], lw=0.6)
-        ax.set_title(f"{f:g} Hz ({(last.stop - last.start) * f / seg.fs:.3g} periods)", fontsize=9)
+        ax.set_title(f"{f:g} Hz (last {(last.stop - last.start) * f / seg.fs:.3g} period)", fontsize=9)
         ax.tick_params(labelsize=7)
     for ax in np.ravel(axes)[n:]:
         ax.axis("off")
@@ -486,5 +486,5 @@ def run_main_job(report_dir: str | Path = "report", quick: bool = False, verbose
         rows.append({"stage": name, "status": status, "message": msg, "seconds": time.perf_counter() - t0})
         log.log(logging.WARNING if status == "failed" else logging.INFO, "[%7s] %s: %s", status, name, msg)
     path = _write_report(ctx, rows)
-    log.info("report -> %s (%.0f s)", path, time.perf_counter() - t_all)
+    log.info("main job finished in %.0f s", time.perf_counter() - t_all)
     return {"stages": rows, "report": str(path), "seconds": time.perf_counter() - t_all}
