@@ -10,13 +10,14 @@ from __future__ import annotations
 
 import json
 import re
+import shutil
 import subprocess
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-CHROMIUM = Path("/usr/bin/chromium")
+CHROMIUM = Path(shutil.which("chromium") or "/usr/bin/chromium")  # Debian package "chromium" (.ci/run installs it)
 pytestmark = pytest.mark.browser
 
 _PROBE = ("<script>window.addEventListener('load',function(){var out={h:document.documentElement.scrollHeight,"
