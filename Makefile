@@ -7,7 +7,7 @@ STAMP  := $(VENV)/.installed
 # on a 2-core machine (measured 9 ms vs <1 ms per 8x8 expm when both cores are busy).
 export OPENBLAS_NUM_THREADS ?= 1
 
-.PHONY: run run-quick test test-all bench fmus install clean floors
+.PHONY: run run-quick test test-all bench fmus docs install clean floors
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -40,6 +40,10 @@ bench: $(STAMP)
 fmus: $(STAMP)
 	$(VENV)/bin/piezotwin export-fmu cantilever -o fmus/cantilever.fmu
 	$(VENV)/bin/piezotwin export-fmu acoustic -o fmus/acoustic.fmu
+
+# Regenerate the CLI reference from the argument parser (tests/test_docs.py checks it is current).
+docs: $(STAMP)
+	$(PY) -m benchmarks.commands.clidoc -o docs/cli.md
 
 clean:
 	rm -rf $(VENV) report .pytest_cache .benchmarks

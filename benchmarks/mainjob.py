@@ -16,6 +16,7 @@ Budgets: the default run is sized for ≤ 10 minutes on 2 cores, ``--quick`` for
 from __future__ import annotations
 
 import html
+import logging
 import time
 import traceback
 from dataclasses import dataclass, field
@@ -27,6 +28,9 @@ import numpy as np
 
 class StageSkipped(Exception):
     """Raised by a stage whose prerequisites are not available; the message says why."""
+
+
+log = logging.getLogger(__name__)
 
 
 @dataclass
@@ -126,11 +130,13 @@ def _stage_cantilever_figures(ctx: Context) -> str:
     cols = 4
     rows = int(np.ceil(n / cols))
     fig, axes = plt.subplots(rows, cols, figsize=(11, 2.6 * rows))
+    from sysid.plots import whole_periods
+
     for ax, seg in zip(np.ravel(axes), segs):
         f = seg.meta["segment"].get("freq_hz")
-        half = len(seg) // 2 if len(seg) > 4 else 0  # last half: past the start-up transient
-        ax.plot(seg.u[half:], seg.y[half:], lw=0.6)
-        ax.set_title(f"{f:g} Hz", fontsize=9)
+        last = whole_periods(len(seg), seg.fs, f)  # the last whole period: a closed loop (0.1 Hz: the whole 10 s)
+        ax.plot(seg.u[last], seg.y[last], lw=0.6)
+        ax.set_title(f"{f:g} Hz (last {(last.stop - last.start) * f / seg.fs:.3g} period)", fontsize=9)
         ax.tick_params(labelsize=7)
     for ax in np.ravel(axes)[n:]:
         ax.axis("off")
@@ -150,8 +156,8 @@ def _stage_cantilever_figures(ctx: Context) -> str:
     ctx.save_figure(fig, "cantilever_multisine_spectra", "Cantilever twin: input and output spectra of the thesis multisine")
     widths = []
     for seg in segs[:2]:
-        half = len(seg) // 2
-        y, u = seg.y[half:], seg.u[half:]
+        last = whole_periods(len(seg), seg.fs, seg.meta["segment"].get("freq_hz"))
+        y, u = seg.y[last], seg.u[last]
         up = np.gradient(u) > 0
         grid = np.linspace(-0.5, 0.5, 21) * np.ptp(u)
         try:
@@ -305,13 +311,11 @@ def _residual_figure(ctx: Context) -> None:
     e = rec.y[skip:] - yhat[skip:]
     res = correlation_tests(e, rec.u[skip:], max_lag=20)
     plt = _plt()
+    from sysid.plots import draw_correlation_test
+
     fig, axes = plt.subplots(1, len(res["tests"]), figsize=(13, 2.8))
     for ax, t in zip(np.atleast_1d(axes), res["tests"]):
-        ax.stem(t["lags"], t["values"], basefmt=" ", markerfmt=".")
-        ax.axhline(t["band"], color="r", ls="--", lw=0.8)
-        ax.axhline(-t["band"], color="r", ls="--", lw=0.8)
-        ax.set_title(f"{t['name']} ({'pass' if t['passed'] else 'fail'})", fontsize=9)
-        ax.set_ylim(-1, 1)
+        draw_correlation_test(ax, t)  # y-axis scaled to the data, band shaded
     fig.suptitle(f"residual tests (95 % band): {r['identifier']} one-step residuals on the {r['dataset']} estimation data",
                  fontsize=10)
     fig.tight_layout()
@@ -431,8 +435,7 @@ STAGES: list[tuple[str, Callable[[Context], str]]] = [
 
 # ---------------------------------------------------------------------------------------------- report
 _CSS = ("body{font-family:sans-serif;max-width:1200px;margin:1em auto;padding:0 1em}"
-        "table{border-collapse:collapse;font-size:12px;margin:.5em 0}td,th{border:1px solid #bbb;padding:3px 6px}"
-        "th{background:#eee}figure{margin:1em 0}img{max-width:100%}.skipped{color:#888}.failed{color:#b00}")
+        "figure{margin:1em 0}.skipped{color:#888}.failed{color:#b00}")
 
 
 def _write_report(ctx: Context, rows: list[dict[str, Any]]) -> Path:
@@ -450,9 +453,16 @@ def _write_report(ctx: Context, rows: list[dict[str, Any]]) -> Path:
         body.append("<h2>Figures</h2>")
     for title, src in ctx.figures:
         body.append(f"<figure><img src='{html.escape(src)}' alt='{html.escape(title)}'><figcaption>{html.escape(title)}</figcaption></figure>")
+    from sysid.provenance import REPORT_CSS, collect, html_block
+
+    # the vendored lab data the lab stage reads; the twin datasets are generated in the run (their protocols
+    # and the commit above define them)
+    data_files = sorted((Path(__file__).parent / "data").glob("*/*.npz")) if any(
+        r["stage"] == "score lab benchmarks" and r["status"] == "done" for r in rows) else []
+    body.append(html_block(collect(files=data_files)))
     path = ctx.report_dir / "index.html"
     path.write_text("<!doctype html><html><head><meta charset='utf-8'><title>PiezoTwin report</title>"
-                    f"<style>{_CSS}</style></head><body>" + "\n".join(body) + "</body></html>")
+                    f"<style>{_CSS}{REPORT_CSS}</style></head><body>" + "\n".join(body) + "</body></html>")
     return path
 
 
@@ -474,9 +484,7 @@ def run_main_job(report_dir: str | Path = "report", quick: bool = False, verbose
             msg, status = f"failed: {type(exc).__name__}: {exc}", "failed"
             ctx.section(f"Stage '{name}' failed", f"<pre>{html.escape(traceback.format_exc())}</pre>")
         rows.append({"stage": name, "status": status, "message": msg, "seconds": time.perf_counter() - t0})
-        if verbose:
-            print(f"[{status:>7}] {name}: {msg}", flush=True)
+        log.log(logging.WARNING if status == "failed" else logging.INFO, "[%7s] %s: %s", status, name, msg)
     path = _write_report(ctx, rows)
-    if verbose:
-        print(f"report -> {path} ({time.perf_counter() - t_all:.0f} s)")
+    log.info("main job finished in %.0f s", time.perf_counter() - t_all)
     return {"stages": rows, "report": str(path), "seconds": time.perf_counter() - t_all}

@@ -32,7 +32,7 @@ from sysid.registry import get_identifier
 __all__ = ["cantilever_data", "cantilever_sines", "acoustic_data", "acoustic_osa_vs_sim", "ACOUSTIC_STRUCTURE", "ACOUSTIC_NK"]
 
 # The network of Table 4.1 / 4.3
-CANTILEVER_STRUCTURE = {"n_y": 10, "n_u": 10, "hidden": [25, 25, 25, 25], "activation": "relu"}
+CANTILEVER_STRUCTURE = {"ny": 10, "nu": 10, "hidden": [25, 25, 25, 25], "activation": "relu"}
 
 
 def cantilever_data(duration_s: float | None = None, freqs_hz: Sequence[float] | None = None, seed: int = 0,
@@ -78,7 +78,7 @@ def cantilever_sines(identifier: str = "narx-mlp", params: dict[str, Any] | None
 # one-step model, then 20 simulation-error epochs (windows of 100 steps, 8 per batch, lr 3e-4) fine-tune it.
 # lr 3e-4 was chosen among 1e-5 … 1e-3 on seeds 0-1; it is also the best of 1e-4/3e-4/1e-3 on the held-out
 # continuation of the multisine (validation="multisine"), i.e. without looking at the chirp.
-ACOUSTIC_STRUCTURE = {"n_y": 512, "n_u": 512, "hidden": [75, 75], "activation": "sigmoid"}
+ACOUSTIC_STRUCTURE = {"ny": 512, "nu": 512, "hidden": [75, 75], "activation": "sigmoid"}
 ACOUSTIC_OSA = {"epochs": 75}  # Table 5.3: 75 epochs, lr 1e-4, batch 128
 ACOUSTIC_SIM = {"pretrain_epochs": 75, "pretrain_lr": 1e-4, "pretrain_batch_size": 128, "epochs": 20, "lr": 3e-4,
                 "window": 100, "batch_size": 8}

@@ -62,7 +62,7 @@ SETTINGS: dict[str, dict[str, dict[str, Any]]] = {
     },
     # Neural (they normalise internally): the dissertation's 4 x 25 ReLU, lags 10, with epochs sized so that
     # each dataset costs seconds on 2 cores; small data get more epochs.
-    # Linear bypass (narx-mlp/-sim "linear", rnn "linear_order"): the least-squares ARX of the same lags, fixed,
+    # Linear bypass (narx-mlp/-sim "linear", rnn "linear"): the least-squares ARX of the same lags, fixed,
     # plus the network's correction. Turned on only for the pairs that did not beat the linear baseline without it
     # (the former exemptions), and there only where hold-out validation on the ESTIMATION data preferred it: fit on
     # the first 80 % of the estimation record, free-run RMSE on the last 20 % (quick data; cantilever: full data).
@@ -104,23 +104,23 @@ SETTINGS: dict[str, dict[str, dict[str, Any]]] = {
     # 2.86 on v80), lags 2 + tanh 2.08 / 2.27 robust -> the same setting. Checked on the test only afterwards,
     # seeds 0-4: 2.84 / 2.75 / 2.80 / 2.84 / 2.89 um vs ARX 3.58 (clean 2.84 / 2.74 / 2.80 / 2.84 / 2.88 vs 3.66).
     "narx-mlp": {
-        "*": {"n_y": 10, "n_u": 10, "hidden": [25, 25, 25, 25], "epochs": 10},
+        "*": {"ny": 10, "nu": 10, "hidden": [25, 25, 25, 25], "epochs": 10},
         "cascaded-tanks": {"epochs": 200, "linear": True},
-        "piezo-tue": {"n_y": 1, "n_u": 2, "hidden": [25, 25], "epochs": 20, "linear": True, "lr": 3e-5, "ensemble": 3},
+        "piezo-tue": {"ny": 1, "nu": 2, "hidden": [25, 25], "epochs": 20, "linear": True, "lr": 3e-5, "ensemble": 3},
         "wiener-hammerstein": {"linear": True},
-        "cantilever-thesis": {"n_y": 2, "n_u": 2, "activation": "tanh", "linear": True},
-        "cantilever-thesis-clean": {"n_y": 2, "n_u": 2, "activation": "tanh", "linear": True},
+        "cantilever-thesis": {"ny": 2, "nu": 2, "activation": "tanh", "linear": True},
+        "cantilever-thesis-clean": {"ny": 2, "nu": 2, "activation": "tanh", "linear": True},
     },
     "narx-mlp-sim": {
-        "*": {"n_y": 10, "n_u": 10, "hidden": [25, 25, 25, 25], "epochs": 2},
+        "*": {"ny": 10, "nu": 10, "hidden": [25, 25, 25, 25], "epochs": 2},
         "cascaded-tanks": {"epochs": 100},
-        "piezo-tue": {"n_y": 2, "n_u": 2, "hidden": [25, 25], "epochs": 5, "linear": True, "pretrain_epochs": 20,
+        "piezo-tue": {"ny": 2, "nu": 2, "hidden": [25, 25], "epochs": 5, "linear": True, "pretrain_epochs": 20,
                       "pretrain_lr": 3e-5, "lr": 1e-4},
         "wiener-hammerstein": {"epochs": 1},
         "bouc-wen": {"linear": True},
     },
-    "rnn": {"*": {}, "cascaded-tanks": {"linear_order": 4}, "piezo-tue": {"linear_order": 4},
-            "cantilever-thesis": {"linear_order": 4}, "cantilever-thesis-clean": {"linear_order": 4}},
+    "rnn": {"*": {}, "cascaded-tanks": {"linear": 4}, "piezo-tue": {"linear": 4},
+            "cantilever-thesis": {"linear": 4}, "cantilever-thesis-clean": {"linear": 4}},
 }
 # The acoustic channel delays the input by its time of flight (~76 µs = ~510 samples at 6.75 MHz, found by
 # cross-correlation of u and y): the polynomial and linear models take the input from nk = 505 samples back.
@@ -431,12 +431,9 @@ def _score(identifiers, datasets, quick, sysidentpy, progress, factory, log) -> 
     datasets = list(datasets)
     run.selection = {"identifiers": identifiers, "datasets": datasets}
     pairs = [(i, d) for d in datasets for i in identifiers]
-    try:
-        from tqdm import tqdm
+    from sysid.progress import progress as _bar
 
-        bar = tqdm(total=len(pairs), desc="score", disable=not progress, leave=False)
-    except ImportError:  # pragma: no cover
-        bar = None
+    bar = _bar(total=len(pairs), desc="score", show=progress)
     for dname in datasets:
         try:
             ds = prepare_dataset(load_dataset(dname, progress=progress), quick)
@@ -855,8 +852,10 @@ def write_report(run: ScoreRun, report_dir: str | Path) -> dict[str, Path]:
         paths["nrmse"] = out / "score_nrmse.png"
         fig.savefig(paths["nrmse"], dpi=90)
         plt.close(fig)
-    # measured vs free-run predictions: one figure per dataset (first test), first 1000 scored samples
+    # measured vs free-run predictions: one figure per dataset (first test), the whole scored record and a zoom
     if run.predictions and run.datasets:
+        from sysid.plots import plot_measured_vs_predicted
+
         for dname, ds in run.datasets.items():
             test = next(iter(ds.tests))
             rec = ds.tests[test]
@@ -864,20 +863,9 @@ def write_report(run: ScoreRun, report_dir: str | Path) -> dict[str, Path]:
             if not keys:
                 continue
             n0 = ds.init_samples
-            n1 = min(len(rec), n0 + 1000)
-            t = np.arange(n0, n1) / rec.fs
-            fig, ax = plt.subplots(figsize=(8, 3.2))
-            ax.plot(t, rec.y[n0:n1], "k", lw=1.2, label="measured")
-            for k in sorted(keys):
-                y = run.predictions[k][n0:n1]
-                ax.plot(t, y, lw=0.8, label=k[0])
-            ax.set_xlabel("time [s]")
-            ax.set_ylabel(f"y [{ds.units.get('y', '')}]")
-            ax.set_title(f"{dname} / {test}: free-run simulation")
-            ax.legend(fontsize=7, ncol=3)
-            fig.tight_layout()
-            p = out / f"freerun_{dname}_{test}.png"
-            fig.savefig(p, dpi=80)
-            plt.close(fig)
+            t = np.arange(n0, len(rec)) / rec.fs
+            preds = {k[0]: np.asarray(run.predictions[k])[n0:] for k in sorted(keys)}
+            p = plot_measured_vs_predicted(t, rec.y[n0:], preds, out / f"freerun_{dname}_{test}.png",
+                                           title=f"{dname} / {test}: free-run simulation", unit=ds.units.get("y", ""))
             paths[f"freerun_{dname}"] = p
     return paths

@@ -15,8 +15,10 @@
 
 from __future__ import annotations
 
+import functools
 import inspect
 import json
+import warnings
 from abc import ABC, abstractmethod
 from pathlib import Path
 from typing import Any, ClassVar, Sequence
@@ -79,6 +81,33 @@ class Identifier(ABC):
 
     name: ClassVar[str] = "identifier"
 
+    def __init_subclass__(cls, **kwargs: Any) -> None:
+        """Every identifier's constructor accepts the deprecated option names of :data:`sysid.config.ALIASES`."""
+        super().__init_subclass__(**kwargs)
+        if "__init__" not in cls.__dict__:
+            return
+        init = cls.__dict__["__init__"]
+
+        @functools.wraps(init)
+        def __init__(self, *args: Any, **kw: Any) -> None:
+            from sysid.config import resolve_aliases
+
+            if kw:
+                kw = resolve_aliases(kw, inspect.signature(init).parameters, f"{cls.name}")
+            init(self, *args, **kw)
+
+        cls.__init__ = __init__  # type: ignore[method-assign]
+
+    def __getattr__(self, name: str) -> Any:
+        """Deprecated option names (:data:`sysid.config.ALIASES`) still read, e.g. ``model.n_y``."""
+        from sysid.config import ALIASES
+
+        new = ALIASES.get(name)
+        if new is not None and not name.startswith("__") and new in type(self)._param_names():
+            warnings.warn(f"{self.name}: {name} is deprecated, use {new}", DeprecationWarning, stacklevel=2)
+            return getattr(self, new)
+        raise AttributeError(f"{type(self).__name__!r} object has no attribute {name!r}")
+
     # ------------------------------------------------------------------ configuration
     @classmethod
     def _param_names(cls) -> list[str]:
@@ -90,7 +119,10 @@ class Identifier(ABC):
         return {k: getattr(self, k) for k in self._param_names()}
 
     def set_params(self, **params: Any) -> "Identifier":
+        from sysid.config import resolve_aliases
+
         valid = self._param_names()
+        params = resolve_aliases(params, valid, self.name)
         for k, v in params.items():
             if k not in valid:
                 raise ConfigError(f"{self.name}: unknown option {k!r}; valid: {', '.join(valid)}")
@@ -108,6 +140,9 @@ class Identifier(ABC):
             for p in sig.parameters.values()
             if p.name != "self" and p.kind is p.POSITIONAL_OR_KEYWORD
         }
+        from sysid.config import resolve_aliases
+
+        assignments = resolve_aliases(assignments, defaults, f"{cls.name} --set")
         values = apply_assignments(defaults, assignments, what=f"{cls.name} option")
         return cls(**values)
 
@@ -170,6 +205,10 @@ def load_model(path: str | Path) -> Identifier:
     if missing:
         raise DataError(f"{path}: model file lacks {', '.join(missing)}")
     cls = get_identifier(payload["identifier"])
+    if isinstance(payload["params"], dict):  # files written before an option was renamed (sysid.config.ALIASES)
+        from sysid.config import resolve_aliases
+
+        payload["params"] = resolve_aliases(payload["params"], cls._param_names(), f"{path}")
     unknown = sorted(set(payload["params"]) - set(cls._param_names())) if isinstance(payload["params"], dict) else ["(not a dict)"]
     if unknown:
         raise DataError(f"{path}: model file has options {', '.join(unknown)} that {cls.name} does not take")

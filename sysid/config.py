@@ -8,11 +8,46 @@ and refused with the list of valid names.
 from __future__ import annotations
 
 import typing
+import warnings
 from typing import Any, Iterable, Mapping
 
 from sysid.errors import ConfigError
 
-__all__ = ["parse_assignments", "coerce", "apply_assignments", "positive", "make_rng"]
+__all__ = ["parse_assignments", "coerce", "apply_assignments", "positive", "make_rng", "ALIASES", "resolve_aliases"]
+
+# One vocabulary for identifier options (DESIGN.md): lags ``ny``, ``nu``, delay ``nk`` in every identifier that
+# has them, the linear bypass ``linear``. Older spellings stay accepted for one release, with a
+# DeprecationWarning: deprecated name -> current name. Applied to constructor keywords, ``set_params`` and
+# ``--set`` alike (sysid.base.Identifier), so a saved model with the old names still loads.
+ALIASES: dict[str, str] = {
+    "n_y": "ny",
+    "n_u": "nu",
+    "linear_order": "linear",  # rnn: order of the ARX bypass (narx-mlp: linear=true)
+}
+
+
+def resolve_aliases(params: Mapping[str, Any], valid: Iterable[str], owner: str = "option") -> dict[str, Any]:
+    """``params`` with deprecated names (:data:`ALIASES`) renamed to the current ones that ``valid`` holds.
+
+    A deprecated name is renamed only where the current name is a valid option and the old one is not; it
+    issues a :class:`DeprecationWarning`. Giving both spellings of one option is refused (ConfigError).
+    """
+    valid = set(valid)
+    out: dict[str, Any] = {}
+    renamed = []
+    for key, value in params.items():
+        new = ALIASES.get(key)
+        if new is not None and new in valid and key not in valid:
+            if new in params:
+                raise ConfigError(f"{owner}: {key!r} and {new!r} are the same option; give only {new!r}")
+            renamed.append((key, new))
+            key = new
+        out[key] = value
+    if renamed:
+        names = ", ".join(f"{old} -> {new}" for old, new in renamed)
+        warnings.warn(f"{owner}: deprecated option name(s) {names}; the old names will be removed in a later release",
+                      DeprecationWarning, stacklevel=3)
+    return out
 
 
 def parse_assignments(items: Iterable[str] | None, what: str = "--set") -> dict[str, str]:

@@ -4,6 +4,10 @@
 - :func:`plot_correlation_tests` — the five correlation tests of eq. 2-32 with their 95 % bands (Fig. 5.6);
 - :func:`plot_scatter` — measured vs predicted with the least-squares regression line and R² (Fig. 5.2);
 - :func:`plot_horizon_residuals` — residual at several prediction horizons (1, k, free run);
+- :func:`plot_measured_vs_predicted` — the whole record (every sample, or its min/max envelope) and a zoomed
+  panel, so a report never shows only the start of a record;
+- :func:`draw_correlation_test` — one test on given axes, y-axis scaled to the data, band shaded;
+- :func:`whole_periods` — the samples of the last whole period(s) of a sine, for hysteresis loops;
 - :func:`identification_report` — all of the above for a fitted model on a record.
 Each function returns the path it wrote.
 """
@@ -27,7 +31,15 @@ from sysid.errors import DivergenceWarning  # noqa: E402
 from sysid.residuals import correlation_tests, residual_spectrum  # noqa: E402
 
 __all__ = ["plot_residuals", "plot_correlation_tests", "plot_scatter", "plot_horizon_residuals",
-           "identification_report"]
+           "identification_report", "plot_measured_vs_predicted", "draw_correlation_test", "whole_periods",
+           "BAND_COLOR", "ZOOM_COLOR"]
+
+# Colours that mean one thing in every report (the browser test looks for them): the 95 % confidence band of
+# a correlation test, and the span of the whole record that the zoomed panel shows.
+BAND_COLOR = "#ffc04d"
+ZOOM_COLOR = "#c6dbf7"
+MEASURED_COLOR = "#000000"
+PREDICTED_COLORS = ("#d62728", "#2ca02c", "#9467bd", "#8c564b", "#e377c2", "#17becf", "#bcbd22", "#7f7f7f")
 
 
 def _save(fig, path) -> Path:
@@ -63,22 +75,115 @@ def plot_residuals(e: np.ndarray, fs: float, path, title: str = "one-step residu
     return _save(fig, path)
 
 
+def draw_correlation_test(ax, test: dict[str, Any], label: str = "") -> None:
+    """One correlation test of :func:`sysid.residuals.correlation_tests` on ``ax``.
+
+    The 95 % band ±z/√N is a shaded strip (:data:`BAND_COLOR`) with dashed edges; the y-axis is scaled to the
+    larger of the data and 1.5 × the band (never a fixed ±1, on which a band of ±0.01 is invisible); the
+    title says pass/fail and the band's value.
+    """
+    lags = np.asarray(test["lags"], float)
+    vals = np.asarray(test["values"], float)
+    band = float(np.atleast_1d(test["band"])[0])
+    finite = vals[np.isfinite(vals)]
+    lim = 1.15 * max(float(np.max(np.abs(finite))) if finite.size else 0.0, 1.5 * band, 1e-12)
+    lo, hi = (lags.min() - 1, lags.max() + 1) if lags.size else (-1, 1)
+    ax.fill_between([lo, hi], -band, band, color=BAND_COLOR, lw=0, zorder=0, label="95 % band")
+    ax.hlines([-band, band], lo, hi, colors="k", linestyles="--", lw=0.7, zorder=1)
+    ax.axhline(0, color="k", lw=0.5, zorder=1)
+    ax.vlines(lags, 0, vals, lw=1.2, color="tab:blue" if test["passed"] else "tab:red", zorder=2)
+    ax.plot(lags, vals, ".", ms=3, color="tab:blue" if test["passed"] else "tab:red", zorder=3)
+    ax.set_xlim(lo, hi)
+    ax.set_ylim(-lim, lim)
+    name = f"{test['name']} {label}".strip()
+    ax.set_title(f"{name}: {'pass' if test['passed'] else 'fail'} (band ±{band:.2g})", fontsize=9)
+    ax.set_xlabel("lag τ", fontsize=8)
+    ax.tick_params(labelsize=7)
+
+
 def plot_correlation_tests(result: dict[str, Any], path, title: str = "residual correlation tests") -> Path:
-    """Bar plots of φ(τ) for the five tests with the ±band (Figure 5.6 analogue); failing tests in red."""
+    """The five tests of eq. 2-32 (Figure 5.6 analogue), each on its own y-scale with the band visible."""
     tests = result["tests"]
-    fig, axes = plt.subplots(1, len(tests), figsize=(3.2 * len(tests), 3.0), sharey=True)
+    fig, axes = plt.subplots(1, len(tests), figsize=(3.2 * len(tests), 3.0))
     for ax, t in zip(np.atleast_1d(axes), tests):
-        lags = np.asarray(t["lags"])
-        vals = np.asarray(t["values"])
-        ax.bar(lags, vals, width=0.8, color="tab:blue" if t["passed"] else "tab:red")
-        ax.axhline(t["band"], color="k", ls="--", lw=0.8)
-        ax.axhline(-t["band"], color="k", ls="--", lw=0.8)
-        ax.axhline(0, color="k", lw=0.5)
-        ax.set(title=f"{t['name']} ({'pass' if t['passed'] else 'fail'})", xlabel="lag τ")
+        draw_correlation_test(ax, t)
     np.atleast_1d(axes)[0].set_ylabel("φ(τ)")
-    np.atleast_1d(axes)[0].set_ylim(-1, 1)
     fig.suptitle(f"{title}: band ±{result['band']:.3g} (95 %, N = {result['n']})", y=1.06)
     return _save(fig, path)
+
+
+def _envelope(t: np.ndarray, y: np.ndarray, max_points: int) -> tuple[np.ndarray, np.ndarray]:
+    """``(t, y)`` reduced to the min and max of each of ``max_points // 2`` bins, in time order: every
+    extreme of the record stays visible (plain subsampling would drop peaks)."""
+    n = y.size
+    if n <= max_points:
+        return t, y
+    bins = max_points // 2
+    edges = np.linspace(0, n, bins + 1).astype(int)
+    tt, yy = [], []
+    for a, b in zip(edges[:-1], edges[1:]):
+        seg = y[a:b]
+        if not np.isfinite(seg).any():
+            tt += [t[a], t[b - 1]]
+            yy += [np.nan, np.nan]
+            continue
+        i, j = int(np.nanargmin(seg)), int(np.nanargmax(seg))
+        for k in sorted((i, j)):
+            tt.append(t[a + k])
+            yy.append(seg[k])
+    return np.asarray(tt), np.asarray(yy)
+
+
+def plot_measured_vs_predicted(t: np.ndarray, y: np.ndarray, predictions: dict[str, np.ndarray], path,
+                               title: str = "measured vs predicted", unit: str = "", zoom_samples: int = 1000,
+                               zoom: tuple[int, int] | None = None, max_points: int = 20000) -> Path:
+    """Two panels: the whole record (every sample up to ``max_points``, beyond that the min/max envelope of
+    each bin) and a zoom of ``zoom_samples`` samples around the largest error of the first prediction (or the
+    sample range ``zoom``), shaded in :data:`ZOOM_COLOR` on the whole-record panel.
+
+    ``t`` [s], ``y`` and each prediction have the same length; non-finite predictions (a diverged free run)
+    are left as gaps.
+    """
+    t = np.asarray(t, float)
+    y = np.asarray(y, float).reshape(len(t), -1)[:, 0]
+    preds = {k: np.asarray(v, float).reshape(len(t), -1)[:, 0] for k, v in predictions.items()}
+    n = len(t)
+    if zoom is None:
+        w = max(2, min(int(zoom_samples), n))
+        first = next(iter(preds.values()), None)
+        err = np.abs(y - first) if first is not None else np.zeros(n)
+        err = np.where(np.isfinite(err), err, -1.0)
+        c = int(np.argmax(err)) if err.max() > 0 else n // 2
+        a = int(np.clip(c - w // 2, 0, n - w))
+        zoom = (a, a + w)
+    a, b = int(zoom[0]), int(zoom[1])
+    fig, ax = plt.subplots(2, 1, figsize=(10, 5.6), gridspec_kw={"height_ratios": [1.2, 1]})
+    if b - a < n:
+        ax[0].axvspan(t[a], t[b - 1], color=ZOOM_COLOR, lw=0, zorder=0, label="zoom below")
+    ax[0].plot(*_envelope(t, y, max_points), color=MEASURED_COLOR, lw=0.7, label="measured", zorder=2)
+    for (k, v), col in zip(preds.items(), PREDICTED_COLORS * 4):
+        ax[0].plot(*_envelope(t, v, max_points), color=col, lw=0.6, label=k, zorder=3)
+        ax[1].plot(t[a:b], v[a:b], color=col, lw=1.0, label=k, zorder=3)
+    ax[1].plot(t[a:b], y[a:b], color=MEASURED_COLOR, lw=1.4, label="measured", zorder=2)
+    ax[0].set_xlim(t[0], t[-1])
+    ax[1].set_xlim(t[a], t[b - 1])
+    ax[0].set_title(f"{title}: whole record, {n} samples", fontsize=10)
+    ax[1].set_title(f"zoom: samples {a}–{b - 1}" + (" (largest error of the first model)" if predictions else ""), fontsize=9)
+    for axis in ax:
+        axis.set_ylabel(f"y [{unit}]" if unit else "y")
+        axis.tick_params(labelsize=8)
+    ax[1].set_xlabel("time [s]")
+    ax[0].legend(fontsize=7, ncol=min(4, len(preds) + 2), loc="upper right")
+    fig.tight_layout()
+    return _save(fig, path)
+
+
+def whole_periods(n: int, fs: float, freq_hz: float, periods: int = 1) -> slice:
+    """The last ``periods`` whole periods of a sine of ``freq_hz`` in a segment of ``n`` samples at ``fs``
+    (the whole segment when it is shorter): a hysteresis loop drawn from it is closed, never half a cycle."""
+    per = int(round(fs / float(freq_hz))) if freq_hz and freq_hz > 0 else n
+    want = max(1, int(periods)) * max(per, 1)
+    return slice(max(0, n - want), n)
 
 
 def plot_scatter(y: np.ndarray, y_hat: np.ndarray, path, title: str = "measured vs predicted", unit: str = "") -> Path:

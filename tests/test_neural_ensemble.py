@@ -49,13 +49,13 @@ def _reference_predictions(model, members, val, horizon):
     out = yn.copy()
     if horizon is None:
         for t in range(lag, n):
-            out[t] = net(_regressor(out, un, t, model.n_y, model.n_u, model.nk)[None, :])[0]
+            out[t] = net(_regressor(out, un, t, model.ny, model.nu, model.nk)[None, :])[0]
     else:
         for t in range(lag, n):
             s = max(lag, t - horizon + 1)  # the prediction ŷ(t | t-horizon) starts from measurements before s
             work = yn.copy()
             for tt in range(s, t + 1):
-                work[tt] = net(_regressor(work, un, tt, model.n_y, model.n_u, model.nk)[None, :])[0]
+                work[tt] = net(_regressor(work, un, tt, model.ny, model.nu, model.nk)[None, :])[0]
             out[t] = work[t]
     y = model.normaliser_.inverse_y(out)
     y[:lag] = val.y.reshape(-1, 1)[:lag]

@@ -204,7 +204,7 @@ def test_rnn_linear_path_fixed_in_training_saved_and_loaded(plant, tmp_path):
         assert m2.linear_order == 3
         for h, p in preds.items():
             np.testing.assert_array_equal(m2.predict(val, h), p)
-    with pytest.raises(ConfigError, match="linear_order"):
+    with pytest.raises(ConfigError, match="linear"):
         RNNStateSpace(n_enc=4, linear_order=5)._check_params()
 
 

@@ -32,7 +32,7 @@ def test_parse_grid():
     spec = SweepSpec("narx-mlp", g, repeats=3, fixed={"epochs": "5"})
     assert spec.n_configs == 12
     a = spec.assignments({"lags": "3", "hidden": "25-25", "activation": "tanh"}, seed=7)
-    assert a == {"epochs": "5", "n_y": "3", "n_u": "3", "hidden": "25-25", "activation": "tanh", "seed": "7"}
+    assert a == {"epochs": "5", "ny": "3", "nu": "3", "hidden": "25-25", "activation": "tanh", "seed": "7"}
     for bad in ("nosuch=1", "lags=a", "hidden", "lags=5..2", ""):
         with pytest.raises(ConfigError):
             parse_grid(bad, "narx-mlp")

@@ -20,9 +20,12 @@ def register(sub) -> None:
 def run(args: argparse.Namespace) -> int:
     from benchmarks.mainjob import run_main_job
 
-    summary = run_main_job(report_dir=args.report, quick=args.quick, verbose=not args.json)
+    summary = run_main_job(report_dir=args.report, quick=args.quick, verbose=not (args.json or getattr(args, "quiet", False)))
     if args.json:
         from benchmarks.commands.common import emit_json
 
         emit_json(summary)
+    else:
+        failed = [s["stage"] for s in summary["stages"] if s["status"] == "failed"]
+        print(f"report -> {summary['report']}" + (f"  (failed stages: {', '.join(failed)})" if failed else ""))
     return 0 if all(s["status"] != "failed" for s in summary["stages"]) else 1

@@ -70,7 +70,8 @@ def run(args: argparse.Namespace) -> int:
             raise ConfigError("--from-runs goes with --update-baselines (and without --check)")
         return _floors_from_runs(args, bpath, baselines)
     quiet = args.json
-    res = scoring.score(idents, dsets, quick=args.quick, sysidentpy=not args.no_sysidentpy, progress=not quiet,
+    res = scoring.score(idents, dsets, quick=args.quick, sysidentpy=not args.no_sysidentpy,
+                        progress=not (quiet or getattr(args, "quiet", False)),
                         log=None if quiet else (lambda s: print(s, flush=True)))
     out = scoring._clean(res.to_dict())
     if args.check:

@@ -3,7 +3,7 @@
 Structure sweep with repeated runs (dissertation Tables 4.2, 5.4–5.6, Fig. 5.13) on Optuna; see
 :mod:`sysid.neural.search`. SPEC: ``KEY=V1,V2,...`` items separated by ``;`` — identifier options as for
 ``identify --set``; list values with dashes (``hidden=25-25,25-25-25-25``); integer ranges ``a..b``; ``lags``
-sets n_y and n_u together. Example::
+sets ny and nu together. Example::
 
     piezotwin search narx-mlp --est est.npz --val val.npz \\
         --grid "lags=5,10;hidden=25-25,25-25-25-25;activation=relu,tanh" --repeats 5 --set epochs=20
@@ -26,7 +26,7 @@ def register(sub) -> None:
                        formatter_class=argparse.RawDescriptionHelpFormatter,
                        epilog="SPEC: KEY=V1,V2,... items separated by ';'. Keys are the identifier's options (as for\n"
                               "identify --set); list values use dashes (hidden=25-25,25-25-25-25 is two choices);\n"
-                              "a..b is every integer from a to b; 'lags' sets n_y and n_u together (n_enc for rnn).\n"
+                              "a..b is every integer from a to b; 'lags' sets ny and nu together (n_enc for rnn).\n"
                               "Example: --grid 'lags=5,10;hidden=25-25,25-25-25-25;activation=relu,tanh'\n"
                               "Re-running the same command resumes the sweep stored in --storage/--study.")
     p.add_argument("identifier", help="identifier id (narx-mlp, narx-mlp-sim, rnn, narx-poly, ...)")
@@ -66,7 +66,7 @@ def run(args: argparse.Namespace) -> int:
     spec = SweepSpec(identifier=args.identifier, grid=parse_grid(args.grid, args.identifier), repeats=args.repeats,
                      seed=args.seed, fixed=parse_assignments(args.set_), sampler=args.sampler)
     summary = run_sweep(spec, est if len(est) > 1 else est[0], val, storage=args.storage, study=args.study,
-                        trials=args.trials, workers=args.workers, progress=not args.no_progress)
+                        trials=args.trials, workers=args.workers, progress=not (args.no_progress or getattr(args, "quiet", False)))
     url = storage_url(args.storage, args.study)
     summary.update({"identifier": args.identifier, "study": args.study, "storage": url, "sampler": args.sampler,
                     "repeats": args.repeats, "grid": spec.grid})

@@ -59,7 +59,9 @@ def sweep(twin, name: str, values: list[Any], protocol: str | None = None, ident
         twin.check_protocol(protocol)
     rows = []
     spectra = []
-    for v in values:
+    from sysid.progress import progress
+
+    for v in progress(values, desc=f"sweep {name}", unit="value"):
         tw = twin.with_params(**{name: v})
         row = {"value": v, **tw.sweep_metrics(protocol=protocol, identify=identify)}
         rows.append(row)

@@ -99,12 +99,9 @@ def generate_records(spec: TwinDatasetSpec, use_cache: bool = True, progress: bo
         tests = {t: read_record(folder / f"test_{t}.npz", require_y=True) for t in spec.tests}
         return est, tests, folder
     jobs = [("est", spec.est)] + [(f"test_{t}", v) for t, v in spec.tests.items()]
-    try:
-        from tqdm import tqdm
+    from sysid.progress import progress as _bar
 
-        it = tqdm(jobs, desc=f"generate {spec.name}", disable=not progress, leave=False)
-    except ImportError:  # pragma: no cover - tqdm is a dependency
-        it = jobs
+    it = _bar(jobs, desc=f"generate {spec.name}", show=progress)
     out: dict[str, Record] = {}
     for key, (protocol, options) in it:
         twin.check_protocol(protocol)

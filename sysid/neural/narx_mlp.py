@@ -1,7 +1,7 @@
 """Neural NARX: the dissertation's multilayer perceptron (§2.5, ch. 4 and 5.2) and its simulation-error variant.
 
 :class:`NARXMLP` (registry id ``narx-mlp``) is the model of Tables 4.1 and 5.3: a dense network (eq. 2-10) fed
-with the regressor of eq. 2-14 — ``n_y`` past outputs and ``n_u`` past inputs (lags 1 … 1024) — trained
+with the regressor of eq. 2-14 — ``ny`` past outputs and ``nu`` past inputs (lags 1 … 1024) — trained
 one-step-ahead (series-parallel) on the targets of eq. 2-15 with MSE loss (eq. 2-27) and RMSprop (eq.
 2-25/2-26), on data normalised to zero mean and unit variance. Defaults are Table 4.1: 4 hidden layers of
 25 ReLU units, lags 10, learning rate 1e-4, batches of 128 pairs, 100 epochs (Table 5.3 used 75).
@@ -35,6 +35,7 @@ from sysid.neural.core import (ACT_CODE, ACTIVATIONS, FlatMLP, LagData, RMSprop,
                                k_step_mlp, lag_matrix_np, least_squares_linear, merge_ensemble, mlp_forward_np, regressor_lag)
 from sysid.neural.device import configure_threads, select_device, train_dtype
 from sysid.neural.persist import TorchFileSave
+from sysid.progress import progress
 from sysid.record import Normaliser, Record
 
 __all__ = ["NARXMLP", "NARXMLPSim"]
@@ -98,12 +99,12 @@ class _NeuralNARXBase(TorchFileSave, Identifier):
 
     # ------------------------------------------------------------------ checks
     def _check_params(self, check_device: bool = True) -> None:
-        for key in ("n_y", "n_u"):
+        for key in ("ny", "nu"):
             v = getattr(self, key)
             if not isinstance(v, (int, np.integer)) or isinstance(v, bool) or not 0 <= v <= MAX_LAG:
                 raise ConfigError(f"{self.name}: {key}={v!r} must be an integer in [0, {MAX_LAG}]")
-        if self.n_y < 1:
-            raise ConfigError(f"{self.name}: n_y={self.n_y} must be at least 1 (a NARX model feeds back past outputs)")
+        if self.ny < 1:
+            raise ConfigError(f"{self.name}: ny={self.ny} must be at least 1 (a NARX model feeds back past outputs)")
         nk = self.nk
         if not isinstance(nk, (int, np.integer)) or isinstance(nk, bool) or not 0 <= nk <= 100_000:
             raise ConfigError(f"{self.name}: nk={nk!r} must be an integer in [0, 100000] (input delay in samples)")
@@ -147,7 +148,7 @@ class _NeuralNARXBase(TorchFileSave, Identifier):
         if self.select_tail:
             last = recs[-1]
             n_hold = int(round(self.select_tail * len(last)))
-            lag = regressor_lag(self.n_y, self.n_u, self.nk)
+            lag = regressor_lag(self.ny, self.nu, self.nk)
             cut = len(last) - n_hold
             if n_hold < 1 or cut - lag < max(1, int(getattr(self, "window", 1))) or cut < lag + 1:
                 raise DataError(f"{self.name}: select_tail={self.select_tail} leaves {cut} training / {n_hold} held-out "
@@ -164,9 +165,9 @@ class _NeuralNARXBase(TorchFileSave, Identifier):
         from sysid.metrics import r2
 
         (un, yn), = normalised_pairs([self._tail], self.normaliser_)
-        yh, div = free_run_mlp(net.weights_np(), list(net.sizes), ACT_CODE[self.activation], yn, un, self.n_y, self.n_u,
+        yh, div = free_run_mlp(net.weights_np(), list(net.sizes), ACT_CODE[self.activation], yn, un, self.ny, self.nu,
                                DIVERGENCE_BOUND, self.nk, self.linear)
-        lag = regressor_lag(self.n_y, self.n_u, self.nk)
+        lag = regressor_lag(self.ny, self.nu, self.nk)
         return -np.inf if div >= 0 or not np.isfinite(yh).all() else float(r2(yn, yh, lag))
 
     def member_seeds(self) -> list[int]:
@@ -176,7 +177,7 @@ class _NeuralNARXBase(TorchFileSave, Identifier):
         return [int(self.seed) * k + i for i in range(k)]
 
     def _fit(self, recs: list[Record]) -> "_NeuralNARXBase":
-        lag = regressor_lag(self.n_y, self.n_u, self.nk)
+        lag = regressor_lag(self.ny, self.nu, self.nk)
         nu, ny = check_channels(recs, lag, self.name)
         t0 = time.perf_counter()
         configure_threads()
@@ -184,8 +185,8 @@ class _NeuralNARXBase(TorchFileSave, Identifier):
         self.normaliser_ = fit_normaliser(recs)
         pairs = normalised_pairs(recs, self.normaliser_)
         dtype = train_dtype(getattr(self, "dtype", "float32"), self.name)
-        data_t = LagData(pairs, self.n_y, self.n_u, device, dtype=dtype, nk=self.nk)
-        lin = least_squares_linear(pairs, self.n_y, self.n_u, self.nk) if self.linear else None
+        data_t = LagData(pairs, self.ny, self.nu, device, dtype=dtype, nk=self.nk)
+        lin = least_squares_linear(pairs, self.ny, self.nu, self.nk) if self.linear else None
         members, histories, selections = [], [], []
         for seed in self.member_seeds():
             torch.manual_seed(seed)
@@ -242,7 +243,7 @@ class _NeuralNARXBase(TorchFileSave, Identifier):
         opt = RMSprop(net.flat, lr)
         M, B = data.n_rows, int(self.batch_size if batch_size is None else batch_size)
         dev = data.device
-        for ep in range(int(epochs)):
+        for ep in progress(range(int(epochs)), desc=f"{self.name} one-step", unit="epoch"):
             perm = torch.randperm(M, generator=gen).to(dev)
             losses: list[torch.Tensor] = []
             if data.X is not None:
@@ -289,7 +290,7 @@ class _NeuralNARXBase(TorchFileSave, Identifier):
         code = ACT_CODE[self.activation]
         self.diverged_at_ = None
         if horizon is None or horizon >= n - lag:
-            yhat, div = free_run_mlp(self.weights_, self.sizes_, code, yn, un, self.n_y, self.n_u, DIVERGENCE_BOUND, self.nk,
+            yhat, div = free_run_mlp(self.weights_, self.sizes_, code, yn, un, self.ny, self.nu, DIVERGENCE_BOUND, self.nk,
                                      self.linear)
             if div >= 0:
                 self.diverged_at_ = int(div)
@@ -297,12 +298,12 @@ class _NeuralNARXBase(TorchFileSave, Identifier):
                               DivergenceWarning, stacklevel=2)
         elif horizon == 1:
             times = np.arange(lag, n)
-            x = np.concatenate([lag_matrix_np(yn, self.n_y, times), lag_matrix_np(un, self.n_u, times, first=self.nk)], axis=1)
+            x = np.concatenate([lag_matrix_np(yn, self.ny, times), lag_matrix_np(un, self.nu, times, first=self.nk)], axis=1)
             yhat = yn.copy()
             with np.errstate(over="ignore", invalid="ignore"):
                 yhat[lag:] = mlp_forward_np(self.weights_, self.sizes_, code, x, self.linear)
         else:
-            yhat = k_step_mlp(self.weights_, self.sizes_, code, yn, un, self.n_y, self.n_u, int(horizon), DIVERGENCE_BOUND,
+            yhat = k_step_mlp(self.weights_, self.sizes_, code, yn, un, self.ny, self.nu, int(horizon), DIVERGENCE_BOUND,
                               self.nk, self.linear)
         if horizon is not None and not np.isfinite(yhat).all():
             bad = np.flatnonzero(~np.isfinite(yhat).all(axis=1))
@@ -320,7 +321,8 @@ class _NeuralNARXBase(TorchFileSave, Identifier):
         if hasattr(self, "weights_"):
             d.update({
                 "structure": {"inputs": self.sizes_[0], "hidden": list(self.hidden), "outputs": self.sizes_[-1],
-                              "activation": self.activation, "n_y": self.n_y, "n_u": self.n_u, "nk": self.nk,
+                              "activation": self.activation, "ny": self.ny, "nu": self.nu, "nk": self.nk,
+                              "n_y": self.ny, "n_u": self.nu,  # old key names, kept for readers of earlier output
                               "linear": bool(self.linear), "ensemble": int(getattr(self, "ensemble", 1))},
                 "terms": [],
                 "max_lag": self.max_lag_,
@@ -360,7 +362,7 @@ class _NeuralNARXBase(TorchFileSave, Identifier):
         if self.sizes_[1:-1] != [k * h for h in self.hidden]:
             raise DataError(f"{self.name}: saved layer sizes {self.sizes_} do not match hidden={self.hidden} with "
                             f"ensemble={k} (merged hidden widths are k × hidden)")
-        self.max_lag_ = regressor_lag(self.n_y, self.n_u, self.nk)
+        self.max_lag_ = regressor_lag(self.ny, self.nu, self.nk)
         self.n_parameters_ = self._real_n_parameters(self.sizes_[0], self.sizes_[-1])
         self.diverged_at_ = None
 
@@ -371,8 +373,9 @@ class NARXMLP(_NeuralNARXBase):
 
     Parameters
     ----------
-    n_y, n_u : int
-        Output and input lags (eq. 2-9/2-14), 0 … 1024 (n_y ≥ 1). Table 4.1: 10 and 10.
+    ny, nu : int
+        Output and input lags (eq. 2-9/2-14), 0 … 1024 (ny ≥ 1). Table 4.1: 10 and 10. The older names
+        ``n_y``, ``n_u`` are accepted as deprecated aliases (:data:`sysid.config.ALIASES`).
     hidden : list of int
         Hidden layer widths, e.g. ``[25, 25, 25, 25]`` (``--set hidden=25-25-25-25``).
     activation : str
@@ -385,9 +388,9 @@ class NARXMLP(_NeuralNARXBase):
     device : str
         ``auto`` (CUDA when present), ``cpu`` or ``cuda``.
     nk : int
-        Input delay in samples: the input regressors are u(t-nk) … u(t-nk-n_u+1). The dissertation's eq. 2-14
+        Input delay in samples: the input regressors are u(t-nk) … u(t-nk-nu+1). The dissertation's eq. 2-14
         is nk = 1 (default); a transmission channel with a time of flight of d samples wants nk ≈ d, so that
-        n_u covers the response instead of the dead time.
+        nu covers the response instead of the dead time.
     linear : bool
         Linear bypass: ŷ = L φ + MLP(φ) (φ the regressor of eq. 2-14), with L and the output bias started at the
         least-squares ARX of the same lags (L kept fixed in training) and the network's output layer at zero, so
@@ -413,15 +416,15 @@ class NARXMLP(_NeuralNARXBase):
 
     name = "narx-mlp"
 
-    def __init__(self, n_y: int = 10, n_u: int = 10, hidden: Sequence[int] = (25, 25, 25, 25), activation: str = "relu",
+    def __init__(self, ny: int = 10, nu: int = 10, hidden: Sequence[int] = (25, 25, 25, 25), activation: str = "relu",
                  lr: float = 1e-4, batch_size: int = 128, epochs: int = 100, seed: int = 0, device: str = "auto",
                  nk: int = 1, linear: bool = False, select_tail: float = 0.0, ensemble: int = 1, dtype: str = "float32"):
         self.dtype = dtype
         self.linear = linear
         self.select_tail = select_tail
         self.ensemble = ensemble
-        self.n_y = n_y
-        self.n_u = n_u
+        self.ny = ny
+        self.nu = nu
         self.nk = nk
         self.hidden = list(hidden) if isinstance(hidden, (list, tuple)) else hidden
         self.activation = activation
@@ -466,12 +469,12 @@ class NARXMLPSim(_NeuralNARXBase):
         Training precision ``float32`` (default) or ``float64``, as for :class:`NARXMLP`.
 
     Each epoch draws ``ceil(rows / window)`` window starts at random positions (so that on average every
-    sample is a target once per epoch); each window starts from the measured ``y(s-1) … y(s-n_y)``.
+    sample is a target once per epoch); each window starts from the measured ``y(s-1) … y(s-ny)``.
     """
 
     name = "narx-mlp-sim"
 
-    def __init__(self, n_y: int = 10, n_u: int = 10, hidden: Sequence[int] = (25, 25, 25, 25), activation: str = "relu",
+    def __init__(self, ny: int = 10, nu: int = 10, hidden: Sequence[int] = (25, 25, 25, 25), activation: str = "relu",
                  lr: float = 1e-3, batch_size: int = 32, epochs: int = 100, seed: int = 0, device: str = "auto",
                  window: int = 50, pretrain_epochs: int = 10, pretrain_lr: float = 1e-3, nk: int = 1,
                  select_tail: float = 0.0, pretrain_batch_size: int | None = None, linear: bool = False,
@@ -479,8 +482,8 @@ class NARXMLPSim(_NeuralNARXBase):
         self.dtype = dtype
         self.linear = linear
         self.ensemble = ensemble
-        self.n_y = n_y
-        self.n_u = n_u
+        self.ny = ny
+        self.nu = nu
         self.nk = nk
         self.hidden = list(hidden) if isinstance(hidden, (list, tuple)) else hidden
         self.activation = activation
@@ -524,7 +527,7 @@ class NARXMLPSim(_NeuralNARXBase):
         opt = RMSprop(net.flat, self.lr)
         B = int(self.batch_size)
         nyr, ch = data.n_yreg, data.ny_ch
-        for _ in range(int(self.epochs)):
+        for _ in progress(range(int(self.epochs)), desc=f"{self.name} simulation", unit="epoch"):
             pick = torch.randint(0, starts.size, (n_win,), generator=gen).to(dev)
             total = torch.zeros((), device=dev, dtype=data.dtype)
             for sel in pick.split(B):
@@ -532,7 +535,7 @@ class NARXMLPSim(_NeuralNARXBase):
                 rows = (s[:, None] + steps[None, :]).reshape(-1)
                 Xw = data.x(rows).view(s.shape[0], T, data.n_in)
                 target = data.Y[rows].view(s.shape[0], T, ch)
-                yreg = Xw[:, 0, :nyr]  # measured y(s-1) … y(s-n_y): the shooting node
+                yreg = Xw[:, 0, :nyr]  # measured y(s-1) … y(s-ny): the shooting node
                 preds = []
                 for j in range(T):
                     yh = net(torch.cat([yreg, Xw[:, j, nyr:]], dim=1))

@@ -6,7 +6,7 @@ Model (discrete time, normalised units)::
     h(t+1)  = GRU(u(t), h(t))            (or an LSTM cell; its cell state also comes from the encoder)
     ŷ(t+1)  = C h(t+1) + d  [+ ŷ_lin(t+1)]
 
-With ``linear_order`` = k > 0 a linear path is added: ŷ_lin is the free-run simulation of an ARX model of
+With ``linear`` = k > 0 a linear path is added: ŷ_lin is the free-run simulation of an ARX model of
 orders (k, k) with intercept, ŷ_lin(t) = Σ_i A_i ŷ_lin(t-i) + Σ_i B_i u(t-i) + c, started from the measured
 y(t0-1) … y(t0-k) of the encoder window. It is the least-squares ARX of the estimation data, kept fixed, and
 the readout (C, d) starts at zero, so training starts from the ARX model's simulation and the recurrent network
@@ -39,6 +39,7 @@ from sysid.errors import ConfigError, DataError, DivergenceWarning
 from sysid.neural.core import LagData, lag_matrix_np, least_squares_linear
 from sysid.neural.device import configure_threads, select_device, train_dtype
 from sysid.neural.persist import TorchFileSave
+from sysid.progress import progress
 from sysid.neural.narx_mlp import MAX_LAG, _as2d, check_channels, check_predict_input, fit_normaliser, normalised_pairs
 from sysid.record import Normaliser, Record
 
@@ -127,10 +128,11 @@ class RNNStateSpace(TorchFileSave, Identifier):
         Simulated window length T, windows per batch, epochs (each draws rows/T windows) and Adam step size.
     clip : float
         Gradient-norm clipping (0: off).
-    linear_order : int
+    linear : int
         Order k (0 … n_enc) of the linear ARX path added to the output, started at the least-squares ARX(k, k)
         with intercept and kept fixed in training (the recurrent network learns the residual of its simulation);
-        0 (default): no linear path.
+        0 (default): no linear path. The same option name as the NARX-MLP's bypass; the older name
+        ``linear_order`` is accepted as a deprecated alias (:data:`sysid.config.ALIASES`).
     seed, device, dtype :
         As for the NARX-MLP (``dtype``: training precision, ``float32`` or ``float64``).
     """
@@ -139,9 +141,9 @@ class RNNStateSpace(TorchFileSave, Identifier):
 
     def __init__(self, n_state: int = 32, n_enc: int = 20, enc_hidden: Sequence[int] = (64,), cell: str = "gru",
                  window: int = 100, batch_size: int = 32, epochs: int = 30, lr: float = 3e-3, clip: float = 1.0,
-                 seed: int = 0, device: str = "auto", linear_order: int = 0, dtype: str = "float32"):
+                 seed: int = 0, device: str = "auto", linear: int = 0, dtype: str = "float32"):
         self.dtype = dtype
-        self.linear_order = linear_order
+        self.linear = linear
         self.n_state = n_state
         self.n_enc = n_enc
         self.enc_hidden = list(enc_hidden) if isinstance(enc_hidden, (list, tuple)) else enc_hidden
@@ -166,7 +168,7 @@ class RNNStateSpace(TorchFileSave, Identifier):
         pos_int("window", 1, 100_000)
         pos_int("batch_size", 1, 1_000_000)
         pos_int("epochs", 0, 1_000_000)
-        pos_int("linear_order", 0, int(self.n_enc))
+        pos_int("linear", 0, int(self.n_enc))
         eh = self.enc_hidden
         if not isinstance(eh, (list, tuple)) or not all(isinstance(w, (int, np.integer)) and not isinstance(w, bool) and w >= 1 for w in eh):
             raise ConfigError(f"{self.name}: enc_hidden={eh!r} must be a list of widths, e.g. enc_hidden=64 or 64-64")
@@ -185,7 +187,7 @@ class RNNStateSpace(TorchFileSave, Identifier):
 
     def _build(self, nu: int, ny: int) -> _Net:
         return _Net(self.n_enc * (nu + ny), self.enc_hidden, int(self.n_state), nu, ny, self.cell,
-                    int(self.linear_order), int(self.n_enc))
+                    int(self.linear), int(self.n_enc))
 
     # ------------------------------------------------------------------ fit
     def fit(self, data: Record | Sequence[Record]) -> "RNNStateSpace":
@@ -206,12 +208,12 @@ class RNNStateSpace(TorchFileSave, Identifier):
         if starts.size == 0:
             raise DataError(f"{self.name}: no record has {T + self.n_enc} samples for one window; lower window or n_enc")
         net = self._build(nu, ny)
-        if self.linear_order:
+        if self.linear:
             # the ARX path is the least-squares ARX, kept fixed; the recurrent network learns the residual of its
             # simulation. Training it with Adam as well was measured worse (quick data, free-run RMSE: cascaded
             # tanks 2.1 V trained vs 0.65 V fixed; piezo 3.5 vs 1.09 um): Adam's steps of about lr per weight
             # move the poles of a finely sampled ARX that far.
-            net.init_linear(*least_squares_linear(pairs, int(self.linear_order), int(self.linear_order)))
+            net.init_linear(*least_squares_linear(pairs, int(self.linear), int(self.linear)))
             net.arx.requires_grad_(False)
         net = net.to(device=device, dtype=dtype)
         opt = torch.optim.Adam([p for p in net.parameters() if p.requires_grad], lr=float(self.lr))
@@ -219,7 +221,7 @@ class RNNStateSpace(TorchFileSave, Identifier):
         steps = torch.arange(T, device=device)
         n_win = max(1, math.ceil(data_t.n_rows / T))
         self.loss_history_ = []
-        for _ in range(int(self.epochs)):
+        for _ in progress(range(int(self.epochs)), desc=self.name, unit="epoch"):
             pick = torch.randint(0, starts.size, (n_win,), generator=gen).to(device)
             total = torch.zeros((), device=device, dtype=dtype)
             for sel in pick.split(int(self.batch_size)):
@@ -303,7 +305,8 @@ class RNNStateSpace(TorchFileSave, Identifier):
         d = super().describe()
         if hasattr(self, "state_dict_"):
             d.update({"structure": {"cell": self.cell, "n_state": self.n_state, "n_enc": self.n_enc,
-                                    "enc_hidden": list(self.enc_hidden), "linear_order": int(self.linear_order)},
+                                    "enc_hidden": list(self.enc_hidden), "linear": int(self.linear),
+                                    "linear_order": int(self.linear)},  # old key, kept for readers
                       "terms": [], "max_lag": self.max_lag_, "device": self.device_used_,
                       "final_loss": self.loss_history_[-1] if self.loss_history_ else None})
         return d

@@ -7,7 +7,7 @@ validation data. Per configuration it reports mean and SD of the four R² values
 Grid SPEC (``--grid``): ``KEY=V1,V2,...`` items separated by ``;``. Keys are constructor options of the
 identifier (``piezotwin identify`` ``--set`` names); a list value is written with dashes as in ``--set``
 (``hidden=25-25,25-25-25-25`` gives two choices); an integer range ``a..b`` expands to every integer from a
-to b; the key ``lags`` sets ``n_y`` and ``n_u`` together (``n_enc`` for ``rnn``). Example::
+to b; the key ``lags`` sets ``ny`` and ``nu`` together (``n_enc`` for ``rnn``). Example::
 
     lags=5,10;hidden=25-25,25-25-25-25;activation=relu,tanh
 
@@ -37,7 +37,7 @@ from typing import Any, Callable, Sequence
 
 import numpy as np
 
-from sysid.config import coerce
+from sysid.config import ALIASES, coerce, resolve_aliases
 from sysid.errors import ConfigError, DivergenceWarning
 from sysid.record import Record
 
@@ -73,6 +73,8 @@ def parse_grid(spec: str, identifier: str) -> dict[str, list[str]]:
             raise ConfigError(f"--grid: expected KEY=V1,V2,... got {item!r}")
         key, _, values = item.partition("=")
         key = key.strip()
+        if key not in valid and ALIASES.get(key) in defaults:  # deprecated spelling (n_y, n_u, linear_order)
+            key = next(iter(resolve_aliases({key: None}, defaults, "--grid")))
         if key not in valid:
             raise ConfigError(f"--grid: unknown option {key!r} of {identifier}; valid: {', '.join(valid)}")
         if key in grid:
@@ -108,11 +110,9 @@ def parse_grid(spec: str, identifier: str) -> dict[str, list[str]]:
 def _targets(key: str, identifier: str, defaults: dict[str, Any]) -> list[str]:
     if key != "lags":
         return [key]
-    if "n_enc" in defaults and "n_y" not in defaults:
+    if "n_enc" in defaults and "ny" not in defaults:
         return ["n_enc"]
-    if "n_y" in defaults:
-        return [k for k in ("n_y", "n_u") if k in defaults]
-    if "ny" in defaults:  # polynomial / linear identifiers spell them ny, nu
+    if "ny" in defaults:  # every identifier with lags spells them ny, nu (sysid.config.ALIASES)
         return [k for k in ("ny", "nu") if k in defaults]
     raise ConfigError(f"--grid: {identifier} has no lag options for 'lags'")
 
@@ -132,10 +132,11 @@ class SweepSpec:
         if not isinstance(self.repeats, int) or self.repeats < 1:
             raise ConfigError(f"--repeats must be a positive integer, got {self.repeats!r}")
         defaults = _identifier_defaults(self.identifier)
+        self.fixed = resolve_aliases(self.fixed, defaults, "--set")
         for k in self.fixed:
             if k not in defaults:
                 raise ConfigError(f"--set: unknown option {k!r} of {self.identifier}; valid: {', '.join(sorted(defaults))}")
-            if k in self.grid or (k in ("n_y", "n_u", "n_enc", "ny", "nu") and "lags" in self.grid):
+            if k in self.grid or (k in ("n_enc", "ny", "nu") and "lags" in self.grid):
                 raise ConfigError(f"--set {k} conflicts with the same option in --grid")
         if "seed" in self.grid:
             raise ConfigError("--grid: seed is set by --seed and --repeats, not swept")
@@ -378,7 +379,7 @@ def run_sweep(spec: SweepSpec, est: Record | Sequence[Record], val: Record | Seq
               study: str = "piezotwin-search", trials: int | None = None, workers: int = 1, progress: bool = True,
               ) -> dict[str, Any]:
     """Run (or resume) a sweep; returns :func:`summarise` of everything the study holds."""
-    from tqdm import tqdm
+    from sysid.progress import progress as progress_bar
 
     url = storage_url(storage, study)
     st = open_study(spec, url, study)
@@ -395,8 +396,8 @@ def run_sweep(spec: SweepSpec, est: Record | Sequence[Record], val: Record | Seq
     if spec.sampler != "grid":
         _requeue_failed(st, spec)  # grid sweeps rerun failed configurations by themselves
     done0 = len(_done_keys(st))
-    bar = tqdm(total=target, initial=min(done0, target), unit="config", desc=f"{spec.identifier} sweep",
-               disable=not progress, file=sys.stderr, dynamic_ncols=True)
+    bar = progress_bar(total=target, initial=min(done0, target), unit="config", desc=f"{spec.identifier} sweep",
+                       show=progress, leave=True)
     try:
         if workers <= 1:
             def tick() -> None:

@@ -53,6 +53,7 @@ from scipy import stats
 
 from sysid.errors import ConfigError, DataError
 from sysid.metrics import nrmse, r2
+from sysid.progress import progress
 from sysid.record import Record
 from twins.base import Twin, param_info
 from twins.calibration import calibrate as ls_calibrate
@@ -716,7 +717,7 @@ def _diagnose(twin: Twin, data: Record, val: Record | None = None, max_rounds: i
         moved = any(abs(float(getattr(prior.params, c)) - float(getattr(stage.twin.params, c)))
                     > 0.02 * max(abs(float(getattr(prior.params, c))), 1e-300) for c in cur_core)
         bases = [stage.twin] + ([prior_base] if moved else [])
-        for e in remaining:
+        for e in progress(remaining, desc=f"diagnose round {rnd + 1}", unit="effect"):
             best_tr = None
             for b in bases:
                 try:

@@ -84,18 +84,14 @@ def write_report(result: dict[str, Any], directory: str | Path) -> Path:
 
     t0 = base.analysis_val["_tests_full"]["tests"]
     t1 = ext.analysis_val["_tests_full"]["tests"]
-    fig, ax = plt.subplots(2, len(t0), figsize=(3.2 * len(t0), 5), sharey=True)
+    from sysid.plots import draw_correlation_test
+
+    fig, ax = plt.subplots(2, len(t0), figsize=(3.2 * len(t0), 5.4))
     for row, tests, lab in ((0, t0, "before"), (1, t1, "after")):
         for j, tt in enumerate(tests):
             vals = np.asarray(tt["values"], float)
-            lags = np.asarray(tt.get("lags", np.arange(vals.size) - (vals.size // 2 if vals.size % 2 else 0)))
-            a = ax[row, j]
-            a.vlines(lags, 0, vals, lw=1.0, color="C0" if tt["passed"] else "C3")
-            b = float(np.atleast_1d(tt["band"])[0])
-            a.axhline(b, color="k", ls="--", lw=0.7)
-            a.axhline(-b, color="k", ls="--", lw=0.7)
-            a.set_title(f"{tt['name']} {lab}", fontsize=9)
-            a.set_ylim(-1, 1)
+            lags = tt.get("lags", np.arange(vals.size) - (vals.size // 2 if vals.size % 2 else 0))
+            draw_correlation_test(ax[row, j], {**tt, "lags": lags}, lab)  # own y-scale, band shaded
     fig.tight_layout()
     fig.savefig(d / "correlation_tests.png", dpi=110)
     plt.close(fig)
@@ -122,13 +118,15 @@ def write_report(result: dict[str, Any], directory: str | Path) -> Path:
         plt.close(fig)
         files.append("hysteresis.png")
 
+    from sysid.provenance import REPORT_CSS, collect, html_block
+
     rows = "".join(
         f"<tr><td>{html.escape(c['effect'])}</td><td>{c['confidence']:.2f}</td><td>{html.escape(c['evidence'])}</td>"
         f"<td>{html.escape(json.dumps(c.get('params', {})))}</td></tr>" for c in result["causes"])
     def tests_txt(s):
         return ", ".join(f"{t['name']}: {'pass' if t['passed'] else 'fail ' + str(t['n_failing'])}" for t in s["tests"]["tests"])
     body = f"""<!doctype html><html><head><meta charset="utf-8"><title>diagnosis: {html.escape(result.get('twin', ''))}</title>
-<style>body{{font-family:sans-serif;max-width:1100px;margin:auto}}td,th{{border:1px solid #ccc;padding:4px;vertical-align:top}}table{{border-collapse:collapse}}</style></head><body>
+<style>body{{font-family:sans-serif;max-width:1100px;margin:auto}}{REPORT_CSS}</style></head><body>
 <h1>Discrepancy diagnosis — twin {html.escape(result.get('twin', ''))}</h1>
 <p>Verdict: <b>{result['verdict']}</b>. Validation NRMSE {result['baseline']['nrmse_val']:.4g} → {result['extended']['nrmse_val']:.4g}
 (ratio {result['gain']['nrmse_ratio']:.3f}), R² {result['baseline']['r2_val']:.5f} → {result['extended']['r2_val']:.5f}.</p>
@@ -137,6 +135,7 @@ def write_report(result: dict[str, Any], directory: str | Path) -> Path:
 <h2>Correlation tests (eq. 2-32), validation</h2><p>before: {html.escape(tests_txt(result['baseline']))}<br>after: {html.escape(tests_txt(result['extended']))}</p>
 <h2>Not explained</h2><p>{html.escape(result['unexplained']['description'])}</p>
 {''.join(f'<h2>{f[:-4]}</h2><img src="{f}" style="max-width:100%">' for f in files)}
+{html_block(collect(records=[r for r in (st.get("est"), val) if r is not None]))}
 </body></html>"""
     index = d / "index.html"
     index.write_text(body)
