@@ -23,6 +23,8 @@ COMMAND_MODULES = (
     "simulate",
     "calibrate",
     "identify",
+    "frf",
+    "bla",
     "search",
     "score",
     "diagnose",

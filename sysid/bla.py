@@ -83,7 +83,8 @@ def best_linear_approximation(realisations: Sequence[tuple[Any, Any]], fs: float
         Periods in each record; ``drop`` leading periods are left out as transient. ``periods - drop >= 2``
         is needed for the noise variance and the detection-line test.
     lines : array_like of int, optional
-        Excited lines (DFT indices of one period), the same for every realisation; default: found per
+        Excited lines (DFT indices of one period), one array for every realisation or a list of one array
+        per realisation; default: found per
         realisation from its input spectrum (``threshold_db`` below its strongest line). G_BLA is given at
         the lines excited in every realisation; each realisation's own non-excited lines serve as its
         detection lines (random detection lines may differ between realisations).
@@ -112,10 +113,13 @@ def best_linear_approximation(realisations: Sequence[tuple[Any, Any]], fs: float
     if lines is None:
         per = [excited_lines(m[0][0], threshold_db) for m in means]
     else:
-        kk = np.asarray(lines, dtype=np.int64).ravel()
-        if kk.size == 0 or kk.min() < 1 or kk.max() >= nl:
-            raise ConfigError(f"BLA: excited lines must lie in 1..{nl - 1}")
-        per = [kk] * len(means)
+        if isinstance(lines, (list, tuple)) and len(lines) == len(means) and all(np.ndim(x) == 1 for x in lines):
+            per = [np.asarray(x, dtype=np.int64) for x in lines]
+        else:
+            per = [np.asarray(lines, dtype=np.int64).ravel()] * len(means)
+        for kk in per:
+            if kk.size == 0 or kk.min() < 1 or kk.max() >= nl:
+                raise ConfigError(f"BLA: excited lines must lie in 1..{nl - 1}")
     k = per[0]
     for kj in per[1:]:
         k = np.intersect1d(k, kj)
