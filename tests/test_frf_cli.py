@@ -159,3 +159,15 @@ def test_wiener_hammerstein_bla_reaches_the_published_rmse():
     assert published == pytest.approx(44.4e-3)
     assert rmse < 1.10 * published  # measured 43.3 mV
     assert np.all(np.abs(tf.poles) < 1)
+
+
+def test_wiener_hammerstein_bla_identifier():
+    """The registered ``bla`` identifier (what ``score`` runs) does the same with its defaults."""
+    from benchmarks.datasets import load_dataset
+    from sysid.registry import get_identifier
+
+    ds = load_dataset("wiener-hammerstein")
+    model = get_identifier("bla")().fit(ds.est)
+    test = ds.tests["test"]
+    rmse = float(np.sqrt(np.mean((test.y - model.predict(test, horizon=None))[ds.init_samples:] ** 2)))
+    assert rmse < 1.10 * ds.references["test"]["linear_baseline"]["value"]  # measured 43.3 mV
