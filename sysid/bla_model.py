@@ -137,7 +137,9 @@ class BLAModel(Identifier):
         d = super().describe()
         if hasattr(self, "b_"):
             p = np.roots(self.a_)
-            d.update(terms=[f"b{i + 1}" for i in range(int(self.nb))] + [f"f{i + 1}" for i in range(int(self.nf))],
+            names = [f"b{i + 1}" for i in range(int(self.nb))] + [f"f{i + 1}" for i in range(int(self.nf))]
+            values = list(self.b_[int(self.nk):]) + list(self.a_[1:])
+            d.update(terms=names, parameters=[{"name": n, "value": float(v), "std": None} for n, v in zip(names, values)],
                      B=self.b_[int(self.nk):].tolist(), F=self.a_.tolist(), poles_abs=np.abs(p).tolist(),
                      fit=dict(self.fit_info_))
             if hasattr(self, "nonlinearity_"):

@@ -171,3 +171,17 @@ def test_wiener_hammerstein_bla_identifier():
     test = ds.tests["test"]
     rmse = float(np.sqrt(np.mean((test.y - model.predict(test, horizon=None))[ds.init_samples:] ** 2)))
     assert rmse < 1.10 * ds.references["test"]["linear_baseline"]["value"]  # measured 43.3 mV
+
+
+def test_bla_bad_input_exit_2(inputs, tmp_path, capsys):
+    (y,) = _simulate(inputs[:1], tmp_path, "b", ["--effects", "none"])
+    short = tmp_path / "short.npz"
+    rec = read_record(y)
+    from sysid.io import write_record
+
+    write_record(rec[: len(rec) // 3 * 2], short)
+    for args in (["bla", y, "--periods", 3, "--drop", 3], ["bla", y, short, "--periods", 3],
+                 ["bla", tmp_path / "missing.npz", "--periods", 3], ["bla", y, "--periods", 3, "--alpha", 2]):
+        code, _, err = _cli(args, capsys)
+        assert code == 2 and err.count("\n") == 1 and "Traceback" not in err
+    assert not list(tmp_path.glob(".*tmp*"))  # no temporary file left behind
