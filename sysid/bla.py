@@ -60,17 +60,17 @@ class BLA:
     info: dict[str, Any] = field(default_factory=dict)
 
 
-def _spectra(u: np.ndarray, y: np.ndarray, periods: int, drop: int):
+def _spectra(u: np.ndarray, y: np.ndarray, periods: int, drop: int, detrend: int):
     u = np.asarray(u, dtype=float)
     y = np.asarray(y, dtype=float)
     if u.ndim != 1 or y.ndim != 1 or u.size != y.size:
         raise DataError(f"BLA: 1-D u and y of equal length expected, got u{u.shape}, y{y.shape}")
-    return period_spectra(u, periods, drop), period_spectra(y, periods, drop)
+    return period_spectra(u, periods, drop, detrend), period_spectra(y, periods, drop, detrend)
 
 
 def best_linear_approximation(realisations: Sequence[tuple[Any, Any]], fs: float, periods: int, drop: int = 0,
                               lines: Any = None, threshold_db: float = EXCITATION_DB,
-                              alpha: float = 1e-3) -> BLA:
+                              alpha: float = 1e-3, detrend: int = 1) -> BLA:
     """Robust BLA of ``M = len(realisations)`` multisine experiments of ``periods`` periods each.
 
     Parameters
@@ -90,6 +90,9 @@ def best_linear_approximation(realisations: Sequence[tuple[Any, Any]], fs: float
         detection lines (random detection lines may differ between realisations).
     alpha : float
         False-alarm probability of the detection-line test.
+    detrend : int
+        Degree of the slow drift removed from u and y, fitted to the period means
+        (:func:`sysid.frf.period_spectra`); 0: none. A drift would otherwise raise every detection line.
 
     Returns
     -------
@@ -102,7 +105,7 @@ def best_linear_approximation(realisations: Sequence[tuple[Any, Any]], fs: float
         raise DataError("BLA: no realisation given")
     fs = float(fs)
     periods = int(periods)
-    specs = [_spectra(u, y, periods, drop) for u, y in realisations]
+    specs = [_spectra(u, y, periods, drop, detrend) for u, y in realisations]
     sizes = {S[0].shape[1] for S in specs}
     if len(sizes) != 1:
         raise DataError("BLA: the realisations have different period lengths")
@@ -153,7 +156,8 @@ def best_linear_approximation(realisations: Sequence[tuple[Any, Any]], fs: float
     return BLA(f_hz=k * fs / n0, G=G_bla, var_noise=var_noise, var_total=var_total, var_distortion=var_dist,
                lines=k, nonlinearity=verdict, detection=detection,
                info={"method": "robust BLA (Pintelon & Schoukens 2012, §3.7)", "realisations": M,
-                     "periods": periods, "periods_used": Pu, "drop": int(drop), "period_samples": int(n0),
+                     "periods": periods, "periods_used": Pu, "drop": int(drop), "detrend": int(detrend),
+                     "period_samples": int(n0),
                      "fs": fs, "resolution_hz": fs / n0})
 
 

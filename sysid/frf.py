@@ -129,11 +129,17 @@ def frf_welch(u: Any, y: Any, fs: float, window: str | tuple = "hann", nperseg: 
                      "segments": int(n_seg), "fs": fs})
 
 
-def period_spectra(x: Any, periods: int, drop: int = 0) -> np.ndarray:
+def period_spectra(x: Any, periods: int, drop: int = 0, detrend: int = 0) -> np.ndarray:
     """DFT of every period: array ``(P - drop, n0 // 2 + 1)`` of ``rfft`` of each period, scaled by ``1/n0``.
 
     ``x`` must hold exactly ``periods`` periods (its length divisible by ``periods``); the first ``drop``
     periods (transient) are left out.
+
+    ``detrend = d > 0`` removes a slow trend (drift, the tail of a transient) of polynomial degree
+    ``min(d, P' - 1)`` (``P'`` periods used) fitted to the *means of the periods* at the period centres: a
+    periodic steady state has the same mean in every period, so only what differs between periods is removed
+    and the periodic part is left untouched. Without it a drift — identical in every period after the
+    period average, as a ramp is — would show at every line, detection lines included.
     """
     x = np.asarray(x, dtype=float)
     periods = int(periods)
@@ -149,6 +155,11 @@ def period_spectra(x: Any, periods: int, drop: int = 0) -> np.ndarray:
         raise ConfigError(f"drop (transient periods) must lie in 0..{periods - 1}, got {drop}")
     n0 = x.size // periods
     frames = x.reshape(periods, n0)[drop:]
+    deg = min(int(detrend), frames.shape[0] - 1)
+    if deg > 0:
+        t = np.arange(frames.size, dtype=float).reshape(frames.shape) / n0  # time in periods
+        coef = np.polyfit(np.arange(frames.shape[0]) + 0.5 - 0.5 / n0, frames.mean(axis=1), deg)
+        frames = frames - np.polyval(coef, t)
     return np.fft.rfft(frames, axis=1) / n0
 
 
@@ -175,7 +186,7 @@ def _mean_and_var(X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def frf_periodic(u: Any, y: Any, fs: float, periods: int, drop: int = 0, lines: Any = None,
-                 threshold_db: float = EXCITATION_DB) -> FRF:
+                 threshold_db: float = EXCITATION_DB, detrend: int = 1) -> FRF:
     """FRF of a periodic record (multisine) of ``periods`` periods, averaged per line over the periods.
 
     With :math:`U^{[p]}(k), Y^{[p]}(k)` the DFT of period ``p`` (``p = drop+1 .. P``, ``P' = P - drop`` used)
@@ -205,6 +216,8 @@ def frf_periodic(u: Any, y: Any, fs: float, periods: int, drop: int = 0, lines: 
     lines : array_like of int, optional
         Excited line indices (e.g. ``info['excited_bins']`` of :func:`sysid.signals.multisine`); default:
         every line whose input amplitude is within ``threshold_db`` dB of the largest.
+    detrend : int
+        Degree of the drift removed from u and y before the analysis (:func:`period_spectra`); 0: none.
 
     Returns
     -------
@@ -214,8 +227,8 @@ def frf_periodic(u: Any, y: Any, fs: float, periods: int, drop: int = 0, lines: 
     """
     u, y = _siso(u, y)
     fs = float(fs)
-    U = period_spectra(u, periods, drop)
-    Y = period_spectra(y, periods, drop)
+    U = period_spectra(u, periods, drop, detrend)
+    Y = period_spectra(y, periods, drop, detrend)
     n0 = u.size // int(periods)
     Um, vU = _mean_and_var(U)
     Ym, vY = _mean_and_var(Y)
@@ -237,5 +250,6 @@ def frf_periodic(u: Any, y: Any, fs: float, periods: int, drop: int = 0, lines: 
     var_G = np.abs(G) ** 2 * np.maximum(rel, 0.0)
     return FRF(f_hz=k * fs / n0, G=G, std=np.sqrt(var_G), lines=k,
                info={"method": "periodic (per-line average over periods)", "period_samples": n0,
-                     "periods": int(periods), "periods_used": int(Pu), "drop": int(drop), "fs": fs,
+                     "periods": int(periods), "periods_used": int(Pu), "drop": int(drop), "detrend": int(detrend),
+                     "fs": fs,
                      "var_Y": vY[k], "var_U": vU[k]})

@@ -84,6 +84,18 @@ def test_periodic_std_matches_noise_closed_form():
     assert np.sqrt(np.mean(err ** 2)) == pytest.approx(predicted, rel=0.25)
 
 
+def test_period_drift_removal_keeps_the_periodic_part():
+    from sysid.frf import period_spectra
+
+    u = multisine(FS, resolution=2.0, band=(2, 300), periods=4, seed=6)
+    ramp = 0.3 + 0.01 * np.arange(u.size) / FS
+    X = period_spectra(u + ramp, 4, drop=1, detrend=1)
+    X0 = period_spectra(u, 4, drop=1)
+    assert np.allclose(X[:, 1:], X0[:, 1:], atol=1e-12)  # the ramp is gone at every line but DC
+    assert np.allclose(period_spectra(u, 4, detrend=2), period_spectra(u, 4), atol=1e-12)
+    assert not np.allclose(period_spectra(u + ramp, 4, drop=1)[:, 1:], X0[:, 1:], atol=1e-6)
+
+
 def test_periodic_refuses_a_record_that_is_not_whole_periods():
     u = np.zeros(1001)
     u[::10] = 1

@@ -110,6 +110,9 @@ def test_frf_bad_periods_exit_2(inputs, tmp_path, capsys):
     ("linear", ["--effects", "measurement_noise", *LINEAR], "linear"),
     ("hysteresis", ["--effects", "measurement_noise"], "odd"),  # Bouc–Wen: odd-symmetric loop
     ("asymmetric", ["--effects", "measurement_noise,asymmetric_hysteresis"], "odd+even"),
+    ("drift", ["--effects", "measurement_noise,thermal_drift", *LINEAR], "linear"),  # drift removed (--detrend 1)
+    ("saturation", ["--effects", "measurement_noise,saturation", *LINEAR, "--set", "sat_voltage_v=60"],
+     "odd"),  # odd-symmetric compression of the amplifier, hysteresis off
 ])
 def test_bla_detects_the_cantilever_nonlinearity(inputs, tmp_path, capsys, tag, twin_args, verdict):
     """Done when: 'linear' on a linear configuration, odd distortion with the hysteresis, even distortion as
@@ -126,7 +129,10 @@ def test_bla_detects_the_cantilever_nonlinearity(inputs, tmp_path, capsys, tag, 
         assert nl["odd_db"] > 30  # measured 56 dB (Bouc-Wen at 80 V against 5 nm noise)
     if "even" in verdict:
         assert nl["even_db"] > 20  # measured 45 dB
-    if verdict == "linear":  # and G_BLA is the exact linear FRF within the noise
+    if verdict == "linear" and tag == "drift":  # without the drift removal the drift looks like distortion
+        code, out, _ = _cli(["bla", *ys, "--periods", PERIODS, "--drop", 1, "--detrend", 0, "--json"], capsys)
+        assert json.loads(out)["nonlinearity"]["verdict"] != "linear"
+    elif verdict == "linear":  # and G_BLA is the exact linear FRF within the noise
         G = np.array(res["re"]) + 1j * np.array(res["im"])
         exact = CantileverTwin(effects=[]).with_params(hysteresis="prandtl-ishlinskii", pi_p0_fraction=1.0
                                                        ).sampled_frequency_response(np.array(res["f_hz"]), 1e4)

@@ -29,6 +29,9 @@ def register(sub) -> None:
     p.add_argument("files", nargs="+", metavar="FILE", help="one record per multisine realisation (u and y)")
     p.add_argument("--periods", type=int, required=True, metavar="P", help="periods in each record")
     p.add_argument("--drop", type=int, default=0, metavar="K", help="leave out the first K (transient) periods")
+    p.add_argument("--detrend", type=int, default=1, metavar="ORDER",
+                   help="periodic: remove a drift of this polynomial degree fitted to the period means (0: none;"
+                        " default 1)")
     p.add_argument("--alpha", type=float, default=1e-3,
                    help="false-alarm probability of the detection-line test (default 1e-3)")
     add_data_args(p)
@@ -38,12 +41,14 @@ def register(sub) -> None:
     p.set_defaults(func=run)
 
 
-def estimate(records, periods: int, drop: int = 0, alpha: float = 1e-3):
+def estimate(records, periods: int, drop: int = 0, alpha: float = 1e-3, detrend: int = 1):
     """The BLA of the records (one per realisation) the way the command computes it."""
     from sysid.bla import best_linear_approximation
 
     if periods < 1:
         raise ConfigError(f"--periods must be >= 1, got {periods}")
+    if detrend < 0:
+        raise ConfigError(f"--detrend must be >= 0, got {detrend}")
     if not 0.0 < alpha < 0.5:
         raise ConfigError(f"--alpha must lie in (0, 0.5), got {alpha}")
     fs = records[0].fs
@@ -60,7 +65,8 @@ def estimate(records, periods: int, drop: int = 0, alpha: float = 1e-3):
         found = [excited_from_meta(r, len(r) // periods) for r in records]
         if all(x is not None for x in found):
             lines = found
-    return best_linear_approximation([(r.u, r.y) for r in records], fs, periods, drop=drop, lines=lines, alpha=alpha)
+    return best_linear_approximation([(r.u, r.y) for r in records], fs, periods, drop=drop, lines=lines, alpha=alpha,
+                                     detrend=detrend)
 
 
 def to_json(res) -> dict[str, Any]:
@@ -88,7 +94,7 @@ def sentence(nl: dict[str, Any]) -> str:
 
 def run(args: argparse.Namespace) -> int:
     records = [read_data(args, f) for f in args.files]
-    res = estimate(records, args.periods, args.drop, args.alpha)
+    res = estimate(records, args.periods, args.drop, args.alpha, args.detrend)
     payload = to_json(res)
     if args.output:
         write_csv({k: payload[k] for k in ("f_hz", "re", "im", "var_noise", "var_distortion", "var_total")},

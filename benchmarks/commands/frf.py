@@ -32,6 +32,9 @@ def register(sub) -> None:
                    "(multisine): average per line over the periods, std of G from their spread (P >= 2)")
     p.add_argument("--drop", type=int, default=0, metavar="K",
                    help="periodic: leave out the first K periods (transient); default 0")
+    p.add_argument("--detrend", type=int, default=1, metavar="ORDER",
+                   help="periodic: remove a drift of this polynomial degree fitted to the period means (0: none;"
+                        " default 1)")
     p.add_argument("--window", default="hann", help="H1: window of the Welch segments (scipy name; default hann)")
     p.add_argument("--nperseg", type=int, help="H1: segment length in samples (default min(N, 1024))")
     p.add_argument("--noverlap", type=int, help="H1: overlap in samples (default nperseg/2)")
@@ -52,7 +55,7 @@ def excited_from_meta(rec: Record, n0: int) -> np.ndarray | None:
 
 
 def estimate(rec: Record, periods: int | None = None, drop: int = 0, window: str = "hann",
-             nperseg: int | None = None, noverlap: int | None = None):
+             nperseg: int | None = None, noverlap: int | None = None, detrend: int = 1):
     """The FRF of a record the way the command computes it (H1, or periodic with ``periods``)."""
     from sysid.frf import frf_periodic, frf_welch
 
@@ -66,7 +69,9 @@ def estimate(rec: Record, periods: int | None = None, drop: int = 0, window: str
     if periods < 1:
         raise ConfigError(f"--periods must be >= 1, got {periods}")
     lines = excited_from_meta(rec, len(rec) // periods) if len(rec) % periods == 0 else None
-    return frf_periodic(rec.u, rec.y, rec.fs, periods, drop=drop, lines=lines)
+    if detrend < 0:
+        raise ConfigError(f"--detrend must be >= 0, got {detrend}")
+    return frf_periodic(rec.u, rec.y, rec.fs, periods, drop=drop, lines=lines, detrend=detrend)
 
 
 def to_json(frf) -> dict[str, Any]:
@@ -96,7 +101,7 @@ def write_csv(columns: dict[str, Any], path: str) -> None:
 
 def run(args: argparse.Namespace) -> int:
     rec = read_data(args, args.file)
-    frf = estimate(rec, args.periods, args.drop, args.window, args.nperseg, args.noverlap)
+    frf = estimate(rec, args.periods, args.drop, args.window, args.nperseg, args.noverlap, args.detrend)
     payload = to_json(frf)
     if args.output:
         cols = {k: payload[k] for k in ("f_hz", "re", "im", "mag_db", "phase_deg")}
