@@ -43,6 +43,11 @@ class BLAModel(Identifier):
     drop : int
         Periodic data: leading periods left out (transient).
 
+    The parameter standard deviations (``describe()['parameters']``) come from the FRF variances by the
+    sandwich formula of :func:`sysid.tfest.tfest`: ``var_total`` of the BLA (noise + nonlinear distortion)
+    with two or more multisine realisations, the noise variance with one, and the coherence-based variance of
+    H1 (approximate: neighbouring Welch bins are correlated) for arbitrary excitation.
+
     Attributes
     ----------
     b_, a_ : ndarray
@@ -80,7 +85,7 @@ class BLAModel(Identifier):
         y_all = np.concatenate([r.y for r in recs])
         self.u_mean_, self.y_mean_ = float(u_all.mean()), float(y_all.mean())
         if periods == 0:
-            f, G, W = self._welch(recs, fs)
+            f, G, W, var = self._welch(recs, fs)
         else:
             from sysid.bla import best_linear_approximation
             from sysid.frf import period_spectra
@@ -90,7 +95,8 @@ class BLAModel(Identifier):
             W = np.mean([np.abs(period_spectra(r.u, periods, int(self.drop)).mean(axis=0)[res.lines]) ** 2
                          for r in recs], axis=0)
             self.nonlinearity_ = res.nonlinearity
-        tf = tfest(f, G, fs, nb=nb, na=nf, nk=nk, weight=W)
+            var = res.var_total if len(recs) >= 2 else res.var_noise
+        tf = tfest(f, G, fs, nb=nb, na=nf, nk=nk, weight=W, var=var)
         self.b_, self.a_, self.fs_ = tf.b, tf.a, float(fs)
         self.fit_info_ = tf.info
         self.max_lag_ = 0
@@ -103,22 +109,29 @@ class BLAModel(Identifier):
         nper = int(self.nperseg)
         if nper < 8:
             raise ConfigError(f"bla: nperseg must be >= 8, got {nper}")
-        s_uu = s_uy = 0.0
-        used = 0
+        s_uu = s_uy = s_yy = 0.0
+        used = segments = 0
         for r in recs:
             if len(r) < nper:
                 continue
             kw = dict(fs=fs, nperseg=nper, noverlap=nper // 2)
             f, puu = scipy.signal.welch(r.u - self.u_mean_, **kw)
             _, puy = scipy.signal.csd(r.u - self.u_mean_, r.y - self.y_mean_, **kw)
+            _, pyy = scipy.signal.welch(r.y - self.y_mean_, **kw)
             s_uu = s_uu + len(r) * puu
             s_uy = s_uy + len(r) * puy
+            s_yy = s_yy + len(r) * pyy
+            segments += 1 + (len(r) - nper) // (nper - nper // 2)
             used += 1
         if not used:
             raise DataError(f"bla: every estimation record is shorter than nperseg={nper}; lower nperseg")
         with np.errstate(divide="ignore", invalid="ignore"):
             G = s_uy / s_uu
-        return f, G, s_uu
+            coh = np.clip(np.abs(s_uy) ** 2 / (s_uu * s_yy), 1e-12, 1.0)
+            # variance of the complex H1 estimate (Bendat & Piersol eq. 9.90 for |G| and the phase, each
+            # (1 - γ²)/(2 n_d γ²)); overlapping segments are not independent: approximate (optimistic)
+            var = np.abs(G) ** 2 * (1.0 - coh) / (segments * coh)
+        return f, G, s_uu, var
 
     def _check_fitted(self) -> None:
         if not hasattr(self, "b_"):
@@ -139,9 +152,15 @@ class BLAModel(Identifier):
             p = np.roots(self.a_)
             names = [f"b{i + 1}" for i in range(int(self.nb))] + [f"f{i + 1}" for i in range(int(self.nf))]
             values = list(self.b_[int(self.nk):]) + list(self.a_[1:])
-            d.update(terms=names, parameters=[{"name": n, "value": float(v), "std": None} for n, v in zip(names, values)],
+            info = getattr(self, "fit_info_", {})
+            if "std_b" in info:
+                stds = [float(x) for x in info["std_b"]] + [float(x) for x in info["std_a"]]
+            else:
+                stds = [None] * len(names)
+            d.update(terms=names, parameters=[{"name": n, "value": float(v), "std": sd}
+                                              for n, v, sd in zip(names, values, stds)],
                      B=self.b_[int(self.nk):].tolist(), F=self.a_.tolist(), poles_abs=np.abs(p).tolist(),
-                     fit=dict(self.fit_info_))
+                     fit={k: v for k, v in self.fit_info_.items() if k not in ("cov", "std_a", "std_b")})
             if hasattr(self, "nonlinearity_"):
                 d["nonlinearity"] = self.nonlinearity_
         return d

@@ -85,7 +85,7 @@ def _stabilise(a: np.ndarray) -> tuple[np.ndarray, int]:
 
 
 def tfest(f_hz: Any, G: Any, fs: float, nb: int, na: int, nk: int = 0, weight: Any = None,
-          iterations: int = 20, refine: bool = True) -> TransferFunction:
+          iterations: int = 20, refine: bool = True, var: Any = None) -> TransferFunction:
     """Fit ``B(z)/A(z)`` (``nb`` numerator coefficients after ``nk`` delays, ``na`` poles) to FRF data.
 
     Parameters
@@ -102,6 +102,13 @@ def tfest(f_hz: Any, G: Any, fs: float, nb: int, na: int, nk: int = 0, weight: A
         Sanathanan–Koerner iterations after Levy's start.
     refine : bool
         Minimise the weighted nonlinear criterion with :func:`scipy.optimize.least_squares` afterwards.
+    var : array_like, optional
+        Variance of each (complex, circular) FRF value, e.g. ``var_total`` of a BLA or ``std**2`` of a
+        periodic FRF, assumed independent between the points. Gives the covariance of the parameters by the
+        sandwich formula :math:`H^{-1} J^T \\Sigma J H^{-1}` (:math:`J` the Jacobian of the weighted residuals,
+        :math:`H = J^TJ`, :math:`\\Sigma = \\mathrm{diag}(W_k\\sigma^2_k/2)` for the real and imaginary parts;
+        Pintelon & Schoukens 2012, §7.2): ``info['cov']`` ordered ``a_1..a_na, b_0..b_{nb-1}`` and
+        ``info['std_a']``, ``info['std_b']``; not given (None) when unstable poles had to be reflected.
 
     Returns
     -------
@@ -156,6 +163,19 @@ def tfest(f_hz: Any, G: Any, fs: float, nb: int, na: int, nk: int = 0, weight: A
                                            xtol=1e-12, ftol=1e-12, max_nfev=200 * (theta.size + 1))
         if np.all(np.isfinite(sol.x)) and np.sum(sol.fun ** 2) <= np.sum(residual(theta) ** 2):
             theta = sol.x
+    cov = None
+    if var is not None:
+        v = np.asarray(var, dtype=float).ravel()
+        if v.size != ok.size:
+            raise DataError(f"tfest: {v.size} variances for {ok.size} frequencies")
+        v = v[ok]
+        A, B = evalAB(theta)
+        dM = np.hstack([-(B / A ** 2)[:, None] * Za, Zb / A[:, None]])  # dM/da_i, dM/db_i
+        J = -sw[:, None] * dM
+        J = np.vstack([J.real, J.imag])
+        sig = np.concatenate([sw ** 2 * v / 2.0] * 2)
+        Hinv = np.linalg.pinv(J.T @ J)
+        cov = Hinv @ (J.T * sig) @ J @ Hinv
     a_poly = np.concatenate([[1.0], theta[:na]])
     a_poly, n_reflected = _stabilise(a_poly)
     b_coef = theta[na:]
@@ -165,7 +185,11 @@ def tfest(f_hz: Any, G: Any, fs: float, nb: int, na: int, nk: int = 0, weight: A
     b_poly = np.concatenate([np.zeros(nk), b_coef])
     _, h = scipy.signal.freqz(b_poly, a_poly, worN=f, fs=fs)
     cost = float(np.sum(w * np.abs(G - h) ** 2) / np.sum(w))
+    info_cov: dict[str, Any] = {}
+    if cov is not None and not n_reflected:
+        sd = np.sqrt(np.maximum(np.diag(cov), 0.0))
+        info_cov = {"cov": cov, "std_a": sd[:na], "std_b": sd[na:]}
     return TransferFunction(b=b_poly, a=a_poly, fs=fs,
-                            info={"nb": nb, "na": na, "nk": nk, "cost": cost, "reflected_poles": n_reflected,
+                            info={**info_cov, "nb": nb, "na": na, "nk": nk, "cost": cost, "reflected_poles": n_reflected,
                                   "points": int(f.size), "method": "Levy + Sanathanan-Koerner"
                                   + (" + nonlinear LS" if refine else "")})
