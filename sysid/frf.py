@@ -166,8 +166,7 @@ def period_spectra(x: Any, periods: int, drop: int = 0, detrend: int = 0) -> np.
 def excited_lines(U: np.ndarray, threshold_db: float = EXCITATION_DB) -> np.ndarray:
     """Indices of the excited DFT lines of an averaged input spectrum ``U`` (DC never counts): lines whose
     amplitude is within ``threshold_db`` of the largest one."""
-    a = np.abs(np.asarray(U))
-    a = a.copy()
+    a = np.abs(np.asarray(U))  # a new array: setting its DC entry leaves U alone
     a[0] = 0.0
     top = float(a.max()) if a.size else 0.0
     if top <= 0:
