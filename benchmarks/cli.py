@@ -30,6 +30,8 @@ COMMAND_MODULES = (
     "simulate",
     "calibrate",
     "identify",
+    "frf",
+    "bla",
     "search",
     "score",
     "diagnose",

@@ -35,7 +35,7 @@ from sysid.record import Record
 
 BASELINES_PATH = Path(__file__).resolve().parent / "baselines.json"
 BASELINES_FORMAT = "piezotwin-baselines/1"
-LINEAR_IDENTIFIERS = ("arx", "armax")
+LINEAR_IDENTIFIERS = ("arx", "armax", "bla")
 METRICS = ("rmse", "nrmse", "r2")
 NORMALISE = "normalise"  # scoring option in SETTINGS (not an identifier option): fit on normalised data
 
@@ -50,6 +50,8 @@ SETTINGS: dict[str, dict[str, dict[str, Any]]] = {
     # sinesweep 4.81e-5 vs 3.70e-5 m (the centred candidate terms differ from the raw ones).
     "arx": {"*": {"ny": 4, "nu": 4}, "wiener-hammerstein": {"ny": 10, "nu": 10}},
     "armax": {"*": {"ny": 4, "nu": 4, "ne": 2}, "wiener-hammerstein": {"ny": 10, "nu": 10, "ne": 2}},
+    # BLA (issue 15): H1/Welch FRF + 6/6 transfer function fitted with input-spectrum weights (sysid.bla_model)
+    "bla": {"*": {"nb": 6, "nf": 6}},
     "narx-poly": {
         "*": {"ny": 2, "nu": 2, "degree": 3, NORMALISE: True},
         "silverbox": {"ny": 2, "nu": 5, "degree": 3, NORMALISE: False},

@@ -33,7 +33,7 @@ import numpy as np
 from sysid.errors import DataError
 from sysid.record import Record, check_array
 
-__all__ = ["read_record", "write_record", "output_file", "json_default", "SUPPORTED_SUFFIXES"]
+__all__ = ["read_record", "write_record", "output_file", "atomic_path", "json_default", "SUPPORTED_SUFFIXES"]
 
 SUPPORTED_SUFFIXES = (".npz", ".csv", ".mat")
 _UNIFORM_TOL = 0.01  # relative jitter of the t column accepted as uniform sampling
@@ -83,6 +83,23 @@ def output_file(path: str | os.PathLike) -> Iterator[Path]:
         yield path
     except OSError as exc:
         raise DataError(f"{path}: cannot write ({exc.strerror or exc})") from None
+
+
+@contextmanager
+def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
+    """Context giving a temporary path beside ``path`` (same folder, same suffix) to write to; on normal exit
+    the temporary file replaces ``path`` with :func:`os.replace` (atomic on one file system), on an exception
+    it is removed and ``path`` is left as it was. Errors of the folder become one-line DataErrors
+    (:func:`output_file`)."""
+    path = Path(path)
+    with output_file(path):
+        tmp = path.with_name(f".{path.stem}.{os.getpid()}.tmp{path.suffix}")
+        try:
+            yield tmp
+            os.replace(tmp, path)
+        finally:
+            if tmp.exists():
+                tmp.unlink()
 
 
 def _write_csv(record: Record, path: Path) -> None:

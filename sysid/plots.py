@@ -8,6 +8,7 @@
   panel, so a report never shows only the start of a record;
 - :func:`draw_correlation_test` — one test on given axes, y-axis scaled to the data, band shaded;
 - :func:`whole_periods` — the samples of the last whole period(s) of a sine, for hysteresis loops;
+- :func:`plot_frf`, :func:`plot_bla` — FRF magnitude/phase (coherence or std) and BLA with noise and distortion levels;
 - :func:`identification_report` — all of the above for a fitted model on a record.
 Each function returns the path it wrote.
 """
@@ -30,7 +31,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 from sysid.errors import DivergenceWarning  # noqa: E402
 from sysid.residuals import correlation_tests, residual_spectrum  # noqa: E402
 
-__all__ = ["plot_residuals", "plot_correlation_tests", "plot_scatter", "plot_horizon_residuals",
+__all__ = ["plot_residuals", "plot_correlation_tests", "plot_scatter", "plot_horizon_residuals", "plot_frf", "plot_bla",
            "identification_report", "plot_measured_vs_predicted", "draw_correlation_test", "whole_periods",
            "BAND_COLOR", "ZOOM_COLOR"]
 
@@ -251,3 +252,81 @@ def identification_report(model, record, out_dir, max_lag: int = 20) -> dict[str
     files["scatter_free_run"] = plot_scatter(y[L:], yf[L:], out / "scatter_free_run.png", "free run")
     files["horizons"] = plot_horizon_residuals(model, record, out / "horizons.png")
     return {k: str(v) for k, v in files.items()}
+
+
+# ---------------------------------------------------------------------------------------------- FRF / BLA
+def _save_atomic(fig, path) -> Path:
+    from sysid.io import atomic_path
+
+    path = Path(path)
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=110, bbox_inches="tight", format=(path.suffix.lstrip(".") or "png"))
+    plt.close(fig)
+    return path
+
+
+def plot_frf(frf, path, title: str = "FRF", unit: str = "", reference: Any = None) -> Path:
+    """Magnitude [dB] and phase [deg] of an :class:`sysid.frf.FRF`, with its 1-σ band (``std``) or its
+    coherence (H1 estimates); ``reference`` (complex array at ``frf.f_hz``) is drawn for comparison."""
+    f = np.asarray(frf.f_hz)
+    G = np.asarray(frf.G)
+    has_coh = frf.coherence is not None
+    fig, ax = plt.subplots(3 if has_coh else 2, 1, figsize=(8, 8 if has_coh else 6), sharex=True)
+    pos = f > 0
+    ax[0].semilogx(f[pos], frf.magnitude_db[pos], lw=1, label="estimate")
+    if frf.std is not None and not has_coh:
+        with np.errstate(divide="ignore"):
+            ax[0].semilogx(f[pos], 20 * np.log10(np.asarray(frf.std)[pos]), lw=0.8, label="std of G")
+    if reference is not None:
+        ref = np.asarray(reference)
+        ax[0].semilogx(f[pos], 20 * np.log10(np.abs(ref[pos])), "k--", lw=0.8, label="reference")
+        ax[1].semilogx(f[pos], np.degrees(np.unwrap(np.angle(ref)))[pos], "k--", lw=0.8)
+    ax[0].set(ylabel=f"|G| [dB{' ' + unit if unit else ''}]", title=title)
+    ax[0].legend(loc="best", fontsize=8)
+    ax[1].semilogx(f[pos], frf.phase_deg[pos], lw=1)
+    ax[1].set(ylabel="phase [deg]")
+    if has_coh:
+        ax[2].semilogx(f[pos], np.asarray(frf.coherence)[pos], lw=1)
+        ax[2].set(ylabel="coherence", ylim=(0, 1.05))
+    ax[-1].set(xlabel="frequency [Hz]")
+    for a in ax:
+        a.grid(True, which="both", alpha=0.3)
+    return _save_atomic(fig, path)
+
+
+def plot_bla(bla, path, title: str = "Best Linear Approximation", unit: str = "") -> Path:
+    """G_BLA magnitude with the noise and nonlinear-distortion standard deviations [dB], its phase, and the
+    output power at the odd / even detection lines against the noise floor."""
+    f = np.asarray(bla.f_hz)
+    fig, ax = plt.subplots(3, 1, figsize=(8, 9))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ax[0].plot(f, 20 * np.log10(np.abs(bla.G)), lw=1, label="G_BLA")
+        ax[0].plot(f, 10 * np.log10(bla.var_noise), ".", ms=2, label="noise std")
+        if np.isfinite(bla.var_distortion).any():
+            ax[0].plot(f, 10 * np.log10(bla.var_distortion), ".", ms=2, label="distortion std")
+    ax[0].set(ylabel=f"[dB{' ' + unit if unit else ''}]", title=title)
+    ax[0].legend(loc="best", fontsize=8)
+    ax[1].plot(f, np.degrees(np.unwrap(np.angle(bla.G))), lw=1)
+    ax[1].set(ylabel="phase [deg]")
+    det = bla.detection
+    nl = bla.nonlinearity
+    if det and np.size(det.get("f_hz", [])):
+        kinds = np.asarray(det["kind"])
+        with np.errstate(divide="ignore"):
+            for kind, mark in (("odd", "o"), ("even", "s"), ("any", "o")):
+                sel = kinds == kind
+                if sel.any():
+                    ax[2].plot(det["f_hz"][sel], 10 * np.log10(det["level"][sel]), mark, ms=3, mfc="none",
+                               label=f"output at {kind} detection lines")
+            ax[2].plot(det["f_hz"], 10 * np.log10(det["noise"]), ".", ms=2, color="gray", label="noise variance")
+        ax[2].legend(loc="best", fontsize=8)
+    txt = f"verdict: {nl.get('verdict')}"
+    for k in ("odd", "even"):
+        v = nl.get(f"{k}_db")
+        if v is not None:
+            txt += f", {k} {v:.1f} dB"
+    ax[2].set(xlabel="frequency [Hz]", ylabel="output power [dB]", title=txt)
+    fig.tight_layout()
+    for a in ax:
+        a.grid(True, alpha=0.3)
+    return _save_atomic(fig, path)

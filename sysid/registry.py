@@ -14,6 +14,7 @@ __all__ = ["IDENTIFIERS", "get_identifier", "available_identifiers", "binary_loa
 IDENTIFIERS: dict[str, str] = {
     "arx": "sysid.linear:ARX",
     "armax": "sysid.linear:ARMAX",
+    "bla": "sysid.bla_model:BLAModel",
     "narx-poly": "sysid.polynomial:NARXPoly",
     "narmax-poly": "sysid.polynomial:NARMAXPoly",
     "narx-mlp": "sysid.neural.narx_mlp:NARXMLP",

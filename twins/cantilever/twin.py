@@ -114,6 +114,48 @@ class CantileverTwin(Twin):
         eye = np.eye(A.shape[0])
         return np.array([C @ np.linalg.solve(si * eye - A, B) for si in s])
 
+    def sampled_frequency_response(self, f_hz: np.ndarray, fs: float) -> np.ndarray:
+        """Exact FRF from the input samples u[k] [V] to the noise-free output samples y[k] [µm] at ``fs`` of
+        the twin with its hysteresis replaced by the line Γ = d·v (d = ``gain_um_per_v``).
+
+        This is the response :meth:`simulate` produces when Γ is linear — ``hysteresis=prandtl-ishlinskii``
+        with ``pi_p0_fraction=1`` (all weight on the r = 0 operator) and no clip (|u| < ``amp_limit_v``) —
+        including the sampling: the input is a first-order hold between samples, so every linear part is
+        the FOH discretisation (:func:`kernels.foh_discretise`, Franklin & Powell §6.3) evaluated at
+        z = e^{j2πf/fs}:
+
+        H(z) = z^{-D}((1 − μ) + μz^{-1}) · d·(1 + Σ_i g_i (b1_i + b0_i z^{-1})/(1 − a_i z^{-1}))
+               · C (I − Φ z^{-1})^{-1} (G1 + G0 z^{-1})
+
+        with the input delay D + μ samples (effect ``input_delay``), the Kelvin–Voigt creep elements
+        (effect ``creep``) and (Φ, G0, G1) of D(s)·sensor over one sample. The sub-steps of the kernel change
+        nothing: a force linear over the sample is linear over every sub-step. Refused for
+        ``amplifier_bandwidth`` (its output is not linear between samples) and for ``saturation``.
+        """
+        for eff in ("amplifier_bandwidth", "saturation"):
+            if self.has(eff):
+                raise ConfigError(f"cantilever: no exact sampled FRF with the effect {eff}; remove it")
+        fs = float(fs)
+        p = self.params
+        T = 1.0 / fs
+        zi = np.exp(-2j * np.pi * np.atleast_1d(np.asarray(f_hz, dtype=float)) / fs)  # z^{-1}
+        A, B, C = self.linear_system()
+        Phi, G0, G1 = K.foh_discretise(A, B, T)
+        eye = np.eye(A.shape[0])
+        lin = np.array([C @ np.linalg.solve(eye - Phi * q, G1 + G0 * q) for q in zi])
+        force = np.full(zi.shape, p.gain_um_per_v, dtype=complex)
+        if self.has("creep"):
+            for tau in self.creep_taus():
+                a, b0, b1 = _first_order_foh(tau, T)
+                force += p.gain_um_per_v * p.creep_per_decade * (b1 + b0 * zi) / (1.0 - a * zi)
+        delay = np.ones(zi.shape, dtype=complex)
+        if self.has("input_delay"):
+            dl = p.input_delay_s * fs
+            D = int(math.floor(dl + 1e-12))
+            mu = max(0.0, dl - D)
+            delay = zi ** D * ((1.0 - mu) + mu * zi)
+        return delay * force * lin
+
     def substeps(self, fs: float) -> int:
         return max(1, int(math.ceil(1.0 / (fs * self.params.max_substep_s) - 1e-9)))
 
