@@ -17,7 +17,11 @@ import numpy as np
 
 from sysid.errors import DataError
 
-__all__ = ["Record", "check_array", "Normaliser"]
+__all__ = ["Record", "check_array", "Normaliser", "FS_MIN", "FS_MAX"]
+
+#: documented physical range of sampling rates [Hz] (docs/data-files.md): 1 mHz (one sample in ~17 min) to
+#: 1 GHz (10x the 100 MHz acoustic rig); a rate outside it is a unit mistake and is refused.
+FS_MIN, FS_MAX = 1e-3, 1e9
 
 
 def check_array(values: Any, name: str, source: str = "array", allow_nan: bool = False) -> np.ndarray:
@@ -90,10 +94,12 @@ class Record:
                 )
         try:
             fs = float(self.fs)
-        except (TypeError, ValueError):
+        except (TypeError, ValueError, OverflowError):
             raise DataError(f"{self.source}: fs is not a number ({self.fs!r})") from None
         if not np.isfinite(fs) or fs <= 0:
             raise DataError(f"{self.source}: sampling rate fs must be positive and finite, got {fs}")
+        if not FS_MIN <= fs <= FS_MAX:
+            raise DataError(f"{self.source}: sampling rate {fs:g} Hz outside the accepted range {FS_MIN:g}..{FS_MAX:g} Hz")
         self.fs = fs
         self.units = {"u": "", "y": "", **dict(self.units or {})}
         self.meta = dict(self.meta or {})

@@ -194,9 +194,9 @@ class Twin(ABC):
     def save_params(self, path: str | Path, extra: Mapping[str, Any] | None = None) -> Path:
         """Write the configuration (and e.g. calibration statistics in ``extra``) as a JSON parameter file."""
         payload = {"format": PARAMS_FORMAT, **self.config(), **(dict(extra) if extra else {})}
-        with output_file(path) as path:
-            path.write_text(json.dumps(payload, indent=2, default=_json_default))
-        return path
+        with output_file(path) as tmp:  # atomic: a temporary file renamed over path (sysid.safeio)
+            tmp.write_text(json.dumps(payload, indent=2, default=_json_default))
+        return Path(path)
 
     # ------------------------------------------------------------------ configuration from the CLI
     @classmethod
