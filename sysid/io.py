@@ -284,6 +284,9 @@ def _read_csv(p: Path, src: str, u_col: str, y_col: str | None, explicit_y: bool
 
     table = parse_csv(p, src)
     index = table.index
+    time_cols = [n for n in index if n.strip().lower() in TIME_COLUMNS]
+    wanted = [s.strip() for spec in (u_col, y_col) if spec is not None for s in str(spec).split(",")]
+    table.prefetch(wanted + time_cols[:1])  # one parsing pass for every column used
 
     def columns(spec: str, role: str) -> np.ndarray:
         names = [s.strip() for s in str(spec).split(",") if s.strip()]
@@ -305,7 +308,6 @@ def _read_csv(p: Path, src: str, u_col: str, y_col: str | None, explicit_y: bool
         elif explicit_y:
             columns(y_col, "y")  # raises the clear message
     fs = None
-    time_cols = [n for n in index if n.strip().lower() in TIME_COLUMNS]
     if len(time_cols) > 1:
         raise DataError(f"{src}: several time columns ({', '.join(time_cols)}); keep one")
     if time_cols:
