@@ -53,6 +53,14 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+class Terminated(BaseException):
+    """Raised by the SIGTERM handler so that every ``finally`` / cleanup runs (temporary files removed)."""
+
+
+def _on_sigterm(signum, frame):  # pragma: no cover - exercised in a subprocess test
+    raise Terminated()
+
+
 def main(argv: list[str] | None = None) -> int:
     os.environ.setdefault("MPLBACKEND", "Agg")
     parser = build_parser()
@@ -60,8 +68,22 @@ def main(argv: list[str] | None = None) -> int:
     if not getattr(args, "command", None):
         parser.print_help()
         return 2
+    import signal
+    import threading
+
+    from sysid.safeio import protect_inputs
+
+    previous = None
+    if threading.current_thread() is threading.main_thread():
+        previous = signal.signal(signal.SIGTERM, _on_sigterm)
     try:
+        from benchmarks.commands.common import preflight
+
+        preflight(args)
         return int(args.func(args) or 0)
+    except Terminated:
+        print(f"piezotwin {args.command}: terminated (SIGTERM); no partial output left", file=sys.stderr)
+        return 143
     except InputError as exc:
         print(f"piezotwin {args.command}: error: {exc}", file=sys.stderr)
         return 2
@@ -79,6 +101,10 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print(f"piezotwin {args.command}: interrupted", file=sys.stderr)
         return 130
+    finally:
+        protect_inputs([])
+        if previous is not None:
+            signal.signal(signal.SIGTERM, previous)
 
 
 if __name__ == "__main__":  # pragma: no cover

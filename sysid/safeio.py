@@ -28,7 +28,7 @@ from typing import Iterable, Iterator
 
 from sysid.errors import DataError
 
-__all__ = ["atomic_path", "atomic_write_text", "atomic_write_bytes", "save_figure", "check_output_path",
+__all__ = ["check_memory", "available_memory", "atomic_path", "atomic_write_text", "atomic_write_bytes", "save_figure", "check_output_path",
            "check_output_dir", "protect_inputs", "protected_inputs", "same_file"]
 
 _PROTECTED: list[str] = []  # input files of the running CLI command (set by protect_inputs)
@@ -77,6 +77,32 @@ def _check_parents(path: Path) -> None:
     parent = next((a for a in path.parents if a.exists()), None)
     if parent is not None and not parent.is_dir():
         raise DataError(f"{path}: cannot write: {parent} is a file, not a folder")
+
+
+def available_memory() -> int:
+    """Bytes of memory available to a new allocation (Linux ``MemAvailable``; else physical memory)."""
+    try:
+        with open("/proc/meminfo") as fh:
+            for line in fh:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except OSError:
+        pass
+    try:
+        return int(os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_AVPHYS_PAGES"))
+    except (ValueError, OSError, AttributeError):
+        return 2**40
+
+
+def check_memory(n_values: float, what: str, copies: float = 4.0, itemsize: int = 8) -> None:
+    """Refuse (one-line DataError with the estimate) a request for ``n_values`` float64 values that, with
+    ``copies`` working arrays of that size, would not fit in the available memory; call before allocating."""
+    need = float(n_values) * itemsize * copies
+    avail = available_memory()
+    if not need < avail:
+        raise DataError(f"{what}: needs about {need / 2**30:.3g} GiB ({float(n_values):.3g} samples x {copies:g} "
+                        f"working copies x {itemsize} B), more than the {avail / 2**30:.3g} GiB of memory available; "
+                        "ask for fewer samples")
 
 
 def _umask_mode() -> int:

@@ -11,6 +11,8 @@ from __future__ import annotations
 import argparse
 import sys
 
+from benchmarks.commands.common import number
+
 
 def _names(text: str | None) -> list[str] | None:
     if text is None:
@@ -28,7 +30,7 @@ def register(sub) -> None:
     p.add_argument("--check", action="store_true", help="exit 1 if any pair falls below its floor in benchmarks/baselines.json")
     p.add_argument("--baselines", metavar="FILE", help="baselines file (default benchmarks/baselines.json)")
     p.add_argument("--update-baselines", action="store_true", help="write floors measured in this run to the baselines file")
-    p.add_argument("--margin", type=float, default=0.15, help="margin of --update-baselines (default 0.15 = 15 %%)")
+    p.add_argument("--margin", type=number(0, 10), default=0.15, help="margin of --update-baselines (default 0.15 = 15 %%)")
     p.add_argument("--no-sysidentpy", action="store_true", help="do not run SysIdentPy's FROLS beside the rows")
     p.add_argument("--report", metavar="DIR", help="write score.json, score.md and figures to DIR")
     p.add_argument("--json", action="store_true", help="print the results as JSON")
