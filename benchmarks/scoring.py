@@ -451,8 +451,15 @@ def sysidentpy_frols(ds, quick: bool = False, use_cache: bool = True) -> list[di
 def load_baselines(path: str | Path | None = None) -> dict[str, Any]:
     p = Path(path) if path else BASELINES_PATH
     if not p.exists():
+        if path:  # a file named by the user must exist (else --check would check no floor at all)
+            raise ConfigError(f"{p}: baselines file not found")
         return {"format": BASELINES_FORMAT, "modes": {}, "rules": []}
-    data = json.loads(p.read_text())
+    try:
+        data = json.loads(p.read_text())
+    except (UnicodeDecodeError, json.JSONDecodeError, IsADirectoryError) as exc:
+        raise ConfigError(f"{p}: not a JSON baselines file ({exc})") from None
+    if not isinstance(data, dict) or not isinstance(data.get("modes", {}), dict):
+        raise ConfigError(f"{p}: not a baselines file (expected a JSON object with 'format' and 'modes')")
     if data.get("format") != BASELINES_FORMAT:
         raise ConfigError(f"{p}: not a baselines file (format {data.get('format')!r})")
     return data

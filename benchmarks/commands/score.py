@@ -53,7 +53,12 @@ def run(args: argparse.Namespace) -> int:
             raise ConfigError(f"unknown dataset {d!r}; valid: {', '.join(dataset_names())}")
     if args.margin < 0:
         raise ConfigError(f"--margin must be >= 0, got {args.margin}")
-    baselines = scoring.load_baselines(args.baselines)
+    from pathlib import Path
+
+    if args.baselines and not Path(args.baselines).exists() and args.update_baselines and not args.check:
+        baselines = {"format": scoring.BASELINES_FORMAT, "modes": {}, "rules": []}  # a new baselines file
+    else:
+        baselines = scoring.load_baselines(args.baselines)  # refuses a missing / non-JSON / wrong file
     quiet = args.json
     res = scoring.score(idents, dsets, quick=args.quick, sysidentpy=not args.no_sysidentpy, progress=not quiet,
                         log=None if quiet else (lambda s: print(s, flush=True)))
@@ -66,11 +71,12 @@ def run(args: argparse.Namespace) -> int:
         out["report"] = {k: str(v) for k, v in paths.items()}
     if args.update_baselines:
         import json
-        from pathlib import Path
 
         new = scoring.make_floors(res, margin=args.margin, previous=baselines)
         path = Path(args.baselines) if args.baselines else scoring.BASELINES_PATH
-        path.write_text(json.dumps(new, indent=2) + "\n")
+        from sysid.safeio import atomic_write_text
+
+        atomic_write_text(path, json.dumps(new, indent=2) + "\n")
         out["baselines_written"] = str(path)
     if args.json:
         emit_json(out)

@@ -59,13 +59,18 @@ def run(args: argparse.Namespace) -> int:
     from sysid.errors import ConfigError
     from sysid.neural.search import SweepSpec, collect, export_jsonl, parse_grid, plot_r2_distribution, run_sweep, storage_url
 
+    from sysid.neural.search import _open_storage
+    from sysid.neural.storage_check import check_storage, init_sqlite
+
     if args.workers < 1:
         raise ConfigError(f"--workers must be ≥ 1, got {args.workers}")
+    check_storage(args.storage, args.study)  # before any work: a bad --storage leaves nothing behind
     est = [read_data(args, f) for f in args.est]
     val = read_data(args, args.val)
     same_fs(est + [val])
     spec = SweepSpec(identifier=args.identifier, grid=parse_grid(args.grid, args.identifier), repeats=args.repeats,
                      seed=args.seed, fixed=parse_assignments(args.set_), sampler=args.sampler)
+    init_sqlite(storage_url(args.storage, args.study), _open_storage)  # new SQLite store: created under a lock
     summary = run_sweep(spec, est if len(est) > 1 else est[0], val, storage=args.storage, study=args.study,
                         trials=args.trials, workers=args.workers, progress=not args.no_progress)
     url = storage_url(args.storage, args.study)

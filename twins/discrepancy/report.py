@@ -14,6 +14,8 @@ from typing import Any
 
 import numpy as np
 
+from sysid.safeio import save_figure
+
 __all__ = ["write_report"]
 
 
@@ -62,7 +64,7 @@ def write_report(result: dict[str, Any], directory: str | Path) -> Path:
     ax[2].set_xlabel("time [s]")
     fig.suptitle(f"validation: NRMSE {result['baseline']['nrmse_val']:.4g} → {result['extended']['nrmse_val']:.4g}")
     fig.tight_layout()
-    fig.savefig(d / "residuals.png", dpi=110)
+    save_figure(fig, d / "residuals.png", dpi=110)
     plt.close(fig)
     files.append("residuals.png")
 
@@ -78,7 +80,7 @@ def write_report(result: dict[str, Any], directory: str | Path) -> Path:
     ax.set_ylabel("PSD")
     ax.legend(fontsize=8)
     fig.tight_layout()
-    fig.savefig(d / "spectra.png", dpi=110)
+    save_figure(fig, d / "spectra.png", dpi=110)
     plt.close(fig)
     files.append("spectra.png")
 
@@ -97,7 +99,7 @@ def write_report(result: dict[str, Any], directory: str | Path) -> Path:
             a.set_title(f"{tt['name']} {lab}", fontsize=9)
             a.set_ylim(-1, 1)
     fig.tight_layout()
-    fig.savefig(d / "correlation_tests.png", dpi=110)
+    save_figure(fig, d / "correlation_tests.png", dpi=110)
     plt.close(fig)
     files.append("correlation_tests.png")
 
@@ -118,7 +120,7 @@ def write_report(result: dict[str, Any], directory: str | Path) -> Path:
             a.set_xlabel("frequency [Hz]")
             a.legend(fontsize=8)
         fig.tight_layout()
-        fig.savefig(d / "hysteresis.png", dpi=110)
+        save_figure(fig, d / "hysteresis.png", dpi=110)
         plt.close(fig)
         files.append("hysteresis.png")
 
@@ -139,5 +141,6 @@ def write_report(result: dict[str, Any], directory: str | Path) -> Path:
 {''.join(f'<h2>{f[:-4]}</h2><img src="{f}" style="max-width:100%">' for f in files)}
 </body></html>"""
     index = d / "index.html"
-    index.write_text(body)
-    return index
+    from sysid.safeio import atomic_write_text
+
+    return atomic_write_text(index, body)
