@@ -91,6 +91,8 @@ def coerce(text: Any, like: Any, key: str = "value", annotation: Any = None) -> 
             return target(vals)
         if target is str:
             return text
+    except ConfigError:
+        raise
     except ValueError:
         name = getattr(target, "__name__", str(target))
         raise ConfigError(f"{key}: expected {name}, got {text!r}") from None
