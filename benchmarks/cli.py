@@ -101,6 +101,10 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print(f"piezotwin {args.command}: interrupted", file=sys.stderr)
         return 130
+    except MemoryError as exc:  # a request the guards did not foresee: still one line, nothing written
+        print(f"piezotwin {args.command}: error: not enough memory for this request ({exc or 'MemoryError'});"
+              " ask for fewer samples", file=sys.stderr)
+        return 2
     finally:
         protect_inputs([])
         if previous is not None:

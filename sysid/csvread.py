@@ -267,6 +267,16 @@ def _fast_layout(raw: bytes, source, src: str, delim: str, decimal: str, has_hea
 
 
 def parse_csv(p: Path, src: str, fast: bool = True) -> CsvTable:
+    """Read and check the structure of a CSV file (see the module doc); numbers are parsed on demand."""
+    try:
+        return _parse_csv(p, src, fast)
+    except csv.Error as exc:  # e.g. a quoted field beyond the csv module's field-size limit
+        raise DataError(f"{src}: cannot split a line into cells ({exc})") from None
+    except UnicodeDecodeError as exc:
+        raise DataError(f"{src}: not a UTF-8 text CSV file ({exc.reason} at byte {exc.start} of a line)") from None
+
+
+def _parse_csv(p: Path, src: str, fast: bool = True) -> CsvTable:
     """Read and check the structure of a CSV file (see the module doc); numbers are parsed on demand.
 
     One vectorised pass finds the newlines and delimiters; a well-formed data block is then checked by the

@@ -301,3 +301,15 @@ def test_score_baselines_file_refused(content, expected, d, capsys):
         f.write_text(content)
     refused(["score", "--check", "--baselines", f, "--identifiers", "arx", "--datasets", "silverbox", "--quick"],
             d, capsys, expected)
+
+
+def test_generate_rate_option_and_memory_fallback(d, capsys):
+    refused(["generate", "cantilever", "steps", "--option", "fs=1e308", "-o", d / "g.npz"], d, capsys, "outside the accepted range")
+    refused(["generate", "cantilever", "steps", "--option", "fs=1e9", "-o", d / "g.npz"], d, capsys, "not enough memory")
+
+
+def test_csv_field_beyond_csv_module_limit(tmp_path):
+    p = tmp_path / "long.csv"
+    p.write_text('u,y\n"' + "x" * 200_000 + '",1\n1,2\n')
+    with pytest.raises(DataError, match="field limit"):
+        read_record(p, fs=10)

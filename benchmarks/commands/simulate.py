@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 
 from benchmarks.commands.common import add_data_args, add_twin_args, read_data, twin_from_args
+from sysid.errors import ConfigError
 from sysid.io import write_record
 
 
@@ -41,7 +42,15 @@ def run_generate(args: argparse.Namespace) -> int:
 
     twin = twin_from_args(args.twin, args)
     twin.check_protocol(args.protocol)
-    rec = twin.generate(args.protocol, **parse_assignments(args.option, "--option"))
+    opts = parse_assignments(args.option, "--option")
+    if "fs" in opts:  # the documented rate range (a huge fs would otherwise overflow or exhaust memory)
+        from benchmarks.commands.common import FS
+
+        try:
+            FS(opts["fs"])
+        except argparse.ArgumentTypeError as exc:
+            raise ConfigError(f"--option fs: {exc}") from None
+    rec = twin.generate(args.protocol, **opts)
     write_record(rec, args.output)
     print(f"generated {args.twin} {args.protocol}: {len(rec)} samples at {rec.fs:g} Hz -> {args.output}")
     return 0
