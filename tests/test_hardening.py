@@ -27,17 +27,22 @@ FS = 1000.0
 N = 400
 
 
-@pytest.fixture()
-def d(tmp_path) -> Path:
+@pytest.fixture(scope="module")
+def cantilever_io():
     from twins.registry import get_twin
 
+    uc = 50 * np.sin(2 * np.pi * 5 * np.arange(500) / FS)
+    return uc, get_twin("cantilever")().simulate(uc, FS)
+
+
+@pytest.fixture()
+def d(tmp_path, cantilever_io) -> Path:
     rng = np.random.default_rng(1)
     u = rng.standard_normal(N)
     y = np.convolve(u, [0.0, 0.5, 0.3])[:N]
     np.savez(tmp_path / "in.npz", u=u, y=y, fs=FS)
     np.savez(tmp_path / "val100.npz", u=u, y=y, fs=100.0)
-    uc = 50 * np.sin(2 * np.pi * 5 * np.arange(500) / FS)
-    yc = get_twin("cantilever")().simulate(uc, FS)
+    uc, yc = cantilever_io
     np.savez(tmp_path / "m.npz", u=uc, y=yc, fs=FS)
     np.savez(tmp_path / "m100.npz", u=uc, y=yc, fs=100.0)
     (tmp_path / "afile").write_text("not a folder\n")
