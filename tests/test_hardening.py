@@ -287,13 +287,15 @@ def test_search_storage_refused(storage, expected, d, capsys):
 
 
 def test_two_processes_create_a_new_sqlite_store(tmp_path):
-    """Two processes opening the same new SQLite store at once: both succeed (creation under a lock)."""
-    script = ("import sys; from sysid.neural.search import _open_storage; from sysid.neural.storage_check import "
-              "init_sqlite; init_sqlite(sys.argv[1], _open_storage); _open_storage(sys.argv[1]); print('ok')")
+    """Three processes opening the same new SQLite store at once all succeed (table creation under a lock).
+    Without the lock this fails most of the time ('table studies already exists', alembic_version UNIQUE)."""
+    script = ("import sys, optuna; from sysid.neural.search import _open_storage; from sysid.neural.storage_check "
+              "import init_sqlite; init_sqlite(sys.argv[1], _open_storage); optuna.create_study(study_name='s', "
+              "storage=_open_storage(sys.argv[1]), load_if_exists=True); print('ok')")
     url = f"sqlite:///{tmp_path / 'new.db'}"
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
     procs = [subprocess.Popen([sys.executable, "-c", script, url], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                              text=True, env=env) for _ in range(2)]
+                              text=True, env=env) for _ in range(3)]
     for p in procs:
         out, err = p.communicate(timeout=120)
         assert p.returncode == 0 and out.strip() == "ok", err
