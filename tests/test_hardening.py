@@ -301,7 +301,7 @@ def test_two_processes_create_a_new_sqlite_store(tmp_path):
         assert p.returncode == 0 and out.strip() == "ok", err
 
 
-@pytest.mark.parametrize("content,expected", [("{{{", "not a JSON"), ("[]", "not a baselines file"), (None, "not found")])
+@pytest.mark.parametrize("content,expected", [("{{{", "JSON"), ("[]", "not a baselines file"), (None, "not found")])
 def test_score_baselines_file_refused(content, expected, d, capsys):
     f = d / "b.json"
     if content is not None:
