@@ -19,11 +19,11 @@ from sysid.errors import DataError
 
 __all__ = ["Record", "check_array", "Normaliser", "FS_MIN", "FS_MAX"]
 
-#: documented physical range of sampling rates [Hz] of data files and options (docs/data-files.md): 1 mHz (one
-#: sample in ~17 min) to 1 GHz (10x the 100 MHz acoustic rig); outside it a rate is a unit mistake and is refused
-#: by sysid.io.read_record and the CLI. A Record itself only needs fs > 0 (frequency-domain records such as
-#: the acoustic twin's vna-sweep use the point spacing).
-FS_MIN, FS_MAX = 1e-3, 1e9
+#: documented range of sampling rates [Hz] of data files and options (docs/data-files.md): up to 1 GHz (10x the
+#: 100 MHz acoustic rig); down to 1e-9 Hz because frequency-domain records (the acoustic twin's vna-sweep files)
+#: store fs = 1/(point spacing in Hz), e.g. 1e-4 for a 10 kHz grid. Outside it a rate is a unit mistake and is
+#: refused by sysid.io.read_record and the CLI; a Record itself only needs fs > 0.
+FS_MIN, FS_MAX = 1e-9, 1e9
 
 
 def check_array(values: Any, name: str, source: str = "array", allow_nan: bool = False) -> np.ndarray:
