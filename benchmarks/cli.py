@@ -158,6 +158,14 @@ class _Session:
         set_enabled(self.progress)
 
 
+class Terminated(BaseException):
+    """Raised by the SIGTERM handler so that every ``finally`` / cleanup runs (temporary files removed)."""
+
+
+def _on_sigterm(signum, frame):  # pragma: no cover - exercised in a subprocess test
+    raise Terminated()
+
+
 def main(argv: list[str] | None = None) -> int:
     os.environ.setdefault("MPLBACKEND", "Agg")
     parser = build_parser()
@@ -170,8 +178,22 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def _run(args: argparse.Namespace) -> int:
+    import signal
+    import threading
+
+    from sysid.safeio import protect_inputs
+
+    previous = None
+    if threading.current_thread() is threading.main_thread():
+        previous = signal.signal(signal.SIGTERM, _on_sigterm)
     try:
+        from benchmarks.commands.common import preflight
+
+        preflight(args)
         return int(args.func(args) or 0)
+    except Terminated:
+        print(f"piezotwin {args.command}: terminated (SIGTERM); no partial output left", file=sys.stderr)
+        return 143
     except InputError as exc:
         print(f"piezotwin {args.command}: error: {exc}", file=sys.stderr)
         return 2
@@ -189,6 +211,14 @@ def _run(args: argparse.Namespace) -> int:
     except KeyboardInterrupt:
         print(f"piezotwin {args.command}: interrupted", file=sys.stderr)
         return 130
+    except MemoryError as exc:  # a request the guards did not foresee: still one line, nothing written
+        print(f"piezotwin {args.command}: error: not enough memory for this request ({exc or 'MemoryError'});"
+              " ask for fewer samples", file=sys.stderr)
+        return 2
+    finally:
+        protect_inputs([])
+        if previous is not None:
+            signal.signal(signal.SIGTERM, previous)
 
 
 if __name__ == "__main__":  # pragma: no cover

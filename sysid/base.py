@@ -171,9 +171,9 @@ class Identifier(ABC):
     def save(self, path: str | Path) -> Path:
         """Save config and learned state as JSON (neural models may override to use torch files)."""
         payload = {"format": "piezotwin-model/1", "identifier": self.name, "params": self.get_params(), "state": self._state()}
-        with output_file(path) as path:
-            path.write_text(json.dumps(payload, default=json_default))
-        return path
+        with output_file(path) as tmp:  # atomic: a temporary file renamed over path (sysid.safeio)
+            tmp.write_text(json.dumps(payload, default=json_default))
+        return Path(path)
 
 
 def load_model(path: str | Path) -> Identifier:

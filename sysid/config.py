@@ -104,28 +104,48 @@ def coerce(text: Any, like: Any, key: str = "value", annotation: Any = None) -> 
         if target is bool:
             return _parse_bool(text, key)
         if target is int:
-            v = float(text)
+            v = _finite(text, key)
+            if abs(v) > _INT_MAX:
+                raise ConfigError(f"{key}: integer {text!r} out of range (|value| <= 2**53)")
             if v != int(v):
                 raise ValueError
             return int(v)
         if target is float:
-            return float(text)
+            return float(text)  # nan/inf are left to the owner's range checks (they name the parameter)
         if target in (list, tuple):
             elem_like = None
             if isinstance(like, (list, tuple)) and like:
                 elem_like = like[0]
-            parts = [p for p in (text.split(";") if ";" in text else text.split("-")) if p != ""] if text else []
+            parts = (text.split(";") if ";" in text else text.split("-")) if text else []
+            if "" in parts:  # '-4' would silently become [4], '25--25' [25, 25]
+                raise ConfigError(f"{key}: list {text!r} has an empty item; list items are separated by '-' "
+                                  "(e.g. 25-25), negative numbers by ';' (e.g. -1;-2)")
             vals = [coerce(p, elem_like if elem_like is not None else 0.0, key) if _numeric(p) else p for p in parts]
             if elem_like is not None and isinstance(elem_like, int) and not isinstance(elem_like, bool):
                 vals = [int(v) for v in vals]
             return target(vals)
         if target is str:
             return text
+    except ConfigError:
+        raise
     except ValueError:
         name = getattr(target, "__name__", str(target))
         raise ConfigError(f"{key}: expected {name}, got {text!r}") from None
     # unknown type: try number, else keep string
     return float(text) if _numeric(text) else text
+
+
+_INT_MAX = 2**53  # integers beyond this are not exact in a float and no option needs them
+
+
+def _finite(text: str, key: str) -> float:
+    """``float(text)`` that refuses nan and ±inf (one line)."""
+    import math
+
+    v = float(text)
+    if not math.isfinite(v):
+        raise ConfigError(f"{key}: expected a finite number, got {text!r}")
+    return v
 
 
 def _numeric(text: str) -> bool:

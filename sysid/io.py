@@ -20,86 +20,73 @@ and records every filled index in ``meta['preprocessing']``.
 
 from __future__ import annotations
 
-import csv
 import json
 import math
 import os
-from contextlib import contextmanager
 from pathlib import Path
-from typing import Any, Iterator
+from typing import Any
 
 import numpy as np
 
 from sysid.errors import DataError
-from sysid.record import Record, check_array
+from sysid.record import FS_MAX, FS_MIN, Record, check_array
+from sysid.safeio import atomic_path, atomic_write_text, check_output_path, save_figure
 
-__all__ = ["read_record", "write_record", "output_file", "atomic_path", "json_default", "SUPPORTED_SUFFIXES"]
+__all__ = ["read_record", "write_record", "output_file", "atomic_path", "atomic_write_text", "check_output_path",
+           "save_figure", "json_default", "SUPPORTED_SUFFIXES", "FS_MIN", "FS_MAX", "check_fs"]
 
 SUPPORTED_SUFFIXES = (".npz", ".csv", ".mat")
 _UNIFORM_TOL = 0.01  # relative jitter of the t column accepted as uniform sampling
 
 
+def check_fs(fs: Any, what: str) -> float:
+    """``fs`` as a float in [FS_MIN, FS_MAX] Hz, or a one-line DataError naming ``what``."""
+    try:
+        v = float(fs)
+    except (TypeError, ValueError, OverflowError):
+        raise DataError(f"{what}: sampling rate is not a number ({fs!r})") from None
+    if not math.isfinite(v) or v <= 0:
+        raise DataError(f"{what}: sampling rate fs must be positive and finite, got {v:g}")
+    if not FS_MIN <= v <= FS_MAX:
+        raise DataError(f"{what}: sampling rate {v:g} Hz outside the accepted range {FS_MIN:g}..{FS_MAX:g} Hz")
+    return v
+
+
 def write_record(record: Record, path: str | os.PathLike) -> Path:
     """Write ``record`` to ``path``: ``.npz`` (the native format, with metadata), or ``.csv`` / ``.mat`` for
     other tools (columns/variables ``t, u, y`` resp. ``u, y, fs``; the CSV keeps the metadata out).
-    Every format reads back bit-exactly (CSV uses the shortest round-tripping decimal text)."""
+    Every format reads back bit-exactly (CSV uses the shortest round-tripping decimal text).
+
+    The write is atomic and non-destructive (:func:`sysid.safeio.atomic_path`): a temporary file beside
+    ``path`` is renamed over it only when complete; an output that is the same file as a protected input is
+    refused before anything is written."""
     path = Path(path)
     suffix = path.suffix.lower()
     if suffix not in SUPPORTED_SUFFIXES:
         raise DataError(f"{path}: unknown format {suffix or '(no suffix)'!r}; supported: {', '.join(SUPPORTED_SUFFIXES)}")
-    with output_file(path):
+    with atomic_path(path) as tmp:
         if suffix == ".csv":
-            _write_csv(record, path)
-            return path
-        if suffix == ".mat":
+            _write_csv(record, tmp)
+        elif suffix == ".mat":
             from scipy.io import savemat
 
             mdict = {"u": record.u, "fs": record.fs}
             if record.y is not None:
                 mdict["y"] = record.y
-            savemat(path, mdict)
-            return path
-        meta = dict(record.meta)
-        meta["units"] = dict(record.units)
-        arrays: dict[str, Any] = {"u": record.u, "fs": np.float64(record.fs), "meta": np.array(json.dumps(meta, default=json_default))}
-        if record.y is not None:
-            arrays["y"] = record.y
-        np.savez(path, **arrays)
+            savemat(tmp, mdict)
+        else:
+            meta = dict(record.meta)
+            meta["units"] = dict(record.units)
+            arrays: dict[str, Any] = {"u": record.u, "fs": np.float64(record.fs),
+                                      "meta": np.array(json.dumps(meta, default=json_default))}
+            if record.y is not None:
+                arrays["y"] = record.y
+            np.savez(tmp, **arrays)
     return path
 
 
-@contextmanager
-def output_file(path: str | os.PathLike) -> Iterator[Path]:
-    """Context for writing the file ``path``: creates its parent folder; a path that is a folder, or any
-    OSError while writing (no permission, a parent that is a file ...), becomes a one-line DataError."""
-    path = Path(path)
-    if path.is_dir():
-        raise DataError(f"{path}: is a directory, expected a file name to write")
-    parent = next((a for a in path.parents if a.exists()), None)
-    if parent is not None and not parent.is_dir():
-        raise DataError(f"{path}: cannot write: {parent} is a file, not a folder")
-    try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        yield path
-    except OSError as exc:
-        raise DataError(f"{path}: cannot write ({exc.strerror or exc})") from None
-
-
-@contextmanager
-def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
-    """Context giving a temporary path beside ``path`` (same folder, same suffix) to write to; on normal exit
-    the temporary file replaces ``path`` with :func:`os.replace` (atomic on one file system), on an exception
-    it is removed and ``path`` is left as it was. Errors of the folder become one-line DataErrors
-    (:func:`output_file`)."""
-    path = Path(path)
-    with output_file(path):
-        tmp = path.with_name(f".{path.stem}.{os.getpid()}.tmp{path.suffix}")
-        try:
-            yield tmp
-            os.replace(tmp, path)
-        finally:
-            if tmp.exists():
-                tmp.unlink()
+# Every writer of the project uses this context (kept under its old name for the existing callers).
+output_file = atomic_path
 
 
 def _write_csv(record: Record, path: Path) -> None:
@@ -158,8 +145,8 @@ def read_record(
         raise DataError(f"{src}: unknown format {suffix or '(no suffix)'!r}; supported: {', '.join(SUPPORTED_SUFFIXES)}")
     if p.stat().st_size == 0:
         raise DataError(f"{src}: file is empty")
-    if fs is not None and (not math.isfinite(float(fs)) or float(fs) <= 0):
-        raise DataError(f"{src}: sampling rate fs must be positive and finite, got {fs}")
+    if fs is not None:
+        fs = check_fs(fs, f"{src}: --fs / fs=")
     if suffix == ".npz":
         u, y, file_fs, units, meta = _read_npz(p, src)
     elif suffix == ".csv":
@@ -168,15 +155,18 @@ def read_record(
         u, y, file_fs, units, meta = _read_mat(p, src, u_var, y_var, fs_var, explicit_y=(y_var not in (None, "y")))
     if fs is None:
         if file_fs is None:
-            raise DataError(f"{src}: no sampling rate in the file (no t column or fs); give --fs / fs=")
-        fs = file_fs
+            raise DataError(f"{src}: no sampling rate in the file (no time column, fs or Ts); give --fs / fs=")
+        fs = check_fs(file_fs, src)
     elif file_fs is not None:
-        where, tol = ("its t column", _UNIFORM_TOL) if suffix == ".csv" else ("its fs", 1e-9)
+        where, tol = meta.pop("_fs_from", "its fs"), 1e-9
+        if "time" in where:
+            tol = _UNIFORM_TOL
         if not math.isclose(float(fs), file_fs, rel_tol=tol):
             raise DataError(f"{src}: --fs / fs={float(fs):g} Hz contradicts the file's own sampling rate "
                             f"{file_fs:.10g} Hz (from {where}); leave out --fs or correct the file")
     if require_y and y is None:
         raise DataError(f"{src}: missing output column/variable y")
+    meta.pop("_fs_from", None)
     meta.setdefault("provenance", {"file": os.path.basename(src)})
     filled: dict[str, list[int]] = {}
     u = check_array(u, "u", src, allow_nan=True)
@@ -241,8 +231,40 @@ def _read_npz(p: Path, src: str):
         raise
     except Exception as exc:  # zipfile.BadZipFile, ValueError (pickled object arrays), OSError
         raise DataError(f"{src}: not a readable .npz file ({type(exc).__name__}: {exc})") from None
-    units = meta.pop("units", {"u": "", "y": ""}) if isinstance(meta, dict) else {}
+    units = meta.pop("units", {"u": "", "y": ""})
+    _check_meta(meta, units, src)
+    u = _check_orientation(u, "u", src)
+    y = None if y is None else _check_orientation(y, "y", src)
     return u, y, fs, units, meta
+
+
+def _check_orientation(x: Any, name: str, src: str) -> np.ndarray:
+    """Samples run along the first axis; a 2-D array with fewer rows than columns is refused, never
+    transposed silently (a (1, N) array would be 1 sample of N channels)."""
+    a = np.asarray(x)
+    if a.ndim == 2 and a.shape[0] < a.shape[1]:
+        raise DataError(f"{src}: {name} has shape {a.shape}: fewer samples than channels; store samples along the "
+                        f"first axis, i.e. shape (N,) or (N, channels) (e.g. {name}.ravel() or {name}.T)")
+    return a
+
+
+def _check_meta(meta: dict, units: Any, src: str) -> None:
+    """Types of the metadata keys the library uses (a wrong type is refused here, not as a traceback later)."""
+    if not isinstance(units, dict) or not all(isinstance(k, str) and isinstance(v, str) for k, v in units.items()):
+        raise DataError(f"{src}: meta 'units' must be an object of strings, e.g. {{\"u\": \"V\", \"y\": \"um\"}}")
+    if "t0" in meta and (isinstance(meta["t0"], bool) or not isinstance(meta["t0"], (int, float))
+                         or not math.isfinite(meta["t0"])):
+        raise DataError(f"{src}: meta 't0' must be a finite number of seconds, got {meta['t0']!r}")
+    for key in ("preprocessing", "segments"):
+        if key in meta and not isinstance(meta[key], list):
+            raise DataError(f"{src}: meta {key!r} must be a list, got {type(meta[key]).__name__}")
+    for i, seg in enumerate(meta.get("segments", [])):
+        if not (isinstance(seg, dict) and all(isinstance(seg.get(k), int) and not isinstance(seg.get(k), bool)
+                                              and seg.get(k) >= 0 for k in ("start", "stop"))):
+            raise DataError(f"{src}: meta 'segments'[{i}] must be an object with integer start and stop >= 0")
+    for key in ("provenance", "signal", "twin_config"):
+        if key in meta and not isinstance(meta[key], dict):
+            raise DataError(f"{src}: meta {key!r} must be an object, got {type(meta[key]).__name__}")
 
 
 def _scalar_fs(value: Any, src: str) -> float:
@@ -256,55 +278,15 @@ def _scalar_fs(value: Any, src: str) -> float:
 
 
 # ---------------------------------------------------------------------------------------------- csv
-def _is_number(text: str) -> bool:
-    try:
-        float(text)
-        return True
-    except ValueError:
-        return False
-
-
 def _read_csv(p: Path, src: str, u_col: str, y_col: str | None, explicit_y: bool):
-    try:
-        with open(p, newline="", encoding="utf-8-sig") as fh:
-            sample = fh.read(65536)
-            fh.seek(0)
-            try:
-                dialect = csv.Sniffer().sniff(sample, delimiters=",;\t ")
-            except csv.Error:
-                dialect = csv.excel
-            rows = [r for r in csv.reader(fh, dialect) if any(c.strip() for c in r)]
-    except UnicodeDecodeError:
-        raise DataError(f"{src}: not a text CSV file") from None
-    if not rows:
-        raise DataError(f"{src}: file has no rows")
-    first = [c.strip() for c in rows[0]]
-    has_header = not all(_is_number(c) for c in first if c != "")
-    if has_header:
-        header = first
-        body = rows[1:]
-    else:
-        header = [str(i) for i in range(len(first))]
-        body = rows
-    if not body:
-        raise DataError(f"{src}: file has a header but no data rows")
-    index = {name: i for i, name in enumerate(header) if name != ""}
+    """Strict CSV reading (rules in :mod:`sysid.csvread` and docs/data-files.md)."""
+    from sysid.csvread import TIME_COLUMNS, parse_csv
 
-    def column(name: str) -> np.ndarray:
-        if header.count(name) > 1:
-            raise DataError(f"{src}: column {name!r} appears {header.count(name)} times in the header; rename the copies")
-        i = index[name]
-        out = np.empty(len(body))
-        for k, row in enumerate(body):
-            cell = row[i].strip() if i < len(row) else ""
-            if cell == "" or cell.lower() in ("nan", "na", "null"):
-                out[k] = np.nan
-            else:
-                try:
-                    out[k] = float(cell)
-                except ValueError:
-                    raise DataError(f"{src}: column {name!r} row {k + 1 + has_header} is not a number: {cell!r}") from None
-        return out
+    table = parse_csv(p, src)
+    index = table.index
+    time_cols = [n for n in index if n.strip().lower() in TIME_COLUMNS]
+    wanted = [s.strip() for spec in (u_col, y_col) if spec is not None for s in str(spec).split(",")]
+    table.prefetch(wanted + time_cols[:1])  # one parsing pass for every column used
 
     def columns(spec: str, role: str) -> np.ndarray:
         names = [s.strip() for s in str(spec).split(",") if s.strip()]
@@ -314,7 +296,7 @@ def _read_csv(p: Path, src: str, u_col: str, y_col: str | None, explicit_y: bool
                 f"{src}: missing column {missing[0]!r} for {role} (columns: {', '.join(index) or 'none'}); "
                 f"choose with --{role}-col"
             )
-        cols = [column(n) for n in names]
+        cols = table.columns(names)
         return cols[0] if len(cols) == 1 else np.column_stack(cols)
 
     u = columns(u_col, "u")
@@ -326,23 +308,31 @@ def _read_csv(p: Path, src: str, u_col: str, y_col: str | None, explicit_y: bool
         elif explicit_y:
             columns(y_col, "y")  # raises the clear message
     fs = None
-    if "t" in index:
-        t = column("t")
-        fs = _fs_from_time(t, src)
+    if len(time_cols) > 1:
+        raise DataError(f"{src}: several time columns ({', '.join(time_cols)}); keep one")
+    if time_cols:
+        name = time_cols[0]
+        t = table.columns([name])[0] * TIME_COLUMNS[name.strip().lower()]
+        fs = _fs_from_time(t, src, name)
     meta = {"provenance": {"file": p.name, "u_col": u_col, "y_col": y_col}}
+    if time_cols:
+        meta["provenance"]["time_col"] = time_cols[0]
+        meta["_fs_from"] = f"its time column {time_cols[0]!r}"
     return u, y, fs, {"u": "", "y": ""}, meta
 
 
-def _fs_from_time(t: np.ndarray, src: str) -> float:
+def _fs_from_time(t: np.ndarray, src: str, name: str = "t") -> float:
+    """Sampling rate [Hz] of a uniform time vector ``t`` [s] (uniform to 1 % of the mean step)."""
     if t.size < 2 or not np.isfinite(t).all():
-        raise DataError(f"{src}: column 't' needs at least two finite values to give the sampling rate")
+        raise DataError(f"{src}: time column/variable {name!r} needs at least two finite values to give the sampling rate")
     d = np.diff(t)
     span = t[-1] - t[0]
     if span <= 0:
-        raise DataError(f"{src}: column 't' is not increasing")
+        raise DataError(f"{src}: time column/variable {name!r} is not increasing")
     dt = span / (t.size - 1)
     if np.max(np.abs(d - dt)) > _UNIFORM_TOL * dt:
-        raise DataError(f"{src}: column 't' is not uniformly sampled (steps {d.min():.6g}..{d.max():.6g} s); resample first")
+        raise DataError(f"{src}: time column/variable {name!r} is not uniformly sampled (steps {d.min():.6g}..{d.max():.6g} s); "
+                        "resample first")
     return 1.0 / dt
 
 
@@ -366,14 +356,34 @@ def _read_mat(p: Path, src: str, u_var: str, y_var: str | None, fs_var: str, exp
             y = _mat_numeric(variables[y_var], y_var, src)
         elif explicit_y:
             raise DataError(f"{src}: missing variable {y_var!r} for y (variables: {', '.join(sorted(variables))}); choose with --y-var")
-    fs = None
+    # the rate: fs_var (default fs), else a scalar Ts [s], else a time vector t / time [s]; several must agree
+    rates: list[tuple[float, str]] = []
     if fs_var in variables:
-        fs = _scalar_fs(variables[fs_var], src)
-    if u.ndim == 2 and u.shape[0] < u.shape[1]:
-        u = u.T  # MATLAB row vectors / channels-by-samples
-    if y is not None and y.ndim == 2 and y.shape[0] < y.shape[1]:
-        y = y.T
-    return u, y, fs, {"u": "", "y": ""}, {"provenance": {"file": p.name, "u_var": u_var, "y_var": y_var}}
+        rates.append((_scalar_fs(variables[fs_var], src), f"its {fs_var}"))
+    if "Ts" in variables:
+        ts = _scalar_fs(variables["Ts"], src)
+        if not (math.isfinite(ts) and ts > 0):
+            raise DataError(f"{src}: Ts must be a positive sampling interval in seconds, got {ts!r}")
+        rates.append((1.0 / ts, "its Ts"))
+    for tname in ("t", "time"):
+        if tname in variables and tname not in (u_var, y_var):
+            t = _mat_numeric(variables[tname], tname, src)
+            if t.ndim != 1:
+                raise DataError(f"{src}: time variable {tname!r} must be a vector, got shape {t.shape}")
+            rates.append((_fs_from_time(t.astype(float), src, tname), f"its time variable {tname!r}"))
+            break
+    for r, w in rates[1:]:
+        tol = _UNIFORM_TOL if "time" in w else 1e-9
+        if not math.isclose(r, rates[0][0], rel_tol=tol):
+            raise DataError(f"{src}: {rates[0][1]} ({rates[0][0]:.10g} Hz) and {w} ({r:.10g} Hz) disagree")
+    fs = rates[0][0] if rates else None
+    # MATLAB row and column vectors are squeezed to 1-D (one channel); matrices must be samples x channels
+    u = _check_orientation(u, u_var, src)
+    y = None if y is None else _check_orientation(y, y_var, src)
+    meta = {"provenance": {"file": p.name, "u_var": u_var, "y_var": y_var}}
+    if rates:
+        meta["_fs_from"] = rates[0][1]
+    return u, y, fs, {"u": "", "y": ""}, meta
 
 
 def _mat_numeric(value: Any, name: str, src: str) -> np.ndarray:
@@ -394,9 +404,19 @@ def _read_mat73(p: Path, src: str) -> dict[str, np.ndarray]:
     out: dict[str, np.ndarray] = {}
     try:
         with h5py.File(p, "r") as f:
-            for k, v in f.items():
+            for k in f.keys():
+                link = f.get(k, getlink=True)
+                if isinstance(link, h5py.ExternalLink):  # never follow a path to another file
+                    raise DataError(f"{src}: variable {k!r} is an external link to {link.filename}; "
+                                    "external links are refused (copy the data into the file)")
+                v = f.get(k)
                 if isinstance(v, h5py.Dataset):
+                    if v.external or v.is_virtual:
+                        raise DataError(f"{src}: variable {k!r} stores its data in another file; refused "
+                                        "(copy the data into the file)")
                     out[k] = np.asarray(v).T
+    except DataError:
+        raise
     except Exception as exc:
         raise DataError(f"{src}: not a readable .mat file ({type(exc).__name__}: {exc})") from None
     return out

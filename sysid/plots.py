@@ -44,11 +44,12 @@ PREDICTED_COLORS = ("#d62728", "#2ca02c", "#9467bd", "#8c564b", "#e377c2", "#17b
 
 
 def _save(fig, path) -> Path:
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110, bbox_inches="tight")
-    plt.close(fig)
-    return path
+    from sysid.safeio import save_figure
+
+    try:
+        return save_figure(fig, path, dpi=110, bbox_inches="tight")  # atomic: no half-written PNG
+    finally:
+        plt.close(fig)
 
 
 def plot_residuals(e: np.ndarray, fs: float, path, title: str = "one-step residuals", unit: str = "") -> Path:

@@ -17,7 +17,13 @@ import numpy as np
 
 from sysid.errors import DataError
 
-__all__ = ["Record", "check_array", "Normaliser"]
+__all__ = ["Record", "check_array", "Normaliser", "FS_MIN", "FS_MAX"]
+
+#: documented range of sampling rates [Hz] of data files and options (docs/data-files.md): up to 1 GHz (10x the
+#: 100 MHz acoustic rig); down to 1e-9 Hz because frequency-domain records (the acoustic twin's vna-sweep files)
+#: store fs = 1/(point spacing in Hz), e.g. 1e-4 for a 10 kHz grid. Outside it a rate is a unit mistake and is
+#: refused by sysid.io.read_record and the CLI; a Record itself only needs fs > 0.
+FS_MIN, FS_MAX = 1e-9, 1e9
 
 
 def check_array(values: Any, name: str, source: str = "array", allow_nan: bool = False) -> np.ndarray:
@@ -90,7 +96,7 @@ class Record:
                 )
         try:
             fs = float(self.fs)
-        except (TypeError, ValueError):
+        except (TypeError, ValueError, OverflowError):
             raise DataError(f"{self.source}: fs is not a number ({self.fs!r})") from None
         if not np.isfinite(fs) or fs <= 0:
             raise DataError(f"{self.source}: sampling rate fs must be positive and finite, got {fs}")

@@ -194,9 +194,9 @@ class Twin(ABC):
     def save_params(self, path: str | Path, extra: Mapping[str, Any] | None = None) -> Path:
         """Write the configuration (and e.g. calibration statistics in ``extra``) as a JSON parameter file."""
         payload = {"format": PARAMS_FORMAT, **self.config(), **(dict(extra) if extra else {})}
-        with output_file(path) as path:
-            path.write_text(json.dumps(payload, indent=2, default=_json_default))
-        return path
+        with output_file(path) as tmp:  # atomic: a temporary file renamed over path (sysid.safeio)
+            tmp.write_text(json.dumps(payload, indent=2, default=_json_default))
+        return Path(path)
 
     # ------------------------------------------------------------------ configuration from the CLI
     @classmethod
@@ -212,9 +212,15 @@ class Twin(ABC):
         active = set(cls.default_effects())
         if params_file is not None:
             data = load_params_file(params_file, cls.name)
-            values.update(_coerce_all(cls, data.get("params", {}), str(params_file)))
+            params = data.get("params", {})
+            if not isinstance(params, dict):
+                raise DataError(f"{params_file}: 'params' must be an object of name: value, got {type(params).__name__}")
+            values.update(_coerce_all(cls, params, str(params_file)))
             if "effects" in data:
-                active = set(data["effects"])
+                eff = data["effects"]
+                if not isinstance(eff, list) or not all(isinstance(e, str) for e in eff):
+                    raise DataError(f"{params_file}: 'effects' must be a list of effect names, got {eff!r}"[:200])
+                active = set(eff)
         if effects is not None:
             text = effects.strip()
             active = set() if text.lower() in ("none", "") else {e.strip() for e in text.split(",") if e.strip()}
@@ -254,8 +260,32 @@ def _coerce_all(cls: type[Twin], raw: Mapping[str, Any], where: str) -> dict[str
     for key, value in raw.items():
         if key not in info:
             raise ConfigError(f"{where}: unknown parameter {key!r} for twin {cls.name}; valid: {', '.join(info)}")
-        out[key] = coerce(value, info[key].default, key) if isinstance(value, str) else value
+        out[key] = coerce(value, info[key].default, key) if isinstance(value, str) else \
+            _json_value(value, info[key].default, key, where)
     return out
+
+
+def _json_value(value: Any, default: Any, key: str, where: str) -> Any:
+    """A parameter value from a JSON file: its JSON type must fit the parameter's (numbers for numbers, a
+    list for a list ...); refused with one line otherwise (issue 19)."""
+    def kind(v: Any) -> str:
+        if isinstance(v, bool):
+            return "bool"
+        if isinstance(v, (int, float)):
+            return "number"
+        if isinstance(v, (list, tuple)):
+            return "list"
+        return type(v).__name__
+    if default is None:
+        if isinstance(value, (dict, list, tuple)):
+            raise ConfigError(f"{where}: parameter {key!r} must be a number, a string or null, got {kind(value)}")
+        return value
+    want, got = kind(default), kind(value)
+    if want != got:
+        raise ConfigError(f"{where}: parameter {key!r} must be a {want}, got {got} ({str(value)[:40]})")
+    if got == "list" and isinstance(default, tuple):
+        return tuple(value)
+    return value
 
 
 def load_params_file(path: str | Path, twin: str | None = None) -> dict[str, Any]:

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from benchmarks.commands.common import add_data_args, add_twin_args, emit_json, read_data, twin_from_args
+from benchmarks.commands.common import add_data_args, add_twin_args, emit_json, read_data, same_fs, twin_from_args
 
 
 def register(sub) -> None:
@@ -24,6 +24,7 @@ def run(args: argparse.Namespace) -> int:
     twin = twin_from_args(args.twin, args)
     data = read_data(args, args.data)
     val = read_data(args, args.val) if args.val else None
+    same_fs([data] + ([val] if val is not None else []))
     names = [n.strip() for n in args.fit.split(",") if n.strip()] if args.fit is not None else None
     result = twin.calibrate(data, val=val, names=names)
     summary = result.to_dict()

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import argparse
 
-from benchmarks.commands.common import add_data_args, add_twin_args, emit_json, read_data, twin_from_args
+from benchmarks.commands.common import NONNEG_INT, add_data_args, add_twin_args, emit_json, number, read_data, same_fs, twin_from_args
 from sysid.errors import ConfigError
 
 
@@ -18,10 +18,10 @@ def register(sub) -> None:
     p.add_argument("twin")
     p.add_argument("--data", required=True, metavar="FILE", help="measured (estimation) record")
     p.add_argument("--val", metavar="FILE", help="validation record (default: last 40 %% of --data)")
-    p.add_argument("--max-rounds", type=int, default=3, help="at most this many effects are added (default 3)")
+    p.add_argument("--max-rounds", type=number(0, 100, integer=True), default=3, help="at most this many effects are added (default 3)")
     p.add_argument("--candidates", metavar="LIST", help="comma-separated catalog effects to try (default: all missing)")
     p.add_argument("--no-calibrate", action="store_true", help="do not re-fit the starting configuration")
-    p.add_argument("--skip", type=int, default=0, help="leading samples not scored (initial transient)")
+    p.add_argument("--skip", type=NONNEG_INT, default=0, help="leading samples not scored (initial transient)")
     add_data_args(p)
     add_twin_args(p)
     p.add_argument("--json", action="store_true")
@@ -37,6 +37,7 @@ def run(args: argparse.Namespace) -> int:
     twin = twin_from_args(args.twin, args)
     data = read_data(args, args.data)
     val = read_data(args, args.val) if args.val else None
+    same_fs([data] + ([val] if val is not None else []))
     cands = [c.strip() for c in args.candidates.split(",") if c.strip()] if args.candidates else None
     result = diagnose(twin, data, val, max_rounds=args.max_rounds, candidates=cands,
                       calibrate_baseline=not args.no_calibrate, skip=args.skip, keep_stages=bool(args.report))

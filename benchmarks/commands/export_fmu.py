@@ -9,14 +9,14 @@ from __future__ import annotations
 import argparse
 import time
 
-from benchmarks.commands.common import add_twin_args, emit_json, twin_from_args
+from benchmarks.commands.common import FS, add_twin_args, emit_json, twin_from_args
 
 
 def register(sub) -> None:
     p = sub.add_parser("export-fmu", help="export a twin as an FMI 2.0 co-simulation FMU")
     p.add_argument("twin")
     add_twin_args(p)
-    p.add_argument("--fs", type=float, default=None,
+    p.add_argument("--fs", type=FS, default=None,
                    help="sampling rate [Hz] = 1/communication step (default: the twin's rate, "
                         "cantilever 10 kHz, acoustic 100 MHz)")
     p.add_argument("-o", "--output", metavar="FILE", help="output .fmu (default fmus/TWIN.fmu)")

@@ -14,7 +14,7 @@ import argparse
 import time
 from typing import Any, Sequence
 
-from benchmarks.commands.common import add_data_args, emit_json, read_data
+from benchmarks.commands.common import add_data_args, emit_json, read_data, same_fs
 from sysid.config import parse_assignments
 from sysid.evaluate import identification_summary
 from sysid.record import Record
@@ -57,6 +57,7 @@ def register(sub) -> None:
 def run(args: argparse.Namespace) -> int:
     est = [read_data(args, f) for f in args.est]
     val = read_data(args, args.val) if args.val else None
+    same_fs(est + ([val] if val is not None else []))
     model, summary = identify(args.identifier, est if len(est) > 1 else est[0], val, parse_assignments(args.set_))
     if args.output:
         path = model.save(args.output)

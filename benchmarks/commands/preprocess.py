@@ -17,6 +17,7 @@ import math
 
 from benchmarks.commands.common import add_data_args, emit_json, read_data
 from sysid.errors import ConfigError
+from sysid.record import FS_MAX, FS_MIN
 from sysid.io import write_record
 
 
@@ -61,18 +62,23 @@ def register(sub) -> None:
     p.set_defaults(func=run, steps=[])
 
 
-def _num(text: str, option: str, integer: bool = False) -> float:
+def _num(text: str, option: str, integer: bool = False, lo: float | None = None, hi: float | None = None) -> float:
     try:
         v = float(text)
     except (TypeError, ValueError):
         raise ConfigError(f"{option} expects a number, got {text!r}") from None
     if not math.isfinite(v):
         raise ConfigError(f"{option} must be finite, got {text!r}")
+    if lo is not None and v < lo or hi is not None and v > hi:
+        raise ConfigError(f"{option}: {text} outside the accepted range {lo:g}..{hi if hi is not None else math.inf:g}")
     if integer:
         if v != int(v):
             raise ConfigError(f"{option} expects an integer, got {text!r}")
         return int(v)
     return v
+
+
+_BIG = 10**12  # sample counts beyond this are no record's
 
 
 def to_steps(raw: list[tuple[str, str | list, str]], signals: str = "both") -> list[dict]:
@@ -82,34 +88,34 @@ def to_steps(raw: list[tuple[str, str | list, str]], signals: str = "both") -> l
     for name, value, opt in raw:
         d: dict = {"step": name}
         if name == "detrend":
-            d["order"] = _num(value, opt, integer=True)
+            d["order"] = _num(value, opt, integer=True, lo=0, hi=20)
         elif name == "hampel" and value:
             parts = str(value).split(":")
             if len(parts) > 2:
                 raise ConfigError(f"{opt} expects HALFWIDTH[:NSIGMA], got {value!r}")
-            d["window"] = _num(parts[0], opt, integer=True)
+            d["window"] = _num(parts[0], opt, integer=True, lo=1, hi=_BIG)
             if len(parts) == 2:
-                d["n_sigma"] = _num(parts[1], opt)
+                d["n_sigma"] = _num(parts[1], opt, lo=0, hi=1e6)
         elif name == "moving_average":
-            d["span"] = _num(value, opt, integer=True)
+            d["span"] = _num(value, opt, integer=True, lo=1, hi=_BIG)
         elif name == "decimate":
-            d["q"] = _num(value, opt, integer=True)
+            d["q"] = _num(value, opt, integer=True, lo=1, hi=_BIG)
         elif name == "resample":
-            d["fs_new"] = _num(value, opt)
+            d["fs_new"] = _num(value, opt, lo=FS_MIN, hi=math.inf)  # the library refuses rates it cannot reach
         elif name == "bandpass":
             parts = str(value).split(":")
             if len(parts) not in (2, 3):
                 raise ConfigError(f"{opt} expects FMIN:FMAX[:ORDER], got {value!r}")
-            d["fmin"], d["fmax"] = _num(parts[0], opt), _num(parts[1], opt)
-            if len(parts) == 3:
-                d["order"] = _num(parts[2], opt, integer=True)
+            d["fmin"], d["fmax"] = _num(parts[0], opt, lo=0, hi=FS_MAX), _num(parts[1], opt, lo=0, hi=FS_MAX)
+            if len(parts) == 3:  # a Butterworth order beyond ~20 is numerically meaningless; 64 is generous
+                d["order"] = _num(parts[2], opt, integer=True, lo=1, hi=64)
         elif name == "segment":
             parts = str(value).split(":")
             if len(parts) not in (1, 2):
                 raise ConfigError(f"{opt} expects LENGTH[:OVERLAP], got {value!r}")
-            d["length"] = _num(parts[0], opt, integer=True)
+            d["length"] = _num(parts[0], opt, integer=True, lo=1, hi=_BIG)
             if len(parts) == 2:
-                d["overlap"] = _num(parts[1], opt, integer=True)
+                d["overlap"] = _num(parts[1], opt, integer=True, lo=0, hi=_BIG)
         if name in per_signal:
             d["signals"] = signals
         out.append(d)
@@ -123,6 +129,12 @@ def run(args: argparse.Namespace) -> int:
     if not steps and not args.fill_missing:
         raise ConfigError("preprocess: give at least one step (see piezotwin preprocess --help)")
     rec = read_data(args, args.file, require_y=False)
+    for st in steps:  # memory guard: the largest record a resampling step would build
+        if st["step"] == "resample" and st["fs_new"] <= FS_MAX:
+            from sysid.safeio import check_memory
+
+            check_memory(len(rec) * max(1.0, st["fs_new"] / rec.fs) * max(rec.n_inputs + rec.n_outputs, 1),
+                         f"preprocess --resample {st['fs_new']:g}", copies=4)
     n0 = len(rec.meta.get("preprocessing", []))
     out = apply_steps(rec, steps)
     write_record(out, args.output)

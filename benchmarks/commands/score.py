@@ -11,6 +11,8 @@ from __future__ import annotations
 import argparse
 import sys
 
+from benchmarks.commands.common import number
+
 
 def _names(text: str | None) -> list[str] | None:
     if text is None:
@@ -28,8 +30,8 @@ def register(sub) -> None:
     p.add_argument("--check", action="store_true", help="exit 1 if any pair falls below its floor in benchmarks/baselines.json")
     p.add_argument("--baselines", metavar="FILE", help="baselines file (default benchmarks/baselines.json)")
     p.add_argument("--update-baselines", action="store_true", help="write floors measured in this run to the baselines file")
-    p.add_argument("--margin", type=float, default=0.15, help="margin of --update-baselines (default 0.15 = 15 %%)")
-    p.add_argument("--seeded-margin", type=float, default=0.5,
+    p.add_argument("--margin", type=number(0, 10), default=0.15, help="margin of --update-baselines (default 0.15 = 15 %%)")
+    p.add_argument("--seeded-margin", type=number(0, 10), default=0.5,
                    help="margin of --update-baselines for identifiers scored over several training seeds (default 0.5)")
     p.add_argument("--from-runs", nargs="+", metavar="RUN.json",
                    help="with --update-baselines: set floors from these saved `score --json` runs (e.g. one per CPU "
@@ -54,12 +56,6 @@ def run(args: argparse.Namespace) -> int:
     for d in dsets or []:
         if d not in dataset_names():
             raise ConfigError(f"unknown dataset {d!r}; valid: {', '.join(dataset_names())}")
-    import math
-
-    for name in ("margin", "seeded_margin"):
-        v = getattr(args, name)
-        if not (math.isfinite(v) and v >= 0):
-            raise ConfigError(f"--{name.replace('_', '-')} must be a finite number >= 0, got {v}")
     from pathlib import Path
 
     bpath = Path(args.baselines) if args.baselines else scoring.BASELINES_PATH
@@ -114,21 +110,11 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _write_json(path, obj) -> None:
-    """Write ``obj`` as JSON atomically: a temporary file beside ``path``, then a rename."""
     import json
-    import os
-    import tempfile
 
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "w") as fh:
-            fh.write(json.dumps(obj, indent=2) + "\n")
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        os.unlink(tmp)
-        raise
+    from sysid.safeio import atomic_write_text
+
+    atomic_write_text(path, json.dumps(obj, indent=2) + "\n")
 
 
 def _floors_from_runs(args: argparse.Namespace, bpath, baselines) -> int:

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import argparse
 
-from benchmarks.commands.common import add_data_args, emit_json, read_data
+from benchmarks.commands.common import COUNT, SEED, add_data_args, emit_json, number, read_data, same_fs
 from sysid.config import parse_assignments
 
 
@@ -34,15 +34,15 @@ def register(sub) -> None:
     p.add_argument("--val", required=True, metavar="FILE", help="validation record")
     p.add_argument("--grid", required=True, metavar="SPEC",
                    help="choices, e.g. 'lags=5,10;hidden=25-25,25-25-25-25;activation=relu,tanh'")
-    p.add_argument("--repeats", type=int, default=1, metavar="R", help="runs per configuration (seeds seed..seed+R-1)")
-    p.add_argument("--seed", type=int, default=0, help="first seed (default 0)")
+    p.add_argument("--repeats", type=COUNT, default=1, metavar="R", help="runs per configuration (seeds seed..seed+R-1)")
+    p.add_argument("--seed", type=SEED, default=0, help="first seed (default 0)")
     p.add_argument("--set", dest="set_", action="append", default=[], metavar="KEY=VALUE[,...]",
                    help="options fixed for every run (e.g. epochs=20)")
     p.add_argument("--sampler", choices=("grid", "random", "tpe"), default="grid")
-    p.add_argument("--trials", type=int, metavar="N", help="configurations to evaluate (default: the whole grid)")
+    p.add_argument("--trials", type=COUNT, metavar="N", help="configurations to evaluate (default: the whole grid)")
     p.add_argument("--storage", metavar="URL|FILE", help="Optuna storage: SQLite file (default STUDY.db) or URL")
     p.add_argument("--study", default="piezotwin-search", help="study name inside the storage")
-    p.add_argument("--workers", type=int, default=1, help="local worker processes sharing the storage")
+    p.add_argument("--workers", type=number(1, 256, integer=True), default=1, help="local worker processes sharing the storage")
     p.add_argument("--export", metavar="FILE.jsonl", help="write one JSON line per run")
     p.add_argument("--plot", metavar="FILE.png", help="R² distribution of the best configuration (Fig. 5.13 analogue)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
@@ -59,12 +59,18 @@ def run(args: argparse.Namespace) -> int:
     from sysid.errors import ConfigError
     from sysid.neural.search import SweepSpec, collect, export_jsonl, parse_grid, plot_r2_distribution, run_sweep, storage_url
 
+    from sysid.neural.search import _open_storage
+    from sysid.neural.storage_check import check_storage, init_sqlite
+
     if args.workers < 1:
         raise ConfigError(f"--workers must be ≥ 1, got {args.workers}")
+    check_storage(args.storage, args.study)  # before any work: a bad --storage leaves nothing behind
     est = [read_data(args, f) for f in args.est]
     val = read_data(args, args.val)
+    same_fs(est + [val])
     spec = SweepSpec(identifier=args.identifier, grid=parse_grid(args.grid, args.identifier), repeats=args.repeats,
                      seed=args.seed, fixed=parse_assignments(args.set_), sampler=args.sampler)
+    init_sqlite(storage_url(args.storage, args.study), _open_storage)  # new SQLite store: created under a lock
     summary = run_sweep(spec, est if len(est) > 1 else est[0], val, storage=args.storage, study=args.study,
                         trials=args.trials, workers=args.workers, progress=not (args.no_progress or getattr(args, "quiet", False)))
     url = storage_url(args.storage, args.study)

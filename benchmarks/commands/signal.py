@@ -14,7 +14,7 @@ import math
 
 import numpy as np
 
-from benchmarks.commands.common import emit_json
+from benchmarks.commands.common import COUNT, FS, POSITIVE, SEED, emit_json, number
 from sysid import signals
 from sysid.errors import ConfigError
 from sysid.io import write_record
@@ -43,32 +43,32 @@ def register(sub) -> None:
     p = sub.add_parser("signal", help="generate an excitation signal (record with u only)",
                        description=__doc__.split("\n\n")[1] if __doc__ else None)
     p.add_argument("kind", choices=KINDS)
-    p.add_argument("--fs", type=float, help="sampling rate [Hz]")
-    p.add_argument("--duration", type=float, help="length [s]")
+    p.add_argument("--fs", type=FS, help="sampling rate [Hz]")
+    p.add_argument("--duration", type=POSITIVE, help="length [s]")
     p.add_argument("--band", metavar="FMIN:FMAX", help="multisine: excited band [Hz] (FMAX may be empty: up to Nyquist);"
                    " chirp: start:end frequency [Hz]")
-    p.add_argument("--components", type=int, help="multisine: number of lines (default: every grid line in the band)")
-    p.add_argument("--resolution", type=float, help="multisine: line spacing [Hz] (default 1/period)")
-    p.add_argument("--amplitude", type=float, default=1.0, help="peak value (RMS value with --rms); default 1")
+    p.add_argument("--components", type=COUNT, help="multisine: number of lines (default: every grid line in the band)")
+    p.add_argument("--resolution", type=POSITIVE, help="multisine: line spacing [Hz] (default 1/period)")
+    p.add_argument("--amplitude", type=number(-1e12, 1e12), default=1.0, help="peak value (RMS value with --rms); default 1")
     p.add_argument("--rms", action="store_true", help="--amplitude is the RMS value")
     p.add_argument("--phase", choices=signals.PHASES, default="random", help="multisine phases (default random)")
     p.add_argument("--grid", choices=signals.GRIDS, default="full", help="multisine line grid (default full)")
-    p.add_argument("--detection-fraction", type=float, default=0.0,
+    p.add_argument("--detection-fraction", type=number(0, 1), default=0.0,
                    help="multisine: fraction of lines left out at random as detection lines (default 0)")
-    p.add_argument("--periods", type=int, default=1, help="number of periods in --duration (multisine, chirp, prbs)")
-    p.add_argument("--seed", type=int, default=0, help="seed of random phases / detection lines / APRBS (default 0)")
+    p.add_argument("--periods", type=COUNT, default=1, help="number of periods in --duration (multisine, chirp, prbs)")
+    p.add_argument("--seed", type=SEED, default=0, help="seed of random phases / detection lines / APRBS (default 0)")
     p.add_argument("--method", choices=("linear", "log"), default="linear", help="chirp sweep law (default linear)")
     p.add_argument("--periodic", action="store_true", help="chirp: periodic chirp of eq. 2-2 (f*T0 integers)")
-    p.add_argument("--freq", type=float, help="sine: frequency [Hz]")
-    p.add_argument("--sine-phase", type=float, default=0.0, help="sine/chirp: initial phase [rad] (cos form, eq. 2-3)")
+    p.add_argument("--freq", type=number(0, 1e9), help="sine: frequency [Hz]")
+    p.add_argument("--sine-phase", type=number(-1e6, 1e6), default=0.0, help="sine/chirp: initial phase [rad] (cos form, eq. 2-3)")
     p.add_argument("--freqs", help="stepped-sine: comma-separated frequencies [Hz]")
-    p.add_argument("--settle", type=float, default=0.0, help="stepped-sine: settling time per step [s]")
-    p.add_argument("--cycles", type=int, default=10, help="stepped-sine: periods measured per step (default 10)")
-    p.add_argument("--order", type=int, default=10, help="prbs: LFSR order, period 2^order-1 bits (default 10)")
-    p.add_argument("--bit-samples", type=int, default=1, help="prbs: samples per bit (default 1)")
+    p.add_argument("--settle", type=number(0, 1e6), default=0.0, help="stepped-sine: settling time per step [s]")
+    p.add_argument("--cycles", type=COUNT, default=10, help="stepped-sine: periods measured per step (default 10)")
+    p.add_argument("--order", type=number(2, 40, integer=True), default=10, help="prbs: LFSR order, period 2^order-1 bits (default 10)")
+    p.add_argument("--bit-samples", type=COUNT, default=1, help="prbs: samples per bit (default 1)")
     p.add_argument("--hold", metavar="MIN:MAX", help="aprbs: hold time range [s] (default 10..100 samples)")
-    p.add_argument("--levels", type=int, help="aprbs: number of discrete levels (default: continuous)")
-    p.add_argument("--truncate", type=int, help="thesis-acoustic: keep the first N samples (the dissertation kept 5000)")
+    p.add_argument("--levels", type=number(2, 10**6, integer=True), help="aprbs: number of discrete levels (default: continuous)")
+    p.add_argument("--truncate", type=COUNT, help="thesis-acoustic: keep the first N samples (the dissertation kept 5000)")
     p.add_argument("--unit", default="V", help="unit of u (default V)")
     p.add_argument("--json", action="store_true", help="print a JSON summary")
     p.add_argument("-o", "--output", required=True, metavar="FILE", help="output record (.npz, .csv or .mat)")
@@ -148,7 +148,29 @@ def build(args: argparse.Namespace) -> tuple[np.ndarray, float, dict, dict]:
     return u, fs, params, info
 
 
+def _expected_samples(args: argparse.Namespace) -> float:
+    """Samples the request would generate (before allocating anything), for the memory guard."""
+    fs = args.fs or 0.0
+    if args.kind == "thesis-chirp":
+        return (args.duration or 0.0) * 100e6
+    if args.kind == "prbs":
+        n = (2 ** args.order - 1) * args.bit_samples * args.periods
+        return max(n, (args.duration or 0.0) * fs)
+    if args.kind == "stepped-sine":
+        try:
+            freqs = [float(f) for f in (args.freqs or "").split(",") if f.strip()]
+        except ValueError:
+            return 0.0
+        return sum(fs * (args.settle + args.cycles / f) for f in freqs if f > 0)
+    if args.kind == "multisine" and args.duration is None and args.resolution:
+        return fs / args.resolution * args.periods
+    return (args.duration or 0.0) * fs
+
+
 def run(args: argparse.Namespace) -> int:
+    from sysid.safeio import check_memory
+
+    check_memory(_expected_samples(args), f"signal {args.kind}", copies=6)
     if args.amplitude is not None and (not math.isfinite(args.amplitude) or args.amplitude <= 0):
         raise ConfigError(f"--amplitude must be positive, got {args.amplitude}")
     u, fs, params, info = build(args)

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 
 from benchmarks.commands.common import add_data_args, add_twin_args, read_data, twin_from_args
+from sysid.errors import ConfigError
 from sysid.io import write_record
 
 
@@ -41,7 +42,19 @@ def run_generate(args: argparse.Namespace) -> int:
 
     twin = twin_from_args(args.twin, args)
     twin.check_protocol(args.protocol)
-    rec = twin.generate(args.protocol, **parse_assignments(args.option, "--option"))
+    opts = parse_assignments(args.option, "--option")
+    if "fs" in opts:  # the documented rate range (a huge fs would otherwise overflow or exhaust memory)
+        import math
+
+        from sysid.record import FS_MAX, FS_MIN
+
+        try:
+            v = float(opts["fs"])
+        except ValueError:
+            v = math.nan  # not a number: the twin's own check names it
+        if math.isfinite(v) and v > 0 and not FS_MIN <= v <= FS_MAX:
+            raise ConfigError(f"--option fs: sampling rate {v:g} Hz outside the accepted range {FS_MIN:g}..{FS_MAX:g} Hz")
+    rec = twin.generate(args.protocol, **opts)
     write_record(rec, args.output)
     print(f"generated {args.twin} {args.protocol}: {len(rec)} samples at {rec.fs:g} Hz -> {args.output}")
     return 0

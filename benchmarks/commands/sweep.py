@@ -18,6 +18,7 @@ from typing import Any
 from benchmarks.commands.common import add_twin_args, clean_json, emit_json, twin_from_args
 from sysid.config import coerce
 from sysid.errors import ConfigError
+from sysid.safeio import save_figure
 
 
 def register(sub) -> None:
@@ -98,7 +99,7 @@ def write_report(result: dict[str, Any], out: Path) -> list[str]:
         axes[0].legend(fontsize=7)
         fig.tight_layout()
         path = out / f"sweep_{name}_spectra.png"
-        fig.savefig(path, dpi=110)
+        save_figure(fig, path, dpi=110)
         plt.close(fig)
         files.append(str(path))
     keys = [k for k, v in result["rows"][0].items()
@@ -120,11 +121,13 @@ def write_report(result: dict[str, Any], out: Path) -> list[str]:
         axes[-1].set_xlabel(f"{name} [{unit}]" if unit else name)
         fig.tight_layout()
         path = out / f"sweep_{name}_metrics.png"
-        fig.savefig(path, dpi=110)
+        save_figure(fig, path, dpi=110)
         plt.close(fig)
         files.append(str(path))
     path = out / f"sweep_{name}.json"
-    path.write_text(json.dumps(clean_json(public(result)), indent=2))
+    from sysid.safeio import atomic_write_text
+
+    atomic_write_text(path, json.dumps(clean_json(public(result)), indent=2))
     files.append(str(path))
     return files
 

@@ -60,8 +60,10 @@ def _from_torch(obj: Any) -> Any:
 def save_torch(model, path: str | Path) -> Path:
     path = Path(path)
     payload = {"format": FORMAT, "identifier": model.name, "params": model.get_params(), "state": _to_torch(model._state())}
-    path.parent.mkdir(parents=True, exist_ok=True)
-    torch.save(payload, path)
+    from sysid.safeio import atomic_path
+
+    with atomic_path(path) as tmp:  # temporary file renamed over path: no partial model file
+        torch.save(payload, tmp)
     return path
 
 

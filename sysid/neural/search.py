@@ -495,12 +495,9 @@ def summarise(runs: list[dict[str, Any]]) -> dict[str, Any]:
 
 def export_jsonl(runs: list[dict[str, Any]], path: str | Path) -> Path:
     """One JSON object per run (config, seed, n_parameters, fit_seconds, estimation/validation scores)."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    with path.open("w") as fh:
-        for run in runs:
-            fh.write(json.dumps(_clean(run)) + "\n")
-    return path
+    from sysid.safeio import atomic_write_text
+
+    return atomic_write_text(path, "".join(json.dumps(_clean(run)) + "\n" for run in runs))
 
 
 def plot_r2_distribution(runs: list[dict[str, Any]], config_key_: str, path: str | Path) -> Path:
@@ -524,8 +521,9 @@ def plot_r2_distribution(runs: list[dict[str, Any]], config_key_: str, path: str
         ax.set_xlabel("free-run R²")
     fig.suptitle(config_key_)
     fig.tight_layout()
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    from sysid.safeio import save_figure
+
+    try:
+        return save_figure(fig, path, dpi=110)
+    finally:
+        plt.close(fig)

@@ -14,6 +14,8 @@ from typing import Any
 
 import numpy as np
 
+from sysid.safeio import save_figure
+
 __all__ = ["write_report"]
 
 
@@ -62,7 +64,7 @@ def write_report(result: dict[str, Any], directory: str | Path) -> Path:
     ax[2].set_xlabel("time [s]")
     fig.suptitle(f"validation: NRMSE {result['baseline']['nrmse_val']:.4g} → {result['extended']['nrmse_val']:.4g}")
     fig.tight_layout()
-    fig.savefig(d / "residuals.png", dpi=110)
+    save_figure(fig, d / "residuals.png", dpi=110)
     plt.close(fig)
     files.append("residuals.png")
 
@@ -78,7 +80,7 @@ def write_report(result: dict[str, Any], directory: str | Path) -> Path:
     ax.set_ylabel("PSD")
     ax.legend(fontsize=8)
     fig.tight_layout()
-    fig.savefig(d / "spectra.png", dpi=110)
+    save_figure(fig, d / "spectra.png", dpi=110)
     plt.close(fig)
     files.append("spectra.png")
 
@@ -93,7 +95,7 @@ def write_report(result: dict[str, Any], directory: str | Path) -> Path:
             lags = tt.get("lags", np.arange(vals.size) - (vals.size // 2 if vals.size % 2 else 0))
             draw_correlation_test(ax[row, j], {**tt, "lags": lags}, lab)  # own y-scale, band shaded
     fig.tight_layout()
-    fig.savefig(d / "correlation_tests.png", dpi=110)
+    save_figure(fig, d / "correlation_tests.png", dpi=110)
     plt.close(fig)
     files.append("correlation_tests.png")
 
@@ -114,7 +116,7 @@ def write_report(result: dict[str, Any], directory: str | Path) -> Path:
             a.set_xlabel("frequency [Hz]")
             a.legend(fontsize=8)
         fig.tight_layout()
-        fig.savefig(d / "hysteresis.png", dpi=110)
+        save_figure(fig, d / "hysteresis.png", dpi=110)
         plt.close(fig)
         files.append("hysteresis.png")
 
@@ -138,5 +140,6 @@ def write_report(result: dict[str, Any], directory: str | Path) -> Path:
 {html_block(collect(records=[r for r in (st.get("est"), val) if r is not None]))}
 </body></html>"""
     index = d / "index.html"
-    index.write_text(body)
-    return index
+    from sysid.safeio import atomic_write_text
+
+    return atomic_write_text(index, body)

@@ -144,8 +144,9 @@ def export_fmu(twin: Twin, path: str | Path, fs: float | None = None, model_name
 
 def _deflate(src: Path, dest: Path) -> None:
     """Copy the FMU (pythonfmu stores its members uncompressed) with deflate compression (FMI allows it)."""
-    tmp = dest.with_name(dest.name + ".part")
-    with zipfile.ZipFile(src) as zin, zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED, compresslevel=9) as zout:
+    from sysid.safeio import atomic_path
+
+    with atomic_path(dest) as tmp, zipfile.ZipFile(src) as zin, \
+            zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED, compresslevel=9) as zout:
         for info in zin.infolist():
             zout.writestr(info.filename, zin.read(info.filename))
-    tmp.replace(dest)
