@@ -23,6 +23,8 @@ COMMAND_MODULES = (
     "simulate",
     "calibrate",
     "identify",
+    "predict",
+    "compare",
     "search",
     "score",
     "diagnose",
