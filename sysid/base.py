@@ -138,8 +138,8 @@ def _wrap_predict(fn):
         if isinstance(data, Record):  # predict(record, horizon) as before
             if len(args) > 1 or (args and horizon is not _UNSET):
                 raise TypeError("predict(record, horizon): too many arguments")
-            h = args[0] if args else (1 if horizon is _UNSET else horizon)
             rec = as_predict_record(self, data, y, fs)
+            h = args[0] if args else ((1 if rec.y is not None else None) if horizon is _UNSET else horizon)
         else:  # predict(u, y=None, horizon=...)
             if len(args) > 2 or (args and y is not None) or (len(args) == 2 and horizon is not _UNSET):
                 raise TypeError("predict(u, y=None, horizon=...): too many arguments")
