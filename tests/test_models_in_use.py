@@ -209,9 +209,11 @@ def _bad_files(tmp_path, est):
     m = ARX().fit(est)
     legacy.write_text(json.dumps({"format": "piezotwin-model/1", "identifier": "narx-mlp",
                                   "params": {}, "state": json.loads(json.dumps(m._state(), default=float))}))
+    trunc_json = tmp_path / "truncated.json"
+    trunc_json.write_text(js.read_text()[: len(js.read_text()) // 2])
     foreign = tmp_path / "settings.json"
     foreign.write_text(json.dumps({"name": "not a model", "values": [1, 2, 3]}))
-    return {trunc: "truncated", edited: "checksum", edited_json: "checksum", legacy: "not a valid narx-mlp model",
+    return {trunc: "truncated", trunc_json: "truncated", edited: "checksum", edited_json: "checksum", legacy: "not a valid narx-mlp model",
             foreign: "not a piezotwin model file"}
 
 
