@@ -57,11 +57,12 @@ def release_wrapper_state(resources: str | Path) -> bool:
     destroying it would finalise Python. Returns True if the reference was dropped.
 
     C host (a simulation tool written in C/C++ that loads the binary with ``dlopen``, the interpreter started
-    by the wrapper): the same double release happens at exit, after the static destructor has run
-    ``Py_Finalize`` (segmentation fault or glibc abort at exit in 3 of 3 runs for every FMU of this
-    project; the acoustic FMU's worker thread finds the damaged heap while being joined). There the fix is
-    :func:`_finalize_at_exit`: the same ``finalizePythonInterpreter()`` registered to run at process exit,
-    before the static destructor, with the binary pinned in memory so the registered address stays valid.
+    by the wrapper): the static destructor runs ``Py_Finalize`` only after the exit handlers of every library
+    loaded later (numpy, scipy, llvmlite) and the same double release follows (segmentation fault or glibc
+    abort at exit in 3 of 3 runs for every FMU of this project; the acoustic FMU crashes while the
+    interpreter's thread is joined). There the fix is :func:`_finalize_at_exit`: the same
+    ``finalizePythonInterpreter()`` registered to run at process exit before those handlers and the static
+    destructor, with the binary pinned in memory so the registered address stays valid.
     """
     if sys.platform != "linux":
         return False
