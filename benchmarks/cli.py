@@ -32,6 +32,8 @@ COMMAND_MODULES = (
     "identify",
     "frf",
     "bla",
+    "predict",
+    "compare",
     "search",
     "score",
     "diagnose",

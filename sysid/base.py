@@ -10,14 +10,24 @@
   remaining samples are ``nan``, ``diverged_at_`` holds the index and a :class:`~sysid.errors.DivergenceWarning`
   is issued — never an exception;
 - ``n_parameters_`` counts the estimated parameters; ``describe()`` returns a JSON-able summary (terms...);
-- ``save(path)`` / :func:`load_model` round-trip a fitted model so it predicts identically.
+- ``save(path)`` / :func:`load_model` round-trip a fitted model so it predicts identically (format:
+  :mod:`sysid.modelfile`).
+
+Arrays as well as records (done once here, for every identifier: :meth:`Identifier.__init_subclass__` wraps
+each subclass's ``fit`` and ``predict``):
+
+- ``fit(u, y, fs=...)`` builds a Record from arrays (``fs`` defaults to 1 Hz, i.e. time in samples);
+  after any fit, ``estimation_`` describes the estimation data (fs, units, sizes, SHA-256) and ``fs_`` is its rate;
+- ``predict(u, y=None, horizon=...)``: without ``y`` a free-run simulation from zero initial conditions
+  (the first ``max_lag_`` outputs are those zeros), with ``y`` one-step by default; a Record without ``y``
+  is predicted the same way. ``predict(record, horizon)`` keeps its meaning;
+- ``score(u, y, horizon=None)`` is R² (eq. 2-31) of that prediction after the first ``max_lag_`` samples.
 """
 
 from __future__ import annotations
 
 import functools
 import inspect
-import json
 import warnings
 from abc import ABC, abstractmethod
 from pathlib import Path
@@ -26,10 +36,11 @@ from typing import Any, ClassVar, Sequence
 import numpy as np
 
 from sysid.errors import ConfigError, DataError
-from sysid.io import json_default, output_file
 from sysid.record import Record
 
-__all__ = ["Identifier", "as_record_list", "check_records", "load_model"]
+__all__ = ["Identifier", "as_record_list", "check_records", "load_model", "as_fit_data", "as_predict_record"]
+
+_UNSET: Any = object()  # "argument not given" (None is a meaningful horizon: free run)
 
 
 def as_record_list(data: Record | Sequence[Record]) -> list[Record]:
@@ -75,6 +86,80 @@ def check_records(records: Sequence[Record], max_lag: int, min_rows: int, what: 
             name = "y" if y_all.shape[1] == 1 else f"y{ch + 1}"
             raise DataError(f"{records[0].source}: output {name} is constant ({y_all[0, ch]:g}); nothing to identify")
 
+def as_fit_data(data: Any, y: Any = None, fs: float | None = None, units: dict[str, str] | None = None
+                ) -> Record | list[Record]:
+    """What ``fit`` accepts: a Record, a list of Records, or arrays ``u, y`` (with ``fs`` [Hz], default 1)."""
+    if isinstance(data, Record) or (isinstance(data, (list, tuple)) and data and all(isinstance(r, Record) for r in data)):
+        if y is not None:
+            raise ConfigError("fit: give either records or arrays u, y, not a record and y")
+        return data if isinstance(data, Record) else list(data)
+    if y is None:
+        raise DataError("fit: arrays need both u and y (fit(u, y, fs=...))")
+    return Record(u=data, y=y, fs=1.0 if fs is None else fs, units=units or {"u": "", "y": ""}, source="array")
+
+
+def as_predict_record(model: "Identifier", data: Any, y: Any = None, fs: float | None = None) -> Record:
+    """A Record from ``predict``'s arguments (arrays get the model's estimation rate, or 1 Hz)."""
+    if isinstance(data, Record):
+        if y is not None:
+            raise ConfigError("predict: give either a record or arrays u (, y), not a record and y")
+        return data
+    rate = fs if fs is not None else getattr(model, "fs_", None) or 1.0
+    return Record(u=data, y=y, fs=rate, source="array")
+
+
+def _zero_output(model: "Identifier", rec: Record) -> Record:
+    """``rec`` with y = 0: the zero initial conditions of a free run from the input alone."""
+    n_out = int(getattr(model, "n_outputs_", 1) or 1)
+    shape = (len(rec),) if n_out == 1 else (len(rec), n_out)
+    out = rec.replace(y=np.zeros(shape))
+    out.meta["initial_conditions"] = "zero"
+    return out
+
+
+def _wrap_fit(fn):
+    @functools.wraps(fn)
+    def fit(self, data, y=None, *, fs=None, units=None, **kwargs):
+        from sysid.modelfile import estimation_info
+
+        fit_data = as_fit_data(data, y, fs, units)
+        out = fn(self, fit_data, **kwargs)
+        recs = [fit_data] if isinstance(fit_data, Record) else fit_data
+        self.estimation_ = estimation_info(recs)
+        self.fs_ = float(recs[0].fs)
+        return out
+
+    fit._piezotwin_wrapped = True
+    return fit
+
+
+def _wrap_predict(fn):
+    @functools.wraps(fn)
+    def predict(self, data, *args, horizon=_UNSET, fs=None, y=None):
+        if isinstance(data, Record):  # predict(record, horizon) as before
+            if len(args) > 1 or (args and horizon is not _UNSET):
+                raise TypeError("predict(record, horizon): too many arguments")
+            rec = as_predict_record(self, data, y, fs)
+            h = args[0] if args else ((1 if rec.y is not None else None) if horizon is _UNSET else horizon)
+        else:  # predict(u, y=None, horizon=...)
+            if len(args) > 2 or (args and y is not None) or (len(args) == 2 and horizon is not _UNSET):
+                raise TypeError("predict(u, y=None, horizon=...): too many arguments")
+            y = args[0] if args else y
+            if len(args) == 2:
+                horizon = args[1]
+            rec = as_predict_record(self, data, y, fs)
+            h = (1 if rec.y is not None else None) if horizon is _UNSET else horizon
+        if rec.y is None:
+            if h is not None:
+                raise ConfigError(f"{self.name}: {h}-step prediction needs the measured output y; a free run "
+                                  "(horizon=None, --horizon inf) needs only the input u")
+            return fn(self, _zero_output(self, rec), None)
+        return fn(self, rec, h)
+
+    predict._piezotwin_wrapped = True
+    return predict
+
+
 
 class Identifier(ABC):
     """Base class of all identifiers. Subclasses set ``name`` (the registry id) and implement fit/predict."""
@@ -82,8 +167,13 @@ class Identifier(ABC):
     name: ClassVar[str] = "identifier"
 
     def __init_subclass__(cls, **kwargs: Any) -> None:
-        """Every identifier's constructor accepts the deprecated option names of :data:`sysid.config.ALIASES`."""
+        """Give every identifier the array API (see the module docstring) by wrapping its own fit/predict, and
+        let its constructor accept the deprecated option names of :data:`sysid.config.ALIASES`."""
         super().__init_subclass__(**kwargs)
+        for attr, wrap in (("fit", _wrap_fit), ("predict", _wrap_predict)):
+            fn = cls.__dict__.get(attr)
+            if fn is not None and not getattr(fn, "__isabstractmethod__", False) and not getattr(fn, "_piezotwin_wrapped", False):
+                setattr(cls, attr, wrap(fn))
         if "__init__" not in cls.__dict__:
             return
         init = cls.__dict__["__init__"]
@@ -168,50 +258,37 @@ class Identifier(ABC):
     def _load_state(self, state: dict[str, Any]) -> None:
         ...
 
+    def score(self, data: Any, y: Any = None, horizon: int | None = None, fs: float | None = None) -> float:
+        """R² (eq. 2-31) of ``predict`` against the measured output, after the first ``max_lag_`` samples.
+
+        ``score(u, y)`` or ``score(record)``; ``horizon`` as in :meth:`predict` (default ``None``: free run,
+        what MATLAB's ``compare`` shows by default). A diverged prediction scores nan.
+        """
+        from sysid import metrics
+
+        rec = as_predict_record(self, data, y, fs)
+        rec.require_output()
+        yh = self.predict(rec, horizon)
+        return metrics.score(rec.y, np.asarray(yh).reshape(rec.y.shape), skip=int(getattr(self, "max_lag_", 0) or 0))["r2"]
+
     def save(self, path: str | Path) -> Path:
-        """Save config and learned state as JSON (neural models may override to use torch files)."""
-        payload = {"format": "piezotwin-model/1", "identifier": self.name, "params": self.get_params(), "state": self._state()}
-        with output_file(path) as tmp:  # atomic: a temporary file renamed over path (sysid.safeio)
-            tmp.write_text(json.dumps(payload, default=json_default))
-        return Path(path)
+        """Write the fitted model to ``path`` (atomically): the npz container, or JSON for ``.json``
+        (:mod:`sysid.modelfile`; neural identifiers also write torch ``.pt``)."""
+        from sysid.modelfile import write_model
+
+        return write_model(self, path)
+
+    @classmethod
+    def load(cls, path: str | Path) -> "Identifier":
+        """Load a model file; on a subclass, refuse a file that holds another identifier."""
+        model = load_model(path)
+        if cls is not Identifier and not isinstance(model, cls):
+            raise DataError(f"{path}: holds a {model.name} model, not {cls.name}")
+        return model
 
 
 def load_model(path: str | Path) -> Identifier:
-    """Load a model written by :meth:`Identifier.save` (any registered identifier)."""
-    from sysid.registry import get_identifier
+    """Load a model written by :meth:`Identifier.save` (any registered identifier, any format version)."""
+    from sysid.modelfile import read_model
 
-    path = Path(path)
-    if not path.exists():
-        raise DataError(f"{path}: model file not found")
-    if path.is_dir():
-        raise DataError(f"{path}: is a directory, expected a model file")
-    loader = None
-    try:
-        payload = json.loads(path.read_text())
-    except (UnicodeDecodeError, json.JSONDecodeError):
-        payload = None
-    if payload is None:
-        # Binary formats (torch) register a loader by suffix in the registry.
-        from sysid.registry import binary_loader
-
-        loader = binary_loader(path)
-        if loader is None:
-            raise DataError(f"{path}: not a piezotwin model file")
-        return loader(path)
-    if not isinstance(payload, dict) or payload.get("format") != "piezotwin-model/1":
-        found = payload.get("format") if isinstance(payload, dict) else type(payload).__name__
-        raise DataError(f"{path}: not a piezotwin model file (format {found!r})")
-    missing = [k for k in ("identifier", "params", "state") if k not in payload]
-    if missing:
-        raise DataError(f"{path}: model file lacks {', '.join(missing)}")
-    cls = get_identifier(payload["identifier"])
-    if isinstance(payload["params"], dict):  # files written before an option was renamed (sysid.config.ALIASES)
-        from sysid.config import resolve_aliases
-
-        payload["params"] = resolve_aliases(payload["params"], cls._param_names(), f"{path}")
-    unknown = sorted(set(payload["params"]) - set(cls._param_names())) if isinstance(payload["params"], dict) else ["(not a dict)"]
-    if unknown:
-        raise DataError(f"{path}: model file has options {', '.join(unknown)} that {cls.name} does not take")
-    model = cls(**payload["params"])
-    model._load_state(payload["state"])
-    return model
+    return read_model(path)

@@ -9,6 +9,8 @@
 - :func:`draw_correlation_test` — one test on given axes, y-axis scaled to the data, band shaded;
 - :func:`whole_periods` — the samples of the last whole period(s) of a sine, for hysteresis loops;
 - :func:`plot_frf`, :func:`plot_bla` — FRF magnitude/phase (coherence or std) and BLA with noise and distortion levels;
+- :func:`plot_compare` — measured vs predicted output of several models, whole record and a zoom (MATLAB
+  ``compare``);
 - :func:`identification_report` — all of the above for a fitted model on a record.
 Each function returns the path it wrote.
 """
@@ -31,7 +33,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 from sysid.errors import DivergenceWarning  # noqa: E402
 from sysid.residuals import correlation_tests, residual_spectrum  # noqa: E402
 
-__all__ = ["plot_residuals", "plot_correlation_tests", "plot_scatter", "plot_horizon_residuals", "plot_frf", "plot_bla",
+__all__ = ["plot_residuals", "plot_correlation_tests", "plot_scatter", "plot_horizon_residuals", "plot_frf", "plot_bla", "plot_compare",
            "identification_report", "plot_measured_vs_predicted", "draw_correlation_test", "whole_periods",
            "BAND_COLOR", "ZOOM_COLOR"]
 
@@ -226,6 +228,35 @@ def plot_horizon_residuals(model, record, path, horizons: Sequence[int | None] =
         ax.set_title(f"RMS {rms:.3g}", fontsize=8, loc="right")
     np.atleast_1d(axes)[-1].set_xlabel("time [s]")
     fig.suptitle("residual at several prediction horizons")
+    return _save(fig, path)
+
+
+def plot_compare(t: np.ndarray, y: np.ndarray, predictions: Sequence[np.ndarray], labels: Sequence[str], path,
+                 skip: int = 0, zoom: tuple[int, int] | None = None, title: str = "measured vs predicted",
+                 unit: str = "") -> Path:
+    """Two panels: the whole record, and a zoom (default: 400 samples, or a twentieth of the record if longer,
+    at its middle) on samples ``zoom = (start, stop)``. The first ``skip`` samples (initial conditions) are
+    shaded."""
+    t = np.asarray(t, float)
+    y = np.asarray(y, float).ravel()
+    n = y.size
+    if zoom is None:
+        width = min(n, max(400, n // 20))
+        a = max(skip, n // 2 - width // 2)
+        zoom = (a, min(n, a + width))
+    fig, axes = plt.subplots(2, 1, figsize=(11, 6.2))
+    lab = f" [{unit}]" if unit else ""
+    for ax, (a, b) in zip(axes, ((0, n), zoom)):
+        ax.plot(t[a:b], y[a:b], "-", color="0.55", lw=2.2, label="measured")
+        for yh, label in zip(predictions, labels):
+            ax.plot(t[a:b], np.asarray(yh, float).ravel()[a:b], lw=0.8, label=label)
+        if skip > a:
+            ax.axvspan(t[a], t[min(skip, b - 1)], color="0.9", zorder=0)
+        ax.set(xlabel="time [s]", ylabel=f"y{lab}")
+    axes[0].set_title(title)
+    axes[0].legend(loc="upper right", fontsize=8)
+    axes[1].set_title(f"zoom: samples {zoom[0]}..{zoom[1]}", fontsize=9)
+    fig.tight_layout()
     return _save(fig, path)
 
 

@@ -107,11 +107,14 @@ def test_old_model_files_with_old_names_load(tmp_path, est_file):
 
     rec = read_record(est_file)
     model = get_identifier("narx-mlp")(ny=2, nu=2, epochs=1, hidden=[4]).fit(rec)
-    path = model.save(tmp_path / "m.json")
-    payload = json.loads(path.read_text())
-    payload["params"]["n_y"] = payload["params"].pop("ny")  # as written before the rename
-    payload["params"]["n_u"] = payload["params"].pop("nu")
-    path.write_text(json.dumps(payload))
+    from sysid.io import json_default
+
+    # a model file as written before the rename: the first (JSON, unchecksummed) format with the old names
+    params = model.get_params()
+    params["n_y"], params["n_u"] = params.pop("ny"), params.pop("nu")
+    payload = {"format": "piezotwin-model/1", "identifier": model.name, "params": params, "state": model._state()}
+    path = tmp_path / "m.json"
+    path.write_text(json.dumps(payload, default=json_default))
     with pytest.warns(DeprecationWarning):
         back = load_model(path)
     np.testing.assert_array_equal(back.predict(rec, horizon=None), model.predict(rec, horizon=None))

@@ -1,7 +1,9 @@
-"""``piezotwin export-fmu TWIN [--set ...] [--effect ...] [--effects ...] [--params FILE] [--seed N] [-o FILE]``.
+"""``piezotwin export-fmu TWIN [--set ...] [--effect ...] [--effects ...] [--params FILE] [--seed N] [-o FILE]``
+and ``piezotwin export-fmu --model MODEL [-o FILE]``.
 
 Builds an FMI 2.0 co-simulation FMU of the twin as configured (the same configuration options as
-``simulate``); see :mod:`twins.fmu` and the README section "fmu".
+``simulate``); see :mod:`twins.fmu` and the README section "fmu". With ``--model`` it exports an identified
+model instead (:mod:`twins.fmu.model_export`; docs/models-in-use.md).
 """
 
 from __future__ import annotations
@@ -13,8 +15,9 @@ from benchmarks.commands.common import FS, add_twin_args, emit_json, twin_from_a
 
 
 def register(sub) -> None:
-    p = sub.add_parser("export-fmu", help="export a twin as an FMI 2.0 co-simulation FMU")
-    p.add_argument("twin")
+    p = sub.add_parser("export-fmu", help="export a twin or an identified model as an FMI 2.0 co-simulation FMU")
+    p.add_argument("twin", nargs="?", help="twin to export (or give --model)")
+    p.add_argument("--model", metavar="MODEL", help="export this identified model file (identify -o) instead of a twin")
     add_twin_args(p)
     p.add_argument("--fs", type=FS, default=None,
                    help="sampling rate [Hz] = 1/communication step (default: the twin's rate, "
@@ -32,6 +35,10 @@ def run(args: argparse.Namespace) -> int:
     from twins.fmu import export_fmu
     from twins.fmu.spec import fmu_variables
 
+    if (args.model is None) == (args.twin is None):
+        raise ConfigError("export-fmu: give a twin name or --model MODEL (one of the two)")
+    if args.model is not None:
+        return _run_model(args)
     twin = twin_from_args(args.twin, args)
     if args.fs is not None and not args.fs > 0:
         raise ConfigError(f"--fs must be positive, got {args.fs}")
@@ -70,3 +77,35 @@ def run(args: argparse.Namespace) -> int:
             print(f"validation: {p}")
         return 1
     return 0
+
+
+def _run_model(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
+    from sysid.base import load_model
+    from sysid.errors import ConfigError
+    from twins.fmu.model_export import export_model_fmu
+
+    if args.fs is not None and not args.fs > 0:
+        raise ConfigError(f"--fs must be positive, got {args.fs}")
+    model = load_model(args.model)
+    out = args.output or f"fmus/{Path(args.model).stem}.fmu"
+    t0 = time.perf_counter()
+    path = export_model_fmu(model, out, fs=args.fs)
+    seconds = time.perf_counter() - t0
+    problems = []
+    if not args.no_validate:
+        from fmpy.validation import validate_fmu
+
+        problems = validate_fmu(str(path))
+    fs = args.fs or model.fs_
+    summary = {"model": str(args.model), "identifier": model.name, "fmu": str(path), "bytes": Path(path).stat().st_size,
+               "fs": fs, "validation_problems": problems, "build_seconds": round(seconds, 3)}
+    if args.json:
+        emit_json(summary)
+    else:
+        print(f"exported {model.name} model {args.model} (fs {fs:g} Hz, step 1/fs) -> {path} "
+              f"({summary['bytes'] / 1e3:.0f} kB, {'valid' if not problems else 'INVALID'})")
+    for p in problems:
+        print(f"validation: {p}")
+    return 1 if problems else 0

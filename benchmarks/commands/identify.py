@@ -49,7 +49,8 @@ def register(sub) -> None:
                    help="identifier options, e.g. ny=2,nu=2,degree=2,criterion=bic; may repeat")
     add_data_args(p)
     p.add_argument("--json", action="store_true", help="print the result as JSON")
-    p.add_argument("-o", "--output", metavar="MODEL", help="save the fitted model (load with sysid.base.load_model)")
+    p.add_argument("-o", "--output", metavar="MODEL", help="save the fitted model: .npz (or .json, readable text); "
+                   "use it with predict / compare / export-fmu --model (docs/models-in-use.md)")
     p.add_argument("--plots", metavar="DIR", help="write residual / correlation-test / scatter PNGs to DIR")
     p.set_defaults(func=run)
 

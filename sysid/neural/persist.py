@@ -5,6 +5,10 @@ The file holds the same payload as the JSON format of :meth:`sysid.base.Identifi
 and read back with ``torch.load(weights_only=True)`` (plain containers, numbers, strings and tensors
 only: no pickled code is executed on load). Weights are stored as float64 tensors, so a loaded model
 predicts bit-identically. Registered in ``sysid.registry.BINARY_LOADERS`` for the suffix ``.pt``.
+
+The portable format is the npz container of :mod:`sysid.modelfile` (no torch needed to read it); ``.pt`` stays
+for compatibility. The payload also carries ``estimation`` (fs, units, hash of the estimation data) and is
+checked by the same code as every other model file (:func:`sysid.modelfile.build_model`).
 """
 
 from __future__ import annotations
@@ -59,26 +63,26 @@ def _from_torch(obj: Any) -> Any:
 
 def save_torch(model, path: str | Path) -> Path:
     path = Path(path)
-    payload = {"format": FORMAT, "identifier": model.name, "params": model.get_params(), "state": _to_torch(model._state())}
     from sysid.safeio import atomic_path
 
-    with atomic_path(path) as tmp:  # temporary file renamed over path: no partial model file
+    payload = {"format": FORMAT, "identifier": model.name, "params": model.get_params(), "state": _to_torch(model._state()),
+               "estimation": getattr(model, "estimation_", None)}
+    with atomic_path(path) as tmp:
         torch.save(payload, tmp)
     return path
 
 
 def load(path: str | Path):
     """Read a ``.pt`` model file written by :func:`save_torch` and return the fitted identifier."""
-    from sysid.registry import get_identifier
+    from sysid.modelfile import build_model
 
     path = Path(path)
     try:
         payload = torch.load(path, map_location="cpu", weights_only=True)
     except Exception as exc:  # torch raises many types for a corrupt or foreign file
-        raise DataError(f"{path}: not a readable torch model file ({type(exc).__name__})") from None
+        raise DataError(f"{path}: not a readable torch model file, or truncated ({type(exc).__name__})") from None
     if not isinstance(payload, dict) or payload.get("format") != FORMAT:
         raise DataError(f"{path}: not a piezotwin model file")
-    cls = get_identifier(payload["identifier"])
-    model = cls(**payload["params"])
-    model._load_state(_from_torch(payload["state"]))
-    return model
+    payload = dict(payload)
+    payload["state"] = _from_torch(payload.get("state", {}))
+    return build_model(path, payload, legacy=True)

@@ -59,24 +59,50 @@ def amplifier_bandwidth(f_hz: np.ndarray, f_low_hz: float, f_high_hz: float) -> 
     return hp * lp
 
 
+#: below this many samples the serial kernel runs (per-sample FMU steps: a parallel launch per sample costs
+#: ~100 µs with both cores busy, the arithmetic well under 1 µs)
+PARALLEL_MIN = 16384
+
+
+@njit(cache=True, inline="always")
+def _rapp_one(x, gain, sat, p2, inv, ip, integer, k2):  # pragma: no cover - compiled; as amplifier_voltage
+    v = gain * x
+    a = np.abs(v / sat)
+    if integer:  # |v/A|^(2p) by multiplication when 2p is whole (p = 2.5 by default): one pow per sample
+        q = a
+        for _ in range(ip - 1):
+            q *= a
+    else:
+        q = a**p2
+    v = v / (1.0 + q) ** inv
+    if k2 != 0.0:
+        v = v + k2 * v * v / sat
+    return 2.0 * v
+
+
 @njit(cache=True, parallel=True)
-def _rapp_kernel(x, gain, sat, p, k2):  # pragma: no cover - compiled; same expressions as amplifier_voltage
+def _rapp_parallel(x, gain, sat, p, k2):  # pragma: no cover - compiled
     out = np.empty_like(x)
     p2 = 2.0 * p
-    inv = 1.0 / p2
     ip = int(p2)
     integer = ip == p2 and ip >= 1
     for i in prange(x.shape[0]):
-        v = gain * x[i]
-        a = np.abs(v / sat)
-        if integer:  # |v/A|^(2p) by multiplication when 2p is whole (p = 2.5 by default): one pow per sample
-            q = a
-            for _ in range(ip - 1):
-                q *= a
-        else:
-            q = a**p2
-        v = v / (1.0 + q) ** inv
-        if k2 != 0.0:
-            v = v + k2 * v * v / sat
-        out[i] = 2.0 * v
+        out[i] = _rapp_one(x[i], gain, sat, p2, 1.0 / p2, ip, integer, k2)
     return out
+
+
+@njit(cache=True)
+def _rapp_serial(x, gain, sat, p, k2):  # pragma: no cover - compiled
+    out = np.empty_like(x)
+    p2 = 2.0 * p
+    ip = int(p2)
+    integer = ip == p2 and ip >= 1
+    for i in range(x.shape[0]):
+        out[i] = _rapp_one(x[i], gain, sat, p2, 1.0 / p2, ip, integer, k2)
+    return out
+
+
+def _rapp_kernel(x, gain, sat, p, k2):
+    """Rapp compression of ``x``: the parallel kernel for long arrays, the serial one (no thread launch) for
+    short ones such as the one-sample calls of an FMU step. Both evaluate the same expression per sample."""
+    return (_rapp_parallel if x.shape[0] >= PARALLEL_MIN else _rapp_serial)(x, gain, sat, p, k2)

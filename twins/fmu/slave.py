@@ -55,9 +55,19 @@ def release_wrapper_state(resources: str | Path) -> bool:
     runs again). Done only where the importing tool is itself a Python program (``sys.orig_argv`` is set,
     so the wrapper did not start the interpreter): in a C host the ``PyState`` owns the interpreter and
     destroying it would finalise Python. Returns True if the reference was dropped.
+
+    C host (a simulation tool written in C/C++ that loads the binary with ``dlopen``, the interpreter started
+    by the wrapper): the static destructor runs ``Py_Finalize`` only after the exit handlers of every library
+    loaded later (numpy, scipy, llvmlite) and the same double release follows (segmentation fault or glibc
+    abort at exit in 3 of 3 runs for every FMU of this project; the acoustic FMU crashes while the
+    interpreter's thread is joined). There the fix is :func:`_finalize_at_exit`: the same
+    ``finalizePythonInterpreter()`` registered to run at process exit before those handlers and the static
+    destructor, with the binary pinned in memory so the registered address stays valid.
     """
-    if sys.platform != "linux" or not getattr(sys, "orig_argv", None):
+    if sys.platform != "linux":
         return False
+    if not getattr(sys, "orig_argv", None):
+        return _finalize_at_exit(resources)
     import ctypes
 
     folder = Path(resources).parent / "binaries" / "linux64"
@@ -79,6 +89,47 @@ def release_wrapper_state(resources: str | Path) -> bool:
             _ctypes.dlclose(lib._handle)  # give back the reference RTLD_NOLOAD took: unloading stays possible
         except (ImportError, AttributeError, OSError):
             pass
+        return True
+    return False
+
+
+def _finalize_at_exit(resources: str | Path) -> bool:
+    """C host: make exit run the wrapper's ``finalizePythonInterpreter()`` before its static destructor.
+
+    Exit handlers run in the reverse order of registration; the wrapper's static destructor was registered
+    when the binary was loaded, so a handler registered now (``__cxa_atexit`` with no DSO handle: run at
+    exit only) runs first. It resets the global ``PyState`` pointer properly (``Py_Finalize`` in the
+    interpreter's own thread, which is then joined); the static destructor and ``onLibraryUnload`` then find
+    ``nullptr`` and release nothing twice. The binary is made ``RTLD_NODELETE`` so that a host's ``dlclose``
+    cannot unmap the function before exit. Registered once per binary and process (the marker lives in
+    ``sys``, which survives pythonfmu's re-execution of the slave module). No Python code runs at exit.
+    Returns True if the handler is registered (now or before).
+    """
+    import ctypes
+
+    folder = Path(resources).parent / "binaries" / "linux64"
+    done = sys.__dict__.setdefault("_piezotwin_fmu_exit_finalize", set())
+    mode = getattr(os, "RTLD_NOLOAD", 4) | getattr(os, "RTLD_NODELETE", 0x1000) | getattr(os, "RTLD_LAZY", 1)
+    for binary in sorted(folder.glob("*.so")):
+        key = str(binary.resolve())
+        if key in done:
+            return True
+        try:
+            lib = ctypes.CDLL(str(binary), mode=mode)  # the loaded binary, now never unmapped
+        except OSError:
+            continue
+        try:
+            finalize = lib.finalizePythonInterpreter
+        except AttributeError:
+            return False
+        libc = ctypes.CDLL(None)
+        register = libc.__cxa_atexit
+        register.restype = ctypes.c_int
+        register.argtypes = [ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p]
+        # void (*)(void) called as void (*)(void *): the extra argument is ignored (x86-64 / aarch64 SysV ABI)
+        if register(ctypes.cast(finalize, ctypes.c_void_p), None, None) != 0:
+            return False
+        done.add(key)
         return True
     return False
 

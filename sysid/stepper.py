@@ -1,0 +1,113 @@
+"""Sample-by-sample free run of a fitted model: ``step(u_k) -> ŷ(k)`` (for FMUs and other real-time hosts).
+
+The stepper reproduces ``model.predict(u)`` (free run from zero initial conditions, eq. 2-29) one sample at a
+time: for ``k < max_lag_`` it returns the zero initial condition, afterwards the model's simulated output. It
+keeps the last ``max_lag_ + 1`` samples and runs the model's *own* compiled free-run kernel on that window
+(:func:`sysid.simulate.free_run` for the polynomial family — ARX, ARMAX, NARX, NARMAX — and
+:func:`sysid.neural.core.free_run_mlp` for the NARX networks, in their normalised units), so every sample is
+computed by the same arithmetic in the same order as the whole-record free run: the two agree bit for bit.
+
+Supported: every identifier whose free run is a function of a finite past (``arx``, ``armax``, ``narx-poly``,
+``narmax-poly``, ``narx-mlp``, ``narx-mlp-sim``). The recurrent ``rnn`` (a hidden state started by an
+encoder) is not.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from sysid.errors import ConfigError
+
+__all__ = ["make_stepper", "STEPPABLE"]
+
+STEPPABLE = ("arx", "armax", "narx-poly", "narmax-poly", "narx-mlp", "narx-mlp-sim")
+
+
+class _WindowStepper:
+    """Shared ring of the last ``L + 1`` inputs and outputs (single channel in and out)."""
+
+    def __init__(self, L: int):
+        self.L = int(L)
+        self.u = np.zeros((self.L + 1, 1))
+        self.y = np.zeros((self.L + 1, 1))
+        self.k = 0
+
+    def reset(self) -> None:
+        self.u[:] = 0.0
+        self.y[:] = 0.0
+        self.k = 0
+
+    def _push_u(self, value: float) -> None:
+        self.u[:-1] = self.u[1:]
+        self.u[-1, 0] = value
+
+    def _push_y(self, value: float) -> None:
+        self.y[:-1] = self.y[1:]
+        self.y[-1, 0] = value
+
+
+class PolynomialStepper(_WindowStepper):
+    def __init__(self, model):
+        super().__init__(model.max_lag_)
+        self.compiled = model.compiled()
+        self.bound = float(model.y_bound_)
+
+    def step(self, u: float) -> float:
+        from sysid.simulate import free_run
+
+        self._push_u(float(u))
+        self._push_y(0.0)  # rows are now times k-L .. k; the last output is what this step computes
+        if self.k >= self.L:  # before: the zero initial conditions, as predict(u) without y
+            yw, _ = free_run(self.compiled, self.u, self.y, self.bound)
+            self.y[-1, 0] = yw[-1, 0]
+        self.k += 1
+        return float(self.y[-1, 0])
+
+
+class NeuralNARXStepper(_WindowStepper):
+    """Works in the model's normalised units (as its free run does) and scales each output back."""
+
+    def __init__(self, model):
+        from sysid.neural.core import ACT_CODE
+
+        super().__init__(model.max_lag_)
+        self.m = model
+        self.code = ACT_CODE[model.activation]
+        self.norm = model.normaliser_
+        self.y0n = float(self.norm.transform_y(np.zeros((1, 1)))[0, 0])  # normalised zero initial condition
+        self.y[:] = self.y0n
+
+    def reset(self) -> None:
+        super().reset()
+        self.y[:] = self.y0n
+
+    def step(self, u: float) -> float:
+        from sysid.neural.core import free_run_mlp
+        from sysid.neural.narx_mlp import DIVERGENCE_BOUND
+
+        m = self.m
+        self._push_u(float(self.norm.transform_u(np.array([[float(u)]]))[0, 0]))
+        self._push_y(self.y0n)  # rows are now times k-L .. k
+        if self.k < self.L:
+            self.k += 1
+            return 0.0
+        yw, _ = free_run_mlp(m.weights_, m.sizes_, self.code, self.y, self.u, m.n_y, m.n_u, DIVERGENCE_BOUND,
+                             m.nk, m.linear)
+        vn = float(yw[-1, 0])
+        self.y[-1, 0] = vn
+        self.k += 1
+        return float(self.norm.inverse_y(np.array([[vn]]))[0, 0]) if math.isfinite(vn) else float("nan")
+
+
+def make_stepper(model):
+    """A fresh stepper (state at rest) for a fitted single-input single-output ``model``."""
+    if model.name not in STEPPABLE:
+        raise ConfigError(f"{model.name}: no per-sample stepper (an FMU needs one); supported: {', '.join(STEPPABLE)}")
+    if int(getattr(model, "n_inputs_", 1)) != 1 or int(getattr(model, "n_outputs_", 1)) != 1:
+        raise ConfigError(f"{model.name}: the stepper handles one input and one output, the model has "
+                          f"{model.n_inputs_} / {model.n_outputs_}")
+    if model.name.startswith("narx-mlp"):
+        return NeuralNARXStepper(model)
+    return PolynomialStepper(model)
