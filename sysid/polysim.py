@@ -18,6 +18,8 @@ zero over the initial samples. Under output (measurement) noise the equation-err
 (the lagged noisy outputs are regressors) while the simulation-error estimate is consistent when the
 structure is right — the test suite checks this on a known polynomial system.
 
+When the least-squares start itself diverges in simulation, the refinement first runs on each record's first n
+samples (n = where it diverged, then doubled until the whole record: a continuation in the data length).
 A trial parameter vector whose simulation leaves ±``DIVERGENCE_FACTOR`` × max|y| gets a large residual so
 that the search rejects it. Standard errors after refinement: σ̂² (JᵀJ)⁻¹ at the optimum (J the simulation
 Jacobian), σ̂² the mean squared simulation residual.
@@ -179,33 +181,53 @@ class NARXPolySim(NARXPoly):
         L = s.max_lag
         cache: dict[str, Any] = {}
 
-        def run(theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-            key = theta.tobytes()
+        def run(theta: np.ndarray, n: int | None = None) -> tuple[np.ndarray, np.ndarray, int]:
+            """Scaled residuals, Jacobian and first divergence index (-1: none) over each record's first n samples."""
+            key = (theta.tobytes(), n)
             if cache.get("key") != key:
-                res, jac = [], []
+                res, jac, first = [], [], -1
                 for u, y in zip(us, ys):
+                    u, y = u[:n], y[:n]
+                    if y.shape[0] <= L:
+                        continue
                     yh, S, div = simulate_sensitivity(s, terms, theta, u, y, bound, True)
                     r = (yh[L:] - y[L:]) / scale
                     J = S[L:] / scale[None, :, None]
                     if div >= 0:
                         r[div - L:] = DIVERGED_RESIDUAL
                         J[div - L:] = 0.0
+                        first = div if first < 0 else min(first, div)
                     res.append(r.reshape(-1))
                     jac.append(J.reshape(-1, theta.size))
-                cache.update(key=key, r=np.concatenate(res), J=np.concatenate(jac))
-            return cache["r"], cache["J"]
+                cache.update(key=key, r=np.concatenate(res), J=np.concatenate(jac), div=first)
+            return cache["r"], cache["J"], cache["div"]
 
-        r0 = run(theta0)[0]
-        sol = least_squares(lambda th: run(th)[0], theta0, jac=lambda th: run(th)[1], method="lm", x_scale="jac",
-                            max_nfev=int(self.max_nfev), xtol=float(self.xtol), ftol=float(self.ftol))
-        theta = sol.x
-        r1, J = run(theta)
+        def solve(theta: np.ndarray, n: int | None):
+            return least_squares(lambda th: run(th, n)[0], theta, jac=lambda th: run(th, n)[1], method="lm",
+                                 x_scale="jac", max_nfev=int(self.max_nfev), xtol=float(self.xtol), ftol=float(self.ftol))
+
+        r0, _, div0 = run(theta0)
+        # Continuation when the least-squares start diverges in simulation: refine on each record's first n samples,
+        # n = the divergence index, then doubling, so that every stage starts from a model that is bounded on most
+        # of its data (a diverged simulation has no useful gradient).
+        theta, nfev, stages = theta0, 0, []
+        n_max = max(len(y) for y in ys)
+        n = None if div0 < 0 else max(div0, L + 50)
+        while n is not None and n < n_max:
+            sol = solve(theta, n)
+            theta, nfev = sol.x, nfev + int(sol.nfev)
+            stages.append(int(n))
+            n = 2 * n
+        sol = solve(theta, None)
+        theta, nfev = sol.x, nfev + int(sol.nfev)
+        r1, J, _ = run(theta)
         rms0, rms1 = float(np.sqrt(np.mean(r0 ** 2))), float(np.sqrt(np.mean(r1 ** 2)))
         status = sol.message
         if not np.isfinite(rms1) or rms1 > rms0:  # never return something worse than the start
             theta, rms1, status = theta0, rms0, f"kept the least-squares start ({sol.message})"
-            r1, J = run(theta)
-        self.refine_info_ = {"nfev": int(sol.nfev), "status": str(status), "rms_ls": rms0, "rms_sim": rms1}
+            r1, J, _ = run(theta)
+        self.refine_info_ = {"nfev": nfev, "status": str(status), "rms_ls": rms0, "rms_sim": rms1,
+                             "continuation_lengths": stages, "start_diverged_at": int(div0)}
         # standard errors: r and J are both divided by the output SD, so σ̂² (JᵀJ)⁻¹ is in θ's own units
         try:
             cov = np.linalg.inv(J.T @ J) * float(np.mean(r1 ** 2))
