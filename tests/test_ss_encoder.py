@@ -131,3 +131,15 @@ def test_bad_options_are_refused():
         SSEncoder(f_hidden="x").fit(Record(u=np.arange(100.0), y=np.arange(100.0) ** 2, fs=1.0))
     with pytest.raises(DataError):
         SSEncoder(T=500, device="cpu").fit(Record(u=np.sin(np.arange(100.0)), y=np.cos(np.arange(100.0)), fs=1.0))
+
+
+def test_default_quick_run_skips_ss_encoder_with_the_reason(monkeypatch):
+    """The quick check's budget has no room for simulation-error training: the default quick run lists ss-encoder
+    as skipped (an explicit --identifiers still runs it)."""
+    import sysid.registry
+    from benchmarks import scoring
+
+    monkeypatch.setattr(sysid.registry, "available_identifiers", lambda: ["ss-encoder"])
+    run = scoring.score(None, ["cascaded-tanks"], quick=True, sysidentpy=False)
+    assert run.rows == []
+    assert {"identifier": "ss-encoder", "reason": scoring.QUICK_SKIP_IDENTIFIERS["ss-encoder"]} in run.skipped
