@@ -129,6 +129,9 @@ def test_bad_options_are_refused():
         SSEncoder(na=0, nb=0).fit(Record(u=np.arange(100.0), y=np.arange(100.0) ** 2, fs=1.0))
     with pytest.raises(ConfigError):
         SSEncoder(f_hidden="x").fit(Record(u=np.arange(100.0), y=np.arange(100.0) ** 2, fs=1.0))
+    m = SSEncoder.from_assignments({"f_hidden": "64-32", "h_hidden": "0", "e_hidden": "0"})
+    m._check_params(check_device=False)
+    assert (m.f_hidden, m.h_hidden, m.e_hidden) == ([64, 32], [], [])
     with pytest.raises(DataError):
         SSEncoder(T=500, device="cpu").fit(Record(u=np.sin(np.arange(100.0)), y=np.cos(np.arange(100.0)), fs=1.0))
 

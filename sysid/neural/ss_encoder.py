@@ -42,6 +42,8 @@ _ACT_NP = {"tanh": np.tanh, "relu": lambda a: np.maximum(a, 0.0), "sigmoid": lam
 def _widths(v: Any, key: str, name: str) -> list[int]:
     if isinstance(v, (int, np.integer)) and not isinstance(v, bool):
         v = [v] if v > 0 else []
+    if isinstance(v, (list, tuple)) and len(v) == 1 and isinstance(v[0], (int, np.integer)) and v[0] == 0:
+        v = []  # "--set f_hidden=0": linear
     if not isinstance(v, (list, tuple)) or not all(isinstance(w, (int, np.integer)) and not isinstance(w, bool) and 1 <= w <= 65536 for w in v):
         raise ConfigError(f"{name}: {key}={v!r} must be a list of hidden widths (e.g. 64 or 64-64; 0 or [] for linear)")
     return [int(w) for w in v]
@@ -63,7 +65,7 @@ class SSEncoder(TorchFileSave, Identifier):
     feedthrough : bool
         Output map h(x, u) instead of h(x).
     T : int
-        Simulated steps per section (paper: 50–80 ... see the docs).
+        Simulated steps per section of the truncated simulation loss (the papers use sections of tens of steps).
     batch_size, epochs, lr : int, int, float
         Sections per Adam step, passes over all sections, Adam step size.
     val_fraction : float
