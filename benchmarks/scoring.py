@@ -151,12 +151,12 @@ SETTINGS["narx-poly-sim"]["silverbox"] = {"ny": 2, "nu": 24, "degree": 3, "max_t
 SETTINGS["narx-poly-sim"]["cascaded-tanks"] = {"ny": 2, "nu": 2, "degree": 3}
 # Encoder state-space model (SUBNET, issue 16): the paper's networks (64 tanh, linear bypass), T = 50, batch 256,
 # Adam 1e-3, 20 % hold-out early stopping; epochs sized for minutes on 2 cores (far fewer than the paper's).
-# Encoder windows na = nb within each dataset's official initialisation window (50 samples; cascaded tanks 4).
+# Encoder windows ny = nu (past outputs / inputs) within each dataset's official initialisation window (50 samples; cascaded tanks 4).
 SETTINGS["ss-encoder"] = {
-    "*": {"nx": 4, "na": 20, "nb": 20, "epochs": 60},
+    "*": {"nx": 4, "ny": 20, "nu": 20, "epochs": 60},
     "wiener-hammerstein": {"nx": 6},
-    "cascaded-tanks": {"nx": 2, "na": 4, "nb": 4, "epochs": 300, "batch_size": 64},
-    "bouc-wen": {"nx": 3, "na": 10, "nb": 10},
+    "cascaded-tanks": {"nx": 2, "ny": 4, "nu": 4, "epochs": 300, "batch_size": 64},
+    "bouc-wen": {"nx": 3, "ny": 10, "nu": 10},
 }
 QUICK_SETTINGS: dict[str, dict[str, dict[str, Any]]] = {
     "narx-mlp": {"*": {"epochs": 5}, "cascaded-tanks": {"epochs": 100}, "piezo-tue": {"epochs": 20},

@@ -34,7 +34,7 @@ def linear_fit():
     rng = np.random.default_rng(0)
     u = rng.standard_normal(3000)
     y, _ = simulate(u, [0.0, 0.0])
-    model = SSEncoder(nx=2, na=4, nb=4, f_hidden=0, h_hidden=0, e_hidden=0, T=30, batch_size=64, epochs=20, lr=1e-2,
+    model = SSEncoder(nx=2, ny=4, nu=4, f_hidden=0, h_hidden=0, e_hidden=0, T=30, batch_size=64, epochs=20, lr=1e-2,
                       device="cpu", seed=0)
     return model.fit(Record(u=u, y=y, fs=1.0))
 
@@ -114,7 +114,7 @@ def test_nonlinear_default_network_beats_linear_on_a_static_nonlinearity():
     ut = rng.standard_normal(400)
     xt, _ = simulate(ut, [0.0, 0.0])
     yt = np.tanh(2.0 * xt)
-    common = dict(nx=2, na=4, nb=4, T=20, batch_size=64, epochs=8, lr=1e-2, device="cpu", seed=0, e_hidden=0)
+    common = dict(nx=2, ny=4, nu=4, T=20, batch_size=64, epochs=8, lr=1e-2, device="cpu", seed=0, e_hidden=0)
     rms = {}
     for name, hidden in (("linear", 0), ("mlp", 64)):
         m = SSEncoder(f_hidden=hidden, h_hidden=hidden, **common).fit(Record(u=u, y=y, fs=1.0))
@@ -126,7 +126,7 @@ def test_bad_options_are_refused():
     from sysid.errors import ConfigError, DataError
 
     with pytest.raises(ConfigError):
-        SSEncoder(na=0, nb=0).fit(Record(u=np.arange(100.0), y=np.arange(100.0) ** 2, fs=1.0))
+        SSEncoder(ny=0, nu=0).fit(Record(u=np.arange(100.0), y=np.arange(100.0) ** 2, fs=1.0))
     with pytest.raises(ConfigError):
         SSEncoder(f_hidden="x").fit(Record(u=np.arange(100.0), y=np.arange(100.0) ** 2, fs=1.0))
     m = SSEncoder.from_assignments({"f_hidden": "64-32", "h_hidden": "0", "e_hidden": "0"})

@@ -1,7 +1,7 @@
 """Encoder state-space identifier (registry id ``ss-encoder``): SUBNET trained on simulation error.
 
 The model is :class:`sysid.neural.subnet.SubnetModel` (x(k+1) = f(x, u), y = h(x), initial state from the
-encoder ψ over the ``lag = max(na, nb)`` samples before it), trained by :func:`sysid.neural.train_sim.train_simulation`
+encoder ψ over the ``lag = max(ny, nu)`` samples before it), trained by :func:`sysid.neural.train_sim.train_simulation`
 on the truncated T-step simulation loss (Beintema, Tóth & Schoukens, Automatica 2023) in normalised units, with
 Adam and early stopping on the free-run RMSE of a held-out tail of the estimation data (``val_fraction``).
 
@@ -56,8 +56,9 @@ class SSEncoder(TorchFileSave, Identifier):
     ----------
     nx : int
         State dimension (paper: 4–8 on Silverbox).
-    na, nb : int
-        Past outputs and inputs read by the encoder; ``max_lag_ = max(na, nb)`` samples start every free run.
+    ny, nu : int
+        Past outputs and inputs read by the encoder (the papers' n_a, n_b; named as the lags of every other
+        identifier); ``max_lag_ = max(ny, nu)`` samples start every free run.
     f_hidden, h_hidden, e_hidden : list of int
         Hidden widths of f, h and the encoder (paper: one layer of 64 tanh units each); ``0`` / ``[]``: linear.
     activation : str
@@ -81,13 +82,13 @@ class SSEncoder(TorchFileSave, Identifier):
 
     name = "ss-encoder"
 
-    def __init__(self, nx: int = 4, na: int = 20, nb: int = 20, f_hidden: Sequence[int] = (64,),
+    def __init__(self, nx: int = 4, ny: int = 20, nu: int = 20, f_hidden: Sequence[int] = (64,),
                  h_hidden: Sequence[int] = (64,), e_hidden: Sequence[int] = (64,), activation: str = "tanh",
                  feedthrough: bool = False, T: int = 50, batch_size: int = 256, epochs: int = 50, lr: float = 1e-3,
                  val_fraction: float = 0.2, patience: int = 0, clip: float = 0.0, seed: int = 0, device: str = "auto"):
         self.nx = nx
-        self.na = na
-        self.nb = nb
+        self.ny = ny
+        self.nu = nu
         self.f_hidden = list(f_hidden) if isinstance(f_hidden, tuple) else f_hidden
         self.h_hidden = list(h_hidden) if isinstance(h_hidden, tuple) else h_hidden
         self.e_hidden = list(e_hidden) if isinstance(e_hidden, tuple) else e_hidden
@@ -111,10 +112,10 @@ class SSEncoder(TorchFileSave, Identifier):
                 raise ConfigError(f"{self.name}: {key}={v!r} must be an integer in [{lo}, {hi}]")
 
         integer("nx", 1, 4096)
-        integer("na", 0, MAX_LAG)
-        integer("nb", 0, MAX_LAG)
-        if self.na + self.nb < 1:
-            raise ConfigError(f"{self.name}: na + nb must be at least 1 (the encoder needs a past window)")
+        integer("ny", 0, MAX_LAG)
+        integer("nu", 0, MAX_LAG)
+        if self.ny + self.nu < 1:
+            raise ConfigError(f"{self.name}: ny + nu must be at least 1 (the encoder needs a past window)")
         integer("T", 1, 100_000)
         integer("batch_size", 1, 1_000_000)
         integer("epochs", 0, 1_000_000)
@@ -139,10 +140,10 @@ class SSEncoder(TorchFileSave, Identifier):
 
     @property
     def lag(self) -> int:
-        return max(int(self.na), int(self.nb))
+        return max(int(self.ny), int(self.nu))
 
-    def _build(self, nu: int, ny: int) -> SubnetModel:
-        return SubnetModel(self.nx, nu, ny, self.na, self.nb, self.f_hidden, self.h_hidden, self.e_hidden,
+    def _build(self, n_in: int, n_out: int) -> SubnetModel:
+        return SubnetModel(self.nx, n_in, n_out, self.ny, self.nu, self.f_hidden, self.h_hidden, self.e_hidden,
                            self.activation, bool(self.feedthrough))
 
     # ------------------------------------------------------------------ fit
@@ -151,14 +152,14 @@ class SSEncoder(TorchFileSave, Identifier):
         self._check_params()
         recs = as_record_list(data)
         lag, T = self.lag, int(self.T)
-        nu, ny = check_channels(recs, lag, self.name)
+        n_in, n_out = check_channels(recs, lag, self.name)  # channels (not lags)
         val_recs: list[Record] = []
         if self.val_fraction:
             last = recs[-1]
             cut = len(last) - int(round(self.val_fraction * len(last)))
             if cut < lag + T or len(last) - cut < 1:
                 raise DataError(f"{self.name}: val_fraction={self.val_fraction} leaves {cut} training samples of "
-                                f"{last.source}, need lag + T = {lag + T}; lower val_fraction, T or na/nb")
+                                f"{last.source}, need lag + T = {lag + T}; lower val_fraction, T or ny/nu")
             val_recs = [last[cut - lag:]]  # the held-out tail with its encoder window
             recs = [*recs[:-1], last[:cut]]
         t0 = time.perf_counter()
@@ -170,8 +171,8 @@ class SSEncoder(TorchFileSave, Identifier):
         self.normaliser_ = fit_normaliser(recs)
         pairs = normalised_pairs(recs, self.normaliser_)
         if not any(u.shape[0] >= lag + T for u, _ in pairs):
-            raise DataError(f"{self.name}: no estimation record has lag + T = {lag + T} samples; lower T or na/nb")
-        model = self._build(nu, ny).to(device)
+            raise DataError(f"{self.name}: no estimation record has lag + T = {lag + T} samples; lower T or ny/nu")
+        model = self._build(n_in, n_out).to(device)
         res = train_simulation(model, pairs, lag, T, int(self.epochs), int(self.batch_size), float(self.lr),
                                val=normalised_pairs(val_recs, self.normaliser_) if val_recs else None,
                                patience=int(self.patience), clip=float(self.clip), generator=gen, device=device,
@@ -180,7 +181,7 @@ class SSEncoder(TorchFileSave, Identifier):
         self.loss_history_ = res.loss_history
         self.val_history_ = res.val_history
         self.best_epoch_ = res.best_epoch
-        self.n_inputs_, self.n_outputs_ = nu, ny
+        self.n_inputs_, self.n_outputs_ = n_in, n_out
         self.max_lag_ = lag
         self.n_parameters_ = int(sum(p.numel() for p in model.parameters()))
         self.device_used_ = str(device)
@@ -203,7 +204,7 @@ class SSEncoder(TorchFileSave, Identifier):
         if not lag <= at <= len(record):
             raise DataError(f"{record.source}: state at sample {at} needs {lag} samples before it")
         (un, yn), = normalised_pairs([record], self.normaliser_)
-        return encode_np(self.weights_, yn[None, at - lag:at], un[None, at - lag:at], self.na, self.nb,
+        return encode_np(self.weights_, yn[None, at - lag:at], un[None, at - lag:at], self.ny, self.nu,
                          _ACT_NP[self.activation])[0]
 
     def predict(self, record: Record, horizon: int | None = 1) -> np.ndarray:
@@ -216,7 +217,7 @@ class SSEncoder(TorchFileSave, Identifier):
         yhat = yn.copy()
         self.diverged_at_ = None
         if horizon is None or horizon >= n - lag:
-            x0 = encode_np(self.weights_, yn[None, :lag], un[None, :lag], self.na, self.nb, act)
+            x0 = encode_np(self.weights_, yn[None, :lag], un[None, :lag], self.ny, self.nu, act)
             out, div = simulate_np(self.weights_, x0, un[None, lag:], bool(self.feedthrough), DIVERGENCE_BOUND, act)
             yhat[lag:] = out[0]
             if div >= 0:
@@ -233,7 +234,7 @@ class SSEncoder(TorchFileSave, Identifier):
                 sl = slice(a, a + chunk)
                 s0 = t0[sl]
                 past = s0[:, None] + np.arange(-lag, 0)[None, :]
-                x = encode_np(self.weights_, yn[past], un[past], self.na, self.nb, act)
+                x = encode_np(self.weights_, yn[past], un[past], self.ny, self.nu, act)
                 idx = np.clip(s0[:, None] + np.arange(k)[None, :], 0, n - 1)
                 out, _ = simulate_np(self.weights_, x, un[idx], bool(self.feedthrough), np.inf, act)
                 yhat[targets[sl]] = out[np.arange(out.shape[0]), steps[sl]]
@@ -252,7 +253,7 @@ class SSEncoder(TorchFileSave, Identifier):
     def describe(self) -> dict[str, Any]:
         d = super().describe()
         if hasattr(self, "weights_"):
-            d.update({"structure": {"nx": self.nx, "na": self.na, "nb": self.nb, "f_hidden": list(self.f_hidden),
+            d.update({"structure": {"nx": self.nx, "ny": self.ny, "nu": self.nu, "f_hidden": list(self.f_hidden),
                                     "h_hidden": list(self.h_hidden), "e_hidden": list(self.e_hidden),
                                     "activation": self.activation, "feedthrough": bool(self.feedthrough)},
                       "terms": [], "max_lag": self.max_lag_, "device": self.device_used_,
