@@ -142,6 +142,24 @@ SETTINGS["narmax-poly"] = {k: {**v, "ne": 2, "els_iter": 2} for k, v in SETTINGS
 # as narx-poly's: best ne=1, els_iter=1, normalised, 0.453 V on the estimation data (the former ne=2, els_iter=2, raw:
 # 0.743 V; a hold-out of the last 20 % was tried first and rejected: 205 samples rank even narx-poly last).
 SETTINGS["narmax-poly"]["cascaded-tanks"].update({"ne": 1, "els_iter": 1, NORMALISE: True})
+# Polynomial NARX refined on simulation error (issue 16): narx-poly's structures, except where a hold-out on the
+# ESTIMATION data (fit on the first 80 %, free-run RMSE on the last 20 %) preferred another candidate; see
+# docs/benchmarks-sota.md for the candidates and their validation and test figures.
+SETTINGS["narx-poly-sim"] = {k: dict(v) for k, v in SETTINGS["narx-poly"].items()}
+SETTINGS["narx-poly-sim"]["silverbox"] = {"ny": 2, "nu": 24, "degree": 3, "max_terms": 120, NORMALISE: False}
+# Cascaded tanks: the 80/20 hold-out is not usable (205 samples of another regime; the refined candidates diverge or
+# reach 1.6 V there), so the candidate of lowest free-run error on the whole estimation record (the refinement's own
+# criterion) is taken: ny = nu = 2 (normalised RMS 0.054; narx-poly's 4/4/20 terms 0.072, raw 4/4/20 0.063).
+SETTINGS["narx-poly-sim"]["cascaded-tanks"] = {"ny": 2, "nu": 2, "degree": 3}
+# Encoder state-space model (SUBNET, issue 16): the paper's networks (64 tanh, linear bypass), T = 50, batch 256,
+# Adam 1e-3, 20 % hold-out early stopping; epochs sized for minutes on 2 cores (far fewer than the paper's).
+# Encoder windows ny = nu (past outputs / inputs) within each dataset's official initialisation window (50 samples; cascaded tanks 4).
+SETTINGS["ss-encoder"] = {
+    "*": {"nx": 4, "ny": 20, "nu": 20, "epochs": 60},
+    "wiener-hammerstein": {"nx": 6},
+    "cascaded-tanks": {"nx": 2, "ny": 4, "nu": 4, "epochs": 300, "batch_size": 64},
+    "bouc-wen": {"nx": 3, "ny": 10, "nu": 10},
+}
 # Quick mode: fewer epochs. Two pairs that did not beat the linear baseline as a median over seeds 0-4 got settings
 # chosen by hold-out validation on the ESTIMATION data (fit on its first 80 %, free-run RMSE on the last 20 %, median
 # over seeds 0-4): narx-mlp-sim on Wiener-Hammerstein lr 1e-3 -> 1e-4 (validation 46.4 -> 19.9 mV; at 1e-3 the
@@ -154,6 +172,15 @@ QUICK_SETTINGS: dict[str, dict[str, dict[str, Any]]] = {
                      "wiener-hammerstein": {"lr": 1e-4}},
     "rnn": {"*": {"epochs": 8}, "wiener-hammerstein": {"epochs": 16}, "piezo-tue": {"epochs": 30},
             "cantilever-thesis": {"epochs": 16}},
+    # not in the default quick run (QUICK_SKIP_IDENTIFIERS); `--quick --identifiers ss-encoder` runs this
+    "ss-encoder": {"*": {"epochs": 2}, "cascaded-tanks": {"epochs": 20}},
+    "narx-poly-sim": {"silverbox": {"nu": 8, "max_terms": 40}, "bouc-wen": {"max_nfev": 30}},
+}
+
+# Identifiers left out of the default quick run (too slow for its budget; `--identifiers` still runs them quick).
+QUICK_SKIP_IDENTIFIERS: dict[str, str] = {
+    "ss-encoder": "left out of the quick check: its simulation-error training needs minutes per dataset on 2 cores "
+                  "(see docs/benchmarks-sota.md)",
 }
 
 # Datasets of the quick check (small or fast enough for CI) and the sample budget of each part in quick mode:
@@ -423,6 +450,10 @@ def _score(identifiers, datasets, quick, sysidentpy, progress, factory, log) -> 
         identifiers = available_identifiers() if factory is None else list(IDENTIFIERS)
         for missing in sorted(set(IDENTIFIERS) - set(identifiers)):
             run.skipped.append({"identifier": missing, "reason": "not built yet (module not importable)"})
+        if quick:
+            for slow in [i for i in identifiers if i in QUICK_SKIP_IDENTIFIERS]:
+                identifiers.remove(slow)
+                run.skipped.append({"identifier": slow, "reason": QUICK_SKIP_IDENTIFIERS[slow]})
     identifiers = list(identifiers)
     if datasets is None:
         info = {d["id"]: d for d in list_datasets()}

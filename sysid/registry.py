@@ -20,6 +20,8 @@ IDENTIFIERS: dict[str, str] = {
     "narx-mlp": "sysid.neural.narx_mlp:NARXMLP",
     "narx-mlp-sim": "sysid.neural.narx_mlp:NARXMLPSim",
     "rnn": "sysid.neural.rnn:RNNStateSpace",
+    "ss-encoder": "sysid.neural.ss_encoder:SSEncoder",
+    "narx-poly-sim": "sysid.polysim:NARXPolySim",
 }
 
 # Binary (non-JSON) model files: suffix -> "module:function(path) -> Identifier".

@@ -27,6 +27,8 @@ SETTINGS = {
     "narx-mlp-sim": "ny=2,nu=2,hidden=6,epochs=1,pretrain_epochs=1,window=10,device=cpu",
     "rnn": "n_state=3,n_enc=3,enc_hidden=6,window=20,epochs=1,device=cpu",
     "bla": "nb=3,nf=2",
+    "narx-poly-sim": "ny=2,nu=2,degree=2",
+    "ss-encoder": "nx=2,ny=3,nu=3,f_hidden=4,h_hidden=4,e_hidden=4,T=10,epochs=1,device=cpu",
 }
 
 

@@ -1,0 +1,304 @@
+"""Encoder state-space identifier (registry id ``ss-encoder``): SUBNET trained on simulation error.
+
+The model is :class:`sysid.neural.subnet.SubnetModel` (x(k+1) = f(x, u), y = h(x), initial state from the
+encoder ψ over the ``lag = max(ny, nu)`` samples before it), trained by :func:`sysid.neural.train_sim.train_simulation`
+on the truncated T-step simulation loss (Beintema, Tóth & Schoukens, Automatica 2023) in normalised units, with
+Adam and early stopping on the free-run RMSE of a held-out tail of the estimation data (``val_fraction``).
+
+Prediction (float64 numpy on the CPU, from the saved weights):
+
+- ``predict(record, None)`` — free run: the encoder estimates x(lag) from the record's first ``lag`` samples
+  (the benchmark's initialisation window when ``lag`` ≤ it), then f/h simulate the rest on the input alone.
+  The first ``lag`` samples of the result are the measurement (``max_lag_ = lag``).
+- ``predict(record, k)`` — at every t ≥ lag: the state x(t-k+1) is encoded from the samples before it and
+  simulated k steps (fewer at the record start); ``k = 1`` is ŷ(t) = h(ψ(past of t)).
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+import warnings
+from typing import Any, Sequence
+
+import numpy as np
+import torch
+
+from sysid.base import Identifier, as_record_list
+from sysid.errors import ConfigError, DataError, DivergenceWarning
+from sysid.neural.device import configure_threads, select_device
+from sysid.neural.narx_mlp import DIVERGENCE_BOUND, MAX_LAG, _as2d, check_channels, check_predict_input, fit_normaliser, normalised_pairs
+from sysid.neural.persist import TorchFileSave
+from sysid.neural.subnet import SubnetModel, encode_np, export_weights, simulate_np
+from sysid.neural.train_sim import train_simulation
+from sysid.record import Normaliser, Record
+
+__all__ = ["SSEncoder"]
+
+_LOG = logging.getLogger(__name__)  # per-epoch progress at INFO (the library configures no handler)
+_ACT_NP = {"tanh": np.tanh, "relu": lambda a: np.maximum(a, 0.0), "sigmoid": lambda a: 1.0 / (1.0 + np.exp(-a))}
+
+
+def _widths(v: Any, key: str, name: str) -> list[int]:
+    if isinstance(v, (int, np.integer)) and not isinstance(v, bool):
+        v = [v] if v > 0 else []
+    if isinstance(v, (list, tuple)) and len(v) == 1 and isinstance(v[0], (int, np.integer)) and v[0] == 0:
+        v = []  # "--set f_hidden=0": linear
+    if not isinstance(v, (list, tuple)) or not all(isinstance(w, (int, np.integer)) and not isinstance(w, bool) and 1 <= w <= 65536 for w in v):
+        raise ConfigError(f"{name}: {key}={v!r} must be a list of hidden widths (e.g. 64 or 64-64; 0 or [] for linear)")
+    return [int(w) for w in v]
+
+
+class SSEncoder(TorchFileSave, Identifier):
+    """SUBNET encoder state-space model trained on truncated simulation error.
+
+    Parameters
+    ----------
+    nx : int
+        State dimension (paper: 4–8 on Silverbox).
+    ny, nu : int
+        Past outputs and inputs read by the encoder (the papers' n_a, n_b; named as the lags of every other
+        identifier); ``max_lag_ = max(ny, nu)`` samples start every free run.
+    f_hidden, h_hidden, e_hidden : list of int
+        Hidden widths of f, h and the encoder (paper: one layer of 64 tanh units each); ``0`` / ``[]``: linear.
+    activation : str
+        ``tanh`` (paper), ``relu`` or ``sigmoid``.
+    feedthrough : bool
+        Output map h(x, u) instead of h(x).
+    T : int
+        Simulated steps per section of the truncated simulation loss (the papers use sections of tens of steps).
+    batch_size, epochs, lr : int, int, float
+        Sections per Adam step, passes over all sections, Adam step size.
+    val_fraction : float
+        Last fraction (0 … 0.5) of the last estimation record held out for early stopping (0: no hold-out, the
+        last epoch's weights are kept).
+    patience : int
+        Epochs without a better validation RMSE before stopping (0: run all ``epochs``).
+    clip : float
+        Gradient-norm clipping (0: off).
+    seed, device :
+        Seeds weights and section order; ``auto`` | ``cpu`` | ``cuda`` (see :mod:`sysid.neural.device`).
+    """
+
+    name = "ss-encoder"
+
+    def __init__(self, nx: int = 4, ny: int = 20, nu: int = 20, f_hidden: Sequence[int] = (64,),
+                 h_hidden: Sequence[int] = (64,), e_hidden: Sequence[int] = (64,), activation: str = "tanh",
+                 feedthrough: bool = False, T: int = 50, batch_size: int = 256, epochs: int = 50, lr: float = 1e-3,
+                 val_fraction: float = 0.2, patience: int = 0, clip: float = 0.0, seed: int = 0, device: str = "auto"):
+        self.nx = nx
+        self.ny = ny
+        self.nu = nu
+        self.f_hidden = list(f_hidden) if isinstance(f_hidden, tuple) else f_hidden
+        self.h_hidden = list(h_hidden) if isinstance(h_hidden, tuple) else h_hidden
+        self.e_hidden = list(e_hidden) if isinstance(e_hidden, tuple) else e_hidden
+        self.activation = activation
+        self.feedthrough = feedthrough
+        self.T = T
+        self.batch_size = batch_size
+        self.epochs = epochs
+        self.lr = lr
+        self.val_fraction = val_fraction
+        self.patience = patience
+        self.clip = clip
+        self.seed = seed
+        self.device = device
+
+    # ------------------------------------------------------------------ checks
+    def _check_params(self, check_device: bool = True) -> None:
+        def integer(key: str, lo: int, hi: int) -> None:
+            v = getattr(self, key)
+            if not isinstance(v, (int, np.integer)) or isinstance(v, bool) or not lo <= v <= hi:
+                raise ConfigError(f"{self.name}: {key}={v!r} must be an integer in [{lo}, {hi}]")
+
+        integer("nx", 1, 4096)
+        integer("ny", 0, MAX_LAG)
+        integer("nu", 0, MAX_LAG)
+        if self.ny + self.nu < 1:
+            raise ConfigError(f"{self.name}: ny + nu must be at least 1 (the encoder needs a past window)")
+        integer("T", 1, 100_000)
+        integer("batch_size", 1, 1_000_000)
+        integer("epochs", 0, 1_000_000)
+        integer("patience", 0, 1_000_000)
+        for key in ("f_hidden", "h_hidden", "e_hidden"):
+            setattr(self, key, _widths(getattr(self, key), key, self.name))
+        if self.activation not in _ACT_NP:
+            raise ConfigError(f"{self.name}: activation={self.activation!r} not one of: {', '.join(_ACT_NP)}")
+        if not isinstance(self.feedthrough, (bool, np.bool_)):
+            raise ConfigError(f"{self.name}: feedthrough={self.feedthrough!r} must be true or false")
+        if not (isinstance(self.lr, (int, float)) and 0 < self.lr < 10):
+            raise ConfigError(f"{self.name}: lr={self.lr!r} must be a positive number below 10")
+        if not (isinstance(self.val_fraction, (int, float)) and not isinstance(self.val_fraction, bool)
+                and 0 <= self.val_fraction <= 0.5):
+            raise ConfigError(f"{self.name}: val_fraction={self.val_fraction!r} must be a fraction in [0, 0.5]")
+        if not (isinstance(self.clip, (int, float)) and self.clip >= 0):
+            raise ConfigError(f"{self.name}: clip={self.clip!r} must be ≥ 0")
+        if not isinstance(self.seed, (int, np.integer)) or isinstance(self.seed, bool):
+            raise ConfigError(f"{self.name}: seed={self.seed!r} must be an integer")
+        if check_device:  # a model trained on a GPU must still load (and predict) on a CPU machine
+            select_device(self.device)
+
+    @property
+    def lag(self) -> int:
+        return max(int(self.ny), int(self.nu))
+
+    def _build(self, n_in: int, n_out: int) -> SubnetModel:
+        return SubnetModel(self.nx, n_in, n_out, self.ny, self.nu, self.f_hidden, self.h_hidden, self.e_hidden,
+                           self.activation, bool(self.feedthrough))
+
+    # ------------------------------------------------------------------ fit
+    def fit(self, data: Record | Sequence[Record]) -> "SSEncoder":
+        """Train on one Record or a list (separate experiments). Returns self."""
+        self._check_params()
+        recs = as_record_list(data)
+        lag, T = self.lag, int(self.T)
+        n_in, n_out = check_channels(recs, lag, self.name)  # channels (not lags)
+        val_recs: list[Record] = []
+        if self.val_fraction:
+            last = recs[-1]
+            cut = len(last) - int(round(self.val_fraction * len(last)))
+            if cut < lag + T or len(last) - cut < 1:
+                raise DataError(f"{self.name}: val_fraction={self.val_fraction} leaves {cut} training samples of "
+                                f"{last.source}, need lag + T = {lag + T}; lower val_fraction, T or ny/nu")
+            val_recs = [last[cut - lag:]]  # the held-out tail with its encoder window
+            recs = [*recs[:-1], last[:cut]]
+        t0 = time.perf_counter()
+        c0 = time.process_time()
+        configure_threads()
+        device = select_device(self.device)
+        torch.manual_seed(int(self.seed))
+        gen = torch.Generator().manual_seed(int(self.seed))
+        self.normaliser_ = fit_normaliser(recs)
+        pairs = normalised_pairs(recs, self.normaliser_)
+        if not any(u.shape[0] >= lag + T for u, _ in pairs):
+            raise DataError(f"{self.name}: no estimation record has lag + T = {lag + T} samples; lower T or ny/nu")
+        model = self._build(n_in, n_out).to(device)
+        res = train_simulation(model, pairs, lag, T, int(self.epochs), int(self.batch_size), float(self.lr),
+                               val=normalised_pairs(val_recs, self.normaliser_) if val_recs else None,
+                               patience=int(self.patience), clip=float(self.clip), generator=gen, device=device,
+                               log=lambda msg: _LOG.info("%s: %s", self.name, msg))
+        self.weights_ = export_weights(model)
+        self.loss_history_ = res.loss_history
+        self.val_history_ = res.val_history
+        self.best_epoch_ = res.best_epoch
+        self.n_inputs_, self.n_outputs_ = n_in, n_out
+        self.max_lag_ = lag
+        self.n_parameters_ = int(sum(p.numel() for p in model.parameters()))
+        self.device_used_ = str(device)
+        self.fit_seconds_ = time.perf_counter() - t0
+        self.fit_cpu_seconds_ = time.process_time() - c0
+        self.diverged_at_ = None
+        return self
+
+    # ------------------------------------------------------------------ predict
+    def _check_fitted(self) -> None:
+        if not hasattr(self, "weights_"):
+            raise ConfigError(f"{self.name}: model is not fitted; call fit() first")
+
+    def initial_state(self, record: Record, at: int | None = None) -> np.ndarray:
+        """The encoder's state estimate x(at) (normalised-model coordinates) from the ``lag`` samples before
+        ``at`` (default: ``at = lag``, the first simulated sample of a free run)."""
+        self._check_fitted()
+        lag = self.max_lag_
+        at = lag if at is None else int(at)
+        if not lag <= at <= len(record):
+            raise DataError(f"{record.source}: state at sample {at} needs {lag} samples before it")
+        (un, yn), = normalised_pairs([record], self.normaliser_)
+        return encode_np(self.weights_, yn[None, at - lag:at], un[None, at - lag:at], self.ny, self.nu,
+                         _ACT_NP[self.activation])[0]
+
+    def predict(self, record: Record, horizon: int | None = 1) -> np.ndarray:
+        """Free run (``None``) or k-step-ahead at every sample (``horizon=k``). Shaped like ``record.y``."""
+        self._check_fitted()
+        check_predict_input(self, record, horizon)
+        lag, n = self.max_lag_, len(record)
+        (un, yn), = normalised_pairs([record], self.normaliser_)
+        act = _ACT_NP[self.activation]
+        yhat = yn.copy()
+        self.diverged_at_ = None
+        if horizon is None or horizon >= n - lag:
+            x0 = encode_np(self.weights_, yn[None, :lag], un[None, :lag], self.ny, self.nu, act)
+            out, div = simulate_np(self.weights_, x0, un[None, lag:], bool(self.feedthrough), DIVERGENCE_BOUND, act)
+            yhat[lag:] = out[0]
+            if div >= 0:
+                self.diverged_at_ = lag + div
+                warnings.warn(f"{self.name}: free-run simulation diverged at sample {lag + div} of {n}; the rest is nan",
+                              DivergenceWarning, stacklevel=2)
+        else:
+            k = int(horizon)
+            targets = np.arange(lag, n)
+            t0 = np.maximum(targets - k + 1, lag)     # first simulated sample of each target's run
+            steps = targets - t0                       # index of the target in its run (< k)
+            chunk = max(1, 2_000_000 // max(1, k * (int(self.nx) + 64)))
+            for a in range(0, targets.size, chunk):
+                sl = slice(a, a + chunk)
+                s0 = t0[sl]
+                past = s0[:, None] + np.arange(-lag, 0)[None, :]
+                x = encode_np(self.weights_, yn[past], un[past], self.ny, self.nu, act)
+                idx = np.clip(s0[:, None] + np.arange(k)[None, :], 0, n - 1)
+                out, _ = simulate_np(self.weights_, x, un[idx], bool(self.feedthrough), np.inf, act)
+                yhat[targets[sl]] = out[np.arange(out.shape[0]), steps[sl]]
+            bad = ~(np.isfinite(yhat).all(axis=1) & (np.abs(yhat) <= DIVERGENCE_BOUND).all(axis=1))
+            if bad.any():
+                first = int(np.flatnonzero(bad)[0])
+                self.diverged_at_ = first
+                yhat[bad] = np.nan
+                warnings.warn(f"{self.name}: {int(bad.sum())} non-finite {k}-step predictions, first at sample {first}",
+                              DivergenceWarning, stacklevel=2)
+        out = self.normaliser_.inverse_y(yhat)
+        out[:lag] = _as2d(record.y)[:lag]  # the encoder window is the measurement
+        return out[:, 0] if record.y.ndim == 1 else out
+
+    # ------------------------------------------------------------------ description / persistence
+    def describe(self) -> dict[str, Any]:
+        d = super().describe()
+        if hasattr(self, "weights_"):
+            d.update({"structure": {"nx": self.nx, "ny": self.ny, "nu": self.nu, "f_hidden": list(self.f_hidden),
+                                    "h_hidden": list(self.h_hidden), "e_hidden": list(self.e_hidden),
+                                    "activation": self.activation, "feedthrough": bool(self.feedthrough)},
+                      "terms": [], "max_lag": self.max_lag_, "device": self.device_used_,
+                      "epochs_run": len(self.loss_history_), "best_epoch": self.best_epoch_,
+                      "final_loss": self.loss_history_[-1] if self.loss_history_ else None,
+                      "best_validation_rmse_normalised": min(self.val_history_) if self.val_history_ else None})
+        return d
+
+    def _state(self) -> dict[str, Any]:
+        self._check_fitted()
+        flat = {}
+        for part, g in self.weights_.items():
+            flat[f"{part}.W"], flat[f"{part}.b"] = g["W"], g["b"]
+            for i, (W, b) in enumerate(g["layers"]):
+                flat[f"{part}.{i}.W"], flat[f"{part}.{i}.b"] = W, b
+        return {"weights": flat, "normaliser": self.normaliser_.to_dict(), "n_inputs": int(self.n_inputs_),
+                "n_outputs": int(self.n_outputs_), "loss_history": [float(v) for v in self.loss_history_],
+                "val_history": [float(v) for v in self.val_history_],
+                "best_epoch": None if self.best_epoch_ is None else int(self.best_epoch_),
+                "device_used": self.device_used_, "fit_seconds": float(self.fit_seconds_)}
+
+    def _load_state(self, state: dict[str, Any]) -> None:
+        self._check_params(check_device=False)
+        self.n_inputs_, self.n_outputs_ = int(state["n_inputs"]), int(state["n_outputs"])
+        ref = export_weights(self._build(self.n_inputs_, self.n_outputs_))
+        flat = state["weights"]
+
+        def get(key: str, like: np.ndarray) -> np.ndarray:
+            if key not in flat:
+                raise DataError(f"{self.name}: saved state lacks {key}")
+            arr = np.asarray(flat[key], dtype=np.float64)
+            if arr.size != like.size:
+                raise DataError(f"{self.name}: saved {key} has {arr.size} values, the options give {like.size}")
+            return arr.reshape(like.shape)
+
+        self.weights_ = {part: {"W": get(f"{part}.W", g["W"]), "b": get(f"{part}.b", g["b"]),
+                                "layers": [(get(f"{part}.{i}.W", W), get(f"{part}.{i}.b", b)) for i, (W, b) in enumerate(g["layers"])]}
+                         for part, g in ref.items()}
+        self.normaliser_ = Normaliser.from_dict(state["normaliser"])
+        self.loss_history_ = [float(v) for v in state.get("loss_history", [])]
+        self.val_history_ = [float(v) for v in state.get("val_history", [])]
+        self.best_epoch_ = state.get("best_epoch")
+        self.device_used_ = state.get("device_used", "cpu")
+        self.fit_seconds_ = float(state.get("fit_seconds", float("nan")))
+        self.max_lag_ = self.lag
+        self.n_parameters_ = int(sum(g["W"].size + g["b"].size + sum(W.size + b.size for W, b in g["layers"])
+                                     for g in self.weights_.values()))
+        self.diverged_at_ = None
