@@ -160,16 +160,19 @@ SETTINGS["ss-encoder"] = {
     "cascaded-tanks": {"nx": 2, "ny": 4, "nu": 4, "epochs": 300, "batch_size": 64},
     "bouc-wen": {"nx": 3, "ny": 10, "nu": 10},
 }
-# Quick mode: fewer epochs. Two pairs that did not beat the linear baseline as a median over seeds 0-4 got settings
-# chosen by hold-out validation on the ESTIMATION data (fit on its first 80 %, free-run RMSE on the last 20 %, median
-# over seeds 0-4): narx-mlp-sim on Wiener-Hammerstein lr 1e-3 -> 1e-4 (validation 46.4 -> 19.9 mV; at 1e-3 the
-# single simulation-error epoch moves the pretrained net at random: seeds 37-77 mV); rnn on cantilever-thesis 8 ->
-# 16 epochs (validation 0.505 -> 0.424 um, seed range 0.47-0.57 -> 0.42-0.44 um).
+# Quick mode: fewer epochs. Pairs whose median over seeds 0-4 did not beat the linear baseline robustly on every CPU
+# kernel set got settings chosen on the ESTIMATION data only, median over seeds 0-4 — by hold-out validation (fit on
+# its first 80 %, free-run RMSE on the last 20 %): narx-mlp-sim on Wiener-Hammerstein lr 1e-3 -> 1e-4 (validation
+# 46.4 -> 19.9 mV; at 1e-3 the short simulation-error training moves the pretrained net at random: seeds 37-77 mV),
+# on cantilever-thesis lr 1e-3 -> 1e-4 (0.477 -> 0.211 um, seed range 0.20-0.89 -> 0.18-0.24 um); rnn on
+# cantilever-thesis 8 -> 16 epochs (0.505 -> 0.424 um, seeds 0.47-0.57 -> 0.42-0.44 um); and, where a 20 % hold-out
+# is another regime (cascaded tanks), by the free run over the whole estimation record: narx-mlp-sim lr 1e-3 -> 1e-4
+# (0.557 -> 0.445 V, seeds 0.51-0.93 -> 0.43-0.48 V; 100 epochs at 1e-3: 0.876 V).
 QUICK_SETTINGS: dict[str, dict[str, dict[str, Any]]] = {
     "narx-mlp": {"*": {"epochs": 5}, "cascaded-tanks": {"epochs": 100}, "piezo-tue": {"epochs": 20},
                  "wiener-hammerstein": {"epochs": 10}},
-    "narx-mlp-sim": {"*": {"epochs": 1}, "cascaded-tanks": {"epochs": 50}, "piezo-tue": {"epochs": 5},
-                     "wiener-hammerstein": {"lr": 1e-4}},
+    "narx-mlp-sim": {"*": {"epochs": 1}, "cascaded-tanks": {"epochs": 50, "lr": 1e-4}, "piezo-tue": {"epochs": 5},
+                     "wiener-hammerstein": {"lr": 1e-4}, "cantilever-thesis": {"lr": 1e-4}},
     "rnn": {"*": {"epochs": 8}, "wiener-hammerstein": {"epochs": 16}, "piezo-tue": {"epochs": 30},
             "cantilever-thesis": {"epochs": 16}},
     # not in the default quick run (QUICK_SKIP_IDENTIFIERS); `--quick --identifiers ss-encoder` runs this
