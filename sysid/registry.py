@@ -14,6 +14,9 @@ __all__ = ["IDENTIFIERS", "get_identifier", "available_identifiers", "binary_loa
 IDENTIFIERS: dict[str, str] = {
     "arx": "sysid.linear:ARX",
     "armax": "sysid.linear:ARMAX",
+    "oe": "sysid.pem:OE",
+    "bj": "sysid.pem:BJ",
+    "n4sid": "sysid.subspace:N4SID",
     "narx-poly": "sysid.polynomial:NARXPoly",
     "narmax-poly": "sysid.polynomial:NARMAXPoly",
     "narx-mlp": "sysid.neural.narx_mlp:NARXMLP",
