@@ -134,12 +134,15 @@ def select_oe_orders(records: list[Record], nk: list[int], max_order: int = 12, 
                                 max_iter=50), records, grid, "oe order selection")
 
 
-def select_arx_orders(records: list[Record], nk: int, max_order: int = 100) -> tuple[int, list[dict[str, Any]]]:
-    """Order n (ny = nu = n) of an ARX model by hold-out free-run error (module docstring)."""
+def select_arx_orders(records: list[Record], nk: int, max_order: int = 100, probe=None
+                      ) -> tuple[int, list[dict[str, Any]]]:
+    """Order n (ny = nu = n) of an ARX model by hold-out free-run error (module docstring). ``probe``: an ARX
+    whose other options (intercept) the candidates copy."""
     from sysid.linear import ARX
 
     grid = [n for n in ORDER_GRID if n <= int(max_order)] or [1]
-    return _search(lambda n: ARX(ny=n, nu=n, nk=nk), records, grid, "arx order selection")
+    intercept = bool(getattr(probe, "intercept", False))
+    return _search(lambda n: ARX(ny=n, nu=n, nk=nk, intercept=intercept), records, grid, "arx order selection")
 
 
 _ORDER_KEYS = {"arx": ("ny", "nu"), "armax": ("ny", "nu", "ne"), "oe": ("nb", "nf"), "bj": ("nb", "nf", "nc", "nd"),
