@@ -23,6 +23,7 @@ COMMAND_MODULES = (
     "simulate",
     "calibrate",
     "identify",
+    "orders",
     "search",
     "score",
     "diagnose",
