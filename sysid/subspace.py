@@ -14,7 +14,13 @@ gives the extended observability matrix Γ_i from the column space of L32 (SVD; 
 singular values when not given: the last step by a factor ≥ 2 between neighbours, :func:`choose_order`), C as the first block
 row of Γ_i and A from its shift invariance (least squares). B and D follow linearly: with Γ⊥ the orthogonal
 complement of Γ_i and M = Γ⊥ᵀ L31 L11⁻¹ = Γ⊥ᵀ H_i (H_i the block-Toeplitz matrix of D, CB, CAB, …), column block
-c gives M_c = L_c D + [L_{c+1} … L_i] Γ_{i−c} B (L_c the c-th block column of Γ⊥ᵀ), solved by least squares.
+c gives M_c = L_c D + [L_{c+1} … L_i] Γ_{i−c} B (L_c the c-th block column of Γ⊥ᵀ), solved by least squares
+(``focus="subspace"``). By default, poles outside the unit circle are reflected (λ → 1/λ̄, counted in
+``reflected_poles_``) and (``focus="simulation"``, as MATLAB's n4sid option of that name) B and D are
+then re-estimated by the linear least squares that minimises the simulation error given A and C — y is linear
+in (B, D) through modal regressors u_b/(q − λ_a), accumulated in chunks like R. On data from a non-linear or
+higher-order system the Toeplitz estimate can be far off (Wiener–Hammerstein benchmark, nx = 6: free-run test
+R² −38) where the least squares gives the best B, D for the identified poles.
 
 Memory: the Hankel matrix (≈ 2i(m+l) × N) is never formed. Its transpose is built in chunks of ``chunk`` rows
 and the triangular factor R (L = Rᵀ) is accumulated by QR of [R; chunk] (R-factor updating; Golub & Van Loan,
@@ -62,6 +68,20 @@ def _ss_loop(A, B, C, D, u, x0):
     return y
 
 
+@njit(cache=True)
+def _modal_filter(u, lam):
+    """w_a(t) = Σ_{k<t} λ_a^{t−1−k} u(k), i.e. u/(q − λ_a), for every λ_a: (N, len(lam)) complex."""
+    N = u.shape[0]
+    q = lam.shape[0]
+    w = np.zeros((N, q), dtype=np.complex128)
+    for a in range(q):
+        acc = 0.0 + 0.0j
+        for t in range(N):
+            w[t, a] = acc
+            acc = lam[a] * acc + u[t]
+    return w
+
+
 def ss_simulate(A, B, C, D, u: np.ndarray, x0: np.ndarray | None = None) -> np.ndarray:
     """y(t) of x(t+1) = A x + B u, y = C x + D u from x(0) = x0 (zeros): (N, l). Compiled loop."""
     A, B, C, D = (np.ascontiguousarray(np.asarray(M, float)) for M in (A, B, C, D))
@@ -93,6 +113,92 @@ def _qr_r(M: np.ndarray) -> np.ndarray:
     return np.linalg.qr(M, mode="r")
 
 
+def _bd_grams(A, C, us, ys, K: int, chunk: int):
+    """Per-segment normal equations of the output-error least squares of (B, D) given (A, C) (module docstring,
+    "focus simulation"): y(t) = Σ_{a,b} (CV)_a B̃_ab w_ab(t) + D u(t), with A = V Λ V⁻¹, B̃ = V⁻¹ B and the modal
+    regressors w_ab = u_b / (q − λ_a) (a complex first-order filter; a conjugate pair gives two real columns
+    2 Re(·) and −2 Im(·)). Returns (grams [(G_s, g_s)], unpack(β) -> (B, D)) or None when A is not
+    diagonalisable in a well-conditioned basis."""
+    lam, V = np.linalg.eig(A)
+    if not np.all(np.isfinite(lam)) or np.linalg.cond(V) > 1e10:
+        return None
+    n, l, m = A.shape[0], C.shape[0], us[0].shape[1]
+    upper = [a for a in range(n) if lam[a].imag > 0 or lam[a].imag == 0]
+    real = {a: lam[a].imag == 0 for a in upper}
+    CV = C @ V
+    p = sum(1 if real[a] else 2 for a in upper) * m + l * m
+    total = sum(len(u) for u in us)
+    bounds = np.linspace(0, total, K + 1).round().astype(int)
+    grams = [(np.zeros((p, p)), np.zeros(p)) for _ in range(K)]
+    g0 = 0
+    for u, y in zip(us, ys):
+        W = {}
+        for b in range(m):
+            wb = _modal_filter(np.ascontiguousarray(u[:, b], dtype=float), np.ascontiguousarray(lam[upper]))
+            for j, a in enumerate(upper):
+                W[(a, b)] = wb[:, j]
+        for s in range(K):
+            lo, hi = max(bounds[s], g0) - g0, min(bounds[s + 1], g0 + len(u)) - g0
+            for t0 in range(lo, hi, chunk):
+                t1 = min(t0 + chunk, hi)
+                cols = []
+                for b in range(m):
+                    for a in upper:
+                        cw = W[(a, b)][t0:t1, None] * CV[None, :, a]
+                        cols.append(cw.real if real[a] else 2.0 * cw.real)
+                        if not real[a]:
+                            cols.append(-2.0 * cw.imag)
+                for b in range(m):
+                    for o in range(l):
+                        z = np.zeros((t1 - t0, l))
+                        z[:, o] = u[t0:t1, b]
+                        cols.append(z)
+                Phi = np.stack(cols, axis=-1).reshape(-1, p)
+                G, g = grams[s]
+                G += Phi.T @ Phi
+                g += Phi.T @ y[t0:t1].reshape(-1)
+        g0 += len(u)
+
+    def unpack(beta):
+        Bt = np.zeros((n, m), complex)
+        j = 0
+        for b in range(m):
+            for a in upper:
+                if real[a]:
+                    Bt[a, b] = beta[j]
+                    j += 1
+                else:
+                    Bt[a, b] = beta[j] + 1j * beta[j + 1]
+                    partner = int(np.argmin(np.abs(lam - np.conj(lam[a])) + (np.arange(n) == a) * 1e300))
+                    Bt[partner, b] = beta[j] - 1j * beta[j + 1]
+                    j += 2
+        D = beta[j:].reshape(m, l).T
+        return np.real(V @ Bt), D
+
+    return grams, unpack
+
+
+def _stable(A: np.ndarray) -> tuple[np.ndarray, int]:
+    """A with every eigenvalue |λ| > 1 reflected to 1/λ̄ (same eigenvectors; conjugate pairs stay pairs), and the
+    number reflected. A simulation model must be stable; the subspace estimate of a non-linear or under-modelled
+    system can have a pole just outside the circle."""
+    lam, V = np.linalg.eig(A)
+    bad = np.abs(lam) > 1.0
+    if not bad.any():
+        return A, 0
+    if np.linalg.cond(V) > 1e10:
+        return A, 0
+    lam = np.where(bad, lam / np.abs(lam) ** 2, lam)
+    return np.real(V @ np.diag(lam) @ np.linalg.inv(V)), int(bad.sum())
+
+
+def _solve(G, g):
+    try:
+        return np.linalg.solve(G, g)
+    except np.linalg.LinAlgError:
+        return np.linalg.lstsq(G, g, rcond=None)[0]
+
+
 class N4SID(Identifier):
     """Subspace (PO-MOESP) state-space identifier, MIMO (module docstring).
 
@@ -103,13 +209,16 @@ class N4SID(Identifier):
     block_rows : i (past and future horizon, samples); ``None`` = max(ceil((n_max + 1)/l) + 1, 10).
     segments : parts of the data for the jackknife uncertainty (≥ 2; more parts = finer std, same cost order).
     chunk : Hankel rows per QR update (memory ≈ chunk · 2i(m+l) · 8 bytes).
+    focus : ``"simulation"`` (B, D by output-error least squares given A, C: the best simulation of the data for
+        those poles) or ``"subspace"`` (B, D from the L factors alone, the Toeplitz formula).
     """
 
     name = "n4sid"
 
     def __init__(self, nx: Any = None, max_order: int = 20, block_rows: Any = None, segments: int = 20,
-                 chunk: int = 20_000):
+                 chunk: int = 20_000, focus: str = "simulation"):
         self.nx = nx
+        self.focus = focus
         self.max_order = max_order
         self.block_rows = block_rows
         self.segments = segments
@@ -164,6 +273,18 @@ class N4SID(Identifier):
         DB = np.linalg.lstsq(np.vstack(rows_K), np.vstack(rows_M), rcond=None)[0]
         return A, DB[l:], C, DB[:l], s, n
 
+    def _bd_simulation(self, A, C, us, ys, K, B0, D0, leave_out: int | None = None):
+        """(B, D) by output-error least squares given (A, C) on every segment but ``leave_out``; falls back on the
+        subspace (Toeplitz) estimate (B0, D0) when A has no well-conditioned eigenbasis."""
+        res = _bd_grams(A, C, us, ys, K, int(self.chunk))
+        if res is None:
+            return B0, D0
+        grams, unpack = res
+        keep = [gr for s, gr in enumerate(grams) if s != leave_out]
+        G = sum(gr[0] for gr in keep)
+        g = sum(gr[1] for gr in keep)
+        return unpack(_solve(G, g))
+
     def fit(self, data: Record | Sequence[Record]) -> "N4SID":
         records = as_record_list(data)
         m, l = records[0].n_inputs, records[0].n_outputs
@@ -180,6 +301,8 @@ class N4SID(Identifier):
         K = int(self.segments)
         if K < 2:
             raise ConfigError(f"n4sid: segments must be >= 2, got {self.segments!r}")
+        if self.focus not in ("simulation", "subspace"):
+            raise ConfigError(f"n4sid: focus must be 'simulation' or 'subspace', got {self.focus!r}")
         if int(self.chunk) < 1:
             raise ConfigError(f"n4sid: chunk must be >= 1, got {self.chunk!r}")
         width = 2 * i * (m + l)
@@ -191,6 +314,11 @@ class N4SID(Identifier):
         Rs = self._r_factors([u / su for u in us], [y / sy for y in ys], i, K)
         R = _qr_r(np.vstack(Rs))
         A, B, C, D, s, n = self._estimate(R, i, m, l, n_fixed, n_max)
+        un, yn = [u / su for u in us], [y / sy for y in ys]
+        self.reflected_poles_ = 0
+        if self.focus == "simulation":
+            A, self.reflected_poles_ = _stable(A)
+            B, D = self._bd_simulation(A, C, un, yn, K, B, D)
         J = sum(len(u) - 2 * i + 1 for u in us)
         self.singular_values_ = (s / math.sqrt(J)).tolist()
         self.nx_ = int(n)
@@ -205,6 +333,9 @@ class N4SID(Identifier):
                 continue
             Rk = _qr_r(np.vstack([Rs[j] for j in range(K) if j != k]))
             Ak, Bk, Ck, Dk, _, _ = self._estimate(Rk, i, m, l, n, n)
+            if self.focus == "simulation":
+                Ak = _stable(Ak)[0]
+                Bk, Dk = self._bd_simulation(Ak, Ck, un, yn, K, Bk, Dk, leave_out=k)
             reps.append((Ak, Bk @ scale[0], scale[1] @ Ck, scale[1] @ Dk @ scale[0]))
         self.replicates_ = reps
         self.n_inputs_, self.n_outputs_ = m, l
@@ -318,6 +449,7 @@ class N4SID(Identifier):
         d = super().describe()
         if hasattr(self, "A_"):
             d.update(nx=self.nx_, chosen_orders=self.chosen_orders_, block_rows=self.block_rows_,
+                     reflected_poles=self.reflected_poles_,
                      singular_values=self.singular_values_[:2 * int(self.max_order) + 2], poles=self.poles(),
                      state_space={k: getattr(self, k + "_").tolist() for k in "ABCD"}, max_lag=self.max_lag_, terms=[])
         return d
@@ -336,7 +468,7 @@ class N4SID(Identifier):
         return {"A": self.A_.tolist(), "B": self.B_.tolist(), "C": self.C_.tolist(), "D": self.D_.tolist(),
                 "replicates": [[M.tolist() for M in rep] for rep in self.replicates_],
                 "singular_values": self.singular_values_, "chosen": self.chosen_orders_,
-                "block_rows": self.block_rows_, "y_bound": self.y_bound_}
+                "block_rows": self.block_rows_, "y_bound": self.y_bound_, "reflected_poles": self.reflected_poles_}
 
     def _load_state(self, state: dict[str, Any]) -> None:
         self.A_, self.B_, self.C_, self.D_ = (np.asarray(state[k], float) for k in "ABCD")
@@ -345,6 +477,7 @@ class N4SID(Identifier):
         self.chosen_orders_ = dict(state["chosen"])
         self.block_rows_ = int(state["block_rows"])
         self.y_bound_ = float(state["y_bound"])
+        self.reflected_poles_ = int(state.get("reflected_poles", 0))
         self.nx_ = self.A_.shape[0]
         self.n_outputs_, self.n_inputs_ = self.D_.shape
         self._set_common()
