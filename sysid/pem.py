@@ -44,51 +44,17 @@ from scipy.signal import lfilter
 
 from sysid.base import Identifier, as_record_list, check_records
 from sysid.errors import ConfigError, DataError, DivergenceWarning
+from sysid.pem_init import hannan_rissanen, is_stable, oe_sim, shift, sriv, stabilise
 from sysid.record import Record
 from sysid.uncertainty import monte_carlo_band, poles_with_std, tf_response_with_std
 
 __all__ = ["OE", "BJ", "sriv", "stabilise"]
 
 DIVERGENCE_FACTOR = 1e3
-SRIV_ITERATIONS = 8
 BACKFIT_SWEEPS = 3
-HR_AR_ORDER = 30  # long-AR order of the Hannan–Rissanen noise-model initialisation
 
 
 # --------------------------------------------------------------------------------------- helpers
-def _shift(x: np.ndarray, s: int) -> np.ndarray:
-    """x(t − s) with zeros before the start (axis 0)."""
-    if s <= 0:
-        return x.copy()
-    out = np.zeros_like(x)
-    if s < x.shape[0]:
-        out[s:] = x[:-s]
-    return out
-
-
-def _lags(x: np.ndarray, lags: Sequence[int]) -> np.ndarray:
-    return np.column_stack([_shift(x, s) for s in lags]) if len(lags) else np.zeros((x.shape[0], 0))
-
-
-def stabilise(poly: np.ndarray, margin: float = 1e-6) -> np.ndarray:
-    """Monic polynomial in q⁻¹ with every root r, |r| ≥ 1, replaced by 1/r̄ (|r| = 1: pulled inside by ``margin``)."""
-    poly = np.asarray(poly, float)
-    if poly.size <= 1:
-        return poly
-    r = np.roots(poly)
-    bad = np.abs(r) >= 1.0 - margin
-    if not bad.any():
-        return poly
-    r = np.where(np.abs(r) > 1.0, 1.0 / np.conj(np.where(bad, r, 1.0)), r)
-    mag = np.abs(r)
-    r = np.where(mag >= 1.0 - margin, r / np.where(mag > 0, mag, 1.0) * (1.0 - margin), r)
-    return np.real(np.poly(r))
-
-
-def _is_stable(poly: np.ndarray) -> bool:
-    return poly.size <= 1 or bool(np.all(np.abs(np.roots(poly)) < 1.0))
-
-
 def _orders(value: Any, m: int, name: str) -> list[int] | None:
     """``None`` (choose automatically), an int for every input, or one per input (list / "2-3" string)."""
     if value is None:
@@ -111,67 +77,6 @@ def _orders(value: Any, m: int, name: str) -> list[int] | None:
     if any(v < 0 for v in out):
         raise ConfigError(f"{name} must be >= 0, got {value!r}")
     return out
-
-
-def _oe_sim(b: np.ndarray, f: np.ndarray, nk: int, u: np.ndarray) -> np.ndarray:
-    return lfilter(np.concatenate([np.zeros(nk), b]), f, u)
-
-
-def sriv(us: list[np.ndarray], ys: list[np.ndarray], nb: int, nf: int, nk: int,
-         iterations: int = SRIV_ITERATIONS) -> tuple[np.ndarray, np.ndarray]:
-    """SISO B/F by the simplified refined instrumental-variable method (Ljung §7.6; Young 1976) on records
-    (lists of 1-D arrays). Returns (b, f) with f monic and stable; the iterate of least output-error cost."""
-    ulags = list(range(nk, nk + nb))
-    ylags = list(range(1, nf + 1))
-
-    def solve(uf, yf, xf):
-        rows_P, rows_Z, rows_y = [], [], []
-        L = max(ylags + ulags + [0])
-        for u_, y_, x_ in zip(uf, yf, xf):
-            P = np.hstack([-_lags(y_, ylags), _lags(u_, ulags)])[L:]
-            Z = np.hstack([-_lags(x_, ylags), _lags(u_, ulags)])[L:] if x_ is not None else P
-            rows_P.append(P), rows_Z.append(Z), rows_y.append(y_[L:])
-        P, Z, yv = np.vstack(rows_P), np.vstack(rows_Z), np.concatenate(rows_y)
-        th = np.linalg.lstsq(Z.T @ P, Z.T @ yv, rcond=None)[0]
-        return th[nf:], np.concatenate([[1.0], th[:nf]])
-
-    def cost(b, f):
-        return sum(float(np.sum((y_ - _oe_sim(b, f, nk, u_)) ** 2)) for u_, y_ in zip(us, ys))
-
-    b, f = solve(us, ys, [None] * len(us))  # ARX least squares
-    f = stabilise(f)
-    best = (cost(b, f), b, f)
-    if nf == 0:
-        return b, f
-    for _ in range(int(iterations)):
-        uf = [lfilter([1.0], f, u_) for u_ in us]
-        yf = [lfilter([1.0], f, y_) for y_ in ys]
-        xf = [lfilter([1.0], f, _oe_sim(b, f, nk, u_)) for u_ in us]
-        try:
-            b, f = solve(uf, yf, xf)
-        except np.linalg.LinAlgError:  # pragma: no cover - singular instruments
-            break
-        f = stabilise(f)
-        c = cost(b, f)
-        if np.isfinite(c) and c < best[0]:
-            best = (c, b, f)
-    return best[1], best[2]
-
-
-def hannan_rissanen(vs: list[np.ndarray], nc: int, nd: int) -> tuple[np.ndarray, np.ndarray]:
-    """ARMA D v = C e by Hannan–Rissanen: long AR for ê, then least squares. Returns stable monic (c, d)."""
-    if nc == 0 and nd == 0:
-        return np.ones(1), np.ones(1)
-    p = max(HR_AR_ORDER, 3 * (nc + nd))
-    P = np.vstack([-_lags(v, range(1, p + 1))[p:] for v in vs])
-    a = np.linalg.lstsq(P, np.concatenate([v[p:] for v in vs]), rcond=None)[0]
-    es = [lfilter(np.concatenate([[1.0], a]), [1.0], v) for v in vs]  # ê = A_long(q) v
-    L = p + max(nc, nd)
-    X = np.vstack([np.hstack([-_lags(v, range(1, nd + 1)), _lags(e, range(1, nc + 1))])[L:] for v, e in zip(vs, es)])
-    th = np.linalg.lstsq(X, np.concatenate([(v - e)[L:] for v, e in zip(vs, es)]), rcond=None)[0]
-    d = stabilise(np.concatenate([[1.0], th[:nd]]))
-    c = stabilise(np.concatenate([[1.0], th[nd:]]))
-    return c, d
 
 
 # --------------------------------------------------------------------------------------- the models
@@ -244,12 +149,12 @@ class _PolyPEM(Identifier):
                     continue
                 bs[i], fs[i] = sriv([u_[:, i] for u_ in us], tgt, nb[i], nf[i], nk[i])
                 for u_, x_ in zip(us, X):
-                    x_[:, i] = _oe_sim(bs[i], fs[i], nk[i], u_[:, i])
+                    x_[:, i] = oe_sim(bs[i], fs[i], nk[i], u_[:, i])
         return bs, fs
 
     def _v(self, rec, bs, fs, nk):
         u = rec.u.reshape(len(rec), -1)
-        return rec.y.reshape(-1) - sum(_oe_sim(bs[i], fs[i], nk[i], u[:, i]) for i in range(len(bs)))
+        return rec.y.reshape(-1) - sum(oe_sim(bs[i], fs[i], nk[i], u[:, i]) for i in range(len(bs)))
 
     def _layout(self, o) -> list[tuple[str, int, int]]:
         """(kind, input index, k) per parameter, in θ order: per input b1..b_nb, f1..f_nf; then c…, d…."""
@@ -293,11 +198,11 @@ class _PolyPEM(Identifier):
 
         def parts(theta):
             bs, fs, c, d = self._unpack(theta, o)
-            if not all(_is_stable(p) for p in fs + [c, d]):
+            if not all(is_stable(p) for p in fs + [c, d]):
                 return None
             out = []
             for u_, y_ in zip(us, ys):
-                X = np.column_stack([_oe_sim(bs[i], fs[i], o["nk"][i], u_[:, i]) for i in range(len(bs))])
+                X = np.column_stack([oe_sim(bs[i], fs[i], o["nk"][i], u_[:, i]) for i in range(len(bs))])
                 v = y_ - X.sum(axis=1)
                 e = lfilter(d, c, v) if self._noise else v
                 out.append((u_, X, v, e))
@@ -327,15 +232,15 @@ class _PolyPEM(Identifier):
                             src = u_[:, i] if kind == "b" else X[:, i]
                             cache[(kind, i)] = lfilter(num, den, src)
                         w = cache[(kind, i)]
-                        J[:, j] = -_shift(w, o["nk"][i] + k - 1) if kind == "b" else _shift(w, k)
+                        J[:, j] = -shift(w, o["nk"][i] + k - 1) if kind == "b" else shift(w, k)
                     elif kind == "c":
                         if "c" not in cache:
                             cache["c"] = lfilter([1.0], c, e)
-                        J[:, j] = -_shift(cache["c"], k)
+                        J[:, j] = -shift(cache["c"], k)
                     else:
                         if "d" not in cache:
                             cache["d"] = lfilter([1.0], c, v)
-                        J[:, j] = _shift(cache["d"], k)
+                        J[:, j] = shift(cache["d"], k)
                 blocks.append(J)
             return np.vstack(blocks)
 
@@ -483,7 +388,7 @@ class _PolyPEM(Identifier):
             th[idx] = th_g
             o = {**self.orders_}
             bs, fs, _, _ = self._unpack(th, o)
-            if not all(_is_stable(f) for f in fs):
+            if not all(is_stable(f) for f in fs):
                 return np.full(len(y), np.nan)
             return self._simulate(u, y, bs, fs)
 

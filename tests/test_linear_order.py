@@ -123,3 +123,16 @@ def test_identify_json_parameters_warnings_and_range(tmp_path, capsys):
 def test_identify_reports_chosen_orders():
     _, s = identify("oe", _sys(seed=5), None, {})
     assert s["chosen_orders"] == {"nk": [1], "nb": [2], "nf": [2]}
+
+
+def test_orders_command_table_json_and_bad_grid(tmp_path, capsys):
+    from benchmarks.cli import main
+
+    write_record(_sys(seed=6, nk=2), tmp_path / "est.npz")
+    write_record(_sys(seed=7, nk=2), tmp_path / "val.npz")
+    rc = main(["orders", "oe", "--est", str(tmp_path / "est.npz"), "--val", str(tmp_path / "val.npz"),
+               "--grid", "1-2-3", "--json", "--plot", str(tmp_path / "o.png")])
+    out = json.loads(capsys.readouterr().out)
+    assert rc == 0 and out["delay"] == [2] and [r["order"] for r in out["rows"]] == [1, 2, 3]
+    assert out["best"]["bic"] == 2 and (tmp_path / "o.png").exists()
+    assert main(["orders", "oe", "--est", str(tmp_path / "est.npz"), "--grid", "0-x"]) == 2
