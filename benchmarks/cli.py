@@ -34,6 +34,7 @@ COMMAND_MODULES = (
     "bla",
     "predict",
     "compare",
+    "orders",
     "search",
     "score",
     "diagnose",

@@ -35,7 +35,7 @@ from sysid.record import Record
 
 BASELINES_PATH = Path(__file__).resolve().parent / "baselines.json"
 BASELINES_FORMAT = "piezotwin-baselines/1"
-LINEAR_IDENTIFIERS = ("arx", "armax", "bla")
+LINEAR_IDENTIFIERS = ("arx", "armax", "bla", "oe", "bj", "n4sid")
 METRICS = ("rmse", "nrmse", "r2")
 NORMALISE = "normalise"  # scoring option in SETTINGS (not an identifier option): fit on normalised data
 
@@ -52,6 +52,11 @@ SETTINGS: dict[str, dict[str, dict[str, Any]]] = {
     "armax": {"*": {"ny": 4, "nu": 4, "ne": 2}, "wiener-hammerstein": {"ny": 10, "nu": 10, "ne": 2}},
     # BLA (issue 15): H1/Welch FRF + 6/6 transfer function fitted with input-spectrum weights (sysid.bla_model)
     "bla": {"*": {"nb": 6, "nf": 6}},
+    # Issue 15's parametric linear models, at the ARX orders (Wiener-Hammerstein: two 3rd-order linear blocks, so
+    # order 6 for the state-space model); the input delay of these models is nk = 1 like ARX's.
+    "oe": {"*": {"nb": 4, "nf": 4, "nk": 1}, "wiener-hammerstein": {"nb": 10, "nf": 10}},
+    "bj": {"*": {"nb": 4, "nf": 4, "nc": 2, "nd": 2, "nk": 1}, "wiener-hammerstein": {"nb": 10, "nf": 10}},
+    "n4sid": {"*": {"nx": 4}, "wiener-hammerstein": {"nx": 6}},
     "narx-poly": {
         "*": {"ny": 2, "nu": 2, "degree": 3, NORMALISE: True},
         "silverbox": {"ny": 2, "nu": 5, "degree": 3, NORMALISE: False},
@@ -129,6 +134,9 @@ SETTINGS: dict[str, dict[str, dict[str, Any]]] = {
 for _ident in ("arx", "armax", "narx-poly"):
     for _d in ("acoustic-thesis", "acoustic-thesis-clean"):
         SETTINGS[_ident][_d] = {**SETTINGS[_ident].get(_d, {}), "ny": 4, "nu": 4, "nk": 505}
+for _ident in ("oe", "bj"):
+    for _d in ("acoustic-thesis", "acoustic-thesis-clean"):
+        SETTINGS[_ident][_d] = {**SETTINGS[_ident].get(_d, {}), "nk": 505}
 SETTINGS["narx-poly"]["acoustic-thesis"].update(degree=2)
 SETTINGS["narx-poly"]["acoustic-thesis-clean"].update(degree=2)
 # NARMAX: the NARX process structure of each dataset plus noise terms by ELS, two iterations. More iterations no

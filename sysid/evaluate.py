@@ -62,7 +62,8 @@ def evaluate(model, data: Record | Sequence[Record], horizons: dict[str, int | N
 def identification_summary(model, est: Record | Sequence[Record], val: Record | Sequence[Record] | None = None,
                            fit_seconds: float | None = None) -> dict[str, Any]:
     """The ``identify`` JSON (interfaces.md): identifier, params, n_parameters, fit_seconds, terms, estimation,
-    validation (``None`` without validation data)."""
+    validation (``None`` without validation data); linear models add ``parameters`` ([{name, value, std}]),
+    ``poles`` and ``chosen_orders``; ``warnings`` lists practitioner warnings (:mod:`sysid.advice`)."""
     d = model.describe()
     out = {
         "identifier": d.get("identifier", getattr(model, "name", type(model).__name__)),
@@ -73,4 +74,11 @@ def identification_summary(model, est: Record | Sequence[Record], val: Record | 
         "estimation": evaluate(model, est),
         "validation": evaluate(model, val) if val is not None else None,
     }
+    # linear models: parameters with std, poles, automatically chosen orders (issue 15)
+    for key in ("parameters", "poles", "chosen_orders", "nx", "order_selection"):
+        if d.get(key) is not None:
+            out[key] = d[key]
+    from sysid.advice import practitioner_warnings
+
+    out["warnings"] = practitioner_warnings(model, est, val, out)
     return out

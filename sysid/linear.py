@@ -67,22 +67,77 @@ class _LinearBase(PolynomialModel):
                 "A_stderr": se["a"], "B_stderr": se["b"] if s.n_inputs > 1 else se["b"][0], "C_stderr": se["c"]}
 
 
+    def parameters(self) -> list[dict[str, Any]]:
+        """``[{"name", "value", "std"}]`` in MATLAB's convention (issue 15): A(q) = 1 + a1 q⁻¹ + …,
+        B(q) = b1 q^-nk + b2 q^-(nk+1) + … (``b1_u2`` … for the 2nd input), C(q) = 1 + c1 q⁻¹ + …; one output."""
+        self._check_fitted()
+        if self.structure_.n_outputs != 1:
+            return []
+        p = self.polynomials(0)
+        out = [{"name": f"a{k}", "value": float(p["A"][k]), "std": float(p["A_stderr"][k])}
+               for k in range(1, len(p["A"]))]
+        B = np.atleast_2d(p["B"])
+        Bs = np.atleast_2d(p["B_stderr"])
+        for i in range(B.shape[0]):
+            suffix = f"_u{i + 1}" if B.shape[0] > 1 else ""
+            out += [{"name": f"b{k + 1}{suffix}", "value": float(B[i, k]), "std": float(Bs[i, k])}
+                    for k in range(B.shape[1])]
+        out += [{"name": f"c{k}", "value": float(p["C"][k]), "std": float(p["C_stderr"][k])}
+                for k in range(1, len(p["C"]))]
+        return out
+
+    def poles(self) -> list[dict[str, Any]]:
+        """Roots of A(q) (one output; ``std`` is None: only the parameters' standard errors are kept)."""
+        self._check_fitted()
+        if self.structure_.n_outputs != 1:
+            raise ConfigError(f"{self.name}: poles are listed for one output only")
+        from sysid.uncertainty import poles_with_std
+
+        return poles_with_std(self.polynomials(0)["A"], None)
+
+    def describe(self) -> dict[str, Any]:
+        d = super().describe()
+        if hasattr(self, "terms_") and self.structure_.n_outputs == 1:
+            d["parameters"] = self.parameters()
+            d["poles"] = self.poles()
+        if getattr(self, "chosen_orders_", None):
+            d["chosen_orders"] = self.chosen_orders_
+            d["order_selection"] = self.order_table_
+        return d
+
+
 class ARX(_LinearBase):
     """ARX by least squares: A(q) y(t) = B(q) u(t − n_k) + e(t).
 
-    Parameters: ``ny`` (order of A), ``nu`` (order of B), ``nk`` (delay, samples), ``intercept`` (add a constant).
+    Parameters: ``ny`` (order of A), ``nu`` (order of B), ``nk`` (delay, samples), ``intercept`` (add a constant),
+    ``orders`` (``"given"``: use ny, nu; ``"auto"``: choose ny = nu by hold-out free-run error over a grid up to
+    ``max_order`` (:func:`sysid.order.select_arx_orders`), then ``ny``/``nu`` hold the chosen order and
+    ``chosen_orders_`` / ``order_table_`` report it).
     MIMO: one model per output over the lags of every output and input.
     """
 
     name = "arx"
 
-    def __init__(self, ny: int = 2, nu: int = 2, nk: int = 1, intercept: bool = False):
+    def __init__(self, ny: int = 2, nu: int = 2, nk: int = 1, intercept: bool = False, orders: str = "given",
+                 max_order: int = 100):
         self.ny = ny
         self.nu = nu
         self.nk = nk
         self.intercept = intercept
+        self.orders = orders
+        self.max_order = max_order
 
     def _fit_records(self, records: list[Record]) -> None:
+        if self.orders not in ("given", "auto"):
+            raise ConfigError(f"arx: orders must be 'given' or 'auto', got {self.orders!r}")
+        self.chosen_orders_ = {}
+        if self.orders == "auto":
+            from sysid.order import select_arx_orders
+
+            probe = ARX(nk=self.nk, intercept=self.intercept)
+            n, self.order_table_ = select_arx_orders(records, self.nk, int(self.max_order), probe)
+            self.ny = self.nu = n
+            self.chosen_orders_ = {"ny": n, "nu": n}
         s = self._linear_structure(records, 0)
         check_records(records, s.max_lag, len(s.terms) + 1, self.name)
         self.structure_ = s

@@ -28,6 +28,9 @@ SETTINGS = {
     "rnn": "n_state=3,n_enc=3,enc_hidden=6,window=20,epochs=1,device=cpu",
     "bla": "nb=3,nf=2",
     "narx-poly-sim": "ny=2,nu=2,degree=2",
+    "oe": "nb=2,nf=2,nk=1",
+    "bj": "nb=2,nf=2,nc=1,nd=1,nk=1",
+    "n4sid": "nx=2",
     "ss-encoder": "nx=2,ny=3,nu=3,f_hidden=4,h_hidden=4,e_hidden=4,T=10,epochs=1,device=cpu",
 }
 
@@ -158,7 +161,7 @@ def test_model_file_is_plain_json_and_npz(data, tmp_path):
     with np.load(p, allow_pickle=False) as z:
         head = json.loads(str(z["header"]))
     assert head["format"] == "piezotwin-model" and head["version"] == 2 and head["identifier"] == "arx"
-    assert head["params"] == {"ny": 2, "nu": 2, "nk": 1, "intercept": False}
+    assert head["params"] == {"ny": 2, "nu": 2, "nk": 1, "intercept": False, "orders": "given", "max_order": 100}
     assert head["estimation"]["fs"] == 1.0 and len(head["estimation"]["sha256"]) == 64
     assert head["checksum"].startswith("sha256:")
 

@@ -40,7 +40,7 @@ def identify(name: str, est: Record | Sequence[Record], val: Record | Sequence[R
 
 
 def register(sub) -> None:
-    p = sub.add_parser("identify", help="identify a black-box model (arx, armax, narx-poly, narmax-poly, ...)")
+    p = sub.add_parser("identify", help="identify a black-box model (arx, armax, oe, bj, n4sid, narx-poly, narmax-poly, ...)")
     p.add_argument("identifier", help="identifier id (piezotwin list identifiers)")
     p.add_argument("--est", required=True, action="append", metavar="FILE",
                    help="estimation record; repeat for several separate experiments")
@@ -67,6 +67,10 @@ def run(args: argparse.Namespace) -> int:
         from sysid.plots import identification_report
 
         summary["plots"] = identification_report(model, val if val is not None else est[0], args.plots)
+        if hasattr(model, "simulation_band"):  # linear models with uncertainty (issue 15)
+            from sysid.linplots import linear_report
+
+            summary["plots"].update(linear_report(model, val if val is not None else est[0], args.plots))
     if args.json:
         emit_json(summary)
         return 0
@@ -82,6 +86,8 @@ def run(args: argparse.Namespace) -> int:
             nr = "nan" if m["nrmse"] is None else f"{m['nrmse']:.5f}"
             extra = f"  (diverged at sample {m['diverged_at']})" if "diverged_at" in m else ""
             print(f"  {part:<10} {mode:<8} R2 = {r2}  NRMSE = {nr}{extra}")
+    for w in summary.get("warnings", []):
+        print(f"  warning: {w}")
     if args.output:
         print(f"  model -> {summary['model_file']}")
     return 0
