@@ -57,8 +57,12 @@ from sysid.record import Record
 from twins.base import Twin, param_info
 from twins.calibration import calibrate as ls_calibrate
 
+from . import defaults as dflt
 from . import evidence as ev
 from . import features as ft
+from . import ranges as rg
+from . import splitting
+from . import unexplained as unx
 
 __all__ = ["diagnose", "NOISE_EFFECTS", "significance"]
 
@@ -639,13 +643,19 @@ def _diagnose(twin: Twin, data: Record, val: Record | None = None, max_rounds: i
              candidates: Sequence[str] | None = None, calibrate_baseline: bool = True,
              calibration_params: Sequence[str] | None = None, alpha: float = 0.01, min_rel_gain: float = 0.005,
              trial_nfev: int = 25, scan_nfev: int = 15, scan_points: int = 13, refine: int = 3, max_lag: int = 20, max_echo_s: float | None = None,
-             skip: int = 0, split: float = 0.6, generic_lags: int = 10, keep_stages: bool = False) -> dict[str, Any]:
+             skip: int = 0, split: float = 0.6, generic_lags: int = 10, keep_stages: bool = False,
+             retest_defaults: bool = True, follow_ranges: bool = True, progress: Any = None) -> dict[str, Any]:
     """The body of :func:`diagnose` (same arguments)."""
     if not isinstance(twin, Twin):
         raise ConfigError("diagnose: twin must be a Twin instance")
+    say = progress if callable(progress) else (lambda msg: None)
     data.require_output()
+    # validation that validates (issue 20): the validation input must move (splitting.py)
     if val is None:
-        data, val = data.split(fraction=split)
+        data, val, split_info = splitting.choose_split(data, split)
+    else:
+        val.require_output()
+        split_info = splitting.check_validation(data, val)
     val.require_output()
     if data.n_inputs != 1 or data.n_outputs != 1:
         raise DataError(f"{data.source}: diagnose handles single-input single-output records")
@@ -657,8 +667,13 @@ def _diagnose(twin: Twin, data: Record, val: Record | None = None, max_rounds: i
     if unknown:
         raise ConfigError(f"unknown effect {unknown[0]!r} for twin {twin.name}; valid: {', '.join(twin.EFFECTS)}")
     t_start = time.perf_counter()
+    # ranges from the data (issue 20): amplitude limit, creep time constants, integration sub-step (ranges.py)
+    range_notes: list[str] = []
+    if follow_ranges:
+        twin, range_notes = rg.follow_record(twin, data, val)
     core = list(calibration_params if calibration_params is not None else twin.CALIBRATION_PARAMS)
     core = _numeric_fields(twin, core)
+    say(f"diagnose {twin.name}: {len(data)} + {len(val)} samples" + "".join(f"; {n}" for n in range_notes))
 
     # 0. saturation rails of the measured records (censored samples), judged with the configuration as given
     current = _deterministic(twin)
@@ -670,8 +685,14 @@ def _diagnose(twin: Twin, data: Record, val: Record | None = None, max_rounds: i
     # 1. calibrate the current configuration (deterministic prediction)
     prior = current
     calib_info: dict[str, Any] = {}
-    core0 = _core_for(current, core)
+    # effects that are on are re-tested after the baseline (defaults.py): their own parameters stay at the
+    # configured values in the baseline fit, so that a mis-sized default shows as the re-test's gain
+    retest = dflt.retestable(current, _unpredictable(twin), NOISE_EFFECTS) if retest_defaults else []
+    held = dflt.owned_fields(current, retest)
+    core0 = [c for c in _core_for(current, core) if c not in held]
+    at_bound: list[dict[str, Any]] = []
     if calibrate_baseline and core0:
+        say("calibrating the configuration as given")
         try:
             if railed:  # the twin's own calibration does not know the rails: output error on the clipped prediction
                 raise TypeError
@@ -680,6 +701,19 @@ def _diagnose(twin: Twin, data: Record, val: Record | None = None, max_rounds: i
             res = ls_calibrate(current, data, core0, val=val, simulate=_simulate)
         fitted = _deterministic(res.twin)
         calib_info = {"fitted": res.fitted, "stderr": res.stderr}
+        # parameters that end at a bound: widen it once and refit before any verdict (ranges.py)
+        hits = rg.at_bounds(fitted, core0)
+        if hits:
+            wide, rows_w = rg.widened(fitted, hits)
+            if rows_w:
+                say("refitting with widened bounds: " + ", ".join(r["param"] for r in rows_w))
+                try:
+                    res_w = ls_calibrate(wide, data, core0, simulate=_simulate)
+                    if _sse(data.y, _simulate(res_w.twin, data), skip) < _sse(data.y, _simulate(fitted, data), skip):
+                        fitted = _deterministic(res_w.twin)
+                        calib_info = {"fitted": res_w.fitted, "stderr": res_w.stderr, "widened": rows_w}
+                except (ConfigError, DataError, ValueError, np.linalg.LinAlgError):
+                    pass
         # keep the calibration only if it improves on the configuration as given (an unconverged fit would
         # otherwise hand every trial that restarts from the prior a spurious gain)
         if _sse(data.y, _simulate(fitted, data), skip) <= _sse(data.y, _simulate(current, data), skip):
@@ -689,12 +723,20 @@ def _diagnose(twin: Twin, data: Record, val: Record | None = None, max_rounds: i
             calib_info["note"] = "calibration did not improve on the given configuration; the given one is used"
     base = _stage(current, data, val, opts)
     stage = base
+    # re-test the effects that are on (issue 20, defaults.py): mis-sized defaults are causes like added effects
+    default_causes: list[dict[str, Any]] = []
+    default_rows: list[dict[str, Any]] = []
+    if retest:
+        say(f"re-testing the effects that are on: {', '.join(retest)}")
+        stage, default_causes, default_rows = dflt.retest_defaults(
+            stage, data, val, core, {**stage.analysis_est, "fs": data.fs}, opts, retest, alpha, min_rel_gain, current,
+            lambda tw: _stage(tw, data, val, opts))
 
     pool = [e for e in (candidates if candidates is not None else twin.EFFECTS)
             if e in twin.EFFECTS and e not in twin.effects and e not in NOISE_EFFECTS
             and e not in _unpredictable(twin)]
 
-    causes: list[dict[str, Any]] = []
+    causes: list[dict[str, Any]] = list(default_causes)
     rounds: list[dict[str, Any]] = []
     for rnd in range(max(int(max_rounds), 0)):
         remaining = [e for e in pool if e not in stage.twin.effects]
@@ -716,7 +758,8 @@ def _diagnose(twin: Twin, data: Record, val: Record | None = None, max_rounds: i
         moved = any(abs(float(getattr(prior.params, c)) - float(getattr(stage.twin.params, c)))
                     > 0.02 * max(abs(float(getattr(prior.params, c))), 1e-300) for c in cur_core)
         bases = [stage.twin] + ([prior_base] if moved else [])
-        for e in remaining:
+        for i_e, e in enumerate(remaining):
+            say(f"round {rnd + 1}: trying {e} ({i_e + 1}/{len(remaining)})")
             best_tr = None
             for b in bases:
                 try:
@@ -838,7 +881,14 @@ def _diagnose(twin: Twin, data: Record, val: Record | None = None, max_rounds: i
                                     f"residual variance; {unexplained['description']}"),
                        "params": {}})
     causes.sort(key=lambda c: -float(c["confidence"]))  # strongest first (stable: round order among equals)
-    verdict = "discrepancy" if causes else "none"
+    # the residual against the noise measured from the data (issue 20, unexplained.py)
+    noise = unx.noise_level(np.concatenate([data.u, val.u]), np.concatenate([data.y, val.y]), data.fs)
+    beyond = unx.judge(val.u, val.y, stage.yhat_val, val.fs, skip, noise=noise)
+    verdict = "unexplained" if beyond["outside"] else ("discrepancy" if causes else "none")
+    # parameters that ended at a bound (after the widened refit of the baseline): reported with the bound
+    fitted_names = set(calib_info.get("fitted", {})) | {k for c in causes for k in c.get("params", {})}
+    at_bound = rg.at_bounds(stage.twin, sorted(fitted_names))
+    say(f"verdict {verdict}")
     kept_unpredictable = set(twin.effects) & _unpredictable(twin)  # noise/quantisation as configured
     out = {
         "verdict": verdict,
@@ -853,6 +903,11 @@ def _diagnose(twin: Twin, data: Record, val: Record | None = None, max_rounds: i
         "params_final": dataclasses.asdict(stage.twin.params),
         "rounds": rounds,
         "unexplained": unexplained,
+        "residual_vs_noise": beyond,
+        "split": split_info,
+        "ranges": range_notes,
+        "defaults": default_rows,
+        "at_bound": at_bound,
         "analysis": {"baseline": {"estimation": _public(base.analysis_est), "validation": _public(base.analysis_val)},
                      "extended": {"estimation": _public(stage.analysis_est), "validation": _public(stage.analysis_val)}},
         "seconds": time.perf_counter() - t_start,
