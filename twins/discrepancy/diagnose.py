@@ -729,7 +729,7 @@ def _diagnose(twin: Twin, data: Record, val: Record | None = None, max_rounds: i
     if retest:
         say(f"re-testing the effects that are on: {', '.join(retest)}")
         stage, default_causes, default_rows = dflt.retest_defaults(
-            stage, data, val, core, {**stage.analysis_est, "fs": data.fs}, opts, retest, alpha, min_rel_gain, current,
+            stage, data, val, core, {**stage.analysis_est, "fs": data.fs}, opts, retest, alpha, min_rel_gain, prior,
             lambda tw: _stage(tw, data, val, opts))
 
     pool = [e for e in (candidates if candidates is not None else twin.EFFECTS)
