@@ -17,7 +17,9 @@ number of creep elements are structural and kept):
    NRMSE with it removed against the refit).
 
 A refit whose validation gain passes the diagnosis' significance rule (F-test with p = |P_e| added
-parameters, Bonferroni over the effects re-tested, and the relative-gain floor) is a cause of kind
+parameters, Bonferroni over the effects re-tested, and the relative-gain floor) — both against the baseline
+and against the refitted twin with P_e put back at their configured values (so that a better core optimum
+found on the way is not credited to the effect: nothing is named then) — is a cause of kind
 ``mis-sized default`` with its corrected parameters and their ratio to the configured values, e.g.
 "creep: creep_per_decade 3.02× the configured 0.015, gain 41 % NRMSE"; it is ranked with the added effects
 (confidence ``(1 − p)·(0.8 + 0.2·min(1, 10·gain))``) and the diagnosis continues from the refitted twin.
@@ -59,7 +61,7 @@ def retest_defaults(stage, est: Record, val: Record, core: list[str], analysis: 
                     opts: dict[str, Any], effects: Sequence[str], alpha: float, min_rel_gain: float,
                     configured: Twin, make_stage) -> tuple[Any, list[dict[str, Any]], list[dict[str, Any]]]:
     """Greedy re-test of ``effects`` from ``stage`` (module docstring). Returns (final stage, causes, rows)."""
-    from .diagnose import _core_for, _int_fields, _numeric_fields, _run_trial, significance
+    from .diagnose import _core_for, _int_fields, _numeric_fields, _run_trial, _simulate_val, _sse, significance
 
     skip = opts["skip"]
     causes: list[dict[str, Any]] = []
@@ -94,6 +96,16 @@ def retest_defaults(stage, est: Record, val: Record, core: list[str], analysis: 
             tr.p_value = significance(stage.sse_val, tr.sse_val, n_eff, tr.n_added)
             tr.gain = max(0.0, 1.0 - tr.nrmse_val / stage.nrmse_val) if stage.nrmse_val > 0 else 0.0
             tr.significant = bool(tr.p_value < alpha / n_tests and tr.gain >= min_rel_gain)
+            if tr.significant:
+                # the gain must come from the effect's own parameters, not from a better core optimum: the refitted
+                # twin with P_e put back at their configured values must be significantly worse
+                yv0 = _simulate_val(tr.twin.with_params(**{f: getattr(configured.params, f) for f in fields}), est, val)
+                sse0 = _sse(val.y, yv0, skip)
+                p0 = significance(sse0, tr.sse_val, n_eff, tr.n_added)
+                g0 = 1.0 - math.sqrt(tr.sse_val / sse0) if sse0 > 0 and math.isfinite(sse0) else 0.0
+                if not (p0 < alpha / n_tests and g0 >= min_rel_gain):
+                    tr.significant = False
+                    tr.core_only = True
             trials.append((e, fields, tr))
         if not trials:
             break
