@@ -35,6 +35,10 @@
    residual model (FIR of u, (u²)′, (u³)′ and a trend), fitted on the estimation residual, scored on the
    validation residual with the same F-test; if significant it is described in generic terms.
 
+Issue 20 around this loop: the split must leave excitation in the validation record and the twin's ranges
+follow the records (:mod:`.realdata`); effects that are on are re-tested after the baseline (:mod:`.defaults`);
+the verdict is ``unexplained`` when the final residual stays far above the noise measured from the data.
+
 Confidence of a cause (in [0, 1]): ``(1 − p_value) · (0.5 + 0.5·√(1 − g₂/g₁)) · (0.8 + 0.2·s)`` with ``g₁`` its
 relative validation gain, ``g₂`` the best gain of a candidate outside its group and ``s`` its signature score
 (the clearer of the estimation and validation records): 1 when only this effect explains the data and its
@@ -60,9 +64,7 @@ from twins.calibration import calibrate as ls_calibrate
 from . import defaults as dflt
 from . import evidence as ev
 from . import features as ft
-from . import ranges as rg
-from . import splitting
-from . import unexplained as unx
+from . import realdata
 
 __all__ = ["diagnose", "NOISE_EFFECTS", "significance"]
 
@@ -649,14 +651,8 @@ def _diagnose(twin: Twin, data: Record, val: Record | None = None, max_rounds: i
     if not isinstance(twin, Twin):
         raise ConfigError("diagnose: twin must be a Twin instance")
     say = progress if callable(progress) else (lambda msg: None)
-    data.require_output()
-    # validation that validates (issue 20): the validation input must move (splitting.py)
-    if val is None:
-        data, val, split_info = splitting.choose_split(data, split)
-    else:
-        val.require_output()
-        split_info = splitting.check_validation(data, val)
-    val.require_output()
+    # issue 20: a validation that carries excitation, the twin's ranges from the records (realdata.py)
+    twin, data, val, split_info, range_notes = realdata.prepare(twin, data, val, split, follow_ranges)
     if data.n_inputs != 1 or data.n_outputs != 1:
         raise DataError(f"{data.source}: diagnose handles single-input single-output records")
     if abs(data.fs - val.fs) > 1e-9 * data.fs:
@@ -667,10 +663,6 @@ def _diagnose(twin: Twin, data: Record, val: Record | None = None, max_rounds: i
     if unknown:
         raise ConfigError(f"unknown effect {unknown[0]!r} for twin {twin.name}; valid: {', '.join(twin.EFFECTS)}")
     t_start = time.perf_counter()
-    # ranges from the data (issue 20): amplitude limit, creep time constants, integration sub-step (ranges.py)
-    range_notes: list[str] = []
-    if follow_ranges:
-        twin, range_notes = rg.follow_record(twin, data, val)
     core = list(calibration_params if calibration_params is not None else twin.CALIBRATION_PARAMS)
     core = _numeric_fields(twin, core)
     say(f"diagnose {twin.name}: {len(data)} + {len(val)} samples" + "".join(f"; {n}" for n in range_notes))
@@ -690,7 +682,6 @@ def _diagnose(twin: Twin, data: Record, val: Record | None = None, max_rounds: i
     retest = dflt.retestable(current, _unpredictable(twin), NOISE_EFFECTS) if retest_defaults else []
     held = dflt.owned_fields(current, retest)
     core0 = [c for c in _core_for(current, core) if c not in held]
-    at_bound: list[dict[str, Any]] = []
     if calibrate_baseline and core0:
         say("calibrating the configuration as given")
         try:
@@ -701,19 +692,10 @@ def _diagnose(twin: Twin, data: Record, val: Record | None = None, max_rounds: i
             res = ls_calibrate(current, data, core0, val=val, simulate=_simulate)
         fitted = _deterministic(res.twin)
         calib_info = {"fitted": res.fitted, "stderr": res.stderr}
-        # parameters that end at a bound: widen it once and refit before any verdict (ranges.py)
-        hits = rg.at_bounds(fitted, core0)
-        if hits:
-            wide, rows_w = rg.widened(fitted, hits)
-            if rows_w:
-                say("refitting with widened bounds: " + ", ".join(r["param"] for r in rows_w))
-                try:
-                    res_w = ls_calibrate(wide, data, core0, simulate=_simulate)
-                    if _sse(data.y, _simulate(res_w.twin, data), skip) < _sse(data.y, _simulate(fitted, data), skip):
-                        fitted = _deterministic(res_w.twin)
-                        calib_info = {"fitted": res_w.fitted, "stderr": res_w.stderr, "widened": rows_w}
-                except (ConfigError, DataError, ValueError, np.linalg.LinAlgError):
-                    pass
+        # parameters that end at a bound: the bound widened once and the fit retried (realdata.py)
+        fitted, wide_info = realdata.refit_at_bounds(fitted, core0, data, lambda tw: _sse(data.y, _simulate(tw, data), skip),
+                                                     _simulate, say)
+        calib_info = wide_info or calib_info
         # keep the calibration only if it improves on the configuration as given (an unconverged fit would
         # otherwise hand every trial that restarts from the prior a spurious gain)
         if _sse(data.y, _simulate(fitted, data), skip) <= _sse(data.y, _simulate(current, data), skip):
@@ -723,24 +705,17 @@ def _diagnose(twin: Twin, data: Record, val: Record | None = None, max_rounds: i
             calib_info["note"] = "calibration did not improve on the given configuration; the given one is used"
     base = _stage(current, data, val, opts)
     stage = base
-    # re-test the effects that are on (issue 20, defaults.py): mis-sized defaults are causes like added effects
-    default_causes: list[dict[str, Any]] = []
-    default_rows: list[dict[str, Any]] = []
-    if retest:
-        say(f"re-testing the effects that are on: {', '.join(retest)}")
-        stage, default_causes, default_rows = dflt.retest_defaults(
-            stage, data, val, core, {**stage.analysis_est, "fs": data.fs}, opts, retest, alpha, min_rel_gain, prior,
-            lambda tw: _stage(tw, data, val, opts))
+    retest_left = list(retest)  # effects that are on, re-tested in every round beside the ones to add
 
     pool = [e for e in (candidates if candidates is not None else twin.EFFECTS)
             if e in twin.EFFECTS and e not in twin.effects and e not in NOISE_EFFECTS
             and e not in _unpredictable(twin)]
 
-    causes: list[dict[str, Any]] = list(default_causes)
+    causes: list[dict[str, Any]] = []
     rounds: list[dict[str, Any]] = []
     for rnd in range(max(int(max_rounds), 0)):
         remaining = [e for e in pool if e not in stage.twin.effects]
-        if not remaining:
+        if not remaining and not retest_left:
             break
         a_val = stage.analysis_val
         a_fit = dict(a_val)
@@ -787,6 +762,9 @@ def _diagnose(twin: Twin, data: Record, val: Record | None = None, max_rounds: i
             trB.seconds += tr.seconds
             if trB.sse_est <= tr.sse_est:
                 trials[i] = trB
+        if retest_left:  # issue 20: the effects that are on, their own parameters refitted (defaults.py)
+            say(f"round {rnd + 1}: re-testing {', '.join(retest_left)}")
+            trials += dflt.retest_trials(bases, retest_left, data, val, core, a_fit_est, opts)
         for tr in trials:
             n_eff = min(n_eff0, ft.effective_samples(val.y[skip:] - tr.yhat_val[skip:]))
             tr.p_value = significance(stage.sse_val, tr.sse_val, n_eff, tr.n_added)
@@ -796,6 +774,8 @@ def _diagnose(twin: Twin, data: Record, val: Record | None = None, max_rounds: i
         n_c = len(trials)
         for tr in trials:
             tr.significant = bool(tr.p_value < alpha / n_c and tr.gain >= min_rel_gain)
+            if tr.significant and getattr(tr, "retest", False):
+                tr.significant = dflt.attributable(tr, data, val, prior, n_eff0, alpha / n_c, min_rel_gain, skip)
         sig_ev = {tr.effect: ev.signature_evidence(twin.EFFECTS[tr.effect], a_val, twin, also=stage.analysis_est)
                   for tr in trials}
         trials.sort(key=lambda t: (t.significant, t.gain + 0.01 * sig_ev[t.effect]["score"] * t.gain), reverse=True)
@@ -830,6 +810,7 @@ def _diagnose(twin: Twin, data: Record, val: Record | None = None, max_rounds: i
                 conf = (1 - tr.p_value) * 0.5 * ((tr.gain / g1) if g1 > 0 else 0.0) * (0.8 + 0.2 * s["score"])
             conf = float(min(1.0, max(0.0, conf))) if tr.significant else float(min(0.2, max(0.0, conf)) * 0.5)
             rows.append({"effect": tr.effect, "family": s["family"], "significant": tr.significant,
+                         "retest": bool(getattr(tr, "retest", False)),
                          "confidence": conf, "signature_score": s["score"], "signature": s["text"],
                          "nrmse_val": tr.nrmse_val, "r2_val": tr.r2_val, "gain": tr.gain, "p_value": tr.p_value,
                          "params": tr.effect_params, "stderr": tr.stderr, "seconds": tr.seconds})
@@ -847,6 +828,9 @@ def _diagnose(twin: Twin, data: Record, val: Record | None = None, max_rounds: i
                  "params": dict(top.effect_params), "stderr": dict(top.stderr), "family": row["family"],
                  "round": rnd + 1, "nrmse_val_before": stage.nrmse_val, "nrmse_val_after": top.nrmse_val,
                  "p_value": top.p_value}
+        if getattr(top, "retest", False):
+            cause.update(dflt.cause_fields(top, stage.nrmse_val, prior))
+            retest_left.remove(top.effect)
         if len(group) > 1:
             cause["group"] = group
             cause["separate_by"] = ev.separating_experiment(fams)
@@ -881,13 +865,8 @@ def _diagnose(twin: Twin, data: Record, val: Record | None = None, max_rounds: i
                                     f"residual variance; {unexplained['description']}"),
                        "params": {}})
     causes.sort(key=lambda c: -float(c["confidence"]))  # strongest first (stable: round order among equals)
-    # the residual against the noise measured from the data (issue 20, unexplained.py)
-    noise = unx.noise_level(np.concatenate([data.u, val.u]), np.concatenate([data.y, val.y]), data.fs)
-    beyond = unx.judge(val.u, val.y, stage.yhat_val, val.fs, skip, noise=noise)
-    verdict = "unexplained" if beyond["outside"] else ("discrepancy" if causes else "none")
-    # parameters that ended at a bound (after the widened refit of the baseline): reported with the bound
-    fitted_names = set(calib_info.get("fitted", {})) | {k for c in causes for k in c.get("params", {})}
-    at_bound = rg.at_bounds(stage.twin, sorted(fitted_names))
+    # issue 20: the residual against the noise measured from the data; parameters at a bound (realdata.py)
+    verdict, beyond, at_bound = realdata.final_verdict(data, val, stage.yhat_val, causes, stage.twin, calib_info, skip)
     say(f"verdict {verdict}")
     kept_unpredictable = set(twin.effects) & _unpredictable(twin)  # noise/quantisation as configured
     out = {
@@ -906,7 +885,7 @@ def _diagnose(twin: Twin, data: Record, val: Record | None = None, max_rounds: i
         "residual_vs_noise": beyond,
         "split": split_info,
         "ranges": range_notes,
-        "defaults": default_rows,
+        "defaults": dflt.contributions(stage.twin, retest, data, val, skip),
         "at_bound": at_bound,
         "analysis": {"baseline": {"estimation": _public(base.analysis_est), "validation": _public(base.analysis_val)},
                      "extended": {"estimation": _public(stage.analysis_est), "validation": _public(stage.analysis_val)}},
