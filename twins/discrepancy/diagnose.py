@@ -706,6 +706,9 @@ def _diagnose(twin: Twin, data: Record, val: Record | None = None, max_rounds: i
     base = _stage(current, data, val, opts)
     stage = base
     retest_left = list(retest)  # effects that are on, re-tested in every round beside the ones to add
+    # trials refit the core without the parameters of the effects that are on: a trial that refitted the creep
+    # rate would credit any added effect with the re-test's gain (the re-tests fit those parameters themselves)
+    core_r = [c for c in core if c not in held]
 
     pool = [e for e in (candidates if candidates is not None else twin.EFFECTS)
             if e in twin.EFFECTS and e not in twin.effects and e not in NOISE_EFFECTS
@@ -738,7 +741,7 @@ def _diagnose(twin: Twin, data: Record, val: Record | None = None, max_rounds: i
             best_tr = None
             for b in bases:
                 try:
-                    tr = _run_trial(b, e, data, val, core, a_fit_est, opts, refit_core=False)
+                    tr = _run_trial(b, e, data, val, core_r, a_fit_est, opts, refit_core=False)
                 except (ConfigError, DataError, ValueError, np.linalg.LinAlgError) as exc:  # cannot run here
                     rounds.append({"round": rnd + 1, "effect": e, "error": str(exc)})
                     continue
@@ -755,7 +758,7 @@ def _diagnose(twin: Twin, data: Record, val: Record | None = None, max_rounds: i
             if i > 0 and (tr.sse_val > 1.5 * trials[0].sse_val or tr.sse_val >= stage.sse_val * (1 - 1e-9)):
                 continue
             try:
-                trB = _run_trial(tr.base, tr.effect, data, val, core, a_fit_est, opts, refit_core=True,
+                trB = _run_trial(tr.base, tr.effect, data, val, core_r, a_fit_est, opts, refit_core=True,
                                  start=tr.effect_params)
             except (ConfigError, DataError, ValueError, np.linalg.LinAlgError):
                 continue
@@ -764,7 +767,7 @@ def _diagnose(twin: Twin, data: Record, val: Record | None = None, max_rounds: i
                 trials[i] = trB
         if retest_left:  # issue 20: the effects that are on, their own parameters refitted (defaults.py)
             say(f"round {rnd + 1}: re-testing {', '.join(retest_left)}")
-            trials += dflt.retest_trials(bases, retest_left, data, val, core, a_fit_est, opts)
+            trials += dflt.retest_trials(bases, retest_left, data, val, core_r, a_fit_est, opts)
         for tr in trials:
             n_eff = min(n_eff0, ft.effective_samples(val.y[skip:] - tr.yhat_val[skip:]))
             tr.p_value = significance(stage.sse_val, tr.sse_val, n_eff, tr.n_added)
