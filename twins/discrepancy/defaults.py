@@ -63,7 +63,7 @@ def retest_trials(bases: Sequence[Twin], effects: Sequence[str], est: Record, va
                   analysis: dict[str, Any], opts: dict[str, Any]) -> list[Any]:
     """One trial per effect of ``effects`` (P_e and the core refitted; the best of ``bases`` by estimation SSE),
     marked ``retest = True``."""
-    from .diagnose import _run_trial
+    from .diagnose import _choice_fields, _run_trial
 
     out = []
     for e in effects:
@@ -71,8 +71,11 @@ def retest_trials(bases: Sequence[Twin], effects: Sequence[str], est: Record, va
             continue
         best = None
         for b in bases:
+            # a list-valued parameter (a model variant) stays as configured: the re-test sizes the effect, it does
+            # not swap its structure (and enumerating the variants would cost up to 8 fits per round)
+            cats = {c: getattr(b.params, c) for c in _choice_fields(b, b.EFFECTS[e].params.values())}
             try:
-                t = _run_trial(b, e, est, val, core, analysis, opts, refit_core=True)
+                t = _run_trial(b, e, est, val, core, analysis, opts, refit_core=True, choice=cats or None)
             except (ConfigError, DataError, ValueError, np.linalg.LinAlgError):
                 continue
             if best is None or t.sse_est < best.sse_est:
