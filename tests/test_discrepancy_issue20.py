@@ -148,13 +148,13 @@ def _rate(results):
 @pytest.mark.parametrize("effect", sorted(C.MISSIZED))
 def test_missized_defaults_over_seeds(effect):
     ok = []
-    for seed in range(5):
+    for seed in range(3):
         start, est, val, true, field = C.missized_case(effect, seed)
         out = diagnose(start, est, val, max_rounds=1)
         top = out["causes"][0] if out["causes"] else {}
         ok.append(top.get("effect") == effect and abs(top["params"][field] - true) <= 0.15 * true)
     print(f"mis-sized {effect}: {_rate(ok)}")
-    assert sum(ok) >= 5
+    assert sum(ok) == 3
 
 
 @pytest.mark.slow
