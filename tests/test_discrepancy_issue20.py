@@ -124,7 +124,7 @@ def test_dead_zone_outside_the_catalog_is_unexplained():
     assert "outside the model class" in out["residual_vs_noise"]["text"]
 
 
-@pytest.mark.slow  # ≈ 40 s CPU: 8200 samples with 400 V jumps need fine sub-steps
+@pytest.mark.slow  # ≈ 27 s CPU: 8200 samples whose 400 V jumps need 118 sub-steps per sample
 def test_creep_stack_record_loads_and_is_diagnosed_from_the_cli(tmp_path, capsys):
     from benchmarks.cli import main
 
