@@ -134,7 +134,8 @@ class Twin(ABC):
     # ------------------------------------------------------------------ parameters
     def validate_params(self) -> None:
         """Refuse out-of-range values with a message that names the parameter and its range."""
-        for name, info in param_info(self.Params).items():
+        # the instance's own class: a copy with widened ranges (twins.discrepancy.ranges) validates against those
+        for name, info in param_info(type(self.params)).items():
             value = getattr(self.params, name)
             lo, hi = info.range
             if isinstance(value, (int, float)) and not isinstance(value, bool):

@@ -39,7 +39,7 @@ class CantileverParams:
                              source=f"{_NOTES} A.3")
     pi_operators: int = pfield(10, "1", 1, 50, "number n of play operators (thresholds r_i = i·r_max/n)",
                                source=f"{_NOTES} A.4 (n = 8–12)")
-    pi_r_max_v: float = pfield(100.0, "V", 1.0, 1000.0, "largest play threshold r_n",
+    pi_r_max_v: float = pfield(100.0, "V", 1.0, 1e4, "largest play threshold r_n",
                                source=f"{_NOTES} A.4 (r_i = 10·i V for ±100 V)")
     pi_p0_fraction: float = pfield(0.55, "1", 0.05, 1.0, "share p_0/d of the linear (r_0 = 0) operator",
                                    source=f"{_NOTES} A.4 check set p_0 = 0.2, p_i = 0.05e^(−0.25i) µm/V (p_0 share 0.55)")
@@ -47,8 +47,9 @@ class CantileverParams:
                              source=f"{_NOTES} A.4 check set")
 
     # ---------------------------------------------------------------- amplifier (core clip)
-    amp_limit_v: float = pfield(100.0, "V", 1.0, 1000.0, "hard output limit of the power amplifier (±)",
-                                source="dissertation §3.1 (−100…+100 V); 150 V for the TU/e data")
+    amp_limit_v: float = pfield(100.0, "V", 1.0, 1e4, "hard output limit of the power amplifier (±)",
+                                source="dissertation §3.1 (−100…+100 V); 150 V for the TU/e data; PZT stacks "
+                                "are driven to 1–1.5 kV (range widened for them, issue 20)")
 
     # ---------------------------------------------------------------- modal dynamics D(s) (core)
     f1_hz: float = pfield(700.0, "Hz", 50.0, 3000.0, "first bending-mode frequency",

@@ -35,6 +35,10 @@
    residual model (FIR of u, (u²)′, (u³)′ and a trend), fitted on the estimation residual, scored on the
    validation residual with the same F-test; if significant it is described in generic terms.
 
+Issue 20 around this loop: the split must leave excitation in the validation record and the twin's ranges
+follow the records (:mod:`.realdata`); effects that are on are re-tested after the baseline (:mod:`.defaults`);
+the verdict is ``unexplained`` when the final residual stays far above the noise measured from the data.
+
 Confidence of a cause (in [0, 1]): ``(1 − p_value) · (0.5 + 0.5·√(1 − g₂/g₁)) · (0.8 + 0.2·s)`` with ``g₁`` its
 relative validation gain, ``g₂`` the best gain of a candidate outside its group and ``s`` its signature score
 (the clearer of the estimation and validation records): 1 when only this effect explains the data and its
@@ -53,13 +57,15 @@ from scipy import stats
 
 from sysid.errors import ConfigError, DataError
 from sysid.metrics import nrmse, r2
-from sysid.progress import progress
+from sysid.progress import progress as progress_bar
 from sysid.record import Record
 from twins.base import Twin, param_info
 from twins.calibration import calibrate as ls_calibrate
 
+from . import defaults as dflt
 from . import evidence as ev
 from . import features as ft
+from . import realdata
 
 __all__ = ["diagnose", "NOISE_EFFECTS", "significance"]
 
@@ -640,14 +646,14 @@ def _diagnose(twin: Twin, data: Record, val: Record | None = None, max_rounds: i
              candidates: Sequence[str] | None = None, calibrate_baseline: bool = True,
              calibration_params: Sequence[str] | None = None, alpha: float = 0.01, min_rel_gain: float = 0.005,
              trial_nfev: int = 25, scan_nfev: int = 15, scan_points: int = 13, refine: int = 3, max_lag: int = 20, max_echo_s: float | None = None,
-             skip: int = 0, split: float = 0.6, generic_lags: int = 10, keep_stages: bool = False) -> dict[str, Any]:
+             skip: int = 0, split: float = 0.6, generic_lags: int = 10, keep_stages: bool = False,
+             retest_defaults: bool = True, follow_ranges: bool = True, progress: Any = None) -> dict[str, Any]:
     """The body of :func:`diagnose` (same arguments)."""
     if not isinstance(twin, Twin):
         raise ConfigError("diagnose: twin must be a Twin instance")
-    data.require_output()
-    if val is None:
-        data, val = data.split(fraction=split)
-    val.require_output()
+    say = progress if callable(progress) else (lambda msg: None)
+    # issue 20: a validation that carries excitation, the twin's ranges from the records (realdata.py)
+    twin, data, val, split_info, range_notes = realdata.prepare(twin, data, val, split, follow_ranges)
     if data.n_inputs != 1 or data.n_outputs != 1:
         raise DataError(f"{data.source}: diagnose handles single-input single-output records")
     if abs(data.fs - val.fs) > 1e-9 * data.fs:
@@ -660,6 +666,7 @@ def _diagnose(twin: Twin, data: Record, val: Record | None = None, max_rounds: i
     t_start = time.perf_counter()
     core = list(calibration_params if calibration_params is not None else twin.CALIBRATION_PARAMS)
     core = _numeric_fields(twin, core)
+    say(f"diagnose {twin.name}: {len(data)} + {len(val)} samples" + "".join(f"; {n}" for n in range_notes))
 
     # 0. saturation rails of the measured records (censored samples), judged with the configuration as given
     current = _deterministic(twin)
@@ -671,8 +678,13 @@ def _diagnose(twin: Twin, data: Record, val: Record | None = None, max_rounds: i
     # 1. calibrate the current configuration (deterministic prediction)
     prior = current
     calib_info: dict[str, Any] = {}
-    core0 = _core_for(current, core)
+    # effects that are on are re-tested after the baseline (defaults.py): their own parameters stay at the
+    # configured values in the baseline fit, so that a mis-sized default shows as the re-test's gain
+    retest = dflt.retestable(current, _unpredictable(twin), NOISE_EFFECTS) if retest_defaults else []
+    held = dflt.owned_fields(current, retest)
+    core0 = [c for c in _core_for(current, core) if c not in held]
     if calibrate_baseline and core0:
+        say("calibrating the configuration as given")
         try:
             if railed:  # the twin's own calibration does not know the rails: output error on the clipped prediction
                 raise TypeError
@@ -681,6 +693,10 @@ def _diagnose(twin: Twin, data: Record, val: Record | None = None, max_rounds: i
             res = ls_calibrate(current, data, core0, val=val, simulate=_simulate)
         fitted = _deterministic(res.twin)
         calib_info = {"fitted": res.fitted, "stderr": res.stderr}
+        # parameters that end at a bound: the bound widened once and the fit retried (realdata.py)
+        fitted, wide_info = realdata.refit_at_bounds(fitted, core0, data, lambda tw: _sse(data.y, _simulate(tw, data), skip),
+                                                     _simulate, say)
+        calib_info = wide_info or calib_info
         # keep the calibration only if it improves on the configuration as given (an unconverged fit would
         # otherwise hand every trial that restarts from the prior a spurious gain)
         if _sse(data.y, _simulate(fitted, data), skip) <= _sse(data.y, _simulate(current, data), skip):
@@ -690,6 +706,10 @@ def _diagnose(twin: Twin, data: Record, val: Record | None = None, max_rounds: i
             calib_info["note"] = "calibration did not improve on the given configuration; the given one is used"
     base = _stage(current, data, val, opts)
     stage = base
+    retest_left = list(retest)  # effects that are on, re-tested in every round beside the ones to add
+    # trials refit the core without the parameters of the effects that are on: a trial that refitted the creep
+    # rate would credit any added effect with the re-test's gain (the re-tests fit those parameters themselves)
+    core_r = [c for c in core if c not in held]
 
     pool = [e for e in (candidates if candidates is not None else twin.EFFECTS)
             if e in twin.EFFECTS and e not in twin.effects and e not in NOISE_EFFECTS
@@ -699,7 +719,7 @@ def _diagnose(twin: Twin, data: Record, val: Record | None = None, max_rounds: i
     rounds: list[dict[str, Any]] = []
     for rnd in range(max(int(max_rounds), 0)):
         remaining = [e for e in pool if e not in stage.twin.effects]
-        if not remaining:
+        if not remaining and not retest_left:
             break
         a_val = stage.analysis_val
         a_fit = dict(a_val)
@@ -717,11 +737,12 @@ def _diagnose(twin: Twin, data: Record, val: Record | None = None, max_rounds: i
         moved = any(abs(float(getattr(prior.params, c)) - float(getattr(stage.twin.params, c)))
                     > 0.02 * max(abs(float(getattr(prior.params, c))), 1e-300) for c in cur_core)
         bases = [stage.twin] + ([prior_base] if moved else [])
-        for e in progress(remaining, desc=f"diagnose round {rnd + 1}", unit="effect"):
+        for i_e, e in enumerate(progress_bar(remaining, desc=f"diagnose round {rnd + 1}", unit="effect")):
+            say(f"round {rnd + 1}: trying {e} ({i_e + 1}/{len(remaining)})")
             best_tr = None
             for b in bases:
                 try:
-                    tr = _run_trial(b, e, data, val, core, a_fit_est, opts, refit_core=False)
+                    tr = _run_trial(b, e, data, val, core_r, a_fit_est, opts, refit_core=False)
                 except (ConfigError, DataError, ValueError, np.linalg.LinAlgError) as exc:  # cannot run here
                     rounds.append({"round": rnd + 1, "effect": e, "error": str(exc)})
                     continue
@@ -738,13 +759,16 @@ def _diagnose(twin: Twin, data: Record, val: Record | None = None, max_rounds: i
             if i > 0 and (tr.sse_val > 1.5 * trials[0].sse_val or tr.sse_val >= stage.sse_val * (1 - 1e-9)):
                 continue
             try:
-                trB = _run_trial(tr.base, tr.effect, data, val, core, a_fit_est, opts, refit_core=True,
+                trB = _run_trial(tr.base, tr.effect, data, val, core_r, a_fit_est, opts, refit_core=True,
                                  start=tr.effect_params)
             except (ConfigError, DataError, ValueError, np.linalg.LinAlgError):
                 continue
             trB.seconds += tr.seconds
             if trB.sse_est <= tr.sse_est:
                 trials[i] = trB
+        if retest_left:  # issue 20: the effects that are on, their own parameters refitted (defaults.py)
+            say(f"round {rnd + 1}: re-testing {', '.join(retest_left)}")
+            trials += dflt.retest_trials(bases, retest_left, data, val, core_r, a_fit_est, opts)
         for tr in trials:
             n_eff = min(n_eff0, ft.effective_samples(val.y[skip:] - tr.yhat_val[skip:]))
             tr.p_value = significance(stage.sse_val, tr.sse_val, n_eff, tr.n_added)
@@ -754,6 +778,8 @@ def _diagnose(twin: Twin, data: Record, val: Record | None = None, max_rounds: i
         n_c = len(trials)
         for tr in trials:
             tr.significant = bool(tr.p_value < alpha / n_c and tr.gain >= min_rel_gain)
+            if tr.significant and getattr(tr, "retest", False):
+                tr.significant = dflt.attributable(tr, data, val, prior, n_eff0, alpha / n_c, min_rel_gain, skip)
         sig_ev = {tr.effect: ev.signature_evidence(twin.EFFECTS[tr.effect], a_val, twin, also=stage.analysis_est)
                   for tr in trials}
         trials.sort(key=lambda t: (t.significant, t.gain + 0.01 * sig_ev[t.effect]["score"] * t.gain), reverse=True)
@@ -788,6 +814,7 @@ def _diagnose(twin: Twin, data: Record, val: Record | None = None, max_rounds: i
                 conf = (1 - tr.p_value) * 0.5 * ((tr.gain / g1) if g1 > 0 else 0.0) * (0.8 + 0.2 * s["score"])
             conf = float(min(1.0, max(0.0, conf))) if tr.significant else float(min(0.2, max(0.0, conf)) * 0.5)
             rows.append({"effect": tr.effect, "family": s["family"], "significant": tr.significant,
+                         "retest": bool(getattr(tr, "retest", False)),
                          "confidence": conf, "signature_score": s["score"], "signature": s["text"],
                          "nrmse_val": tr.nrmse_val, "r2_val": tr.r2_val, "gain": tr.gain, "p_value": tr.p_value,
                          "params": tr.effect_params, "stderr": tr.stderr, "seconds": tr.seconds})
@@ -805,6 +832,9 @@ def _diagnose(twin: Twin, data: Record, val: Record | None = None, max_rounds: i
                  "params": dict(top.effect_params), "stderr": dict(top.stderr), "family": row["family"],
                  "round": rnd + 1, "nrmse_val_before": stage.nrmse_val, "nrmse_val_after": top.nrmse_val,
                  "p_value": top.p_value}
+        if getattr(top, "retest", False):
+            cause.update(dflt.cause_fields(top, stage.nrmse_val, prior))
+            retest_left.remove(top.effect)
         if len(group) > 1:
             cause["group"] = group
             cause["separate_by"] = ev.separating_experiment(fams)
@@ -839,7 +869,9 @@ def _diagnose(twin: Twin, data: Record, val: Record | None = None, max_rounds: i
                                     f"residual variance; {unexplained['description']}"),
                        "params": {}})
     causes.sort(key=lambda c: -float(c["confidence"]))  # strongest first (stable: round order among equals)
-    verdict = "discrepancy" if causes else "none"
+    # issue 20: the residual against the noise measured from the data; parameters at a bound (realdata.py)
+    verdict, beyond, at_bound = realdata.final_verdict(data, val, stage.yhat_val, causes, stage.twin, calib_info, skip)
+    say(f"verdict {verdict}")
     kept_unpredictable = set(twin.effects) & _unpredictable(twin)  # noise/quantisation as configured
     out = {
         "verdict": verdict,
@@ -854,6 +886,11 @@ def _diagnose(twin: Twin, data: Record, val: Record | None = None, max_rounds: i
         "params_final": dataclasses.asdict(stage.twin.params),
         "rounds": rounds,
         "unexplained": unexplained,
+        "residual_vs_noise": beyond,
+        "split": split_info,
+        "ranges": range_notes,
+        "defaults": dflt.contributions(stage.twin, retest, data, val, skip),
+        "at_bound": at_bound,
         "analysis": {"baseline": {"estimation": _public(base.analysis_est), "validation": _public(base.analysis_val)},
                      "extended": {"estimation": _public(stage.analysis_est), "validation": _public(stage.analysis_val)}},
         "seconds": time.perf_counter() - t_start,

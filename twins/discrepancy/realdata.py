@@ -1,0 +1,70 @@
+"""The steps of issue 20 that :func:`twins.discrepancy.diagnose` calls around its loop, kept here so that the
+loop stays readable: the split and ranges before anything is fitted (:mod:`.splitting`, :mod:`.ranges`), the
+widened refit of a baseline that ends at a bound, and the verdict against the noise measured from the data
+(:mod:`.unexplained`). The default-effect re-test is :mod:`.defaults`."""
+
+from __future__ import annotations
+
+from typing import Any, Callable
+
+import numpy as np
+
+from sysid.errors import ConfigError, DataError
+from sysid.record import Record
+from twins.base import Twin
+from twins.calibration import calibrate as ls_calibrate
+
+from . import ranges as rg
+from . import splitting
+from . import unexplained as unx
+
+__all__ = ["prepare", "refit_at_bounds", "final_verdict"]
+
+
+def prepare(twin: Twin, data: Record, val: Record | None, split: float, follow_ranges: bool
+            ) -> tuple[Twin, Record, Record, dict[str, Any], list[str]]:
+    """Split (validation with excitation, or a ``val`` that has it) and the twin's ranges from the records."""
+    data.require_output()
+    if val is None:
+        data, val, split_info = splitting.choose_split(data, split)
+    else:
+        val.require_output()
+        split_info = splitting.check_validation(data, val)
+    notes: list[str] = []
+    if follow_ranges and isinstance(twin, Twin) and data.u.ndim == 1 and val.u.ndim == 1:
+        twin, notes = rg.follow_record(twin, data, val)
+    return twin, data, val, split_info, notes
+
+
+def refit_at_bounds(fitted: Twin, names: list[str], data: Record, sse: Callable[[Twin], float],
+                    simulate: Callable, say: Callable[[str], None]) -> tuple[Twin, dict[str, Any] | None]:
+    """When a fitted parameter of ``names`` ends within 1 % of its bound, refit once with the bound widened
+    (:func:`.ranges.widened`); returns the better twin and, when the refit was kept, its calibration info."""
+    hits = rg.at_bounds(fitted, names)
+    if not hits:
+        return fitted, None
+    wide, rows = rg.widened(fitted, hits)
+    if not rows:
+        return fitted, None
+    say("refitting with widened bounds: " + ", ".join(r["param"] for r in rows))
+    try:
+        res = ls_calibrate(wide, data, names, simulate=simulate)
+    except (ConfigError, DataError, ValueError, np.linalg.LinAlgError):
+        return fitted, None
+    if sse(res.twin) < sse(fitted):
+        return res.twin, {"fitted": res.fitted, "stderr": res.stderr, "widened": rows}
+    return fitted, None
+
+
+def final_verdict(data: Record, val: Record, yhat_val: np.ndarray, causes: list[dict[str, Any]], twin: Twin,
+                  calib_info: dict[str, Any], skip: int) -> tuple[str, dict[str, Any], list[dict[str, Any]]]:
+    """(verdict, residual against noise, parameters at a bound): ``unexplained`` when the validation residual
+    after the extension is far above the noise measured from the data, else ``discrepancy`` with causes or
+    ``none``."""
+    noise = unx.noise_level(np.concatenate([data.u, val.u]), np.concatenate([data.y, val.y]), data.fs)
+    beyond = unx.judge(val.u, val.y, yhat_val, val.fs, skip, noise=noise)
+    verdict = "unexplained" if beyond["outside"] else ("discrepancy" if causes else "none")
+    names = set(calib_info.get("fitted", {})) | {k for c in causes for k in c.get("params", {})}
+    at_bound = rg.at_bounds(twin, sorted(names)) + [
+        {**r, "value": float(getattr(twin.params, r["param"]))} for r in calib_info.get("widened", [])]
+    return verdict, beyond, at_bound

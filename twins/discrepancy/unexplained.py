@@ -1,0 +1,134 @@
+"""Unexplained residual (issue 20, item 4): the data lie outside what the twin can represent.
+
+After the best extension the validation residual e is compared with the measurement-noise level σ², measured
+from the data themselves (never from the twin's noise parameter):
+
+- **hold segments**: stretches where u is constant (|Δu| ≤ 10⁻⁹·span) for ≥ 40 samples; the second half of
+  each hold (after the settling of the modes and the sensor) is detrended linearly (slow creep/drift) and its
+  variance taken; the median over the holds;
+- **high-frequency floor**: the median periodogram level of y in the top 10 % of the band (f > 0.9·fs/2),
+  times the band (white noise has the flat one-sided density 2σ²/fs);
+- **second differences**: σ² ≈ (1.4826·MAD(Δ²y))²/6 (Δ² of white noise has variance 6σ²; the median ignores
+  the few samples where a step or an edge dominates).
+
+Each estimate can only be raised by signal content leaking into it, so the smallest is used.
+
+The excess ratio R = mean(e²)/σ² (validation, after the extension). When R > :data:`EXCESS_LIMIT` the verdict is
+``unexplained``: "outside the model class: X % of residual power unexplained" with X = 100·(1 − σ²/mean(e²)),
+and its signature: where the residual's power lies in frequency (share below f_low = fs/200, between, and
+above f_high = fs/10; the peak of its Welch spectrum) and its correlation with u, |u|, sign(u̇) and the slow
+trend (which tells a dead zone, a backlash, a resonance and a drift apart in words). The limit 9 (residual
+RMS 3× the noise) leaves a wide margin on both sides as measured (docs/diagnosis.md): noise-only data give
+0.10–0.57, correctly extended mis-sized cases 0.006–0.93, the out-of-catalog cases 2.8·10³–4.9·10⁵.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+from scipy import signal as sps
+
+__all__ = ["EXCESS_LIMIT", "noise_level", "judge"]
+
+#: residual power / noise power above which the residual is "far above the noise"
+EXCESS_LIMIT = 9.0
+
+
+def _holds(u: np.ndarray, min_len: int = 40) -> list[tuple[int, int]]:
+    span = float(np.ptp(u)) or 1.0
+    still = np.abs(np.diff(u)) <= 1e-9 * span
+    out, start = [], None
+    for i, s in enumerate(np.append(still, False)):
+        if s and start is None:
+            start = i
+        elif not s and start is not None:
+            if i + 1 - start >= min_len:
+                out.append((start, i + 1))
+            start = None
+    return out
+
+
+def noise_level(u: np.ndarray, y: np.ndarray, fs: float) -> dict[str, Any]:
+    """Noise variance σ² of ``y`` estimated from the data (module docstring); returns the estimates and the
+    one used."""
+    u = np.asarray(u, float).ravel()
+    y = np.asarray(y, float).ravel()
+    est: dict[str, float] = {}
+    hv = []
+    for a, b in _holds(u):
+        seg = y[a + (b - a) // 2: b]
+        if seg.size >= 20:
+            t = np.arange(seg.size)
+            c = np.polyfit(t, seg, 1)
+            hv.append(float(np.var(seg - np.polyval(c, t))))
+    if hv:
+        est["holds"] = float(np.median(hv))
+    if y.size >= 256:
+        f, p = sps.periodogram(y - np.mean(y), fs=fs, detrend="linear")
+        band = f > 0.9 * fs / 2
+        if np.count_nonzero(band) >= 8:
+            est["hf_floor"] = float(np.median(p[band]) * fs / 2)
+    if y.size >= 16:
+        d2 = np.diff(y, 2)
+        mad = float(np.median(np.abs(d2 - np.median(d2))))
+        est["second_diff"] = (1.4826 * mad) ** 2 / 6.0
+    pos = {k: v for k, v in est.items() if v > 0 and math.isfinite(v)}
+    if pos:
+        src = min(pos, key=pos.get)
+        return {"sigma2": pos[src], "source": src, "estimates": est}
+    # exactly repeatable (noise-free, e.g. quantised and constant) data: a tiny floor from the value spacing
+    return {"sigma2": 0.0, "source": "none", "estimates": est}
+
+
+def judge(u: np.ndarray, y: np.ndarray, yhat: np.ndarray, fs: float, skip: int = 0,
+          noise: dict[str, Any] | None = None) -> dict[str, Any]:
+    """Compare the residual y − ŷ with the noise level; ``outside`` True when it is far above it."""
+    u = np.asarray(u, float).ravel()[skip:]
+    y = np.asarray(y, float).ravel()[skip:]
+    e = y - np.asarray(yhat, float).ravel()[skip:]
+    nl = noise or noise_level(u, y, fs)
+    s2 = float(nl["sigma2"])
+    p_e = float(np.mean(e * e))
+    ratio = p_e / s2 if s2 > 0 else (float("inf") if p_e > 0 else 1.0)
+    frac = max(0.0, 1.0 - s2 / p_e) if p_e > 0 else 0.0
+    out: dict[str, Any] = {"noise_var": s2, "noise_source": nl["source"], "noise_estimates": nl["estimates"],
+                           "residual_var": p_e, "excess_ratio": ratio, "unexplained_fraction": frac,
+                           "limit": EXCESS_LIMIT, "outside": bool(ratio > EXCESS_LIMIT)}
+    sig = signature(u, e, fs)
+    out["signature"] = sig
+    out["text"] = (f"outside the model class: {100 * frac:.0f} % of residual power unexplained (residual RMS "
+                   f"{math.sqrt(p_e):.3g}, noise RMS {math.sqrt(s2):.3g} from {nl['source'].replace('_', ' ')}; "
+                   f"{ratio:.3g}× the noise power); its signature: {sig['text']}")
+    return out
+
+
+def signature(u: np.ndarray, e: np.ndarray, fs: float) -> dict[str, Any]:
+    """Residual spectrum (band shares, peak) and correlations with u, |u|, sign(u̇) and a linear trend."""
+    n = e.size
+    nper = int(min(n, max(64, 1 << int(math.log2(max(n // 8, 2))))))
+    f, p = sps.welch(e - np.mean(e), fs=fs, nperseg=nper)
+    tot = float(np.sum(p)) or 1.0
+    f_lo, f_hi = fs / 200.0, fs / 10.0
+    low = float(np.sum(p[f <= f_lo]) / tot)
+    high = float(np.sum(p[f >= f_hi]) / tot)
+    peak = float(f[int(np.argmax(p[1:])) + 1]) if p.size > 1 else 0.0
+
+    def corr(a, b):
+        a = a - np.mean(a)
+        b = b - np.mean(b)
+        d = math.sqrt(float(a @ a) * float(b @ b))
+        return float(a @ b / d) if d > 0 else 0.0
+
+    du = np.gradient(u)
+    cu = {"u": corr(e, u), "|u|": corr(e, np.abs(u)), "sign(du/dt)": corr(e, np.sign(du)),
+          "trend": corr(e, np.arange(n, dtype=float))}
+    mean_share = float(np.mean(e) ** 2 / max(np.mean(e * e), 1e-300))
+    strongest = max(cu, key=lambda k: abs(cu[k]))
+    text = (f"{100 * low:.0f} % of its power below {f_lo:.3g} Hz, {100 * high:.0f} % above {f_hi:.3g} Hz, spectral "
+            f"peak at {peak:.4g} Hz; correlation with u {cu['u']:+.2f}, |u| {cu['|u|']:+.2f}, "
+            f"sign(du/dt) {cu['sign(du/dt)']:+.2f}, time {cu['trend']:+.2f} (strongest: {strongest}); "
+            f"mean {100 * mean_share:.0f} % of its power")
+    return {"band_low": low, "band_high": high, "peak_hz": peak, "corr": cu, "mean_share": mean_share,
+            "text": text}
