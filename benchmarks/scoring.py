@@ -25,7 +25,7 @@ import time
 import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable, Iterable
+from typing import Any, Callable, Iterable, Sequence
 
 import numpy as np
 
@@ -225,10 +225,12 @@ def is_seeded(cls: Any) -> bool:
         return False
 
 
-def seeds_for(cls: Any, params: dict[str, Any], quick: bool) -> tuple[int | None, ...]:
-    """Training seeds scored for one pair: :data:`QUICK_SEEDS` for a seeded identifier in quick mode unless the
-    settings fix a seed; otherwise one run with the settings as given (``None``)."""
-    return QUICK_SEEDS if quick and "seed" not in params and is_seeded(cls) else (None,)
+def seeds_for(cls: Any, params: dict[str, Any], quick: bool, seeds: Sequence[int] | None = None) -> tuple[int | None, ...]:
+    """Training seeds scored for one pair: ``seeds`` (default :data:`QUICK_SEEDS`) for a seeded identifier in quick
+    mode unless the settings fix a seed; otherwise one run with the settings as given (``None``)."""
+    if quick and "seed" not in params and is_seeded(cls):
+        return tuple(int(x) for x in (QUICK_SEEDS if seeds is None else seeds))
+    return (None,)
 
 
 def settings_for(identifier: str, dataset: str, quick: bool = False) -> dict[str, Any]:
@@ -383,7 +385,7 @@ def _median_run(runs: list[dict[str, Any]]) -> dict[str, Any]:
 
 
 def score_pair(identifier: str, ds, quick: bool = False, factory: Callable[[str], Any] | None = None,
-               params: dict[str, Any] | None = None) -> tuple[list[dict[str, Any]], dict[str, np.ndarray]]:
+               params: dict[str, Any] | None = None, seeds: Sequence[int] | None = None) -> tuple[list[dict[str, Any]], dict[str, np.ndarray]]:
     """Fit ``identifier`` on ``ds.est`` and score every test of ``ds``; returns (rows, free-run predictions).
 
     A seeded identifier in quick mode is fitted once per seed of :data:`QUICK_SEEDS` and each test is scored by
@@ -392,16 +394,16 @@ def score_pair(identifier: str, ds, quick: bool = False, factory: Callable[[str]
     from sysid._blas import blas_threads
 
     with blas_threads(1):
-        return _score_pair(identifier, ds, quick, factory, params)
+        return _score_pair(identifier, ds, quick, factory, params, seeds)
 
 
-def _score_pair(identifier, ds, quick, factory, params) -> tuple[list[dict[str, Any]], dict[str, np.ndarray]]:
+def _score_pair(identifier, ds, quick, factory, params, seeds=None) -> tuple[list[dict[str, Any]], dict[str, np.ndarray]]:
     from sysid.registry import get_identifier
 
     cls = (factory or get_identifier)(identifier)
     params = dict(settings_for(identifier, ds.name, quick) if params is None else params)
     normalise = bool(params.pop(NORMALISE, False))
-    seeds = seeds_for(cls, params, quick)
+    seeds = seeds_for(cls, params, quick, seeds)
     runs: dict[str, list[dict[str, Any]]] = {test: [] for test in ds.tests}
     for seed in seeds:
         model = cls(**params) if seed is None else cls(**params, seed=seed)
@@ -439,7 +441,7 @@ def _score_pair(identifier, ds, quick, factory, params) -> tuple[list[dict[str, 
 
 def score(identifiers: Iterable[str] | None = None, datasets: Iterable[str] | None = None, quick: bool = False,
           sysidentpy: bool = True, progress: bool = False, factory: Callable[[str], Any] | None = None,
-          log: Callable[[str], None] | None = None) -> ScoreRun:
+          log: Callable[[str], None] | None = None, seeds: Sequence[int] | None = None) -> ScoreRun:
     """Score identifiers × datasets. Unavailable identifiers/datasets are skipped with the reason.
 
     BLAS runs single-threaded throughout (torch's training already does, :mod:`sysid.neural.device`), so the
@@ -447,10 +449,10 @@ def score(identifiers: Iterable[str] | None = None, datasets: Iterable[str] | No
     from sysid._blas import blas_threads
 
     with blas_threads(1):
-        return _score(identifiers, datasets, quick, sysidentpy, progress, factory, log)
+        return _score(identifiers, datasets, quick, sysidentpy, progress, factory, log, seeds)
 
 
-def _score(identifiers, datasets, quick, sysidentpy, progress, factory, log) -> ScoreRun:
+def _score(identifiers, datasets, quick, sysidentpy, progress, factory, log, seeds=None) -> ScoreRun:
     from benchmarks.datasets import list_datasets, load_dataset
     from sysid.registry import IDENTIFIERS, available_identifiers
 
@@ -491,7 +493,7 @@ def _score(identifiers, datasets, quick, sysidentpy, progress, factory, log) -> 
             if bar:
                 bar.set_postfix_str(f"{ident} on {dname}")
             try:
-                rows, preds = score_pair(ident, ds, quick=quick, factory=factory)
+                rows, preds = score_pair(ident, ds, quick=quick, factory=factory, seeds=seeds)
             except ConfigError as exc:
                 run.skipped.append({"identifier": ident, "dataset": dname, "reason": str(exc)})
                 rows, preds = [], {}
@@ -757,9 +759,11 @@ def make_floors(runs: ScoreRun | dict[str, Any] | list, margin: float = DEFAULT_
     """Baselines from one or more measured runs of the same mode (e.g. one per CPU kernel set × BLAS threads).
 
     Per pair: ``measured`` = the worst (largest) free-run RMSE over the runs, ``measured_min`` the best, and the
-    ceiling ``max_rmse`` = measured × (1 + margin), with ``max(margin, seeded_margin)`` for rows scored over
-    several training seeds (their median moves with the CPU's rounding as a seed would). A pair that diverged or
-    failed in any run cannot get a stable floor: it goes to ``dropped`` with the reason. Pairs of the mode that the
+    ceiling ``max_rmse`` = measured × (1 + margin). Rows scored as a median over training seeds (a new CPU redraws
+    them, as a new seed would) get ``max(measured × (1 + seeded_margin), worst single seed × (1 + margin))``, the
+    single seeds taken from every run, including quick runs over extra seeds (``score --quick --seeds 5-19``; those
+    add draws, not medians). A pair that diverged or failed in any run or seed cannot get a stable floor: it goes
+    to ``dropped`` with the reason. Pairs of the mode that the
     runs did not score keep their previous floors; rules and other modes are kept. The mode's ``provenance``
     gains one entry per update saying how its floors were measured (pairs, environments of the runs, seeds,
     margins, date).
@@ -778,31 +782,40 @@ def make_floors(runs: ScoreRun | dict[str, Any] | list, margin: float = DEFAULT_
     base = json.loads(json.dumps(previous)) if previous else {"format": BASELINES_FORMAT, "modes": {}, "rules": []}
     base["format"] = BASELINES_FORMAT
     values: dict[tuple[str, str, str], list[tuple[dict[str, Any], float | None]]] = {}
+    draws: dict[tuple[str, str, str], list[float | None]] = {}  # single-seed free-run RMSEs of seeded rows
     for d in datas:
         for r in d["rows"]:
+            key = (r["identifier"], r["dataset"], r["test"])
+            seeds = r.get("seeds")
+            if seeds:
+                draws.setdefault(key, []).extend(r.get("free_run_rmse_by_seed") or [None])
+                if mode == "quick" and list(seeds) != list(QUICK_SEEDS):
+                    continue  # a run over extra seeds: only its single-seed draws count
             rmse = (r.get("free_run") or {}).get("rmse")
             ok = r.get("status") == "ok" and _finite(rmse)
-            values.setdefault((r["identifier"], r["dataset"], r["test"]), []).append((r, rmse if ok else None))
+            values.setdefault(key, []).append((r, rmse if ok else None))
     floors = base.setdefault("modes", {}).setdefault(mode, {})
     dropped = [e for e in base.get("dropped", {}).get(mode, [])
                if (e["identifier"], e["dataset"], e.get("test", "*")) not in values]
     for (ident, dname, test), vals in values.items():
         rows = [r for r, _ in vals]
-        if any(v is None for _, v in vals) or len(vals) < len(datas):
-            bad = sum(v is None for _, v in vals) + len(datas) - len(vals)
+        singles = draws.get((ident, dname, test), [])
+        if any(v is None for _, v in vals) or any(x is None or not _finite(x) for x in singles):
+            bad = sum(v is None for _, v in vals) + sum(x is None or not _finite(x) for x in singles)
             dropped.append({"identifier": ident, "dataset": dname, "test": test,
-                            "reason": f"diverged, failed or missing in {bad} of {len(datas)} measuring runs: no stable floor"})
+                            "reason": f"diverged or failed in {bad} of the measured runs/seeds: no stable floor"})
             floors.get(ident, {}).get(dname, {}).pop(test, None)
             continue
         worst, best = max(v for _, v in vals), min(v for _, v in vals)
-        seeded = any(len(r.get("seeds") or ()) > 1 for r in rows)
-        m = max(margin, seeded_margin) if seeded else margin
-        floor = {"max_rmse": float(f"{worst * (1.0 + m):.4g}"), "measured": float(f"{worst:.6g}"),
+        ceiling = worst * (1.0 + margin)
+        if singles:  # scored as a median over seeds: a new CPU redraws the seeds
+            ceiling = max(worst * (1.0 + seeded_margin), max(singles) * (1.0 + margin))
+        floor = {"max_rmse": float(f"{ceiling:.4g}"), "measured": float(f"{worst:.6g}"),
                  "units": rows[0].get("units", ""), "r2_measured": float(f"{min(r['free_run']['r2'] for r in rows):.6g}")}
         if len(vals) > 1:
             floor.update(measured_min=float(f"{best:.6g}"), runs=len(vals))
-        if seeded:
-            floor["seeds"] = rows[0]["seeds"]
+        if singles:
+            floor.update(seeds=rows[0]["seeds"], worst_single_seed=float(f"{max(singles):.6g}"), single_seed_draws=len(singles))
         floors.setdefault(ident, {}).setdefault(dname, {})[test] = floor
     base.setdefault("dropped", {})[mode] = sorted(dropped, key=lambda e: (e["identifier"], e["dataset"], e.get("test", "*")))
     envs = [d.get("environment") or {} for d in datas]
@@ -811,7 +824,8 @@ def make_floors(runs: ScoreRun | dict[str, Any] | list, margin: float = DEFAULT_
         "date": datetime.date.today().isoformat(),
         "identifiers": sorted({k[0] for k in values}), "datasets": sorted({k[1] for k in values}),
         "how": ("max_rmse = worst free-run RMSE over the runs x (1 + margin); seeded identifiers scored as the median "
-                f"over training seeds {list(QUICK_SEEDS) if mode == 'quick' else [0]} in each run"),
+                f"over training seeds {list(QUICK_SEEDS) if mode == 'quick' else [0]} in each run, their max_rmse = "
+                "max(worst median x (1 + seeded_margin), worst single seed of all runs x (1 + margin))"),
         "margin": margin, "seeded_margin": seeded_margin,
         "runs": [{k: e.get(k) for k in ("cpu", "ATEN_CPU_CAPABILITY", "torch_cpu_capability", "OPENBLAS_NUM_THREADS")}
                  for e in envs],

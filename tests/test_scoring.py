@@ -109,7 +109,8 @@ def test_floors_from_several_runs_take_the_worst_and_a_seeded_margin():
     """Runs measured with different CPU kernels / thread counts: the worst value of each pair sets the floor;
     pairs scored over several seeds get the wider seeded margin."""
     runs = [{"mode": "quick", "environment": {"ATEN_CPU_CAPABILITY": isa},
-             "rows": [_row("arx", "cascaded-tanks", "test", 1.0 + d), _seeded_row("narx-mlp", [3e-3 + d / 1e3, 2e-3, 4e-3])]}
+             "rows": [_row("arx", "cascaded-tanks", "test", 1.0 + d),
+                      _seeded_row("narx-mlp", [3e-3 + d / 1e3, 2e-3, 4e-3, 2.5e-3, 3.5e-3])]}
             for isa, d in (("default", 0.0), ("avx2", 0.2))]
     new = scoring.make_floors(runs, margin=0.1, seeded_margin=0.5)
     arx = new["modes"]["quick"]["arx"]["cascaded-tanks"]["test"]
@@ -117,6 +118,13 @@ def test_floors_from_several_runs_take_the_worst_and_a_seeded_margin():
     assert arx["max_rmse"] == pytest.approx(1.2 * 1.1)
     mlp = new["modes"]["quick"]["narx-mlp"]["silverbox"]["arrow"]
     assert mlp["measured"] == pytest.approx(3.2e-3) and mlp["max_rmse"] == pytest.approx(3.2e-3 * 1.5)
+    assert mlp["worst_single_seed"] == 4e-3 and mlp["single_seed_draws"] == 10
+    # a run over extra seeds adds single-seed draws (not a median): one bad seed of 9e-3 lifts the ceiling to
+    # 9e-3 x 1.1, above the worst median x 1.5
+    extra = {"mode": "quick", "rows": [{**_seeded_row("narx-mlp", [2e-3, 9e-3, 3e-3]), "seeds": [5, 6, 7]}]}
+    wide = scoring.make_floors([*runs, extra], margin=0.1, seeded_margin=0.5)["modes"]["quick"]["narx-mlp"]["silverbox"]["arrow"]
+    assert wide["measured"] == pytest.approx(3.2e-3) and wide["runs"] == 2
+    assert wide["max_rmse"] == pytest.approx(9e-3 * 1.1) and wide["single_seed_draws"] == 13
     assert [r["ATEN_CPU_CAPABILITY"] for r in new["provenance"]["quick"][0]["runs"]] == ["default", "avx2"]
     # a later update of one pair keeps the others
     again = scoring.make_floors({"mode": "quick", "rows": [_row("arx", "cascaded-tanks", "test", 2.0)]}, previous=new)

@@ -21,6 +21,18 @@ def _names(text: str | None) -> list[str] | None:
     return names or None
 
 
+def _seed_range(text: str) -> list[int]:
+    """``A-B`` (inclusive) or one seed ``A``: non-negative integers, at most 1000 seeds."""
+    parts = text.split("-")
+    try:
+        lo, hi = (int(parts[0]), int(parts[-1])) if len(parts) in (1, 2) else (None, None)
+    except ValueError:
+        lo = hi = None
+    if lo is None or lo < 0 or hi < lo or hi - lo >= 1000:
+        raise argparse.ArgumentTypeError(f"expected seeds as A-B with 0 <= A <= B < A + 1000, got {text!r}")
+    return list(range(lo, hi + 1))
+
+
 def register(sub) -> None:
     p = sub.add_parser("score", help="score identifiers x datasets against references and accuracy baselines")
     p.add_argument("--identifiers", metavar="A,B", help="comma-separated identifier ids (default: every available one)")
@@ -33,6 +45,9 @@ def register(sub) -> None:
     p.add_argument("--margin", type=number(0, 10), default=0.15, help="margin of --update-baselines (default 0.15 = 15 %%)")
     p.add_argument("--seeded-margin", type=number(0, 10), default=0.5,
                    help="margin of --update-baselines for identifiers scored over several training seeds (default 0.5)")
+    p.add_argument("--seeds", metavar="A-B", type=_seed_range,
+                   help="--quick: training seeds of the seeded (neural) identifiers, scored as their median "
+                        "(default 0-4); runs over other seeds add single-seed draws to --update-baselines --from-runs")
     p.add_argument("--from-runs", nargs="+", metavar="RUN.json",
                    help="with --update-baselines: set floors from these saved `score --json` runs (e.g. one per CPU "
                         "kernel set and BLAS thread count; the worst value of each pair counts) instead of scoring now")
@@ -61,6 +76,10 @@ def run(args: argparse.Namespace) -> int:
     bpath = Path(args.baselines) if args.baselines else scoring.BASELINES_PATH
     # --check needs the floors; --update-baselines may start a new file
     baselines = scoring.load_baselines(bpath) if args.check or bpath.exists() else None
+    if args.seeds is not None and not args.quick:
+        raise ConfigError("--seeds applies to --quick runs (full runs train seed 0)")
+    if args.seeds is not None and args.check:
+        raise ConfigError("--seeds changes what the floors measure: use it to measure (--json), not with --check")
     if args.from_runs:
         if not args.update_baselines or args.check:
             raise ConfigError("--from-runs goes with --update-baselines (and without --check)")
@@ -68,7 +87,7 @@ def run(args: argparse.Namespace) -> int:
     quiet = args.json
     res = scoring.score(idents, dsets, quick=args.quick, sysidentpy=not args.no_sysidentpy,
                         progress=not (quiet or getattr(args, "quiet", False)),
-                        log=None if quiet else (lambda s: print(s, flush=True)))
+                        log=None if quiet else (lambda s: print(s, flush=True)), seeds=args.seeds)
     out = scoring._clean(res.to_dict())
     if args.check:
         failures = scoring.check(res, baselines)
