@@ -79,11 +79,12 @@ class Executor:
         return self.client.scatter(_Blob(obj), broadcast=False, hash=False)
 
     def map(self, fn: Callable[..., Any], tasks: Sequence[tuple], desc: str = "tasks", progress: bool = True,
-            on_result: Callable[[int, Any], None] | None = None) -> list[Any]:
+            on_result: Callable[[int, Any], None] | None = None, keep: bool = True) -> list[Any]:
         """``[fn(*task) for task in tasks]``, wherever it runs.
 
         ``on_result(index, result)`` is called in the order the tasks finish (to log a line per task); the
-        returned list is in the order of ``tasks``. An exception raised by a task is raised here (the other
+        returned list is in the order of ``tasks`` (all None with ``keep=False``, for results that
+        ``on_result`` stores elsewhere, e.g. records written to a file as they come). An exception raised by a task is raised here (the other
         tasks are cancelled): tasks that can fail as a result must catch and return their errors.
         """
         from tqdm import tqdm
@@ -94,9 +95,11 @@ class Executor:
         with tqdm(total=len(tasks), desc=desc, disable=not show, leave=False, file=sys.stderr) as bar:
             if self.client is None:
                 for i, task in enumerate(tasks):
-                    results[i] = fn(*task)
+                    res = fn(*task)
                     if on_result is not None:
-                        on_result(i, results[i])
+                        on_result(i, res)
+                    if keep:
+                        results[i] = res
                     bar.update(1)
                 return results
             from distributed import as_completed
@@ -106,9 +109,12 @@ class Executor:
             try:
                 for fut in as_completed(futures):
                     i = index[fut.key]
-                    results[i] = fut.result()
+                    res = fut.result()
+                    fut.release()
                     if on_result is not None:
-                        on_result(i, results[i])
+                        on_result(i, res)
+                    if keep:
+                        results[i] = res
                     bar.update(1)
             except BaseException:
                 self.client.cancel(futures)
