@@ -184,8 +184,15 @@ def make_executor(workers: int | None = None, scheduler: str | None = None) -> E
             return Executor(Client(scheduler, timeout="20s"))
         except (OSError, TimeoutError) as exc:
             raise ConfigError(f"cannot reach the Dask scheduler {scheduler}: {exc}") from None
-    cluster = LocalCluster(n_workers=int(workers), processes=True, threads_per_worker=1, dashboard_address=None,
-                           silence_logs=40)
+    import logging
+    import warnings
+
+    with warnings.catch_warnings():
+        # "Port 8787 is already in use ... Hosting the HTTP server on port N instead": another cluster on this
+        # machine; harmless (no dashboard is started)
+        warnings.filterwarnings("ignore", message="Port .* is already in use", category=UserWarning)
+        cluster = LocalCluster(n_workers=int(workers), processes=True, threads_per_worker=1, dashboard_address=None,
+                               silence_logs=logging.ERROR)
     return Executor(Client(cluster), cluster)
 
 

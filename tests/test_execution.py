@@ -20,7 +20,7 @@ pytest.importorskip("distributed")
 
 from benchmarks.execution import Executor, make_executor  # noqa: E402
 
-TIMING_KEYS = ("seconds", "fit_seconds")
+TIMING_KEYS = ("seconds", "fit_seconds", "fit_seconds_mean")
 
 
 def strip_timing(obj):
@@ -162,3 +162,32 @@ def test_sweep_survives_a_worker_killed_mid_task(tmp_path):
         th.join()
     assert killed, "no worker was killed"
     assert parallel == serial
+
+
+def test_search_repeats_on_the_cluster_equal_the_serial_sweep(cluster, tmp_path, monkeypatch, capsys):
+    """search --scheduler: the repeats of each configuration run as Dask tasks; the stored runs equal the
+    serial sweep's (timings and pids aside). Through PIEZOTWIN_SCHEDULER, as a user on a cluster would."""
+    from benchmarks.cli import main
+    from sysid.io import write_record
+    from sysid.record import Record
+
+    rng = np.random.default_rng(1)
+    u = rng.standard_normal(600)
+    y = np.convolve(u, [0.0, 0.6, -0.2, 0.1], mode="full")[:600] + 0.01 * rng.standard_normal(600)
+    write_record(Record(u=u, y=y, fs=10.0), tmp_path / "e.npz")
+    argv = ["search", "arx", "--est", str(tmp_path / "e.npz"), "--val", str(tmp_path / "e.npz"), "--grid",
+            "ny=1,2;nu=1,3", "--repeats", "2", "--no-progress", "--json"]
+    monkeypatch.delenv("PIEZOTWIN_SCHEDULER", raising=False)
+    assert main([*argv, "--storage", str(tmp_path / "serial.db")]) == 0
+    serial = json.loads(capsys.readouterr().out)
+    monkeypatch.setenv("PIEZOTWIN_SCHEDULER", cluster.client.scheduler.address)
+    assert main([*argv, "--storage", str(tmp_path / "dask.db")]) == 0
+    dask = json.loads(capsys.readouterr().out)
+    assert dask["n_runs"] == serial["n_runs"] == 8
+    drop = ("storage",)
+    assert strip_timing({k: v for k, v in dask.items() if k not in drop}) == \
+        strip_timing({k: v for k, v in serial.items() if k not in drop})
+    from sysid.neural.search import collect, storage_url
+
+    runs = collect(storage_url(str(tmp_path / "dask.db"), "piezotwin-search"), "piezotwin-search")
+    assert os.getpid() not in {r["pid"] for r in runs}  # fitted on the workers
