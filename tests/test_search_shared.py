@@ -182,3 +182,16 @@ def test_search_that_cannot_complete_says_how_many_are_missing_and_exits_1(tmp_p
     summary = json.loads(captured.out)
     assert summary["missing"] == 1 and summary["complete"] == 2
     assert sorted(_complete_keys(f"sqlite:///{tmp_path / 'm.db'}", "piezotwin-search")) == ["ny=1", "ny=3"]
+
+
+@pytest.mark.slow
+def test_two_processes_create_one_new_sqlite_store_at_once(files, tmp_path):
+    """Issue 14 item 4: two processes started together on a store that does not exist yet: neither crashes,
+    and between them they finish the grid, each configuration once."""
+    db = f"sqlite:///{tmp_path / 'new.db'}"
+    procs = [_search(files, db, "n") for _ in range(2)]
+    for p in procs:
+        _, err = p.communicate(timeout=400)
+        assert p.returncode == 0, err[-2000:]
+    keys = _complete_keys(db, "n")
+    assert sorted(keys) == sorted(f"lags={i}" for i in range(1, 7))

@@ -189,7 +189,17 @@ def _open_storage(url: str):
         from sysid.neural.study import heartbeat_settings
 
         beat, grace = heartbeat_settings()
-        return storages.RDBStorage(url, heartbeat_interval=beat, grace_period=grace, **kwargs)
+        # Two processes opening a new store at once race on creating its tables / version row: the loser gets
+        # an IntegrityError ('UNIQUE constraint failed: alembic_version') or 'database is locked'; retry.
+        from sqlalchemy.exc import SQLAlchemyError
+
+        for attempt in range(10):
+            try:
+                return storages.RDBStorage(url, heartbeat_interval=beat, grace_period=grace, **kwargs)
+            except SQLAlchemyError:
+                if attempt == 9:
+                    raise
+                time.sleep(0.2 * (attempt + 1))
 
 
 def _make_sampler(spec: SweepSpec):

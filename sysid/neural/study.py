@@ -75,12 +75,14 @@ def done_keys(study) -> set[str]:
             if "config_key" in t.user_attrs}
 
 
-def _running_claims(study, exclude: int | None = None) -> dict[int, str]:
-    """trial_id → configuration key of the RUNNING trials that have claimed one."""
+def _snapshot(study) -> tuple[set[str], set[str]]:
+    """(configurations finished, configurations claimed by RUNNING trials), from one read of the study."""
     from optuna.trial import TrialState
 
-    return {t._trial_id: t.user_attrs["config_key"] for t in study.get_trials(deepcopy=False, states=(TrialState.RUNNING,))
-            if "config_key" in t.user_attrs and t._trial_id != exclude}
+    trials = study.get_trials(deepcopy=False, states=(TrialState.COMPLETE, TrialState.RUNNING))
+    done = {t.user_attrs.get("config_key") for t in trials if t.state == TrialState.COMPLETE} - {None}
+    running = {t.user_attrs.get("config_key") for t in trials if t.state == TrialState.RUNNING} - {None}
+    return done, running
 
 
 def reap(study, spec) -> None:
@@ -110,14 +112,18 @@ def claim(trial, key: str, target: int) -> str | None:
     trial.set_user_attr("config_key", key)
     trial.set_user_attr("host", HOST)
     trial.set_user_attr("pid", os.getpid())
-    study = trial.study
-    done = done_keys(study)
+    from optuna.trial import TrialState
+
+    # one read of the study, so that a trial finishing between two reads cannot hide from both of them
+    trials = trial.study.get_trials(deepcopy=False, states=(TrialState.COMPLETE, TrialState.RUNNING))
+    done = {t.user_attrs.get("config_key") for t in trials if t.state == TrialState.COMPLETE} - {None}
     if key in done:
         return "configuration already done"
-    others = _running_claims(study, exclude=trial._trial_id)
-    if key in others.values():
+    others = {t.user_attrs.get("config_key") for t in trials
+              if t.state == TrialState.RUNNING and t._trial_id != trial._trial_id} - {None}
+    if key in others:
         return "configuration running in another process"
-    if len(done | set(others.values()) | {key}) > target:
+    if len(done | others | {key}) > target:
         return "the requested number of configurations is finished or running"
     return None
 
@@ -128,7 +134,8 @@ def _next_grid_config(study, spec, target: int, worker: int, n_workers: int, fai
     given up here): this worker's share (index mod n_workers) first; a random one after a clash."""
     from sysid.neural.search import _grid_configs, config_key
 
-    taken = done_keys(study) | set(_running_claims(study).values())
+    done, running = _snapshot(study)
+    taken = done | running
     missing = [(i, c) for i, c in enumerate(_grid_configs(spec)[:target])
                if config_key(c) not in taken and failed.get(config_key(c), 0) < MAX_FAILURES]
     if not missing:
@@ -159,10 +166,10 @@ def worker_loop(spec, url: str, study_name: str, est, val, target: int, on_trial
     draws = 0
     while True:
         reap(study, spec)
-        done = done_keys(study)
+        done, running = _snapshot(study)
         if len(done) >= target:
             return
-        live = set(_running_claims(study).values()) - done
+        live = running - done
         waiting = study.get_trials(deepcopy=False, states=(TrialState.WAITING,))
         if spec.sampler == "grid":
             cfg = None if waiting else _next_grid_config(study, spec, target, worker, n_workers, failed,
