@@ -193,6 +193,8 @@ def worker_loop(spec, url: str, study_name: str, est, val, target: int, on_trial
         state["clash"] = False
         try:
             study.optimize(objective, n_trials=1, catch=(Exception,), gc_after_trial=False)
+        except optuna.exceptions.UpdateFinishedTrialError:
+            pass  # this trial was failed meanwhile as stale (a starved heartbeat); its configuration is re-run
         except ValueError as exc:  # another client finished the same (retried) trial first: its result stands
             if "Cannot tell" not in str(exc):
                 raise
