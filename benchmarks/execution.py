@@ -90,7 +90,7 @@ class Executor:
         from tqdm import tqdm
 
         tasks = list(tasks)
-        show = bool(progress) and sys.stderr.isatty()
+        show = bool(progress) and _bars_enabled()
         results: list[Any] = [None] * len(tasks)
         with tqdm(total=len(tasks), desc=desc, disable=not show, leave=False, file=sys.stderr) as bar:
             if self.client is None:
@@ -133,6 +133,15 @@ class Executor:
 
     def __exit__(self, *exc) -> None:
         self.close()
+
+
+def _bars_enabled() -> bool:
+    """Progress bars only on a terminal (and not switched off with the project's --quiet, where it exists)."""
+    try:
+        from sysid.progress import enabled
+    except ImportError:
+        return sys.stderr.isatty()
+    return enabled()
 
 
 class _Blob:

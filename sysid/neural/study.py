@@ -233,8 +233,14 @@ def run_sweep(spec, est, val, storage: str | None = None, study: str = "piezotwi
         raise ConfigError(f"--trials must be ≥ 1, got {trials}")
     target = min(target, n_all)
     reap(st, spec)
-    bar = tqdm(total=target, initial=min(len(done_keys(st)), target), unit="config", desc=f"{spec.identifier} sweep",
-               disable=not progress, file=sys.stderr, dynamic_ncols=True)
+    try:  # the project's one switch for bars (off without a terminal or with --quiet), where it exists
+        from sysid.progress import progress as progress_bar
+    except ImportError:
+        def progress_bar(total, initial, unit, desc, show, leave):
+            return tqdm(total=total, initial=initial, unit=unit, desc=desc, disable=not (show and sys.stderr.isatty()),
+                        file=sys.stderr, dynamic_ncols=True, leave=leave)
+    bar = progress_bar(total=target, initial=min(len(done_keys(st)), target), unit="config",
+                       desc=f"{spec.identifier} sweep", show=progress, leave=True)
 
     def tick() -> None:
         bar.n = min(len(done_keys(st)), target)
