@@ -84,8 +84,9 @@ class Executor:
 
         ``on_result(index, result)`` is called in the order the tasks finish (to log a line per task); the
         returned list is in the order of ``tasks`` (all None with ``keep=False``, for results that
-        ``on_result`` stores elsewhere, e.g. records written to a file as they come). An exception raised by a task is raised here (the other
-        tasks are cancelled): tasks that can fail as a result must catch and return their errors.
+        ``on_result`` stores elsewhere, e.g. records written to a file as they come). An exception raised by
+        a task is raised here (the other tasks are cancelled): tasks that can fail as a result must catch and
+        return their errors.
         """
         from tqdm import tqdm
 

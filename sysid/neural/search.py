@@ -20,6 +20,10 @@ several machines share one study. Re-running the same command resumes: finished 
 configurations whose trial failed or was interrupted run again (trials of a killed worker are detected by
 Optuna's heartbeat and retried). ``workers`` local processes share the storage; a progress bar shows the
 configurations done and the time left. Results export as JSON lines (one line per run).
+
+How many processes share one study and finish exactly the requested configurations, none twice, none lost to
+a killed process: :mod:`sysid.neural.study`. The repeats of a configuration can run as Dask tasks
+(``run_config(..., executor)``, :mod:`benchmarks.execution`).
 """
 
 from __future__ import annotations
