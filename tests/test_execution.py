@@ -64,6 +64,9 @@ def test_score_on_two_workers_equals_the_serial_run(cluster):
     assert json.dumps(strip_timing(parallel)) == json.dumps(strip_timing(serial))
     pids = cluster.client.run(os.getpid)
     assert len(set(pids.values())) == 2 and os.getpid() not in pids.values()  # really other processes
+    # workers run BLAS single-threaded, and without Dask's MALLOC_TRIM_THRESHOLD_ (2x CPU on numpy temporaries)
+    env = cluster.client.run(lambda: (os.environ.get("OPENBLAS_NUM_THREADS"), os.environ.get("MALLOC_TRIM_THRESHOLD_")))
+    assert set(env.values()) == {("1", None)}
 
 
 def test_generate_grid_hdf5_reads_back_bit_identical_with_h5py_alone(cluster, tmp_path):
