@@ -202,9 +202,12 @@ def make_executor(workers: int | None = None, scheduler: str | None = None) -> E
     # Dask starts its workers with MALLOC_TRIM_THRESHOLD_=65536; setting it switches off glibc's dynamic mmap
     # threshold, so every numpy temporary above 128 KiB is mmapped and page-faulted afresh: measured here, the
     # same numpy task took 0.85 CPU s in such a worker, 0.35 s without the variable (and 0.78 s in this process
-    # with it). Unset for the workers started here (see docs/running-at-scale.md for `dask worker`).
-    no_trim = {"distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None}
-    with warnings.catch_warnings(), dask.config.set(no_trim):
+    # with it). Unset for the workers started here (see docs/running-at-scale.md for `dask worker`). The
+    # workers' statistical profiler (a thread sampling the task's stack every 10 ms, for the dashboard, which
+    # is not started here) is switched off too.
+    settings = {"distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None,
+                "distributed.worker.profile.enabled": False}
+    with warnings.catch_warnings(), dask.config.set(settings):
         # "Port 8787 is already in use ... Hosting the HTTP server on port N instead": another cluster on this
         # machine; harmless (no dashboard is started)
         warnings.filterwarnings("ignore", message="Port .* is already in use", category=UserWarning)
