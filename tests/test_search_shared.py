@@ -66,8 +66,12 @@ def _complete_keys(storage: str, study: str) -> list[str]:
     return [t.user_attrs["config_key"] for t in _trials(storage, study) if t.state == TrialState.COMPLETE]
 
 
-def _kill_in_trial(victim: subprocess.Popen, storage: str, study: str, timeout: float = 240) -> None:
-    """SIGKILL ``victim`` once it has finished a trial and is in the middle of another."""
+def _kill_in_trial(victim: subprocess.Popen, storage: str, study: str, timeout: float = 240) -> str:
+    """SIGKILL ``victim`` once it has finished a trial and has just (< half a trial ago) started another whose claim
+    stood (user attribute ``claimed``: it is fitting, not about to give way), so that the kill lands in the
+    middle of that trial (one takes seconds); returns the key of the interrupted one."""
+    from datetime import datetime
+
     from optuna.trial import TrialState
 
     t0 = time.monotonic()
@@ -76,13 +80,18 @@ def _kill_in_trial(victim: subprocess.Popen, storage: str, study: str, timeout: 
             mine = [t for t in _trials(storage, study) if t.user_attrs.get("pid") == victim.pid]
         except Exception:  # the study does not exist yet
             mine = []
-        if any(t.state == TrialState.COMPLETE for t in mine) and any(t.state == TrialState.RUNNING for t in mine):
+        done = [(t.datetime_complete - t.datetime_start).total_seconds() for t in mine
+                if t.state == TrialState.COMPLETE and t.datetime_complete and t.datetime_start]
+        # "just started": younger than half the shortest trial it finished, so the kill lands before its end
+        young = [t for t in mine if done and t.state == TrialState.RUNNING and t.user_attrs.get("claimed")
+                 and t.datetime_start is not None and (datetime.now() - t.datetime_start).total_seconds() < min(done) / 2]
+        if young:
             victim.send_signal(signal.SIGKILL)
             victim.wait()
-            return
+            return young[0].user_attrs["config_key"]
         if victim.poll() is not None:
             pytest.fail(f"the process to kill ended by itself: {victim.stderr.read()[-500:]}")
-        time.sleep(0.05)
+        time.sleep(0.02)
     victim.kill()
     pytest.fail("the process never had a finished and a running trial at the same time")
 
@@ -92,7 +101,7 @@ def test_two_processes_on_postgres_finish_exactly_the_grid_and_survive_sigkill(f
     configuration exactly once (the killed trial is taken over), and exits 0."""
     a = _search(files, postgres_url, "pg")
     b = _search(files, postgres_url, "pg")
-    _kill_in_trial(a, postgres_url, "pg")
+    interrupted = _kill_in_trial(a, postgres_url, "pg")
     out, err = b.communicate(timeout=400)
     assert b.returncode == 0, err[-2000:]
     keys = _complete_keys(postgres_url, "pg")
@@ -101,10 +110,13 @@ def test_two_processes_on_postgres_finish_exactly_the_grid_and_survive_sigkill(f
     assert summary["missing"] == 0 and summary["complete"] == 6 and summary["n_runs"] == 6
     from optuna.trial import TrialState
 
-    killed = [t for t in _trials(postgres_url, "pg") if t.user_attrs.get("pid") == a.pid and t.state == TrialState.FAIL]
-    assert killed, "the killed process's running trial was not marked failed"
-    # the killed process's configuration was finished by the other one
-    assert {t.user_attrs["config_key"] for t in killed} <= set(keys)
+    trials = _trials(postgres_url, "pg")
+    killed = [t for t in trials if t.user_attrs.get("pid") == a.pid and t.user_attrs.get("config_key") == interrupted
+              and t.state != TrialState.COMPLETE]
+    assert [t.state for t in killed] == [TrialState.FAIL]  # the interrupted trial was failed, not left RUNNING
+    # and its configuration was finished by the other process
+    assert [t.user_attrs["pid"] for t in trials if t.state == TrialState.COMPLETE
+            and t.user_attrs["config_key"] == interrupted] == [b.pid]
 
 
 @pytest.mark.slow

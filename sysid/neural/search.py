@@ -320,6 +320,7 @@ def _make_objective(spec: SweepSpec, est, val, target: int | None = None, execut
         if reason is not None:
             state["clash"] = True
             raise optuna.TrialPruned(reason)  # not counted; the loop draws or picks again
+        trial.set_user_attr("claimed", True)  # the claim stands: this trial fits the configuration
         try:
             runs = run_config(spec, config, est, val, executor=executor)
         except Exception as exc:
