@@ -83,8 +83,9 @@ def _kill_in_trial(victim: subprocess.Popen, storage: str, study: str, timeout: 
         done = [(t.datetime_complete - t.datetime_start).total_seconds() for t in mine
                 if t.state == TrialState.COMPLETE and t.datetime_complete and t.datetime_start]
         # "just started": younger than half the shortest trial it finished, so the kill lands before its end
+        now = datetime.now()
         young = [t for t in mine if done and t.state == TrialState.RUNNING and t.user_attrs.get("claimed")
-                 and t.datetime_start is not None and (datetime.now() - t.datetime_start).total_seconds() < min(done) / 2]
+                 and t.datetime_start is not None and (now - t.datetime_start).total_seconds() < min(done) / 2]
         if young:
             victim.send_signal(signal.SIGKILL)
             victim.wait()
