@@ -49,8 +49,8 @@ clean:
 	rm -rf $(VENV) report .pytest_cache .benchmarks
 
 # Accuracy floors of the quick check, measured as CI meets them on any x86-64 CPU: the quick run with torch's
-# generic, AVX2 and native kernels, each with 1 and 2 BLAS threads; the worst value of each pair sets its floor
-# (docs/regression-check.md). FLOORS_ARGS narrows it, e.g. FLOORS_ARGS="--identifiers oe,bj".
+# generic, AVX2 and native kernels, each with 1 and 2 BLAS threads, plus seeds 5-19 of the seeded identifiers; the
+# worst value of each pair sets its floor (docs/regression-check.md). FLOORS_ARGS narrows it, e.g. FLOORS_ARGS="--identifiers oe,bj".
 floors: $(STAMP)
 	mkdir -p .floors
 	for isa in default avx2 native; do for th in 1 2; do \
@@ -58,4 +58,5 @@ floors: $(STAMP)
 	  $$e OPENBLAS_NUM_THREADS=$$th $(VENV)/bin/piezotwin score --quick --json $(FLOORS_ARGS) \
 	    > .floors/run_$${isa}_$${th}.json || exit 1; \
 	done; done
-	$(VENV)/bin/piezotwin score --quick --update-baselines --from-runs .floors/run_*.json
+	$(VENV)/bin/piezotwin score --quick --json --seeds 5-19 $(FLOORS_ARGS) > .floors/extra_seeds.json
+	$(VENV)/bin/piezotwin score --quick --update-baselines --from-runs .floors/run_*.json .floors/extra_seeds.json

@@ -439,20 +439,37 @@ def _score_pair(identifier, ds, quick, factory, params, seeds=None) -> tuple[lis
     return rows, preds
 
 
+def score_pair_task(identifier: str, ds, quick: bool = False, factory: Callable[[str], Any] | None = None,
+                    seeds: Sequence[int] | None = None
+                    ) -> tuple[list[dict[str, Any]], dict[str, np.ndarray], dict[str, str] | None]:
+    """One pair as a task: (rows, free-run predictions, skip entry or None). A ConfigError is a skip; any
+    other exception of the identifier is a result (rows with status error), not a crashed run."""
+    try:
+        rows, preds = score_pair(identifier, ds, quick=quick, factory=factory, seeds=seeds)
+        return rows, preds, None
+    except ConfigError as exc:
+        return [], {}, {"identifier": identifier, "dataset": ds.name, "reason": str(exc)}
+    except Exception as exc:
+        return ([{"identifier": identifier, "dataset": ds.name, "test": t, "status": "error",
+                  "message": f"{type(exc).__name__}: {exc}"[:300], "references": ds.references.get(t, {})}
+                 for t in ds.tests], {}, None)
+
+
 def score(identifiers: Iterable[str] | None = None, datasets: Iterable[str] | None = None, quick: bool = False,
           sysidentpy: bool = True, progress: bool = False, factory: Callable[[str], Any] | None = None,
-          log: Callable[[str], None] | None = None, seeds: Sequence[int] | None = None) -> ScoreRun:
+          log: Callable[[str], None] | None = None, seeds: Sequence[int] | None = None, executor=None) -> ScoreRun:
     """Score identifiers × datasets. Unavailable identifiers/datasets are skipped with the reason.
 
-    BLAS runs single-threaded throughout (torch's training already does, :mod:`sysid.neural.device`), so the
-    numbers do not depend on ``OPENBLAS_NUM_THREADS`` or the machine's core count."""
+    ``executor`` (:class:`benchmarks.execution.Executor`; default in-process) runs the pairs. BLAS runs
+    single-threaded throughout (here and in :func:`score_pair`, wherever a pair runs; torch's training already
+    does, :mod:`sysid.neural.device`), so the numbers do not depend on ``OPENBLAS_NUM_THREADS`` or the core count."""
     from sysid._blas import blas_threads
 
     with blas_threads(1):
-        return _score(identifiers, datasets, quick, sysidentpy, progress, factory, log, seeds)
+        return _score(identifiers, datasets, quick, sysidentpy, progress, factory, log, seeds, executor)
 
 
-def _score(identifiers, datasets, quick, sysidentpy, progress, factory, log, seeds=None) -> ScoreRun:
+def _score(identifiers, datasets, quick, sysidentpy, progress, factory, log, seeds=None, executor=None) -> ScoreRun:
     from benchmarks.datasets import list_datasets, load_dataset
     from sysid.registry import IDENTIFIERS, available_identifiers
 
@@ -476,43 +493,42 @@ def _score(identifiers, datasets, quick, sysidentpy, progress, factory, log, see
                 run.skipped.append({"dataset": n, "reason": d["description"].rsplit("[", 1)[-1].rstrip("]")})
     datasets = list(datasets)
     run.selection = {"identifiers": identifiers, "datasets": datasets}
-    pairs = [(i, d) for d in datasets for i in identifiers]
-    from sysid.progress import progress as _bar
-
-    bar = _bar(total=len(pairs), desc="score", show=progress)
+    loaded: dict[str, Any] = {}
     for dname in datasets:
         try:
-            ds = prepare_dataset(load_dataset(dname, progress=progress), quick)
-            run.datasets[dname] = ds
+            loaded[dname] = prepare_dataset(load_dataset(dname, progress=progress), quick)
         except InputError as exc:
-            run.skipped.append({"dataset": dname, "reason": str(exc)})
-            if bar:
-                bar.update(len(identifiers))
+            loaded[dname] = exc
+    # One task per identifier x dataset pair (benchmarks.execution: in-process, or on Dask workers); the rows
+    # are put together below in the serial order, whatever order the tasks finished in.
+    from benchmarks.execution import Executor
+
+    ex = executor or Executor()
+    handles = {d: ex.share(ds) for d, ds in loaded.items() if not isinstance(ds, Exception)}
+    pairs = [(i, d) for d in datasets if d in handles for i in identifiers]
+
+    def logged(k: int, outcome) -> None:
+        for r in outcome[0]:
+            log(format_row(r))
+
+    outcomes = ex.map(score_pair_task, [(i, handles[d], quick, factory, seeds) for i, d in pairs], desc="score",
+                      progress=progress, on_result=logged)
+    by_pair = dict(zip(pairs, outcomes))
+    for dname in datasets:
+        ds = loaded[dname]
+        if isinstance(ds, Exception):
+            run.skipped.append({"dataset": dname, "reason": str(ds)})
             continue
+        run.datasets[dname] = ds
         for ident in identifiers:
-            if bar:
-                bar.set_postfix_str(f"{ident} on {dname}")
-            try:
-                rows, preds = score_pair(ident, ds, quick=quick, factory=factory, seeds=seeds)
-            except ConfigError as exc:
-                run.skipped.append({"identifier": ident, "dataset": dname, "reason": str(exc)})
-                rows, preds = [], {}
-            except Exception as exc:  # a crashing identifier is a result (status error), not a crashed run
-                rows = [{"identifier": ident, "dataset": dname, "test": t, "status": "error",
-                         "message": f"{type(exc).__name__}: {exc}"[:300], "references": ds.references.get(t, {})}
-                        for t in ds.tests]
-                preds = {}
-            for r in rows:
-                run.rows.append(r)
-                log(format_row(r))
+            rows, preds, skip = by_pair[(ident, dname)]
+            if skip is not None:
+                run.skipped.append(skip)
+            run.rows.extend(rows)
             for t, y in preds.items():
                 run.predictions[(ident, dname, t)] = y
-            if bar:
-                bar.update(1)
         if sysidentpy:
             run.sysidentpy.extend(sysidentpy_frols(ds, quick=quick))
-    if bar:
-        bar.close()
     run.seconds = time.perf_counter() - t_start
     return run
 

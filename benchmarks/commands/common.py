@@ -123,7 +123,8 @@ def preflight(args: argparse.Namespace) -> None:
         v = getattr(args, name, None)
         if isinstance(v, str) and v:
             check_output_path(v)
-            if name == "output" and args.command in RECORD_OUTPUT_COMMANDS:
+            collection = args.command == "generate" and (getattr(args, "grid", None) or getattr(args, "seeds", None))
+            if name == "output" and args.command in RECORD_OUTPUT_COMMANDS and not collection:  # .h5: checked there
                 suffix = Path(v).suffix.lower()
                 if suffix not in SUPPORTED_SUFFIXES:
                     raise DataError(f"{v}: unknown format {suffix or '(no suffix)'!r}; supported: "

@@ -4,6 +4,7 @@ Scores identifiers × datasets (test RMSE, NRMSE, R² one-step and free-run, fit
 the published reference numbers and SysIdentPy's FROLS on the same split. ``--check`` compares with
 ``benchmarks/baselines.json`` and exits 1 naming every pair below its floor. ``--update-baselines`` writes
 new floors from this run (measured × (1 + margin)) — a deliberate step, to be committed.
+``--workers N`` / ``--scheduler ADDRESS`` run the pairs on Dask (:mod:`benchmarks.execution`).
 """
 
 from __future__ import annotations
@@ -12,6 +13,7 @@ import argparse
 import sys
 
 from benchmarks.commands.common import number
+from benchmarks.execution import add_execution_args, executor_from_args
 
 
 def _names(text: str | None) -> list[str] | None:
@@ -54,6 +56,7 @@ def register(sub) -> None:
     p.add_argument("--no-sysidentpy", action="store_true", help="do not run SysIdentPy's FROLS beside the rows")
     p.add_argument("--report", metavar="DIR", help="write score.json, score.md and figures to DIR")
     p.add_argument("--json", action="store_true", help="print the results as JSON")
+    add_execution_args(p)
     p.set_defaults(func=run)
 
 
@@ -85,9 +88,10 @@ def run(args: argparse.Namespace) -> int:
             raise ConfigError("--from-runs goes with --update-baselines (and without --check)")
         return _floors_from_runs(args, bpath, baselines)
     quiet = args.json
-    res = scoring.score(idents, dsets, quick=args.quick, sysidentpy=not args.no_sysidentpy,
-                        progress=not (quiet or getattr(args, "quiet", False)),
-                        log=None if quiet else (lambda s: print(s, flush=True)), seeds=args.seeds)
+    with executor_from_args(args) as ex:
+        res = scoring.score(idents, dsets, quick=args.quick, sysidentpy=not args.no_sysidentpy,
+                            progress=not (quiet or getattr(args, "quiet", False)),
+                            log=None if quiet else (lambda s: print(s, flush=True)), seeds=args.seeds, executor=ex)
     out = scoring._clean(res.to_dict())
     if args.check:
         failures = scoring.check(res, baselines)

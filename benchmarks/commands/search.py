@@ -10,14 +10,20 @@ sets ny and nu together. Example::
 
 Storage: ``--storage FILE.db`` (SQLite, default ``STUDY.db`` in the current folder) or an Optuna URL such as
 ``postgresql://user:pw@host/db`` shared by workers on several machines (run the same command on each).
-Re-running the same command resumes an interrupted sweep. ``--workers N`` runs N local processes.
+Re-running the same command resumes an interrupted sweep; it exits 0 only when the study holds the requested
+number of finished configurations, else 1 with a line saying how many are missing. ``--workers N`` runs N
+local search processes; ``--scheduler ADDRESS`` (or ``PIEZOTWIN_SCHEDULER``) runs each configuration's
+repeats as tasks on a Dask cluster (:mod:`benchmarks.execution`).
 """
 
 from __future__ import annotations
 
 import argparse
 
+import sys
+
 from benchmarks.commands.common import COUNT, SEED, add_data_args, emit_json, number, read_data, same_fs
+from benchmarks.execution import add_execution_args, make_executor
 from sysid.config import parse_assignments
 
 
@@ -42,11 +48,13 @@ def register(sub) -> None:
     p.add_argument("--trials", type=COUNT, metavar="N", help="configurations to evaluate (default: the whole grid)")
     p.add_argument("--storage", metavar="URL|FILE", help="Optuna storage: SQLite file (default STUDY.db) or URL")
     p.add_argument("--study", default="piezotwin-search", help="study name inside the storage")
-    p.add_argument("--workers", type=number(1, 256, integer=True), default=1, help="local worker processes sharing the storage")
+    p.add_argument("--workers", type=number(1, 256, integer=True), default=1,
+                   help="local worker processes sharing the storage (each runs whole configurations)")
     p.add_argument("--export", metavar="FILE.jsonl", help="write one JSON line per run")
     p.add_argument("--plot", metavar="FILE.png", help="R² distribution of the best configuration (Fig. 5.13 analogue)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     add_data_args(p)
+    add_execution_args(p, workers=False)
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=run)
 
@@ -71,8 +79,15 @@ def run(args: argparse.Namespace) -> int:
     spec = SweepSpec(identifier=args.identifier, grid=parse_grid(args.grid, args.identifier), repeats=args.repeats,
                      seed=args.seed, fixed=parse_assignments(args.set_), sampler=args.sampler)
     init_sqlite(storage_url(args.storage, args.study), _open_storage)  # new SQLite store: created under a lock
-    summary = run_sweep(spec, est if len(est) > 1 else est[0], val, storage=args.storage, study=args.study,
-                        trials=args.trials, workers=args.workers, progress=not (args.no_progress or getattr(args, "quiet", False)))
+    with make_executor(scheduler=args.scheduler) as ex:
+        if ex.kind == "dask" and args.workers > 1:
+            raise ConfigError("--workers N runs N local search processes; with --scheduler the repeats run on the "
+                              "Dask workers: give one of them")
+        est_h = ex.share(est if len(est) > 1 else est[0]) if ex.kind == "dask" else (est if len(est) > 1 else est[0])
+        val_h = ex.share(val) if ex.kind == "dask" else val
+        summary = run_sweep(spec, est_h, val_h, storage=args.storage, study=args.study, trials=args.trials,
+                            workers=args.workers, progress=not (args.no_progress or getattr(args, "quiet", False)),
+                            executor=ex if ex.kind == "dask" else None)
     url = storage_url(args.storage, args.study)
     summary.update({"identifier": args.identifier, "study": args.study, "storage": url, "sampler": args.sampler,
                     "repeats": args.repeats, "grid": spec.grid})
@@ -83,9 +98,14 @@ def run(args: argparse.Namespace) -> int:
         summary["runs_file"] = str(export_jsonl(runs, args.export))
     if args.plot and summary["best"] is not None:
         summary["plot"] = str(plot_r2_distribution(runs, summary["best"]["config_key"], args.plot))
+    missing = summary["missing"]
+    if missing:  # stderr, so that --json output stays one document
+        print(f"search: {missing} of {summary['requested']} requested configurations did not complete "
+              f"({summary['complete']} complete in study {args.study}); rerun the same command to resume",
+              file=sys.stderr)
     if args.json:
         emit_json(summary)
-        return 0
+        return 1 if missing else 0
     print(f"{args.identifier}: {summary['n_configs']} configurations, {summary['n_runs']} runs  (storage {url}, study {args.study})")
     print(f"  {'configuration':<44} {'params':>7}  {'R2 OSA est':>10} {'R2 FRS est':>17} {'R2 OSA val':>10} {'R2 FRS val':>17}")
     for c in summary["configs"]:
@@ -101,4 +121,4 @@ def run(args: argparse.Namespace) -> int:
     for key in ("runs_file", "plot"):
         if key in summary:
             print(f"  {key} -> {summary[key]}")
-    return 0
+    return 1 if missing else 0

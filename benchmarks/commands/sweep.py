@@ -5,7 +5,8 @@ For each value of one twin parameter (any field of the twin's parameter dataclas
 and its ``sweep_metrics(protocol)`` are tabulated. A twin that defines no ``sweep_metrics`` is refused with
 a one-line message. With ``--report DIR``: ``sweep_<param>_spectra.png`` (when the twin has
 ``sweep_spectrum``) and ``sweep_<param>_metrics.png`` (each numeric figure against the parameter), plus
-``sweep_<param>.json``.
+``sweep_<param>.json``. ``--workers N`` / ``--scheduler ADDRESS`` run the values as Dask tasks
+(:mod:`benchmarks.execution`); the rows keep the order of the values.
 """
 
 from __future__ import annotations
@@ -16,6 +17,7 @@ from pathlib import Path
 from typing import Any
 
 from benchmarks.commands.common import add_twin_args, clean_json, emit_json, twin_from_args
+from benchmarks.execution import add_execution_args, executor_from_args
 from sysid.config import coerce
 from sysid.errors import ConfigError
 from sysid.safeio import save_figure
@@ -30,6 +32,7 @@ def register(sub) -> None:
     add_twin_args(p)
     p.add_argument("--json", action="store_true")
     p.add_argument("--report", metavar="DIR", help="write PNG plots and the JSON table into DIR")
+    add_execution_args(p)
     p.set_defaults(func=run)
 
 
@@ -50,25 +53,30 @@ def parse_spec(spec: str, params_cls: type) -> tuple[str, list[Any]]:
     return name, [coerce(v, info[name].default, name) for v in values]
 
 
-def sweep(twin, name: str, values: list[Any], protocol: str | None = None, identify: bool = True) -> dict[str, Any]:
-    """Run the study; returns {twin, param, unit, rows: [{value, **metrics}], ...}."""
+def sweep_point(twin, name: str, value: Any, protocol: str | None, identify: bool) -> tuple[dict[str, Any], Any]:
+    """One value of the study (a task): the row of figures and the spectrum (or None)."""
+    tw = twin.with_params(**{name: value})
+    row = {"value": value, **tw.sweep_metrics(protocol=protocol, identify=identify)}
+    return row, (tw.sweep_spectrum() if hasattr(tw, "sweep_spectrum") else None)
+
+
+def sweep(twin, name: str, values: list[Any], protocol: str | None = None, identify: bool = True, executor=None,
+          progress: bool = False) -> dict[str, Any]:
+    """Run the study; returns {twin, param, unit, rows: [{value, **metrics}], ...}. One task per value on
+    ``executor`` (:class:`benchmarks.execution.Executor`; default in-process), rows in the order of ``values``."""
+    from benchmarks.execution import Executor
     from twins.base import param_info
 
     if not hasattr(twin, "sweep_metrics"):
         raise ConfigError(f"twin {twin.name} defines no sweep metrics; sweep is available for: acoustic")
     if protocol is not None:
         twin.check_protocol(protocol)
-    rows = []
-    spectra = []
-    from sysid.progress import progress
-
-    for v in progress(values, desc=f"sweep {name}", unit="value"):
-        tw = twin.with_params(**{name: v})
-        row = {"value": v, **tw.sweep_metrics(protocol=protocol, identify=identify)}
-        rows.append(row)
-        if hasattr(tw, "sweep_spectrum"):
-            f, curves = tw.sweep_spectrum()
-            spectra.append((v, f, curves))
+    ex = executor or Executor()
+    tw = ex.share(twin)
+    results = ex.map(sweep_point, [(tw, name, v, protocol, identify) for v in values], desc=f"sweep {name}",
+                     progress=progress)
+    rows = [row for row, _ in results]
+    spectra = [(v, *spec) for v, (_, spec) in zip(values, results) if spec is not None]
     unit = param_info(type(twin.params))[name].unit
     return {"twin": twin.name, "param": name, "unit": unit, "effects": sorted(twin.effects), "rows": rows,
             "_spectra": spectra}
@@ -139,7 +147,9 @@ def public(result: dict[str, Any]) -> dict[str, Any]:
 def run(args: argparse.Namespace) -> int:
     twin = twin_from_args(args.twin, args)
     name, values = parse_spec(args.spec, type(twin.params))
-    result = sweep(twin, name, values, args.protocol, identify=not args.no_identify)
+    with executor_from_args(args) as ex:
+        result = sweep(twin, name, values, args.protocol, identify=not args.no_identify, executor=ex,
+                       progress=not args.json)
     if args.report:
         result["report_files"] = write_report(result, Path(args.report))
     if args.json:

@@ -20,15 +20,17 @@ several machines share one study. Re-running the same command resumes: finished 
 configurations whose trial failed or was interrupted run again (trials of a killed worker are detected by
 Optuna's heartbeat and retried). ``workers`` local processes share the storage; a progress bar shows the
 configurations done and the time left. Results export as JSON lines (one line per run).
+
+How many processes share one study and finish exactly the requested configurations, none twice, none lost to
+a killed process: :mod:`sysid.neural.study`. The repeats of a configuration can run as Dask tasks
+(``run_config(..., executor)``, :mod:`benchmarks.execution`).
 """
 
 from __future__ import annotations
 
 import json
 import math
-import multiprocessing as mp
 import os
-import sys
 import time
 import warnings
 from dataclasses import asdict, dataclass, field
@@ -188,7 +190,20 @@ def _open_storage(url: str):
             kwargs["heartbeat_stale_trial_callback"] = storages.RetryHeartbeatStaleTrialCallback(max_retry=2)
         else:  # pragma: no cover - older Optuna
             kwargs["failed_trial_callback"] = storages.RetryFailedTrialCallback(max_retry=2)
-        return storages.RDBStorage(url, heartbeat_interval=20, grace_period=60, **kwargs)
+        from sysid.neural.study import heartbeat_settings
+
+        beat, grace = heartbeat_settings()
+        # Two processes opening a new store at once race on creating its tables / version row: the loser gets
+        # an IntegrityError ('UNIQUE constraint failed: alembic_version') or 'database is locked'; retry.
+        from sqlalchemy.exc import SQLAlchemyError
+
+        for attempt in range(10):
+            try:
+                return storages.RDBStorage(url, heartbeat_interval=beat, grace_period=grace, **kwargs)
+            except SQLAlchemyError:
+                if attempt == 9:
+                    raise
+                time.sleep(0.2 * (attempt + 1))
 
 
 def _make_sampler(spec: SweepSpec):
@@ -208,13 +223,28 @@ def _spec_dict(spec: SweepSpec) -> dict[str, Any]:
     return d
 
 
+def _create_study(storage, study_name: str, spec: SweepSpec):
+    """create_study(load_if_exists=True), retried: two processes creating the same new store or study at once
+    race on its tables and its name (an IntegrityError / DuplicatedStudyError / 'database is locked' in one)."""
+    import optuna
+    from sqlalchemy.exc import SQLAlchemyError
+
+    for attempt in range(10):
+        try:
+            return optuna.create_study(study_name=study_name, storage=storage, sampler=_make_sampler(spec),
+                                       direction="maximize", load_if_exists=True)
+        except (optuna.exceptions.DuplicatedStudyError, SQLAlchemyError):
+            if attempt == 9:
+                raise
+            time.sleep(0.2 * (attempt + 1))
+
+
 def open_study(spec: SweepSpec, url: str, study_name: str, create: bool = True):
     import optuna
 
     storage = _open_storage(url)
     if create:
-        study = optuna.create_study(study_name=study_name, storage=storage, sampler=_make_sampler(spec),
-                                    direction="maximize", load_if_exists=True)
+        study = _create_study(storage, study_name, spec)
         saved = study.user_attrs.get("spec")
         if saved is None:
             study.set_user_attr("spec", _spec_dict(spec))
@@ -225,26 +255,34 @@ def open_study(spec: SweepSpec, url: str, study_name: str, create: bool = True):
 
 
 # ---------------------------------------------------------------------------------------------- one configuration
-def run_config(spec: SweepSpec, config: dict[str, str], est: Record | Sequence[Record],
-               val: Record | Sequence[Record]) -> list[dict[str, Any]]:
-    """Fit ``spec.repeats`` models of one configuration; one dict per run with the identify-JSON scores."""
+def run_one(spec: SweepSpec, config: dict[str, str], repeat: int, est: Record | Sequence[Record],
+            val: Record | Sequence[Record]) -> dict[str, Any]:
+    """Fit one run (repeat ``repeat``, seed ``spec.seed + repeat``) of one configuration: a pure function of
+    its arguments, so a Dask worker gives the same numbers as this process."""
     from sysid.evaluate import evaluate
     from sysid.registry import get_identifier
 
-    cls = get_identifier(spec.identifier)
-    runs = []
-    for r in range(spec.repeats):
-        seed = spec.seed + r
-        model = cls.from_assignments(spec.assignments(config, seed))
-        t0 = time.perf_counter()
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", DivergenceWarning)
-            model.fit(est)
-        fit_s = time.perf_counter() - t0
-        runs.append({"config": dict(config), "repeat": r, "seed": seed, "n_parameters": model.n_parameters_,
-                     "fit_seconds": fit_s, "estimation": evaluate(model, est), "validation": evaluate(model, val),
-                     "pid": os.getpid()})
-    return runs
+    seed = spec.seed + repeat
+    model = get_identifier(spec.identifier).from_assignments(spec.assignments(config, seed))
+    t0 = time.perf_counter()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", DivergenceWarning)
+        model.fit(est)
+    fit_s = time.perf_counter() - t0
+    return {"config": dict(config), "repeat": repeat, "seed": seed, "n_parameters": model.n_parameters_,
+            "fit_seconds": fit_s, "estimation": evaluate(model, est), "validation": evaluate(model, val),
+            "pid": os.getpid()}
+
+
+def run_config(spec: SweepSpec, config: dict[str, str], est: Record | Sequence[Record],
+               val: Record | Sequence[Record], executor=None) -> list[dict[str, Any]]:
+    """Fit ``spec.repeats`` models of one configuration; one dict per run with the identify-JSON scores.
+    ``executor`` (:class:`benchmarks.execution.Executor`, or any object with its ``map``) runs the repeats;
+    default: one after the other here. ``est``/``val`` may be handles of ``executor.share``."""
+    tasks = [(spec, config, r, est, val) for r in range(spec.repeats)]
+    if executor is None:
+        return [run_one(*t) for t in tasks]
+    return executor.map(run_one, tasks, desc=config_key(config), progress=False)
 
 
 def _objective_value(runs: list[dict[str, Any]]) -> float:
@@ -265,23 +303,30 @@ def _clean(obj: Any) -> Any:
     return obj
 
 
-def _done_keys(study) -> set[str]:
-    from optuna.trial import TrialState
-
-    return {t.user_attrs["config_key"] for t in study.get_trials(deepcopy=False, states=(TrialState.COMPLETE,))
-            if "config_key" in t.user_attrs}
-
-
-def _make_objective(spec: SweepSpec, est, val) -> Callable:
+def _make_objective(spec: SweepSpec, est, val, target: int | None = None, executor=None,
+                    state: dict[str, Any] | None = None) -> Callable:
+    """The trial: claim the configuration (:func:`sysid.neural.study.claim`), then fit its repeats."""
     import optuna
+
+    from sysid.neural.study import claim
+
+    state = {} if state is None else state
+    limit = spec.n_configs if target is None else target
 
     def objective(trial: "optuna.Trial") -> float:
         config = {k: trial.suggest_categorical(k, v) for k, v in spec.grid.items()}
         key = config_key(config)
-        if key in _done_keys(trial.study):
-            raise optuna.TrialPruned("configuration already done")  # random/TPE redraw; cheap
-        trial.set_user_attr("config_key", key)
-        runs = run_config(spec, config, est, val)
+        reason = claim(trial, key, limit)
+        if reason is not None:
+            state["clash"] = True
+            raise optuna.TrialPruned(reason)  # not counted; the loop draws or picks again
+        trial.set_user_attr("claimed", True)  # the claim stands: this trial fits the configuration
+        try:
+            runs = run_config(spec, config, est, val, executor=executor)
+        except Exception as exc:
+            trial.set_user_attr("error", f"{type(exc).__name__}: {exc}"[:300])
+            state["failed_key"] = key
+            raise
         trial.set_user_attr("runs", _clean(runs))
         return _objective_value(runs)
 
@@ -293,21 +338,6 @@ def _grid_configs(spec: SweepSpec) -> list[dict[str, str]]:
 
     keys = list(spec.grid)
     return [dict(zip(keys, values)) for values in itertools.product(*(spec.grid[k] for k in keys))]
-
-
-def _next_grid_config(study, spec: SweepSpec, target: int, worker: int, n_workers: int) -> dict[str, str] | None:
-    """The next grid configuration for this worker: among the first ``target`` grid points, one that is
-    neither finished nor running — its own share (index mod n_workers) first, then any other."""
-    from optuna.trial import TrialState
-
-    trials = study.get_trials(deepcopy=False, states=(TrialState.COMPLETE, TrialState.RUNNING, TrialState.WAITING))
-    taken = {config_key({k: str(v) for k, v in t.params.items()}) for t in trials if t.params}
-    taken |= {t.user_attrs.get("config_key") for t in trials}
-    missing = [(i, c) for i, c in enumerate(_grid_configs(spec)[:target]) if config_key(c) not in taken]
-    if not missing:
-        return None
-    own = [c for i, c in missing if i % n_workers == worker]
-    return (own or [c for _, c in missing])[0]
 
 
 def _requeue_failed(study, spec: SweepSpec) -> int:
@@ -330,108 +360,15 @@ def _requeue_failed(study, spec: SweepSpec) -> int:
     return n
 
 
-def _worker_loop(spec: SweepSpec, url: str, study_name: str, est, val, target: int,
-                 on_trial: Callable[[], None] | None = None, barrier=None, worker: int = 0, n_workers: int = 1) -> None:
-    """Run configurations until the sweep has ``target`` finished ones.
-
-    Grid sweeps claim configurations one at a time (fixing the trial's parameters with Optuna's
-    PartialFixedSampler) instead of queueing them as WAITING trials: two SQLite clients can pop the same
-    waiting trial (SQLite has no row locks), while a claimed configuration is visible as RUNNING at once.
-    """
-    import optuna
-
-    study = open_study(spec, url, study_name, create=False)
-    objective = _make_objective(spec, est, val)
-    base = _make_sampler(spec)
-    if barrier is not None:
-        barrier.wait(timeout=300)
-    attempts = 0
-    while attempts < 50 * max(target, 1):
-        if len(_done_keys(study)) >= target:
-            break
-        if spec.sampler == "grid":
-            cfg = _next_grid_config(study, spec, target, worker, n_workers)
-            if cfg is None:
-                break  # the rest is running in other workers
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore", optuna.exceptions.ExperimentalWarning)
-                study.sampler = optuna.samplers.PartialFixedSampler(cfg, base)
-        attempts += 1
-        try:
-            study.optimize(objective, n_trials=1, catch=(), gc_after_trial=False)
-        except ValueError as exc:  # another client finished the same (retried) trial first: its result stands
-            if "Cannot tell" not in str(exc):
-                raise
-        if on_trial is not None:
-            on_trial()
-
-
-def _worker_main(spec_d: dict, url: str, study_name: str, est, val, target: int, barrier, worker: int,
-                 n_workers: int) -> None:
-    from sysid.neural.device import configure_threads
-
-    configure_threads(1)
-    _worker_loop(SweepSpec(**spec_d), url, study_name, est, val, target, barrier=barrier, worker=worker,
-                 n_workers=n_workers)
-
-
 def run_sweep(spec: SweepSpec, est: Record | Sequence[Record], val: Record | Sequence[Record], storage: str | None = None,
               study: str = "piezotwin-search", trials: int | None = None, workers: int = 1, progress: bool = True,
-              ) -> dict[str, Any]:
-    """Run (or resume) a sweep; returns :func:`summarise` of everything the study holds."""
-    from sysid.progress import progress as progress_bar
+              executor=None) -> dict[str, Any]:
+    """Run (or resume) a sweep until the study holds ``trials`` finished configurations (all by default);
+    :func:`summarise` of the study plus ``requested``/``complete``/``missing``. See :mod:`sysid.neural.study`."""
+    from sysid.neural.study import run_sweep as _run
 
-    url = storage_url(storage, study)
-    st = open_study(spec, url, study)
-    n_all = spec.n_configs
-    target = n_all if trials is None else int(trials)
-    if target < 1:
-        raise ConfigError(f"--trials must be ≥ 1, got {trials}")
-    target = min(target, n_all)
-    from optuna.storages import fail_stale_trials
-
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")  # Optuna marks the heartbeat API experimental
-        fail_stale_trials(st)  # trials of a killed worker (heartbeat older than the grace period) are re-queued
-    if spec.sampler != "grid":
-        _requeue_failed(st, spec)  # grid sweeps rerun failed configurations by themselves
-    done0 = len(_done_keys(st))
-    bar = progress_bar(total=target, initial=min(done0, target), unit="config", desc=f"{spec.identifier} sweep",
-                       show=progress, leave=True)
-    try:
-        if workers <= 1:
-            def tick() -> None:
-                bar.n = min(len(_done_keys(st)), target)
-                bar.refresh()
-
-            _worker_loop(spec, url, study, est, val, target, on_trial=tick)
-        else:
-            ctx = mp.get_context("spawn")
-            barrier = ctx.Barrier(int(workers))
-            procs = [ctx.Process(target=_worker_main, args=(asdict(spec), url, study, est, val, target, barrier, w,
-                                                            int(workers)), daemon=False)
-                     for w in range(int(workers))]
-            for p in procs:
-                p.start()
-            try:
-                while any(p.is_alive() for p in procs):
-                    time.sleep(1.0)
-                    bar.n = min(len(_done_keys(st)), target)
-                    bar.refresh()
-            except KeyboardInterrupt:
-                for p in procs:
-                    p.terminate()
-                raise
-            for p in procs:
-                p.join()
-            bad = [p.exitcode for p in procs if p.exitcode != 0]
-            if bad:
-                raise RuntimeError(f"search: {len(bad)} worker process(es) failed (exit codes {bad}); rerun to resume")
-        bar.n = min(len(_done_keys(st)), target)
-        bar.refresh()
-    finally:
-        bar.close()
-    return summarise(collect(url, study))
+    return _run(spec, est, val, storage=storage, study=study, trials=trials, workers=workers, progress=progress,
+                executor=executor)
 
 
 # ---------------------------------------------------------------------------------------------- results
