@@ -721,13 +721,16 @@ def check_rules(run: ScoreRun | dict[str, Any], baselines: dict[str, Any]) -> li
     """The failures of ``run`` against the baselines' rules alone (beats the linear baseline, beats a value)."""
     data = run.to_dict() if isinstance(run, ScoreRun) else run
     by_key = {(r["identifier"], r["dataset"], r["test"]): r for r in data["rows"]}
-    return [f for rule in baselines.get("rules", []) for f in _check_rule(rule, by_key)]
+    return [f for rule in baselines.get("rules", []) for f in _check_rule(rule, by_key, data.get("mode", ""))]
 
 
-def _check_rule(rule: dict[str, Any], by_key: dict[tuple[str, str, str], dict[str, Any]]) -> list[str]:
+def _check_rule(rule: dict[str, Any], by_key: dict[tuple[str, str, str], dict[str, Any]], mode: str = "") -> list[str]:
+    """Failures of one rule. An exemption names identifier, dataset, optionally test and ``modes`` (default: every
+    mode), and says why."""
     out = []
     kind = rule["rule"]
-    exempt = {(e["identifier"], e["dataset"], e.get("test", "*")) for e in rule.get("exemptions", [])}
+    exempt = {(e["identifier"], e["dataset"], e.get("test", "*")) for e in rule.get("exemptions", [])
+              if mode in e.get("modes", [mode])}
 
     def is_exempt(i: str, d: str, t: str) -> bool:
         return (i, d, t) in exempt or (i, d, "*") in exempt

@@ -56,6 +56,10 @@ def test_rules_beat_linear_and_published():
     # an explicit, documented exemption removes exactly that pair
     base["rules"][0]["exemptions"] = [{"identifier": "narmax-poly", "dataset": "wiener-hammerstein", "why": "test"}]
     assert len(scoring.check_rules({"mode": "quick", "rows": rows}, base)) == 1
+    # ... in the modes it names only
+    base["rules"][0]["exemptions"][0]["modes"] = ["full"]
+    assert len(scoring.check_rules({"mode": "quick", "rows": rows}, base)) == 2
+    assert len(scoring.check_rules({"mode": "full", "rows": rows}, base)) == 1
 
 
 def test_scores_match_an_independent_computation():
