@@ -25,6 +25,8 @@ from typing import Any, Callable
 
 import numpy as np
 
+from sysid.safeio import atomic_write_text, save_figure
+
 
 class StageSkipped(Exception):
     """Raised by a stage whose prerequisites are not available; the message says why."""
@@ -49,7 +51,7 @@ class Context:
         d = self.report_dir / "fig"
         d.mkdir(parents=True, exist_ok=True)
         rel = f"fig/{name}.png"
-        fig.savefig(self.report_dir / rel, dpi=80)
+        save_figure(fig, self.report_dir / rel, dpi=80)  # atomic: no half-written PNG under the final name
         plt.close(fig)
         self.figures.append((title, rel))
         return rel
@@ -461,8 +463,8 @@ def _write_report(ctx: Context, rows: list[dict[str, Any]]) -> Path:
         r["stage"] == "score lab benchmarks" and r["status"] == "done" for r in rows) else []
     body.append(html_block(collect(files=data_files)))
     path = ctx.report_dir / "index.html"
-    path.write_text("<!doctype html><html><head><meta charset='utf-8'><title>PiezoTwin report</title>"
-                    f"<style>{_CSS}{REPORT_CSS}</style></head><body>" + "\n".join(body) + "</body></html>")
+    atomic_write_text(path, "<!doctype html><html><head><meta charset='utf-8'><title>PiezoTwin report</title>"
+                      f"<style>{_CSS}{REPORT_CSS}</style></head><body>" + "\n".join(body) + "</body></html>")
     return path
 
 

@@ -29,12 +29,13 @@ import numpy as np
 
 from benchmarks.commands.common import clean_json
 from sysid.record import Record
+from sysid.safeio import atomic_write_text
 
 
 def _save(out: Path, name: str, obj: dict[str, Any]) -> Path:
     out.mkdir(parents=True, exist_ok=True)
     p = out / f"{name}.json"
-    p.write_text(json.dumps(clean_json(obj), indent=2))
+    atomic_write_text(p, json.dumps(clean_json(obj), indent=2))
     return p
 
 

@@ -91,8 +91,6 @@ def export_fmu(twin: Twin, path: str | Path, fs: float | None = None, model_name
     ``fs`` [Hz] is the sampling rate (default: :func:`default_fs`); the communication step is ``1/fs``.
     Returns the path written. Raises :class:`~sysid.errors.ConfigError` for a twin that cannot be exported.
     """
-    from pythonfmu import FmuBuilder
-
     path = Path(path)
     if path.suffix != ".fmu":
         raise ConfigError(f"{path}: the output file must end in .fmu")
@@ -128,17 +126,26 @@ def export_fmu(twin: Twin, path: str | Path, fs: float | None = None, model_name
                 files.append(pkg_dir / top)
             else:
                 files.append(src)
-        script_dir = stage / "script"
-        script_dir.mkdir()
-        script = script_dir / f"{model_name}_slave.py"
-        script.write_text(slave_source(model_name, twin.name))
-        try:
-            out = FmuBuilder.build_FMU(script, dest=stage / path.name, project_files=files)
-        finally:
-            sys.modules.pop(script.stem, None)
-            if str(script_dir) in sys.path:
-                sys.path.remove(str(script_dir))
-        _deflate(Path(out), path)
+        build_from_source(stage, model_name, slave_source(model_name, twin.name), files, path)
+    return path
+
+
+def build_from_source(stage: Path, model_name: str, source: str, files: list, path: Path) -> Path:
+    """Build the FMU ``path`` with pythonfmu from the slave script ``source`` and the ``files`` it ships, in the
+    staging folder ``stage``; the builder's import of the script is undone afterwards."""
+    from pythonfmu import FmuBuilder
+
+    script_dir = stage / "script"
+    script_dir.mkdir()
+    script = script_dir / f"{model_name}_slave.py"
+    script.write_text(source)
+    try:
+        out = FmuBuilder.build_FMU(script, dest=stage / path.name, project_files=files)
+    finally:
+        sys.modules.pop(script.stem, None)
+        if str(script_dir) in sys.path:
+            sys.path.remove(str(script_dir))
+    _deflate(Path(out), path)
     return path
 
 

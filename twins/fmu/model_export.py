@@ -11,7 +11,6 @@ the neural models). The FMU's output equals the model's own free run from zero i
 from __future__ import annotations
 
 import json
-import sys
 import tempfile
 from pathlib import Path
 from typing import Iterable
@@ -19,7 +18,7 @@ from typing import Iterable
 from sysid.errors import ConfigError
 from sysid.modelfile import write_model
 from sysid.stepper import make_stepper
-from twins.fmu.export import SHIPPED_PACKAGES, _copy_package, _deflate, _identifier, _project_version
+from twins.fmu.export import SHIPPED_PACKAGES, _copy_package, _identifier, _project_version, build_from_source
 from twins.fmu.model_slave import MODEL_CONFIG_NAME, MODEL_FORMAT
 
 __all__ = ["export_model_fmu", "model_slave_source"]
@@ -45,8 +44,6 @@ def export_model_fmu(model, path: str | Path, fs: float | None = None, model_nam
     estimation rate (``model.fs_``); it must be given for model files that do not record it."""
     import importlib
 
-    from pythonfmu import FmuBuilder
-
     path = Path(path)
     if path.suffix != ".fmu":
         raise ConfigError(f"{path}: the output file must end in .fmu")
@@ -70,15 +67,5 @@ def export_model_fmu(model, path: str | Path, fs: float | None = None, model_nam
             mod = importlib.import_module(name)
             _copy_package(Path(mod.__file__).parent, pkg_dir / name)
             files.append(pkg_dir / name)
-        script_dir = stage / "script"
-        script_dir.mkdir()
-        script = script_dir / f"{model_name}_slave.py"
-        script.write_text(model_slave_source(model_name, model.name))
-        try:
-            out = FmuBuilder.build_FMU(script, dest=stage / path.name, project_files=files)
-        finally:
-            sys.modules.pop(script.stem, None)
-            if str(script_dir) in sys.path:
-                sys.path.remove(str(script_dir))
-        _deflate(Path(out), path)
+        build_from_source(stage, model_name, model_slave_source(model_name, model.name), files, path)
     return path
