@@ -93,7 +93,7 @@ class NeuralNARXStepper(_WindowStepper):
         if self.k < self.L:
             self.k += 1
             return 0.0
-        yw, _ = free_run_mlp(m.weights_, m.sizes_, self.code, self.y, self.u, m.n_y, m.n_u, DIVERGENCE_BOUND,
+        yw, _ = free_run_mlp(m.weights_, m.sizes_, self.code, self.y, self.u, m.ny, m.nu, DIVERGENCE_BOUND,
                              m.nk, m.linear)
         vn = float(yw[-1, 0])
         self.y[-1, 0] = vn

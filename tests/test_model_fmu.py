@@ -34,7 +34,7 @@ def _models(est):
         "armax": ARMAX(ny=2, nu=2, ne=1).fit(est),
         "narx-poly": NARXPoly(degree=2).fit(est),
         "narmax-poly": NARMAXPoly(ne=1).fit(est),
-        "narx-mlp": NARXMLP(n_y=3, n_u=3, hidden=[8, 8], epochs=3, device="cpu", linear=True, seed=1).fit(est),
+        "narx-mlp": NARXMLP(ny=3, nu=3, hidden=[8, 8], epochs=3, device="cpu", linear=True, seed=1).fit(est),
     }
 
 
