@@ -610,7 +610,9 @@ def sysidentpy_frols(ds, quick: bool = False, use_cache: bool = True) -> list[di
         rows.append(row)
     if use_cache:
         cache.parent.mkdir(parents=True, exist_ok=True)
-        cache.write_text(json.dumps(_clean(rows)))
+        from sysid.safeio import atomic_write_text
+
+        atomic_write_text(cache, json.dumps(_clean(rows)))
     return rows
 
 
@@ -894,19 +896,22 @@ def markdown_table(run: ScoreRun | dict[str, Any]) -> str:
 
 
 def write_report(run: ScoreRun, report_dir: str | Path) -> dict[str, Path]:
-    """score.json, score.md and figures (free-run NRMSE bars; measured vs free-run for each dataset test)."""
+    """score.json, score.md and figures (free-run NRMSE bars; measured vs free-run for each dataset test), each
+    written atomically (:mod:`sysid.safeio`)."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    from sysid.safeio import atomic_write_text, save_figure
+
     out = Path(report_dir)
     out.mkdir(parents=True, exist_ok=True)
     paths: dict[str, Path] = {}
     paths["json"] = out / "score.json"
-    paths["json"].write_text(json.dumps(_clean(run.to_dict()), indent=2))
+    atomic_write_text(paths["json"], json.dumps(_clean(run.to_dict()), indent=2))
     paths["markdown"] = out / "score.md"
-    paths["markdown"].write_text(markdown_table(run))
+    atomic_write_text(paths["markdown"], markdown_table(run))
     ok = [r for r in run.rows if r.get("status") in ("ok", "diverged")]
     if ok:
         labels = sorted({f"{r['dataset']}/{r['test']}" for r in ok})
@@ -927,7 +932,7 @@ def write_report(run: ScoreRun, report_dir: str | Path) -> dict[str, Path]:
         ax.legend(fontsize=8)
         fig.tight_layout()
         paths["nrmse"] = out / "score_nrmse.png"
-        fig.savefig(paths["nrmse"], dpi=90)
+        save_figure(fig, paths["nrmse"], dpi=90)
         plt.close(fig)
     # measured vs free-run predictions: one figure per dataset (first test), the whole scored record and a zoom
     if run.predictions and run.datasets:
