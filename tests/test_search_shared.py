@@ -43,7 +43,7 @@ def _search(files: Path, storage: str, study: str, *extra: str, grace: int = 30)
     env = {**os.environ, "PYTHONPATH": str(REPO), "OPENBLAS_NUM_THREADS": "1", "PIEZOTWIN_HEARTBEAT_S": "1",
            "PIEZOTWIN_GRACE_S": str(grace)}
     cmd = [sys.executable, "-m", "benchmarks.cli", "search", "narx-mlp", "--est", str(files / "est.npz"),
-           "--val", str(files / "val.npz"), "--grid", GRID, "--set", "epochs=40,hidden=16-16,device=cpu",
+           "--val", str(files / "val.npz"), "--grid", GRID, "--set", "epochs=150,hidden=16-16,device=cpu",
            "--storage", storage, "--study", study, "--no-progress", "--json", *extra]
     return subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=files)
 
