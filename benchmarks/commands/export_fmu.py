@@ -28,6 +28,20 @@ def register(sub) -> None:
     p.set_defaults(func=run)
 
 
+def _export(export, what, out: str, args: argparse.Namespace):
+    """``export(what, out, fs=args.fs)`` timed, then checked by ``fmpy validate`` unless ``--no-validate``:
+    returns (path, seconds, problems)."""
+    t0 = time.perf_counter()
+    path = export(what, out, fs=args.fs)
+    seconds = time.perf_counter() - t0
+    problems = []
+    if not args.no_validate:
+        from fmpy.validation import validate_fmu
+
+        problems = validate_fmu(str(path))
+    return path, seconds, problems
+
+
 def run(args: argparse.Namespace) -> int:
     from pathlib import Path
 
@@ -43,14 +57,7 @@ def run(args: argparse.Namespace) -> int:
     if args.fs is not None and not args.fs > 0:
         raise ConfigError(f"--fs must be positive, got {args.fs}")
     out = args.output or f"fmus/{args.twin}.fmu"
-    t0 = time.perf_counter()
-    path = export_fmu(twin, out, fs=args.fs)
-    seconds = time.perf_counter() - t0
-    problems = []
-    if not args.no_validate:
-        from fmpy.validation import validate_fmu
-
-        problems = validate_fmu(str(path))
+    path, seconds, problems = _export(export_fmu, twin, out, args)
     import json
     import zipfile
 
@@ -90,14 +97,7 @@ def _run_model(args: argparse.Namespace) -> int:
         raise ConfigError(f"--fs must be positive, got {args.fs}")
     model = load_model(args.model)
     out = args.output or f"fmus/{Path(args.model).stem}.fmu"
-    t0 = time.perf_counter()
-    path = export_model_fmu(model, out, fs=args.fs)
-    seconds = time.perf_counter() - t0
-    problems = []
-    if not args.no_validate:
-        from fmpy.validation import validate_fmu
-
-        problems = validate_fmu(str(path))
+    path, seconds, problems = _export(export_model_fmu, model, out, args)
     fs = args.fs or model.fs_
     summary = {"model": str(args.model), "identifier": model.name, "fmu": str(path), "bytes": Path(path).stat().st_size,
                "fs": fs, "validation_problems": problems, "build_seconds": round(seconds, 3)}
