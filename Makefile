@@ -29,13 +29,13 @@ test: $(STAMP)
 	$(PY) -m pytest -q
 
 test-all: $(STAMP)
-	$(PY) -m pytest -q -m "slow or not slow"
+	$(PY) -m pytest -q -m "not perf"
 
 bench: $(STAMP)
-	mkdir -p benchmarks/results
-	$(PY) -m pytest -q -m "slow or not slow" benchmarks/perf --benchmark-enable --benchmark-only \
-	  --benchmark-json=benchmarks/results/bench.json -p no:randomly
-	$(PY) -m benchmarks.perf.summarise benchmarks/results/bench.json -o benchmarks/results/summary.md
+	mkdir -p docs/perf
+	$(PY) -m pytest -q -m perf tests/perf --benchmark-enable --benchmark-only \
+	  --benchmark-json=docs/perf/bench.json -p no:randomly
+	$(PY) -m tests.perf.summarise docs/perf/bench.json -o docs/perf/summary.md
 
 fmus: $(STAMP)
 	$(VENV)/bin/piezotwin export-fmu cantilever -o fmus/cantilever.fmu
@@ -43,7 +43,7 @@ fmus: $(STAMP)
 
 # Regenerate the CLI reference from the argument parser (tests/test_docs.py checks it is current).
 docs: $(STAMP)
-	$(PY) -m benchmarks.commands.clidoc -o docs/cli.md
+	$(PY) -m benchmarks.cli.clidoc -o docs/cli.md
 
 clean:
 	rm -rf $(VENV) report .pytest_cache .benchmarks

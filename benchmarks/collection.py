@@ -105,7 +105,7 @@ def generate_point(twin, changes: dict[str, Any], seed: int, protocol: str, opti
 
 
 def _json(obj: Any, sort: bool = True) -> str:
-    from benchmarks.commands.common import clean_json
+    from sysid.jsonio import clean_json
 
     return json.dumps(clean_json(obj), sort_keys=sort, default=str)
 

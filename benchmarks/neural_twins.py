@@ -136,7 +136,7 @@ def acoustic_osa_vs_sim(seeds: Sequence[int] = (0, 1, 2, 3, 4), structure: dict[
 
 
 def main(argv: list[str] | None = None) -> int:
-    from benchmarks.commands.common import clean_json
+    from sysid.jsonio import clean_json
 
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     p.add_argument("experiment", choices=("cantilever", "acoustic"))

@@ -27,7 +27,7 @@ from typing import Any
 
 import numpy as np
 
-from benchmarks.commands.common import clean_json
+from sysid.jsonio import clean_json
 from sysid.record import Record
 from sysid.safeio import atomic_write_text
 

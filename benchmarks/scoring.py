@@ -857,7 +857,7 @@ def make_floors(runs: ScoreRun | dict[str, Any] | list, margin: float = DEFAULT_
 
 # ----------------------------------------------------------------------------------------- output
 def _clean(obj: Any) -> Any:
-    from benchmarks.commands.common import clean_json
+    from sysid.jsonio import clean_json
 
     return clean_json(obj)
 

@@ -18,7 +18,7 @@ The rules a CSV file must follow are in ``docs/data-files.md``; in short:
 
 Parsing of the numbers is done by :func:`pandas.read_csv` (C engine) on the selected columns; the structural
 checks (cells per line, blank lines, comments) are vectorised with numpy over the file's bytes, so the whole
-read stays within about 1.5x of ``pandas.read_csv`` alone (``benchmarks/perf/test_csv_read.py``).
+read stays within about 1.5x of ``pandas.read_csv`` alone (``tests/perf/test_csv_read.py``).
 """
 
 from __future__ import annotations

@@ -29,11 +29,12 @@ from typing import Any
 import numpy as np
 
 from sysid.errors import DataError
+from sysid.jsonio import json_default
 from sysid.record import FS_MAX, FS_MIN, Record, check_array
 from sysid.safeio import atomic_path, atomic_write_text, check_output_path, save_figure
 
 __all__ = ["read_record", "write_record", "output_file", "atomic_path", "atomic_write_text", "check_output_path",
-           "save_figure", "json_default", "SUPPORTED_SUFFIXES", "FS_MIN", "FS_MAX", "check_fs"]
+           "save_figure", "SUPPORTED_SUFFIXES", "FS_MIN", "FS_MAX", "check_fs"]
 
 SUPPORTED_SUFFIXES = (".npz", ".csv", ".mat")
 _UNIFORM_TOL = 0.01  # relative jitter of the t column accepted as uniform sampling
@@ -103,17 +104,6 @@ def _write_csv(record: Record, path: Path) -> None:
         fh.write(",".join(["t"] + header) + "\n")
         for k, row in enumerate(data):
             fh.write(",".join([repr(k / record.fs)] + [repr(float(v)) for v in row]) + "\n")
-
-
-def json_default(obj: Any) -> Any:
-    """``json.dumps(default=...)`` hook for numpy arrays/scalars and paths (one place for the whole project)."""
-    if isinstance(obj, np.ndarray):
-        return obj.tolist()
-    if isinstance(obj, np.generic):
-        return obj.item()
-    if isinstance(obj, Path):
-        return str(obj)
-    raise TypeError(f"not JSON serialisable: {type(obj).__name__}")
 
 
 def read_record(

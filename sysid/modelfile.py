@@ -37,7 +37,7 @@ from typing import Any, Sequence
 import numpy as np
 
 from sysid.errors import ConfigError, DataError, InputError
-from sysid.io import json_default
+from sysid.jsonio import json_default
 from sysid.safeio import atomic_path
 
 __all__ = ["FORMAT", "VERSION", "LEGACY_FORMAT", "write_model", "read_model", "estimation_info",

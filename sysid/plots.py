@@ -35,7 +35,7 @@ from sysid.residuals import correlation_tests, residual_spectrum  # noqa: E402
 
 __all__ = ["plot_residuals", "plot_correlation_tests", "plot_scatter", "plot_horizon_residuals", "plot_frf", "plot_bla", "plot_compare",
            "identification_report", "plot_measured_vs_predicted", "draw_correlation_test", "whole_periods",
-           "BAND_COLOR", "ZOOM_COLOR"]
+           "BAND_COLOR", "ZOOM_COLOR", "pyplot"]
 
 # Colours that mean one thing in every report (the browser test looks for them): the 95 % confidence band of
 # a correlation test, and the span of the whole record that the zoomed panel shows.
@@ -43,6 +43,18 @@ BAND_COLOR = "#ffc04d"
 ZOOM_COLOR = "#c6dbf7"
 MEASURED_COLOR = "#000000"
 PREDICTED_COLORS = ("#d62728", "#2ca02c", "#9467bd", "#8c564b", "#e377c2", "#17becf", "#bcbd22", "#7f7f7f")
+
+
+def pyplot():
+    """matplotlib.pyplot with the non-interactive Agg backend: the one plotting set-up of the project (every
+    module that draws calls this instead of choosing a backend itself)."""
+    os.environ.setdefault("MPLBACKEND", "Agg")
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot
+
+    return matplotlib.pyplot
 
 
 def _save(fig, path) -> Path:

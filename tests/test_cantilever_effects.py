@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from scipy.signal import welch
 
-from benchmarks.commands.list_cmd import collect
+from benchmarks.cli.list_cmd import collect
 from twins.cantilever import CantileverTwin
 from twins.cantilever.figures import last_period, loop_metrics
 

@@ -30,7 +30,7 @@ def test_version(capsys):
 @pytest.fixture
 def chatty(monkeypatch):
     """`list` replaced by a command that logs at every level, warns (a multi-line warning) and prints a result."""
-    import benchmarks.commands.list_cmd as list_cmd
+    import benchmarks.cli.list_cmd as list_cmd
 
     def run(args):
         log = logging.getLogger("sysid.fake")
@@ -99,12 +99,12 @@ def _prints_outside_main(path: Path) -> list[int]:
 
 
 def test_library_logs_never_prints():
-    """Only the CLI (benchmarks/cli.py, benchmarks/commands/) and scripts' main() print; the speed suite is tests."""
+    """Only the CLI (benchmarks/cli/main.py, benchmarks/cli/) and scripts' main() print; the speed suite is tests."""
     offenders = {}
     for pkg in ("sysid", "twins", "benchmarks"):
         for path in (ROOT / pkg).rglob("*.py"):
             rel = path.relative_to(ROOT).as_posix()
-            if rel == "benchmarks/cli.py" or rel.startswith(("benchmarks/commands/", "benchmarks/perf/")):
+            if rel == "benchmarks/cli/main.py" or rel.startswith(("benchmarks/cli/", "tests/perf/")):
                 continue
             lines = _prints_outside_main(path)
             if lines:

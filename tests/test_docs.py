@@ -97,15 +97,15 @@ def test_every_skipped_example_says_why():
 
 def test_cli_reference_is_generated_from_the_parser():
     """docs/cli.md must equal the generator's output: after adding or changing a command, run `make docs`."""
-    from benchmarks.commands.clidoc import generate
+    from benchmarks.cli.clidoc import generate
 
     committed = (DOCS / "cli.md").read_text(encoding="utf-8")
-    assert committed == generate(), "docs/cli.md is stale: run `make docs` (python -m benchmarks.commands.clidoc -o docs/cli.md)"
+    assert committed == generate(), "docs/cli.md is stale: run `make docs` (python -m benchmarks.cli.clidoc -o docs/cli.md)"
 
 
 def test_cli_reference_lists_every_command_and_option():
     from benchmarks.cli import build_parser
-    from benchmarks.commands.clidoc import generate
+    from benchmarks.cli.clidoc import generate
 
     text = generate()
     sub = next(a for a in build_parser()._actions if a.__class__.__name__ == "_SubParsersAction")

@@ -307,7 +307,7 @@ def cantilever_runs(tmp_path_factory):
 def test_cantilever_process_exits_cleanly(cantilever_runs, tmp_path):
     """A process that ran the cantilever FMU in-process, error cases included, and then exits normally
     (no os._exit) must exit with status 0. Before the fix this child aborted at exit in 22 of 30 runs
-    (glibc "corrupted double-linked list", status 134; benchmarks/perf/fmu_exit_stress.py --mode project)."""
+    (glibc "corrupted double-linked list", status 134; tests/perf/fmu_exit_stress.py --mode project)."""
     _, path, *_ = cantilever_runs
     script = tmp_path / "exit_child.py"
     script.write_text(_EXIT_CHILD)

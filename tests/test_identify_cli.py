@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from benchmarks.cli import main
-from benchmarks.commands.identify import identify
+from benchmarks.cli.identify import identify
 from sysid.base import load_model
 from sysid.evaluate import evaluate
 from sysid.io import read_record, write_record

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from scipy.signal import lfilter
 
-from benchmarks.commands.identify import identify
+from benchmarks.cli.identify import identify
 from sysid.advice import closed_loop_correlation, practitioner_warnings
 from sysid.io import write_record
 from sysid.linear import ARX

@@ -184,7 +184,7 @@ def test_old_formats_still_read(data, tmp_path):
     m = NARXPoly().fit(est)
     v1 = {"format": "piezotwin-model/1", "identifier": m.name, "params": m.get_params(), "state": m._state()}
     p = tmp_path / "old.json"
-    from sysid.io import json_default
+    from sysid.jsonio import json_default
 
     p.write_text(json.dumps(v1, default=json_default))
     assert np.array_equal(load_model(p).predict(val, None), m.predict(val, None))

@@ -108,7 +108,7 @@ def test_old_model_files_with_old_names_load(tmp_path, est_file):
 
     rec = read_record(est_file)
     model = get_identifier("narx-mlp")(ny=2, nu=2, epochs=1, hidden=[4]).fit(rec)
-    from sysid.io import json_default
+    from sysid.jsonio import json_default
 
     # a model file as written before the rename: the first (JSON, unchecksummed) format with the old names
     params = model.get_params()

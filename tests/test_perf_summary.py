@@ -4,11 +4,11 @@ from __future__ import annotations
 
 import json
 
-from benchmarks.perf.summarise import main, pair_references, summarise
+from tests.perf.summarise import main, pair_references, summarise
 
 
 def _b(module, name, mean, **extra):
-    return {"name": name, "fullname": f"benchmarks/perf/{module}.py::{name}", "stats": {"mean": mean, "min": mean * 0.9},
+    return {"name": name, "fullname": f"tests/perf/{module}.py::{name}", "stats": {"mean": mean, "min": mean * 0.9},
             "extra_info": extra}
 
 
@@ -22,9 +22,9 @@ DATA = {"machine_info": {"cpu": {"brand_raw": "TestCPU", "count": 2}, "python_ve
 
 def test_pairs_and_ratios(tmp_path):
     refs = pair_references(DATA["benchmarks"])
-    assert refs["benchmarks/perf/test_signals.py::test_decimate_10M_points"].endswith("test_decimate_scipy_reference")
-    assert refs["benchmarks/perf/test_frols.py::test_ours"].endswith("test_theirs")
-    assert "benchmarks/perf/test_signals.py::test_chirp_10M_points" not in refs
+    assert refs["tests/perf/test_signals.py::test_decimate_10M_points"].endswith("test_decimate_scipy_reference")
+    assert refs["tests/perf/test_frols.py::test_ours"].endswith("test_theirs")
+    assert "tests/perf/test_signals.py::test_chirp_10M_points" not in refs
     text = summarise(DATA)
     assert "| signals: decimate_10M_points | 500.0 ms |" in text and "| 4× |" in text
     assert "| 30× |" in text and "1 M/s" in text

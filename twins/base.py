@@ -20,7 +20,7 @@ import numpy as np
 
 from sysid.config import coerce, make_rng, parse_assignments
 from sysid.errors import ConfigError, DataError
-from sysid.io import json_default as _json_default
+from sysid.jsonio import json_default as _json_default
 from sysid.io import output_file
 from sysid.record import Record
 

@@ -24,7 +24,8 @@ from pathlib import Path
 from typing import Any, Iterable
 
 from sysid.errors import ConfigError
-from twins.base import Twin, _json_default
+from sysid.jsonio import json_default as _json_default
+from twins.base import Twin
 from twins.fmu.cores import choose_core
 from twins.fmu.spec import CONFIG_NAME, fmu_config
 

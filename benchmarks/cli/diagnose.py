@@ -1,0 +1,80 @@
+"""``piezotwin diagnose TWIN --data FILE [--val FILE] [--params FILE] [--effects LIST] [--json] [--report DIR]``.
+
+Calibrates the twin's configuration to the data, analyses the residual, names the cause among the twin's
+catalog effects, extends the twin with it and reports the validation gain (issue 8; library:
+:func:`twins.discrepancy.diagnose`).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+from benchmarks.cli.common import NONNEG_INT, add_data_args, add_twin_args, emit_json, number, read_data, same_fs, twin_from_args
+from sysid.errors import ConfigError
+
+
+def register(sub) -> None:
+    p = sub.add_parser("diagnose", help="what a twin gets wrong about measured data, why, and the gain once modelled")
+    p.add_argument("twin")
+    p.add_argument("--data", required=True, metavar="FILE", help="measured (estimation) record")
+    p.add_argument("--val", metavar="FILE", help="validation record (default: last 40 %% of --data)")
+    p.add_argument("--max-rounds", type=number(0, 100, integer=True), default=3, help="at most this many effects are added (default 3)")
+    p.add_argument("--candidates", metavar="LIST", help="comma-separated catalog effects to try (default: all missing)")
+    p.add_argument("--no-calibrate", action="store_true", help="do not re-fit the starting configuration")
+    p.add_argument("--skip", type=NONNEG_INT, default=0, help="leading samples not scored (initial transient)")
+    add_data_args(p)
+    add_twin_args(p)
+    p.add_argument("--progress", action="store_true",
+                   help="print the steps as they run on stderr (default when stderr is a terminal)")
+    p.add_argument("--json", action="store_true")
+    p.add_argument("--report", metavar="DIR", help="write figures and index.html here")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from twins.discrepancy import diagnose
+
+    if args.max_rounds < 0:
+        raise ConfigError(f"--max-rounds must be >= 0, got {args.max_rounds}")
+    twin = twin_from_args(args.twin, args)
+    data = read_data(args, args.data)
+    val = read_data(args, args.val) if args.val else None
+    same_fs([data] + ([val] if val is not None else []))
+    cands = [c.strip() for c in args.candidates.split(",") if c.strip()] if args.candidates else None
+    show = bool(getattr(args, "progress", False)) or sys.stderr.isatty()
+    result = diagnose(twin, data, val, max_rounds=args.max_rounds, candidates=cands,
+                      calibrate_baseline=not args.no_calibrate, skip=args.skip, keep_stages=bool(args.report),
+                      progress=(lambda msg: print(f"[diagnose] {msg}", file=sys.stderr, flush=True)) if show else None)
+    if args.report:
+        from twins.discrepancy.report import write_report
+
+        index = write_report(result, args.report)
+        result["report"] = str(index)
+    result.pop("_stages", None)
+    if args.json:
+        emit_json(result)
+        return 0
+    b, e = result["baseline"], result["extended"]
+    print(f"diagnose {args.twin}: verdict {result['verdict']}")
+    if result.get("split", {}).get("note"):
+        print(f"  validation: {result['split']['note']}")
+    for note in result.get("ranges", []):
+        print(f"  range: {note}")
+    print(f"  validation NRMSE {b['nrmse_val']:.5g} -> {e['nrmse_val']:.5g} (ratio {result['gain']['nrmse_ratio']:.3f}),"
+          f" R2 {b['r2_val']:.5f} -> {e['r2_val']:.5f}")
+    print(f"  correlation tests {'pass' if b['tests']['passed'] else 'fail'} -> {'pass' if e['tests']['passed'] else 'fail'}")
+    for c in result["causes"]:
+        params = ", ".join(f"{k}={v:.4g}" if isinstance(v, (int, float)) else f"{k}={v}"
+                           for k, v in c.get("params", {}).items())
+        print(f"  cause {c['effect']} (confidence {c['confidence']:.2f}) {params}")
+        print(f"    {c['evidence']}")
+    if result["verdict"] == "unexplained":
+        print(f"  {result['residual_vs_noise']['text']}")
+    elif not result["causes"]:
+        print(f"  residual: {result['unexplained']['description']}")
+    for row in result.get("at_bound", []):
+        print(f"  at bound: {row['param']}={row['value']:.4g} {row['unit']} (its {row['side']} bound {row['bound']:g})")
+    if args.report:
+        print(f"  report -> {result['report']}")
+    return 0
