@@ -25,6 +25,7 @@ from typing import Any, Callable
 
 import numpy as np
 
+from sysid.plots import pyplot
 from sysid.safeio import atomic_write_text, save_figure
 
 
@@ -46,13 +47,11 @@ class Context:
 
     def save_figure(self, fig, name: str, title: str) -> str:
         """Save a matplotlib figure as ``fig/<name>.png`` under the report folder; returns the relative path."""
-        import matplotlib.pyplot as plt
-
         d = self.report_dir / "fig"
         d.mkdir(parents=True, exist_ok=True)
         rel = f"fig/{name}.png"
         save_figure(fig, self.report_dir / rel, dpi=80)  # atomic: no half-written PNG under the final name
-        plt.close(fig)
+        pyplot().close(fig)
         self.figures.append((title, rel))
         return rel
 
@@ -60,13 +59,6 @@ class Context:
         self.sections.append((title, content_html))
 
 
-def _plt():
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    return plt
 
 
 def _not_built(exc: Exception, what: str) -> StageSkipped:
@@ -125,7 +117,7 @@ def _stage_cantilever_figures(ctx: Context) -> str:
     ds = ctx.data.get("twin_datasets", {}).get("cantilever-thesis")
     if ds is None:
         raise StageSkipped("no cantilever dataset (cantilever twin not built)")
-    plt = _plt()
+    plt = pyplot()
     test = ds.tests["thesis-sines"]
     segs = test.segments()
     n = len(segs)
@@ -176,7 +168,7 @@ def _stage_acoustic_figures(ctx: Context) -> str:
     ds = ctx.data.get("twin_datasets", {}).get("acoustic-thesis")
     if ds is None:
         raise StageSkipped("no acoustic dataset (acoustic twin not built)")
-    plt = _plt()
+    plt = pyplot()
     fig, axes = plt.subplots(2, 2, figsize=(11, 5.5))
     for col, (title, rec) in enumerate((("multisine (estimation)", ds.est), ("1 ms chirp (test)", next(iter(ds.tests.values()))))):
         for row, (x, lab) in enumerate(((rec.u, "input [V]"), (rec.y, "output [V]"))):
@@ -315,7 +307,7 @@ def _residual_figure(ctx: Context) -> None:
     skip = max(ds.init_samples, int(getattr(model, "max_lag_", 0)))
     e = rec.y[skip:] - yhat[skip:]
     res = correlation_tests(e, rec.u[skip:], max_lag=20)
-    plt = _plt()
+    plt = pyplot()
     from sysid.plots import draw_correlation_test
 
     fig, axes = plt.subplots(1, len(res["tests"]), figsize=(13, 2.8))
@@ -379,7 +371,7 @@ def _stage_sweep(ctx: Context) -> str:
     base = cls()
     if not hasattr(base, "spectrum_metrics"):
         raise StageSkipped("acoustic twin has no spectrum_metrics yet")
-    plt = _plt()
+    plt = pyplot()
     distances = [0.05, 0.1, 0.15, 0.2] if ctx.quick else [0.05, 0.075, 0.1, 0.125, 0.15, 0.2, 0.3]
     temps = [15.0, 24.0, 35.0] if ctx.quick else [10.0, 15.0, 20.0, 24.0, 30.0, 35.0, 40.0]
     f = np.linspace(800e3, 1450e3, 600)

@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from sysid.plots import _save, plt
+from sysid.plots import _save, pyplot
 from sysid.record import Record
 
 __all__ = ["plot_simulation_band", "plot_bode_with_std", "linear_report"]
@@ -28,7 +28,7 @@ def plot_simulation_band(model, record: Record, path, z: float = 2.0, n_draws: i
     std = np.asarray(std, float).reshape(len(record), -1)
     n = min(len(record), max_points)
     t = record.t[:n]
-    fig, axes = plt.subplots(y.shape[1], 1, figsize=(7.5, 2.8 * y.shape[1]), squeeze=False)
+    fig, axes = pyplot().subplots(y.shape[1], 1, figsize=(7.5, 2.8 * y.shape[1]), squeeze=False)
     for o, ax in enumerate(axes[:, 0]):
         ax.plot(t, y[:n, o], color="0.6", lw=0.8, label="measured")
         ax.plot(t, sim[:n, o], color="C0", lw=0.9, label="free run")
@@ -48,7 +48,7 @@ def plot_bode_with_std(model, fs: float, path, n_freq: int = 400) -> Path:
     std = None if r["std"] is None else np.asarray(r["std"])
     G = G.reshape(len(f), -1)
     std = None if std is None else std.reshape(len(f), -1)
-    fig, (a1, a2) = plt.subplots(2, 1, figsize=(7.0, 5.0), sharex=True)
+    fig, (a1, a2) = pyplot().subplots(2, 1, figsize=(7.0, 5.0), sharex=True)
     for k in range(G.shape[1]):
         mag = np.abs(G[:, k])
         line, = a1.semilogx(f, 20 * np.log10(np.maximum(mag, 1e-300)), lw=1.0, label=None if G.shape[1] == 1 else f"G{k + 1}")

@@ -200,10 +200,10 @@ def order_table(identifier: str, est: Record | Sequence[Record], val: Record | S
 
 def plot_order_table(rows: list[dict[str, Any]], path: str | Path, title: str = "order selection") -> Path:
     """AIC/BIC (left axis) and validation free-run R² (right axis) against the order; PNG."""
-    from sysid.plots import _save, plt
+    from sysid.plots import _save, pyplot
 
     ok = [r for r in rows if "error" not in r]
-    fig, ax = plt.subplots(figsize=(6.4, 3.6))
+    fig, ax = pyplot().subplots(figsize=(6.4, 3.6))
     n = [r["order"] for r in ok]
     for key, style in (("aic", "o-"), ("bic", "s--")):
         ax.plot(n, [np.nan if r.get(key) is None else r[key] for r in ok], style, label=key.upper())

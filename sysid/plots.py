@@ -24,14 +24,8 @@ from typing import Any, Sequence
 
 import numpy as np
 
-os.environ.setdefault("MPLBACKEND", "Agg")
-import matplotlib  # noqa: E402
-
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-
-from sysid.errors import DivergenceWarning  # noqa: E402
-from sysid.residuals import correlation_tests, residual_spectrum  # noqa: E402
+from sysid.errors import DivergenceWarning
+from sysid.residuals import correlation_tests, residual_spectrum
 
 __all__ = ["plot_residuals", "plot_correlation_tests", "plot_scatter", "plot_horizon_residuals", "plot_frf", "plot_bla", "plot_compare",
            "identification_report", "plot_measured_vs_predicted", "draw_correlation_test", "whole_periods",
@@ -47,7 +41,9 @@ PREDICTED_COLORS = ("#d62728", "#2ca02c", "#9467bd", "#8c564b", "#e377c2", "#17b
 
 def pyplot():
     """matplotlib.pyplot with the non-interactive Agg backend: the one plotting set-up of the project (every
-    module that draws calls this instead of choosing a backend itself)."""
+    module that draws calls this instead of choosing a backend itself). matplotlib is imported here, on the
+    first figure, so that importing a module that can draw costs nothing and never picks a backend for the
+    user's own session."""
     os.environ.setdefault("MPLBACKEND", "Agg")
     import matplotlib
 
@@ -63,14 +59,14 @@ def _save(fig, path) -> Path:
     try:
         return save_figure(fig, path, dpi=110, bbox_inches="tight")  # atomic: no half-written PNG
     finally:
-        plt.close(fig)
+        pyplot().close(fig)
 
 
 def plot_residuals(e: np.ndarray, fs: float, path, title: str = "one-step residuals", unit: str = "") -> Path:
     """Residual time series, histogram with the fitted normal density, and Welch spectrum."""
     e = np.asarray(e, float).ravel()
     t = np.arange(e.size) / fs
-    fig, ax = plt.subplots(1, 3, figsize=(13, 3.4))
+    fig, ax = pyplot().subplots(1, 3, figsize=(13, 3.4))
     ax[0].plot(t, e, lw=0.5)
     ax[0].set(xlabel="time [s]", ylabel=f"residual [{unit}]" if unit else "residual", title=title)
     ef = e[np.isfinite(e)]
@@ -120,7 +116,7 @@ def draw_correlation_test(ax, test: dict[str, Any], label: str = "") -> None:
 def plot_correlation_tests(result: dict[str, Any], path, title: str = "residual correlation tests") -> Path:
     """The five tests of eq. 2-32 (Figure 5.6 analogue), each on its own y-scale with the band visible."""
     tests = result["tests"]
-    fig, axes = plt.subplots(1, len(tests), figsize=(3.2 * len(tests), 3.0))
+    fig, axes = pyplot().subplots(1, len(tests), figsize=(3.2 * len(tests), 3.0))
     for ax, t in zip(np.atleast_1d(axes), tests):
         draw_correlation_test(ax, t)
     np.atleast_1d(axes)[0].set_ylabel("φ(τ)")
@@ -173,7 +169,7 @@ def plot_measured_vs_predicted(t: np.ndarray, y: np.ndarray, predictions: dict[s
         a = int(np.clip(c - w // 2, 0, n - w))
         zoom = (a, a + w)
     a, b = int(zoom[0]), int(zoom[1])
-    fig, ax = plt.subplots(2, 1, figsize=(10, 5.6), gridspec_kw={"height_ratios": [1.2, 1]})
+    fig, ax = pyplot().subplots(2, 1, figsize=(10, 5.6), gridspec_kw={"height_ratios": [1.2, 1]})
     if b - a < n:
         ax[0].axvspan(t[a], t[b - 1], color=ZOOM_COLOR, lw=0, zorder=0, label="zoom below")
     ax[0].plot(*_envelope(t, y, max_points), color=MEASURED_COLOR, lw=0.7, label="measured", zorder=2)
@@ -208,7 +204,7 @@ def plot_scatter(y: np.ndarray, y_hat: np.ndarray, path, title: str = "measured 
     yh = np.asarray(y_hat, float).ravel()
     ok = np.isfinite(yh)
     y, yh = y[ok], yh[ok]
-    fig, ax = plt.subplots(figsize=(4.6, 4.4))
+    fig, ax = pyplot().subplots(figsize=(4.6, 4.4))
     ax.plot(y, yh, ".", ms=1.5, alpha=0.4)
     if y.size > 1 and np.ptp(y) > 0:
         slope, icpt = np.polyfit(y, yh, 1)
@@ -226,7 +222,7 @@ def plot_scatter(y: np.ndarray, y_hat: np.ndarray, path, title: str = "measured 
 
 def plot_horizon_residuals(model, record, path, horizons: Sequence[int | None] = (1, 5, 20, None)) -> Path:
     """Residual y − ŷ at several horizons (k-step ahead at every sample; None = free run), one row each."""
-    fig, axes = plt.subplots(len(horizons), 1, figsize=(10, 1.9 * len(horizons)), sharex=True)
+    fig, axes = pyplot().subplots(len(horizons), 1, figsize=(10, 1.9 * len(horizons)), sharex=True)
     t = record.t
     L = int(getattr(model, "max_lag_", 0))
     for ax, h in zip(np.atleast_1d(axes), horizons):
@@ -256,7 +252,7 @@ def plot_compare(t: np.ndarray, y: np.ndarray, predictions: Sequence[np.ndarray]
         width = min(n, max(400, n // 20))
         a = max(skip, n // 2 - width // 2)
         zoom = (a, min(n, a + width))
-    fig, axes = plt.subplots(2, 1, figsize=(11, 6.2))
+    fig, axes = pyplot().subplots(2, 1, figsize=(11, 6.2))
     lab = f" [{unit}]" if unit else ""
     for ax, (a, b) in zip(axes, ((0, n), zoom)):
         ax.plot(t[a:b], y[a:b], "-", color="0.55", lw=2.2, label="measured")
@@ -305,7 +301,7 @@ def _save_atomic(fig, path) -> Path:
     path = Path(path)
     with atomic_path(path) as tmp:
         fig.savefig(tmp, dpi=110, bbox_inches="tight", format=(path.suffix.lstrip(".") or "png"))
-    plt.close(fig)
+    pyplot().close(fig)
     return path
 
 
@@ -315,7 +311,7 @@ def plot_frf(frf, path, title: str = "FRF", unit: str = "", reference: Any = Non
     f = np.asarray(frf.f_hz)
     G = np.asarray(frf.G)
     has_coh = frf.coherence is not None
-    fig, ax = plt.subplots(3 if has_coh else 2, 1, figsize=(8, 8 if has_coh else 6), sharex=True)
+    fig, ax = pyplot().subplots(3 if has_coh else 2, 1, figsize=(8, 8 if has_coh else 6), sharex=True)
     pos = f > 0
     ax[0].semilogx(f[pos], frf.magnitude_db[pos], lw=1, label="estimate")
     if frf.std is not None and not has_coh:
@@ -342,7 +338,7 @@ def plot_bla(bla, path, title: str = "Best Linear Approximation", unit: str = ""
     """G_BLA magnitude with the noise and nonlinear-distortion standard deviations [dB], its phase, and the
     output power at the odd / even detection lines against the noise floor."""
     f = np.asarray(bla.f_hz)
-    fig, ax = plt.subplots(3, 1, figsize=(8, 9))
+    fig, ax = pyplot().subplots(3, 1, figsize=(8, 9))
     with np.errstate(divide="ignore", invalid="ignore"):
         ax[0].plot(f, 20 * np.log10(np.abs(bla.G)), lw=1, label="G_BLA")
         ax[0].plot(f, 10 * np.log10(bla.var_noise), ".", ms=2, label="noise std")

@@ -15,12 +15,9 @@ def test_skipped_and_failed_stages_are_reported(tmp_path, monkeypatch):
         raise RuntimeError("boom")
 
     def fine(ctx):
-        import matplotlib
+        from sysid.plots import pyplot
 
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
-
-        fig, ax = plt.subplots()
+        fig, ax = pyplot().subplots()
         ax.plot([0, 1])
         ctx.save_figure(fig, "ok", "a figure")
         return "made one figure"

@@ -94,10 +94,9 @@ def trace_reaches_end(img: np.ndarray) -> tuple[float, float]:
 def page(tmp_path_factory):
     if not CHROMIUM.exists():
         pytest.skip("headless browser test needs /usr/bin/chromium (Debian package 'chromium'); not installed")
-    import matplotlib
+    from sysid.plots import pyplot
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = pyplot()
 
     from benchmarks.mainjob import Context, _write_report
     from sysid.plots import draw_correlation_test, plot_measured_vs_predicted

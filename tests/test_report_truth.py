@@ -25,10 +25,9 @@ def test_loops_cover_whole_periods():
 
 
 def test_correlation_axes_scale_to_the_data_and_show_the_band():
-    import matplotlib
+    from sysid.plots import pyplot
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = pyplot()
 
     band = 1.96 / np.sqrt(20_000)
     small = {"name": "r_ee", "passed": True, "lags": list(range(1, 21)), "values": list(0.5 * band * np.sin(np.arange(20))),

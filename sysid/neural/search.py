@@ -439,11 +439,9 @@ def export_jsonl(runs: list[dict[str, Any]], path: str | Path) -> Path:
 
 def plot_r2_distribution(runs: list[dict[str, Any]], config_key_: str, path: str | Path) -> Path:
     """Fig. 5.13 analogue: histograms of free-run R² in estimation and validation with fitted normal curves."""
-    import matplotlib
+    from sysid.plots import pyplot
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
+    plt = pyplot()
     rs = [r for r in runs if r["config_key"] == config_key_]
     fig, axes = plt.subplots(1, 2, figsize=(10, 3.8))
     for ax, part, title in zip(axes, ("estimation", "validation"), ("(a) estimation", "(b) validation")):

@@ -173,10 +173,9 @@ def compare(p: AcousticParams, distances=(20, 40, 80), data_dir: str | Path | No
 
 def report_figure(p: AcousticParams, path: str | Path, distances=(20, 40, 80), data_dir=None) -> Path:
     """PNG: measured vs twin magnitude spectra and impulse-response envelopes at each distance."""
-    import matplotlib
+    from sysid.plots import pyplot
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = pyplot()
 
     fig, axes = plt.subplots(1, 2, figsize=(11, 4))
     f = np.fft.rfftfreq(_NFFT, 1.0 / FS_FIR)

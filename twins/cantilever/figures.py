@@ -1,4 +1,4 @@
-"""Figures of the cantilever case study (matplotlib, Agg backend, PNG files).
+"""Figures of the cantilever case study (PNG files, drawn with :func:`sysid.plots.pyplot`).
 
 - :func:`plot_sine_loops` — the analogue of dissertation Figure 4.3: normalised u–y loops, measured
   (blue) against the twin's free-run simulation (red), one panel per validation sine.
@@ -14,18 +14,12 @@ from pathlib import Path
 import numpy as np
 
 from sysid.metrics import r2
+from sysid.plots import pyplot
 from sysid.record import Record
 
 __all__ = ["plot_sine_loops", "plot_multisine_spectra", "last_period", "loop_metrics"]
 
 
-def _plt():
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    return plt
 
 
 def last_period(seg_len: int, fs: float, freq_hz: float) -> slice:
@@ -70,7 +64,7 @@ def plot_sine_loops(measured: Record, twin, path: str | Path, title: str = "") -
     """Figure 4.3 analogue: per thesis sine (``measured.meta['segments']``), the last period's u–y loop of
     the measurement (blue) and the twin's free run over the same input (red), both normalised as in the
     dissertation (zero mean, unit standard deviation of the measured segment). R² per panel."""
-    plt = _plt()
+    plt = pyplot()
     segs = measured.meta.get("segments")
     if not segs:
         raise ValueError("plot_sine_loops: the record has no meta['segments'] (use the thesis-sines protocol)")
@@ -110,7 +104,7 @@ def plot_multisine_spectra(record: Record, path: str | Path, twin=None, band_hz:
     """
     from scipy.signal import welch
 
-    plt = _plt()
+    plt = pyplot()
     record.require_output()
     nper = min(len(record), int(2 ** np.floor(np.log2(max(256, record.fs * 2)))))
     f, pu = welch(record.u, fs=record.fs, nperseg=nper)

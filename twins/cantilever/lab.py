@@ -62,10 +62,9 @@ def calibrate_lab(hysteresis: str = "bouc-wen", est: Record | None = None, val: 
 
 def plot_lab_loops(twin, path: str | Path, rec: Record | None = None, split_s: float = SPLIT_S) -> Path:
     """One PNG: measured and simulated u–y loops (left), and the time series with the residual (right)."""
-    import matplotlib
+    from sysid.plots import pyplot
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = pyplot()
 
     rec = rec if rec is not None else load_lab_record()
     y_sim = twin.noise_free().simulate(rec.u, rec.fs)

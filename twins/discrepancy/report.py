@@ -14,18 +14,12 @@ from typing import Any
 
 import numpy as np
 
+from sysid.plots import pyplot
 from sysid.safeio import save_figure
 
 __all__ = ["write_report"]
 
 
-def _plt():
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    return plt
 
 
 def _psd(x, fs):
@@ -43,7 +37,7 @@ def write_report(result: dict[str, Any], directory: str | Path) -> Path:
         raise ValueError("write_report needs diagnose(..., keep_stages=True)")
     d = Path(directory)
     d.mkdir(parents=True, exist_ok=True)
-    plt = _plt()
+    plt = pyplot()
     val = st["val"]
     base, ext = st["baseline"], st["extended"]
     t = np.arange(val.n) / val.fs
