@@ -15,7 +15,6 @@ Budgets: the default run is sized for ≤ 10 minutes on 2 cores, ``--quick`` for
 
 from __future__ import annotations
 
-import html
 import logging
 import time
 import traceback
@@ -26,7 +25,8 @@ from typing import Any, Callable
 import numpy as np
 
 from sysid.plots import pyplot
-from sysid.safeio import atomic_write_text, save_figure
+from sysid.report import esc, figure, table, write_page
+from sysid.safeio import save_figure
 
 
 class StageSkipped(Exception):
@@ -222,9 +222,9 @@ def _score_stage(ctx: Context, datasets: list[str], key: str, title: str, syside
     ctx.data[f"{key}_check"] = failures
     table = _html_score_table(run)
     chk = ("<p>Accuracy floors (benchmarks/baselines.json): all met.</p>" if not failures else
-           "<p><b>Below their floor:</b></p><ul>" + "".join(f"<li>{html.escape(f)}</li>" for f in failures) + "</ul>")
-    skipped = "".join(f"<li>{html.escape(' on '.join(x for x in (s.get('identifier'), s.get('dataset')) if x))}: "
-                      f"{html.escape(s['reason'])}</li>" for s in run.skipped)
+           "<p><b>Below their floor:</b></p><ul>" + "".join(f"<li>{esc(f)}</li>" for f in failures) + "</ul>")
+    skipped = "".join(f"<li>{esc(' on '.join(x for x in (s.get('identifier'), s.get('dataset')) if x))}: "
+                      f"{esc(s['reason'])}</li>" for s in run.skipped)
     ctx.section(title, table + chk + (f"<p>Skipped:</p><ul>{skipped}</ul>" if skipped else "")
                 + f"<p>JSON: <a href='{key}/score.json'>{key}/score.json</a>, Markdown: <a href='{key}/score.md'>{key}/score.md</a></p>")
     ok = [r for r in run.rows if r.get("status") == "ok"]
@@ -238,31 +238,30 @@ def _score_stage(ctx: Context, datasets: list[str], key: str, title: str, syside
             f"{len(failures)} below floor; best free run: {summary}")
 
 
+_SCORE_HEADER = ["dataset / test", "identifier", "free-run RMSE", "free-run R²", "one-step RMSE", "fit [s]", "params",
+                 "SysIdentPy FROLS", "linear baseline", "best published", "SysIdentPy published"]
+
+
 def _html_score_table(run) -> str:
     from benchmarks.scoring import _fmt
 
     sidp = {(r["dataset"], r["test"]): r for r in run.sysidentpy}
-    head = ("<table class='score'><tr><th>dataset / test</th><th>identifier</th><th>free-run RMSE</th><th>free-run R²</th>"
-            "<th>one-step RMSE</th><th>fit [s]</th><th>params</th><th>SysIdentPy FROLS</th><th>linear baseline</th>"
-            "<th>best published</th><th>SysIdentPy published</th></tr>")
-    rows = [head]
+
+    def ref_cell(r: dict[str, Any], kind: str) -> str:
+        v = (r.get("references") or {}).get(kind)
+        return f"{_fmt(v['value'])} ({esc(v['model'])})" if v else ""
+
+    rows = []
     for r in run.rows:
-        ref = r.get("references") or {}
-
-        def rv(k: str) -> str:
-            v = ref.get(k)
-            return f"{_fmt(v['value'])} ({html.escape(v['model'])})" if v else ""
-
         s = sidp.get((r["dataset"], r["test"]))
-        st = "" if s is None else (_fmt(s["free_run"]["rmse"]) if s.get("status") == "ok" else f"skipped: {html.escape(s.get('reason', ''))}")
+        st = "" if s is None else (_fmt(s["free_run"]["rmse"]) if s.get("status") == "ok" else f"skipped: {esc(s.get('reason', ''))}")
         if r.get("status") == "error":
-            cells = [f"{r['dataset']} / {r['test']}", r["identifier"], "error: " + html.escape(r.get("message", "")), "", "", "", ""]
+            cells = [f"{r['dataset']} / {r['test']}", r["identifier"], "error: " + esc(r.get("message", "")), "", "", "", ""]
         else:
-            cells = [f"{r['dataset']} / {r['test']}", r["identifier"], f"{_fmt(r['free_run']['rmse'])} {html.escape(r['units'])}",
+            cells = [f"{r['dataset']} / {r['test']}", r["identifier"], f"{_fmt(r['free_run']['rmse'])} {esc(r['units'])}",
                      _fmt(r["free_run"]["r2"]), _fmt(r["one_step"]["rmse"]), f"{r['fit_seconds']:.2f}", str(r["n_parameters"])]
-        rows.append("<tr>" + "".join(f"<td>{c}</td>" for c in cells + [st, rv("linear_baseline"), rv("best_published"), rv("sysidentpy")]) + "</tr>")
-    rows.append("</table>")
-    return "".join(rows)
+        rows.append(cells + [st] + [ref_cell(r, k) for k in ("linear_baseline", "best_published", "sysidentpy")])
+    return table(_SCORE_HEADER, rows, cls="score")
 
 
 def _stage_identify_twins(ctx: Context) -> str:
@@ -355,7 +354,7 @@ def _stage_discrepancy(ctx: Context) -> str:
     causes = ", ".join(c["effect"] for c in res.get("causes", [])) or "none"
     b, e = res["baseline"], res["extended"]
     ctx.section("Discrepancy diagnosis", f"<p>Cantilever twin without creep vs data from the twin with creep (steps): "
-                f"verdict <b>{html.escape(str(res['verdict']))}</b>, causes: {html.escape(causes)}; validation NRMSE "
+                f"verdict <b>{esc(res['verdict'])}</b>, causes: {esc(causes)}; validation NRMSE "
                 f"{b['nrmse_val']:.4g} → {e['nrmse_val']:.4g}. <a href='discrepancy/{index.name}'>full diagnosis</a></p>")
     return f"hidden effect creep -> found: {causes}; validation NRMSE {b['nrmse_val']:.4g} -> {e['nrmse_val']:.4g}"
 
@@ -406,13 +405,10 @@ def _stage_sweep(ctx: Context) -> str:
     fig.suptitle("acoustic twin: distance and temperature sweeps")
     fig.tight_layout()
     ctx.save_figure(fig, "acoustic_sweep", "Acoustic twin: response, peak gain and time of flight against distance and temperature")
-    tab = ["<table class='score'><tr><th>parameter</th><th>value</th><th>peak frequency [kHz]</th><th>peak gain [dB]</th>"
-           "<th>-3 dB bandwidth [kHz]</th><th>time of flight [µs]</th></tr>"]
-    for p, v, m in rows:
-        tab.append(f"<tr><td>{p}</td><td>{v:g}</td><td>{m['peak_frequency_hz'] / 1e3:.1f}</td><td>{m['peak_gain_db']:.2f}</td>"
-                   f"<td>{m['bandwidth_hz'] / 1e3:.1f}</td><td>{m['time_of_flight_s'] * 1e6:.2f}</td></tr>")
-    tab.append("</table>")
-    ctx.section("Acoustic channel sweep", "".join(tab))
+    tab = table(["parameter", "value", "peak frequency [kHz]", "peak gain [dB]", "-3 dB bandwidth [kHz]", "time of flight [µs]"],
+                [[p, f"{v:g}", f"{m['peak_frequency_hz'] / 1e3:.1f}", f"{m['peak_gain_db']:.2f}", f"{m['bandwidth_hz'] / 1e3:.1f}",
+                  f"{m['time_of_flight_s'] * 1e6:.2f}"] for p, v, m in rows], cls="score")
+    ctx.section("Acoustic channel sweep", tab)
     tof = [m["time_of_flight_s"] for _, m in dd]
     return (f"{len(distances)} distances, {len(temps)} temperatures; time of flight {tof[0] * 1e6:.1f} -> "
             f"{tof[-1] * 1e6:.1f} µs over {distances[0] * 100:g}-{distances[-1] * 100:g} cm")
@@ -436,31 +432,30 @@ _CSS = ("body{font-family:sans-serif;max-width:1200px;margin:1em auto;padding:0 
 
 
 def _write_report(ctx: Context, rows: list[dict[str, Any]]) -> Path:
+    from sysid.provenance import collect
+
     ctx.report_dir.mkdir(parents=True, exist_ok=True)
     mode = "quick" if ctx.quick else "default"
     body = [f"<h1>PiezoTwin main job</h1><p>Mode: {mode}. Generated {time.strftime('%Y-%m-%d %H:%M:%S UTC', time.gmtime())}.</p>",
-            "<table><tr><th>stage</th><th>status</th><th>result</th><th>s</th></tr>"]
-    for r in rows:
-        body.append(f"<tr class='{r['status']}'><td>{html.escape(r['stage'])}</td><td>{r['status']}</td>"
-                    f"<td>{html.escape(r['message'])}</td><td>{r['seconds']:.1f}</td></tr>")
-    body.append("</table>")
-    for title, content in ctx.sections:
-        body.append(f"<h2>{html.escape(title)}</h2>{content}")
+            table(["stage", "status", "result", "s"],
+                  [[esc(r["stage"]), r["status"], esc(r["message"]), f"{r['seconds']:.1f}"] for r in rows],
+                  row_classes=[r["status"] for r in rows])]
+    body += [f"<h2>{esc(title)}</h2>{content}" for title, content in ctx.sections]
     if ctx.figures:
         body.append("<h2>Figures</h2>")
-    for title, src in ctx.figures:
-        body.append(f"<figure><img src='{html.escape(src)}' alt='{html.escape(title)}'><figcaption>{html.escape(title)}</figcaption></figure>")
-    from sysid.provenance import REPORT_CSS, collect, html_block
-
+    body += [figure(src, title) for title, src in ctx.figures]
     # the vendored lab data the lab stage reads; the twin datasets are generated in the run (their protocols
     # and the commit above define them)
-    data_files = sorted((Path(__file__).parent / "data").glob("*/*.npz")) if any(
-        r["stage"] == "score lab benchmarks" and r["status"] == "done" for r in rows) else []
-    body.append(html_block(collect(files=data_files)))
-    path = ctx.report_dir / "index.html"
-    atomic_write_text(path, "<!doctype html><html><head><meta charset='utf-8'><title>PiezoTwin report</title>"
-                      f"<style>{_CSS}{REPORT_CSS}</style></head><body>" + "\n".join(body) + "</body></html>")
-    return path
+    lab_done = any(r["stage"] == "score lab benchmarks" and r["status"] == "done" for r in rows)
+    return write_page(ctx.report_dir / "index.html", "PiezoTwin report", body, css=_CSS,
+                      provenance=collect(files=_scored_lab_files() if lab_done else []))
+
+
+def _scored_lab_files() -> list[Path]:
+    """The record files of the scored lab datasets, as the dataset registry resolves them."""
+    from benchmarks.datasets import files
+
+    return sorted(p for name in files.SCORED_LAB for p in files.get(name).paths())
 
 
 def run_main_job(report_dir: str | Path = "report", quick: bool = False, verbose: bool = True,
@@ -479,7 +474,7 @@ def run_main_job(report_dir: str | Path = "report", quick: bool = False, verbose
             msg, status = f"skipped: {exc}", "skipped"
         except Exception as exc:  # a broken stage is reported, the job goes on
             msg, status = f"failed: {type(exc).__name__}: {exc}", "failed"
-            ctx.section(f"Stage '{name}' failed", f"<pre>{html.escape(traceback.format_exc())}</pre>")
+            ctx.section(f"Stage '{name}' failed", f"<pre>{esc(traceback.format_exc())}</pre>")
         rows.append({"stage": name, "status": status, "message": msg, "seconds": time.perf_counter() - t0})
         log.log(logging.WARNING if status == "failed" else logging.INFO, "[%7s] %s: %s", status, name, msg)
     path = _write_report(ctx, rows)

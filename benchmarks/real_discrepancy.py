@@ -44,11 +44,12 @@ def _strip(res: dict[str, Any]) -> dict[str, Any]:
 
 
 def piezo(out: Path) -> dict[str, Any]:
+    from benchmarks.datasets import files
     from twins.cantilever.lab import lab_split, lab_twin, static_line_r2
     from twins.discrepancy import diagnose
     from twins.discrepancy.report import write_report
 
-    est, val = lab_split()
+    est, val = lab_split(files.piezo_tue_record())
     # the validation part is one 150 V, 1 Hz sine: give the loop analysis its segment (whole periods at the end)
     val.meta["segments"] = [{"start": 0, "stop": len(val), "freq_hz": 1.0}]
     twin = lab_twin()
@@ -65,9 +66,10 @@ def piezo(out: Path) -> dict[str, Any]:
 def water_records(distance_mm: int = 20, seed: int = 0) -> tuple[Record, Record]:
     """Measured I/O records from the measured FIRs: multisine through FIR #1, chirp through FIR #6."""
     from sysid import signals
+    from benchmarks.datasets import files
     from twins.acoustic.labdata import FS_FIR, load_charac
 
-    h = load_charac(distance_mm)
+    h = load_charac(distance_mm, files.water_fir())
     fs = FS_FIR
     n = 10_000
     u_est = signals.multisine(fs, duration=n / fs, band=(0.9e6, 1.5e6), amplitude=1.0, phase="random", seed=seed)
@@ -89,7 +91,9 @@ def water(out: Path, distance_mm: int = 20) -> dict[str, Any]:
 
     from twins.acoustic.amplifier import voltage_gain
 
-    p40, fit = fit_transducer(40)
+    from benchmarks.datasets import files
+
+    p40, fit = fit_transducer(40, files.water_fir())
     # the FIR is the electro-acoustic response V_rx/V_oc: the twin's amplifier (V_oc = 2·G_v·u) is divided out
     # through the receive gain, and no amplifier nonlinearity is switched on
     g_amp = 2.0 * voltage_gain(p40.amp_gain_db)

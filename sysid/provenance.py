@@ -1,14 +1,14 @@
 """Where a result came from: package version, git commit, command line, data-file hashes, date, machine.
 
-:func:`collect` gathers it once per report; :func:`html_block` renders it as the ``<section
-id="provenance">`` that every HTML report ends with. Nothing here is required to succeed: a field that
-cannot be found (no git, a record that came from memory) says so instead of failing the report.
+:func:`collect` gathers it once per report; :func:`html_block` (:func:`sysid.report.provenance_section`)
+renders it as the ``<section id="provenance">`` that every HTML report ends with. Nothing here is required
+to succeed: a field that cannot be found (no git, a record that came from memory) says so instead of failing
+the report.
 """
 
 from __future__ import annotations
 
 import hashlib
-import html
 import os
 import platform
 import shlex
@@ -17,6 +17,8 @@ import sys
 import time
 from pathlib import Path
 from typing import Any, Iterable
+
+from sysid.report import REPORT_CSS, provenance_section  # noqa: F401  (REPORT_CSS: importable from its old home)
 
 __all__ = ["collect", "html_block", "file_sha256"]
 
@@ -87,22 +89,6 @@ def collect(files: Iterable[str | os.PathLike] = (), records: Iterable[Any] = ()
 
 
 def html_block(prov: dict[str, Any]) -> str:
-    """The provenance as an HTML ``<section id="provenance">`` (a table that wraps on narrow pages)."""
-    rows = [("version", f"{prov['package']} {prov['version']}"), ("git commit", prov["commit"]),
-            ("command", prov["command"]), ("date (UTC)", prov["date_utc"]), ("machine", prov["machine"])]
-    cells = "".join(f"<tr><th>{html.escape(k)}</th><td><code>{html.escape(str(v))}</code></td></tr>" for k, v in rows)
-    if prov["data"]:
-        files = "".join(f"<li><code>{html.escape(d['file'])}</code> — "
-                        + (f"{d['bytes']} bytes, sha256 <code>{d['sha256']}</code>" if d["sha256"] else "not a file (built in memory)")
-                        + "</li>" for d in prov["data"])
-        cells += f"<tr><th>data</th><td><ul class='files'>{files}</ul></td></tr>"
-    else:
-        cells += "<tr><th>data</th><td>none read from files (generated in this run)</td></tr>"
-    return f"<section id='provenance'><h2>Provenance</h2><table class='provenance'>{cells}</table></section>"
-
-
-# CSS shared by the HTML reports: tables never wider than the page (they scroll or wrap inside themselves).
-REPORT_CSS = ("table{border-collapse:collapse;font-size:12px;margin:.5em 0;display:block;max-width:100%;overflow-x:auto}"
-              "td,th{border:1px solid #bbb;padding:3px 6px;vertical-align:top;overflow-wrap:anywhere}"
-              "th{background:#eee;text-align:left}code{font-size:11px;overflow-wrap:anywhere}"
-              "ul.files{margin:0;padding-left:1.2em}img{max-width:100%}")
+    """The provenance as an HTML ``<section id="provenance">`` (rendered by the report module, where every
+    page of HTML is built)."""
+    return provenance_section(prov)

@@ -4,28 +4,40 @@ import hashlib
 
 import pytest
 
-from twins.acoustic.labdata import DATA_DIR, compare, fit_transducer, load_charac, measured_decays
+from benchmarks.datasets import files
+from sysid.errors import DataError
+from twins.acoustic.labdata import compare, fit_transducer, load_charac, measured_decays
 
 
 @pytest.fixture(scope="module")
-def fitted():
-    params, summary = fit_transducer(40)  # the transducer is fitted at ONE distance
-    return params, summary, compare(params, (20, 40, 80))
+def data():
+    return files.water_fir()
 
 
-def test_vendored_data_is_intact_and_licensed():
-    assert (DATA_DIR / "LICENSE.txt").read_text().startswith("The data and photographs in this project are licensed")
-    source = (DATA_DIR / "SOURCE.txt").read_text()
-    for d in (1, 20, 40, 80):
-        name = f"charac/charac_water_{d}.mat"
-        digest = hashlib.sha256((DATA_DIR / name).read_bytes()).hexdigest()
+@pytest.fixture(scope="module")
+def fitted(data):
+    params, summary = fit_transducer(40, data)  # the transducer is fitted at ONE distance
+    return params, summary, compare(params, (20, 40, 80), data)
+
+
+def test_vendored_data_is_intact_and_licensed(data):
+    entry = files.get("ultrasound-water-fir")
+    assert entry.licence_path().read_text().startswith("The data and photographs in this project are licensed")
+    source = entry.source_path().read_text()
+    for name, path in zip(entry.files, entry.paths()):
+        digest = hashlib.sha256(path.read_bytes()).hexdigest()
         assert f"{digest}  {name}" in source
-    assert load_charac(20).shape == (20, 2000)
+    assert sorted(data) == [1, 20, 40, 80]
+    assert load_charac(20, data).shape == (20, 2000)
+    with pytest.raises(DataError, match="no measured impulse responses"):
+        load_charac(20, None)  # the twin package reads no files: the caller passes the measurement
+    with pytest.raises(DataError, match="at 30 mm"):
+        load_charac(30, data)
 
 
-def test_fir_peak_amplitude_decay_with_distance_within_10_percent(fitted):
+def test_fir_peak_amplitude_decay_with_distance_within_10_percent(fitted, data):
     _, _, cmp = fitted
-    measured = measured_decays()["envelope_peak_mean"]
+    measured = measured_decays(data)["envelope_peak_mean"]
     for key in ("20_40", "40_80"):
         assert cmp["decay"][key]["measured"] == pytest.approx(measured[key], rel=1e-12)
         assert cmp["decay"][key]["twin"] == pytest.approx(cmp["decay"][key]["measured"], rel=0.10)

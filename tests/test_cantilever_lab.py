@@ -10,17 +10,19 @@ import numpy as np
 import pytest
 
 from benchmarks.cli import main
+from benchmarks.datasets import files
 from sysid.io import read_record, write_record
 from twins.cantilever import CantileverTwin
-from twins.cantilever.lab import LAB_FILE, calibrate_lab, lab_split, load_lab_record, plot_lab_loops, static_line_r2
+from twins.cantilever.lab import calibrate_lab, lab_split, load_lab_record, plot_lab_loops, static_line_r2
 
 
 def test_vendored_record_matches_its_source():
-    rec = load_lab_record()
-    folder = LAB_FILE.parent
-    src = (folder / "SOURCE.txt").read_text()
+    entry = files.get("piezo-tue")
+    rec = files.piezo_tue_record()
+    folder = entry.folder_path()
+    src = entry.source_path().read_text()
     prov = (folder / "PROVENANCE.txt").read_text()
-    assert (folder / "LICENSE_from_initial_commit.txt").read_text().startswith("MIT License")
+    assert entry.licence_path().read_text().startswith("MIT License")
     csv_sha = re.search(r"sha256\s*:\s*([0-9a-f]{64})", src).group(1)
     assert csv_sha in prov  # the npz was made from the CSV that SOURCE.txt describes
     assert f"u {hashlib.sha256(rec.u.tobytes()).hexdigest()}" in prov
@@ -33,18 +35,29 @@ def test_vendored_record_matches_its_source():
 def test_vendored_record_equals_the_csv(shared_data):
     csv = shared_data / "piezo_tue_150v_1hz" / "hysteresis_v_150_1hz.csv"
     d = np.genfromtxt(csv, delimiter=",")
-    rec = load_lab_record()
+    rec = files.piezo_tue_record()
     assert np.array_equal(rec.u, d[:, 3]) and np.array_equal(rec.y, d[:, 2])
 
 
-def test_static_line_baseline_is_the_issues_0977():
-    est, val = lab_split()
+def test_lab_functions_take_the_record_from_the_caller():
+    rec = files.piezo_tue_record()
+    assert load_lab_record(rec) is rec
+    from_file = load_lab_record(files.get("piezo-tue").paths()[0])  # or a Record file the caller names
+    assert np.array_equal(from_file.u, rec.u) and np.array_equal(from_file.y, rec.y)
+    with pytest.raises(TypeError):
+        lab_split()  # the twin package does not know where the measurement is kept
+    with pytest.raises(ValueError, match="measured record"):
+        calibrate_lab()
+
+
+def test_static_line_baseline_is_0977():
+    est, val = lab_split(files.piezo_tue_record())
     assert static_line_r2(est, val) == pytest.approx(0.977, abs=0.001)
 
 
 def test_calibration_short_segment_cli_round_trip(tmp_path, capsys):
     """Fast version of the lab check: 2 s around the first step → the next 1 s, through the CLI."""
-    rec = load_lab_record()
+    rec = files.piezo_tue_record()
     est, val = rec[15000:25000], rec[25000:30000]
     write_record(est, tmp_path / "est.npz")
     write_record(val, tmp_path / "val.npz")
@@ -74,10 +87,11 @@ def test_calibration_short_segment_cli_round_trip(tmp_path, capsys):
 @pytest.mark.slow
 @pytest.mark.parametrize("model", ["bouc-wen", "prandtl-ishlinskii"])
 def test_lab_first_5s_calibration_predicts_last_5s(model, tmp_path):
-    """The issue's check: calibrated on the first 5 s, free-run R² on the last 5 s ≥ 0.995 (line: 0.977)."""
-    res = calibrate_lab(model)
+    """Calibrated on the first 5 s, free-run R² on the last 5 s ≥ 0.995 (a static line: 0.977)."""
+    rec = files.piezo_tue_record()
+    res = calibrate_lab(model, rec=rec)
     assert res.scores["validation"]["r2"] >= 0.995
-    png = plot_lab_loops(res.twin, tmp_path / "lab.png")
+    png = plot_lab_loops(res.twin, tmp_path / "lab.png", rec)
     assert png.stat().st_size > 10_000
 
 
@@ -146,7 +160,7 @@ def test_calibration_recovers_known_parameters_from_noisy_twin_data():
 
 
 def test_calibration_refuses_settings_that_are_not_continuous():
-    rec = load_lab_record()[16000:17000]
+    rec = files.piezo_tue_record()[16000:17000]
     for name in ("hysteresis", "pi_operators"):
         with pytest.raises(Exception, match="not a continuous parameter"):
             CantileverTwin().calibrate(rec, names=[name])

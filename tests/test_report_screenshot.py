@@ -1,4 +1,4 @@
-"""The report shows the truth, checked in headless Chromium (issue 18): the page is rendered to a PNG and its
+"""The report shows the truth, checked in headless Chromium: the page is rendered to a PNG and its
 pixels show the whole measured/predicted record (a feature at the very end of the record is drawn), the
 correlation tests' confidence bands (visible, not a hairline on a ±1 axis) and the provenance block.
 
@@ -120,7 +120,7 @@ def page(tmp_path_factory):
         draw_correlation_test(ax, test)
     fig.tight_layout()
     ctx.save_figure(fig, "tests", "correlation tests")
-    # controls, drawn the way the report drew them before issue 18
+    # controls, drawn the way a report that hides the truth would draw them (the start only, a fixed ±1 axis)
     plot_measured_vs_predicted(t[:1000], y[:1000], {"model": yhat[:1000]}, rep / "fig" / "control_trace.png", unit="µm")
     ctx.figures.append(("control: first 1000 samples", "fig/control_trace.png"))
     fig, axes = plt.subplots(1, 5, figsize=(13, 2.8))

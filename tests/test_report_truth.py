@@ -1,4 +1,4 @@
-"""The report's building blocks tell the truth (issue 18): loops over whole periods, correlation-test axes
+"""The report's building blocks tell the truth: loops over whole periods, correlation-test axes
 scaled to the data with the band visible, whole-record traces that keep every extreme, and a provenance
 record with real hashes."""
 

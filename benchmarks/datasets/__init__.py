@@ -6,7 +6,9 @@ of each test that free-run simulation may take from the measurement and that are
 sampling rate and the published reference numbers.
 
 Lab data come from compact copies vendored in ``benchmarks/data/`` (see :mod:`benchmarks.datasets.lab`);
-``load_dataset(name, source=PATH)`` builds the same dataset from the original published files instead.
+``load_dataset(name, source=PATH)`` builds the same dataset from the original published files instead. Every
+lab data file, with its licence and source note and the loader that reads it, is listed in
+:mod:`benchmarks.datasets.files`; the twins compared with lab data receive the loaded records and arrays.
 Twin datasets are generated on demand and cached (:mod:`benchmarks.datasets.twin`).
 """
 

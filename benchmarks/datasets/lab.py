@@ -186,10 +186,13 @@ def read_original(name: str, source: str | Path) -> dict[str, Record]:
 
 def read_vendored(name: str, data_dir: Path | None = None) -> dict[str, Record]:
     """Raw records of lab dataset ``name`` from the compact copies in ``benchmarks/data/<folder>/``."""
-    spec = LAB_SPECS[name]
-    folder = (data_dir or DATA_DIR) / spec.folder
+    return read_vendored_folder(name, (data_dir or DATA_DIR) / LAB_SPECS[name].folder)
+
+
+def read_vendored_folder(name: str, folder: Path) -> dict[str, Record]:
+    """Raw records of lab dataset ``name`` from its vendored record files (``<stem>.npz``) in ``folder``."""
     out = {}
-    for stem in spec.records:
+    for stem in LAB_SPECS[name].records:
         path = folder / f"{stem}.npz"
         if not path.exists():
             raise DataError(f"{path}: vendored data missing (rebuild with python -m benchmarks.datasets.vendor)")

@@ -1,7 +1,7 @@
 """Published reference numbers: free-run RMSE on the official test data, in the units of the dataset's y.
 
-The values are the table of issue 7 ("Reference numbers"), collected from the benchmarks' result pages
-(nonlinearbenchmark.org), the cited papers and the SysIdentPy book. Each entry says which model reached it;
+The values are collected from the benchmarks' result pages (nonlinearbenchmark.org), the cited papers and the
+SysIdentPy book. Each entry says which model reached it;
 ``kind`` is one of ``linear_baseline`` (best linear approximation, BLA), ``best_published``,
 ``best_published_grey_box`` and ``sysidentpy`` (SysIdentPy's published polynomial NARX number).
 """

@@ -1,15 +1,17 @@
 """Comparison of the twin with measured water-channel impulse responses (USbodyComm, KU Leuven, CC-BY-SA 4.0).
 
-Data: ``benchmarks/data/ultrasound_water_fir/charac/charac_water_{1,20,40,80}.mat`` — 4 × 5 FIR impulse
-responses per distance (2000 taps, 5 MHz), transmitter → anechoic water tank → receiver, "omni-directional"
-transducers of ≈ 1.2 MHz centre frequency and ≈ 130 kHz bandwidth (README_doc.md); no plates, no epoxy. The
-responses are time-aligned (the leading delay was removed), so they test amplitude and spectrum, not the
-time of flight.
+Data: the ``charac_water_{1,20,40,80}`` measurements — 4 × 5 FIR impulse responses per distance (2000 taps,
+5 MHz), transmitter → anechoic water tank → receiver, "omni-directional" transducers of ≈ 1.2 MHz centre
+frequency and ≈ 130 kHz bandwidth (the dataset's readme); no plates, no epoxy. The responses are time-aligned
+(the leading delay was removed), so they test amplitude and spectrum, not the time of flight. Every function
+that needs them takes them as ``data``: distance [mm] → array (responses × taps) at :data:`FS_FIR`. This module
+does not read files; the benchmark package's dataset registry serves the vendored copy (with its licence) as
+``ultrasound-water-fir``.
 
 Twin configuration (:func:`lab_params`): water at 20 °C, no steel, no epoxy, circular PZT-4 discs of radius
 ``aperture_radius_m`` facing each other at the given distance, backed by ``backing_rayl``, driven from 50 Ω,
 received into 50 Ω, no inter-transducer reverberation (bare PZT faces would echo at 2d/c at −10…−20 dB; the
-measured responses show none — the holders are covered with absorber, README_doc.md); no amplifier (the FIR is the electro-acoustic
+measured responses show none — the holders are covered with absorber, says the dataset's readme); no amplifier (the FIR is the electro-acoustic
 response). The transducer (thickness → resonance, backing → bandwidth, output gain) is fitted to the
 magnitude spectrum at ONE distance (:func:`fit_transducer`, 40 mm) and the twin is then compared at the
 others (:func:`compare`).
@@ -27,6 +29,7 @@ Amplitude measure: peak of the Hilbert envelope of each impulse response, averag
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
@@ -38,32 +41,32 @@ from sysid.errors import DataError
 from twins.acoustic.channel import frequency_response
 from twins.acoustic.params import AcousticParams
 
-__all__ = ["DATA_DIR", "FS_FIR", "load_charac", "lab_params", "fit_transducer", "compare", "measured_decays",
+__all__ = ["FS_FIR", "load_charac", "lab_params", "fit_transducer", "compare", "measured_decays",
            "LAB_APERTURE_M"]
 
-DATA_DIR = Path(__file__).resolve().parents[2] / "benchmarks" / "data" / "ultrasound_water_fir"
-FS_FIR = 5e6  # Hz, README_doc.md / the .mat files
+FS_FIR = 5e6  # Hz, the sampling rate every measured response states
 DISTANCES_MM = (1, 20, 40, 80)
 FIT_BAND_HZ = (0.75e6, 1.5e6)  # where the measured spectrum is within ≈ 20 dB of its peak
 LAB_APERTURE_M = 2.5e-3
 _NFFT = 4096
 
 
-def load_charac(distance_mm: int, data_dir: str | Path | None = None) -> np.ndarray:
-    """The 20 measured impulse responses (4 × 5, shape (20, 2000)) at ``distance_mm`` ∈ {1, 20, 40, 80}."""
-    from scipy.io import loadmat
+# distance [mm] -> measured impulse responses (responses x taps) at FS_FIR
+FirData = Mapping[int, np.ndarray]
 
-    path = Path(data_dir or DATA_DIR) / "charac" / f"charac_water_{int(distance_mm)}.mat"
-    if not path.exists():
-        raise DataError(f"{path}: lab data file not found (distances: {', '.join(map(str, DISTANCES_MM))} mm)")
-    m = loadmat(path, squeeze_me=True, struct_as_record=False)
-    blocks = []
-    for key in ("FIR1", "FIR2", "FIR3", "FIR4"):
-        s = m[key]
-        if abs(float(s.fs) - FS_FIR) > 1.0:
-            raise DataError(f"{path}: {key}.fs = {s.fs}, expected {FS_FIR:g} Hz")
-        blocks.append(np.atleast_2d(np.asarray(s.h, dtype=float)))
-    return np.concatenate(blocks, axis=0)
+
+def load_charac(distance_mm: int, data: FirData | None) -> np.ndarray:
+    """The measured impulse responses at ``distance_mm`` (4 × 5 at the published distances: shape (20, 2000))
+    from ``data``."""
+    if data is None:
+        raise DataError("no measured impulse responses given: pass data = {distance_mm: responses} "
+                        "(the vendored copy is the dataset 'ultrasound-water-fir')")
+    try:
+        h = data[int(distance_mm)]
+    except KeyError:
+        raise DataError(f"no measured impulse responses at {distance_mm} mm "
+                        f"(given: {', '.join(map(str, sorted(data)))} mm)") from None
+    return np.atleast_2d(np.asarray(h, dtype=float))
 
 
 def envelope_peak(h: np.ndarray) -> np.ndarray:
@@ -71,9 +74,9 @@ def envelope_peak(h: np.ndarray) -> np.ndarray:
     return np.abs(hilbert(h, axis=-1)).max(axis=-1)
 
 
-def measured_decays(data_dir: str | Path | None = None) -> dict[str, dict[str, float]]:
+def measured_decays(data: FirData | None) -> dict[str, dict[str, float]]:
     """Amplitude ratios 20→40 and 40→80 mm under several amplitude measures (the choice matters by ±0.04)."""
-    H = {d: load_charac(d, data_dir) for d in (20, 40, 80)}
+    H = {d: load_charac(d, data) for d in (20, 40, 80)}
     measures = {
         "envelope_peak_mean": lambda h: envelope_peak(h).mean(),
         "abs_peak_mean": lambda h: np.abs(h).max(axis=1).mean(),
@@ -102,13 +105,13 @@ def _measured_spectrum(h: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return f, np.abs(np.fft.rfft(h, _NFFT, axis=1)).mean(axis=0)
 
 
-def fit_transducer(distance_mm: int = 40, data_dir: str | Path | None = None,
+def fit_transducer(distance_mm: int = 40, data: FirData | None = None,
                    params: AcousticParams | None = None) -> tuple[AcousticParams, dict[str, Any]]:
     """Fit PZT thickness (resonance), backing impedance (bandwidth) and output gain to the mean magnitude
     spectrum at ONE distance, in dB over 0.75–1.5 MHz. Coarse grid over (thickness, backing), then bounded
     least squares. Returns (fitted params at that distance, fit summary)."""
     p0 = params or lab_params(distance_mm * 1e-3)
-    f, mag = _measured_spectrum(load_charac(distance_mm, data_dir))
+    f, mag = _measured_spectrum(load_charac(distance_mm, data))
     band = (f >= FIT_BAND_HZ[0]) & (f <= FIT_BAND_HZ[1])
     fb, target = f[band], 20 * np.log10(mag[band])
 
@@ -143,12 +146,12 @@ def model_impulse_response(p: AcousticParams, distance_mm: float, n: int = 2000)
     return np.fft.irfft(_model_spectrum(p, distance_mm, f), _NFFT)[:n]
 
 
-def compare(p: AcousticParams, distances=(20, 40, 80), data_dir: str | Path | None = None) -> dict[str, Any]:
+def compare(p: AcousticParams, distances=(20, 40, 80), data: FirData | None = None) -> dict[str, Any]:
     """Twin vs measurement at each distance: envelope peaks, decay ratios, spectrum errors (dB, 0.75–1.5 MHz)."""
     out: dict[str, Any] = {"distances_mm": list(distances), "per_distance": {}}
     amp_m, amp_t = {}, {}
     for d in distances:
-        H = load_charac(d, data_dir)
+        H = load_charac(d, data)
         f, mag = _measured_spectrum(H)
         band = (f >= FIT_BAND_HZ[0]) & (f <= FIT_BAND_HZ[1])
         model = np.abs(_model_spectrum(p, d, f[band]))
@@ -171,7 +174,7 @@ def compare(p: AcousticParams, distances=(20, 40, 80), data_dir: str | Path | No
     return out
 
 
-def report_figure(p: AcousticParams, path: str | Path, distances=(20, 40, 80), data_dir=None) -> Path:
+def report_figure(p: AcousticParams, path: str | Path, distances=(20, 40, 80), data: FirData | None = None) -> Path:
     """PNG: measured vs twin magnitude spectra and impulse-response envelopes at each distance."""
     from sysid.plots import pyplot
 
@@ -181,7 +184,7 @@ def report_figure(p: AcousticParams, path: str | Path, distances=(20, 40, 80), d
     f = np.fft.rfftfreq(_NFFT, 1.0 / FS_FIR)
     t = np.arange(2000) / FS_FIR * 1e6
     for i, d in enumerate(distances):
-        H = load_charac(d, data_dir)
+        H = load_charac(d, data)
         _, mag = _measured_spectrum(H)
         col = f"C{i}"
         axes[0].plot(f / 1e3, 20 * np.log10(mag), col, lw=0.8, label=f"measured {d} mm")

@@ -1,13 +1,12 @@
-"""The measured TU/e piezo actuator (benchmarks/data/piezo_tue_150v_1hz) and the twin calibrated to it.
+"""The measured TU/e piezo actuator and the twin calibrated to it.
 
 The record: u = drive voltage [V], y = displacement [µm], 5 kHz, 10 s: 3.26 s at 0 V, then a jump to −87 V
-into a 150 V, 1 Hz sine. It is the single vendored copy shared with the dataset registry
-(``benchmarks/data/piezo_tue_150v_1hz/hysteresis_v_150_1hz.npz``: origin and licence in SOURCE.txt and the
-licence file beside it, how the npz was made — u = CSV column 3, y = column 2, float64 unchanged — in
-PROVENANCE.txt). Only the file is read here, so ``twins`` does not import ``benchmarks``.
-The issue's check: calibrate on the first 5 s, free-run R² on the last 5 s ≥ 0.995 (a static line u → y
-reaches 0.977). The last 5 s are scored as the continuation of the free run over the whole input (see
-:func:`twins.cantilever.calibration.continues`).
+into a 150 V, 1 Hz sine (Chandra et al. 2023, MIT licence). This module does not know where the file is kept:
+the caller passes the measured record in (the benchmark package serves it from its dataset registry as
+``piezo-tue``, with its licence and provenance), so the twin works the same on a user's own copy.
+The check this configuration is built for: calibrate on the first 5 s, free-run R² on the last 5 s ≥ 0.995 (a
+static line u → y reaches 0.977). The last 5 s are scored as the continuation of the free run over the whole
+input (see :func:`twins.cantilever.calibration.continues`).
 """
 
 from __future__ import annotations
@@ -16,25 +15,29 @@ from pathlib import Path
 
 import numpy as np
 
+from sysid.errors import DataError
 from sysid.io import read_record
 from sysid.metrics import r2
 from sysid.record import Record
 
-__all__ = ["LAB_FILE", "load_lab_record", "lab_split", "static_line_r2", "lab_twin", "calibrate_lab",
-           "plot_lab_loops"]
+__all__ = ["load_lab_record", "lab_split", "static_line_r2", "lab_twin", "calibrate_lab", "plot_lab_loops"]
 
-LAB_FILE = Path(__file__).resolve().parents[2] / "benchmarks" / "data" / "piezo_tue_150v_1hz" / "hysteresis_v_150_1hz.npz"
 SPLIT_S = 5.0
 
 
-def load_lab_record() -> Record:
-    """The vendored measurement as a Record (u [V], y [µm], fs = 5000 Hz)."""
-    return read_record(LAB_FILE, require_y=True)
+def load_lab_record(source: Record | str | Path) -> Record:
+    """The measurement as a Record (u [V], y [µm], fs = 5000 Hz): ``source`` is the Record itself (checked)
+    or a Record file (``.npz``) to read."""
+    rec = source if isinstance(source, Record) else read_record(source, require_y=True)
+    if rec.y is None:
+        raise DataError(f"{rec.source or 'record'}: the lab record needs a measured output y")
+    return rec
 
 
-def lab_split(rec: Record | None = None, split_s: float = SPLIT_S) -> tuple[Record, Record]:
-    """(first ``split_s`` seconds, the rest); the second continues the first (``meta['t0']``)."""
-    rec = rec if rec is not None else load_lab_record()
+def lab_split(rec: Record, split_s: float = SPLIT_S) -> tuple[Record, Record]:
+    """(first ``split_s`` seconds, the rest) of the measured record; the second continues the first
+    (``meta['t0']``)."""
+    rec = load_lab_record(rec)
     return rec.split(index=int(round(split_s * rec.fs)))
 
 
@@ -53,20 +56,22 @@ def lab_twin(hysteresis: str = "bouc-wen"):
 
 
 def calibrate_lab(hysteresis: str = "bouc-wen", est: Record | None = None, val: Record | None = None,
-                  substep_s: float | None = 5e-5, max_nfev: int = 60):
-    """Calibrate :func:`lab_twin` on ``est`` (default: first 5 s) and score ``val`` (default: last 5 s)."""
+                  substep_s: float | None = 5e-5, max_nfev: int = 60, rec: Record | None = None):
+    """Calibrate :func:`lab_twin` on ``est`` and score ``val``; without them, on the first 5 s and the last
+    5 s of the measured record ``rec``."""
     if est is None or val is None:
-        est, val = lab_split()
+        if rec is None:
+            raise ValueError("calibrate_lab needs est and val, or the measured record rec to split")
+        est, val = lab_split(rec)
     return lab_twin(hysteresis).calibrate(est, val=val, substep_s=substep_s, max_nfev=max_nfev)
 
 
-def plot_lab_loops(twin, path: str | Path, rec: Record | None = None, split_s: float = SPLIT_S) -> Path:
+def plot_lab_loops(twin, path: str | Path, rec: Record, split_s: float = SPLIT_S) -> Path:
     """One PNG: measured and simulated u–y loops (left), and the time series with the residual (right)."""
     from sysid.plots import pyplot
 
     plt = pyplot()
-
-    rec = rec if rec is not None else load_lab_record()
+    rec = load_lab_record(rec)
     y_sim = twin.noise_free().simulate(rec.u, rec.fs)
     k = int(round(split_s * rec.fs))
     fig, (a1, a2) = plt.subplots(1, 2, figsize=(12, 4.8))

@@ -2,8 +2,8 @@
 
 Every field carries its unit, documented range and source (see :func:`twins.base.pfield`). The ranges are
 wide enough for both the dissertation's 15 × 2 × 0.3 mm PZT cantilever (±100 V, ≈0.3 µm/V, f₁ ≈ 700 Hz) and
-the measured TU/e actuator vendored in ``benchmarks/data/piezo_tue_150v_1hz`` (±150 V, ±19.7 µm, a
-loop slope of ≈0.13 µm/V, a step response ringing near 800 Hz).
+the measured TU/e actuator of :mod:`twins.cantilever.lab` (±150 V, ±19.7 µm, a loop slope of ≈0.13 µm/V, a
+step response ringing near 800 Hz).
 
 Notation (physics notes A.1/A.3): u [V] command → amplifier → v [V] → Γ[v] (hysteresis, µm) + Cr(s)v (creep,
 µm) → D(s) (normalised modal dynamics, D(0) = 1) → δ [µm] → sensor → y [µm].

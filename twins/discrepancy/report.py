@@ -7,7 +7,6 @@ the predictions); it writes ``residuals.png``, ``spectra.png``, ``correlation_te
 
 from __future__ import annotations
 
-import html
 import json
 from pathlib import Path
 from typing import Any
@@ -18,6 +17,8 @@ from sysid.plots import pyplot
 from sysid.safeio import save_figure
 
 __all__ = ["write_report"]
+
+_CSS = "body{font-family:sans-serif;max-width:1100px;margin:auto}"
 
 
 
@@ -114,26 +115,25 @@ def write_report(result: dict[str, Any], directory: str | Path) -> Path:
         plt.close(fig)
         files.append("hysteresis.png")
 
-    from sysid.provenance import REPORT_CSS, collect, html_block
+    from sysid.provenance import collect
+    from sysid.report import esc, image, table, write_page
 
-    rows = "".join(
-        f"<tr><td>{html.escape(c['effect'])}</td><td>{c['confidence']:.2f}</td><td>{html.escape(c['evidence'])}</td>"
-        f"<td>{html.escape(json.dumps(c.get('params', {})))}</td></tr>" for c in result["causes"])
+    causes = table(["effect", "confidence", "evidence", "params"],
+                   [[esc(c["effect"]), f"{c['confidence']:.2f}", esc(c["evidence"]), esc(json.dumps(c.get("params", {})))]
+                    for c in result["causes"]])
+
     def tests_txt(s):
         return ", ".join(f"{t['name']}: {'pass' if t['passed'] else 'fail ' + str(t['n_failing'])}" for t in s["tests"]["tests"])
-    body = f"""<!doctype html><html><head><meta charset="utf-8"><title>diagnosis: {html.escape(result.get('twin', ''))}</title>
-<style>body{{font-family:sans-serif;max-width:1100px;margin:auto}}{REPORT_CSS}</style></head><body>
-<h1>Discrepancy diagnosis — twin {html.escape(result.get('twin', ''))}</h1>
-<p>Verdict: <b>{result['verdict']}</b>. Validation NRMSE {result['baseline']['nrmse_val']:.4g} → {result['extended']['nrmse_val']:.4g}
-(ratio {result['gain']['nrmse_ratio']:.3f}), R² {result['baseline']['r2_val']:.5f} → {result['extended']['r2_val']:.5f}.</p>
-<p>Effects before: {html.escape(', '.join(result['baseline']['effects']) or 'none')}; after: {html.escape(', '.join(result['extended']['effects']) or 'none')}.</p>
-<h2>Causes</h2><table><tr><th>effect</th><th>confidence</th><th>evidence</th><th>params</th></tr>{rows}</table>
-<h2>Correlation tests (eq. 2-32), validation</h2><p>before: {html.escape(tests_txt(result['baseline']))}<br>after: {html.escape(tests_txt(result['extended']))}</p>
-<h2>Not explained</h2><p>{html.escape(result['unexplained']['description'])}</p>
-{''.join(f'<h2>{f[:-4]}</h2><img src="{f}" style="max-width:100%">' for f in files)}
-{html_block(collect(records=[r for r in (st.get("est"), val) if r is not None]))}
-</body></html>"""
-    index = d / "index.html"
-    from sysid.safeio import atomic_write_text
 
-    return atomic_write_text(index, body)
+    b, x = result["baseline"], result["extended"]
+    twin = result.get("twin", "")
+    body = [f"<h1>Discrepancy diagnosis — twin {esc(twin)}</h1>",
+            f"<p>Verdict: <b>{esc(result['verdict'])}</b>. Validation NRMSE {b['nrmse_val']:.4g} → {x['nrmse_val']:.4g} "
+            f"(ratio {result['gain']['nrmse_ratio']:.3f}), R² {b['r2_val']:.5f} → {x['r2_val']:.5f}.</p>",
+            f"<p>Effects before: {esc(', '.join(b['effects']) or 'none')}; after: {esc(', '.join(x['effects']) or 'none')}.</p>",
+            f"<h2>Causes</h2>{causes}",
+            f"<h2>Correlation tests (eq. 2-32), validation</h2><p>before: {esc(tests_txt(b))}<br>after: {esc(tests_txt(x))}</p>",
+            f"<h2>Not explained</h2><p>{esc(result['unexplained']['description'])}</p>",
+            "".join(f"<h2>{esc(f[:-4])}</h2>{image(f, style='max-width:100%')}" for f in files)]
+    return write_page(d / "index.html", f"diagnosis: {twin}", body, css=_CSS,
+                      provenance=collect(records=[r for r in (st.get("est"), val) if r is not None]))
