@@ -64,3 +64,18 @@ def test_provenance_hashes_files_and_names_the_source(tmp_path):
     assert re.match(r"\d{4}-\d\d-\d\dT\d\d:\d\d:\d\dZ", prov["date_utc"])
     block = html_block(prov)
     assert block.startswith("<section id='provenance'>") and prov["data"][0]["sha256"] in block
+
+
+def test_one_page_template_escapes_data_and_ends_with_the_provenance(tmp_path):
+    from sysid.report import figure, table, write_page
+
+    prov = collect(files=[])
+    path = write_page(tmp_path / "index.html", "a <b> & c", [table(["k", "v"], [["x", "<i>ok</i>"]], row_classes=["done"]),
+                                                             figure("fig/a b.png", "A & B")], css="h1{}", provenance=prov)
+    page = path.read_text()
+    assert page.startswith("<!doctype html>") and page.endswith("</body></html>")
+    assert "<title>a &lt;b&gt; &amp; c</title>" in page and "<style>h1{}table{" in page
+    assert "<tr class='done'><td>x</td><td><i>ok</i></td></tr>" in page  # cells are HTML: the caller escapes data
+    assert "<figure><img src='fig/a b.png' alt='A &amp; B'><figcaption>A &amp; B</figcaption></figure>" in page
+    assert page.index("<section id='provenance'>") > page.index("<figure>")
+    assert html_block(prov) in page
