@@ -24,9 +24,8 @@ from typing import Any, Callable
 
 import numpy as np
 
-from sysid.plots import pyplot
+from sysid.plots import pyplot, save_and_close
 from sysid.report import esc, figure, table, write_page
-from sysid.safeio import save_figure
 
 
 class StageSkipped(Exception):
@@ -47,11 +46,8 @@ class Context:
 
     def save_figure(self, fig, name: str, title: str) -> str:
         """Save a matplotlib figure as ``fig/<name>.png`` under the report folder; returns the relative path."""
-        d = self.report_dir / "fig"
-        d.mkdir(parents=True, exist_ok=True)
         rel = f"fig/{name}.png"
-        save_figure(fig, self.report_dir / rel, dpi=80)  # atomic: no half-written PNG under the final name
-        pyplot().close(fig)
+        save_and_close(fig, self.report_dir / rel, dpi=80)
         self.figures.append((title, rel))
         return rel
 

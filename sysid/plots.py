@@ -29,7 +29,7 @@ from sysid.residuals import correlation_tests, residual_spectrum
 
 __all__ = ["plot_residuals", "plot_correlation_tests", "plot_scatter", "plot_horizon_residuals", "plot_frf", "plot_bla", "plot_compare",
            "identification_report", "plot_measured_vs_predicted", "draw_correlation_test", "whole_periods",
-           "BAND_COLOR", "ZOOM_COLOR", "pyplot"]
+           "BAND_COLOR", "ZOOM_COLOR", "pyplot", "save_and_close"]
 
 # Colours that mean one thing in every report (the browser test looks for them): the 95 % confidence band of
 # a correlation test, and the span of the whole record that the zoomed panel shows.
@@ -53,13 +53,20 @@ def pyplot():
     return matplotlib.pyplot
 
 
-def _save(fig, path) -> Path:
+def save_and_close(fig, path, **savefig_kw) -> Path:
+    """Write ``fig`` to ``path`` (format from the suffix; ``savefig_kw`` as for ``Figure.savefig``) and close
+    it, also when writing fails. The file appears whole or not at all: a report or a browser never reads half
+    a PNG under its final name. Returns the path."""
     from sysid.safeio import save_figure
 
     try:
-        return save_figure(fig, path, dpi=110, bbox_inches="tight")  # atomic: no half-written PNG
+        return save_figure(fig, path, **savefig_kw)
     finally:
         pyplot().close(fig)
+
+
+def _save(fig, path) -> Path:
+    return save_and_close(fig, path, dpi=110, bbox_inches="tight")
 
 
 def plot_residuals(e: np.ndarray, fs: float, path, title: str = "one-step residuals", unit: str = "") -> Path:
@@ -295,21 +302,10 @@ def identification_report(model, record, out_dir, max_lag: int = 20) -> dict[str
 
 
 # ---------------------------------------------------------------------------------------------- FRF / BLA
-def _save_atomic(fig, path) -> Path:
-    from sysid.io import atomic_path
-
-    path = Path(path)
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=110, bbox_inches="tight", format=(path.suffix.lstrip(".") or "png"))
-    pyplot().close(fig)
-    return path
-
-
 def plot_frf(frf, path, title: str = "FRF", unit: str = "", reference: Any = None) -> Path:
     """Magnitude [dB] and phase [deg] of an :class:`sysid.frf.FRF`, with its 1-σ band (``std``) or its
     coherence (H1 estimates); ``reference`` (complex array at ``frf.f_hz``) is drawn for comparison."""
     f = np.asarray(frf.f_hz)
-    G = np.asarray(frf.G)
     has_coh = frf.coherence is not None
     fig, ax = pyplot().subplots(3 if has_coh else 2, 1, figsize=(8, 8 if has_coh else 6), sharex=True)
     pos = f > 0
@@ -331,7 +327,7 @@ def plot_frf(frf, path, title: str = "FRF", unit: str = "", reference: Any = Non
     ax[-1].set(xlabel="frequency [Hz]")
     for a in ax:
         a.grid(True, which="both", alpha=0.3)
-    return _save_atomic(fig, path)
+    return _save(fig, path)
 
 
 def plot_bla(bla, path, title: str = "Best Linear Approximation", unit: str = "") -> Path:
@@ -369,4 +365,4 @@ def plot_bla(bla, path, title: str = "Best Linear Approximation", unit: str = ""
     fig.tight_layout()
     for a in ax:
         a.grid(True, alpha=0.3)
-    return _save_atomic(fig, path)
+    return _save(fig, path)

@@ -176,7 +176,7 @@ def compare(p: AcousticParams, distances=(20, 40, 80), data: FirData | None = No
 
 def report_figure(p: AcousticParams, path: str | Path, distances=(20, 40, 80), data: FirData | None = None) -> Path:
     """PNG: measured vs twin magnitude spectra and impulse-response envelopes at each distance."""
-    from sysid.plots import pyplot
+    from sysid.plots import pyplot, save_and_close
 
     plt = pyplot()
 
@@ -208,8 +208,4 @@ def report_figure(p: AcousticParams, path: str | Path, distances=(20, 40, 80), d
     axes[1].legend(fontsize=7)
     fig.suptitle("USbodyComm water FIRs vs acoustic twin (transducer fitted at 40 mm)")
     fig.tight_layout()
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
-    return path
+    return save_and_close(fig, path, dpi=100)

@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from sysid.metrics import r2
-from sysid.plots import pyplot
+from sysid.plots import pyplot, save_and_close
 from sysid.record import Record
 
 __all__ = ["plot_sine_loops", "plot_multisine_spectra", "last_period", "loop_metrics"]
@@ -94,7 +94,7 @@ def plot_sine_loops(measured: Record, twin, path: str | Path, title: str = "") -
     fig.supylabel("y (normalised)")
     fig.suptitle(title or "Cantilever: u–y loops per validation sine (cf. dissertation Figure 4.3)")
     fig.tight_layout()
-    return _save(fig, path, plt)
+    return save_and_close(fig, path, dpi=110)
 
 
 def plot_multisine_spectra(record: Record, path: str | Path, twin=None, band_hz: float = 500.0) -> Path:
@@ -129,12 +129,4 @@ def plot_multisine_spectra(record: Record, path: str | Path, twin=None, band_hz:
     axes[1].set_xlim(max(f[1], 0.1), record.fs / 2)
     fig.suptitle("Multisine: input and output power spectra (cf. dissertation Figure 3.4)")
     fig.tight_layout()
-    return _save(fig, path, plt)
-
-
-def _save(fig, path, plt) -> Path:
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return save_and_close(fig, path, dpi=110)

@@ -68,7 +68,7 @@ def calibrate_lab(hysteresis: str = "bouc-wen", est: Record | None = None, val: 
 
 def plot_lab_loops(twin, path: str | Path, rec: Record, split_s: float = SPLIT_S) -> Path:
     """One PNG: measured and simulated u–y loops (left), and the time series with the residual (right)."""
-    from sysid.plots import pyplot
+    from sysid.plots import pyplot, save_and_close
 
     plt = pyplot()
     rec = load_lab_record(rec)
@@ -93,8 +93,4 @@ def plot_lab_loops(twin, path: str | Path, rec: Record, split_s: float = SPLIT_S
     a2.legend(loc="lower left", fontsize=8)
     a2.grid(alpha=0.3)
     fig.tight_layout()
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return save_and_close(fig, path, dpi=110)
