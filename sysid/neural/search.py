@@ -439,7 +439,7 @@ def export_jsonl(runs: list[dict[str, Any]], path: str | Path) -> Path:
 
 def plot_r2_distribution(runs: list[dict[str, Any]], config_key_: str, path: str | Path) -> Path:
     """Fig. 5.13 analogue: histograms of free-run R² in estimation and validation with fitted normal curves."""
-    from sysid.plots import pyplot
+    from sysid.plots import pyplot, save_and_close
 
     plt = pyplot()
     rs = [r for r in runs if r["config_key"] == config_key_]
@@ -456,9 +456,4 @@ def plot_r2_distribution(runs: list[dict[str, Any]], config_key_: str, path: str
         ax.set_xlabel("free-run R²")
     fig.suptitle(config_key_)
     fig.tight_layout()
-    from sysid.safeio import save_figure
-
-    try:
-        return save_figure(fig, path, dpi=110)
-    finally:
-        plt.close(fig)
+    return save_and_close(fig, path, dpi=110)
