@@ -55,8 +55,6 @@ class Context:
         self.sections.append((title, content_html))
 
 
-
-
 def _not_built(exc: Exception, what: str) -> StageSkipped:
     return StageSkipped(f"{what} not built yet ({exc})")
 
@@ -216,12 +214,12 @@ def _score_stage(ctx: Context, datasets: list[str], key: str, title: str, syside
             ctx.figures.append((f"{title}: {p.stem.replace('_', ' ')}", f"{key}/{p.name}"))
     failures = scoring.check(run)
     ctx.data[f"{key}_check"] = failures
-    table = _html_score_table(run)
+    scores = _html_score_table(run)
     chk = ("<p>Accuracy floors (benchmarks/baselines.json): all met.</p>" if not failures else
            "<p><b>Below their floor:</b></p><ul>" + "".join(f"<li>{esc(f)}</li>" for f in failures) + "</ul>")
     skipped = "".join(f"<li>{esc(' on '.join(x for x in (s.get('identifier'), s.get('dataset')) if x))}: "
                       f"{esc(s['reason'])}</li>" for s in run.skipped)
-    ctx.section(title, table + chk + (f"<p>Skipped:</p><ul>{skipped}</ul>" if skipped else "")
+    ctx.section(title, scores + chk + (f"<p>Skipped:</p><ul>{skipped}</ul>" if skipped else "")
                 + f"<p>JSON: <a href='{key}/score.json'>{key}/score.json</a>, Markdown: <a href='{key}/score.md'>{key}/score.md</a></p>")
     ok = [r for r in run.rows if r.get("status") == "ok"]
     best = {}

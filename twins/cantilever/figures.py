@@ -14,18 +14,16 @@ from pathlib import Path
 import numpy as np
 
 from sysid.metrics import r2
-from sysid.plots import pyplot, save_and_close
+from sysid.plots import pyplot, save_and_close, whole_periods
 from sysid.record import Record
 
 __all__ = ["plot_sine_loops", "plot_multisine_spectra", "last_period", "loop_metrics"]
 
 
-
-
 def last_period(seg_len: int, fs: float, freq_hz: float) -> slice:
-    """Slice of the last whole period of a sine segment of ``seg_len`` samples (steady-state loop)."""
-    n = int(round(fs / freq_hz))
-    return slice(max(0, seg_len - n), seg_len)
+    """Slice of the last whole period of a sine segment of ``seg_len`` samples (steady-state loop); the
+    reports cut their loops with the same :func:`sysid.plots.whole_periods`."""
+    return whole_periods(seg_len, fs, freq_hz)
 
 
 def loop_metrics(u: np.ndarray, y: np.ndarray, freq_hz: float, fs: float) -> dict[str, float]:

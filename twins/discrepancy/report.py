@@ -20,8 +20,6 @@ __all__ = ["write_report"]
 _CSS = "body{font-family:sans-serif;max-width:1100px;margin:auto}"
 
 
-
-
 def _psd(x, fs):
     from scipy import signal as sps
 
