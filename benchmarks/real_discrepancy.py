@@ -1,4 +1,4 @@
-"""The discrepancy analysis on measured data (issue 8, "On real data"): reproducible figures for the README.
+"""The discrepancy analysis on measured data: reproducible figures for the README.
 
 ``python -m benchmarks.real_discrepancy [--out DIR] [--only piezo,water,narmax]`` writes one JSON per study
 and a report folder (figures + index.html) per diagnosis:
@@ -39,14 +39,10 @@ def _save(out: Path, name: str, obj: dict[str, Any]) -> Path:
     return p
 
 
-def _strip(res: dict[str, Any]) -> dict[str, Any]:
-    return {k: v for k, v in res.items() if not k.startswith("_")}
-
-
 def piezo(out: Path) -> dict[str, Any]:
     from benchmarks.datasets import files
     from twins.cantilever.lab import lab_split, lab_twin, static_line_r2
-    from twins.discrepancy import diagnose
+    from twins.discrepancy import run_diagnosis
     from twins.discrepancy.report import write_report
 
     est, val = lab_split(files.piezo_tue_record())
@@ -54,11 +50,11 @@ def piezo(out: Path) -> dict[str, Any]:
     val.meta["segments"] = [{"start": 0, "stop": len(val), "freq_hz": 1.0}]
     twin = lab_twin()
     t0 = time.perf_counter()
-    res = diagnose(twin, est, val, max_rounds=3, keep_stages=True)
+    diagnosis = run_diagnosis(twin, est, val, max_rounds=3)
+    res = diagnosis.to_dict()
     res["seconds"] = time.perf_counter() - t0
     res["static_line_r2_val"] = static_line_r2(est, val)
-    write_report(res, out / "piezo")
-    res = _strip(res)
+    write_report(diagnosis.to_dict(keep_stages=True), out / "piezo")
     _save(out, "piezo", res)
     return res
 
@@ -86,7 +82,7 @@ def water(out: Path, distance_mm: int = 20) -> dict[str, Any]:
 
     from twins.acoustic import AcousticTwin
     from twins.acoustic.labdata import fit_transducer
-    from twins.discrepancy import diagnose
+    from twins.discrepancy import DiagnoseOptions, run_diagnosis
     from twins.discrepancy.report import write_report
 
     from twins.acoustic.amplifier import voltage_gain
@@ -101,12 +97,12 @@ def water(out: Path, distance_mm: int = 20) -> dict[str, Any]:
     twin = AcousticTwin(p, effects=set(), seed=0)
     est, val = water_records(distance_mm)
     t0 = time.perf_counter()
-    res = diagnose(twin, est, val, max_rounds=3, keep_stages=True,
-                   calibration_params=("pzt_thickness_m", "backing_rayl", "output_gain"))
+    opts = DiagnoseOptions(calibration_params=("pzt_thickness_m", "backing_rayl", "output_gain"))
+    diagnosis = run_diagnosis(twin, est, val, max_rounds=3, options=opts)
+    res = diagnosis.to_dict()
     res["seconds"] = time.perf_counter() - t0
     res["transducer_fit_40mm"] = fit
-    write_report(res, out / "water")
-    res = _strip(res)
+    write_report(diagnosis.to_dict(keep_stages=True), out / "water")
     _save(out, "water", res)
     return res
 

@@ -1,4 +1,4 @@
-"""Hidden-effect cases for the discrepancy tests (issue 8): data with one catalog effect at random plausible
+"""Hidden-effect cases for the discrepancy tests: data with one catalog effect at random plausible
 parameters, from the dissertation's protocols (multisine estimation, sine or chirp validation) or from steps,
 and the twin to diagnose from (the same configuration without that effect).
 

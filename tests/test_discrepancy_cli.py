@@ -1,4 +1,4 @@
-"""``piezotwin diagnose``: JSON contract, report folder, bad input (issue 8)."""
+"""``piezotwin diagnose``: JSON contract, report folder, bad input."""
 
 from __future__ import annotations
 

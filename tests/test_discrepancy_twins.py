@@ -1,4 +1,4 @@
-"""Hidden-effect tests of the discrepancy analysis on the two twins (issue 8).
+"""Hidden-effect tests of the discrepancy analysis on the two twins.
 
 Default suite (about a minute): the echo injected as a delayed scaled copy. ``slow``: effects injected with a few lines of independent code written
 here — creep as a sum of first-order lags, a delay as a shift, an echo as a delayed scaled copy of the output,
@@ -7,7 +7,7 @@ protocols do not generate; plus one catalog effect per twin and a noise-only cas
 
 ``slow`` suite: every catalog effect of both twins at random plausible parameters over several seeds from
 the protocols (multisine estimation, sine/chirp validation, steps), noise-only cases, two effects at once;
-the success rates are asserted against the issue's 95 % and printed (see the README for the measured rates).
+the success rates are asserted against 95 % and printed (see the README for the measured rates).
 """
 
 from __future__ import annotations

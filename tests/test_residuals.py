@@ -5,6 +5,7 @@ import pytest
 
 from sysid.errors import DataError
 from sysid.residuals import correlation_tests, normality, residual_spectrum, xcorr
+from sysid.residuals import tests_summary as summary  # (a name starting with "test" would be collected)
 
 
 def test_xcorr_matches_eq_2_33_directly():
@@ -15,6 +16,19 @@ def test_xcorr_matches_eq_2_33_directly():
     lags = np.array([-7, -1, 0, 1, 5, 20])
     want = [np.sum(xm[: 300 - t] * ym[t:]) / den if t >= 0 else np.sum(xm[-t:] * ym[: 300 + t]) / den for t in lags]
     np.testing.assert_allclose(xcorr(x, y, lags), want, atol=1e-12)
+
+
+def test_summary_keeps_the_decisions_and_counts_without_the_curves():
+    rng = np.random.default_rng(3)
+    e = rng.standard_normal(500)
+    r = correlation_tests(np.r_[e[:1], e[1:] + 0.8 * e[:-1]], rng.uniform(-1, 1, 500), max_lag=10)
+    s = summary(r)
+    assert s["passed"] == r["passed"] and [t["name"] for t in s["tests"]] == [t["name"] for t in r["tests"]]
+    for full, short in zip(r["tests"], s["tests"]):
+        assert short["n_failing"] == len(full["failing_lags"]) and short["failing_lags"] == full["failing_lags"][:40]
+        assert short["max_abs"] == pytest.approx(np.max(np.abs(full["values"]))) and short["band"] == r["band"]
+        assert "values" not in short
+    assert not s["tests"][0]["passed"]  # the coloured residual fails r_ee
 
 
 def test_white_noise_about_five_percent_outside_the_band():

@@ -1,8 +1,8 @@
 """``piezotwin diagnose TWIN --data FILE [--val FILE] [--params FILE] [--effects LIST] [--json] [--report DIR]``.
 
 Calibrates the twin's configuration to the data, analyses the residual, names the cause among the twin's
-catalog effects, extends the twin with it and reports the validation gain (issue 8; library:
-:func:`twins.discrepancy.diagnose`).
+catalog effects, extends the twin with it and reports the validation gain (library:
+:func:`twins.discrepancy.run_diagnosis`).
 """
 
 from __future__ import annotations
@@ -33,7 +33,7 @@ def register(sub) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from twins.discrepancy import diagnose
+    from twins.discrepancy import DiagnoseOptions, run_diagnosis
 
     if args.max_rounds < 0:
         raise ConfigError(f"--max-rounds must be >= 0, got {args.max_rounds}")
@@ -43,15 +43,14 @@ def run(args: argparse.Namespace) -> int:
     same_fs([data] + ([val] if val is not None else []))
     cands = [c.strip() for c in args.candidates.split(",") if c.strip()] if args.candidates else None
     show = bool(getattr(args, "progress", False)) or sys.stderr.isatty()
-    result = diagnose(twin, data, val, max_rounds=args.max_rounds, candidates=cands,
-                      calibrate_baseline=not args.no_calibrate, skip=args.skip, keep_stages=bool(args.report),
-                      progress=(lambda msg: print(f"[diagnose] {msg}", file=sys.stderr, flush=True)) if show else None)
+    opts = DiagnoseOptions(candidates=cands, calibrate_baseline=not args.no_calibrate, skip=args.skip,
+                           progress=(lambda msg: print(f"[diagnose] {msg}", file=sys.stderr, flush=True)) if show else None)
+    diagnosis = run_diagnosis(twin, data, val, max_rounds=args.max_rounds, options=opts)
+    result = diagnosis.to_dict()
     if args.report:
         from twins.discrepancy.report import write_report
 
-        index = write_report(result, args.report)
-        result["report"] = str(index)
-    result.pop("_stages", None)
+        result["report"] = str(write_report(diagnosis.to_dict(keep_stages=True), args.report))
     if args.json:
         emit_json(result)
         return 0

@@ -1,4 +1,4 @@
-"""Re-test the effects that are already on (issue 20, item 1).
+"""Re-test the effects that are already on.
 
 A twin's default effects (for the cantilever: creep, second mode, sensor low-pass) are part of the
 configuration, so the add-an-effect loop of :mod:`.diagnose` never tried them. When the data have one of them
@@ -11,7 +11,7 @@ round of the diagnosis each such effect not yet re-tested successfully is a cand
 could be added, with the same ranking, significance rule and grouping:
 
 1. **refit**: P_e (pre-scanned over their documented ranges, then least squares) together with the core
-   calibration parameters (:func:`.diagnose._run_trial` with the effect already present), from the round's
+   calibration parameters (:func:`.trials.run_trial` with the effect already present), from the round's
    starting points (the calibrated core, which may have bent to mimic the mis-sized effect — a 3× creep rate
    on steps pulls the gain to 2.6× its value — and the core as configured);
 2. **attributable**: the gain must come from P_e, not from a better core optimum found on the way: the
@@ -36,6 +36,11 @@ from sysid.metrics import nrmse
 from sysid.record import Record
 from twins.base import Twin
 
+from .fields import choice_fields, effect_fields
+from .options import DiagnoseOptions
+from .prediction import significance, simulate_val, sse
+from .trials import Trial, run_trial
+
 __all__ = ["retestable", "owned_fields", "retest_trials", "attributable", "cause_fields", "contributions"]
 
 
@@ -53,18 +58,13 @@ def owned_fields(twin: Twin, effects: Sequence[str]) -> set[str]:
 
 
 def _fields(twin: Twin, effect: str) -> list[str]:
-    from .diagnose import _int_fields, _numeric_fields
-
-    vals = twin.EFFECTS[effect].params.values()
-    return [f for f in _numeric_fields(twin, vals) if f not in _int_fields(twin, vals)]
+    return effect_fields(twin, twin.EFFECTS[effect].params.values())
 
 
 def retest_trials(bases: Sequence[Twin], effects: Sequence[str], est: Record, val: Record, core: list[str],
-                  analysis: dict[str, Any], opts: dict[str, Any]) -> list[Any]:
+                  analysis: dict[str, Any], opts: DiagnoseOptions) -> list[Trial]:
     """One trial per effect of ``effects`` (P_e and the core refitted; the best of ``bases`` by estimation SSE),
     marked ``retest = True``."""
-    from .diagnose import _choice_fields, _run_trial
-
     out = []
     for e in effects:
         if not _fields(bases[0], e):
@@ -73,9 +73,9 @@ def retest_trials(bases: Sequence[Twin], effects: Sequence[str], est: Record, va
         for b in bases:
             # a list-valued parameter (a model variant) stays as configured: the re-test sizes the effect, it does
             # not swap its structure (and enumerating the variants would cost up to 8 fits per round)
-            cats = {c: getattr(b.params, c) for c in _choice_fields(b, b.EFFECTS[e].params.values())}
+            cats = {c: getattr(b.params, c) for c in choice_fields(b, b.EFFECTS[e].params.values())}
             try:
-                t = _run_trial(b, e, est, val, core, analysis, opts, refit_core=True, choice=cats or None)
+                t = run_trial(b, e, est, val, core, analysis, opts, refit_core=True, choice=cats or None)
             except (ConfigError, DataError, ValueError, np.linalg.LinAlgError):
                 continue
             if best is None or t.sse_est < best.sse_est:
@@ -86,21 +86,19 @@ def retest_trials(bases: Sequence[Twin], effects: Sequence[str], est: Record, va
     return out
 
 
-def attributable(tr, est: Record, val: Record, configured: Twin, n_eff: float, level: float, min_rel_gain: float,
+def attributable(tr: Trial, est: Record, val: Record, configured: Twin, n_eff: float, level: float, min_rel_gain: float,
                  skip: int) -> bool:
     """Step 2 of the module docstring: P_e back at their configured values must be significantly worse."""
-    from .diagnose import _simulate_val, _sse, significance
-
     fields = _fields(configured, tr.effect)
-    yv0 = _simulate_val(tr.twin.with_params(**{f: getattr(configured.params, f) for f in fields}), est, val)
-    sse0 = _sse(val.y, yv0, skip)
+    yv0 = simulate_val(tr.twin.with_params(**{f: getattr(configured.params, f) for f in fields}), est, val)
+    sse0 = sse(val.y, yv0, skip)
     if not (math.isfinite(sse0) and sse0 > 0):
         return True
     g0 = 1.0 - math.sqrt(tr.sse_val / sse0)
     return bool(significance(sse0, tr.sse_val, n_eff, tr.n_added) < level and g0 >= min_rel_gain)
 
 
-def cause_fields(tr, nrmse_before: float, configured: Twin) -> dict[str, Any]:
+def cause_fields(tr: Trial, nrmse_before: float, configured: Twin) -> dict[str, Any]:
     """Kind, ratios to the configured values and the evidence sentence of a significant re-test."""
     fields = _fields(configured, tr.effect)
     ratio = {}
@@ -117,16 +115,14 @@ def cause_fields(tr, nrmse_before: float, configured: Twin) -> dict[str, Any]:
 
 def contributions(twin: Twin, effects: Sequence[str], est: Record, val: Record, skip: int) -> list[dict[str, Any]]:
     """Step 3: validation NRMSE of ``twin`` with and without each effect of ``effects`` (no refit)."""
-    from .diagnose import _simulate_val
-
-    y_with = _simulate_val(twin, est, val)
+    y_with = simulate_val(twin, est, val)
     n_with = nrmse(val.y, y_with, skip)
     out = []
     for e in effects:
         if e not in twin.effects:
             continue
         try:
-            y_wo = _simulate_val(twin.with_effects(set(twin.effects) - {e}), est, val)
+            y_wo = simulate_val(twin.with_effects(set(twin.effects) - {e}), est, val)
         except (ConfigError, DataError, ValueError):
             continue
         n_wo = nrmse(val.y, y_wo, skip)

@@ -1,10 +1,10 @@
-"""Per-effect evidence from physical residual signatures (issue 8, step 3).
+"""Per-effect evidence from physical residual signatures.
 
 An effect of a twin's catalog is matched to a *signature family* by the words of its id and its one-line
 ``signature`` (creep, echo, delay, compression, …). Each family reads the numbers of
 :func:`twins.discrepancy.features.analyse` and returns a score in [0, 1] (how clearly the residual carries that
 signature) and a sentence with the numbers behind it. The score only ranks and explains; the decisive
-evidence is the trial fit in :mod:`twins.discrepancy.diagnose` (add the effect, fit, measure the gain).
+evidence is the trial fit in :mod:`twins.discrepancy.trials` (add the effect, fit, measure the gain).
 
 Families whose members the data cannot tell apart from one signature alone are listed in
 :data:`SEPARATING_EXPERIMENTS` with the experiment that would separate them.
@@ -184,7 +184,6 @@ def _creep(a: dict, twin: Twin) -> tuple[float, str]:
         return score, (f"after {sd['n_steps']} input steps the residual drifts logarithmically: "
                        f"{sd['gain_per_decade']:+.3g} per input unit per decade, {100 * sd['share']:.0f} % of the "
                        "in-hold residual variance: creep")
-    lf = a["bands"]
     score = _clip01((tr["drift_share"] - 0.1) / 0.5) * 0.7
     return score, (f"slow residual component ({100 * tr['drift_share']:.0f} % of its variance is a trend); no input "
                    "steps to confirm a logarithmic creep law")
@@ -228,7 +227,6 @@ def _quant(a: dict, twin: Twin) -> tuple[float, str]:
 def _rate(a: dict, twin: Twin) -> tuple[float, str]:
     h = [s for s in a["hysteresis"] if math.isfinite(s["width_measured"]) and math.isfinite(s["width_simulated"])]
     if len(h) < 2:
-        nl = a["nonlinear"]
         return 0.1, "no sine segments to compare loop widths against frequency"
     f = np.array([s["freq_hz"] for s in h])
     dw = np.array([s["width_measured"] - s["width_simulated"] for s in h])

@@ -1,4 +1,4 @@
-"""Ranges from the data (issue 20, item 2): the twin's amplitude limit, time constants and integration step
+"""Ranges from the data: the twin's amplitude limit, time constants and integration step
 follow the record, and fitted parameters that end at a bound are reported and retried once with the bound
 widened.
 

@@ -1,4 +1,4 @@
-"""Validation that validates (issue 20, item 3): the validation record must carry excitation.
+"""Validation that validates: the validation record must carry excitation.
 
 A validation record whose input holds still (u ≈ constant, e.g. the 0 V rest at the end of a step test)
 scores only the twin's response to nothing: offset, drift and the tail of creep. Every configuration that

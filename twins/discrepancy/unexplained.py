@@ -1,4 +1,4 @@
-"""Unexplained residual (issue 20, item 4): the data lie outside what the twin can represent.
+"""Unexplained residual: the data lie outside what the twin can represent.
 
 After the best extension the validation residual e is compared with the measurement-noise level σ², measured
 from the data themselves (never from the twin's noise parameter):
@@ -20,6 +20,10 @@ above f_high = fs/10; the peak of its Welch spectrum) and its correlation with u
 trend (which tells a dead zone, a backlash, a resonance and a drift apart in words). The limit 9 (residual
 RMS 3× the noise) leaves a wide margin on both sides as measured (docs/diagnosis.md): noise-only data give
 0.10–0.57, correctly extended mis-sized cases 0.006–0.93, the out-of-catalog cases 2.8·10³–4.9·10⁵.
+
+:func:`generic_residual_model` tests what is left for structure no catalog entry explains: a generic
+linear-in-parameters residual model (FIR of u, (u²)′, (u³)′ and a trend) fitted on the estimation residual and
+scored on the validation residual with the diagnosis' F-test.
 """
 
 from __future__ import annotations
@@ -30,7 +34,12 @@ from typing import Any
 import numpy as np
 from scipy import signal as sps
 
-__all__ = ["EXCESS_LIMIT", "noise_level", "judge"]
+from sysid.record import Record
+
+from .features import effective_samples
+from .prediction import significance
+
+__all__ = ["EXCESS_LIMIT", "noise_level", "judge", "generic_residual_model"]
 
 #: residual power / noise power above which the residual is "far above the noise"
 EXCESS_LIMIT = 9.0
@@ -132,3 +141,32 @@ def signature(u: np.ndarray, e: np.ndarray, fs: float) -> dict[str, Any]:
             f"mean {100 * mean_share:.0f} % of its power")
     return {"band_low": low, "band_high": high, "peak_hz": peak, "corr": cu, "mean_share": mean_share,
             "text": text}
+
+
+def generic_residual_model(est: Record, val: Record, e_est: np.ndarray, e_val: np.ndarray, lags: int,
+                            skip: int) -> dict[str, Any]:
+    """Structure no catalog entry explains: a FIR model of the residual on u, (u²)′, (u³)′ (lags 0…L) and a
+    trend, fitted on the estimation residual and scored on the validation residual (relative SSE, F-test)."""
+    def design(rec: Record) -> np.ndarray:
+        u = np.asarray(rec.u, float)
+        sc = float(np.std(est.u)) or 1.0
+        mu = float(np.mean(est.u))
+        z = (u - mu) / sc
+        cols = [np.ones_like(z), np.linspace(-1, 1, z.size)]
+        for x in (z, z ** 2 - 1.0, z ** 3 - 3 * z):
+            for k in range(lags + 1):
+                cols.append(np.r_[np.zeros(k), x[: x.size - k]])
+        return np.column_stack(cols)
+    A = design(est)[skip:]
+    # ridge-regularised least squares: lagged copies of a slow input are nearly collinear, and an unregularised
+    # fit would extrapolate wildly to the validation record
+    G = A.T @ A
+    lam = 1e-4 * float(np.mean(np.diag(G))) or 1e-12
+    c = np.linalg.solve(G + lam * np.eye(G.shape[0]), A.T @ e_est[skip:])
+    pv = design(val)[skip:] @ c
+    ev_ = e_val[skip:]
+    sse0 = float(ev_ @ ev_)
+    sse1 = float((ev_ - pv) @ (ev_ - pv))
+    n_eff = effective_samples(ev_ - pv)
+    p = significance(sse0, sse1, n_eff, A.shape[1])
+    return {"nrmse_ratio": math.sqrt(sse1 / sse0) if sse0 > 0 else 1.0, "p_value": p, "n_terms": int(A.shape[1])}

@@ -1,4 +1,4 @@
-"""Cases of issue 20 for the discrepancy tests: a default effect mis-sized ×3, two hidden effects at once, and
+"""Cases of measured-data robustness for the discrepancy tests: a default effect mis-sized ×3, two hidden effects at once, and
 effects outside the catalog written here independently of the twin (a dead zone and a backlash of the
 amplifier input, an unmodelled resonance of the mount added to the output).
 

@@ -1,8 +1,8 @@
-"""Diagnosis that holds on real measurements (issue 20).
+"""Diagnosis that holds on measured records: split, ranges, bounds, sub-step, noise level, mis-sized defaults.
 
 Default suite: the unit checks (split on a hold, amplitude option, bounds, sub-step accuracy against a 1 µs
 solution, noise level against a known σ), one mis-sized default effect, one effect outside the catalog and
-the simulated 1.4 kV creep record through the CLI. ``slow``: the seed sweeps of the issue's "Done when"
+the simulated 1.4 kV creep record through the CLI. ``slow``: the seed sweeps behind the success rates
 (rates printed; docs/diagnosis.md lists the measured ones).
 """
 
@@ -19,11 +19,11 @@ from twins.discrepancy import diagnose, ranges, splitting, unexplained
 from twins.cantilever import CantileverTwin
 from twins.cantilever.substep import choose_substep
 
-import discrepancy_cases20 as C
+import discrepancy_cases_measured as C
 from discrepancy_cases import hidden_case
 
 
-# ------------------------------------------------------------------------------------------ item 3: split
+# ------------------------------------------------------------------------------------------ split
 def test_default_split_moves_off_a_hold():
     fs = 100.0
     rng = np.random.default_rng(0)
@@ -48,7 +48,7 @@ def test_validation_record_on_a_hold_is_refused():
         diagnose(CantileverTwin(), est, val)
 
 
-# ------------------------------------------------------------------------------------------ item 2: ranges
+# ------------------------------------------------------------------------------------------ ranges
 def _rec(u, fs=100.0):
     return Record(u=np.asarray(u, float), y=np.zeros(len(u)), fs=fs)
 
@@ -75,7 +75,7 @@ def test_at_bound_reported_and_widened_once():
     assert ranges.at_bounds(wide, ["f1_hz"]) == []
 
 
-# ------------------------------------------------------------------------------------------ item 6: sub-step
+# ------------------------------------------------------------------------------------------ sub-step
 @pytest.mark.parametrize("kind", ["staircase_1k", "slow_sines_1k", "multisine_10k"])
 def test_bandwidth_chosen_substep_meets_its_bound_against_a_1us_solution(kind):
     tw = CantileverTwin().noise_free()
@@ -97,7 +97,7 @@ def test_bandwidth_chosen_substep_meets_its_bound_against_a_1us_solution(kind):
         assert tw.with_params(max_substep_s=h).substeps(fs) <= 5
 
 
-# ------------------------------------------------------------------------------------------ item 4: noise
+# ------------------------------------------------------------------------------------------ noise
 def test_noise_level_from_holds_matches_the_known_sigma():
     rng = np.random.default_rng(2)
     u = np.repeat(rng.uniform(-1, 1, 20), 500)
@@ -158,7 +158,7 @@ def test_missized_defaults_over_seeds(effect):
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=False, reason="issue 20 item 5 not met: the greedy rounds name one of two simultaneous "
+@pytest.mark.xfail(strict=False, reason="the greedy rounds name one of two simultaneous "
                    "effects, a mimic takes the other's place (seed 0: asymmetric hysteresis for creep + thermal drift, "
                    "a slow sensor for saturation + delay); a joint pair search is still to do")
 @pytest.mark.parametrize("pair", sorted(C.PAIRS))

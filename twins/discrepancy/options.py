@@ -1,0 +1,71 @@
+"""The settings of a diagnosis, as one typed object."""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Any, Callable, Sequence
+
+__all__ = ["DiagnoseOptions"]
+
+
+@dataclasses.dataclass
+class DiagnoseOptions:
+    """Settings of :func:`twins.discrepancy.diagnose` (its keyword arguments).
+
+    candidates
+        Catalog effects to try (default: every effect not in the configuration, except noise).
+    calibrate_baseline
+        Refit the configuration as given before anything is added.
+    calibration_params
+        Core parameters refitted with every trial (default ``twin.CALIBRATION_PARAMS``).
+    alpha, min_rel_gain
+        Significance level (Bonferroni over the candidates) and minimum relative validation NRMSE reduction.
+    trial_nfev, scan_nfev, scan_points, refine
+        Budgets: least-squares evaluations of a full trial (effect + core parameters) and of the first-stage
+        fit (effect parameters only, core held), points of each parameter pre-scan, and how many of the best
+        first-stage candidates get the full refit.
+    max_lag, max_echo_s
+        Lags of the correlation tests and nonlinear correlations; longest echo delay searched [s].
+    skip
+        Leading samples not scored (initial transient).
+    split
+        Estimation share of ``data`` when no validation record is given.
+    generic_lags
+        FIR length of the generic residual model (what no catalog effect explains).
+    keep_stages
+        Attach the predictions (``_stages``) to the dict result, for :func:`twins.discrepancy.report.write_report`.
+    retest_defaults
+        Re-test the deterministic effects that are on (their own parameters refitted).
+    follow_ranges
+        Adjust the twin's amplitude limit, time constants and integration step to the records.
+    progress
+        Callable taking one message per step, or None.
+    """
+
+    candidates: Sequence[str] | None = None
+    calibrate_baseline: bool = True
+    calibration_params: Sequence[str] | None = None
+    alpha: float = 0.01
+    min_rel_gain: float = 0.005
+    trial_nfev: int = 25
+    scan_nfev: int = 15
+    scan_points: int = 13
+    refine: int = 3
+    max_lag: int = 20
+    max_echo_s: float | None = None
+    skip: int = 0
+    split: float = 0.6
+    generic_lags: int = 10
+    keep_stages: bool = False
+    retest_defaults: bool = True
+    follow_ranges: bool = True
+    progress: Callable[[str], Any] | None = None
+
+    def __post_init__(self) -> None:
+        for name in ("trial_nfev", "scan_nfev", "scan_points", "skip", "max_lag"):
+            setattr(self, name, int(getattr(self, name)))
+
+    def say(self, msg: str) -> None:
+        """Report one step to ``progress`` (nothing when it is not callable)."""
+        if callable(self.progress):
+            self.progress(msg)

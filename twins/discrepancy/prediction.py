@@ -1,0 +1,90 @@
+"""The prediction a diagnosis compares with the data, and the numbers it is judged by.
+
+The prediction is the twin's deterministic free-run simulation: without the effects that add error no
+prediction can follow (noise, quantisation), clipped to the saturation rails of the measured record when it
+has any, and for a validation record that continues the estimation record simulated as that continuation.
+:func:`significance` is the F-test every gain of the diagnosis is judged by.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+from scipy import stats
+
+from sysid.record import Record
+from twins.base import Twin
+
+from . import evidence as ev
+from .features import clip_to_rails
+
+__all__ = ["NOISE_EFFECTS", "unpredictable", "deterministic", "simulate", "simulate_val", "with_rails", "sse",
+           "significance"]
+
+#: effects that model unpredictable noise: never a candidate cause, always off in the fitted prediction
+NOISE_EFFECTS: tuple[str, ...] = ("measurement_noise",)
+
+#: meta key under which the diagnosis attaches the saturation rails to its working copies of the records
+RAILS_KEY = "diagnose_saturation_rails"
+
+
+def unpredictable(twin: Twin) -> set[str]:
+    """Effects that add error no prediction can follow: noise, and quantisation (its error depends on the
+    noise); they are left out of the fitted prediction and are judged by their data signature only."""
+    return {e for e, s in twin.EFFECTS.items() if e in NOISE_EFFECTS or ev.family_of(s) in ("noise", "quantization")}
+
+
+def deterministic(twin: Twin) -> Twin:
+    """The same twin without its noise and quantisation effects (the prediction to compare with data)."""
+    eff = set(twin.effects) - unpredictable(twin)
+    return twin if eff == set(twin.effects) else twin.with_effects(eff)
+
+
+def simulate(twin: Twin, rec: Record) -> np.ndarray:
+    """The twin's output for ``rec.u``, clipped to the record's saturation rails when it has any."""
+    return clip_to_rails(np.asarray(twin.simulate(rec.u, rec.fs), dtype=float), rec.meta.get(RAILS_KEY))
+
+
+def with_rails(rec: Record, rails: dict[str, Any]) -> Record:
+    """``rec`` carrying the saturation rails ``rails`` (unchanged when neither side has one)."""
+    if rails.get("lo") is None and rails.get("hi") is None:
+        return rec
+    return rec.replace(meta={**rec.meta, RAILS_KEY: {"lo": rails["lo"], "hi": rails["hi"]}})
+
+
+def continues(est: Record, val: Record) -> bool:
+    """True when ``val`` directly continues ``est`` (same source and fs, ``t0`` at the end of ``est``, as
+    ``Record.split`` makes them): the validation is then simulated as the continuation of the estimation input
+    (still free run, no measured output used), so a system with memory (hysteresis, creep) is not restarted."""
+    if val.fs != est.fs or "t0" not in val.meta or est.source != val.source:
+        return False
+    t_end = float(est.meta.get("t0", 0.0)) + len(est) / est.fs
+    return abs(float(val.meta["t0"]) - t_end) < 0.5 / est.fs
+
+
+def simulate_val(twin: Twin, est: Record, val: Record) -> np.ndarray:
+    """The prediction of the validation record (as the continuation of ``est`` where it continues it)."""
+    if continues(est, val):
+        y = simulate(twin, Record(u=np.concatenate([est.u, val.u]), y=None, fs=est.fs))[len(est):]
+        return clip_to_rails(y, val.meta.get(RAILS_KEY))
+    return simulate(twin, val)
+
+
+def sse(y: np.ndarray, yh: np.ndarray, skip: int) -> float:
+    """Sum of squared errors after the first ``skip`` samples (inf when not finite)."""
+    r = np.asarray(y, float)[skip:] - np.asarray(yh, float)[skip:]
+    v = float(np.sum(r * r))
+    return v if math.isfinite(v) else float("inf")
+
+
+def significance(sse0: float, sse1: float, n_eff: float, p_extra: int) -> float:
+    """p-value of the F-test that the residual variance fell from sse0 to sse1 by adding ``p_extra`` parameters,
+    with ``n_eff`` effective independent samples: ``F = (N_eff − p)/p · (s₀² − s₁²)/s₁²``."""
+    p = max(int(p_extra), 1)
+    if not (math.isfinite(sse0) and math.isfinite(sse1)) or sse1 >= sse0 or sse1 <= 0:
+        return 1.0 if sse1 > 0 or sse1 >= sse0 else 0.0
+    d2 = max(n_eff - p, 1.0)
+    F = d2 / p * (sse0 - sse1) / sse1
+    return float(stats.f.sf(F, p, d2))

@@ -1,0 +1,152 @@
+"""Ranking the trials of one round: significance, order, what the data cannot tell apart, confidence, cause.
+
+**Significance** of a gain: an F-test on the validation residual variance (:func:`.prediction.significance`)
+with ``p`` the number of added parameters and ``N_eff`` the effective number of independent residual samples
+(:func:`.features.effective_samples`), Bonferroni-corrected over the candidates tried (``p_value < alpha /
+n_candidates``), *and* a relative validation NRMSE reduction of at least ``min_rel_gain`` (a floor against
+gains of no practical size on very long records). A re-tested effect that is on must also owe its gain to its
+own parameters (:func:`.defaults.attributable`).
+
+**Order**: significant first, then by gain, ties broken by the signature score (:mod:`.evidence`).
+
+**Group** what the data cannot tell apart: candidates of the leading cause's ``EffectSpec.group`` whose NRMSE
+is within 2× of the leader's, and any candidate whose validation residual variance is within the sampling
+error ``2·√(2/N_eff)`` of the leader's (or not significantly larger) while its prediction differs from the
+leader's by less than half the residual RMS. The group is reported with the experiment that would separate it.
+
+**Confidence** of a cause (in [0, 1]): ``(1 − p_value) · (0.5 + 0.5·√(1 − g₂/g₁)) · (0.8 + 0.2·s)`` with ``g₁``
+its relative validation gain, ``g₂`` the best gain of a candidate outside its group and ``s`` its signature
+score (the clearer of the estimation and validation records): 1 when only this effect explains the data and
+its signature is clear, ½ when another effect explains it about as well.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from typing import Any
+
+import numpy as np
+
+from sysid.record import Record
+from twins.base import Twin
+
+from . import defaults as dflt
+from . import evidence as ev
+from . import features as ft
+from .fields import fmt_params
+from .options import DiagnoseOptions
+from .prediction import significance
+from .trials import Stage, Trial
+
+__all__ = ["Ranking", "rank_round", "cause_from"]
+
+
+@dataclasses.dataclass
+class Ranking:
+    """The trials of a round, best first, the leader's group and one JSON row per trial."""
+
+    trials: list[Trial]
+    group: list[str]
+    rows: list[dict[str, Any]]
+
+    @property
+    def top(self) -> Trial:
+        return self.trials[0]
+
+
+def rank_round(trials: list[Trial], stage: Stage, est: Record, val: Record, twin: Twin, prior: Twin,
+               n_eff0: float, opts: DiagnoseOptions) -> Ranking:
+    """Judge, order and group the (non-empty) ``trials`` of a round that started from ``stage``."""
+    _judge(trials, stage, est, val, prior, n_eff0, opts)
+    sig_ev = {tr.effect: ev.signature_evidence(twin.EFFECTS[tr.effect], stage.analysis_val, twin,
+                                               also=stage.analysis_est) for tr in trials}
+    trials.sort(key=lambda t: (t.significant, t.gain + 0.01 * sig_ev[t.effect]["score"] * t.gain), reverse=True)
+    group = _group(trials, twin, val, opts)
+    return Ranking(trials, group, _rows(trials, group, sig_ev))
+
+
+def _judge(trials: list[Trial], stage: Stage, est: Record, val: Record, prior: Twin, n_eff0: float,
+           opts: DiagnoseOptions) -> None:
+    """p-value, gain and significance of each trial against ``stage`` (module docstring)."""
+    skip = opts.skip
+    for tr in trials:
+        n_eff = min(n_eff0, ft.effective_samples(val.y[skip:] - tr.yhat_val[skip:]))
+        tr.p_value = significance(stage.sse_val, tr.sse_val, n_eff, tr.n_added)
+        tr.gain = max(0.0, 1.0 - tr.nrmse_val / stage.nrmse_val) if stage.nrmse_val > 0 else 0.0
+    level = opts.alpha / len(trials)
+    for tr in trials:
+        tr.significant = bool(tr.p_value < level and tr.gain >= opts.min_rel_gain)
+        if tr.significant and tr.retest:
+            tr.significant = dflt.attributable(tr, est, val, prior, n_eff0, level, opts.min_rel_gain, skip)
+
+
+def _group(trials: list[Trial], twin: Twin, val: Record, opts: DiagnoseOptions) -> list[str]:
+    """The leader and the candidates the data cannot tell from it (module docstring)."""
+    skip = opts.skip
+    top = trials[0]
+    n_eff_top = ft.effective_samples(val.y[skip:] - top.yhat_val[skip:])
+    tol = 2.0 * math.sqrt(2.0 / max(n_eff_top, 1.0))
+    e_rms_top = math.sqrt(top.sse_val / max(val.n - skip, 1))
+    top_group = twin.EFFECTS[top.effect].group
+    group = [top.effect]
+    for tr in trials[1:]:
+        # the data cannot tell tr from the leader when the leader's residual is not significantly smaller
+        not_better = significance(tr.sse_val, top.sse_val, n_eff_top, 1) > opts.alpha
+        # a catalog ambiguity group: members that explain the data nearly as well (NRMSE within 2×) go together
+        same_group = (bool(top_group) and twin.EFFECTS[tr.effect].group == top_group and tr.significant
+                      and tr.nrmse_val <= 2.0 * top.nrmse_val)
+        d_pred = float(np.sqrt(np.mean((tr.yhat_val[skip:] - top.yhat_val[skip:]) ** 2)))
+        equal = tr.significant and (tr.sse_val <= top.sse_val * (1 + tol) or not_better) and d_pred < 0.5 * e_rms_top
+        if same_group or equal:
+            group.append(tr.effect)
+    return group
+
+
+def _confidence(tr: Trial, top: Trial, in_group: bool, g2: float, score: float) -> float:
+    """Confidence of one trial (module docstring); capped at 0.1 for a trial that is not significant."""
+    g1 = top.gain
+    if in_group:
+        sep = 1.0 - (g2 / g1 if g1 > 0 else 1.0)
+        conf = (1 - tr.p_value) * (0.5 + 0.5 * math.sqrt(max(sep, 0.0))) * (0.8 + 0.2 * score)
+        if tr.effect != top.effect:
+            conf *= (tr.gain / g1) if g1 > 0 else 0.0
+    else:
+        conf = (1 - tr.p_value) * 0.5 * ((tr.gain / g1) if g1 > 0 else 0.0) * (0.8 + 0.2 * score)
+    return float(min(1.0, max(0.0, conf))) if tr.significant else float(min(0.2, max(0.0, conf)) * 0.5)
+
+
+def _rows(trials: list[Trial], group: list[str], sig_ev: dict[str, dict[str, Any]]) -> list[dict[str, Any]]:
+    g2 = max([t.gain for t in trials if t.effect not in group] + [0.0])
+    rows = []
+    for tr in trials:
+        s = sig_ev[tr.effect]
+        conf = _confidence(tr, trials[0], tr.effect in group, g2, s["score"])
+        rows.append({"effect": tr.effect, "family": s["family"], "significant": tr.significant,
+                     "retest": bool(tr.retest),
+                     "confidence": conf, "signature_score": s["score"], "signature": s["text"],
+                     "nrmse_val": tr.nrmse_val, "r2_val": tr.r2_val, "gain": tr.gain, "p_value": tr.p_value,
+                     "params": tr.effect_params, "stderr": tr.stderr, "seconds": tr.seconds})
+    return rows
+
+
+def cause_from(ranking: Ranking, stage: Stage, twin: Twin, prior: Twin, rnd: int) -> dict[str, Any]:
+    """The cause a round names: its leader (significant), with its group and the experiment to separate it."""
+    top, row, group = ranking.top, ranking.rows[0], ranking.group
+    text = (f"{row['signature']}; adding {top.effect} and fitting "
+            f"{fmt_params(top.effect_params) or 'the core'} lowers the "
+            f"validation NRMSE {stage.nrmse_val:.4g} → {top.nrmse_val:.4g} (F-test p = {top.p_value:.2g})")
+    cause = {"effect": top.effect, "confidence": row["confidence"], "evidence": text,
+             "params": dict(top.effect_params), "stderr": dict(top.stderr), "family": row["family"],
+             "round": rnd, "nrmse_val_before": stage.nrmse_val, "nrmse_val_after": top.nrmse_val,
+             "p_value": top.p_value}
+    if top.retest:
+        cause.update(dflt.cause_fields(top, stage.nrmse_val, prior))
+    if len(group) > 1:
+        cause["group"] = group
+        cause["separate_by"] = ev.separating_experiment([ev.family_of(twin.EFFECTS[g]) for g in group])
+        gains_txt = ", ".join(f"{r['gain']:.3f}" for r in ranking.rows if r["effect"] in group)
+        cause["evidence"] += (f"; the data cannot tell {', '.join(group)} apart "
+                              f"(gains {gains_txt}); "
+                              f"to separate them: {cause['separate_by']}")
+    return cause

@@ -1,0 +1,145 @@
+"""Trial fits of catalog effects, and the stages (configurations with their residual analysis) between them.
+
+A trial adds one effect to a configuration and fits it to the estimation record: stage A fits the effect's
+own parameters after a pre-scan (:mod:`.prescan`) with the core held at its calibration; stage B also refits
+the core. The validation record is simulated with the result; its SSE is what the ranking judges.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import itertools
+import time
+from typing import Any, Iterable
+
+import numpy as np
+
+from sysid.metrics import nrmse, r2
+from sysid.record import Record
+from twins.base import Twin, param_info
+from twins.calibration import calibrate as ls_calibrate
+
+from . import features as ft
+from .fields import choice_fields, core_for, effect_fields, int_fields
+from .options import DiagnoseOptions
+from .prescan import prescan
+from .prediction import simulate, simulate_val, sse
+
+__all__ = ["Trial", "run_trial", "Stage", "make_stage"]
+
+
+@dataclasses.dataclass
+class Trial:
+    """One candidate effect fitted: the twin with it, its parameters and the validation numbers."""
+
+    effect: str
+    twin: Twin
+    fitted: dict[str, float]
+    effect_params: dict[str, float]
+    stderr: dict[str, float]
+    sse_est: float
+    sse_val: float
+    yhat_val: np.ndarray
+    nrmse_val: float
+    r2_val: float
+    p_value: float = 1.0
+    gain: float = 0.0
+    significant: bool = False
+    seconds: float = 0.0
+    n_added: int = 0
+    base: Twin | None = None
+    retest: bool = False  # an effect that was already on, its own parameters refitted (:mod:`.defaults`)
+
+
+def run_trial(base: Twin, effect: str, est: Record, val: Record, core: list[str], a_val: dict[str, Any],
+              opts: DiagnoseOptions, refit_core: bool, start: dict[str, float] | None = None,
+              choice: dict[str, Any] | None = None) -> Trial:
+    """Add ``effect`` to ``base`` and fit it to ``est``: stage A (``refit_core=False``) fits the effect's own
+    parameters after a pre-scan with the core held at its calibration; stage B also refits the core.
+
+    An effect with both a list-valued parameter (a model variant, e.g. Rapp or cubic compression) and numeric
+    ones is fitted once per variant (at most 8 combinations) and the variant with the smallest estimation SSE
+    is kept: the variants are different structures, each with its own optimum of the numeric parameters
+    (choosing the variant at the configured numeric values picks the wrong one when they are far off)."""
+    t0 = time.perf_counter()
+    spec = base.EFFECTS[effect]
+    tw = base.with_effects(set(base.effects) | {effect})
+    eff_fields = effect_fields(tw, spec.params.values())
+    cat_fields = choice_fields(tw, spec.params.values())
+    if start is None and choice is None and cat_fields and eff_fields:
+        info = param_info(type(tw.params))
+        best: Trial | None = None
+        for combo in itertools.islice(itertools.product(*(info[c].choices for c in cat_fields)), 8):
+            tr = run_trial(base, effect, est, val, core, a_val, opts, refit_core, choice=dict(zip(cat_fields, combo)))
+            if best is None or tr.sse_est < best.sse_est:
+                best = tr
+        assert best is not None
+        best.seconds = time.perf_counter() - t0
+        return best
+    if choice is not None:
+        tw = tw.with_params(**choice)
+        x0 = {**(prescan(tw, est, eff_fields, a_val, opts.scan_points, opts.skip, ()) if eff_fields else {}),
+              **choice}
+    elif start is None:
+        x0 = (prescan(tw, est, eff_fields, a_val, opts.scan_points, opts.skip, cat_fields)
+              if (eff_fields or cat_fields) else {})
+    else:
+        x0 = dict(start)
+    return _fit(base, tw, effect, est, val, core, x0, eff_fields, cat_fields, opts, refit_core, t0)
+
+
+def _fit(base: Twin, tw: Twin, effect: str, est: Record, val: Record, core: list[str], x0: dict[str, Any],
+         eff_fields: list[str], cat_fields: list[str], opts: DiagnoseOptions, refit_core: bool, t0: float) -> Trial:
+    """Least squares from the start ``x0`` (categorical and integer parameters stay at their scanned values)."""
+    fixed = {k: v for k, v in x0.items() if k in cat_fields or k in int_fields(tw, eff_fields)}
+    if fixed:
+        tw = tw.with_params(**{k: (int(round(v)) if k not in cat_fields else v) for k, v in fixed.items()})
+    x0 = {k: v for k, v in x0.items() if k not in fixed}
+    names = [f for f in eff_fields if f not in fixed]
+    if refit_core:
+        names += [c for c in core_for(tw, core) if c not in eff_fields]
+    if names:
+        res = ls_calibrate(tw, est, names, x0={**{c: float(getattr(base.params, c)) for c in core}, **x0},
+                           simulate=simulate, max_nfev=opts.trial_nfev if refit_core else opts.scan_nfev,
+                           skip=opts.skip)
+        fit_tw, fitted, stderr = res.twin, res.fitted, res.stderr
+    else:
+        fit_tw, fitted, stderr = tw, {}, {}
+    yv = simulate_val(fit_tw, est, val)
+    ye = simulate(fit_tw, est)
+    ok = bool(np.all(np.isfinite(yv)))
+    eff_all = eff_fields + [c for c in cat_fields if c not in eff_fields]
+    return Trial(effect=effect, twin=fit_tw, fitted=fitted,
+                 effect_params={f: fitted.get(f, getattr(fit_tw.params, f)) for f in eff_all},
+                 stderr={f: stderr.get(f, float("nan")) for f in eff_fields},
+                 sse_est=sse(est.y, ye, opts.skip), sse_val=sse(val.y, yv, opts.skip), yhat_val=yv,
+                 nrmse_val=nrmse(val.y, yv, opts.skip) if ok else float("inf"),
+                 r2_val=r2(val.y, yv, opts.skip) if ok else float("-inf"),
+                 seconds=time.perf_counter() - t0, n_added=max(len(eff_fields), 1), base=base)
+
+
+@dataclasses.dataclass
+class Stage:
+    """A configuration with its validation prediction and residual analysis."""
+
+    twin: Twin
+    yhat_est: np.ndarray
+    yhat_val: np.ndarray
+    analysis_est: dict[str, Any]
+    analysis_val: dict[str, Any]
+    nrmse_val: float
+    r2_val: float
+    sse_val: float
+
+    def summary(self, also: Iterable[str] = ()) -> dict[str, Any]:
+        return {"effects": sorted(set(self.twin.effects) | set(also)), "r2_val": self.r2_val, "nrmse_val": self.nrmse_val,
+                "tests": ft.tests_summary(self.analysis_val["_tests_full"])}
+
+
+def make_stage(twin: Twin, est: Record, val: Record, opts: DiagnoseOptions) -> Stage:
+    """Simulate both records with ``twin`` and analyse both residuals."""
+    ye = simulate(twin, est)
+    yv = simulate_val(twin, est, val)
+    ae = ft.analyse(est.u, est.y, ye, est.fs, est.meta, max_lag=opts.max_lag, max_echo_s=opts.max_echo_s)
+    av = ft.analyse(val.u, val.y, yv, val.fs, val.meta, max_lag=opts.max_lag, max_echo_s=opts.max_echo_s)
+    return Stage(twin, ye, yv, ae, av, nrmse(val.y, yv, opts.skip), r2(val.y, yv, opts.skip), sse(val.y, yv, opts.skip))
