@@ -37,7 +37,7 @@ def test_parse_grid():
         with pytest.raises(ConfigError):
             parse_grid(bad, "narx-mlp")
     with pytest.raises(ConfigError):
-        SweepSpec("narx-mlp", g, fixed={"n_y": "3"})  # conflicts with lags in the grid
+        SweepSpec("narx-mlp", g, fixed={"ny": "3"})  # conflicts with lags in the grid
 
 
 def test_grid_sweep_repeats_and_resume(tmp_path, data):
