@@ -1,7 +1,7 @@
 """What every twin shares: parameter dataclasses with units and ranges, the effect catalog, configuration.
 
 A twin's *configuration* is its parameters (a dataclass whose fields carry unit, range and description in
-their metadata, see :func:`pfield`) and its set of switched-on effects (DESIGN.md "Effects"). The helpers
+their metadata, see :func:`pfield`) and its set of switched-on effects (:class:`EffectSpec`). The helpers
 here turn the CLI's ``--params / --set / --effect / --without / --effects / --seed`` into a configured twin,
 and write and read parameter files.
 """
@@ -168,7 +168,8 @@ class Twin(ABC):
     def from_options(cls, params_file: str | Path | None = None, set_: Iterable[str] | None = None,
                      effect: Iterable[str] | None = None, without: Iterable[str] | None = None,
                      effects: str | None = None, seed: int | None = 0) -> "Twin":
-        """Build a configured twin from the options every twin command takes (DESIGN.md).
+        """Build a configured twin from the options every twin command takes (``--params``, ``--set``,
+        ``--effect``, ``--without``, ``--effects``, ``--seed``).
 
         Order: defaults → ``params_file`` → ``effects`` (exact set, ``none`` = bare core) → ``effect``
         (add, with ``NAME:key=value,...``) → ``without`` (remove) → ``set_`` (parameters by name).
@@ -232,7 +233,7 @@ def _coerce_all(cls: type[Twin], raw: Mapping[str, Any], where: str) -> dict[str
 
 def _json_value(value: Any, default: Any, key: str, where: str) -> Any:
     """A parameter value from a JSON file: its JSON type must fit the parameter's (numbers for numbers, a
-    list for a list ...); refused with one line otherwise (issue 19)."""
+    list for a list ...); refused with one line otherwise, never silently converted."""
     def kind(v: Any) -> str:
         if isinstance(v, bool):
             return "bool"
