@@ -4,38 +4,16 @@ of what changed. Collected with the other steps in :mod:`sysid.preprocess`."""
 
 from __future__ import annotations
 
-import math
 from typing import Any
 
 import numpy as np
 from numba import njit
 
+from sysid.checks import _as_float, _finite, _int_param
 from sysid.config import positive
 from sysid.errors import ConfigError, DataError
 
 __all__ = ["remove_offset", "detrend", "hampel", "fill_missing"]
-
-
-def _as_float(x: Any, name: str = "x") -> np.ndarray:
-    arr = np.asarray(x, dtype=np.float64)
-    if arr.ndim not in (1, 2) or arr.shape[0] == 0:
-        raise DataError(f"{name}: expected a non-empty 1-D or 2-D (samples x channels) array, got shape {arr.shape}")
-    return arr
-
-
-def _finite(x: np.ndarray, name: str) -> None:
-    if not np.isfinite(x).all():
-        raise DataError(f"{name}: has non-finite samples; fill missing samples first (fill_missing)")
-
-
-def _int_param(name: str, value: Any, lo: int) -> int:
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise ConfigError(f"{name} must be an integer, got {value!r}") from None
-    if not math.isfinite(v) or v != int(v) or v < lo:
-        raise ConfigError(f"{name} must be an integer >= {lo}, got {value!r}")
-    return int(v)
 
 
 # ---------------------------------------------------------------------------------------------- offset / trend

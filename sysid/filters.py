@@ -10,7 +10,7 @@ from fractions import Fraction
 import numpy as np
 from scipy import signal as sps
 
-from sysid.cleaning import _as_float, _finite, _int_param
+from sysid.checks import _as_float, _finite, _int_param
 from sysid.config import positive
 from sysid.errors import ConfigError
 

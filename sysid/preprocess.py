@@ -26,7 +26,8 @@ from __future__ import annotations
 
 from typing import Any, Iterable
 
-from sysid.cleaning import _int_param, detrend, fill_missing, hampel, remove_offset
+from sysid.checks import _int_param
+from sysid.cleaning import detrend, fill_missing, hampel, remove_offset
 from sysid.config import positive
 from sysid.errors import ConfigError, DataError
 from sysid.filters import (ATTEN_DB_DEFAULT, PASSBAND_DEFAULT, antialias_filter, bandpass, bandpass_design, decimate,

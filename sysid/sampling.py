@@ -10,7 +10,7 @@ from typing import Any
 import numpy as np
 import scipy.fft
 
-from sysid.cleaning import _as_float, _finite, _int_param
+from sysid.checks import _as_float, _finite, _int_param
 from sysid.config import positive
 from sysid.errors import ConfigError, DataError
 
