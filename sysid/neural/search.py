@@ -24,8 +24,11 @@ configurations done and the time left. Results export as JSON lines (one line pe
 How many processes share one study and finish exactly the requested configurations, none twice, none lost to
 a killed process: :mod:`sysid.neural.study`. The repeats of a configuration can run as Dask tasks
 (``run_config(..., executor)``, :mod:`benchmarks.execution`).
-"""
 
+This module gathers the public names: the sweep's definition, storage and single runs live in
+:mod:`sysid.neural.sweep`, reading results back in :mod:`sysid.neural.sweep_results`, and :func:`run_sweep` in
+:mod:`sysid.neural.study`.
+"""
 
 from sysid.neural.study import run_sweep
 from sysid.neural.sweep import (DIVERGED_OBJECTIVE, R2_KEYS, SAMPLERS, SweepSpec, _open_storage, config_key,
