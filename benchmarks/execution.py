@@ -36,7 +36,7 @@ __all__ = ["SCHEDULER_ENV", "Executor", "add_execution_args", "executor_from_arg
 
 
 def add_execution_args(p: argparse.ArgumentParser, workers: bool = True) -> None:
-    """``--workers N`` and ``--scheduler ADDRESS`` (DESIGN.md: the same on every command that fans out)."""
+    """``--workers N`` and ``--scheduler ADDRESS`` (the same on every command that fans out)."""
     g = p.add_argument_group("execution (Dask)")
     if workers:
         g.add_argument("--workers", type=int, metavar="N",

@@ -1,4 +1,4 @@
-"""The neural identifiers on the twins: the dissertation's experiments of ch. 4 and §5.2 (issue 6 results).
+"""The neural identifiers on the twins: the dissertation's experiments of ch. 4 and §5.2.
 
 - :func:`cantilever_sines` — estimation on the cantilever twin's ``thesis-multisine`` (80 000 samples at
   10 kHz), validation by free run on each ``thesis-sines`` segment (0.1–500 Hz), R² per frequency and their

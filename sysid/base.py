@@ -1,4 +1,4 @@
-"""The interface every identifier follows (scikit-learn shape, DESIGN.md "Style").
+"""The interface every identifier follows (scikit-learn shape: constructor options, ``fit``, ``predict``).
 
 - configuration in ``__init__`` (keyword arguments with defaults; :meth:`get_params` lists them);
 - ``fit(record_or_list)`` returns ``self``; a list of Records is several separate experiments, and no

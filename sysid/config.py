@@ -1,8 +1,8 @@
 """Parsing of ``KEY=VALUE`` assignments (``--set``) and coercion to typed values.
 
-One place for the rules of DESIGN.md: ``--set`` may repeat; one ``--set`` may carry several pairs separated
-by commas; a list value is written with dashes (``hidden=75-75``); names are checked against the valid ones
-and refused with the list of valid names.
+One place for these rules, so every command reads options alike: ``--set`` may repeat; one ``--set`` may carry
+several pairs separated by commas; a list value is written with dashes (``hidden=75-75``); names are checked against
+the valid ones and refused with the list of valid names.
 """
 
 from __future__ import annotations
@@ -15,10 +15,10 @@ from sysid.errors import ConfigError
 
 __all__ = ["parse_assignments", "coerce", "apply_assignments", "positive", "make_rng", "ALIASES", "resolve_aliases"]
 
-# One vocabulary for identifier options (DESIGN.md): lags ``ny``, ``nu``, delay ``nk`` in every identifier that
-# has them, the linear bypass ``linear``. Older spellings stay accepted for one release, with a
-# DeprecationWarning: deprecated name -> current name. Applied to constructor keywords, ``set_params`` and
-# ``--set`` alike (sysid.base.Identifier), so a saved model with the old names still loads.
+# One vocabulary for identifier options, the same in the Python API, ``--set`` and model files: lags ``ny``, ``nu``,
+# delay ``nk`` in every identifier that has them, the linear bypass ``linear``. Older spellings stay accepted for
+# one release, with a DeprecationWarning: deprecated name -> current name. Applied to constructor keywords,
+# ``set_params`` and ``--set`` alike (sysid.base.Identifier), so a saved model with the old names still loads.
 ALIASES: dict[str, str] = {
     "n_y": "ny",
     "n_u": "nu",

@@ -1,4 +1,5 @@
-"""Strict, vectorised CSV reading for :func:`sysid.io.read_record` (issues 18 item 5 and 19 item 2).
+"""Strict, vectorised CSV reading for :func:`sysid.io.read_record`: a row that breaks a rule is refused with its
+line number, never dropped or altered.
 
 The rules a CSV file must follow are in ``docs/data-files.md``; in short:
 

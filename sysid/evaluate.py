@@ -74,7 +74,7 @@ def identification_summary(model, est: Record | Sequence[Record], val: Record | 
         "estimation": evaluate(model, est),
         "validation": evaluate(model, val) if val is not None else None,
     }
-    # linear models: parameters with std, poles, automatically chosen orders (issue 15)
+    # linear models: parameters with std, poles, automatically chosen orders
     for key in ("parameters", "poles", "chosen_orders", "nx", "order_selection"):
         if d.get(key) is not None:
             out[key] = d[key]

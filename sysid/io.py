@@ -1,4 +1,4 @@
-"""Reading and writing :class:`~sysid.record.Record` files (DESIGN.md, "Contracts").
+"""Reading and writing :class:`~sysid.record.Record` files (the formats every command reads and writes).
 
 - ``.npz``: arrays ``u``, ``y`` (absent for input-only records), scalar ``fs`` and ``meta``, a JSON string that
   also carries the units. Loadable with plain ``numpy.load(path, allow_pickle=False)``.

@@ -68,8 +68,9 @@ class _LinearBase(PolynomialModel):
 
 
     def parameters(self) -> list[dict[str, Any]]:
-        """``[{"name", "value", "std"}]`` in MATLAB's convention (issue 15): A(q) = 1 + a1 q⁻¹ + …,
-        B(q) = b1 q^-nk + b2 q^-(nk+1) + … (``b1_u2`` … for the 2nd input), C(q) = 1 + c1 q⁻¹ + …; one output."""
+        """``[{"name", "value", "std"}]`` in MATLAB's convention, so that the numbers compare with its ``arx``:
+        A(q) = 1 + a1 q⁻¹ + …, B(q) = b1 q^-nk + b2 q^-(nk+1) + … (``b1_u2`` … for the 2nd input),
+        C(q) = 1 + c1 q⁻¹ + …; one output."""
         self._check_fitted()
         if self.structure_.n_outputs != 1:
             return []

@@ -1,4 +1,4 @@
-"""Figures of the linear models' uncertainty (issue 15): the simulated output with its confidence band and the
+"""Figures of the linear models' uncertainty: the simulated output with its confidence band and the
 frequency response with its standard deviation. PNG files via :mod:`sysid.plots` (matplotlib Agg).
 
 - :func:`plot_simulation_band`: measured output, free-run simulation and the band ± ``z`` std per sample

@@ -28,6 +28,7 @@ import numpy as np
 
 from sysid.errors import ConfigError, DataError, DivergenceWarning
 from sysid.record import Record
+from sysid.registry import get_identifier
 
 __all__ = ["delay_estimate", "order_table", "plot_order_table", "select_oe_orders", "select_arx_orders",
            "ORDER_GRID"]
@@ -139,8 +140,7 @@ def _search(make, records: list[Record], grid: Sequence[int], what: str) -> tupl
 def select_oe_orders(records: list[Record], nk: list[int], max_order: int = 12, nb=None, nf=None
                      ) -> tuple[int, list[dict[str, Any]]]:
     """Order n (nb = nf = n unless given) of an OE model by hold-out free-run error (module docstring)."""
-    from sysid.pem import OE
-
+    OE = get_identifier("oe")  # through the registry: sysid.pem calls this module when its orders are open
     grid = [n for n in ORDER_GRID if n <= int(max_order)] or [1]
     return _search(lambda n: OE(nb=nb if nb is not None else n, nf=nf if nf is not None else n, nk=nk,
                                 max_iter=50), records, grid, "oe order selection")
@@ -150,8 +150,7 @@ def select_arx_orders(records: list[Record], nk: int, max_order: int = 100, prob
                       ) -> tuple[int, list[dict[str, Any]]]:
     """Order n (ny = nu = n) of an ARX model by hold-out free-run error (module docstring). ``probe``: an ARX
     whose other options (intercept) the candidates copy."""
-    from sysid.linear import ARX
-
+    ARX = get_identifier("arx")  # through the registry: sysid.linear calls this module for orders="auto"
     grid = [n for n in ORDER_GRID if n <= int(max_order)] or [1]
     intercept = bool(getattr(probe, "intercept", False))
     return _search(lambda n: ARX(ny=n, nu=n, nk=nk, intercept=intercept), records, grid, "arx order selection")
@@ -167,7 +166,6 @@ def order_table(identifier: str, est: Record | Sequence[Record], val: Record | S
     """One row per order n (every order key of ``identifier`` set to n): n_parameters, AIC, BIC (estimation data,
     one-step errors) and free-run R² / NRMSE on ``val`` (or None). ``options`` are further constructor options."""
     from sysid.evaluate import evaluate
-    from sysid.registry import get_identifier
 
     if identifier not in _ORDER_KEYS:
         raise ConfigError(f"order table: identifier {identifier!r} has no order grid; valid: {', '.join(_ORDER_KEYS)}")

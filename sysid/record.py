@@ -1,4 +1,4 @@
-"""The Record: one input/output experiment (DESIGN.md, "Contracts").
+"""The Record: one input/output experiment (the contract between readers, identifiers and twins).
 
 A :class:`Record` holds the input ``u`` and output ``y`` (float arrays of equal length, 1-D for SISO or
 2-D ``(N, channels)`` for MIMO), the sampling rate ``fs`` in Hz, the units of both signals and a metadata

@@ -1,4 +1,5 @@
-"""Atomic, non-destructive output files (issue 19): one helper used by every writer of the project.
+"""Atomic, non-destructive output files: one helper used by every writer of the project, so that an interrupted
+or failed write never leaves a half-written file and never overwrites an input.
 
 Every file the project writes goes through :func:`atomic_path` (or the thin wrappers
 :func:`atomic_write_text`, :func:`atomic_write_bytes`, :func:`save_figure`):

@@ -85,7 +85,7 @@ class NeuralNARXStepper(_WindowStepper):
 
     def step(self, u: float) -> float:
         from sysid.neural.core import free_run_mlp
-        from sysid.neural.narx_mlp import DIVERGENCE_BOUND
+        from sysid.neural.records import DIVERGENCE_BOUND
 
         m = self.m
         self._push_u(float(self.norm.transform_u(np.array([[float(u)]]))[0, 0]))

@@ -1,4 +1,4 @@
-"""Physics of the acoustic twin against closed forms and published numbers (issue 4)."""
+"""Physics of the acoustic twin against closed forms and published numbers."""
 
 import dataclasses
 

@@ -1,4 +1,4 @@
-"""The acoustic twin end to end: time of flight, echoes, effects, protocols, calibration, sweep CLI (issue 4)."""
+"""The acoustic twin end to end: time of flight, echoes, effects, protocols, calibration, sweep CLI."""
 
 import json
 

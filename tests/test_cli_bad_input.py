@@ -1,5 +1,5 @@
 """Bad input on the CLI: exit status 2 and exactly one line on stderr that names the problem (and the file),
-never a traceback, never silently dropped or altered data (DESIGN.md, issue 2 item 3).
+never a traceback, never silently dropped or altered data (one line naming the file and the problem, exit 2).
 
 The table runs ``benchmarks.cli.main`` in-process (fast); a few cases run ``python -m benchmarks.cli`` in a
 subprocess to prove that no traceback or warning reaches a real stderr.

@@ -1,4 +1,4 @@
-"""CLI conventions of every command (issue 18, DESIGN.md): --version, -q/--quiet, -v/--verbose through
+"""CLI conventions of every command: --version, -q/--quiet, -v/--verbose through
 logging, one-line warnings, progress bars only on a terminal, and a library that never prints or configures
 logging itself."""
 

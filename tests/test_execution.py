@@ -135,7 +135,7 @@ def test_generate_grid_cli_writes_the_collection(tmp_path):
 def test_sweep_survives_a_worker_killed_mid_task(tmp_path):
     """SIGKILL one worker process while the sweep's tasks run: the lost task is re-run and the result is
     complete and identical to the serial run."""
-    from benchmarks.cli.sweep import public, sweep
+    from benchmarks.sweep import public, sweep
     from sysid.jsonio import clean_json
     from twins.registry import get_twin
 

@@ -1,4 +1,4 @@
-"""FMU export (issue 9): build, validate, round trip against the native twins, tunable parameters.
+"""FMU export: build, validate, round trip against the native twins, tunable parameters.
 
 The exporter is exercised on small twins defined in ``tests/_fmu_toy.py`` (a stepped toy and an
 FFT-simulated echo channel like the acoustic twin) and on the project's cantilever and acoustic twins.

@@ -1,4 +1,4 @@
-"""FMUs in a C host (issue 17): ``tests/c/fmu_host.c`` loads the FMU binary with ``dlopen`` as a simulation tool
+"""FMUs in a C host: ``tests/c/fmu_host.c`` loads the FMU binary with ``dlopen`` as a simulation tool
 does (fmi2Instantiate, 3000 × fmi2DoStep, fmi2Terminate, fmi2FreeInstance, dlclose), linked with libpython as
 pythonfmu 0.7 requires, and must exit 0 every time; its outputs equal the model's own free run.
 

@@ -1,4 +1,4 @@
-"""Nonparametric FRF, BLA and the transfer-function fit against closed forms (issue 15, frequency domain)."""
+"""Nonparametric FRF, BLA and the transfer-function fit against closed forms (frequency domain)."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Issue 15 "Done when" (frequency domain): the frf / bla commands on the cantilever twin and the
+"""Frequency domain end to end: the frf / bla commands on the cantilever twin and the
 Wiener-Hammerstein benchmark, checked against the twin's exact linear FRF and the published BLA RMSE."""
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Fuzz test of every data-reading command (issue 19, item 5): malformed files and option values.
+"""Fuzz test of every data-reading command: malformed files and option values.
 
 A seeded, table-driven generator mutates good CSV / NPZ / MAT records (truncation, stray bytes, delimiters,
 extra or missing cells, blank and comment lines, UTF-16, CRLF, inf/nan text, wrong shapes, dtypes, fs and

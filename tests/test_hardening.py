@@ -1,4 +1,4 @@
-"""Issue 19: nothing lost, nothing misread, no traceback — the measured failing cases, each reproduced.
+"""Nothing lost, nothing misread, no traceback — the measured failing cases, each reproduced.
 
 Every refusal: exit status 2, exactly one line on stderr naming the file/option, no traceback, inputs
 byte-for-byte unchanged and no new file left in the folder. Valid files are read exactly right (the expected

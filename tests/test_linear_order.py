@@ -1,4 +1,4 @@
-"""Delay estimate, order selection and practitioner warnings of the linear identifiers; identify CLI keys (issue 15)."""
+"""Delay estimate, order selection and practitioner warnings of the linear identifiers; identify CLI keys."""
 
 import json
 

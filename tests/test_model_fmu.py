@@ -1,4 +1,4 @@
-"""Identified models as FMUs (issue 17): per-sample stepper == free run bit for bit; exported ARX, narx-poly and
+"""Identified models as FMUs: per-sample stepper == free run bit for bit; exported ARX, narx-poly and
 a NARX network validate with fmpy and their FMPy simulation equals the model's own free run (1e-9 relative)."""
 
 import json

@@ -1,4 +1,4 @@
-"""Identified models in use (issue 17): identify -> predict -> compare from the CLI and from Python, model files
+"""Identified models in use: identify -> predict -> compare from the CLI and from Python, model files
 (format 2, old formats still read, bad files refused with one line), the array API."""
 
 import json

@@ -33,24 +33,24 @@ def plant():
     (5, 25, 3151), (5, 50, 11301), (5, 100, 42601),
 ])
 def test_parameter_count_matches_table_4_2(layers, width, expected):
-    # Table 4.2: n_y = n_u = 10 (20 regressors, eq. 2-14), one output
+    # Table 4.2: ny = nu = 10 (20 regressors, eq. 2-14), one output
     assert count_mlp_parameters(20, [width] * layers, 1) == expected
 
 
 def test_fitted_parameter_count_and_regressor(plant):
     est, _ = plant
-    m = NARXMLP(n_y=10, n_u=10, hidden=[25] * 4, epochs=1).fit(est)
+    m = NARXMLP(ny=10, nu=10, hidden=[25] * 4, epochs=1).fit(est)
     assert m.n_parameters_ == 2501 == m.weights_.size
     assert m.max_lag_ == 10 and m.sizes_ == [20, 25, 25, 25, 25, 1]
 
 
 def test_config_from_set_strings():
-    m = NARXMLP.from_assignments({"hidden": "75-75", "activation": "sigmoid", "n_y": "512", "n_u": "512", "epochs": "75"})
-    assert m.hidden == [75, 75] and m.activation == "sigmoid" and m.n_y == 512 and m.epochs == 75
+    m = NARXMLP.from_assignments({"hidden": "75-75", "activation": "sigmoid", "ny": "512", "nu": "512", "epochs": "75"})
+    assert m.hidden == [75, 75] and m.activation == "sigmoid" and m.ny == 512 and m.epochs == 75
     with pytest.raises(ConfigError):
         NARXMLP(activation="softplus").fit(Record(u=np.zeros(50), y=np.zeros(50), fs=1.0))
     with pytest.raises(ConfigError):
-        NARXMLP(n_y=2000)._check_params()
+        NARXMLP(ny=2000)._check_params()
     with pytest.raises(ConfigError):
         NARXMLP(device="tpu")._check_params()
 
@@ -58,7 +58,7 @@ def test_config_from_set_strings():
 # ------------------------------------------------------------------ prediction kernels
 def test_kernels_agree_with_direct_recursion():
     rng = np.random.default_rng(0)
-    sizes = [5, 7, 6, 1]  # n_y = 3, n_u = 2
+    sizes = [5, 7, 6, 1]  # ny = 3, nu = 2
     flat = rng.normal(0, 0.4, count_mlp_parameters(5, [7, 6], 1))
     un = rng.normal(size=(60, 1))
     yn = rng.normal(size=(60, 1))
@@ -85,9 +85,9 @@ def test_kernels_agree_with_direct_recursion():
 def test_divergence_gives_nan_and_warning():
     sizes = [1, 1]
     flat = np.array([3.0, 0.0])  # y(t) = 3 y(t-1): unstable
-    m = NARXMLP(n_y=1, n_u=0, hidden=[], epochs=0)
+    m = NARXMLP(ny=1, nu=0, hidden=[], epochs=0)
     m._check_params = lambda: None  # allow the linear (no hidden layer) test network
-    rec = Record(u=np.sin(np.arange(200.0)), y=np.r_[1.0, np.zeros(199)], fs=1.0)  # n_u = 0: u unused
+    rec = Record(u=np.sin(np.arange(200.0)), y=np.r_[1.0, np.zeros(199)], fs=1.0)  # nu = 0: u unused
     m.fit(rec)
     m.weights_, m.sizes_ = flat, sizes
     with pytest.warns(DivergenceWarning):
@@ -97,8 +97,8 @@ def test_divergence_gives_nan_and_warning():
 
 # ------------------------------------------------------------------ training and persistence
 @pytest.mark.parametrize("cls,kw", [
-    (NARXMLP, dict(n_y=4, n_u=4, hidden=[16, 16], activation="tanh", lr=1e-3, epochs=40)),
-    (NARXMLPSim, dict(n_y=4, n_u=4, hidden=[16, 16], activation="tanh", epochs=3, pretrain_epochs=30, window=20)),
+    (NARXMLP, dict(ny=4, nu=4, hidden=[16, 16], activation="tanh", lr=1e-3, epochs=40)),
+    (NARXMLPSim, dict(ny=4, nu=4, hidden=[16, 16], activation="tanh", epochs=3, pretrain_epochs=30, window=20)),
     (RNNStateSpace, dict(n_state=16, n_enc=8, enc_hidden=[32], window=40, batch_size=16, epochs=40, lr=5e-3)),
 ])
 def test_learns_saves_loads_identically(plant, tmp_path, cls, kw):
@@ -121,7 +121,7 @@ def test_learns_saves_loads_identically(plant, tmp_path, cls, kw):
 
 def test_deterministic_on_cpu_for_a_seed(plant):
     est, val = plant
-    kw = dict(n_y=3, n_u=3, hidden=[8, 8], epochs=2, lr=1e-3, device="cpu")
+    kw = dict(ny=3, nu=3, hidden=[8, 8], epochs=2, lr=1e-3, device="cpu")
     a = NARXMLP(seed=7, **kw).fit(est)
     b = NARXMLP(seed=7, **kw).fit(est)
     c = NARXMLP(seed=8, **kw).fit(est)
@@ -140,7 +140,7 @@ def test_deterministic_on_cpu_for_a_seed(plant):
 def test_several_records_and_bad_input(plant):
     est, val = plant
     a, b = est.split(fraction=0.5)
-    m = NARXMLP(n_y=3, n_u=3, hidden=[8], epochs=1, device="cpu").fit([a, b])
+    m = NARXMLP(ny=3, nu=3, hidden=[8], epochs=1, device="cpu").fit([a, b])
     assert m.predict(val, None).shape == val.y.shape
     with pytest.raises(DataError):
         m.predict(val[:3], None)
@@ -184,8 +184,8 @@ def test_hand_written_backprop_equals_autograd(activation):
 
 
 @pytest.mark.parametrize("name,opts", [
-    ("narx-mlp", "n_y=3,n_u=3,hidden=8-8,epochs=2,device=cpu"),
-    ("narx-mlp-sim", "n_y=3,n_u=3,hidden=8,epochs=1,pretrain_epochs=1,window=10,device=cpu"),
+    ("narx-mlp", "ny=3,nu=3,hidden=8-8,epochs=2,device=cpu"),
+    ("narx-mlp-sim", "ny=3,nu=3,hidden=8,epochs=1,pretrain_epochs=1,window=10,device=cpu"),
     ("rnn", "n_state=4,n_enc=4,enc_hidden=8,window=20,epochs=1,device=cpu"),
 ])
 def test_identify_cli_same_json_as_polynomial_models(tmp_path, plant, capsys, name, opts):
@@ -214,7 +214,7 @@ def test_identify_cli_same_json_as_polynomial_models(tmp_path, plant, capsys, na
 
 def test_model_trained_for_cuda_loads_and_predicts_on_cpu(plant, tmp_path):
     est, val = plant
-    m = NARXMLP(n_y=2, n_u=2, hidden=[4], epochs=1, device="cpu").fit(est)
+    m = NARXMLP(ny=2, nu=2, hidden=[4], epochs=1, device="cpu").fit(est)
     ref = m.predict(val, None)
     m.device = "cuda"  # as saved by a GPU run; prediction never needs the training device
     for suffix in (".pt", ".json"):
@@ -225,7 +225,7 @@ def test_model_trained_for_cuda_loads_and_predicts_on_cpu(plant, tmp_path):
 
 def test_input_delay_nk_kernels_and_fit(plant):
     rng = np.random.default_rng(1)
-    sizes = [5, 6, 1]  # n_y = 2, n_u = 3, nk = 4: u(t-4), u(t-5), u(t-6)
+    sizes = [5, 6, 1]  # ny = 2, nu = 3, nk = 4: u(t-4), u(t-5), u(t-6)
     flat = rng.normal(0, 0.4, count_mlp_parameters(5, [6], 1))
     un = rng.normal(size=(50, 1))
     yn = rng.normal(size=(50, 1))
@@ -238,7 +238,7 @@ def test_input_delay_nk_kernels_and_fit(plant):
     ks = k_step_mlp(flat, sizes, 1, yn, un, 2, 3, 60, 1e6, nk=4)  # k beyond the record: a free run from the start
     np.testing.assert_allclose(ks, ref, rtol=1e-12, atol=1e-12)
     est, val = plant
-    m = NARXMLP(n_y=2, n_u=3, nk=4, hidden=[6], epochs=1, device="cpu").fit(est)
+    m = NARXMLP(ny=2, nu=3, nk=4, hidden=[6], epochs=1, device="cpu").fit(est)
     assert m.max_lag_ == 6 and m.n_parameters_ == count_mlp_parameters(5, [6], 1)
     assert m.predict(val, None).shape == val.y.shape and np.isfinite(m.predict(val, 3)).all()
 
@@ -248,7 +248,7 @@ def test_sim_warm_start_is_the_one_step_model_and_tail_selection(plant):
     model's exactly. select_tail: the kept weights are the best free-run R² on the held-out estimation tail."""
     est, _ = plant
     est = est[:2000]
-    kw = dict(n_y=4, n_u=4, hidden=[8], activation="tanh", seed=3, device="cpu")
+    kw = dict(ny=4, nu=4, hidden=[8], activation="tanh", seed=3, device="cpu")
     osa = NARXMLP(**kw, epochs=3, lr=1e-3, batch_size=64).fit(est)
     warm = NARXMLPSim(**kw, epochs=0, pretrain_epochs=3, pretrain_lr=1e-3, pretrain_batch_size=64, batch_size=4).fit(est)
     np.testing.assert_array_equal(warm.weights_, osa.weights_)

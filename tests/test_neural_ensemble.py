@@ -36,8 +36,8 @@ def _mean_net(members, sizes, code, linear):
     return f
 
 
-def _regressor(y, u, t, n_y, n_u, nk):
-    return np.concatenate([y[t - np.arange(1, n_y + 1)].reshape(-1), u[t - np.arange(nk, nk + n_u)].reshape(-1)])
+def _regressor(y, u, t, ny, nu, nk):
+    return np.concatenate([y[t - np.arange(1, ny + 1)].reshape(-1), u[t - np.arange(nk, nk + nu)].reshape(-1)])
 
 
 def _reference_predictions(model, members, val, horizon):
@@ -75,7 +75,7 @@ def test_merged_network_is_the_mean_of_its_members(plant, name, cls, kw, two):
     est, est2, val = plant
     data = [est, est2] if two else est
     k, seed = 3, 2
-    common = dict(n_y=3, n_u=2, hidden=[6, 5], device="cpu", **kw)
+    common = dict(ny=3, nu=2, hidden=[6, 5], device="cpu", **kw)
     ens = cls(seed=seed, ensemble=k, **common).fit(data)
     members = [cls(seed=seed * k + i, **common).fit(data) for i in range(k)]
     n_in = ens.sizes_[0]
@@ -121,7 +121,7 @@ def test_merge_ensemble_random_weights(act, hidden, linear):
 
 def test_ensemble_one_is_the_single_network(plant):
     est, _, val = plant
-    common = dict(n_y=3, n_u=2, hidden=[6, 5], device="cpu", epochs=2, linear=True, seed=4)
+    common = dict(ny=3, nu=2, hidden=[6, 5], device="cpu", epochs=2, linear=True, seed=4)
     a = NARXMLP(**common).fit(est)
     b = NARXMLP(ensemble=1, **common).fit(est)
     assert b.sizes_ == [a.sizes_[0], 6, 5, 1]
@@ -139,7 +139,7 @@ def test_ensemble_one_is_the_single_network(plant):
 @pytest.mark.parametrize("suffix", [".json", ".pt"])
 def test_ensemble_saved_and_loaded(plant, tmp_path, suffix):
     est, _, val = plant
-    m = NARXMLPSim(n_y=3, n_u=2, hidden=[6], device="cpu", epochs=1, pretrain_epochs=1, window=10, linear=True,
+    m = NARXMLPSim(ny=3, nu=2, hidden=[6], device="cpu", epochs=1, pretrain_epochs=1, window=10, linear=True,
                    ensemble=3, seed=1).fit(est)
     m2 = load_model(m.save(tmp_path / f"ens{suffix}"))
     assert m2.ensemble == 3 and m2.sizes_ == m.sizes_ and m2.n_parameters_ == m.n_parameters_
@@ -150,9 +150,9 @@ def test_ensemble_saved_and_loaded(plant, tmp_path, suffix):
 
 def test_saved_sizes_must_match_ensemble(plant, tmp_path):
     est, _, _ = plant
-    m = NARXMLP(n_y=3, n_u=2, hidden=[6], device="cpu", epochs=1, ensemble=2).fit(est)
+    m = NARXMLP(ny=3, nu=2, hidden=[6], device="cpu", epochs=1, ensemble=2).fit(est)
     state = m._state()
-    bad = NARXMLP(n_y=3, n_u=2, hidden=[6], device="cpu", ensemble=3)
+    bad = NARXMLP(ny=3, nu=2, hidden=[6], device="cpu", ensemble=3)
     with pytest.raises(DataError, match="ensemble=3"):
         bad._load_state(state)
 
@@ -162,6 +162,6 @@ def test_saved_sizes_must_match_ensemble(plant, tmp_path):
 def test_bad_ensemble_values(plant, cls, value):
     est, _, _ = plant
     with pytest.raises(ConfigError) as err:
-        cls(n_y=2, n_u=2, hidden=[4], device="cpu", epochs=1, ensemble=value).fit(est)
+        cls(ny=2, nu=2, hidden=[4], device="cpu", epochs=1, ensemble=value).fit(est)
     msg = str(err.value)
     assert "ensemble" in msg and "\n" not in msg

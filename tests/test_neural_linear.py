@@ -1,4 +1,4 @@
-"""Linear bypass of the neural identifiers (NARX-MLP ``linear=True``, RNN ``linear_order=k``).
+"""Linear bypass of the neural identifiers (NARX-MLP ``linear=True``, RNN ``linear=k``).
 
 The bypass starts at the least-squares ARX of the same lags with an intercept, and the network's output at zero,
 so an untrained model must predict exactly what :class:`sysid.linear.ARX` (closed-form least squares on the raw
@@ -57,7 +57,7 @@ def _reference_net(flat, sizes, code, x, linear):
 def test_untrained_bypass_is_the_least_squares_arx(plant, cls, kw):
     est, val = plant
     arx = ARX(ny=3, nu=2, intercept=True).fit(est)
-    m = cls(n_y=3, n_u=2, hidden=[8, 8], linear=True, device="cpu", **kw).fit(est)
+    m = cls(ny=3, nu=2, hidden=[8, 8], linear=True, device="cpu", **kw).fit(est)
     scale = np.std(val.y)
     for h in (1, 4, None):
         a, b = arx.predict(val, h), m.predict(val, h)
@@ -74,13 +74,13 @@ def test_untrained_bypass_is_the_least_squares_arx(plant, cls, kw):
 
 def test_bypass_stays_fixed_in_training_and_counts_parameters(plant):
     est, _ = plant
-    m0 = NARXMLP(n_y=3, n_u=2, hidden=[8], linear=True, epochs=0, device="cpu").fit(est)
-    m = NARXMLP(n_y=3, n_u=2, hidden=[8], linear=True, epochs=2, lr=1e-3, device="cpu").fit(est)
+    m0 = NARXMLP(ny=3, nu=2, hidden=[8], linear=True, epochs=0, device="cpu").fit(est)
+    m = NARXMLP(ny=3, nu=2, hidden=[8], linear=True, epochs=2, lr=1e-3, device="cpu").fit(est)
     n_mlp = count_mlp_parameters(5, [8], 1)
     assert m.n_parameters_ == m.weights_.size == n_mlp + 5 == count_mlp_parameters(5, [8], 1, linear=True)
     np.testing.assert_array_equal(m.weights_[n_mlp:], m0.weights_[n_mlp:])  # L: the least-squares ARX, untouched
     assert not np.array_equal(m.weights_[:n_mlp], m0.weights_[:n_mlp])        # the network did train
-    s = NARXMLPSim(n_y=3, n_u=2, hidden=[8], linear=True, epochs=1, pretrain_epochs=1, window=10, device="cpu").fit(est)
+    s = NARXMLPSim(ny=3, nu=2, hidden=[8], linear=True, epochs=1, pretrain_epochs=1, window=10, device="cpu").fit(est)
     np.testing.assert_array_equal(s.weights_[n_mlp:], m0.weights_[n_mlp:])
     assert m.describe()["structure"]["linear"] is True
     with pytest.raises(ConfigError, match="linear"):
@@ -91,7 +91,7 @@ def test_bypass_stays_fixed_in_training_and_counts_parameters(plant):
 @pytest.mark.parametrize("code", [0, 1, 2])
 def test_free_run_and_k_step_kernels_with_bypass_equal_a_numpy_loop(code):
     rng = np.random.default_rng(4)
-    sizes = [5, 6, 4, 1]  # n_y = 2, n_u = 3
+    sizes = [5, 6, 4, 1]  # ny = 2, nu = 3
     flat = rng.normal(0, 0.3, count_mlp_parameters(5, [6, 4], 1, linear=True))
     flat[-5:] = [0.5, -0.2, 0.3, 0.1, -0.1]  # a stable linear part
     un = rng.normal(size=(70, 1))
@@ -151,7 +151,7 @@ def test_rnn_linear_path_untrained_is_the_arx_simulation(plant):
     est, val = plant
     k, n_enc = 3, 5
     arx = ARX(ny=k, nu=k, intercept=True).fit(est)
-    m = RNNStateSpace(n_state=4, n_enc=n_enc, enc_hidden=[8], epochs=0, linear_order=k, device="cpu").fit(est)
+    m = RNNStateSpace(n_state=4, n_enc=n_enc, enc_hidden=[8], epochs=0, linear=k, device="cpu").fit(est)
     scale = np.std(val.y)
     np.testing.assert_allclose(m.predict(val, 1)[n_enc:], arx.predict(val, 1)[n_enc:], rtol=0, atol=2e-5 * scale)
     # free run: the RNN starts from the measured y(0..n_enc-1); the ARX simulation started at the same sample
@@ -166,7 +166,7 @@ def test_rnn_linear_path_equals_a_numpy_recursion():
 
     torch.manual_seed(0)
     k, n_enc, nu, ny = 3, 4, 1, 1
-    net = _Net(n_enc * (nu + ny), [6], 5, nu, ny, "gru", linear_order=k, n_enc=n_enc).double()
+    net = _Net(n_enc * (nu + ny), [6], 5, nu, ny, "gru", linear=k, n_enc=n_enc).double()
     rng = np.random.default_rng(2)
     with torch.no_grad():
         net.arx.weight.copy_(torch.tensor([[0.6, -0.3, 0.1, 0.8, -0.4, 0.2]], dtype=torch.float64))
@@ -190,27 +190,27 @@ def test_rnn_linear_path_equals_a_numpy_recursion():
 
 def test_rnn_linear_path_fixed_in_training_saved_and_loaded(plant, tmp_path):
     est, val = plant
-    kw = dict(n_state=6, n_enc=5, enc_hidden=[8], window=20, batch_size=8, linear_order=3, device="cpu", seed=2)
+    kw = dict(n_state=6, n_enc=5, enc_hidden=[8], window=20, batch_size=8, linear=3, device="cpu", seed=2)
     m0 = RNNStateSpace(epochs=0, **kw).fit(est)
     m = RNNStateSpace(epochs=2, **kw).fit(est)
     for key in ("arx.weight", "arx.bias"):
         np.testing.assert_array_equal(m.state_dict_[key], m0.state_dict_[key])
     assert not np.array_equal(m.state_dict_["readout.weight"], m0.state_dict_["readout.weight"])
-    assert m.n_parameters_ == RNNStateSpace(epochs=0, **{**kw, "linear_order": 0}).fit(est).n_parameters_ + 7
+    assert m.n_parameters_ == RNNStateSpace(epochs=0, **{**kw, "linear": 0}).fit(est).n_parameters_ + 7
     assert m.describe()["structure"]["linear_order"] == 3
     preds = {h: m.predict(val, h) for h in (1, 6, None)}
     for suffix in (".pt", ".json"):
         m2 = load_model(m.save(tmp_path / f"rnn{suffix}"))
-        assert m2.linear_order == 3
+        assert m2.linear == 3
         for h, p in preds.items():
             np.testing.assert_array_equal(m2.predict(val, h), p)
     with pytest.raises(ConfigError, match="linear"):
-        RNNStateSpace(n_enc=4, linear_order=5)._check_params()
+        RNNStateSpace(n_enc=4, linear=5)._check_params()
 
 
 def test_narx_mlp_bypass_saved_and_loaded(plant, tmp_path):
     est, val = plant
-    m = NARXMLP(n_y=3, n_u=2, hidden=[8], linear=True, epochs=1, device="cpu").fit(est)
+    m = NARXMLP(ny=3, nu=2, hidden=[8], linear=True, epochs=1, device="cpu").fit(est)
     preds = {h: m.predict(val, h) for h in (1, 5, None)}
     for suffix in (".pt", ".json"):
         m2 = load_model(m.save(tmp_path / f"mlp{suffix}"))

@@ -37,7 +37,7 @@ def test_parse_grid():
         with pytest.raises(ConfigError):
             parse_grid(bad, "narx-mlp")
     with pytest.raises(ConfigError):
-        SweepSpec("narx-mlp", g, fixed={"n_y": "3"})  # conflicts with lags in the grid
+        SweepSpec("narx-mlp", g, fixed={"ny": "3"})  # conflicts with lags in the grid
 
 
 def test_grid_sweep_repeats_and_resume(tmp_path, data):
@@ -102,6 +102,7 @@ def test_interrupted_sweep_resumes(tmp_path, data, monkeypatch):
     """Ctrl-C in the middle of the second configuration: the rerun keeps the finished one, reruns the
     interrupted one and runs the rest."""
     import sysid.neural.search as S
+    import sysid.neural.sweep as W  # where the objective looks run_config up
 
     est, val = data
     spec = SweepSpec("narx-mlp", parse_grid("lags=2,3,4", "narx-mlp"), repeats=1, fixed=FIXED)
@@ -114,10 +115,10 @@ def test_interrupted_sweep_resumes(tmp_path, data, monkeypatch):
             raise KeyboardInterrupt
         return real(*args, **kwargs)
 
-    monkeypatch.setattr(S, "run_config", flaky)
+    monkeypatch.setattr(W, "run_config", flaky)
     with pytest.raises(KeyboardInterrupt):
         run_sweep(spec, est, val, storage=str(tmp_path / "i.db"), study="i", progress=False)
-    monkeypatch.setattr(S, "run_config", real)
+    monkeypatch.setattr(W, "run_config", real)
     res = run_sweep(spec, est, val, storage=str(tmp_path / "i.db"), study="i", progress=False)
     assert res["n_configs"] == 3 and res["n_runs"] == 3
     runs = collect(storage_url(str(tmp_path / "i.db"), "i"), "i")

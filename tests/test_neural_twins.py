@@ -1,4 +1,4 @@
-"""The neural identifiers on the twins (issue 6 results). Fast reduced-budget variants run by default; the
+"""The neural identifiers on the twins. Fast reduced-budget variants run by default; the
 full-budget figures of the README are the slow tests."""
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""One vocabulary of identifier options (issue 18, DESIGN.md): lags ``ny``, ``nu`` and delay ``nk`` in every
+"""One vocabulary of identifier options: lags ``ny``, ``nu`` and delay ``nk`` in every
 identifier that has them, ``linear`` for the linear bypass; the older spellings (``n_y``, ``n_u``,
 ``linear_order``) work as deprecated aliases, through one table (sysid.config.ALIASES)."""
 

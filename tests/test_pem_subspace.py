@@ -1,5 +1,5 @@
 """OE / BJ (prediction-error method) and N4SID (PO-MOESP): recovery of known systems within their own reported
-uncertainty, closed-form transfer functions, persistence, bad input (issue 15)."""
+uncertainty, closed-form transfer functions, persistence, bad input."""
 
 import numpy as np
 import pytest
@@ -42,7 +42,7 @@ def _poles_within(model, k=2.0):
     (lambda: N4SID(), "white"),
 ])
 def test_poles_recovered_within_two_reported_std_on_20_seeds(make, noise):
-    """Done-when of issue 15: ≥ 18 of 20 noise seeds have every pole within 2 of its reported (complex) std; the
+    """Calibrated uncertainty: ≥ 18 of 20 noise seeds have every pole within 2 of its reported (complex) std; the
     reported std must also be honest: the RMS error over the seeds is within a factor 2 of the mean reported std."""
     hits, errs, sds = 0, [], []
     for seed in range(20):

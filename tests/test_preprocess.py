@@ -5,6 +5,7 @@ import pytest
 from scipy.signal import lfilter
 
 from sysid import preprocess as P
+from sysid.cleaning import _hampel_1d
 from sysid.errors import ConfigError, DataError
 from sysid.record import Record
 
@@ -322,7 +323,7 @@ def test_hampel_running_median_and_mad_match_numpy():
     rng = np.random.default_rng(5)
     for x in (rng.standard_normal(300), np.round(rng.standard_normal(300), 1)):
         for k in (1, 3, 10):
-            out, med, sigma = P._hampel_1d(x, k, 3.0)
+            out, med, sigma = _hampel_1d(x, k, 3.0)
             pad = np.pad(x, k, mode="reflect")
             w = np.lib.stride_tricks.sliding_window_view(pad, 2 * k + 1)
             m_ref = np.median(w, axis=1)

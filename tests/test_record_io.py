@@ -1,5 +1,5 @@
 """Records: round trips through every format bit-exactly, slicing/splitting, the normaliser, and the
-clear one-line error for each kind of bad input (issue 2, item 3)."""
+clear one-line error for each kind of bad input."""
 
 import json
 

@@ -22,7 +22,7 @@ u = rng.standard_normal(3000)
 y = np.zeros_like(u)
 for k in range(2, u.size):  # a mildly nonlinear second-order system
     y[k] = 1.5 * y[k - 1] - 0.7 * y[k - 2] + 0.5 * u[k - 1] + 0.1 * np.tanh(y[k - 1]) ** 2
-m = NARXMLP(n_y=2, n_u=2, hidden=[8, 8], epochs=3, dtype="{dtype}", device="cpu").fit(Record(u=u, y=y, fs=1.0))
+m = NARXMLP(ny=2, nu=2, hidden=[8, 8], epochs=3, dtype="{dtype}", device="cpu").fit(Record(u=u, y=y, fs=1.0))
 print(json.dumps(np.asarray(m.weights_, dtype=np.float64).tolist()))
 """
 

@@ -1,4 +1,4 @@
-"""One Optuna study run by several `piezotwin search` processes (issue 22 item 2, issue 14 item 4).
+"""One Optuna study run by several `piezotwin search` processes.
 
 Real parts: a PostgreSQL server started by the fixture (tests/_postgres.py), `piezotwin search` processes,
 SIGKILL. Checked on the study itself: exactly the requested number of COMPLETE trials, each configuration
@@ -122,7 +122,7 @@ def test_two_processes_on_postgres_finish_exactly_the_grid_and_survive_sigkill(f
 
 @pytest.mark.slow
 def test_sqlite_search_killed_then_rerun_completes_exactly_the_requested_trials(files, tmp_path):
-    """Issue 14 item 4: SIGKILL after the first finished trial, then the same command again: exactly the
+    """SIGKILL after the first finished trial, then the same command again: exactly the
     requested COMPLETE trials, exit 0 (measured before: 5 of 6, exit 0)."""
     db = f"sqlite:///{tmp_path / 's.db'}"
     a = _search(files, db, "s", "--trials", "5")
@@ -174,7 +174,7 @@ def test_search_that_cannot_complete_says_how_many_are_missing_and_exits_1(tmp_p
     the number of missing configurations; the others complete."""
     import numpy as np
 
-    import sysid.neural.search as S
+    import sysid.neural.sweep as S  # run_config looks run_one up here
     from benchmarks.cli import main
     from sysid.record import Record
 
@@ -202,7 +202,7 @@ def test_search_that_cannot_complete_says_how_many_are_missing_and_exits_1(tmp_p
 
 @pytest.mark.slow
 def test_two_processes_create_one_new_sqlite_store_at_once(files, tmp_path):
-    """Issue 14 item 4: two processes started together on a store that does not exist yet: neither crashes,
+    """Two processes started together on a store that does not exist yet: neither crashes,
     and between them they finish the grid, each configuration once."""
     db = f"sqlite:///{tmp_path / 'new.db'}"
     procs = [_search(files, db, "n") for _ in range(2)]

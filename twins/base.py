@@ -1,7 +1,7 @@
 """What every twin shares: parameter dataclasses with units and ranges, the effect catalog, configuration.
 
 A twin's *configuration* is its parameters (a dataclass whose fields carry unit, range and description in
-their metadata, see :func:`pfield`) and its set of switched-on effects (DESIGN.md "Effects"). The helpers
+their metadata, see :func:`pfield`) and its set of switched-on effects (:class:`EffectSpec`). The helpers
 here turn the CLI's ``--params / --set / --effect / --without / --effects / --seed`` into a configured twin,
 and write and read parameter files.
 """
@@ -20,50 +20,14 @@ import numpy as np
 
 from sysid.config import coerce, make_rng, parse_assignments
 from sysid.errors import ConfigError, DataError
-from sysid.jsonio import json_default as _json_default
 from sysid.io import output_file
+from sysid.jsonio import json_default as _json_default
 from sysid.record import Record
+from twins.paramfields import ParamInfo, param_info, pfield
 
 __all__ = ["pfield", "ParamInfo", "param_info", "EffectSpec", "Twin", "PARAMS_FORMAT"]
 
 PARAMS_FORMAT = "piezotwin-params/1"
-
-
-def pfield(default: Any, unit: str, lo: float | None = None, hi: float | None = None, doc: str = "",
-           choices: Iterable[Any] | None = None, source: str = "") -> Any:
-    """A dataclass field for a physical parameter: default, unit, documented range [lo, hi], description.
-
-    ``source`` says where the value comes from (physics notes section, paper). ``choices`` restricts
-    string-valued parameters (e.g. a fluid name).
-    """
-    meta = {"unit": unit, "range": (lo, hi), "doc": doc, "source": source,
-            "choices": tuple(choices) if choices is not None else None}
-    if isinstance(default, (list, dict)):
-        return field(default_factory=lambda d=default: type(d)(d), metadata=meta)
-    return field(default=default, metadata=meta)
-
-
-@dataclass(frozen=True)
-class ParamInfo:
-    name: str
-    default: Any
-    unit: str
-    range: tuple[float | None, float | None]
-    doc: str
-    source: str
-    choices: tuple[Any, ...] | None
-
-
-def param_info(params_cls: type) -> dict[str, ParamInfo]:
-    """Field name → :class:`ParamInfo` for a parameter dataclass."""
-    out = {}
-    for f in dataclasses.fields(params_cls):
-        md = f.metadata or {}
-        default = f.default if f.default is not dataclasses.MISSING else (
-            f.default_factory() if f.default_factory is not dataclasses.MISSING else None)  # type: ignore[misc]
-        out[f.name] = ParamInfo(f.name, default, md.get("unit", ""), tuple(md.get("range", (None, None))),
-                                md.get("doc", ""), md.get("source", ""), md.get("choices"))
-    return out
 
 
 @dataclass(frozen=True)
@@ -204,7 +168,8 @@ class Twin(ABC):
     def from_options(cls, params_file: str | Path | None = None, set_: Iterable[str] | None = None,
                      effect: Iterable[str] | None = None, without: Iterable[str] | None = None,
                      effects: str | None = None, seed: int | None = 0) -> "Twin":
-        """Build a configured twin from the options every twin command takes (DESIGN.md).
+        """Build a configured twin from the options every twin command takes (``--params``, ``--set``,
+        ``--effect``, ``--without``, ``--effects``, ``--seed``).
 
         Order: defaults → ``params_file`` → ``effects`` (exact set, ``none`` = bare core) → ``effect``
         (add, with ``NAME:key=value,...``) → ``without`` (remove) → ``set_`` (parameters by name).
@@ -268,7 +233,7 @@ def _coerce_all(cls: type[Twin], raw: Mapping[str, Any], where: str) -> dict[str
 
 def _json_value(value: Any, default: Any, key: str, where: str) -> Any:
     """A parameter value from a JSON file: its JSON type must fit the parameter's (numbers for numbers, a
-    list for a list ...); refused with one line otherwise (issue 19)."""
+    list for a list ...); refused with one line otherwise, never silently converted."""
     def kind(v: Any) -> str:
         if isinstance(v, bool):
             return "bool"

@@ -8,10 +8,9 @@ respect to the physical parameters), which is the usual asymptotic estimate for 
 
 from __future__ import annotations
 
-import dataclasses
 import time
 from dataclasses import dataclass, field
-from typing import Any, Callable, Sequence
+from typing import TYPE_CHECKING, Any, Callable, Sequence
 
 import numpy as np
 from scipy.optimize import least_squares
@@ -19,7 +18,10 @@ from scipy.optimize import least_squares
 from sysid.errors import ConfigError, DataError
 from sysid.metrics import nrmse, r2
 from sysid.record import Record
-from twins.base import Twin, param_info
+from twins.paramfields import param_info
+
+if TYPE_CHECKING:  # annotations only: twins.base calls calibrate() from Twin.calibrate
+    from twins.base import Twin
 
 __all__ = ["CalibrationResult", "calibrate", "check_calibration_data"]
 

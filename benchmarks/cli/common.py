@@ -14,7 +14,7 @@ from sysid.io import read_record, write_record
 from sysid.jsonio import clean_json
 from sysid.record import FS_MAX, FS_MIN, Record
 
-# ---------------------------------------------------------------------------- option types (issue 19)
+# ---------------------------------------------------------------------------- option types
 # argparse calls these on the option's text; ArgumentTypeError becomes "argument --x: message", exit 2, one line.
 SEED_MAX = 2**32 - 1
 
@@ -69,7 +69,7 @@ POSITIVE = number(0, 1e12, lo_open=True)  # a positive finite quantity (duration
 
 
 def add_data_args(p: argparse.ArgumentParser) -> None:
-    """Options of every command that reads a data file (DESIGN.md)."""
+    """Options of every command that reads a data file."""
     g = p.add_argument_group("data files")
     g.add_argument("--fs", type=FS, help="sampling rate [Hz] when the file has no t column / fs (a file that has"
                    " its own rate must agree with --fs, else it is refused)")
@@ -104,9 +104,9 @@ RECORD_OUTPUT_COMMANDS = ("signal", "preprocess", "simulate", "generate")
 
 
 def preflight(args: argparse.Namespace) -> None:
-    """Check every output the command will write before any work (issue 19): outputs that are an input
-    file (by inode, symlinks included), folders that are files, a record output with an unknown suffix, a
-    --storage that is a data file. Registers the inputs so that every writer refuses to overwrite them."""
+    """Check every output the command will write before any work, so a wrong path fails at once: outputs that
+    are an input file (by inode, symlinks included), folders that are files, a record output with an unknown
+    suffix, a --storage that is a data file. Registers the inputs so that every writer refuses to overwrite them."""
     from sysid.errors import DataError
     from sysid.io import SUPPORTED_SUFFIXES
     from sysid.safeio import check_output_dir, check_output_path, protect_inputs, same_file
@@ -144,7 +144,7 @@ def preflight(args: argparse.Namespace) -> None:
 
 
 def add_twin_args(p: argparse.ArgumentParser, seed: bool = True) -> None:
-    """Options of every command that builds a twin (DESIGN.md)."""
+    """Options of every command that builds a twin."""
     g = p.add_argument_group("twin configuration")
     g.add_argument("--params", metavar="FILE", help="saved calibration (parameter file) to start from")
     g.add_argument("--set", dest="set_", action="append", default=[], metavar="KEY=VALUE[,...]",

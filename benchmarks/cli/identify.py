@@ -67,7 +67,7 @@ def run(args: argparse.Namespace) -> int:
         from sysid.plots import identification_report
 
         summary["plots"] = identification_report(model, val if val is not None else est[0], args.plots)
-        if hasattr(model, "simulation_band"):  # linear models with uncertainty (issue 15)
+        if hasattr(model, "simulation_band"):  # linear models with uncertainty
             from sysid.linplots import linear_report
 
             summary["plots"].update(linear_report(model, val if val is not None else est[0], args.plots))

@@ -5,7 +5,7 @@ Each command lives in its own module under :mod:`benchmarks.cli` with ``register
 is printed as one line on stderr with exit status 2 — never a traceback; so is an OSError about a path the
 user named (an output folder that is a file, no permission ...).
 
-Conventions of every command (DESIGN.md): ``--version``; ``-q/--quiet`` (only results on stdout: no
+Conventions of every command: ``--version``; ``-q/--quiet`` (only results on stdout: no
 information messages, no progress bars, no warnings) and ``-v/--verbose`` (debug messages). The library logs
 through :mod:`logging` and never configures it; this module does, for the duration of one command, and puts
 it back afterwards. Python warnings are shown as one line each on stderr.

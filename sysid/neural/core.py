@@ -2,7 +2,7 @@
 
 - :class:`LagData` — the regression matrix Φ and targets Y of dissertation eq. 2-14 / 2-15 for one or several
   records (no regressor spans two records), kept as tensors on the training device. Row ``r`` holds, for a
-  target time ``t``, ``[y(t-1) … y(t-n_y), u(t-1) … u(t-n_u)]`` (lag-major; all channels of one lag side by
+  target time ``t``, ``[y(t-1) … y(t-ny), u(t-1) … u(t-nu)]`` (lag-major; all channels of one lag side by
   side). Small problems pre-build Φ once; very long lags (Φ larger than ``PREBUILD_LIMIT`` elements) gather
   rows on demand from the series instead, so lags up to 1024 fit in memory.
 - :class:`FlatMLP` — the feed-forward network of eq. 2-10 (Glorot-uniform weights, zero biases: the Keras
@@ -35,9 +35,9 @@ ACT_CODE = {"relu": 0, "tanh": 1, "sigmoid": 2}
 PREBUILD_LIMIT = 40_000_000  # elements of Φ (160 MB in float32) above which rows are gathered per batch
 
 
-def regressor_lag(n_y: int, n_u: int, nk: int = 1) -> int:
-    """Samples of history a regressor needs: y(t-1…t-n_y) and u(t-nk … t-nk-n_u+1)."""
-    return max(int(n_y), int(nk) + int(n_u) - 1 if n_u > 0 else 0)
+def regressor_lag(ny: int, nu: int, nk: int = 1) -> int:
+    """Samples of history a regressor needs: y(t-1…t-ny) and u(t-nk … t-nk-nu+1)."""
+    return max(int(ny), int(nk) + int(nu) - 1 if nu > 0 else 0)
 
 
 def count_mlp_parameters(n_in: int, hidden: Sequence[int], n_out: int, linear: bool = False) -> int:
@@ -103,14 +103,14 @@ def merge_ensemble(members: Sequence[np.ndarray], sizes: Sequence[int], linear: 
 class LagData:
     """Φ and Y (eq. 2-14, 2-15) for a list of normalised ``(u, y)`` pairs, 2-D arrays ``(N, channels)``."""
 
-    def __init__(self, pairs: Sequence[tuple[np.ndarray, np.ndarray]], n_y: int, n_u: int,
+    def __init__(self, pairs: Sequence[tuple[np.ndarray, np.ndarray]], ny: int, nu: int,
                  device: torch.device, dtype: torch.dtype = torch.float32, prebuild: bool | None = None, nk: int = 1):
-        self.n_y, self.n_u, self.nk = int(n_y), int(n_u), int(nk)
-        self.lag = regressor_lag(self.n_y, self.n_u, self.nk)
+        self.ny, self.nu, self.nk = int(ny), int(nu), int(nk)
+        self.lag = regressor_lag(self.ny, self.nu, self.nk)
         self.ny_ch = pairs[0][1].shape[1]
         self.nu_ch = pairs[0][0].shape[1]
-        self.n_yreg = self.n_y * self.ny_ch
-        self.n_in = self.n_yreg + self.n_u * self.nu_ch
+        self.n_yreg = self.ny * self.ny_ch
+        self.n_in = self.n_yreg + self.nu * self.nu_ch
         ucat, ycat, row_time, seg, seg_bounds = [], [], [], [], []
         offset = rows = 0
         for k, (u, y) in enumerate(pairs):
@@ -139,8 +139,8 @@ class LagData:
         self.u = torch.as_tensor(u_all, dtype=dtype, device=device)
         self.y = torch.as_tensor(y_all, dtype=dtype, device=device)
         self.row_time = torch.as_tensor(self.row_time_np, dtype=torch.long, device=device)
-        self.ylags = torch.arange(1, self.n_y + 1, device=device)
-        self.ulags = torch.arange(self.nk, self.nk + self.n_u, device=device)
+        self.ylags = torch.arange(1, self.ny + 1, device=device)
+        self.ulags = torch.arange(self.nk, self.nk + self.nu, device=device)
         self.Y = self.y[self.row_time]
         if prebuild is None:
             prebuild = self.n_rows * self.n_in <= PREBUILD_LIMIT
@@ -161,7 +161,7 @@ class LagData:
         return np.concatenate(out) if out else np.zeros(0, dtype=np.int64)
 
 
-def least_squares_linear(pairs: Sequence[tuple[np.ndarray, np.ndarray]], n_y: int, n_u: int, nk: int = 1,
+def least_squares_linear(pairs: Sequence[tuple[np.ndarray, np.ndarray]], ny: int, nu: int, nk: int = 1,
                          chunk: int = 20_000) -> tuple[np.ndarray, np.ndarray]:
     """Least-squares linear model of the NARX regressor: ``y(t) ≈ L φ(t) + c`` over every regressor row of the
     (normalised) ``(u, y)`` pairs, φ(t) as in :class:`LagData` (eq. 2-14/2-15).
@@ -171,12 +171,12 @@ def least_squares_linear(pairs: Sequence[tuple[np.ndarray, np.ndarray]], n_y: in
     accumulated over row chunks, columns scaled to a unit diagonal, with ``numpy.linalg.lstsq`` (minimum-norm
     solution if the regressor is rank deficient). Returns (L (n_out, n_in), c (n_out,)).
     """
-    lag = regressor_lag(n_y, n_u, nk)
+    lag = regressor_lag(ny, nu, nk)
     G = b = None
     for u, y in pairs:
         for a0 in range(lag, y.shape[0], chunk):
             times = np.arange(a0, min(a0 + chunk, y.shape[0]))
-            X = np.concatenate([lag_matrix_np(y, n_y, times), lag_matrix_np(u, n_u, times, first=nk),
+            X = np.concatenate([lag_matrix_np(y, ny, times), lag_matrix_np(u, nu, times, first=nk),
                                 np.ones((times.size, 1))], axis=1)
             G = X.T @ X if G is None else G + X.T @ X
             b = X.T @ y[times] if b is None else b + X.T @ y[times]
@@ -367,7 +367,7 @@ def mlp_forward_np(flat: np.ndarray, sizes: Sequence[int], code: int, x: np.ndar
 
 
 @njit(cache=True)
-def _free_run_kernel(flat, sizes, code, y0, un, n_y, n_u, nk, start, bound, linear):  # pragma: no cover - compiled
+def _free_run_kernel(flat, sizes, code, y0, un, ny, nu, nk, start, bound, linear):  # pragma: no cover - compiled
     n, ny_ch = y0.shape
     nu_ch = un.shape[1]
     n_layers = sizes.shape[0] - 1
@@ -386,13 +386,13 @@ def _free_run_kernel(flat, sizes, code, y0, un, n_y, n_u, nk, start, bound, line
         lin0 += sizes[layer] * sizes[layer + 1] + sizes[layer + 1]
     diverged = -1
     for t in range(start, n):
-        # regressor: y(t-1..t-n_y) (all channels per lag), then u(t-1..t-n_u)
+        # regressor: y(t-1..t-ny) (all channels per lag), then u(t-1..t-nu)
         k = 0
-        for i in range(1, n_y + 1):
+        for i in range(1, ny + 1):
             for c in range(ny_ch):
                 a_buf[k] = out[t - i, c]
                 k += 1
-        for i in range(nk, nk + n_u):
+        for i in range(nk, nk + nu):
             for c in range(nu_ch):
                 a_buf[k] = un[t - i, c]
                 k += 1
@@ -442,14 +442,14 @@ def _free_run_kernel(flat, sizes, code, y0, un, n_y, n_u, nk, start, bound, line
 
 
 def free_run_mlp(flat: np.ndarray, sizes: Sequence[int], code: int, yn: np.ndarray, un: np.ndarray,
-                 n_y: int, n_u: int, bound: float, nk: int = 1, linear: bool = False) -> tuple[np.ndarray, int]:
+                 ny: int, nu: int, bound: float, nk: int = 1, linear: bool = False) -> tuple[np.ndarray, int]:
     """Free-run simulation (eq. 2-29/2-30) in normalised units: the first ``regressor_lag`` samples of ``yn``
     are the measured initial conditions, the rest is simulated from ``un``. Returns (ŷ, diverged index or -1).
     ``linear``: the network has the linear bypass (see :class:`FlatMLP`)."""
-    lag = regressor_lag(n_y, n_u, nk)
+    lag = regressor_lag(ny, nu, nk)
     return _free_run_kernel(np.ascontiguousarray(flat, dtype=np.float64), np.asarray(sizes, dtype=np.int64), int(code),
                             np.ascontiguousarray(yn, dtype=np.float64), np.ascontiguousarray(un, dtype=np.float64),
-                            int(n_y), int(n_u), int(nk), int(lag), float(bound), bool(linear))
+                            int(ny), int(nu), int(nk), int(lag), float(bound), bool(linear))
 
 
 def lag_matrix_np(series: np.ndarray, lags: int, times: np.ndarray, first: int = 1) -> np.ndarray:
@@ -458,25 +458,25 @@ def lag_matrix_np(series: np.ndarray, lags: int, times: np.ndarray, first: int =
     return series[idx].reshape(times.size, -1)
 
 
-def k_step_mlp(flat: np.ndarray, sizes: Sequence[int], code: int, yn: np.ndarray, un: np.ndarray, n_y: int, n_u: int,
+def k_step_mlp(flat: np.ndarray, sizes: Sequence[int], code: int, yn: np.ndarray, un: np.ndarray, ny: int, nu: int,
                k: int, bound: float, nk: int = 1, linear: bool = False) -> np.ndarray:
     """k-step-ahead prediction ŷ(t | t-k) at every sample t ≥ lag, vectorised over t.
 
     With P_j(t) = ŷ(t | t-j-1), P_0 is the one-step prediction and P_j uses, for lag i, the earlier
     prediction P_{j-i}(t-i) when i ≤ j and the measurement y(t-i) otherwise; P_{k-1} is returned. Costs k
-    batched passes of the network; only the last n_y arrays P are kept.
+    batched passes of the network; only the last ny arrays P are kept.
     """
     n, ny_ch = yn.shape
-    lag = regressor_lag(n_y, n_u, nk)
+    lag = regressor_lag(ny, nu, nk)
     times = np.arange(lag, n)
-    U = lag_matrix_np(un, n_u, times, first=nk)
-    Ymeas = lag_matrix_np(yn, n_y, times).reshape(times.size, n_y, ny_ch)
+    U = lag_matrix_np(un, nu, times, first=nk)
+    Ymeas = lag_matrix_np(yn, ny, times).reshape(times.size, ny, ny_ch)
     hist: list[np.ndarray] = []  # hist[-i] = P_{j-i} over the full time axis (measured before lag)
     P = None
     with np.errstate(over="ignore", invalid="ignore"):
         for j in range(k):
             Yreg = Ymeas.copy()
-            for i in range(1, min(j, n_y) + 1):
+            for i in range(1, min(j, ny) + 1):
                 Pji = hist[-i]
                 Yreg[:, i - 1, :] = Pji[times - i]
             x = np.concatenate([Yreg.reshape(times.size, -1), U], axis=1)
@@ -485,6 +485,6 @@ def k_step_mlp(flat: np.ndarray, sizes: Sequence[int], code: int, yn: np.ndarray
             P = yn.copy()
             P[lag:] = pred
             hist.append(P)
-            if len(hist) > n_y:
+            if len(hist) > ny:
                 hist.pop(0)
     return P

@@ -23,67 +23,26 @@ from __future__ import annotations
 import math
 import time
 import warnings
-from pathlib import Path
 from typing import Any, Sequence
 
 import numpy as np
 import torch
 
-from sysid.base import Identifier, as_record_list, check_records
+from sysid.base import Identifier, as_record_list
 from sysid.errors import ConfigError, DataError, DivergenceWarning
 from sysid.neural.core import (ACT_CODE, ACTIVATIONS, FlatMLP, LagData, RMSprop, count_mlp_parameters, free_run_mlp,
                                k_step_mlp, lag_matrix_np, least_squares_linear, merge_ensemble, mlp_forward_np, regressor_lag)
 from sysid.neural.device import configure_threads, select_device, train_dtype
 from sysid.neural.persist import TorchFileSave
+from sysid.neural.records import (DIVERGENCE_BOUND, MAX_LAG, _as2d, check_channels, check_predict_input, fit_normaliser,
+                                  normalised_pairs)
 from sysid.progress import progress
 from sysid.record import Normaliser, Record
 
 __all__ = ["NARXMLP", "NARXMLPSim"]
 
-MAX_LAG = 1024
-# A simulated output beyond this many standard deviations of the estimation output is a divergence.
-DIVERGENCE_BOUND = 1e3
 # Most members of an ensemble (``ensemble=k``): k trainings, and a merged network k times as wide.
 MAX_ENSEMBLE = 64
-
-
-def _as2d(a: np.ndarray) -> np.ndarray:
-    return a[:, None] if a.ndim == 1 else a
-
-
-def normalised_pairs(recs: Sequence[Record], norm: Normaliser | None) -> list[tuple[np.ndarray, np.ndarray]]:
-    out = []
-    for r in recs:
-        u = norm.transform_u(r.u) if norm is not None else r.u
-        y = norm.transform_y(r.y) if norm is not None else r.y
-        out.append((_as2d(np.asarray(u, dtype=float)), _as2d(np.asarray(y, dtype=float))))
-    return out
-
-
-def fit_normaliser(recs: Sequence[Record]) -> Normaliser:
-    """Scale from all estimation records together (one mean and SD per channel)."""
-    joined = Record(u=np.concatenate([r.u for r in recs]), y=np.concatenate([r.y for r in recs]), fs=recs[0].fs)
-    return Normaliser().fit(joined)
-
-
-def check_channels(recs: Sequence[Record], max_lag: int, what: str) -> tuple[int, int]:
-    """The shared identifier data checks (channels, NaN/inf, length vs lags, constant input/output), then
-    the numbers of inputs and outputs."""
-    check_records(recs, max_lag, 1, what)
-    return recs[0].n_inputs, recs[0].n_outputs
-
-
-def check_predict_input(model: Identifier, record: Record, horizon: int | None) -> None:
-    """Checks shared by the neural models' ``predict``: an output to compare with, the fitted channel counts,
-    more samples than the model's lag, and a horizon that is a positive integer or ``None`` (free run)."""
-    record.require_output()
-    if (record.n_inputs, record.n_outputs) != (model.n_inputs_, model.n_outputs_):
-        raise DataError(f"{record.source}: {record.n_inputs} inputs / {record.n_outputs} outputs, model has "
-                        f"{model.n_inputs_} / {model.n_outputs_}")
-    if len(record) <= model.max_lag_:
-        raise DataError(f"{record.source}: {len(record)} samples, need more than the model's lag {model.max_lag_}")
-    if horizon is not None and (not isinstance(horizon, (int, np.integer)) or isinstance(horizon, bool) or horizon < 1):
-        raise ConfigError(f"{model.name}: horizon must be a positive integer or None (free run), got {horizon!r}")
 
 
 def _check_storage(net: FlatMLP) -> None:

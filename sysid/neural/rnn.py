@@ -14,7 +14,7 @@ learns the nonlinear correction (a linear model refined by a network: BLA-initia
 2019; the linear skip of SUBNET, Beintema et al.).
 
 The encoder estimates the initial state from ``n_enc`` past measured samples (the same regressor as a NARX
-with n_y = n_u = n_enc, eq. 2-14); afterwards the model runs on the input alone, so every prediction is a
+with ny = nu = n_enc, eq. 2-14); afterwards the model runs on the input alone, so every prediction is a
 simulation. Training minimises the free-run (simulation) MSE over windows of ``window`` samples started at
 random positions (multiple shooting, many windows as one batch), with Adam and gradient-norm clipping.
 
@@ -28,7 +28,6 @@ from __future__ import annotations
 import math
 import time
 import warnings
-from pathlib import Path
 from typing import Any, Sequence
 
 import numpy as np
@@ -40,7 +39,7 @@ from sysid.neural.core import LagData, lag_matrix_np, least_squares_linear
 from sysid.neural.device import configure_threads, select_device, train_dtype
 from sysid.neural.persist import TorchFileSave
 from sysid.progress import progress
-from sysid.neural.narx_mlp import MAX_LAG, _as2d, check_channels, check_predict_input, fit_normaliser, normalised_pairs
+from sysid.neural.records import MAX_LAG, _as2d, check_channels, check_predict_input, fit_normaliser, normalised_pairs
 from sysid.record import Normaliser, Record
 
 __all__ = ["RNNStateSpace"]
@@ -50,11 +49,11 @@ CELLS = ("gru", "lstm")
 
 class _Net(torch.nn.Module):
     def __init__(self, n_enc_in: int, enc_hidden: Sequence[int], n_state: int, nu: int, ny: int, cell: str,
-                 linear_order: int = 0, n_enc: int = 0):
+                 linear: int = 0, n_enc: int = 0):
         super().__init__()
         self.cell = cell
         self.n_state = n_state
-        self.nu, self.ny, self.k, self.n_enc = nu, ny, int(linear_order), int(n_enc)
+        self.nu, self.ny, self.k, self.n_enc = nu, ny, int(linear), int(n_enc)
 
         n_init = n_state * (2 if cell == "lstm" else 1)
         layers: list[torch.nn.Module] = []

@@ -27,7 +27,7 @@ import torch
 from sysid.base import Identifier, as_record_list
 from sysid.errors import ConfigError, DataError, DivergenceWarning
 from sysid.neural.device import configure_threads, select_device
-from sysid.neural.narx_mlp import DIVERGENCE_BOUND, MAX_LAG, _as2d, check_channels, check_predict_input, fit_normaliser, normalised_pairs
+from sysid.neural.records import DIVERGENCE_BOUND, MAX_LAG, _as2d, check_channels, check_predict_input, fit_normaliser, normalised_pairs
 from sysid.neural.persist import TorchFileSave
 from sysid.neural.subnet import SubnetModel, encode_np, export_weights, simulate_np
 from sysid.neural.train_sim import train_simulation

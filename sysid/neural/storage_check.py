@@ -1,4 +1,5 @@
-"""Validation and safe creation of a ``search --storage`` before any work (issue 19, item 5).
+"""Validation and safe creation of a ``search --storage`` before any work, so that a bad path fails at once and
+not after hours of training.
 
 :func:`check_storage` turns the option into an Optuna storage URL (as :func:`sysid.neural.search.storage_url`)
 and refuses, with one line, what would otherwise be a traceback later: text that is not a URL, an unknown

@@ -37,19 +37,12 @@ from dataclasses import asdict
 from typing import Any, Callable
 
 from sysid.errors import ConfigError
+from sysid.neural.sweep import (SweepSpec, _grid_configs, _make_objective, _make_sampler, _requeue_failed,
+                                config_key, heartbeat_settings, open_study, storage_url)
+from sysid.neural.sweep_results import collect, summarise
 
 HOST = socket.gethostname()
 MAX_FAILURES = 2  # a configuration whose fit raised this often in one process is given up (reported missing)
-
-
-def heartbeat_settings() -> tuple[int, int]:
-    """(heartbeat interval, grace period) in whole seconds (Optuna wants integers)."""
-    try:
-        beat = max(1, int(float(os.environ.get("PIEZOTWIN_HEARTBEAT_S", "20"))))
-        grace = max(beat + 1, int(float(os.environ.get("PIEZOTWIN_GRACE_S", str(3 * beat)))))
-    except ValueError as exc:
-        raise ConfigError(f"PIEZOTWIN_HEARTBEAT_S / PIEZOTWIN_GRACE_S: {exc}") from None
-    return beat, grace
 
 
 def _pid_alive(pid: int) -> bool:
@@ -89,8 +82,6 @@ def reap(study, spec) -> None:
     """Fail the RUNNING trials of dead processes: stale heartbeats (any host), vanished pids (this host)."""
     from optuna.storages import fail_stale_trials
     from optuna.trial import TrialState
-
-    from sysid.neural.search import _requeue_failed
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # Optuna marks the heartbeat API experimental
@@ -132,8 +123,6 @@ def _next_grid_config(study, spec, target: int, worker: int, n_workers: int, fai
                       rng: random.Random | None) -> dict[str, str] | None:
     """A configuration among the first ``target`` grid points that is neither finished nor running (nor
     given up here): this worker's share (index mod n_workers) first; a random one after a clash."""
-    from sysid.neural.search import _grid_configs, config_key
-
     done, running = _snapshot(study)
     taken = done | running
     missing = [(i, c) for i, c in enumerate(_grid_configs(spec)[:target])
@@ -152,12 +141,10 @@ def worker_loop(spec, url: str, study_name: str, est, val, target: int, on_trial
     import optuna
     from optuna.trial import TrialState
 
-    from sysid.neural.search import _make_objective, _make_sampler, config_key, open_study
-
     study = open_study(spec, url, study_name, create=False)
     failed: dict[str, int] = {}
     state = {"clash": False}
-    objective = _make_objective(spec, est, val, target=target, executor=executor, state=state)
+    objective = _make_objective(spec, est, val, claim, target=target, executor=executor, state=state)
     base = _make_sampler(spec)
     rng = random.Random(f"{HOST}:{os.getpid()}:{time.time_ns()}")
     beat, _ = heartbeat_settings()
@@ -210,7 +197,6 @@ def worker_loop(spec, url: str, study_name: str, est, val, target: int, on_trial
 def _worker_main(spec_d: dict, url: str, study_name: str, est, val, target: int, barrier, worker: int,
                  n_workers: int) -> None:
     from sysid.neural.device import configure_threads
-    from sysid.neural.search import SweepSpec
 
     configure_threads(1)
     worker_loop(SweepSpec(**spec_d), url, study_name, est, val, target, barrier=barrier, worker=worker,
@@ -222,8 +208,6 @@ def run_sweep(spec, est, val, storage: str | None = None, study: str = "piezotwi
     """Run (or resume) a sweep; returns :func:`~sysid.neural.search.summarise` of everything the study holds,
     plus ``requested``, ``complete`` and ``missing`` (configurations)."""
     from tqdm import tqdm
-
-    from sysid.neural.search import collect, open_study, storage_url, summarise
 
     url = storage_url(storage, study)
     st = open_study(spec, url, study)

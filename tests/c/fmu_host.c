@@ -1,4 +1,4 @@
-/* A minimal FMI 2.0 co-simulation host in C, as a simulation tool loads an FMU (issue 17).
+/* A minimal FMI 2.0 co-simulation host in C, as a simulation tool loads an FMU.
  *
  *   fmu_host BINARY.so RESOURCE_URI GUID VR_U VR_Y FS N_STEPS [OUT.txt]
  *

@@ -1,4 +1,4 @@
-"""Speed of the acoustic twin (issue 4): the 100 ms record at 100 MHz (10 M samples) in under 5 s and under
+"""Speed of the acoustic twin: the 100 ms record at 100 MHz (10 M samples) in under 5 s and under
 2 GB on 2 cores; a ``vna-sweep`` of 2000 frequencies in under 0.2 s (interactive sweeps and calibration).
 
 Run: ``make bench`` or

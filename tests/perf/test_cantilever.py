@@ -1,4 +1,4 @@
-"""Speed of the cantilever twin (issue 3): 80 000 samples (the thesis estimation set) < 0.2 s and
+"""Speed of the cantilever twin: 80 000 samples (the thesis estimation set) < 0.2 s and
 1 000 000 samples < 2 s, default configuration (Bouc–Wen, creep, two modes, sensor, noise, quantiser;
 20 µs sub-steps = 5 per sample at 10 kHz). Run by ``make bench``."""
 

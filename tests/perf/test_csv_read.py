@@ -1,4 +1,4 @@
-"""Speed of the strict CSV reader (issues 18 item 5, 19): a 1e6-row ``t,u,y`` file is read by
+"""Speed of the strict CSV reader: a 1e6-row ``t,u,y`` file is read by
 :func:`sysid.io.read_record` (structure checks + time column + parsing) within 2x of a bare
 ``pandas.read_csv`` of the same file. Both are wall-clock times (``time.perf_counter``), taken alternately in
 the same run, best of 5 each, so that the load of a shared machine hits both alike (CPU time is not used:

@@ -1,4 +1,4 @@
-"""Speed of the Dask execution backend (issue 22): a score grid of 9 identifier × dataset pairs run in this
+"""Speed of the Dask execution backend: a score grid of 9 identifier × dataset pairs run in this
 process and on a local cluster of 2 worker processes, in the same run, with the same JSON (timings aside).
 
 Goal: the 2-worker run takes ≤ 0.6 × the serial wall time on a 2-core machine. The cluster is started and

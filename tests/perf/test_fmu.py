@@ -1,4 +1,4 @@
-"""Speed of the exported FMUs (issue 9): cost per communication step and per simulated second.
+"""Speed of the exported FMUs: cost per communication step and per simulated second.
 
 Run by ``make bench``. One fmpy co-simulation step = fmpy's own loop (input interpolation, setReal,
 doStep, getReal, recording) + pythonfmu's C->Python call + the twin's per-sample core; the cores are also

@@ -1,10 +1,10 @@
-"""Per-step cost of the exported FMUs in an FMI host (issue 17): acoustic ≤ 100 µs, cantilever ≤ 50 µs per
+"""Per-step cost of the exported FMUs in an FMI host: acoustic ≤ 100 µs, cantilever ≤ 50 µs per
 communication step with both cores busy; identified-model FMUs alongside.
 
 One step = FMPy's co-simulation loop (setReal, doStep, getReal, recording) + pythonfmu's C->Python call + the
 per-sample core. Each benchmark runs 3000 steps (``extra_info["per_step_s"]`` is the mean per step). The
 machine's 1-minute load average is recorded in ``extra_info["loadavg"]``: compare figures only at similar load.
-The acoustic per-sample path is serial since issue 17 (``twins.acoustic.amplifier.PARALLEL_MIN``): numba's
+The acoustic per-sample path is serial (``twins.acoustic.amplifier.PARALLEL_MIN``): numba's
 parallel kernel was launched once per sample (164 µs per step with both cores busy).
 """
 
@@ -37,7 +37,7 @@ def fmus(tmp_path_factory):
 
 @pytest.mark.parametrize("name", ["acoustic", "acoustic_parallel_reference", "cantilever", "narx-poly"])
 def test_fmu_step(benchmark, fmus, name, monkeypatch):
-    """``acoustic_parallel_reference``: the acoustic FMU with the per-sample parallel launch of before issue 17
+    """``acoustic_parallel_reference``: the acoustic FMU with the per-sample parallel launch it had before
     (the FMU runs in this process and uses its already imported ``twins``, so the switch reaches it)."""
     from twins.fmu.check import fmu_simulate
 

@@ -1,7 +1,7 @@
-"""Speed of FROLS and of the compiled free run, side by side with SysIdentPy 0.9 in the same run (issue 5).
+"""Speed of FROLS and of the compiled free run, side by side with SysIdentPy 0.9 in the same run.
 
 Run with ``make bench`` (or ``pytest tests/perf/test_frols.py --benchmark-enable -m "slow or not slow"``).
-Goals: FROLS at N = 1e6, n_y = n_u = 10, degree 2 (231 candidates) < 15 s and < 2 GB peak memory; free run of a
+Goals: FROLS at N = 1e6, ny = nu = 10, degree 2 (231 candidates) < 15 s and < 2 GB peak memory; free run of a
 20-term model ≥ 10 M samples/s; FROLS ≥ 10× faster than SysIdentPy at N = 1e5. Both sides do the same job:
 degree-2 candidates, least squares, order chosen by BIC among 1..15 terms. Results (times, ratios, peak RSS)
 go to ``extra_info`` of the benchmark JSON and are printed.

@@ -1,4 +1,4 @@
-"""Speed of the neural identifiers (issue 6): one epoch and the full 100-epoch training of the dissertation's
+"""Speed of the neural identifiers: one epoch and the full 100-epoch training of the dissertation's
 4 × 25 ReLU NARX-MLP (lags 10) on 80 000 samples — the goal is ≤ 60 s for the 100 epochs on 2 CPU cores —
 and the free-run simulation (compiled recursion against a PyTorch eager loop as reference).
 

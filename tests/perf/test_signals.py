@@ -1,4 +1,4 @@
-"""Speed of signal generation and preprocessing at the dissertation's sizes (issue 2: "multisine of 10 M points
+"""Speed of signal generation and preprocessing at the dissertation's sizes ("multisine of 10 M points
 at 100 MHz, and decimation of 10 M points: a few seconds at most on 2 cores").
 
 Run: ``make bench`` or

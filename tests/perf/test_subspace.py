@@ -1,4 +1,4 @@
-"""Speed and memory of the subspace identifier ``n4sid`` (issue 15), with nfoursid 1.0 timed in the same run.
+"""Speed and memory of the subspace identifier ``n4sid``, with nfoursid 1.0 timed in the same run.
 
 Run with ``make bench`` (or ``pytest tests/perf/test_subspace.py --benchmark-enable -m "slow or not slow"``).
 Goal: a 10th-order 2×2 model from 1e6 samples in under 30 s and 4 GB on 2 cores, order chosen from the singular

@@ -1,4 +1,4 @@
-"""Piezoacoustic transmission twin (issue 4): layered 1-D acoustics, Mason/Kino transducers, RF amplifier,
+"""Piezoacoustic transmission twin: layered 1-D acoustics, Mason/Kino transducers, RF amplifier,
 reverberation, tank-wall echoes, crosstalk, noise and ADC; fluid/temperature/distance studies."""
 
 from twins.acoustic.params import AcousticParams

@@ -1,6 +1,6 @@
 """Parameters of the piezoacoustic twin (dataclass with units, ranges and sources; twins.base.pfield).
 
-Default stack (chosen in issue 4, see README section "acoustic" and :mod:`twins.acoustic.calibration`):
+Default stack (see README section "acoustic" and :mod:`twins.acoustic.calibration`):
 PZT-4 2.16 mm | epoxy 100 µm | SS316 6.25 mm | water 100 mm at 24 °C | SS316 | epoxy | PZT-4, plates
 70 × 25 mm, air backing, Tx driven through 50 Ω, Rx into 1 MΩ ∥ 15 pF. Its direct-path transmission peaks
 at ≈ 940 and ≈ 1162 kHz (dissertation Figure 3.9).

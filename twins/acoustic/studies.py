@@ -27,7 +27,7 @@ def _identified_accuracy(twin, protocol: str | None, identifier: str = "arx") ->
         from sysid.registry import get_identifier
 
         cls = get_identifier(identifier)
-    except Exception as exc:  # identifiers are another team's module: absent until merged
+    except Exception as exc:  # a build without the identifier's dependencies: the column is null, with the reason
         return {"identified_model_r2": None,
                 "identified_model_note": f"{exc} — left null until the identifiers are merged"}
     from sysid.metrics import r2 as _r2
@@ -50,22 +50,20 @@ def _identified_accuracy(twin, protocol: str | None, identifier: str = "arx") ->
         return {"identified_model_r2": None, "identified_model_note": f"{identifier} failed: {exc}"}
 
 
-def sweep_metrics(self, protocol: str | None = None, identify: bool = True) -> dict[str, Any]:
+def sweep_metrics(twin, protocol: str | None = None, identify: bool = True) -> dict[str, Any]:
     """Figures of ``piezotwin sweep``: peak frequency/gain, −3 dB bandwidth, time of flight (+ identified-model
-    accuracy, null until the identifiers are in the build)."""
-    out: dict[str, Any] = dict(self.spectrum_metrics())
+    accuracy, null when no identifier could be fitted). :meth:`AcousticTwin.sweep_metrics` calls this."""
+    out: dict[str, Any] = dict(twin.spectrum_metrics())
     if identify:
-        out.update(_identified_accuracy(self, protocol))
+        out.update(_identified_accuracy(twin, protocol))
     return out
 
 
-
-
-def sweep_spectrum(self, band=(0.5e6, 2.0e6), points: int = 2000) -> tuple[np.ndarray, dict]:
+def sweep_spectrum(twin, band=(0.5e6, 2.0e6), points: int = 2000) -> tuple[np.ndarray, dict]:
     """(f, {"direct": dB, "full": dB}) of |V_rx/V_oc| for the sweep report's spectrum plot."""
     f = np.linspace(band[0], band[1], points)
-    direct = 20 * np.log10(np.abs(self.frequency_response(f, direct_only=True, include_amplifier=False)) + 1e-300)
-    full = 20 * np.log10(np.abs(self.frequency_response(f, include_amplifier=False)) + 1e-300)
+    direct = 20 * np.log10(np.abs(twin.frequency_response(f, direct_only=True, include_amplifier=False)) + 1e-300)
+    full = 20 * np.log10(np.abs(twin.frequency_response(f, include_amplifier=False)) + 1e-300)
     return f, {"direct": direct, "full": full}
 
 

@@ -1,4 +1,5 @@
-"""Effect catalog of the cantilever twin (DESIGN.md "Effects").
+"""Effect catalog of the cantilever twin: each effect is switched on or off by name, its parameters are fields
+of the twin's parameter dataclass.
 
 Each effect names its own parameters (fields of :class:`CantileverParams`) and the one-line residual
 signature that reveals it when a twin without the effect is compared with data that has it. The effects are

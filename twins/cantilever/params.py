@@ -49,7 +49,7 @@ class CantileverParams:
     # ---------------------------------------------------------------- amplifier (core clip)
     amp_limit_v: float = pfield(100.0, "V", 1.0, 1e4, "hard output limit of the power amplifier (±)",
                                 source="dissertation §3.1 (−100…+100 V); 150 V for the TU/e data; PZT stacks "
-                                "are driven to 1–1.5 kV (range widened for them, issue 20)")
+                                "are driven to 1–1.5 kV (range widened for them)")
 
     # ---------------------------------------------------------------- modal dynamics D(s) (core)
     f1_hz: float = pfield(700.0, "Hz", 50.0, 3000.0, "first bending-mode frequency",

@@ -1,4 +1,4 @@
-"""Integration sub-step of the cantilever twin chosen from the record (issue 20, item 6).
+"""Integration sub-step of the cantilever twin chosen from the record.
 
 Inside one sample interval the kernel (:mod:`.kernels`) is exact for everything except one approximation:
 the force f = Γ[v] + creep is taken as piecewise linear between the M sub-step nodes (first-order hold into

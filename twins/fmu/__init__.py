@@ -1,4 +1,4 @@
-"""FMU export of the twins (FMI 2.0 co-simulation via pythonfmu; issue 9).
+"""FMU export of the twins (FMI 2.0 co-simulation via pythonfmu).
 
 - :func:`export_fmu` (:mod:`twins.fmu.export`): configured twin -> ``.fmu`` with input ``u``, output ``y``,
   every physical parameter, effect switch, ``seed`` and ``fs`` as FMU parameters (:mod:`twins.fmu.spec`).

@@ -1,0 +1,60 @@
+"""What every neural identifier does with its records before and after the network: scale them (one mean and
+SD per channel over all estimation records), turn them into 2-D arrays, and check them — for fitting (channels,
+finite values, length against the lags) and for prediction (the fitted channel counts, a valid horizon).
+Shared by :mod:`sysid.neural.narx_mlp`, :mod:`sysid.neural.rnn` and :mod:`sysid.neural.ss_encoder`.
+"""
+
+from __future__ import annotations
+
+from typing import Sequence
+
+import numpy as np
+
+from sysid.base import Identifier, check_records
+from sysid.errors import ConfigError, DataError
+from sysid.record import Normaliser, Record
+
+__all__ = ["MAX_LAG", "DIVERGENCE_BOUND", "normalised_pairs", "fit_normaliser", "check_channels", "check_predict_input"]
+
+MAX_LAG = 1024
+# A simulated output beyond this many standard deviations of the estimation output is a divergence.
+DIVERGENCE_BOUND = 1e3
+
+
+def _as2d(a: np.ndarray) -> np.ndarray:
+    return a[:, None] if a.ndim == 1 else a
+
+
+def normalised_pairs(recs: Sequence[Record], norm: Normaliser | None) -> list[tuple[np.ndarray, np.ndarray]]:
+    out = []
+    for r in recs:
+        u = norm.transform_u(r.u) if norm is not None else r.u
+        y = norm.transform_y(r.y) if norm is not None else r.y
+        out.append((_as2d(np.asarray(u, dtype=float)), _as2d(np.asarray(y, dtype=float))))
+    return out
+
+
+def fit_normaliser(recs: Sequence[Record]) -> Normaliser:
+    """Scale from all estimation records together (one mean and SD per channel)."""
+    joined = Record(u=np.concatenate([r.u for r in recs]), y=np.concatenate([r.y for r in recs]), fs=recs[0].fs)
+    return Normaliser().fit(joined)
+
+
+def check_channels(recs: Sequence[Record], max_lag: int, what: str) -> tuple[int, int]:
+    """The shared identifier data checks (channels, NaN/inf, length vs lags, constant input/output), then
+    the numbers of inputs and outputs."""
+    check_records(recs, max_lag, 1, what)
+    return recs[0].n_inputs, recs[0].n_outputs
+
+
+def check_predict_input(model: Identifier, record: Record, horizon: int | None) -> None:
+    """Checks shared by the neural models' ``predict``: an output to compare with, the fitted channel counts,
+    more samples than the model's lag, and a horizon that is a positive integer or ``None`` (free run)."""
+    record.require_output()
+    if (record.n_inputs, record.n_outputs) != (model.n_inputs_, model.n_outputs_):
+        raise DataError(f"{record.source}: {record.n_inputs} inputs / {record.n_outputs} outputs, model has "
+                        f"{model.n_inputs_} / {model.n_outputs_}")
+    if len(record) <= model.max_lag_:
+        raise DataError(f"{record.source}: {len(record)} samples, need more than the model's lag {model.max_lag_}")
+    if horizon is not None and (not isinstance(horizon, (int, np.integer)) or isinstance(horizon, bool) or horizon < 1):
+        raise ConfigError(f"{model.name}: horizon must be a positive integer or None (free run), got {horizon!r}")
