@@ -14,7 +14,7 @@ from benchmarks.execution import Executor
 from sysid.config import coerce
 from sysid.errors import ConfigError
 from sysid.jsonio import clean_json
-from sysid.safeio import atomic_write_text, save_figure
+from sysid.safeio import atomic_write_text
 from twins.base import param_info
 
 __all__ = ["parse_spec", "sweep_point", "sweep", "write_report", "public"]
@@ -66,7 +66,7 @@ def write_report(result: dict[str, Any], out: Path) -> list[str]:
     of ``result`` in ``out``; the paths written."""
     import numpy as np
 
-    from sysid.plots import pyplot
+    from sysid.plots import pyplot, save_and_close
 
     plt = pyplot()
 
@@ -88,8 +88,7 @@ def write_report(result: dict[str, Any], out: Path) -> list[str]:
         axes[0].legend(fontsize=7)
         fig.tight_layout()
         path = out / f"sweep_{name}_spectra.png"
-        save_figure(fig, path, dpi=110)
-        plt.close(fig)
+        save_and_close(fig, path, dpi=110)
         files.append(str(path))
     keys = [k for k, v in result["rows"][0].items()
             if k != "value" and isinstance(v, (int, float)) and not isinstance(v, bool)]
@@ -110,8 +109,7 @@ def write_report(result: dict[str, Any], out: Path) -> list[str]:
         axes[-1].set_xlabel(f"{name} [{unit}]" if unit else name)
         fig.tight_layout()
         path = out / f"sweep_{name}_metrics.png"
-        save_figure(fig, path, dpi=110)
-        plt.close(fig)
+        save_and_close(fig, path, dpi=110)
         files.append(str(path))
     path = out / f"sweep_{name}.json"
     atomic_write_text(path, json.dumps(clean_json(public(result)), indent=2))

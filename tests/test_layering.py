@@ -180,14 +180,9 @@ def test_no_upward_imports():
     assert layering_violations(edges) == []
 
 
-# Cycles left to the work on the discrepancy pipeline, which owns both modules (defaults imports diagnose
-# inside functions). Remove the entry once the two are untangled; nothing else may join this list.
-KNOWN_CYCLES = [["twins.discrepancy.defaults", "twins.discrepancy.diagnose"]]
-
-
 def test_no_import_cycles():
     edges = import_edges(ROOT)
-    cycles = [c for c in import_cycles(edges) if c not in KNOWN_CYCLES]
+    cycles = import_cycles(edges)
     assert _describe(cycles, edges) == []
 
 
