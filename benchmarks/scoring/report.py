@@ -52,7 +52,6 @@ def write_report(run: ScoreRun, report_dir: str | Path) -> dict[str, Path]:
     from sysid.safeio import atomic_write_text, save_figure
 
     plt = pyplot()
-
     out = Path(report_dir)
     out.mkdir(parents=True, exist_ok=True)
     paths: dict[str, Path] = {}
