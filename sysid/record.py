@@ -10,6 +10,7 @@ A record built by a signal generator may have ``y is None`` (input only).
 from __future__ import annotations
 
 import copy
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -17,7 +18,7 @@ import numpy as np
 
 from sysid.errors import DataError
 
-__all__ = ["Record", "check_array", "Normaliser", "FS_MIN", "FS_MAX"]
+__all__ = ["Record", "check_array", "Normaliser", "NormalisedModel", "FS_MIN", "FS_MAX"]
 
 #: documented range of sampling rates [Hz] of data files and options (docs/data-files.md): up to 1 GHz (10x the
 #: 100 MHz acoustic rig); down to 1e-9 Hz because frequency-domain records (the acoustic twin's vna-sweep files)
@@ -215,10 +216,13 @@ class Normaliser:
     nothing divides by zero. The inverse reproduces the original to floating-point round-off.
     """
 
-    def fit(self, record: Record) -> "Normaliser":
-        self.u_mean_, self.u_scale_ = self._stats(record.u)
-        if record.y is not None:
-            self.y_mean_, self.y_scale_ = self._stats(record.y)
+    def fit(self, data: Record | Sequence[Record]) -> "Normaliser":
+        """Scale from ``data``: one record, or several taken together (one mean and deviation per channel)."""
+        recs = [data] if isinstance(data, Record) else list(data)
+        u = recs[0].u if len(recs) == 1 else np.concatenate([r.u for r in recs])
+        self.u_mean_, self.u_scale_ = self._stats(u)
+        if all(r.y is not None for r in recs):
+            self.y_mean_, self.y_scale_ = self._stats(recs[0].y if len(recs) == 1 else np.concatenate([r.y for r in recs]))
         else:
             self.y_mean_, self.y_scale_ = np.float64(0.0), np.float64(1.0)
         return self
@@ -259,3 +263,26 @@ class Normaliser:
         for k, v in d.items():
             setattr(obj, k, np.asarray(v, dtype=float))
         return obj
+
+
+class NormalisedModel:
+    """Any identifier fitted on data scaled to zero mean / unit deviation (a :class:`Normaliser` fitted on the
+    estimation data, all records together); predictions are mapped back to the data's units, so metrics computed
+    on them are in the original units. Other attributes are the wrapped model's."""
+
+    def __init__(self, model):
+        self.model = model
+
+    def fit(self, data: Record | Sequence[Record]) -> NormalisedModel:
+        recs = [data] if isinstance(data, Record) else list(data)
+        self.norm_ = Normaliser().fit(recs)
+        self.model.fit([self.norm_.transform(r) for r in recs] if len(recs) > 1 else self.norm_.transform(recs[0]))
+        return self
+
+    def predict(self, record: Record, horizon: int | None = 1) -> np.ndarray:
+        return self.norm_.inverse_y(self.model.predict(self.norm_.transform(record), horizon=horizon))
+
+    def __getattr__(self, name: str):
+        if name == "model":
+            raise AttributeError(name)
+        return getattr(self.model, name)

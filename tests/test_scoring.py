@@ -88,6 +88,38 @@ def test_normalised_wrapper_is_exact_for_an_affine_invariant_model():
     np.testing.assert_allclose(wrapped.predict(ds.tests["test"], horizon=None), raw, rtol=1e-9, atol=1e-9)
 
 
+def test_normaliser_fitted_on_several_records_is_the_one_of_the_joined_record():
+    """The wrapper fits one scale on all estimation records together: the same as on their concatenation."""
+    from sysid.record import Normaliser, Record
+
+    rng = np.random.default_rng(0)
+    recs = [Record(u=rng.normal(k, 1 + k, 50), y=rng.normal(-k, 2, 50), fs=10.0) for k in range(3)]
+    joined = Record(u=np.concatenate([r.u for r in recs]), y=np.concatenate([r.y for r in recs]), fs=10.0)
+    a, b = Normaliser().fit(recs), Normaliser().fit(joined)
+    assert a.to_dict() == b.to_dict()
+    assert scoring.Normalised is scoring.NormalisedModel
+
+
+def test_settings_files_name_real_identifiers_and_datasets_and_say_why(tmp_path):
+    """Every settings file is an identifier of the registry, every table a dataset (or "*"); a table without
+    its `why` line is refused."""
+    from benchmarks.datasets import dataset_names
+    from sysid.registry import IDENTIFIERS
+
+    assert set(scoring.SETTINGS) <= set(IDENTIFIERS) and set(scoring.QUICK_SETTINGS) <= set(scoring.SETTINGS)
+    for table in (scoring.SETTINGS, scoring.QUICK_SETTINGS):
+        for ident, entries in table.items():
+            assert set(entries) <= {"*", *dataset_names()}, ident
+            assert all("why" not in options for options in entries.values())
+    assert set(scoring.QUICK_DATASETS) <= set(dataset_names())
+    assert set(scoring.QUICK_SKIP_IDENTIFIERS) <= set(IDENTIFIERS) and len(scoring.QUICK_SEEDS) == 5
+    (tmp_path / "arx.toml").write_text('[datasets."*"]\nwhy = "measured"\nny = 4\n\n[quick.silverbox]\nny = 2\n')
+    with pytest.raises(scoring.ConfigError, match=r"\[quick.silverbox\] needs a `why` line"):
+        scoring.load_identifier_settings(tmp_path)
+    (tmp_path / "arx.toml").write_text('[datasets."*"]\nwhy = "measured"\nny = 4\n')
+    assert scoring.load_identifier_settings(tmp_path) == ({"arx": {"*": {"ny": 4}}}, {})
+
+
 def test_make_floors_adds_margin_and_keeps_rules():
     run = {"mode": "quick", "rows": [_row("arx", "cascaded-tanks", "test", 1.0), _row("x", "d", "t", float("nan"), status="diverged")]}
     prev = {"format": scoring.BASELINES_FORMAT, "modes": {"full": {"a": {}}}, "rules": [{"rule": "beats_linear", "datasets": []}]}

@@ -1,0 +1,316 @@
+"""Scoring core: identifiers × datasets → test accuracy, fit time, parameter count.
+
+For every identifier (registry id, :mod:`sysid.registry`) and dataset (:mod:`benchmarks.datasets`) the
+identifier is fitted on the estimation data with the settings of :mod:`benchmarks.scoring.settings` and predicts
+every test set one step ahead and in free run (``predict(record, horizon=1)`` / ``horizon=None``). Metrics
+(:mod:`sysid.metrics`) skip the first ``max(dataset.init_samples, model.max_lag_)`` samples of each test — the
+official initialisation window, or the model's own initial conditions if it needs more. Beside each row: the
+published reference numbers of that test (:mod:`benchmarks.datasets.references`) and SysIdentPy's FROLS fitted
+on the same split (:mod:`benchmarks.scoring.crosscheck`).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+import warnings
+from collections.abc import Callable, Iterable, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from benchmarks.scoring.settings import (
+    NORMALISE,
+    QUICK_DATASETS,
+    QUICK_MAX_SAMPLES,
+    QUICK_SKIP_IDENTIFIERS,
+    seeds_for,
+    settings_for,
+)
+from sysid.errors import ConfigError, InputError
+from sysid.record import NormalisedModel, Record
+
+METRICS = ("rmse", "nrmse", "r2")
+
+
+class _Scored:
+    """Proxy of a fitted model for :func:`sysid.evaluate.evaluate`: reports ``max_lag_`` = the scoring skip
+    (max of the dataset's initialisation window and the model's own lags) and keeps the predictions."""
+
+    def __init__(self, model, skip: int):
+        self.model, self.max_lag_, self.outputs = model, skip, {}
+
+    def predict(self, record: Record, horizon: int | None = 1) -> np.ndarray:
+        y = self.model.predict(record, horizon=horizon)
+        self.outputs[horizon] = np.asarray(y, dtype=float)
+        return y
+
+    @property
+    def diverged_at_(self):
+        return getattr(self.model, "diverged_at_", None)
+
+
+def evaluate(model, record: Record, init_samples: int = 0) -> dict[str, Any]:
+    """One-step and free-run metrics of a fitted ``model`` on ``record``, scored from sample
+    ``max(init_samples, model.max_lag_)`` on — the poly team's :func:`sysid.evaluate.evaluate` on a proxy."""
+    from sysid.evaluate import evaluate as sysid_evaluate
+
+    skip = max(int(init_samples), int(getattr(model, "max_lag_", 0) or 0))
+    proxy = _Scored(model, skip)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        ev = sysid_evaluate(proxy, record, all_metrics=True)
+    out: dict[str, Any] = {"skip": skip, "n_scored": len(record) - skip}
+    for key in ("one_step", "free_run"):
+        out[key] = {m: ev[key][m] for m in METRICS}
+    yfr = proxy.outputs.get(None)
+    out["diverged"] = bool(yfr is None or not np.isfinite(yfr[skip:]).all())
+    if "diverged_at" in ev["free_run"]:
+        out["diverged_at"] = ev["free_run"]["diverged_at"]
+    out["warnings"] = sorted({str(w.message).splitlines()[0][:200] for w in caught})
+    out["_yhat_free_run"] = yfr
+    return out
+
+
+
+@dataclass
+class ScoreRun:
+    """Rows of one scoring run (one per identifier × dataset × test) plus what was skipped and why."""
+
+    quick: bool
+    rows: list[dict[str, Any]] = field(default_factory=list)
+    skipped: list[dict[str, str]] = field(default_factory=list)
+    sysidentpy: list[dict[str, Any]] = field(default_factory=list)
+    predictions: dict[tuple[str, str, str], np.ndarray] = field(default_factory=dict, repr=False)
+    datasets: dict[str, Any] = field(default_factory=dict, repr=False)
+    seconds: float = 0.0
+    selection: dict[str, list[str]] = field(default_factory=dict)  # identifiers and datasets asked for
+    environment: dict[str, Any] = field(default_factory=dict)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"format": "piezotwin-score/1", "mode": "quick" if self.quick else "full", "rows": self.rows,
+                "sysidentpy": self.sysidentpy, "skipped": self.skipped, "seconds": self.seconds,
+                "selection": self.selection, "environment": self.environment}
+
+
+def environment() -> dict[str, Any]:
+    """What a floor measured in this process depends on: CPU, torch's kernel set, thread settings, versions."""
+    import os
+    import platform
+
+    import scipy
+
+    env: dict[str, Any] = {"machine": platform.machine(), "cpu": platform.processor() or ""}
+    try:
+        with open("/proc/cpuinfo") as fh:
+            env["cpu"] = next((ln.split(":", 1)[1].strip() for ln in fh if ln.startswith("model name")), env["cpu"])
+    except OSError:
+        pass
+    env["ATEN_CPU_CAPABILITY"] = os.environ.get("ATEN_CPU_CAPABILITY", "")
+    env["OPENBLAS_NUM_THREADS"] = os.environ.get("OPENBLAS_NUM_THREADS", "")
+    versions = {"python": platform.python_version(), "numpy": np.__version__, "scipy": scipy.__version__}
+    try:
+        import torch
+
+        env["torch_cpu_capability"] = torch.backends.cpu.get_cpu_capability()
+        versions["torch"] = torch.__version__
+    except ImportError:  # pragma: no cover - torch is a dependency
+        pass
+    env["versions"] = versions
+    return env
+
+
+def _quick_cut(rec: Record, n: int | None) -> Record:
+    return rec if n is None or len(rec) <= n else rec[:n]
+
+
+def prepare_dataset(ds, quick: bool):
+    """Apply the quick-mode sample budget (QUICK_MAX_SAMPLES) to a loaded Dataset, in place; returns it."""
+    if not quick or ds.name not in QUICK_MAX_SAMPLES:
+        return ds
+    lim = QUICK_MAX_SAMPLES[ds.name]
+    if isinstance(ds.est, Record):
+        ds.est = _quick_cut(ds.est, lim.get("est"))
+    ds.tests = {k: _quick_cut(v, lim.get("test")) for k, v in ds.tests.items()}
+    ds.meta["quick_max_samples"] = lim
+    return ds
+
+
+def _median_run(runs: list[dict[str, Any]]) -> dict[str, Any]:
+    """The run of median free-run RMSE (a diverged or non-finite run counts as +inf; the lower median for an even
+    count), so the scored row is one real model with consistent metrics."""
+    def key(ev: dict[str, Any]) -> float:
+        rmse = (ev.get("free_run") or {}).get("rmse")
+        return rmse if _finite(rmse) and not ev.get("diverged") else math.inf
+
+    order = sorted(range(len(runs)), key=lambda k: key(runs[k]))
+    return runs[order[(len(runs) - 1) // 2]]
+
+
+def score_pair(identifier: str, ds, quick: bool = False, factory: Callable[[str], Any] | None = None,
+               params: dict[str, Any] | None = None, seeds: Sequence[int] | None = None) -> tuple[list[dict[str, Any]], dict[str, np.ndarray]]:
+    """Fit ``identifier`` on ``ds.est`` and score every test of ``ds``; returns (rows, free-run predictions).
+
+    A seeded identifier in quick mode is fitted once per seed of :data:`QUICK_SEEDS` and each test is scored by
+    the run of median free-run RMSE (:func:`_median_run`); the row lists every seed's free-run RMSE. BLAS runs
+    single-threaded (wherever the pair runs: in-process or in a worker), so no number depends on the core count."""
+    from sysid._blas import blas_threads
+
+    with blas_threads(1):
+        return _score_pair(identifier, ds, quick, factory, params, seeds)
+
+
+def _score_pair(identifier, ds, quick, factory, params, seeds=None) -> tuple[list[dict[str, Any]], dict[str, np.ndarray]]:
+    from sysid.registry import get_identifier
+
+    cls = (factory or get_identifier)(identifier)
+    params = dict(settings_for(identifier, ds.name, quick) if params is None else params)
+    normalise = bool(params.pop(NORMALISE, False))
+    seeds = seeds_for(cls, params, quick, seeds)
+    runs: dict[str, list[dict[str, Any]]] = {test: [] for test in ds.tests}
+    for seed in seeds:
+        model = cls(**params) if seed is None else cls(**params, seed=seed)
+        if normalise:
+            model = NormalisedModel(model)
+        t0 = time.perf_counter()
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            model.fit(ds.est)
+        fit_s = time.perf_counter() - t0
+        for test, rec in ds.tests.items():
+            ev = evaluate(model, rec, ds.init_samples)
+            ev.update(seed=seed, fit_seconds=fit_s, n_parameters=getattr(model, "n_parameters_", None))
+            runs[test].append(ev)
+    if normalise:
+        params[NORMALISE] = True
+    rows, preds = [], {}
+    for test, rec in ds.tests.items():
+        ev = dict(_median_run(runs[test]))
+        preds[test] = ev.pop("_yhat_free_run")
+        seed, fit_s, n_par = ev.pop("seed"), ev.pop("fit_seconds"), ev.pop("n_parameters")
+        row = {
+            "identifier": identifier, "dataset": ds.name, "test": test, "status": "diverged" if ev["diverged"] else "ok",
+            "params": params, "n_parameters": n_par, "fit_seconds": fit_s,
+            "n_est": sum(len(r) for r in ds.est_records), "n_test": len(rec), "units": ds.units.get("y", ""),
+            **ev, "references": ds.references.get(test, {}),
+        }
+        if seed is not None:
+            rmses = [(r.get("free_run") or {}).get("rmse") for r in runs[test]]
+            row.update(seed=seed, seeds=list(seeds),
+                       free_run_rmse_by_seed=[x if _finite(x) else None for x in rmses])
+        rows.append(row)
+    return rows, preds
+
+
+def score_pair_task(identifier: str, ds, quick: bool = False, factory: Callable[[str], Any] | None = None,
+                    seeds: Sequence[int] | None = None
+                    ) -> tuple[list[dict[str, Any]], dict[str, np.ndarray], dict[str, str] | None]:
+    """One pair as a task: (rows, free-run predictions, skip entry or None). A ConfigError is a skip; any
+    other exception of the identifier is a result (rows with status error), not a crashed run."""
+    try:
+        rows, preds = score_pair(identifier, ds, quick=quick, factory=factory, seeds=seeds)
+        return rows, preds, None
+    except ConfigError as exc:
+        return [], {}, {"identifier": identifier, "dataset": ds.name, "reason": str(exc)}
+    except Exception as exc:
+        return ([{"identifier": identifier, "dataset": ds.name, "test": t, "status": "error",
+                  "message": f"{type(exc).__name__}: {exc}"[:300], "references": ds.references.get(t, {})}
+                 for t in ds.tests], {}, None)
+
+
+def score(identifiers: Iterable[str] | None = None, datasets: Iterable[str] | None = None, quick: bool = False,
+          sysidentpy: bool = True, progress: bool = False, factory: Callable[[str], Any] | None = None,
+          log: Callable[[str], None] | None = None, seeds: Sequence[int] | None = None, executor=None) -> ScoreRun:
+    """Score identifiers × datasets. Unavailable identifiers/datasets are skipped with the reason.
+
+    ``executor`` (:class:`benchmarks.execution.Executor`; default in-process) runs the pairs. BLAS runs
+    single-threaded throughout (here and in :func:`score_pair`, wherever a pair runs; torch's training already
+    does, :mod:`sysid.neural.device`), so the numbers do not depend on ``OPENBLAS_NUM_THREADS`` or the core count."""
+    from sysid._blas import blas_threads
+
+    with blas_threads(1):
+        return _score(identifiers, datasets, quick, sysidentpy, progress, factory, log, seeds, executor)
+
+
+def _score(identifiers, datasets, quick, sysidentpy, progress, factory, log, seeds=None, executor=None) -> ScoreRun:
+    from benchmarks.datasets import list_datasets, load_dataset
+    from sysid.registry import IDENTIFIERS, available_identifiers
+
+    t_start = time.perf_counter()
+    run = ScoreRun(quick=quick, environment=environment())
+    log = log or (lambda s: None)
+    if identifiers is None:
+        identifiers = available_identifiers() if factory is None else list(IDENTIFIERS)
+        for missing in sorted(set(IDENTIFIERS) - set(identifiers)):
+            run.skipped.append({"identifier": missing, "reason": "not built yet (module not importable)"})
+        if quick:
+            for slow in [i for i in identifiers if i in QUICK_SKIP_IDENTIFIERS]:
+                identifiers.remove(slow)
+                run.skipped.append({"identifier": slow, "reason": QUICK_SKIP_IDENTIFIERS[slow]})
+    identifiers = list(identifiers)
+    if datasets is None:
+        info = {d["id"]: d for d in list_datasets()}
+        datasets = [n for n in (QUICK_DATASETS if quick else info) if info[n]["available"]]
+        for n, d in info.items():
+            if not d["available"] and (not quick or n in QUICK_DATASETS):
+                run.skipped.append({"dataset": n, "reason": d["description"].rsplit("[", 1)[-1].rstrip("]")})
+    datasets = list(datasets)
+    run.selection = {"identifiers": identifiers, "datasets": datasets}
+    loaded: dict[str, Any] = {}
+    for dname in datasets:
+        try:
+            loaded[dname] = prepare_dataset(load_dataset(dname, progress=progress), quick)
+        except InputError as exc:
+            loaded[dname] = exc
+    # One task per identifier x dataset pair (benchmarks.execution: in-process, or on Dask workers); the rows
+    # are put together below in the serial order, whatever order the tasks finished in.
+    from benchmarks.execution import Executor
+
+    ex = executor or Executor()
+    handles = {d: ex.share(ds) for d, ds in loaded.items() if not isinstance(ds, Exception)}
+    pairs = [(i, d) for d in datasets if d in handles for i in identifiers]
+
+    def logged(k: int, outcome) -> None:
+        for r in outcome[0]:
+            log(format_row(r))
+
+    outcomes = ex.map(score_pair_task, [(i, handles[d], quick, factory, seeds) for i, d in pairs], desc="score",
+                      progress=progress, on_result=logged)
+    by_pair = dict(zip(pairs, outcomes))
+    for dname in datasets:
+        ds = loaded[dname]
+        if isinstance(ds, Exception):
+            run.skipped.append({"dataset": dname, "reason": str(ds)})
+            continue
+        run.datasets[dname] = ds
+        for ident in identifiers:
+            rows, preds, skip = by_pair[(ident, dname)]
+            if skip is not None:
+                run.skipped.append(skip)
+            run.rows.extend(rows)
+            for t, y in preds.items():
+                run.predictions[(ident, dname, t)] = y
+        if sysidentpy:
+            from benchmarks.scoring.crosscheck import sysidentpy_frols
+
+            run.sysidentpy.extend(sysidentpy_frols(ds, quick=quick))
+    run.seconds = time.perf_counter() - t_start
+    return run
+
+
+def format_row(r: dict[str, Any]) -> str:
+    head = f"{r['identifier']:<12} {r['dataset']:<20} {r['test']:<22}"
+    if r.get("status") == "error":
+        return f"{head} error: {r.get('message', '')}"
+    fr, os_ = r["free_run"], r["one_step"]
+    return (f"{head} free-run RMSE {_fmt(fr['rmse'])} {r['units']} (R2 {_fmt(fr['r2'])})  one-step RMSE "
+            f"{_fmt(os_['rmse'])}  fit {r['fit_seconds']:.2f} s  {r['n_parameters']} params")
+
+
+def _fmt(x: Any) -> str:
+    return "nan" if x is None or (isinstance(x, float) and not math.isfinite(x)) else f"{x:.4g}"
+
+
+def _finite(x: Any) -> bool:
+    return isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)
