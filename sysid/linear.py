@@ -19,7 +19,7 @@ Both models predict through the compiled polynomial machinery (one-step, k-step,
 
 from __future__ import annotations
 
-from typing import Any, Sequence
+from typing import Any
 
 import numpy as np
 from scipy.optimize import least_squares as _scipy_lsq

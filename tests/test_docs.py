@@ -3,7 +3,6 @@ docs/ runs, the CLI reference equals what the parser generates, and the licence 
 
 from __future__ import annotations
 
-import os
 import re
 import tomllib
 from pathlib import Path

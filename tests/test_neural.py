@@ -14,7 +14,7 @@ from sysid.neural.core import count_mlp_parameters, free_run_mlp, k_step_mlp, ml
 from sysid.neural.narx_mlp import NARXMLP, NARXMLPSim  # noqa: E402
 from sysid.neural.rnn import RNNStateSpace  # noqa: E402
 from sysid.record import Record  # noqa: E402
-from tests.neural_systems import bouc_wen_record, multisine_input, sine_input  # noqa: E402
+from tests.neural_systems import bouc_wen_record, multisine_input  # noqa: E402
 
 FS = 1000.0
 

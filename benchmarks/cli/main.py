@@ -170,7 +170,6 @@ def _on_sigterm(signum, frame):  # pragma: no cover - exercised in a subprocess 
 
 
 def main(argv: list[str] | None = None) -> int:
-    os.environ.setdefault("MPLBACKEND", "Agg")
     parser = build_parser()
     args = parser.parse_args(argv)
     if not getattr(args, "command", None):

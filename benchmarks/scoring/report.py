@@ -48,8 +48,8 @@ def markdown_table(run: ScoreRun | dict[str, Any]) -> str:
 def write_report(run: ScoreRun, report_dir: str | Path) -> dict[str, Path]:
     """score.json, score.md and figures (free-run NRMSE bars; measured vs free-run for each dataset test), each
     written atomically (:mod:`sysid.safeio`)."""
-    from sysid.plots import pyplot
-    from sysid.safeio import atomic_write_text, save_figure
+    from sysid.plots import pyplot, save_and_close
+    from sysid.safeio import atomic_write_text
 
     plt = pyplot()
     out = Path(report_dir)
@@ -79,8 +79,7 @@ def write_report(run: ScoreRun, report_dir: str | Path) -> dict[str, Path]:
         ax.legend(fontsize=8)
         fig.tight_layout()
         paths["nrmse"] = out / "score_nrmse.png"
-        save_figure(fig, paths["nrmse"], dpi=90)
-        plt.close(fig)
+        save_and_close(fig, paths["nrmse"], dpi=90)
     # measured vs free-run predictions: one figure per dataset (first test), the whole scored record and a zoom
     if run.predictions and run.datasets:
         from sysid.plots import plot_measured_vs_predicted

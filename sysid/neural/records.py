@@ -36,8 +36,7 @@ def normalised_pairs(recs: Sequence[Record], norm: Normaliser | None) -> list[tu
 
 def fit_normaliser(recs: Sequence[Record]) -> Normaliser:
     """Scale from all estimation records together (one mean and SD per channel)."""
-    joined = Record(u=np.concatenate([r.u for r in recs]), y=np.concatenate([r.y for r in recs]), fs=recs[0].fs)
-    return Normaliser().fit(joined)
+    return Normaliser().fit(list(recs))
 
 
 def check_channels(recs: Sequence[Record], max_lag: int, what: str) -> tuple[int, int]:

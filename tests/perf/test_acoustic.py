@@ -6,7 +6,6 @@ Run: ``make bench`` or
 Timings on a shared machine are inflated by the other processes (see README, section acoustic).
 """
 
-import time
 from pathlib import Path
 
 import numpy as np

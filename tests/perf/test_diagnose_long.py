@@ -1,4 +1,4 @@
-"""Speed of the discrepancy diagnosis on a long slow record (issue 20, item 6): 100 000 samples at 1 kHz
+"""Speed of the discrepancy diagnosis on a long slow record: 100 000 samples at 1 kHz
 (a random-phase multisine of 0.01–5 Hz at ±80 V, creep rate twice the default) diagnosed in under 2 minutes
 on 2 cores. The record's bandwidth sets the integration sub-step (twins.cantilever.substep): the default
 20 µs (50 sub-steps per sample at 1 kHz) becomes 1 sub-step. (A step record keeps finer sub-steps: the

@@ -1,5 +1,5 @@
 """Speed of the benchmark suite itself: loading the vendored lab data, and one identifier fitted and scored on
-a real benchmark beside SysIdentPy's FROLS on the same data and structure (issue 7, "FROLS versus SysIdentPy
+a real benchmark beside SysIdentPy's FROLS on the same data and structure ("FROLS versus SysIdentPy
 in one run", here end-to-end on Silverbox: fit on the 65 062 estimation samples + free run of the 21 688-sample
 multisine test).
 

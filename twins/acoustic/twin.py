@@ -13,7 +13,6 @@ stages separately for the FMU export (interfaces.md): simulate(u) = measure(h âˆ
 
 from __future__ import annotations
 
-import dataclasses
 from typing import Any
 
 import numpy as np
@@ -24,7 +23,7 @@ from sysid.config import coerce
 from sysid.errors import ConfigError
 from sysid.record import Record
 from twins.acoustic.amplifier import amplifier_voltage
-from twins.acoustic.channel import channel_parts, frequency_response, geometry, wall_path_length
+from twins.acoustic.channel import frequency_response, geometry, wall_path_length
 from twins.acoustic.params import AcousticParams
 from twins.acoustic.protocols import BAND_HZ, FS_ACQ, PROTOCOLS, RECIPE_KEEP, apply_recipe, excitation
 from twins.base import EffectSpec, Twin
