@@ -22,7 +22,7 @@ Every refusal is a one-line :class:`~sysid.errors.DataError` naming the path.
 from __future__ import annotations
 
 import os
-import tempfile
+import secrets
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Iterable, Iterator
@@ -124,12 +124,13 @@ def atomic_path(path: str | os.PathLike, inputs: Iterable[str | os.PathLike] = (
     path = check_output_path(path, inputs)
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp_name = tempfile.mkstemp(prefix=f".{path.name}.tmp-", suffix=path.suffix, dir=path.parent)
-        os.close(fd)
     except OSError as exc:
         raise DataError(f"{path}: cannot write ({exc.strerror or exc})") from None
-    tmp = Path(tmp_name)
+    # The name is fixed before the file exists and the file is created inside the try: an interrupt
+    # (SIGINT/SIGTERM raise in this process) that lands right after the creation still removes it.
+    tmp = path.parent / f".{path.name}.tmp-{secrets.token_hex(8)}{path.suffix}"
     try:
+        os.close(os.open(tmp, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o600))
         yield tmp
         mode = path.stat().st_mode & 0o7777 if path.exists() else _umask_mode()
         os.chmod(tmp, mode)

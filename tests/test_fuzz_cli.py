@@ -12,7 +12,6 @@ unchanged and a refused case leaves no new file. The default run is bounded to a
 import hashlib
 import io
 import json
-import time
 from pathlib import Path
 
 import numpy as np
@@ -202,7 +201,8 @@ def _commands(path: Path, out: Path, slow: bool) -> list[list[str]]:
     return cmds
 
 
-def _fuzz(tmp_path: Path, capsys, budget_s: float, seed: int, slow: bool = False) -> dict[str, int]:
+def _fuzz(tmp_path: Path, capsys, cases: int, seed: int, slow: bool = False) -> dict[str, int]:
+    """``cases`` random bad (or good) inputs, a fixed number so that the run does not depend on the machine's speed."""
     rng = np.random.default_rng(seed)
     good = tmp_path / "good.npz"
     u, y = _good_arrays()
@@ -210,8 +210,7 @@ def _fuzz(tmp_path: Path, capsys, budget_s: float, seed: int, slow: bool = False
     out = tmp_path / "out.npz"
     text = _csv_text()
     counts = {"cases": 0, "accepted": 0, "refused": 0}
-    t0 = time.perf_counter()
-    while time.perf_counter() - t0 < budget_s:
+    for _ in range(cases):
         which = int(rng.integers(0, 4))
         if which == 3:
             argv = option_cases(rng, good, out)[int(rng.integers(0, 15))]
@@ -230,12 +229,12 @@ def _fuzz(tmp_path: Path, capsys, budget_s: float, seed: int, slow: bool = False
 
 
 def test_fuzz_commands_quick(tmp_path, capsys):
-    counts = _fuzz(tmp_path, capsys, budget_s=4.0, seed=0)
-    assert counts["cases"] >= 20 and counts["refused"] > 0, counts
+    counts = _fuzz(tmp_path, capsys, cases=24, seed=0)  # every case is checked inside (_check)
+    assert counts["refused"] > 0, counts
 
 
 @pytest.mark.slow
 @pytest.mark.parametrize("seed", range(1, 5))
 def test_fuzz_commands_long(tmp_path, capsys, seed):
-    counts = _fuzz(tmp_path, capsys, budget_s=60.0, seed=seed, slow=True)
-    assert counts["cases"] >= 50 and counts["refused"] > 0 and counts["accepted"] > 0, counts
+    counts = _fuzz(tmp_path, capsys, cases=300, seed=seed, slow=True)
+    assert counts["refused"] > 0 and counts["accepted"] > 0, counts
