@@ -52,7 +52,8 @@ def test_serial_is_the_default_and_bad_options_are_refused(monkeypatch):
 
 
 def test_score_on_two_workers_equals_the_serial_run(cluster):
-    """4 identifier x dataset pairs on the cluster: the same rows, numbers and order as in-process."""
+    """4 identifier x dataset pairs, and a seeded one, on the cluster: the same rows, numbers and order as
+    in-process."""
     from benchmarks import scoring
 
     assert cluster.kind == "dask" and cluster.n_workers == 2
@@ -61,6 +62,12 @@ def test_score_on_two_workers_equals_the_serial_run(cluster):
     serial = scoring._clean(scoring.score(**args).to_dict())
     parallel = scoring._clean(scoring.score(**args, executor=cluster).to_dict())
     assert len(serial["rows"]) == 4
+    assert json.dumps(strip_timing(parallel)) == json.dumps(strip_timing(serial))
+    # a seeded identifier: its five training seeds are five tasks, assembled into the same median row
+    args = dict(identifiers=["narx-mlp"], datasets=["cascaded-tanks"], quick=True, sysidentpy=False)
+    serial = scoring._clean(scoring.score(**args).to_dict())
+    parallel = scoring._clean(scoring.score(**args, executor=cluster).to_dict())
+    assert serial["rows"][0]["seeds"] == [0, 1, 2, 3, 4]
     assert json.dumps(strip_timing(parallel)) == json.dumps(strip_timing(serial))
     pids = cluster.client.run(os.getpid)
     assert len(set(pids.values())) == 2 and os.getpid() not in pids.values()  # really other processes
@@ -194,3 +201,20 @@ def test_search_repeats_on_the_cluster_equal_the_serial_sweep(cluster, tmp_path,
 
     runs = collect(storage_url(str(tmp_path / "dask.db"), "piezotwin-search"), "piezotwin-search")
     assert os.getpid() not in {r["pid"] for r in runs}  # fitted on the workers
+
+
+def test_score_spreads_the_training_seeds_of_a_pair_as_tasks():
+    """Quick mode: one task per training seed (five for a seeded identifier, the extra four return nothing for
+    an unseeded one), so a neural pair is not one long task that leaves the other workers idle."""
+    from benchmarks import scoring
+    from benchmarks.execution import Executor
+
+    class Recording(Executor):
+        def map(self, fn, tasks, **kw):
+            self.tasks = list(tasks)
+            return super().map(fn, self.tasks, **kw)
+
+    ex = Recording()
+    run = scoring.score(["arx"], ["cascaded-tanks"], quick=True, sysidentpy=False, executor=ex)
+    assert [t[-1] for t in ex.tasks] == [0, 1, 2, 3, 4]
+    assert len(run.rows) == 1 and "seeds" not in run.rows[0]  # one fit: arx has no training seed

@@ -21,9 +21,11 @@ from typing import Any
 import numpy as np
 
 from benchmarks.scoring.settings import (
+    METRICS,
     NORMALISE,
     QUICK_DATASETS,
     QUICK_MAX_SAMPLES,
+    QUICK_SEEDS,
     QUICK_SKIP_IDENTIFIERS,
     seeds_for,
     settings_for,
@@ -31,7 +33,6 @@ from benchmarks.scoring.settings import (
 from sysid.errors import ConfigError, InputError
 from sysid.record import NormalisedModel, Record
 
-METRICS = ("rmse", "nrmse", "r2")
 
 
 class _Scored:
@@ -162,26 +163,56 @@ def score_pair(identifier: str, ds, quick: bool = False, factory: Callable[[str]
 
 
 def _score_pair(identifier, ds, quick, factory, params, seeds=None) -> tuple[list[dict[str, Any]], dict[str, np.ndarray]]:
+    outcomes = [_fit_seed(identifier, ds, quick, factory, params, seeds, k) for k in range(_max_seeds(quick, seeds))]
+    return _assemble(identifier, ds, quick, params, outcomes)
+
+
+def _plan(identifier, ds, quick, factory, params, seeds) -> tuple[Any, dict[str, Any], bool, tuple[int | None, ...]]:
+    """The identifier class, its options (without the normalise flag), the flag and the seeds of one pair."""
     from sysid.registry import get_identifier
 
     cls = (factory or get_identifier)(identifier)
     params = dict(settings_for(identifier, ds.name, quick) if params is None else params)
     normalise = bool(params.pop(NORMALISE, False))
-    seeds = seeds_for(cls, params, quick, seeds)
-    runs: dict[str, list[dict[str, Any]]] = {test: [] for test in ds.tests}
-    for seed in seeds:
-        model = cls(**params) if seed is None else cls(**params, seed=seed)
-        if normalise:
-            model = NormalisedModel(model)
-        t0 = time.perf_counter()
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            model.fit(ds.est)
-        fit_s = time.perf_counter() - t0
-        for test, rec in ds.tests.items():
-            ev = evaluate(model, rec, ds.init_samples)
-            ev.update(seed=seed, fit_seconds=fit_s, n_parameters=getattr(model, "n_parameters_", None))
-            runs[test].append(ev)
+    return cls, params, normalise, seeds_for(cls, params, quick, seeds)
+
+
+def _max_seeds(quick: bool, seeds: Sequence[int] | None) -> int:
+    """How many seed tasks a pair may need: the quick seeds of a seeded identifier, else one."""
+    return len(QUICK_SEEDS if seeds is None else seeds) if quick else 1
+
+
+def _fit_seed(identifier, ds, quick, factory, params, seeds, k: int) -> dict[str, dict[str, Any]] | None:
+    """Fit the ``k``-th training seed of one pair and evaluate every test: {test: evaluation}; None when the
+    pair has fewer than ``k + 1`` seeds (an identifier without a seed is fitted once)."""
+    cls, params, normalise, pair_seeds = _plan(identifier, ds, quick, factory, params, seeds)
+    if k >= len(pair_seeds):
+        return None
+    seed = pair_seeds[k]
+    model = cls(**params) if seed is None else cls(**params, seed=seed)
+    if normalise:
+        model = NormalisedModel(model)
+    t0 = time.perf_counter()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        model.fit(ds.est)
+    fit_s = time.perf_counter() - t0
+    out = {}
+    for test, rec in ds.tests.items():
+        ev = evaluate(model, rec, ds.init_samples)
+        ev.update(seed=seed, fit_seconds=fit_s, n_parameters=getattr(model, "n_parameters_", None))
+        out[test] = ev
+    return out
+
+
+def _assemble(identifier, ds, quick, params, outcomes) -> tuple[list[dict[str, Any]], dict[str, np.ndarray]]:
+    """Rows and free-run predictions of one pair from its seeds' evaluations (in seed order; None for a seed
+    the pair does not have). Needs no identifier class, so the parent of Dask tasks does not import one."""
+    params = dict(settings_for(identifier, ds.name, quick) if params is None else params)
+    normalise = bool(params.pop(NORMALISE, False))
+    outcomes = [o for o in outcomes if o is not None]
+    runs = {test: [o[test] for o in outcomes] for test in ds.tests}
+    pair_seeds = [o[next(iter(ds.tests))]["seed"] for o in outcomes] if ds.tests else []
     if normalise:
         params[NORMALISE] = True
     rows, preds = [], {}
@@ -197,10 +228,31 @@ def _score_pair(identifier, ds, quick, factory, params, seeds=None) -> tuple[lis
         }
         if seed is not None:
             rmses = [(r.get("free_run") or {}).get("rmse") for r in runs[test]]
-            row.update(seed=seed, seeds=list(seeds),
+            row.update(seed=seed, seeds=list(pair_seeds),
                        free_run_rmse_by_seed=[x if _finite(x) else None for x in rmses])
         rows.append(row)
     return rows, preds
+
+
+def _guarded(identifier: str, ds, body: Callable[[], Any]) -> tuple[str, Any]:
+    """``("ok", body())``; a ConfigError is ``("skip", entry)`` and any other exception of the identifier
+    ``("error", rows)``: a failing pair is a result, not a crashed run."""
+    try:
+        return "ok", body()
+    except ConfigError as exc:
+        return "skip", {"identifier": identifier, "dataset": ds.name, "reason": str(exc)}
+    except Exception as exc:
+        return "error", [{"identifier": identifier, "dataset": ds.name, "test": t, "status": "error",
+                          "message": f"{type(exc).__name__}: {exc}"[:300], "references": ds.references.get(t, {})}
+                         for t in ds.tests]
+
+
+def _outcome(status: str, value: Any) -> tuple[list[dict[str, Any]], dict[str, np.ndarray], dict[str, str] | None]:
+    if status == "skip":
+        return [], {}, value
+    if status == "error":
+        return value, {}, None
+    return value[0], value[1], None
 
 
 def score_pair_task(identifier: str, ds, quick: bool = False, factory: Callable[[str], Any] | None = None,
@@ -208,15 +260,28 @@ def score_pair_task(identifier: str, ds, quick: bool = False, factory: Callable[
                     ) -> tuple[list[dict[str, Any]], dict[str, np.ndarray], dict[str, str] | None]:
     """One pair as a task: (rows, free-run predictions, skip entry or None). A ConfigError is a skip; any
     other exception of the identifier is a result (rows with status error), not a crashed run."""
-    try:
-        rows, preds = score_pair(identifier, ds, quick=quick, factory=factory, seeds=seeds)
-        return rows, preds, None
-    except ConfigError as exc:
-        return [], {}, {"identifier": identifier, "dataset": ds.name, "reason": str(exc)}
-    except Exception as exc:
-        return ([{"identifier": identifier, "dataset": ds.name, "test": t, "status": "error",
-                  "message": f"{type(exc).__name__}: {exc}"[:300], "references": ds.references.get(t, {})}
-                 for t in ds.tests], {}, None)
+    return _outcome(*_guarded(identifier, ds, lambda: score_pair(identifier, ds, quick=quick, factory=factory,
+                                                                    seeds=seeds)))
+
+
+def score_seed_task(identifier: str, ds, quick: bool, factory: Callable[[str], Any] | None,
+                    seeds: Sequence[int] | None, k: int) -> tuple[str, Any]:
+    """One training seed of one pair as a task (the unit the executor spreads: a pair's seeds run in parallel);
+    ``(status, value)`` as :func:`_guarded`, with the seed's evaluations (or None) when it ran."""
+    from sysid._blas import blas_threads
+
+    with blas_threads(1):
+        return _guarded(identifier, ds, lambda: _fit_seed(identifier, ds, quick, factory, None, seeds, k))
+
+
+def _pair_outcome(identifier, ds, quick, results: list[tuple[str, Any]]):
+    """A pair's (rows, predictions, skip) from its seed tasks, as :func:`score_pair_task` gives it: the first
+    failing seed (in seed order) decides a skip or an error."""
+    for status, value in results:
+        if status != "ok":
+            return _outcome(status, value)
+    return _outcome(*_guarded(identifier, ds, lambda: _assemble(identifier, ds, quick, None,
+                                                                  [v for _, v in results])))
 
 
 def score(identifiers: Iterable[str] | None = None, datasets: Iterable[str] | None = None, quick: bool = False,
@@ -263,21 +328,32 @@ def _score(identifiers, datasets, quick, sysidentpy, progress, factory, log, see
             loaded[dname] = prepare_dataset(load_dataset(dname, progress=progress), quick)
         except InputError as exc:
             loaded[dname] = exc
-    # One task per identifier x dataset pair (benchmarks.execution: in-process, or on Dask workers); the rows
-    # are put together below in the serial order, whatever order the tasks finished in.
+    # Tasks run in-process or on Dask workers (benchmarks.execution); the rows are put together below in the
+    # serial order, whatever order the tasks finished in.
     from benchmarks.execution import Executor
 
     ex = executor or Executor()
     handles = {d: ex.share(ds) for d, ds in loaded.items() if not isinstance(ds, Exception)}
     pairs = [(i, d) for d in datasets if d in handles for i in identifiers]
 
-    def logged(k: int, outcome) -> None:
-        for r in outcome[0]:
-            log(format_row(r))
+    # One task per training seed of a pair, so that the five seeds of a neural pair spread over the workers
+    # instead of making one long task; the pair's rows are assembled here when its last seed is in.
+    n_seeds = _max_seeds(quick, seeds)
+    tasks = [(i, handles[d], quick, factory, seeds, k) for i, d in pairs for k in range(n_seeds)]
+    pending: dict[tuple[str, str], dict[int, tuple[str, Any]]] = {p: {} for p in pairs}
+    by_pair: dict[tuple[str, str], Any] = {}
 
-    outcomes = ex.map(score_pair_task, [(i, handles[d], quick, factory, seeds) for i, d in pairs], desc="score",
-                      progress=progress, on_result=logged)
-    by_pair = dict(zip(pairs, outcomes))
+    def collect(j: int, result: tuple[str, Any]) -> None:
+        pair = pairs[j // n_seeds]
+        pending[pair][j % n_seeds] = result
+        if len(pending[pair]) == n_seeds:
+            got = pending.pop(pair)
+            ordered = [got[k] for k in range(n_seeds)]
+            by_pair[pair] = _pair_outcome(pair[0], loaded[pair[1]], quick, ordered)
+            for r in by_pair[pair][0]:
+                log(format_row(r))
+
+    ex.map(score_seed_task, tasks, desc="score", progress=progress, on_result=collect, keep=False)
     for dname in datasets:
         ds = loaded[dname]
         if isinstance(ds, Exception):

@@ -14,8 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from benchmarks.scoring.core import METRICS
-from benchmarks.scoring.settings import SYSIDENTPY_QUICK_MAX_EST, sysidentpy_settings
+from benchmarks.scoring.settings import METRICS, SYSIDENTPY_QUICK_MAX_EST, sysidentpy_settings
 from sysid.jsonio import clean_json
 from sysid.metrics import score as metric_score
 
