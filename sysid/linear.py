@@ -170,10 +170,13 @@ def _choose_orders(model, keys: tuple[str, ...]) -> bool:
     given = [k for k in keys if getattr(model, k) is not None]
     choose = mode == "auto" or (mode is None and (not given or getattr(model, "_orders_open", False)))
     model._orders_open = bool(choose and mode is None)
-    if not choose:
-        for k in keys:
-            if getattr(model, k) is None:
+    for k in keys:
+        v = getattr(model, k)
+        if v is None:
+            if not choose:
                 setattr(model, k, 2)
+        elif isinstance(v, (float, np.floating)) and float(v).is_integer():
+            setattr(model, k, int(v))  # `--set ny=4` reads a number as float when the option's default is None
     return choose
 
 
