@@ -72,3 +72,21 @@ def test_mimo_armax_chooses_orders_when_none_given():
     rec = _simulate(6_000, seed=5)
     m = ARMAX(max_order=4).fit(rec)
     assert m.chosen_orders_["ne"] == 2 and m.chosen_orders_["ny"] == m.ny >= 1
+
+
+def test_identify_cli_fits_a_mimo_armax_from_csv_columns(tmp_path, capsys):
+    import json
+
+    from benchmarks.cli import main
+
+    rec = _simulate(4_000, seed=6)
+    path = tmp_path / "mimo.csv"
+    np.savetxt(path, np.c_[np.arange(len(rec)) / 100.0, rec.u, rec.y], delimiter=",", header="t,f1,f2,a1,a2",
+               comments="")
+    assert main(["identify", "armax", "--est", str(path), "--u-col", "f1,f2", "--y-col", "a1,a2",
+                 "--set", "ny=1,nu=1,ne=1", "--json", "-o", str(tmp_path / "m.json")]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["n_parameters"] == 10
+    m = load_model(tmp_path / "m.json")
+    for o in range(2):
+        assert np.all(np.abs(m.theta_[o] - _truth(m, o)) < 5 * m.stderr_[o])
