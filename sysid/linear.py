@@ -13,6 +13,9 @@ so that A(q) = 1 − Σ θ_{y,i} q^{−i}, B(q) = Σ θ_{u,i} q^{−i} (applied 
 - ``method="els"``: extended least squares — least squares on [y lags, u lags, e lags] with e the residuals of
   the previous iteration, repeated until the parameters settle.
 
+Several outputs (ARMAX): y_o(t) = Σ_p Σ_i θ_{o,p,i} y_p(t−i) + Σ_j Σ_i θ_{o,j,i} u_j(t−n_k−i) + C_o(q) e_o(t), i.e.
+the polynomial-matrix form A(q) y = B(q) u + C(q) e with A, B full and C diagonal.
+
 Standard errors: σ̂² (JᵀJ)⁻¹ with σ̂² = SSR/(N − p) (J = regressor matrix for LS/ELS, Jacobian for PEM).
 Both models predict through the compiled polynomial machinery (one-step, k-step, free run).
 """
@@ -103,7 +106,7 @@ class _LinearBase(PolynomialModel):
             d["poles"] = self.poles()
         if getattr(self, "chosen_orders_", None):
             d["chosen_orders"] = self.chosen_orders_
-            d["order_selection"] = self.order_table_
+            d["order_selection"] = getattr(self, "order_table_", None)
         return d
 
 
@@ -111,15 +114,17 @@ class ARX(_LinearBase):
     """ARX by least squares: A(q) y(t) = B(q) u(t − n_k) + e(t).
 
     Parameters: ``ny`` (order of A), ``nu`` (order of B), ``nk`` (delay, samples), ``intercept`` (add a constant),
-    ``orders`` (``"given"``: use ny, nu; ``"auto"``: choose ny = nu by hold-out free-run error over a grid up to
-    ``max_order`` (:func:`sysid.order.select_arx_orders`), then ``ny``/``nu`` hold the chosen order and
-    ``chosen_orders_`` / ``order_table_`` report it).
+    ``orders``: ``None`` (default) chooses the orders when neither ``ny`` nor ``nu`` is given and otherwise uses
+    them (one left out is 2, the order this identifier always had); ``"auto"`` always chooses; ``"given"`` never
+    does (ny, nu default 2). Choosing takes ny = nu by hold-out free-run error over a grid up to ``max_order``
+    (:func:`sysid.order.select_arx_orders`); the fitted model holds the chosen order in ``ny``/``nu`` and reports
+    it in ``chosen_orders_`` / ``order_table_``.
     MIMO: one model per output over the lags of every output and input.
     """
 
     name = "arx"
 
-    def __init__(self, ny: int = 2, nu: int = 2, nk: int = 1, intercept: bool = False, orders: str = "given",
+    def __init__(self, ny: Any = None, nu: Any = None, nk: int = 1, intercept: bool = False, orders: Any = None,
                  max_order: int = 100):
         self.ny = ny
         self.nu = nu
@@ -129,13 +134,11 @@ class ARX(_LinearBase):
         self.max_order = max_order
 
     def _fit_records(self, records: list[Record]) -> None:
-        if self.orders not in ("given", "auto"):
-            raise ConfigError(f"arx: orders must be 'given' or 'auto', got {self.orders!r}")
         self.chosen_orders_ = {}
-        if self.orders == "auto":
+        if _choose_orders(self, ("ny", "nu")):
             from sysid.order import select_arx_orders
 
-            probe = ARX(nk=self.nk, intercept=self.intercept)
+            probe = ARX(nk=self.nk, intercept=self.intercept, orders="given")
             n, self.order_table_ = select_arx_orders(records, self.nk, int(self.max_order), probe)
             self.ny = self.nu = n
             self.chosen_orders_ = {"ny": n, "nu": n}
@@ -151,19 +154,49 @@ class ARX(_LinearBase):
             self.err_.append([None] * len(s.terms))
         self.noise_variance_ = None
 
+    def _extra_state(self) -> dict[str, Any]:
+        return {"chosen_orders": dict(self.chosen_orders_)} if getattr(self, "chosen_orders_", None) else {}
+
+    def _load_extra(self, extra: dict[str, Any]) -> None:
+        self.chosen_orders_ = dict(extra.get("chosen_orders", {}))
+
+
+def _choose_orders(model, keys: tuple[str, ...]) -> bool:
+    """Whether this fit chooses the orders ``keys`` (``orders`` option, see :class:`ARX`); fills the ones left out
+    with the old default 2 when it does not. A model that chose once chooses again when refitted."""
+    mode = model.orders
+    if mode not in (None, "given", "auto"):
+        raise ConfigError(f"{model.name}: orders must be 'given' or 'auto' (or left out), got {mode!r}")
+    given = [k for k in keys if getattr(model, k) is not None]
+    choose = mode == "auto" or (mode is None and (not given or getattr(model, "_orders_open", False)))
+    model._orders_open = bool(choose and mode is None)
+    for k in keys:
+        v = getattr(model, k)
+        if v is None:
+            if not choose:
+                setattr(model, k, 2)
+        elif isinstance(v, (float, np.floating)) and float(v).is_integer():
+            setattr(model, k, int(v))  # `--set ny=4` reads a number as float when the option's default is None
+    return choose
+
 
 class ARMAX(_LinearBase):
     """ARMAX (eq. 2-4/2-5) by the prediction-error method (``method="pem"``) or extended least squares (``"els"``).
 
     Parameters: ``ny, nu, ne, nk`` orders and delay; ``intercept``; ``max_iter`` (ELS iterations, and the
-    initialisation of PEM); ``tol`` (relative parameter change ending ELS).
-    One output (several inputs allowed).
+    initialisation of PEM); ``tol`` (relative parameter change ending ELS); ``orders`` and ``max_order`` as for
+    :class:`ARX`: with none of ny, nu, ne given, ny = nu are the ARX order chosen by hold-out free-run error and
+    ne = 2 (reported in ``chosen_orders_``); otherwise an order left out is 2.
+    Several outputs: one MISO ARMAX per output — the lags of every output and input, and the output's own noise
+    lags (C diagonal) — estimated jointly by ELS (each output's residuals feed its own noise regressors) and
+    refined output by output by PEM.
     """
 
     name = "armax"
 
-    def __init__(self, ny: int = 2, nu: int = 2, ne: int = 2, nk: int = 1, method: str = "pem",
-                 intercept: bool = False, max_iter: int = 50, tol: float = 1e-8):
+    def __init__(self, ny: Any = None, nu: Any = None, ne: Any = None, nk: int = 1, method: str = "pem",
+                 intercept: bool = False, max_iter: int = 50, tol: float = 1e-8, orders: Any = None,
+                 max_order: int = 100):
         self.ny = ny
         self.nu = nu
         self.ne = ne
@@ -172,72 +205,88 @@ class ARMAX(_LinearBase):
         self.intercept = intercept
         self.max_iter = max_iter
         self.tol = tol
+        self.orders = orders
+        self.max_order = max_order
 
     def _fit_records(self, records: list[Record]) -> None:
         if self.method not in ("pem", "els"):
             raise ConfigError(f"armax: method must be 'pem' or 'els', got {self.method!r}")
+        self.chosen_orders_ = {}
+        if _choose_orders(self, ("ny", "nu", "ne")):
+            from sysid.order import select_arx_orders
+
+            probe = ARX(nk=self.nk, intercept=self.intercept, orders="given")
+            n, self.order_table_ = select_arx_orders(records, self.nk, int(self.max_order), probe)
+            self.ny = self.nu = n
+            self.ne = 2
+            self.chosen_orders_ = {"ny": n, "nu": n, "ne": 2}
         if int(self.ne) < 1:
             raise ConfigError("armax: ne must be >= 1 (use arx without a noise model)")
-        if records[0].n_outputs != 1:
-            raise ConfigError(f"armax: one output supported, the data have {records[0].n_outputs}; "
-                              "use arx or narmax-poly for several outputs")
         s = self._linear_structure(records, self.ne)
-        check_records(records, s.max_lag, len(s.terms) + 1, self.name)
+        # Several outputs: one MISO ARMAX per output over the lags of every output and input and the output's own
+        # noise lags (diagonal C), so that each output's prediction error is filtered by its own C only.
+        terms = [[t for t in s.terms if not s.is_noise(t) or s.regressors[t[0]][1] == o] for o in range(s.n_outputs)]
+        check_records(records, s.max_lag, len(terms[0]) + 1, self.name)
         self.structure_ = s
-        theta, stderr, e_list, iters = self._els(records, s)
+        thetas, e_list, iters = self._els(records, s, terms)
         self.els_iterations_ = iters
         # PEM: minimise; ELS: keep the ELS estimate but take its standard errors from the prediction-error
         # gradient (regressors filtered by 1/C) — plain LS errors ignore the estimated e and were ~1.6× too small.
-        theta, stderr, self.pem_status_ = self._pem(records, s, theta, optimise=self.method == "pem")
-        self.terms_ = [list(s.terms)]
-        self.theta_ = [np.asarray(theta)]
-        self.stderr_ = [np.asarray(stderr)]
-        self.err_ = [[None] * len(s.terms)]
+        fits = [self._pem(records, s, terms[o], o, thetas[o], optimise=self.method == "pem")
+                for o in range(s.n_outputs)]
+        self.pem_status_ = fits[0][2] if len(fits) == 1 else [f[2] for f in fits]
+        self.terms_ = terms
+        self.theta_ = [np.asarray(f[0]) for f in fits]
+        self.stderr_ = [np.asarray(f[1]) for f in fits]
+        self.err_ = [[None] * len(t) for t in terms]
 
     # ---------------------------------------------------------------- ELS
-    def _els(self, records, s):
-        zeros = [np.zeros((len(r), 1)) for r in records]
+    def _els(self, records, s, terms):
+        n_out = s.n_outputs
+        zeros = [np.zeros((len(r), n_out)) for r in records]
         proc = [t for t in s.terms if not s.is_noise(t)]
-        ls = fr.least_squares(records, s, proc, 0, e_list=zeros)
-        e_list = fr.fitted_residuals(records, s, [proc], [ls.theta], e_list=zeros)
+        th = [fr.least_squares(records, s, proc, o, e_list=zeros).theta for o in range(n_out)]
+        e_list = fr.fitted_residuals(records, s, [proc] * n_out, th, e_list=zeros)
         theta_prev = None
         it = 0
         for it in range(1, int(self.max_iter) + 1):
-            ls = fr.least_squares(records, s, s.terms, 0, e_list=e_list)
-            e_list = fr.fitted_residuals(records, s, [s.terms], [ls.theta], e_list=e_list)
+            th = [fr.least_squares(records, s, terms[o], o, e_list=e_list).theta for o in range(n_out)]
+            e_list = fr.fitted_residuals(records, s, terms, th, e_list=e_list)
+            theta = np.concatenate(th)
             # relative change per parameter, without an absolute floor (in SI units a parameter may be ~1e-12)
-            if theta_prev is not None and np.max(np.abs(ls.theta - theta_prev) / np.maximum(
-                    np.maximum(np.abs(ls.theta), np.abs(theta_prev)), 1e-300)) < self.tol:
+            if theta_prev is not None and np.max(np.abs(theta - theta_prev) / np.maximum(
+                    np.maximum(np.abs(theta), np.abs(theta_prev)), 1e-300)) < self.tol:
                 break
-            theta_prev = ls.theta
-        return ls.theta, ls.stderr, e_list, it
+            theta_prev = theta
+        return th, e_list, it
 
     # ---------------------------------------------------------------- PEM
-    def _layout(self, s):
-        """Indices of the y, u, e and constant terms in s.terms (degree-1 structure)."""
+    def _layout(self, s, terms):
+        """Indices of the y, u, e and constant terms in ``terms`` (degree-1 structure)."""
         idx = {"y": [], "u": [], "e": [], "c": []}
-        for j, t in enumerate(s.terms):
+        for j, t in enumerate(terms):
             if not t:
                 idx["c"].append(j)
             else:
                 idx[s.regressors[t[0]][0]].append(j)
         return idx
 
-    def _pem(self, records, s, theta0, optimise: bool = True):
+    def _pem(self, records, s, terms, output, theta0, optimise: bool = True):
+        """Prediction-error fit of one output's parameters (``terms``), started from ``theta0``."""
         L = s.max_lag
-        idx = self._layout(s)
+        idx = self._layout(s, terms)
         proc_idx = idx["y"] + idx["u"] + idx["c"]
-        proc_terms = [s.terms[j] for j in proc_idx]
+        proc_terms = [terms[j] for j in proc_idx]
         # Regressor columns of the process part are fixed (measured data): build them once per record.
-        zeros = [np.zeros((len(r), 1)) for r in records]
+        zeros = [np.zeros((len(r), s.n_outputs)) for r in records]
         blocks = []
         for rec, z in zip(records, zeros):
             X = np.vstack([x for x, _ in fr.lagged_chunks([rec], s, [z])]) if len(rec) > L else None
             P = fr.term_columns(X, proc_terms)
-            yv = rec.y.reshape(-1)[L:]
+            yv = rec.y.reshape(len(rec), -1)[L:, output]
             blocks.append((P, yv, len(rec)))
         ne = len(idx["e"])
-        e_lags = [s.regressors[s.terms[j][0]][2] for j in idx["e"]]
+        e_lags = [s.regressors[terms[j][0]][2] for j in idx["e"]]
 
         def split(theta):
             th_p = theta[: len(proc_idx)]
@@ -288,8 +337,8 @@ class ARMAX(_LinearBase):
             se = np.sqrt(np.maximum(np.diag(cov), 0.0))
         except np.linalg.LinAlgError:
             se = np.full(p, np.nan)
-        theta = np.empty(len(s.terms))
-        stderr = np.empty(len(s.terms))
+        theta = np.empty(len(terms))
+        stderr = np.empty(len(terms))
         order = proc_idx + idx["e"]
         theta[order] = x
         stderr[order] = se
@@ -299,4 +348,7 @@ class ARMAX(_LinearBase):
         return theta, stderr, message
 
     def _extra_state(self) -> dict[str, Any]:
-        return {}
+        return {"chosen_orders": dict(self.chosen_orders_)} if getattr(self, "chosen_orders_", None) else {}
+
+    def _load_extra(self, extra: dict[str, Any]) -> None:
+        self.chosen_orders_ = dict(extra.get("chosen_orders", {}))

@@ -77,6 +77,10 @@ def run(args: argparse.Namespace) -> int:
     print(f"{summary['identifier']}: {summary['n_parameters']} parameters, fitted in {summary['fit_seconds']:.2f} s")
     if hasattr(model, "summary"):
         print(model.summary())
+    if summary.get("chosen_orders"):
+        print("  orders chosen automatically (none given): "
+              + ", ".join(f"{k}={'-'.join(map(str, v)) if isinstance(v, list) else v}"
+                          for k, v in summary["chosen_orders"].items()))
     for part in ("estimation", "validation"):
         s = summary.get(part)
         if not s:
