@@ -80,7 +80,7 @@ def release_wrapper_state(resources: str | Path) -> bool:
         try:
             finalize = lib.finalizePythonInterpreter
         except AttributeError:
-            return False  # not the pythonfmu 0.7 wrapper
+            continue  # not the pythonfmu 0.7 wrapper (e.g. the libpython loader in front of it)
         finalize.restype, finalize.argtypes = None, []
         finalize()
         try:
@@ -121,7 +121,7 @@ def _finalize_at_exit(resources: str | Path) -> bool:
         try:
             finalize = lib.finalizePythonInterpreter
         except AttributeError:
-            return False
+            continue  # the libpython loader (twins.fmu.shim): the wrapper is the other binary
         libc = ctypes.CDLL(None)
         register = libc.__cxa_atexit
         register.restype = ctypes.c_int
