@@ -21,7 +21,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
-__all__ = ["amplifier_voltage", "amplifier_bandwidth", "voltage_gain"]
+__all__ = ["amplifier_voltage", "amplifier_bandwidth", "sample_amplifier", "voltage_gain"]
 
 
 def voltage_gain(gain_db: float) -> float:
@@ -49,6 +49,26 @@ def amplifier_voltage(x: np.ndarray, gain_db: float = 50.0, compression: str | N
     if even_ratio:
         v = v + even_ratio * v * v / sat_v
     return 2.0 * v
+
+
+def sample_amplifier(gain_db: float = 50.0, compression: str | None = None, sat_v: float = 105.0,
+                     smoothness: float = 2.5, even_ratio: float = 0.0):
+    """``float -> float``: :func:`amplifier_voltage` for one sample at a time with the same arithmetic (the
+    per-sample path of an FMU step: no array, no thread launch), or None for a compression without one."""
+    gain, sat, k2 = voltage_gain(gain_db), float(sat_v), float(even_ratio)
+    if compression == "rapp":
+        p = float(smoothness)
+        return lambda x: _rapp_scalar(float(x), gain, sat, p, k2)
+    if compression not in (None, "none", "linear"):
+        return None
+
+    def linear(x: float) -> float:
+        v = gain * float(x)
+        if k2:
+            v = v + k2 * v * v / sat
+        return 2.0 * v
+
+    return linear
 
 
 def amplifier_bandwidth(f_hz: np.ndarray, f_low_hz: float, f_high_hz: float) -> np.ndarray:
@@ -100,6 +120,13 @@ def _rapp_serial(x, gain, sat, p, k2):  # pragma: no cover - compiled
     for i in range(x.shape[0]):
         out[i] = _rapp_one(x[i], gain, sat, p2, 1.0 / p2, ip, integer, k2)
     return out
+
+
+@njit(cache=True)
+def _rapp_scalar(x, gain, sat, p, k2):  # pragma: no cover - compiled
+    p2 = 2.0 * p
+    ip = int(p2)
+    return _rapp_one(x, gain, sat, p2, 1.0 / p2, ip, ip == p2 and ip >= 1, k2)
 
 
 def _rapp_kernel(x, gain, sat, p, k2):

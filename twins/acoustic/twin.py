@@ -13,6 +13,7 @@ stages separately for the FMU export (interfaces.md): simulate(u) = measure(h âˆ
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import numpy as np
@@ -22,7 +23,7 @@ from scipy import signal as sps
 from sysid.config import coerce
 from sysid.errors import ConfigError
 from sysid.record import Record
-from twins.acoustic.amplifier import amplifier_voltage
+from twins.acoustic.amplifier import amplifier_voltage, sample_amplifier
 from twins.acoustic.channel import frequency_response, geometry, wall_path_length
 from twins.acoustic.params import AcousticParams
 from twins.acoustic.protocols import BAND_HZ, FS_ACQ, PROTOCOLS, RECIPE_KEEP, apply_recipe, excitation
@@ -117,6 +118,38 @@ class AcousticTwin(Twin):
                                  p.amp_compression if self.has("amplifier_compression") else None,
                                  p.amp_sat_v, p.amp_smoothness,
                                  p.amp_even_ratio if self.has("amplifier_even_distortion") else 0.0)
+
+    def sample_amplifier(self):
+        """:meth:`amplifier` as a ``float -> float`` function for one sample at a time (same arithmetic), or
+        None where the compression has no per-sample form (the FMU core then calls :meth:`amplifier`)."""
+        p = self.params
+        return sample_amplifier(p.amp_gain_db, p.amp_compression if self.has("amplifier_compression") else None,
+                                p.amp_sat_v, p.amp_smoothness,
+                                p.amp_even_ratio if self.has("amplifier_even_distortion") else 0.0)
+
+    def sample_measure(self, fs: float):
+        """:meth:`measure` as ``(y: float, rng) -> float`` for one sample at a time: the same float32 noise
+        draw from ``rng``, the same arithmetic (noise scaled in float32, added in float64; clip; round half to
+        even, the sign of zero kept; times the LSB), so a run of samples equals :meth:`measure` of the block."""
+        p = self.params
+        noise = np.float32(p.noise_v) if self.has("measurement_noise") and p.noise_v > 0 else None
+        adc = self.has("adc_quantization")
+        lsb = 2.0 * p.adc_range_v / 2 ** p.adc_bits
+        lo, hi = -p.adc_range_v, p.adc_range_v - lsb
+        f32 = np.float32
+
+        def measure(y: float, rng: np.random.Generator) -> float:
+            y = float(y)
+            if noise is not None:
+                y += float(noise * rng.standard_normal(dtype=f32))
+            if adc:
+                y = lo if y < lo else hi if y > hi else y
+                if y == y:  # NaN passes through, as in numpy
+                    q = round(y / lsb)
+                    y = q * lsb if q else math.copysign(0.0, y) * lsb
+            return y
+
+        return measure
 
     def measure(self, y, fs: float, rng: np.random.Generator | None = None) -> np.ndarray:
         """Scope: add white noise (``measurement_noise``) then quantise/clip (``adc_quantization``)."""

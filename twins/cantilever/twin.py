@@ -284,10 +284,15 @@ def _first_order_foh(tau: float, h: float) -> tuple[float, float, float]:
     return a, r - a, 1.0 - r
 
 
+def _run_args(u, noise, out, cfg, st) -> tuple:
+    """The arguments of the kernel ``run_block`` (the state arrays are updated in place)."""
+    return (u, noise, out, cfg["icfg"], cfg["fcfg"], st["sc"], st["z"], st["xc"], st["play"], st["buf"],
+            st["vsub"], cfg["Phi"], cfg["G0"], cfg["G1"], cfg["Cout"], cfg["cr_a"], cfg["cr_b0"], cfg["cr_b1"],
+            cfg["cr_g"], cfg["pi_r"], cfg["pi_p"])
+
+
 def _run(u, noise, out, cfg, st) -> None:
-    K.run_block(u, noise, out, cfg["icfg"], cfg["fcfg"], st["sc"], st["z"], st["xc"], st["play"], st["buf"],
-                st["vsub"], cfg["Phi"], cfg["G0"], cfg["G1"], cfg["Cout"], cfg["cr_a"], cfg["cr_b0"], cfg["cr_b1"],
-                cfg["cr_g"], cfg["pi_r"], cfg["pi_p"])
+    K.run_block(*_run_args(u, noise, out, cfg, st))
 
 
 class CantileverStepper:
@@ -314,6 +319,13 @@ class CantileverStepper:
         """Back to rest at 0 V, time 0, noise sequence restarted."""
         self._st = self.twin._fresh_state(self._cfg)
         self._rng = np.random.default_rng(self.twin.seed)
+        self._bind()
+
+    def _bind(self) -> None:
+        """Bind the kernel's arguments once (a step then costs one kernel call, no look-ups)."""
+        self._noise_um = self.twin.params.noise_um
+        self._n[0] = 0.0
+        self._args = _run_args(self._u, self._n, self._y, self._cfg, self._st)
 
     def retune(self, twin: CantileverTwin) -> None:
         """Continue with the parameters of ``twin`` from the next :meth:`step` on, keeping the dynamic state.
@@ -345,12 +357,14 @@ class CantileverStepper:
                               f"({', '.join(dict.fromkeys(changed))}); set it before the start")
         self.twin, self._cfg = twin, cfg
         self._noise_on = twin.has("measurement_noise") and twin.params.noise_um > 0
+        self._bind()
 
     def step(self, u: float) -> float:
         """Apply the voltage sample ``u`` [V]; returns the displacement reading y [µm] at this sample."""
         if not math.isfinite(u):
             raise DataError(f"cantilever stepper: input sample is not finite ({u!r})")
         self._u[0] = u
-        self._n[0] = self.twin.params.noise_um * self._rng.standard_normal() if self._noise_on else 0.0
-        _run(self._u, self._n, self._y, self._cfg, self._st)
+        if self._noise_on:  # else it stays 0.0 (set by _bind)
+            self._n[0] = self._noise_um * self._rng.standard_normal()
+        K.run_block(*self._args)
         return float(self._y[0])

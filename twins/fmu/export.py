@@ -7,7 +7,9 @@ What goes into the FMU (``resources/``):
 - the packages ``twins/`` and ``sysid/`` (Python sources only) and any extra module the twin class lives in,
   so the FMU runs where only CPython 3 with numpy and scipy is installed (pythonfmu puts ``resources/`` first
   on ``sys.path``; a host process that has already imported ``twins`` keeps its own copy);
-- ``pythonfmu/`` (embedded by pythonfmu itself) and the binaries ``linux64``/``win64`` (no macOS binary).
+- ``pythonfmu/`` (embedded by pythonfmu itself) and the binaries ``linux64``/``win64`` (no macOS binary); on
+  Linux x86-64 with ``gcc`` the linux64 binary is a loader that brings libpython into a C host and forwards
+  to pythonfmu's wrapper, shipped beside it (:mod:`twins.fmu.shim`).
 """
 
 from __future__ import annotations
@@ -151,10 +153,13 @@ def build_from_source(stage: Path, model_name: str, source: str, files: list, pa
 
 
 def _deflate(src: Path, dest: Path) -> None:
-    """Copy the FMU (pythonfmu stores its members uncompressed) with deflate compression (FMI allows it)."""
+    """Copy the FMU (pythonfmu stores its members uncompressed) with deflate compression (FMI allows it), with
+    the libpython loader in front of the linux64 wrapper (:mod:`twins.fmu.shim`)."""
     from sysid.safeio import atomic_path
+    from twins.fmu.shim import with_loader
 
-    with atomic_path(dest) as tmp, zipfile.ZipFile(src) as zin, \
-            zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED, compresslevel=9) as zout:
-        for info in zin.infolist():
-            zout.writestr(info.filename, zin.read(info.filename))
+    with zipfile.ZipFile(src) as zin:
+        members = with_loader({info.filename: zin.read(info.filename) for info in zin.infolist()})
+    with atomic_path(dest) as tmp, zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED, compresslevel=9) as zout:
+        for name, data in members.items():
+            zout.writestr(name, data)

@@ -22,7 +22,7 @@ from pythonfmu import Fmi2Causality, Fmi2Initial, Fmi2Slave, Fmi2Variability, Re
 from pythonfmu.default_experiment import DefaultExperiment
 from pythonfmu.enums import Fmi2Status
 
-from twins.fmu.slave import STEP_TOLERANCE, _with_attrs, release_wrapper_state
+from twins.fmu.slave import STEP_TOLERANCE, FastIO, _with_attrs, release_wrapper_state
 
 __all__ = ["ModelSlave", "MODEL_CONFIG_NAME", "MODEL_FORMAT"]
 
@@ -38,7 +38,7 @@ def load_model_config(resources: str | Path) -> dict[str, Any]:
     return cfg
 
 
-class ModelSlave(Fmi2Slave):
+class ModelSlave(FastIO, Fmi2Slave):
     """An identified PiezoTwin model as an FMI 2.0 co-simulation slave (input ``u``, output ``y``)."""
 
     author = "PiezoTwin"
@@ -67,6 +67,8 @@ class ModelSlave(Fmi2Slave):
             unit=units.get("y") or None))
         self.register_variable(String("identifier", causality=Fmi2Causality.parameter,
                                       variability=Fmi2Variability.fixed, description="identifier of the model"))
+        self._check_io_refs()
+        self._step_checked = None  # the communication step, once checked
         self._stepper = None
         release_wrapper_state(self.resources)  # pythonfmu 0.7: double release of its PyState at exit
 
@@ -99,11 +101,13 @@ class ModelSlave(Fmi2Slave):
     def do_step(self, current_time: float, step_size: float) -> bool:
         if self._stepper is None:
             self._start()
-        ratio = step_size * self._fs
-        if abs(ratio - 1.0) > STEP_TOLERANCE:
-            msg = f"communication step {step_size!r} s must be 1/fs = {1.0 / self._fs!r} s (a discrete-time model)"
-            self.log(msg, Fmi2Status.error)
-            raise RuntimeError(msg)
+        if step_size != self._step_checked:  # a host keeps its step: checked once
+            if abs(step_size * self._fs - 1.0) > STEP_TOLERANCE:
+                msg = (f"communication step {step_size!r} s must be 1/fs = {1.0 / self._fs!r} s "
+                       "(a discrete-time model)")
+                self.log(msg, Fmi2Status.error)
+                raise RuntimeError(msg)
+            self._step_checked = step_size
         u = float(self.u)
         if not math.isfinite(u):
             msg = f"input u={u!r} at t={current_time!r} s is not finite"

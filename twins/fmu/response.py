@@ -222,10 +222,13 @@ class ResponseCore:
 
 
 def amplifier_of(twin):
-    """``twin.amplifier`` as a float -> float function (identity when the twin has none).
-
-    Calls it on a Python float when that gives the same value as on a one-element array (numpy ufunc
+    """``twin.amplifier`` as a float -> float function (identity when the twin has none): the twin's
+    ``sample_amplifier()`` where it gives one, else ``amplifier`` itself, which it calls on a Python float when that gives the same value as on a one-element array (numpy ufunc
     code does, ~1 us), else on a one-element array."""
+    own = getattr(twin, "sample_amplifier", None)
+    fn = own() if own is not None else None
+    if fn is not None:  # the twin's own per-sample form (same arithmetic, no array per call)
+        return fn
     amp = getattr(twin, "amplifier", None)
     if amp is None:
         return lambda x: x
@@ -253,12 +256,16 @@ def amplifier_of(twin):
 
 
 def measure_of(twin, fs: float):
-    """Per-sample ``(y, rng) -> y`` from ``twin.measure(y, fs, rng)`` (noise + ADC), or None.
+    """Per-sample ``(y, rng) -> y`` from ``twin.sample_measure(fs)`` if the twin has it, else from
+    ``twin.measure(y, fs, rng)`` (noise + ADC), or None.
 
     ``measure`` is called on one-element arrays with the core's generator, so a twin whose ``measure``
     draws one value per sample in order (``rng.standard_normal(y.shape)``) gets exactly the noise of its
     block ``simulate``.
     """
+    own = getattr(twin, "sample_measure", None)
+    if own is not None:  # the twin's own per-sample form (same draws and arithmetic, no array per call)
+        return own(fs)
     fn = getattr(twin, "measure", None)
     if fn is None:
         return None

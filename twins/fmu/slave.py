@@ -29,7 +29,7 @@ from pythonfmu.enums import Fmi2Status
 from twins.fmu.spec import CONFIG_NAME, FORMAT, decode_value
 
 
-__all__ = ["TwinSlave", "load_fmu_config", "release_wrapper_state"]
+__all__ = ["FastIO", "TwinSlave", "load_fmu_config", "release_wrapper_state"]
 
 #: relative tolerance on ``step_size * fs`` being a whole number of samples
 STEP_TOLERANCE = 1e-6
@@ -80,7 +80,7 @@ def release_wrapper_state(resources: str | Path) -> bool:
         try:
             finalize = lib.finalizePythonInterpreter
         except AttributeError:
-            return False  # not the pythonfmu 0.7 wrapper
+            continue  # not the pythonfmu 0.7 wrapper (e.g. the libpython loader in front of it)
         finalize.restype, finalize.argtypes = None, []
         finalize()
         try:
@@ -121,7 +121,7 @@ def _finalize_at_exit(resources: str | Path) -> bool:
         try:
             finalize = lib.finalizePythonInterpreter
         except AttributeError:
-            return False
+            continue  # the libpython loader (twins.fmu.shim): the wrapper is the other binary
         libc = ctypes.CDLL(None)
         register = libc.__cxa_atexit
         register.restype = ctypes.c_int
@@ -175,7 +175,28 @@ def _with_attrs(var, **extra):
 _TYPES = {"Real": Real, "Integer": Integer, "Boolean": Boolean, "String": String}
 
 
-class TwinSlave(Fmi2Slave):
+class FastIO:
+    """``set_real``/``get_real`` of the input ``u`` (value reference 0) and the output ``y`` (1) without
+    pythonfmu's generic loop over variables: a host's step is a set, a ``do_step`` and a get, so these two
+    calls are on the per-sample path. Same effect as the generic ones; other value references go there."""
+
+    def _check_io_refs(self) -> None:
+        if [self.vars[0].name, self.vars[1].name] != ["u", "y"]:
+            raise RuntimeError("u and y must be the first two variables registered")
+
+    def set_real(self, vrs, values):
+        if len(vrs) == 1 and vrs[0] == 0:
+            self.u = values[0]
+        else:
+            super().set_real(vrs, values)
+
+    def get_real(self, vrs):
+        if len(vrs) == 1 and vrs[0] == 1:
+            return [float(self.y)]
+        return super().get_real(vrs)
+
+
+class TwinSlave(FastIO, Fmi2Slave):
     """A configured PiezoTwin twin as an FMI 2.0 co-simulation slave (input ``u``, output ``y``)."""
 
     author = "PiezoTwin"
@@ -211,6 +232,8 @@ class TwinSlave(Fmi2Slave):
         for unit in (units.get("u"), units.get("y")):
             if unit:
                 self._units.add(unit)
+        self._check_io_refs()
+        self._step_samples = (None, 0)  # (communication step, samples per step) last checked
         for v in cfg["variables"]:
             name = v["name"]
             self._values[name] = v["start"]
@@ -265,11 +288,14 @@ class TwinSlave(Fmi2Slave):
     def _do_step(self, current_time: float, step_size: float) -> bool:
         if self._core is None:
             self._start()
-        ratio = step_size * self._fs
-        n = round(ratio)
-        if n < 1 or abs(ratio - n) > STEP_TOLERANCE * n:
-            return self._fail(f"communication step {step_size!r} s is not a whole number of sampling periods "
-                              f"1/fs = {1.0 / self._fs!r} s")
+        checked, n = self._step_samples
+        if step_size != checked:  # a host keeps its step: checked once
+            ratio = step_size * self._fs
+            n = round(ratio)
+            if n < 1 or abs(ratio - n) > STEP_TOLERANCE * n:
+                return self._fail(f"communication step {step_size!r} s is not a whole number of sampling periods "
+                                  f"1/fs = {1.0 / self._fs!r} s")
+            self._step_samples = (step_size, n)
         u = float(self.u)
         if not math.isfinite(u):
             return self._fail(f"input u={u!r} at t={current_time!r} s is not finite")
@@ -281,9 +307,11 @@ class TwinSlave(Fmi2Slave):
                                   f"{type(exc).__name__}: {exc}")
             self._retune = False
         step = self._core.step
-        y = 0.0
-        for _ in range(n):
+        if n == 1:
             y = step(u)
+        else:
+            for _ in range(n):
+                y = step(u)
         self.y = float(y)
         return True
 
@@ -336,6 +364,7 @@ class TwinSlave(Fmi2Slave):
 
         try:
             twin = self.make_twin()
+            self._step_samples = (None, 0)  # fs is set now
             self._core = build_core(twin, self._fs, self._cfg["core"], self.resources)
         except Exception as exc:  # the message reaches the importing tool's log
             self.log(f"{type(exc).__name__}: {exc}", Fmi2Status.error)
