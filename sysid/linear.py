@@ -138,6 +138,7 @@ class ARX(_LinearBase):
         if _choose_orders(self, ("ny", "nu")):
             from sysid.order import select_arx_orders
 
+            check_records(records, max(1, int(self.nk)), 3, self.name)  # the data's own faults first, by name
             probe = ARX(nk=self.nk, intercept=self.intercept, orders="given")
             n, self.order_table_ = select_arx_orders(records, self.nk, int(self.max_order), probe)
             self.ny = self.nu = n
@@ -177,6 +178,8 @@ def _choose_orders(model, keys: tuple[str, ...]) -> bool:
                 setattr(model, k, 2)
         elif isinstance(v, (float, np.floating)) and float(v).is_integer():
             setattr(model, k, int(v))  # `--set ny=4` reads a number as float when the option's default is None
+        elif isinstance(v, bool) or not isinstance(v, (int, np.integer)):
+            raise ConfigError(f"{model.name}: {k}: expected int, got {v!r}")
     return choose
 
 
@@ -215,6 +218,7 @@ class ARMAX(_LinearBase):
         if _choose_orders(self, ("ny", "nu", "ne")):
             from sysid.order import select_arx_orders
 
+            check_records(records, max(1, int(self.nk)), 3, self.name)  # the data's own faults first, by name
             probe = ARX(nk=self.nk, intercept=self.intercept, orders="given")
             n, self.order_table_ = select_arx_orders(records, self.nk, int(self.max_order), probe)
             self.ny = self.nu = n
