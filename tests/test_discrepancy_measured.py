@@ -1,8 +1,8 @@
 """Diagnosis that holds on measured records: split, ranges, bounds, sub-step, noise level, mis-sized defaults.
 
 Default suite: the unit checks (split on a hold, amplitude option, bounds, sub-step accuracy against a 1 µs
-solution, noise level against a known σ), one mis-sized default effect, one effect outside the catalog and
-the simulated 1.4 kV creep record through the CLI. ``slow``: the seed sweeps behind the success rates
+solution, noise level against a known σ), one mis-sized default effect, one effect outside the catalog, two
+hidden effects at once (one seed) and the simulated 1.4 kV creep record through the CLI. ``slow``: the seed sweeps behind the success rates
 (rates printed; docs/diagnosis.md lists the measured ones).
 """
 
@@ -139,6 +139,25 @@ def test_creep_stack_record_loads_and_is_diagnosed_from_the_cli(tmp_path, capsys
     assert out["verdict"] == "unexplained" or (out["verdict"] == "discrepancy" and named[0] == "creep"), out["causes"]
 
 
+def _named(out):
+    return {c["effect"] for c in out["causes"]} | {g for c in out["causes"] for g in c.get("group", [])}
+
+
+def test_two_hidden_effects_creep_and_thermal_drift():
+    """Seed 0: the first round names an asymmetric hysteresis that mimics creep + drift on steps, the second
+    round the drift; the revisit puts creep in the mimic's place and refits the drift beside it."""
+    pair = ("creep", "thermal_drift")
+    start, est, val, true = C.pair_case(pair, 0)
+    out = diagnose(start, est, val, max_rounds=3)
+    assert set(pair) <= _named(out) and out["verdict"] == "discrepancy", out["causes"]
+    creep = next(c for c in out["causes"] if c["effect"] == "creep")
+    drift = next(c for c in out["causes"] if c["effect"] == "thermal_drift")
+    assert creep["replaces"] == "asymmetric_hysteresis"
+    assert abs(creep["params"]["creep_per_decade"] - true["creep_per_decade"]) <= 0.15 * true["creep_per_decade"]
+    for f in ("thermal_drift_um", "thermal_tau_s"):  # refitted beside creep, no longer beside the mimic
+        assert abs(drift["params"][f] - true[f]) <= 0.15 * true[f], drift
+
+
 # ------------------------------------------------------------------------------------------ slow sweeps
 def _rate(results):
     return sum(results), len(results)
@@ -157,18 +176,21 @@ def test_missized_defaults_over_seeds(effect):
     assert sum(ok) == 3
 
 
+# pairs whose 10-seed rate was measured (docs/diagnosis.md); the others run, but are not yet held to it
+_PAIRS_MET = {("creep", "thermal_drift")}
+_PAIR_PARAMS = [p if p in _PAIRS_MET else
+                pytest.param(p, marks=pytest.mark.xfail(strict=False, reason="10-seed rate not yet measured"))
+                for p in sorted(C.PAIRS) + sorted(C.ACOUSTIC_PAIRS)]
+
+
 @pytest.mark.slow
-@pytest.mark.xfail(strict=False, reason="the greedy rounds name one of two simultaneous "
-                   "effects, a mimic takes the other's place (seed 0: asymmetric hysteresis for creep + thermal drift, "
-                   "a slow sensor for saturation + delay); a joint pair search is still to do")
-@pytest.mark.parametrize("pair", sorted(C.PAIRS))
+@pytest.mark.parametrize("pair", _PAIR_PARAMS)
 def test_two_hidden_effects_over_seeds(pair):
     ok = []
     for seed in range(10):
         start, est, val, _ = C.pair_case(pair, seed)
         out = diagnose(start, est, val, max_rounds=3)
-        named = {c["effect"] for c in out["causes"]} | {g for c in out["causes"] for g in c.get("group", [])}
-        ok.append(set(pair) <= named)
+        ok.append(set(pair) <= _named(out))
     print(f"pair {pair}: {_rate(ok)}")
     assert sum(ok) >= 9
 
