@@ -8,12 +8,16 @@ remains or ``max_rounds`` effects were added.
 leader can be a third effect that mimics the sum better than either part alone (on steps, creep plus thermal
 drift looks like an asymmetric hysteresis to the first round: gain 44 % against 1 % for the drift). The
 second round then adds the other true effect, and the one the mimic stands in for is no longer significant
-(its gain is what the mimic did not already absorb). So, once at least two effects were added, each of them
-but the last is taken out in turn, the others kept (their parameters refitted with the core in the full
-fits), and every candidate is tried in its slot with the same trials and ranking as a round. A significant
-candidate that beats the incumbent's own refit in that slot (F-test at ``alpha``) replaces it; after a
-replacement the greedy rounds resume, since the effect the mimic hid can now be found. The last added
-effect needs no revisit: its round already tried every candidate with the others present.
+(its gain is what the mimic did not already absorb). A first-round leader can also be a default effect re-tested
+at a wrong size (a slower sensor standing in for saturation plus a delay). So, once at least two causes were
+named, each of them but the last is taken out in turn (an added effect switched off, a re-tested default put
+back at its configured size), the others kept (their parameters refitted with the core in the full fits), and
+every candidate is tried in its slot with the same trials and ranking as a round (a re-tested default
+beside them). A significant candidate that beats the incumbent's own refit in that slot (F-test at ``alpha``)
+replaces it, and the parameters of the causes kept are reported as refitted beside it; after a replacement
+the greedy rounds resume, since the effect the mimic hid can now be found. The last cause needs no revisit:
+its round already tried every candidate with the others present. With one cause or none (noise only, a single
+effect) nothing is revisited and nothing costs more.
 """
 
 from __future__ import annotations
@@ -106,22 +110,20 @@ def _greedy(loop: _Loop, ext: Extension, n_max: int) -> None:
 
 
 def revisit(loop: _Loop, ext: Extension) -> bool:
-    """Each added effect but the last, taken out and its slot tried again (module docstring); True when one was
+    """Each cause but the last, taken out and its slot tried again (module docstring); True when one was
     replaced. Updates ``ext`` in place."""
     inp, cal, opts, skip = loop.inp, loop.cal, loop.opts, loop.opts.skip
-    def added() -> list[dict[str, Any]]:
-        return [c for c in ext.causes if c.get("kind") != "mis-sized default" and c["effect"] in ext.stage.twin.effects]
-
     changed = False
-    for i in range(len(added()) - 1):
-        cause = added()[i]
-        eff, twin = cause["effect"], ext.stage.twin
-        others = [c["effect"] for c in added() if c["effect"] != eff]
-        base = make_stage(twin.with_effects(set(twin.effects) - {eff}), inp.est, inp.val, opts)
-        core_x = loop.core_r + [f for o in others for f in effect_fields(twin, twin.EFFECTS[o].params.values())]
+    for i in range(len(ext.causes) - 1):
+        cause, twin = ext.causes[i], ext.stage.twin
+        eff, retest = cause["effect"], cause.get("kind") == "mis-sized default"
+        base = make_stage(_taken_out(twin, eff, retest, cal.prior), inp.est, inp.val, opts)
+        others = [c["effect"] for c in ext.causes if c is not cause]
+        core_x = loop.core_r + [f for o in others for f in effect_fields(twin, twin.EFFECTS[o].params.values())
+                                if f not in loop.core_r]
         cands = [e for e in loop.pool if e not in base.twin.effects]
-        opts.say(f"revisiting {eff}: {len(cands)} candidates in its place")
-        trials, errors = round_trials(inp, cal, base, cands, [], core_x, f"revisit {eff}", opts)
+        opts.say(f"revisiting {eff}: {len(cands) + retest} candidates in its place")
+        trials, errors = round_trials(inp, cal, base, cands, [eff] if retest else [], core_x, f"revisit {eff}", opts)
         ext.rounds += errors
         if not trials:
             continue
@@ -136,17 +138,28 @@ def revisit(loop: _Loop, ext: Extension) -> bool:
         new = cause_from(ranking, base, inp.twin, cal.prior, cause["round"])
         new["replaces"] = eff
         new["evidence"] += f"; replaces {eff}, which the first rounds named in its place"
-        ext.causes[ext.causes.index(cause)] = new
+        ext.causes[i] = new
         ext.stage = make_stage(top.twin, inp.est, inp.val, opts)
         row["replaced_by"] = top.effect
+        if retest:  # back at its configured size: the next rounds may re-test it again
+            loop.retest_left.append(eff)
         changed = True
-        _refresh_params(ext, [c["effect"] for c in added() if c is not new])
+        _refresh_params(ext, [c["effect"] for c in ext.causes if c is not new])
     return changed
 
 
+def _taken_out(twin: Twin, effect: str, retest: bool, prior: Twin) -> Twin:
+    """``twin`` without ``effect``: switched off if it was added, its parameters back at their configured values
+    if it is a re-tested default."""
+    if not retest:
+        return twin.with_effects(set(twin.effects) - {effect})
+    fields = effect_fields(twin, twin.EFFECTS[effect].params.values())
+    return twin.with_params(**{f: getattr(prior.params, f) for f in fields})
+
+
 def _refresh_params(ext: Extension, effects: list[str]) -> None:
-    """The parameters of the effects kept beside a replacement, as refitted together with it (their first fits
-    were made beside the mimic and carry its bias); the earlier values stay under ``params_first_fit``."""
+    """The parameters of the added effects kept beside a replacement, as refitted together with it (their first
+    fits were made beside the mimic and carry its bias); the earlier values stay under ``params_first_fit``."""
     twin = ext.stage.twin
     for c in ext.causes:
         if c["effect"] in effects and c.get("kind") != "mis-sized default":
