@@ -76,12 +76,14 @@ def test_at_bound_reported_and_widened_once():
 
 
 # ------------------------------------------------------------------------------------------ sub-step
-@pytest.mark.parametrize("kind", ["staircase_1k", "slow_sines_1k", "multisine_10k"])
+@pytest.mark.parametrize("kind", ["staircase_1k", "steps_protocol_1k", "slow_sines_1k", "multisine_10k"])
 def test_bandwidth_chosen_substep_meets_its_bound_against_a_1us_solution(kind):
     tw = CantileverTwin().noise_free()
     rng = np.random.default_rng(1)
     if kind == "staircase_1k":
         fs, u = 1000.0, np.repeat(rng.uniform(-80, 80, 6), 300)
+    elif kind == "steps_protocol_1k":  # the twin's own step protocol, as the step cases of the diagnosis use it
+        fs, u = 1000.0, tw.generate("steps", fs=1000.0, hold_s=1.0, level_v=80.0).u
     elif kind == "slow_sines_1k":
         t = np.arange(3000) / 1000.0
         fs, u = 1000.0, 80 * np.sin(2 * np.pi * 3 * t) + 20 * np.sin(2 * np.pi * 47 * t)
@@ -144,17 +146,16 @@ def _named(out):
 
 
 def test_two_hidden_effects_creep_and_thermal_drift():
-    """Seed 0: the first round names an asymmetric hysteresis that mimics creep + drift on steps, the second
-    round the drift; the revisit puts creep in the mimic's place and refits the drift beside it."""
+    """Creep + thermal drift on steps (seed 0), both named with their parameters within 15 %: before the revisit
+    and the core refit of the estimation leader, an asymmetric hysteresis mimicking the pair took creep's place."""
     pair = ("creep", "thermal_drift")
     start, est, val, true = C.pair_case(pair, 0)
     out = diagnose(start, est, val, max_rounds=3)
     assert set(pair) <= _named(out) and out["verdict"] == "discrepancy", out["causes"]
     creep = next(c for c in out["causes"] if c["effect"] == "creep")
     drift = next(c for c in out["causes"] if c["effect"] == "thermal_drift")
-    assert creep["replaces"] == "asymmetric_hysteresis"
     assert abs(creep["params"]["creep_per_decade"] - true["creep_per_decade"]) <= 0.15 * true["creep_per_decade"]
-    for f in ("thermal_drift_um", "thermal_tau_s"):  # refitted beside creep, no longer beside the mimic
+    for f in ("thermal_drift_um", "thermal_tau_s"):
         assert abs(drift["params"][f] - true[f]) <= 0.15 * true[f], drift
 
 
