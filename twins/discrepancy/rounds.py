@@ -15,9 +15,10 @@ back at its configured size), the others kept (their parameters refitted with th
 every candidate is tried in its slot with the same trials and ranking as a round (a re-tested default
 beside them). A significant candidate that beats the incumbent's own refit in that slot (F-test at ``alpha``)
 replaces it, and the parameters of the causes kept are reported as refitted beside it; an incumbent that keeps
-its slot keeps its joint refit where that fits both records better. After a replacement the greedy rounds resume, since the effect the mimic hid can now be found. The last cause needs no revisit:
-its round already tried every candidate with the others present. With one cause or none (noise only, a single
-effect) nothing is revisited and nothing costs more.
+its slot keeps its joint refit where that fits both records better. After a replacement the greedy rounds
+resume, since the effect the mimic hid can now be found. The last cause needs no revisit: its round already
+tried every candidate with the others present. With one cause or none (noise only, a single effect) nothing
+is revisited.
 """
 
 from __future__ import annotations
