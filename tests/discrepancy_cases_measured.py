@@ -23,11 +23,17 @@ MISSIZED = {
     "sensor_lowpass": ("sensor_bandwidth_hz", 1.0 / 3.0, "broadband"),
 }
 
-# pairs of hidden effects (start: the default twin without both) → data kind and drawn parameters
+# pairs of hidden effects of the cantilever (start: the default twin without both) → data kind and drawn parameters
 PAIRS = {
     ("creep", "thermal_drift"): ("steps", {"creep_per_decade": (0.015, 0.03), "thermal_drift_um": (1.5, 3.0),
                                            "thermal_tau_s": (1.0, 3.0)}),
     ("saturation", "input_delay"): ("multisine", {"sat_voltage_v": (70.0, 110.0), "input_delay_s": (2e-4, 6e-4)}),
+}
+
+# pairs of the acoustic twin (ranges as for the single effects in discrepancy_cases.ACOUSTIC)
+ACOUSTIC_PAIRS = {
+    ("amplifier_compression", "wall_echo"): ("multisine", {"amp_sat_v": (60.0, 110.0), "wall_distance_m": (0.02, 0.05),
+                                                           "wall_coupling": (0.1, 0.3)}),
 }
 
 OUTSIDE = ("dead_zone", "backlash", "resonance")
@@ -51,14 +57,19 @@ def missized_case(effect: str, seed: int):
 
 
 def pair_case(pair: tuple[str, str], seed: int):
-    """(start = default twin without both effects, est, val, true parameters)."""
-    cls = _twin()
-    kind, spec = PAIRS[pair]
+    """(start = default twin without both effects, est, val, true parameters); a pair of :data:`PAIRS` (cantilever)
+    or :data:`ACOUSTIC_PAIRS`."""
+    if pair in ACOUSTIC_PAIRS:
+        from twins.acoustic import AcousticTwin as cls
+
+        name, (kind, spec) = "acoustic", ACOUSTIC_PAIRS[pair]
+    else:
+        cls, name, (kind, spec) = _twin(), "cantilever", PAIRS[pair]
     rng = np.random.default_rng(5000 + seed)
     params = {k: float(rng.uniform(*v)) for k, v in spec.items()}
     base = cls.from_options(seed=seed)
     truth = cls(base.with_params(**params).params, set(base.effects) | set(pair), seed)
-    est, val = records("cantilever", truth, kind, seed)
+    est, val = records(name, truth, kind, seed)
     return cls.from_options(seed=0, without=list(pair)), est, val, params
 
 

@@ -1,8 +1,8 @@
 """Diagnosis that holds on measured records: split, ranges, bounds, sub-step, noise level, mis-sized defaults.
 
 Default suite: the unit checks (split on a hold, amplitude option, bounds, sub-step accuracy against a 1 µs
-solution, noise level against a known σ), one mis-sized default effect, one effect outside the catalog and
-the simulated 1.4 kV creep record through the CLI. ``slow``: the seed sweeps behind the success rates
+solution, noise level against a known σ), one mis-sized default effect, one effect outside the catalog, two
+hidden effects at once (one seed) and the simulated 1.4 kV creep record through the CLI. ``slow``: the seed sweeps behind the success rates
 (rates printed; docs/diagnosis.md lists the measured ones).
 """
 
@@ -76,12 +76,14 @@ def test_at_bound_reported_and_widened_once():
 
 
 # ------------------------------------------------------------------------------------------ sub-step
-@pytest.mark.parametrize("kind", ["staircase_1k", "slow_sines_1k", "multisine_10k"])
+@pytest.mark.parametrize("kind", ["staircase_1k", "steps_protocol_1k", "slow_sines_1k", "multisine_10k"])
 def test_bandwidth_chosen_substep_meets_its_bound_against_a_1us_solution(kind):
     tw = CantileverTwin().noise_free()
     rng = np.random.default_rng(1)
     if kind == "staircase_1k":
         fs, u = 1000.0, np.repeat(rng.uniform(-80, 80, 6), 300)
+    elif kind == "steps_protocol_1k":  # the twin's own step protocol, as the step cases of the diagnosis use it
+        fs, u = 1000.0, tw.generate("steps", fs=1000.0, hold_s=1.0, level_v=80.0).u
     elif kind == "slow_sines_1k":
         t = np.arange(3000) / 1000.0
         fs, u = 1000.0, 80 * np.sin(2 * np.pi * 3 * t) + 20 * np.sin(2 * np.pi * 47 * t)
@@ -139,6 +141,24 @@ def test_creep_stack_record_loads_and_is_diagnosed_from_the_cli(tmp_path, capsys
     assert out["verdict"] == "unexplained" or (out["verdict"] == "discrepancy" and named[0] == "creep"), out["causes"]
 
 
+def _named(out):
+    return {c["effect"] for c in out["causes"]} | {g for c in out["causes"] for g in c.get("group", [])}
+
+
+def test_two_hidden_effects_creep_and_thermal_drift():
+    """Creep + thermal drift on steps (seed 0), both named with their parameters within 15 %: before the revisit
+    and the core refit of the estimation leader, an asymmetric hysteresis mimicking the pair took creep's place."""
+    pair = ("creep", "thermal_drift")
+    start, est, val, true = C.pair_case(pair, 0)
+    out = diagnose(start, est, val, max_rounds=3)
+    assert set(pair) <= _named(out) and out["verdict"] == "discrepancy", out["causes"]
+    creep = next(c for c in out["causes"] if c["effect"] == "creep")
+    drift = next(c for c in out["causes"] if c["effect"] == "thermal_drift")
+    assert abs(creep["params"]["creep_per_decade"] - true["creep_per_decade"]) <= 0.15 * true["creep_per_decade"]
+    for f in ("thermal_drift_um", "thermal_tau_s"):
+        assert abs(drift["params"][f] - true[f]) <= 0.15 * true[f], drift
+
+
 # ------------------------------------------------------------------------------------------ slow sweeps
 def _rate(results):
     return sum(results), len(results)
@@ -157,18 +177,22 @@ def test_missized_defaults_over_seeds(effect):
     assert sum(ok) == 3
 
 
+# pairs whose 10-seed rate was measured (docs/diagnosis.md: creep + thermal drift 9/10); the others run, but are
+# not yet held to it
+_PAIRS_MET = {("creep", "thermal_drift")}
+_PAIR_PARAMS = [p if p in _PAIRS_MET else
+                pytest.param(p, marks=pytest.mark.xfail(strict=False, reason="10-seed rate not yet measured"))
+                for p in sorted(C.PAIRS) + sorted(C.ACOUSTIC_PAIRS)]
+
+
 @pytest.mark.slow
-@pytest.mark.xfail(strict=False, reason="the greedy rounds name one of two simultaneous "
-                   "effects, a mimic takes the other's place (seed 0: asymmetric hysteresis for creep + thermal drift, "
-                   "a slow sensor for saturation + delay); a joint pair search is still to do")
-@pytest.mark.parametrize("pair", sorted(C.PAIRS))
+@pytest.mark.parametrize("pair", _PAIR_PARAMS)
 def test_two_hidden_effects_over_seeds(pair):
     ok = []
     for seed in range(10):
         start, est, val, _ = C.pair_case(pair, seed)
         out = diagnose(start, est, val, max_rounds=3)
-        named = {c["effect"] for c in out["causes"]} | {g for c in out["causes"] for g in c.get("group", [])}
-        ok.append(set(pair) <= named)
+        ok.append(set(pair) <= _named(out))
     print(f"pair {pair}: {_rate(ok)}")
     assert sum(ok) >= 9
 

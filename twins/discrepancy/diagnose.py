@@ -17,7 +17,7 @@
    mis-sized default shows as the gain of its re-test (:mod:`.defaults`).
 2. **Analyse** the residual ``e = y − ŷ`` on estimation and validation data (:func:`.trials.make_stage`,
    :func:`.features.analyse`).
-3. **Trial every catalog effect** the configuration lacks (:func:`_round_trials`): add it, pre-scan each of
+3. **Trial every catalog effect** the configuration lacks (:func:`.rounds.round_trials`): add it, pre-scan each of
    its parameters over its documented range plus the values the residual features suggest (:mod:`.prescan`),
    then fit its parameters together with the core calibration parameters by free-run output error, and
    re-simulate the validation record (:mod:`.trials`). The validation gain of the trial is the decisive
@@ -28,8 +28,10 @@
    The relative-gain floor was kept: the acoustic crosstalk and even-order cases that stayed under it
    (0.1–0.7 %) did so because the uncensored clipping of the validation record dominated the residual; with
    the saturation step they gain 27–86 %.
-5. **Extend** (:func:`_extend`): keep the leading cause if significant, repeat (at most ``max_rounds``) until
-   nothing significant remains. Quantisation is judged by the lattice of the measured values alone.
+5. **Extend** (:func:`_extend`, :mod:`.rounds`): keep the leading cause if significant, repeat (at most
+   ``max_rounds``) until nothing significant remains; then revisit each added effect but the last with the
+   others in place, since a first-round leader can mimic the sum of two hidden effects (:func:`.rounds.revisit`).
+   Quantisation is judged by the lattice of the measured values alone.
 6. **Verdict** (:func:`_conclude`): test what is left for structure no catalog entry explains
    (:func:`.unexplained.generic_residual_model`); the verdict is ``unexplained`` when the final residual stays
    far above the noise measured from the data, else ``discrepancy`` with causes or ``none``.
@@ -47,7 +49,6 @@ from typing import Any
 import numpy as np
 
 from sysid.errors import ConfigError, DataError
-from sysid.progress import progress as progress_bar
 from sysid.record import Record
 from twins.base import Twin
 from twins.calibration import calibrate as ls_calibrate
@@ -60,16 +61,12 @@ from .fields import core_for, numeric_fields, quant_params
 from .options import DiagnoseOptions
 from .prediction import (NOISE_EFFECTS, deterministic, significance, simulate, simulate_val, sse, unpredictable,
                          with_rails)
-from .ranking import cause_from, rank_round
 from .result import Diagnosis
-from .trials import Stage, Trial, make_stage, run_trial
+from .rounds import Extension, extend
+from .trials import Stage, make_stage
 from .unexplained import generic_residual_model
 
 __all__ = ["diagnose", "run_diagnosis", "NOISE_EFFECTS", "significance"]
-
-#: the failures that mean "this candidate cannot run here" (it is left out of the round)
-_TRIAL_ERRORS = (ConfigError, DataError, ValueError, np.linalg.LinAlgError)
-
 
 def diagnose(twin: Twin, data: Record, val: Record | None = None, max_rounds: int = 3, *,
              threads: int | None = None, **options: Any) -> dict[str, Any]:
@@ -240,110 +237,13 @@ def _own_calibration(twin: Twin) -> bool:
 
 
 # ---------------------------------------------------------------------------------------------- 3.–5. extend
-@dataclasses.dataclass
-class _Extension:
-    """The configuration after the rounds, the causes they named and every round's numbers."""
-
-    stage: Stage
-    causes: list[dict[str, Any]]
-    rounds: list[dict[str, Any]]
-
-
-def _extend(inp: _Inputs, cal: _Calibrated, base: Stage, max_rounds: int, opts: DiagnoseOptions) -> _Extension:
-    """Rounds of trials; each significant leader is added to the configuration."""
-    twin, skip = inp.twin, opts.skip
-    stage = base
-    retest_left = list(cal.retest)
-    # trials refit the core without the parameters of the effects that are on: a trial that refitted the creep
-    # rate would credit any added effect with the re-test's gain (the re-tests fit those parameters themselves)
-    core_r = [c for c in inp.core if c not in cal.held]
-    pool = [e for e in (opts.candidates if opts.candidates is not None else twin.EFFECTS)
-            if e in twin.EFFECTS and e not in twin.effects and e not in NOISE_EFFECTS and e not in unpredictable(twin)]
-    causes: list[dict[str, Any]] = []
-    rounds: list[dict[str, Any]] = []
-    for rnd in range(1, max(int(max_rounds), 0) + 1):
-        remaining = [e for e in pool if e not in stage.twin.effects]
-        if not remaining and not retest_left:
-            break
-        n_eff0 = ft.effective_samples(inp.val.y[skip:] - stage.yhat_val[skip:])
-        trials, errors = _round_trials(inp, cal, stage, remaining, retest_left, core_r, rnd, opts)
-        rounds += errors
-        if not trials:
-            break
-        ranking = rank_round(trials, stage, inp.est, inp.val, twin, cal.prior, n_eff0, opts)
-        rounds.append({"round": rnd, "nrmse_val_before": stage.nrmse_val, "n_eff": n_eff0,
-                       "candidates": ranking.rows, "group": ranking.group})
-        top = ranking.top
-        if not top.significant:
-            break
-        causes.append(cause_from(ranking, stage, twin, cal.prior, rnd))
-        if top.retest:
-            retest_left.remove(top.effect)
-        stage = make_stage(top.twin, inp.est, inp.val, opts)
-    return _Extension(stage, causes, rounds)
-
-
-def _round_trials(inp: _Inputs, cal: _Calibrated, stage: Stage, remaining: list[str], retest_left: list[str],
-                  core_r: list[str], rnd: int, opts: DiagnoseOptions) -> tuple[list[Trial], list[dict[str, Any]]]:
-    """The trials of one round (stage A for every candidate, stage B for the best, the re-tests) and a row for
-    each candidate that could not run."""
-    # features that guide the pre-scan come from the estimation residual (the data the trial is fitted to)
-    a_est = {**stage.analysis_est, "fs": inp.est.fs}
-    bases = _starting_points(stage, cal.prior, inp.core)
-    trials: list[Trial] = []
-    errors: list[dict[str, Any]] = []
-    for i_e, e in enumerate(progress_bar(remaining, desc=f"diagnose round {rnd}", unit="effect")):
-        opts.say(f"round {rnd}: trying {e} ({i_e + 1}/{len(remaining)})")
-        best_tr = None
-        for b in bases:
-            try:
-                tr = run_trial(b, e, inp.est, inp.val, core_r, a_est, opts, refit_core=False)
-            except _TRIAL_ERRORS as exc:  # cannot run here
-                errors.append({"round": rnd, "effect": e, "error": str(exc)})
-                continue
-            if best_tr is None or tr.sse_est < best_tr.sse_est:
-                if best_tr is not None:
-                    tr.seconds += best_tr.seconds
-                best_tr = tr
-        if best_tr is not None:
-            trials.append(best_tr)
-    _refine(trials, stage, inp, core_r, a_est, opts)
-    if retest_left:
-        opts.say(f"round {rnd}: re-testing {', '.join(retest_left)}")
-        trials += dflt.retest_trials(bases, retest_left, inp.est, inp.val, core_r, a_est, opts)
-    return trials, errors
-
-
-def _starting_points(stage: Stage, prior: Twin, core: list[str]) -> list[Twin]:
-    """The calibrated configuration (which may have bent its core parameters to mimic the missing effect) and,
-    where the calibration moved a core parameter by more than 2 % of its value, the configuration as given."""
-    cur_core = core_for(stage.twin, core)
-    prior_base = stage.twin.with_params(**{c: getattr(prior.params, c) for c in cur_core})
-    moved = any(abs(float(getattr(prior.params, c)) - float(getattr(stage.twin.params, c)))
-                > 0.02 * max(abs(float(getattr(prior.params, c))), 1e-300) for c in cur_core)
-    return [stage.twin] + ([prior_base] if moved else [])
-
-
-def _refine(trials: list[Trial], stage: Stage, inp: _Inputs, core_r: list[str], a_est: dict[str, Any],
-            opts: DiagnoseOptions) -> None:
-    """Stage B: the leader, and whoever comes close to it (within a factor 1.5 in validation SSE), refitted
-    together with the core parameters (``opts.refine`` at most); kept where the estimation SSE improves."""
-    trials.sort(key=lambda t: t.sse_val)
-    for i, tr in enumerate(trials[: max(int(opts.refine), 0)]):
-        if i > 0 and (tr.sse_val > 1.5 * trials[0].sse_val or tr.sse_val >= stage.sse_val * (1 - 1e-9)):
-            continue
-        try:
-            trB = run_trial(tr.base, tr.effect, inp.est, inp.val, core_r, a_est, opts, refit_core=True,
-                            start=tr.effect_params)
-        except _TRIAL_ERRORS:
-            continue
-        trB.seconds += tr.seconds
-        if trB.sse_est <= tr.sse_est:
-            trials[i] = trB
+def _extend(inp: _Inputs, cal: _Calibrated, base: Stage, max_rounds: int, opts: DiagnoseOptions) -> Extension:
+    """Greedy rounds of trials, then the revisit of each named effect (:mod:`.rounds`)."""
+    return extend(inp, cal, base, max_rounds, opts)
 
 
 # ---------------------------------------------------------------------------------------------- 6. verdict
-def _conclude(inp: _Inputs, cal: _Calibrated, base: Stage, ext: _Extension, opts: DiagnoseOptions) -> Diagnosis:
+def _conclude(inp: _Inputs, cal: _Calibrated, base: Stage, ext: Extension, opts: DiagnoseOptions) -> Diagnosis:
     """Quantisation and unexplained structure beside the causes found, the verdict, the typed result."""
     stage = ext.stage
     causes = ext.causes + _quantization_causes(inp, opts)
