@@ -79,10 +79,14 @@ class Executor:
         return self.client.scatter(_Blob(obj), broadcast=False, hash=False)
 
     def map(self, fn: Callable[..., Any], tasks: Sequence[tuple], desc: str = "tasks", progress: bool = True,
-            on_result: Callable[[int, Any], None] | None = None, keep: bool = True) -> list[Any]:
+            on_result: Callable[[int, Any], None] | None = None, keep: bool = True,
+            priorities: Sequence[float] | None = None) -> list[Any]:
         """``[fn(*task) for task in tasks]``, wherever it runs.
 
         ``on_result(index, result)`` is called in the order the tasks finish (to log a line per task); the
+        ``priorities`` (one per task, larger first) orders the tasks on a cluster, e.g. the expected cost, so
+        that the long ones start first and the short ones fill the end (no idle worker while the last long task
+        runs); in this process the tasks run in their given order. The
         returned list is in the order of ``tasks`` (all None with ``keep=False``, for results that
         ``on_result`` stores elsewhere, e.g. records written to a file as they come). An exception raised by
         a task is raised here (the other tasks are cancelled): tasks that can fail as a result must catch and
@@ -105,7 +109,8 @@ class Executor:
                 return results
             from distributed import as_completed
 
-            futures = [self.client.submit(_call, fn, *task, pure=False) for task in tasks]
+            prio = [0.0] * len(tasks) if priorities is None else [float(p) for p in priorities]
+            futures = [self.client.submit(_call, fn, *task, pure=False, priority=p) for task, p in zip(tasks, prio, strict=True)]
             index = {f.key: i for i, f in enumerate(futures)}
             try:
                 for fut in as_completed(futures):

@@ -353,7 +353,10 @@ def _score(identifiers, datasets, quick, sysidentpy, progress, factory, log, see
             for r in by_pair[pair][0]:
                 log(format_row(r))
 
-    ex.map(score_seed_task, tasks, desc="score", progress=progress, on_result=collect, keep=False)
+    # Larger estimation data first on a cluster (a proxy of a task's cost), so small tasks fill the end.
+    size = {d: sum(len(r) for r in loaded[d].est_records) for d in handles}
+    ex.map(score_seed_task, tasks, desc="score", progress=progress, on_result=collect, keep=False,
+           priorities=[size[d] for _, d in pairs for _ in range(n_seeds)])
     for dname in datasets:
         ds = loaded[dname]
         if isinstance(ds, Exception):
