@@ -136,11 +136,7 @@ class ARX(_LinearBase):
     def _fit_records(self, records: list[Record]) -> None:
         self.chosen_orders_ = {}
         if _choose_orders(self, ("ny", "nu")):
-            from sysid.order import select_arx_orders
-
-            check_records(records, max(1, int(self.nk)), 3, self.name)  # the data's own faults first, by name
-            probe = ARX(nk=self.nk, intercept=self.intercept, orders="given")
-            n, self.order_table_ = select_arx_orders(records, self.nk, int(self.max_order), probe)
+            n = _search_arx_order(self, records)
             self.ny = self.nu = n
             self.chosen_orders_ = {"ny": n, "nu": n}
         s = self._linear_structure(records, 0)
@@ -160,6 +156,17 @@ class ARX(_LinearBase):
 
     def _load_extra(self, extra: dict[str, Any]) -> None:
         self.chosen_orders_ = dict(extra.get("chosen_orders", {}))
+
+
+def _search_arx_order(model, records: list[Record]) -> int:
+    """ny = nu chosen by hold-out free-run error of ARX over the grid up to ``model.max_order`` (the table in
+    ``model.order_table_``); the data's own faults (constant input, too few samples) are reported first, by name."""
+    from sysid.order import select_arx_orders
+
+    check_records(records, max(1, int(model.nk)), 3, model.name)
+    probe = ARX(nk=model.nk, intercept=model.intercept, orders="given")
+    n, model.order_table_ = select_arx_orders(records, model.nk, int(model.max_order), probe)
+    return n
 
 
 def _choose_orders(model, keys: tuple[str, ...]) -> bool:
@@ -216,11 +223,7 @@ class ARMAX(_LinearBase):
             raise ConfigError(f"armax: method must be 'pem' or 'els', got {self.method!r}")
         self.chosen_orders_ = {}
         if _choose_orders(self, ("ny", "nu", "ne")):
-            from sysid.order import select_arx_orders
-
-            check_records(records, max(1, int(self.nk)), 3, self.name)  # the data's own faults first, by name
-            probe = ARX(nk=self.nk, intercept=self.intercept, orders="given")
-            n, self.order_table_ = select_arx_orders(records, self.nk, int(self.max_order), probe)
+            n = _search_arx_order(self, records)
             self.ny = self.nu = n
             self.ne = 2
             self.chosen_orders_ = {"ny": n, "nu": n, "ne": 2}

@@ -172,9 +172,14 @@ def _plan(identifier, ds, quick, factory, params, seeds) -> tuple[Any, dict[str,
     from sysid.registry import get_identifier
 
     cls = (factory or get_identifier)(identifier)
-    params = dict(settings_for(identifier, ds.name, quick) if params is None else params)
-    normalise = bool(params.pop(NORMALISE, False))
+    params, normalise = _options(identifier, ds, quick, params)
     return cls, params, normalise, seeds_for(cls, params, quick, seeds)
+
+
+def _options(identifier, ds, quick, params) -> tuple[dict[str, Any], bool]:
+    """The pair's identifier options without the normalise flag, and the flag."""
+    params = dict(settings_for(identifier, ds.name, quick) if params is None else params)
+    return params, bool(params.pop(NORMALISE, False))
 
 
 def _max_seeds(quick: bool, seeds: Sequence[int] | None) -> int:
@@ -208,8 +213,7 @@ def _fit_seed(identifier, ds, quick, factory, params, seeds, k: int) -> dict[str
 def _assemble(identifier, ds, quick, params, outcomes) -> tuple[list[dict[str, Any]], dict[str, np.ndarray]]:
     """Rows and free-run predictions of one pair from its seeds' evaluations (in seed order; None for a seed
     the pair does not have). Needs no identifier class, so the parent of Dask tasks does not import one."""
-    params = dict(settings_for(identifier, ds.name, quick) if params is None else params)
-    normalise = bool(params.pop(NORMALISE, False))
+    params, normalise = _options(identifier, ds, quick, params)
     outcomes = [o for o in outcomes if o is not None]
     runs = {test: [o[test] for o in outcomes] for test in ds.tests}
     pair_seeds = [o[next(iter(ds.tests))]["seed"] for o in outcomes] if ds.tests else []
