@@ -100,22 +100,26 @@ def provenance() -> dict[str, Any]:
             "versions": versions}
 
 
-def measure(entry: Entry, seeds: Sequence[int] = DEFAULT_SEEDS, executor=None, progress: bool = False) -> dict[str, Any]:
+def measure(entry: Entry, seeds: Sequence[int] = DEFAULT_SEEDS, executor=None, progress: bool = False,
+            fresh: bool = True) -> dict[str, Any]:
     """Score one row as its :func:`command` does and return it with how it was measured (not yet stored).
 
-    In-process runs (no Dask ``executor``) measure in a new Python process, as the printed command runs: the
-    row's times then include what a user's first fit pays (numba compilation) and nothing of the rows measured
-    before it. With a Dask executor the fits run on its workers and ``cpu_seconds`` counts none of them."""
-    if getattr(executor, "client", None) is not None:
+    Without a Dask ``executor`` the row is measured in a new Python process (``fresh``), as the printed command
+    runs: its times then include what a user's first fit pays (numba compilation) and nothing of the rows
+    measured before it; ``fresh=False`` measures here (quicker to start, times depend on what ran before).
+    With a Dask executor the fits run on its workers and ``cpu_seconds`` counts none of them."""
+    if not fresh or getattr(executor, "client", None) is not None:
         return _measure(entry, [int(s) for s in seeds], executor, progress)
     import multiprocessing
     from concurrent.futures import ProcessPoolExecutor
 
     with ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn")) as pool:
-        return pool.submit(_measure, entry, [int(s) for s in seeds], None, progress).result()
+        return pool.submit(_measure, entry, [int(s) for s in seeds], None, progress, "fresh").result()
 
 
-def _measure(entry: Entry, seeds: list[int], executor, progress: bool) -> dict[str, Any]:
+def _measure(entry: Entry, seeds: list[int], executor, progress: bool, process: str | None = None) -> dict[str, Any]:
+    if process is None:
+        process = "shared" if getattr(executor, "client", None) is None else "dask workers"
     from benchmarks import scoring
 
     load_before = list(os.getloadavg())
@@ -125,7 +129,7 @@ def _measure(entry: Entry, seeds: list[int], executor, progress: bool) -> dict[s
     wall, cpu = time.perf_counter() - wall0, time.process_time() - cpu0
     measured = provenance()
     measured.update(load_average_before=load_before, load_average_after=list(os.getloadavg()),
-                    wall_seconds=wall, cpu_seconds=cpu, process="fresh" if executor is None else "dask workers")
+                    wall_seconds=wall, cpu_seconds=cpu, process=process)
     return {"format": ROW_FORMAT, "dataset": entry.dataset, "identifier": entry.identifier, "seeds": seeds,
             "command": command(entry.dataset, entry.identifier, seeds), "why": entry.why, "measured": measured,
             "score": scoring._clean(run.to_dict())}
@@ -233,7 +237,9 @@ def fmt_value(x: Any, unit: str = "") -> str:
         return "—"
     if unit == "V" and abs(x) < 0.1:
         x, unit = x * 1e3, "mV"
-    return f"{x:.3g} {unit}".strip()
+    text = f"{x:#.3g}"  # 3 significant digits, trailing zeros kept (0.260)
+    text = text.rstrip(".") if "e" not in text else text
+    return f"{text} {unit}".strip()
 
 
 def fmt_spread(rmse: dict[str, Any], unit: str) -> str:

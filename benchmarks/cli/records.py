@@ -29,6 +29,9 @@ def register(sub) -> None:
     p.add_argument("--stored", metavar="DIR", help="folder of the stored rows (default docs/records)")
     p.add_argument("--markdown", metavar="FILE", help="page to write (default docs/benchmarks.md)")
     p.add_argument("--records-json", metavar="FILE", help="summary to write (default benchmarks/records.json)")
+    p.add_argument("--in-process", action="store_true",
+                   help="measure the rows in this process, not each in a fresh one (quicker to start; a row's times "
+                        "then include no numba compilation that an earlier row already paid)")
     p.add_argument("--json", action="store_true", help="print the records.json mapping")
     add_execution_args(p)
     p.set_defaults(func=run)
@@ -63,7 +66,7 @@ def run(args: argparse.Namespace) -> int:
             for e in chosen:
                 if not quiet:
                     print(f"{e.dataset}: {records.command(e.dataset, e.identifier, seeds)}", flush=True)
-                row = records.measure(e, seeds, executor=ex, progress=not quiet)
+                row = records.measure(e, seeds, executor=ex, progress=not quiet, fresh=not args.in_process)
                 path = records.write_row(row, stored)
                 if not quiet:
                     for r in records.score_rows(row):
