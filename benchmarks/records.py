@@ -260,7 +260,11 @@ def fmt_spread(rmse: dict[str, Any], unit: str) -> str:
 
 
 def _settings_text(params: dict[str, Any]) -> str:
-    return ", ".join(f"{k}={v}" for k, v in params.items()) or "defaults"
+    """The options as ``--set`` writes them (a list with dashes: ``hidden=25-25``)."""
+    def value(v: Any) -> str:
+        return "-".join(str(x) for x in v) if isinstance(v, (list, tuple)) else str(v)
+
+    return ", ".join(f"{k}={value(v)}" for k, v in params.items()) or "defaults"
 
 
 def page_context(entries: Sequence[Entry], rows: dict[str, dict[str, Any]],

@@ -10,7 +10,7 @@ raw result with how it was measured in ``docs/records/<dataset>.json``, then ren
 from __future__ import annotations
 
 import argparse
-import sys
+import logging
 
 from benchmarks.cli.common import seed_range
 from benchmarks.execution import add_execution_args, executor_from_args
@@ -75,9 +75,9 @@ def run(args: argparse.Namespace) -> int:
                     print(f"  stored -> {path} ({m['wall_seconds']:.1f} s wall, {m['cpu_seconds']:.1f} s CPU)")
     rows, missing = records.load_rows(entries, stored)
     data = records.write_outputs(entries, rows, missing, markdown, summary_path)
-    for e in missing:
-        print(f"piezotwin records: no stored row for {e.dataset} ({e.identifier}): run `piezotwin records "
-              f"--datasets {e.dataset}`", file=sys.stderr)
+    for e in missing:  # a warning: -q leaves it out
+        logging.getLogger(__name__).warning("no stored row for %s (%s): run `piezotwin records --datasets %s`",
+                                            e.dataset, e.identifier, e.dataset)
     if args.json:
         emit_json(data)
         return 0
