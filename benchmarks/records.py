@@ -118,9 +118,11 @@ def measure(entry: Entry, seeds: Sequence[int] = DEFAULT_SEEDS, executor=None, p
 
 
 def _measure(entry: Entry, seeds: list[int], executor, progress: bool, process: str | None = None) -> dict[str, Any]:
-    if process is None:
-        process = "shared" if getattr(executor, "client", None) is None else "dask workers"
+    """The row measured where this runs; ``process`` says where that is (fresh, in-process, dask workers)."""
     from benchmarks import scoring
+
+    if process is None:
+        process = "in-process" if getattr(executor, "client", None) is None else "dask workers"
 
     load_before = list(os.getloadavg())
     wall0, cpu0 = time.perf_counter(), time.process_time()

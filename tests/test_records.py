@@ -265,7 +265,7 @@ def test_one_real_row_end_to_end_equals_score_json(tmp_path, capsys):
     cmd = "piezotwin score --datasets cascaded-tanks --identifiers arx --seeds 0-2 --json"
     assert row["command"] == cmd and cmd in out and cmd in md.read_text()
     m = row["measured"]
-    assert m["process"] == "shared" and m["wall_seconds"] > 0 and m["cpu_seconds"] > 0 and len(m["load_average_before"]) == 3
+    assert m["process"] == "in-process" and m["wall_seconds"] > 0 and m["cpu_seconds"] > 0 and len(m["load_average_before"]) == 3
     assert m["versions"]["numpy"] == np.__version__ and m["machine"]["cores"] >= 1
     _same(row["score"], _fresh_score(cmd, capsys))
     entry = json.loads(js.read_text())["cascaded-tanks"]
