@@ -44,6 +44,7 @@ fmus: $(STAMP)
 # Regenerate the CLI reference from the argument parser (tests/test_docs.py checks it is current).
 docs: $(STAMP)
 	$(PY) -m benchmarks.cli.clidoc -o docs/cli.md
+	$(PY) -m benchmarks.cli records --render-only
 
 clean:
 	rm -rf $(VENV) report .pytest_cache .benchmarks

@@ -19,6 +19,18 @@ from sysid.record import FS_MAX, FS_MIN, Record
 SEED_MAX = 2**32 - 1
 
 
+def seed_range(text: str) -> list[int]:
+    """``A-B`` (inclusive) or one seed ``A``: non-negative integers, at most 1000 seeds."""
+    parts = text.split("-")
+    try:
+        lo, hi = (int(parts[0]), int(parts[-1])) if len(parts) in (1, 2) else (None, None)
+    except ValueError:
+        lo = hi = None
+    if lo is None or lo < 0 or hi < lo or hi - lo >= 1000:
+        raise argparse.ArgumentTypeError(f"expected seeds as A-B with 0 <= A <= B < A + 1000, got {text!r}")
+    return list(range(lo, hi + 1))
+
+
 def number(lo: float | None = None, hi: float | None = None, integer: bool = False, lo_open: bool = False):
     """An argparse ``type``: a finite number (an integer if ``integer``) in [lo, hi] (``(lo, hi]`` with
     ``lo_open``). Refuses nan, inf, huge values and text with one line."""

@@ -37,6 +37,7 @@ COMMAND_MODULES = (
     "orders",
     "search",
     "score",
+    "records",
     "diagnose",
     "sweep",
     "export_fmu",

@@ -12,7 +12,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from benchmarks.cli.common import number
+from benchmarks.cli.common import number, seed_range
 from benchmarks.execution import add_execution_args, executor_from_args
 
 
@@ -21,18 +21,6 @@ def _names(text: str | None) -> list[str] | None:
         return None
     names = [s.strip() for s in text.split(",") if s.strip()]
     return names or None
-
-
-def _seed_range(text: str) -> list[int]:
-    """``A-B`` (inclusive) or one seed ``A``: non-negative integers, at most 1000 seeds."""
-    parts = text.split("-")
-    try:
-        lo, hi = (int(parts[0]), int(parts[-1])) if len(parts) in (1, 2) else (None, None)
-    except ValueError:
-        lo = hi = None
-    if lo is None or lo < 0 or hi < lo or hi - lo >= 1000:
-        raise argparse.ArgumentTypeError(f"expected seeds as A-B with 0 <= A <= B < A + 1000, got {text!r}")
-    return list(range(lo, hi + 1))
 
 
 def register(sub) -> None:
@@ -47,9 +35,11 @@ def register(sub) -> None:
     p.add_argument("--margin", type=number(0, 10), default=0.15, help="margin of --update-baselines (default 0.15 = 15 %%)")
     p.add_argument("--seeded-margin", type=number(0, 10), default=0.5,
                    help="margin of --update-baselines for identifiers scored over several training seeds (default 0.5)")
-    p.add_argument("--seeds", metavar="A-B", type=_seed_range,
-                   help="--quick: training seeds of the seeded (neural) identifiers, scored as their median "
-                        "(default 0-4); runs over other seeds add single-seed draws to --update-baselines --from-runs")
+    p.add_argument("--seeds", metavar="A-B", type=seed_range,
+                   help="training seeds of the seeded (neural) identifiers, each test scored by the median seed and "
+                        "listed per seed with mean and SD (default: 0-4 with --quick, the identifier's own seed "
+                        "without); deterministic identifiers are fitted once and say so; quick runs over other seeds "
+                        "add single-seed draws to --update-baselines --from-runs")
     p.add_argument("--from-runs", nargs="+", metavar="RUN.json",
                    help="with --update-baselines: set floors from these saved `score --json` runs (e.g. one per CPU "
                         "kernel set and BLAS thread count; the worst value of each pair counts) instead of scoring now")
@@ -79,8 +69,6 @@ def run(args: argparse.Namespace) -> int:
     bpath = Path(args.baselines) if args.baselines else scoring.BASELINES_PATH
     # --check needs the floors; --update-baselines may start a new file
     baselines = scoring.load_baselines(bpath) if args.check or bpath.exists() else None
-    if args.seeds is not None and not args.quick:
-        raise ConfigError("--seeds applies to --quick runs (full runs train seed 0)")
     if args.seeds is not None and args.check:
         raise ConfigError("--seeds changes what the floors measure: use it to measure (--json), not with --check")
     if args.from_runs:

@@ -153,8 +153,9 @@ def score_pair(identifier: str, ds, quick: bool = False, factory: Callable[[str]
                params: dict[str, Any] | None = None, seeds: Sequence[int] | None = None) -> tuple[list[dict[str, Any]], dict[str, np.ndarray]]:
     """Fit ``identifier`` on ``ds.est`` and score every test of ``ds``; returns (rows, free-run predictions).
 
-    A seeded identifier in quick mode is fitted once per seed of :data:`QUICK_SEEDS` and each test is scored by
-    the run of median free-run RMSE (:func:`_median_run`); the row lists every seed's free-run RMSE. BLAS runs
+    A seeded identifier is fitted once per seed of ``seeds`` (default: :data:`QUICK_SEEDS` in quick mode, the
+    identifier's own seed in a full run) and each test is scored by the run of median free-run RMSE
+    (:func:`_median_run`); the row lists every seed's RMSE and their mean and SD. BLAS runs
     single-threaded (wherever the pair runs: in-process or in a worker), so no number depends on the core count."""
     from sysid._blas import blas_threads
 
@@ -164,7 +165,7 @@ def score_pair(identifier: str, ds, quick: bool = False, factory: Callable[[str]
 
 def _score_pair(identifier, ds, quick, factory, params, seeds=None) -> tuple[list[dict[str, Any]], dict[str, np.ndarray]]:
     outcomes = [_fit_seed(identifier, ds, quick, factory, params, seeds, k) for k in range(_max_seeds(quick, seeds))]
-    return _assemble(identifier, ds, quick, params, outcomes)
+    return _assemble(identifier, ds, quick, params, outcomes, seeds)
 
 
 def _plan(identifier, ds, quick, factory, params, seeds) -> tuple[Any, dict[str, Any], bool, tuple[int | None, ...]]:
@@ -183,8 +184,11 @@ def _options(identifier, ds, quick, params) -> tuple[dict[str, Any], bool]:
 
 
 def _max_seeds(quick: bool, seeds: Sequence[int] | None) -> int:
-    """How many seed tasks a pair may need: the quick seeds of a seeded identifier, else one."""
-    return len(QUICK_SEEDS if seeds is None else seeds) if quick else 1
+    """How many seed tasks a pair may need: the seeds asked for (quick or full mode), else the quick seeds in
+    quick mode, else one (a full run trains the identifier's default seed)."""
+    if seeds is not None:
+        return len(seeds)
+    return len(QUICK_SEEDS) if quick else 1
 
 
 def _fit_seed(identifier, ds, quick, factory, params, seeds, k: int) -> dict[str, dict[str, Any]] | None:
@@ -210,9 +214,13 @@ def _fit_seed(identifier, ds, quick, factory, params, seeds, k: int) -> dict[str
     return out
 
 
-def _assemble(identifier, ds, quick, params, outcomes) -> tuple[list[dict[str, Any]], dict[str, np.ndarray]]:
+def _assemble(identifier, ds, quick, params, outcomes, seeds=None) -> tuple[list[dict[str, Any]], dict[str, np.ndarray]]:
     """Rows and free-run predictions of one pair from its seeds' evaluations (in seed order; None for a seed
-    the pair does not have). Needs no identifier class, so the parent of Dask tasks does not import one."""
+    the pair does not have). Needs no identifier class, so the parent of Dask tasks does not import one.
+
+    A seeded row lists every seed's free-run and one-step RMSE and the mean and sample SD of the free-run RMSE
+    over the seeds that stayed finite; when ``seeds`` were asked for and the pair was fitted once (no training
+    seed, or one fixed by the settings), the row says ``"seeds": "deterministic"`` with that one value as mean."""
     params, normalise = _options(identifier, ds, quick, params)
     outcomes = [o for o in outcomes if o is not None]
     runs = {test: [o[test] for o in outcomes] for test in ds.tests}
@@ -231,11 +239,28 @@ def _assemble(identifier, ds, quick, params, outcomes) -> tuple[list[dict[str, A
             **ev, "references": ds.references.get(test, {}),
         }
         if seed is not None:
-            rmses = [(r.get("free_run") or {}).get("rmse") for r in runs[test]]
-            row.update(seed=seed, seeds=list(pair_seeds),
-                       free_run_rmse_by_seed=[x if _finite(x) else None for x in rmses])
+            row.update(seed=seed, seeds=list(pair_seeds), **_seed_columns(runs[test]))
+        elif seeds is not None:
+            rmse = ev["free_run"]["rmse"]
+            row.update(seeds="deterministic", free_run_rmse_mean=rmse if _finite(rmse) else None,
+                       free_run_rmse_sd=0.0 if _finite(rmse) else None, fit_seconds_mean=fit_s)
         rows.append(row)
     return rows, preds
+
+
+def _seed_columns(runs: list[dict[str, Any]]) -> dict[str, Any]:
+    """Per-seed free-run and one-step RMSE of one test (None where not finite), the mean and sample SD of the
+    finite free-run values (SD 0 for one value; None when none is finite) and the mean fit time."""
+    def finite(key: str) -> list[float | None]:
+        vals = [(r.get(key) or {}).get("rmse") for r in runs]
+        return [x if _finite(x) else None for x in vals]
+
+    free = finite("free_run")
+    ok = np.array([x for x in free if x is not None], dtype=float)
+    return {"free_run_rmse_by_seed": free, "one_step_rmse_by_seed": finite("one_step"),
+            "free_run_rmse_mean": float(ok.mean()) if ok.size else None,
+            "free_run_rmse_sd": (float(ok.std(ddof=1)) if ok.size > 1 else 0.0) if ok.size else None,
+            "fit_seconds_mean": float(np.mean([r["fit_seconds"] for r in runs]))}
 
 
 def _guarded(identifier: str, ds, body: Callable[[], Any]) -> tuple[str, Any]:
@@ -278,14 +303,14 @@ def score_seed_task(identifier: str, ds, quick: bool, factory: Callable[[str], A
         return _guarded(identifier, ds, lambda: _fit_seed(identifier, ds, quick, factory, None, seeds, k))
 
 
-def _pair_outcome(identifier, ds, quick, results: list[tuple[str, Any]]):
+def _pair_outcome(identifier, ds, quick, results: list[tuple[str, Any]], seeds: Sequence[int] | None = None):
     """A pair's (rows, predictions, skip) from its seed tasks, as :func:`score_pair_task` gives it: the first
     failing seed (in seed order) decides a skip or an error."""
     for status, value in results:
         if status != "ok":
             return _outcome(status, value)
     return _outcome(*_guarded(identifier, ds, lambda: _assemble(identifier, ds, quick, None,
-                                                                  [v for _, v in results])))
+                                                                  [v for _, v in results], seeds)))
 
 
 def score(identifiers: Iterable[str] | None = None, datasets: Iterable[str] | None = None, quick: bool = False,
@@ -353,7 +378,7 @@ def _score(identifiers, datasets, quick, sysidentpy, progress, factory, log, see
         if len(pending[pair]) == n_seeds:
             got = pending.pop(pair)
             ordered = [got[k] for k in range(n_seeds)]
-            by_pair[pair] = _pair_outcome(pair[0], loaded[pair[1]], quick, ordered)
+            by_pair[pair] = _pair_outcome(pair[0], loaded[pair[1]], quick, ordered, seeds)
             for r in by_pair[pair][0]:
                 log(format_row(r))
 

@@ -209,7 +209,7 @@ def make_floors(runs: ScoreRun | dict[str, Any] | list, margin: float = DEFAULT_
         for r in d["rows"]:
             key = (r["identifier"], r["dataset"], r["test"])
             seeds = r.get("seeds")
-            if seeds:
+            if isinstance(seeds, list) and seeds:  # a seeded row ("deterministic" when fitted once)
                 draws.setdefault(key, []).extend(r.get("free_run_rmse_by_seed") or [None])
                 if mode == "quick" and list(seeds) != list(QUICK_SEEDS):
                     continue  # a run over extra seeds: only its single-seed draws count

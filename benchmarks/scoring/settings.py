@@ -110,8 +110,9 @@ def is_seeded(cls: Any) -> bool:
 
 
 def seeds_for(cls: Any, params: dict[str, Any], quick: bool, seeds: Sequence[int] | None = None) -> tuple[int | None, ...]:
-    """Training seeds scored for one pair: ``seeds`` (default :data:`QUICK_SEEDS`) for a seeded identifier in quick
-    mode unless the settings fix a seed; otherwise one run with the settings as given (``None``)."""
-    if quick and "seed" not in params and is_seeded(cls):
+    """Training seeds scored for one pair: for a seeded identifier whose settings fix no seed, ``seeds`` when
+    given (quick or full mode), else :data:`QUICK_SEEDS` in quick mode; otherwise one run with the settings as
+    given (``None``: a full run without ``seeds`` trains the identifier's default seed)."""
+    if (quick or seeds is not None) and "seed" not in params and is_seeded(cls):
         return tuple(int(x) for x in (QUICK_SEEDS if seeds is None else seeds))
     return (None,)

@@ -1,0 +1,324 @@
+"""The records table: per dataset, the identifier whose full settings give its best row, scored over training
+seeds, stored with how it was measured, and rendered into ``docs/benchmarks.md`` and ``benchmarks/records.json``.
+
+- ``benchmarks/settings/records.toml`` names, per dataset, the identifier of its row (with a ``why`` line);
+- :func:`measure` scores one row exactly as ``piezotwin score --datasets D --identifiers I --seeds A-B --json``
+  does (same library call, same settings) and wraps the raw result with the machine, date, load average,
+  package versions and wall/CPU seconds; :func:`write_row` stores it as ``<dataset>.json`` (atomically);
+- :func:`load_rows` reads the stored rows back, :func:`summary` turns them into the ``records.json`` mapping and
+  :func:`render_markdown` fills the page template (``benchmarks/templates/benchmarks.md.j2``).
+
+Rendering needs no fitting, so one dataset's row can be measured again while the others are kept as stored.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from benchmarks.scoring.settings import SETTINGS_DIR, _read
+from sysid.errors import ConfigError
+
+ROW_FORMAT = "piezotwin-records-row/1"
+_ROOT = Path(__file__).resolve().parent.parent
+#: where the rows are stored, the page and the summary are written (a source checkout's paths)
+STORED_DIR = _ROOT / "docs" / "records"
+MARKDOWN_PATH = _ROOT / "docs" / "benchmarks.md"
+RECORDS_JSON = Path(__file__).resolve().parent / "records.json"
+RECORDS_SETTINGS = SETTINGS_DIR / "records.toml"
+TEMPLATES_DIR = Path(__file__).resolve().parent / "templates"
+TEMPLATE = "benchmarks.md.j2"
+#: training seeds of every row (a deterministic identifier is fitted once and says so)
+DEFAULT_SEEDS: tuple[int, ...] = (0, 1, 2)
+# keys of a score run that measure time, not accuracy: they differ between two runs of the same command
+TIMING_KEYS = ("seconds", "fit_seconds", "fit_seconds_mean")
+
+
+@dataclass(frozen=True)
+class Entry:
+    """One row of the table: the dataset, the identifier whose full settings give it, and why that one."""
+
+    dataset: str
+    identifier: str
+    why: str
+
+
+def load_entries(path: str | Path | None = None) -> list[Entry]:
+    """The rows of ``records.toml`` in the file's order; each table needs a known ``identifier`` and a ``why``."""
+    from benchmarks.datasets import dataset_names
+    from sysid.registry import IDENTIFIERS
+
+    path = Path(path) if path else RECORDS_SETTINGS
+    entries = []
+    for dname, table in _read(path).items():
+        if dname not in dataset_names():
+            raise ConfigError(f"{path}: [{dname}] is not a dataset; valid: {', '.join(dataset_names())}")
+        if not isinstance(table, dict) or set(table) != {"identifier", "why"}:
+            raise ConfigError(f"{path}: [{dname}] needs exactly `identifier` and a `why` line")
+        ident, why = table["identifier"], table["why"]
+        if ident not in IDENTIFIERS:
+            raise ConfigError(f"{path}: [{dname}] identifier {ident!r} unknown; valid: {', '.join(IDENTIFIERS)}")
+        if not (isinstance(why, str) and why.strip()):
+            raise ConfigError(f"{path}: [{dname}] needs a `why` line saying which measurement chose {ident!r}")
+        entries.append(Entry(dname, ident, why.strip()))
+    return entries
+
+
+def seeds_text(seeds: Sequence[int]) -> str:
+    """``A-B`` for consecutive seeds (the form ``score --seeds`` takes)."""
+    seeds = [int(s) for s in seeds]
+    if not seeds or seeds != list(range(seeds[0], seeds[0] + len(seeds))):
+        raise ConfigError(f"records need consecutive training seeds (A-B), got {seeds}")
+    return f"{seeds[0]}-{seeds[-1]}"
+
+
+def command(dataset: str, identifier: str, seeds: Sequence[int] = DEFAULT_SEEDS) -> str:
+    """The ``piezotwin score`` command that reproduces one row with the default (full) settings."""
+    return f"piezotwin score --datasets {dataset} --identifiers {identifier} --seeds {seeds_text(seeds)} --json"
+
+
+def provenance() -> dict[str, Any]:
+    """What a measured time depends on: date, machine (CPU, cores, torch kernels), load and package versions."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    from benchmarks.scoring.core import environment
+
+    env = environment()
+    versions = env.pop("versions", {})
+    for dist in ("piezotwin", "sysidentpy"):
+        try:
+            versions[dist] = version(dist)
+        except PackageNotFoundError:
+            versions[dist] = None
+    return {"date": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()), "machine": {**env, "cores": os.cpu_count()},
+            "versions": versions}
+
+
+def measure(entry: Entry, seeds: Sequence[int] = DEFAULT_SEEDS, executor=None, progress: bool = False,
+            fresh: bool = True) -> dict[str, Any]:
+    """Score one row as its :func:`command` does and return it with how it was measured (not yet stored).
+
+    Without a Dask ``executor`` the row is measured in a new Python process (``fresh``), as the printed command
+    runs: its times then include what a user's first fit pays (numba compilation) and nothing of the rows
+    measured before it; ``fresh=False`` measures here (quicker to start, times depend on what ran before).
+    With a Dask executor the fits run on its workers and ``cpu_seconds`` counts none of them."""
+    if not fresh or getattr(executor, "client", None) is not None:
+        return _measure(entry, [int(s) for s in seeds], executor, progress)
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor
+
+    with ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn")) as pool:
+        return pool.submit(_measure, entry, [int(s) for s in seeds], None, progress, "fresh").result()
+
+
+def _measure(entry: Entry, seeds: list[int], executor, progress: bool, process: str | None = None) -> dict[str, Any]:
+    """The row measured where this runs; ``process`` says where that is (fresh, in-process, dask workers)."""
+    from benchmarks import scoring
+
+    if process is None:
+        process = "in-process" if getattr(executor, "client", None) is None else "dask workers"
+
+    load_before = list(os.getloadavg())
+    wall0, cpu0 = time.perf_counter(), time.process_time()
+    run = scoring.score([entry.identifier], [entry.dataset], quick=False, progress=progress, seeds=seeds,
+                        executor=executor)
+    wall, cpu = time.perf_counter() - wall0, time.process_time() - cpu0
+    measured = provenance()
+    measured.update(load_average_before=load_before, load_average_after=list(os.getloadavg()),
+                    wall_seconds=wall, cpu_seconds=cpu, process=process)
+    return {"format": ROW_FORMAT, "dataset": entry.dataset, "identifier": entry.identifier, "seeds": seeds,
+            "command": command(entry.dataset, entry.identifier, seeds), "why": entry.why, "measured": measured,
+            "score": scoring._clean(run.to_dict())}
+
+
+def row_path(directory: str | Path, dataset: str) -> Path:
+    return Path(directory) / f"{dataset}.json"
+
+
+def write_row(row: dict[str, Any], directory: str | Path) -> Path:
+    """Store one measured row as ``<directory>/<dataset>.json``, atomically."""
+    from sysid.jsonio import clean_json
+    from sysid.safeio import atomic_write_text
+
+    path = row_path(directory, row["dataset"])
+    path.parent.mkdir(parents=True, exist_ok=True)
+    atomic_write_text(path, json.dumps(clean_json(row), indent=1, ensure_ascii=False) + "\n")
+    return path
+
+
+def load_rows(entries: Sequence[Entry], directory: str | Path) -> tuple[dict[str, dict[str, Any]], list[Entry]]:
+    """The stored rows of ``entries`` (by dataset) and the entries that have none yet. A stored row of another
+    identifier than the entry names counts as missing (the settings changed since it was measured)."""
+    rows, missing = {}, []
+    for e in entries:
+        path = row_path(directory, e.dataset)
+        if not path.exists():
+            missing.append(e)
+            continue
+        row = _read_row(path)
+        if row["dataset"] != e.dataset:
+            raise ConfigError(f"{path}: holds the row of {row['dataset']!r}, not of {e.dataset!r}")
+        if row["identifier"] != e.identifier:
+            missing.append(e)
+            continue
+        rows[e.dataset] = row
+    return rows, missing
+
+
+def _read_row(path: Path) -> dict[str, Any]:
+    try:
+        row = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise ConfigError(f"{path}: cannot read a stored records row ({exc})") from None
+    if not (isinstance(row, dict) and row.get("format") == ROW_FORMAT and isinstance(row.get("score"), dict)
+            and isinstance(row["score"].get("rows"), list) and isinstance(row.get("measured"), dict)
+            and all(isinstance(row.get(k), str) for k in ("dataset", "identifier", "command"))):
+        raise ConfigError(f"{path}: not a stored records row (format {ROW_FORMAT!r} with dataset, identifier, "
+                          "command, measured and score)")
+    return row
+
+
+def score_rows(row: dict[str, Any]) -> list[dict[str, Any]]:
+    """The scored test rows of one stored row (its identifier on its dataset), in test order."""
+    return [r for r in row["score"]["rows"] if r.get("identifier") == row["identifier"]
+            and r.get("dataset") == row["dataset"]]
+
+
+def _test_rmse(r: dict[str, Any]) -> dict[str, Any]:
+    """mean / sd / seeds of one scored test row (``seeds``: seed -> free-run RMSE, or ``"deterministic"``)."""
+    if r.get("status") == "error":
+        return {"mean": None, "sd": None, "seeds": None}
+    seeds = r.get("seeds")
+    if isinstance(seeds, list):
+        by_seed = {str(s): v for s, v in zip(seeds, r.get("free_run_rmse_by_seed") or [])}
+        return {"mean": r.get("free_run_rmse_mean"), "sd": r.get("free_run_rmse_sd"), "seeds": by_seed}
+    rmse = (r.get("free_run") or {}).get("rmse")
+    return {"mean": rmse, "sd": 0.0 if rmse is not None else None, "seeds": "deterministic"}
+
+
+def _record(r: dict[str, Any]) -> dict[str, Any] | None:
+    best = (r.get("references") or {}).get("best_published")
+    return {k: best[k] for k in ("value", "unit", "model")} if best else None
+
+
+def summarise_row(row: dict[str, Any]) -> dict[str, Any]:
+    """One dataset's entry of ``records.json``: identifier, free-run RMSE per test (mean, sd, seeds), the mean
+    training time of one model (seconds), the reproducing command and the published record per test."""
+    tests = score_rows(row)
+    fits = [r.get("fit_seconds_mean", r.get("fit_seconds")) for r in tests]
+    fits = [f for f in fits if isinstance(f, (int, float))]
+    return {"identifier": row["identifier"], "rmse": {r["test"]: _test_rmse(r) for r in tests},
+            "seconds": fits[0] if fits else None, "command": row["command"],
+            "record": {r["test"]: _record(r) for r in tests}}
+
+
+def summary(entries: Sequence[Entry], rows: dict[str, dict[str, Any]]) -> dict[str, Any]:
+    """``records.json``: dataset -> :func:`summarise_row`, in the order of ``records.toml``; rows not stored yet
+    are left out (:func:`load_rows` names them)."""
+    return {e.dataset: summarise_row(rows[e.dataset]) for e in entries if e.dataset in rows}
+
+
+def strip_timing(obj: Any) -> Any:
+    """A score run without its timing keys: what two runs of the same command share exactly."""
+    if isinstance(obj, dict):
+        return {k: strip_timing(v) for k, v in obj.items() if k not in TIMING_KEYS}
+    if isinstance(obj, list):
+        return [strip_timing(v) for v in obj]
+    return obj
+
+
+def fmt_value(x: Any, unit: str = "") -> str:
+    """A figure for the page: mV below 0.1 V, 3 significant digits; ``—`` when missing or not finite."""
+    if not isinstance(x, (int, float)) or isinstance(x, bool) or not math.isfinite(x):
+        return "—"
+    if unit == "V" and abs(x) < 0.1:
+        x, unit = x * 1e3, "mV"
+    text = f"{x:#.3g}"  # 3 significant digits, trailing zeros kept (0.260)
+    text = text.rstrip(".") if "e" not in text else text
+    return f"{text} {unit}".strip()
+
+
+def fmt_spread(rmse: dict[str, Any], unit: str) -> str:
+    """``mean ± SD unit (seeds A-B)``, or ``value unit (deterministic)``, in the unit :func:`fmt_value` picks."""
+    mean, sd = rmse.get("mean"), rmse.get("sd")
+    text = fmt_value(mean, unit)
+    if text == "—":
+        return "diverged or failed" if rmse.get("seeds") is not None else "error"
+    if rmse["seeds"] == "deterministic":
+        return f"{text} (deterministic)"
+    scale = 1e3 if text.endswith(" mV") else 1.0
+    value, shown_unit = text.split(" ", 1) if " " in text else (text, "")
+    seeds = [int(s) for s in rmse["seeds"]]
+    n_bad = sum(v is None for v in rmse["seeds"].values())
+    spread = f"{value} ± {sd * scale:.2g} {shown_unit}".strip() if isinstance(sd, (int, float)) else text
+    bad = f", {n_bad} diverged" if n_bad else ""
+    return f"{spread} (seeds {seeds[0]}-{seeds[-1]}{bad})"
+
+
+def _settings_text(params: dict[str, Any]) -> str:
+    """The options as ``--set`` writes them (a list with dashes: ``hidden=25-25``)."""
+    def value(v: Any) -> str:
+        return "-".join(str(x) for x in v) if isinstance(v, (list, tuple)) else str(v)
+
+    return ", ".join(f"{k}={value(v)}" for k, v in params.items()) or "defaults"
+
+
+def page_context(entries: Sequence[Entry], rows: dict[str, dict[str, Any]],
+                 missing: Sequence[Entry]) -> dict[str, Any]:
+    """What the page template shows: one line per dataset and test, one per stored row's measurement, and the
+    rows not measured yet with the command that measures them."""
+    lines, measurements = [], []
+    for e in entries:
+        if e.dataset not in rows:
+            continue
+        row = rows[e.dataset]
+        entry = summarise_row(row)
+        for r in score_rows(row):
+            unit = r.get("units", "")
+            rec = entry["record"][r["test"]]
+            lines.append({"dataset": e.dataset, "test": r["test"], "identifier": row["identifier"],
+                          "settings": _settings_text(r.get("params") or {}),
+                          "rmse": fmt_spread(entry["rmse"][r["test"]], unit),
+                          "seconds": "—" if entry["seconds"] is None else f"{entry['seconds']:.3g}",
+                          "record": f"{fmt_value(rec['value'], unit)} ({rec['model']})" if rec else "—",
+                          "command": row["command"]})
+        m = row["measured"]
+        versions = m.get("versions") or {}
+        measurements.append({
+            "dataset": e.dataset, "date": m.get("date", "?"), "cpu": (m.get("machine") or {}).get("cpu", "?"),
+            "cores": (m.get("machine") or {}).get("cores", "?"),
+            "load": " → ".join(f"{(m.get(k) or [math.nan])[0]:.1f}" for k in ("load_average_before", "load_average_after")),
+            "wall": f"{m.get('wall_seconds', math.nan):.1f}", "cpu_s": f"{m.get('cpu_seconds', math.nan):.1f}",
+            "versions": ", ".join(f"{k} {v}" for k, v in versions.items() if v)})
+    return {"lines": lines, "measurements": measurements, "why": [(e.dataset, e.identifier, e.why) for e in entries],
+            "missing": [{"dataset": e.dataset, "identifier": e.identifier,
+                         "command": f"piezotwin records --datasets {e.dataset}"} for e in missing],
+            "default_seeds": seeds_text(DEFAULT_SEEDS)}
+
+
+def render_markdown(entries: Sequence[Entry], rows: dict[str, dict[str, Any]], missing: Sequence[Entry]) -> str:
+    """The whole ``docs/benchmarks.md``: the page template with the records tables filled from stored rows."""
+    import jinja2
+
+    env = jinja2.Environment(loader=jinja2.FileSystemLoader(TEMPLATES_DIR), undefined=jinja2.StrictUndefined,
+                             keep_trailing_newline=True, autoescape=False)
+    return env.get_template(TEMPLATE).render(**page_context(entries, rows, missing))
+
+
+def write_outputs(entries: Sequence[Entry], rows: dict[str, dict[str, Any]], missing: Sequence[Entry],
+                  markdown: str | Path, records_json: str | Path) -> dict[str, Any]:
+    """Render both outputs and write them atomically; returns the ``records.json`` mapping."""
+    from sysid.jsonio import clean_json
+    from sysid.safeio import atomic_write_text
+
+    text = render_markdown(entries, rows, missing)
+    data = clean_json(summary(entries, rows))
+    atomic_write_text(records_json, json.dumps(data, indent=2, ensure_ascii=False) + "\n")
+    atomic_write_text(markdown, text)
+    return data
