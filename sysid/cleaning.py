@@ -64,24 +64,11 @@ def _hampel_core(xp: np.ndarray, n: int, k: int, med: np.ndarray, mad: np.ndarra
         if i > 0:
             old = xp[i - 1]
             new = xp[i + w - 1]
-            # delete old (binary search for its position)
-            lo, hi = 0, w
-            while lo < hi:
-                mid = (lo + hi) // 2
-                if s[mid] < old:
-                    lo = mid + 1
-                else:
-                    hi = mid
+            # delete old (its first position in the sorted window), then insert new into s[0 : w-1]
+            lo = np.searchsorted(s, old)
             for j in range(lo, w - 1):
                 s[j] = s[j + 1]
-            # insert new into s[0 : w-1]
-            lo, hi = 0, w - 1
-            while lo < hi:
-                mid = (lo + hi) // 2
-                if s[mid] < new:
-                    lo = mid + 1
-                else:
-                    hi = mid
+            lo = np.searchsorted(s[:w - 1], new)
             for j in range(w - 1, lo, -1):
                 s[j] = s[j - 1]
             s[lo] = new

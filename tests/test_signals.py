@@ -202,13 +202,13 @@ def test_sine_eq_2_3_and_crest_factor():
 def test_stepped_sine_windows_and_continuity():
     fs = 10e3
     u, info = S.stepped_sine(fs, [10.0, 25.0, 100.0], amplitude=2.0, settle=0.2, cycles=5, return_info=True)
-    for st in info["steps"]:
-        assert st["measure_start"] - st["start"] == 2000
-        n = st["stop"] - st["measure_start"]
-        assert n == round(st["cycles"] * fs / st["freq_hz"])
-        seg = u[st["measure_start"]:st["stop"]]
+    for step in info["steps"]:
+        assert step["measure_start"] - step["start"] == 2000
+        n = step["stop"] - step["measure_start"]
+        assert n == round(step["cycles"] * fs / step["freq_hz"])
+        seg = u[step["measure_start"]:step["stop"]]
         X = np.abs(np.fft.rfft(seg)) * 2 / n
-        assert X[st["cycles"]] == pytest.approx(2.0, rel=1e-9)  # whole periods: all power on one line
+        assert X[step["cycles"]] == pytest.approx(2.0, rel=1e-9)  # whole periods: all power on one line
     assert u.size == info["steps"][-1]["stop"]
     # phase-continuous: no step larger than the fastest sine's slope allows
     assert np.max(np.abs(np.diff(u))) <= 2.0 * 2 * np.pi * 100.0 / fs * 1.0001

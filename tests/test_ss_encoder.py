@@ -122,6 +122,24 @@ def test_nonlinear_default_network_beats_linear_on_a_static_nonlinearity():
     assert rms["mlp"] < 0.5 * rms["linear"]
 
 
+def test_cosine_decay_to_lr_is_the_constant_step_and_decays_otherwise():
+    """A cosine from lr down to lr_min = lr is the constant step: the same weights bit for bit; a decay to 0 trains
+    the first epoch at lr exactly as the constant step does and differs from the second epoch on."""
+    rng = np.random.default_rng(3)
+    u = rng.standard_normal(600)
+    y, _ = simulate(u, [0.0, 0.0])
+    common = dict(nx=2, ny=4, nu=4, f_hidden=8, h_hidden=0, e_hidden=0, T=20, batch_size=32, epochs=4, lr=1e-2,
+                  device="cpu", seed=0, val_fraction=0.0)
+    rec = Record(u=u, y=y, fs=1.0)
+    const = SSEncoder(**common).fit(rec)
+    same = SSEncoder(lr_min=1e-2, **common).fit(rec)
+    for part in const.weights_:
+        np.testing.assert_array_equal(const.weights_[part]["W"], same.weights_[part]["W"])
+    decayed = SSEncoder(lr_min=0.0, **common).fit(rec)
+    assert decayed.loss_history_[0] == const.loss_history_[0]  # the first epoch runs at lr in both
+    assert decayed.loss_history_ != const.loss_history_
+
+
 def test_bad_options_are_refused():
     from sysid.errors import ConfigError, DataError
 
@@ -132,6 +150,8 @@ def test_bad_options_are_refused():
     m = SSEncoder.from_assignments({"f_hidden": "64-32", "h_hidden": "0", "e_hidden": "0"})
     m._check_params(check_device=False)
     assert (m.f_hidden, m.h_hidden, m.e_hidden) == ([64, 32], [], [])
+    with pytest.raises(ConfigError, match="lr_min"):
+        SSEncoder(lr=1e-3, lr_min=1e-2, device="cpu").fit(Record(u=np.arange(100.0), y=np.arange(100.0) ** 2, fs=1.0))
     with pytest.raises(DataError):
         SSEncoder(T=500, device="cpu").fit(Record(u=np.sin(np.arange(100.0)), y=np.cos(np.arange(100.0)), fs=1.0))
 

@@ -72,7 +72,6 @@ def _bounds(twin: Twin, names: Sequence[str]) -> tuple[np.ndarray, np.ndarray]:
         if n not in info:
             raise ConfigError(f"cannot fit unknown parameter {n!r}; valid: {', '.join(info)}")
         a, b = info[n].range
-        v = float(getattr(twin.params, n))
         a = -np.inf if a is None else float(a)
         b = np.inf if b is None else float(b)
         lo.append(a)

@@ -101,17 +101,21 @@ def train_simulation(model: torch.nn.Module, train: Sequence[tuple[np.ndarray, n
                      val: Sequence[tuple[np.ndarray, np.ndarray]] | None = None, patience: int = 0,
                      clip: float = 0.0, generator: torch.Generator | None = None,
                      device: torch.device = torch.device("cpu"), log: Callable[[str], None] | None = None,
-                     max_seconds: float | None = None) -> SimTrainResult:
+                     max_seconds: float | None = None, lr_min: float | None = None) -> SimTrainResult:
     """Minimise the truncated T-step simulation loss of ``model`` on ``train`` with Adam (see the module
     docstring); early stopping on the free-run RMSE of ``val`` when given (the best weights are loaded back into
     ``model``). ``patience`` > 0 stops after that many epochs without a better validation RMSE; ``clip`` > 0
     clips the gradient norm; ``max_seconds`` (wall clock) stops after the epoch that passes it — a guard for
-    shared machines, not a setting that results should depend on. Returns a :class:`SimTrainResult`."""
+    shared machines, not a setting that results should depend on. ``lr_min``: the step size follows a cosine from
+    ``lr`` down to ``lr_min`` over ``epochs`` (``torch.optim.lr_scheduler.CosineAnnealingLR``, one step per
+    epoch; Loshchilov & Hutter 2017, eq. 5); ``None`` keeps ``lr`` constant. Returns a :class:`SimTrainResult`."""
     gen = generator or torch.Generator().manual_seed(0)
     sec = Sections(train, lag, T, device)
     if len(sec) == 0:
         raise ValueError(f"no record has lag + T = {lag + T} samples for one section")
     opt = torch.optim.Adam(model.parameters(), lr=float(lr))
+    sched = (torch.optim.lr_scheduler.CosineAnnealingLR(opt, T_max=max(int(epochs), 1), eta_min=float(lr_min))
+             if lr_min is not None else None)
     res = SimTrainResult()
     c0, w0 = time.process_time(), time.perf_counter()
     best_state = None
@@ -138,6 +142,8 @@ def train_simulation(model: torch.nn.Module, train: Sequence[tuple[np.ndarray, n
             total += loss.detach().double() * sel.numel()
         res.loss_history.append(float(total.item()) / len(sec))
         res.epochs_run = ep
+        if sched is not None:
+            sched.step()
         msg = f"epoch {ep}: train loss {res.loss_history[-1]:.4g}"
         if val:
             v = validation_rmse(model, val, lag, device)
