@@ -133,7 +133,11 @@ def test_render_puts_each_value_in_its_cell(fake, capsys):
     assert sb["rmse"]["multisine"]["mean"] == pytest.approx(0.85e-3) and sb["rmse"]["multisine"]["seeds"] == {
         "0": 0.84e-3, "1": 0.85e-3, "2": 0.86e-3}
     assert sb["rmse"]["arrow"]["sd"] == pytest.approx(np.std([2.5e-3, 2.7e-3, 3.0e-3], ddof=1))
-    assert sb["record"] == {"multisine": {"value": 0.31e-3, "unit": "V", "model": "GRU"}, "arrow": None}
+    # the published record comes from today's reference table where it has the test, else from the stored row
+    from benchmarks.datasets.references import references_for
+
+    arrow = {k: references_for("silverbox")["arrow"]["best_published"][k] for k in ("value", "unit", "model")}
+    assert sb["record"] == {"multisine": {"value": 0.31e-3, "unit": "V", "model": "GRU"}, "arrow": arrow}
     assert sb["command"] == "piezotwin score --datasets silverbox --identifiers ss-encoder --seeds 0-2 --json"
     ct = data["cascaded-tanks"]
     assert ct["rmse"] == {"test": {"mean": 0.358, "sd": 0.0, "seeds": "deterministic"}} and ct["seconds"] == 1.5
@@ -142,7 +146,7 @@ def test_render_puts_each_value_in_its_cell(fake, capsys):
     ms = _cells(md, "| silverbox / multisine")
     assert ms == ["silverbox / multisine", "`ss-encoder`: ny=2, nu=24", "0.850 ± 0.01 mV (seeds 0-2)", "240",
                   "0.310 mV (GRU)", f"`{sb['command']}`"]
-    assert _cells(md, "| silverbox / arrow")[4] == "—"
+    assert _cells(md, "| silverbox / arrow")[4] == "1.41 mV (SUBNET (arrow full))"  # stored without, found in the table
     assert _cells(md, "| cascaded-tanks / test")[2:5] == ["0.358 V (deterministic)", "1.5", "0.340 V (black-box)"]
     assert "| silverbox / multisine | `arx`" not in md
     assert _cells(md, "| silverbox | 2026-11-26")[4:7] == ["1.5 → 2.5", "100.0", "50.0"]

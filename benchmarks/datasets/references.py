@@ -30,6 +30,9 @@ REFERENCES: dict[str, dict[str, dict[str, dict[str, Any]]]] = {
             "best_published": {"value": 1.41 * MV, "unit": "V", "model": "SUBNET (arrow full)"},
             "sysidentpy": {"value": 4.15 * MV, "unit": "V", "model": "polynomial NARX (FROLS)"},
         },
+        "arrow-no-extrapolation": {
+            "best_published": {"value": 0.307 * MV, "unit": "V", "model": "SUBNET encoder (0.307-0.316 mV for nx 4-8)"},
+        },
     },
     "cascaded-tanks": {
         "test": {
