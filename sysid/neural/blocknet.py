@@ -40,7 +40,7 @@ class BlockNet(torch.nn.Module):
     """G1 → F → G2 (+ G0) on ``u`` (B, T, n_in) → ``ŷ`` (B, T, n_out), float64."""
 
     def __init__(self, n_in: int, n_out: int, channels: int, channels_out: int, hidden: Sequence[int], nb: int, na: int,
-                 nb2: int, na2: int, nk: int = 0, linear_path: bool = False, activation: str = "tanh",
+                 nb2: int, na2: int, nk: int = 0, linear: bool = False, activation: str = "tanh",
                  generator: torch.Generator | None = None):
         super().__init__()
         gen = generator or torch.Generator().manual_seed(0)
@@ -57,7 +57,7 @@ class BlockNet(torch.nn.Module):
             layers.append(lin)
         self.f = torch.nn.ModuleList(layers)
         self.g2 = LinearDynamic(channels_out, n_out, nb2, na2, 0, gen)
-        self.g0 = LinearDynamic(n_in, n_out, nb, na, nk, gen) if linear_path else None
+        self.g0 = LinearDynamic(n_in, n_out, nb, na, nk, gen) if linear else None
 
     def static(self, z: torch.Tensor) -> torch.Tensor:
         """F applied at every time step (the last axis holds the channels)."""
