@@ -41,10 +41,10 @@ def test_iir_gradients_match_finite_differences():
 def test_linear_system_learned_exactly():
     """y = B/A u (from rest): a single IIR layer trained on the free-run error finds b and a to 1e-4."""
     rng = np.random.default_rng(0)
-    u = rng.standard_normal(2000)
+    u = rng.standard_normal(1000)
     y = lfilter(B_TRUE, np.r_[1.0, A_TRUE], u)
     layer = LinearDynamic(1, 1, nb=2, na=2, generator=torch.Generator().manual_seed(0))
-    res = train_records(layer, [(u[:, None], y[:, None])], warmup=0, epochs=1500, lr=2e-2, lr_min=1e-4)
+    res = train_records(layer, [(u[:, None], y[:, None])], warmup=0, epochs=300, lr=0.1, lr_min=1e-4)
     assert res.stopped == "epochs"
     np.testing.assert_allclose(layer.b.detach().numpy().ravel(), B_TRUE, atol=1e-4)
     np.testing.assert_allclose(layer.a.detach().numpy().ravel(), A_TRUE, atol=1e-4)
@@ -56,29 +56,43 @@ def _wh_system(u: np.ndarray) -> np.ndarray:
     return lfilter([0.5, 0.3], [1.0, -0.6], w)
 
 
-@pytest.fixture(scope="module")
-def wh_fit():
+def _wh_fit(epochs: int) -> tuple[WHNet, float]:
     rng = np.random.default_rng(1)
-    u = rng.standard_normal(3000)
+    u = rng.standard_normal(2000)
     y = _wh_system(u)
     noise = 0.01 * np.std(y)
-    model = WHNet(channels=3, hidden=12, nb=3, na=2, epochs=600, lr=2e-2, lr_min=1e-4, val_fraction=0.2, warmup=10,
+    model = WHNet(channels=3, hidden=12, nb=3, na=2, epochs=epochs, lr=3e-2, lr_min=1e-4, val_fraction=0.2, warmup=10,
                   seed=0, device="cpu")
     model.fit(Record(u=u, y=y + noise * rng.standard_normal(u.size), fs=1.0))
     return model, noise
 
 
-def test_wiener_hammerstein_system_reproduced_in_free_run(wh_fit):
-    """Known blocks (2nd-order G1, saturating F, 1st-order G2), 1 % output noise: the free run of a new input is
-    within a few noise levels of the noise-free output, and far better than the best linear model."""
-    model, noise = wh_fit
-    rng = np.random.default_rng(2)
-    ut = rng.standard_normal(1000)
+def _free_run_rmse(model: WHNet) -> float:
+    ut = np.random.default_rng(2).standard_normal(1000)
     yt = _wh_system(ut)
     yh = model.predict(Record(u=ut, y=yt, fs=1.0), None)
     np.testing.assert_array_equal(yh[:10], yt[:10])
-    rmse = np.sqrt(np.mean((yh - yt)[10:] ** 2))
-    assert rmse < 3 * noise, (rmse, noise)
+    return float(np.sqrt(np.mean((yh - yt)[10:] ** 2)))
+
+
+@pytest.fixture(scope="module")
+def wh_fit():
+    return _wh_fit(400)  # ≈ 2.5 s CPU
+
+
+def test_wiener_hammerstein_system_learned_in_a_few_seconds(wh_fit):
+    """Known blocks (2nd-order G1, saturating F, 1st-order G2), 1 % output noise, 400 epochs: the free run of a new
+    input is within 6 noise levels of the noise-free output (the slow test trains to the noise level)."""
+    model, noise = wh_fit
+    assert _free_run_rmse(model) < 6 * noise
+
+
+@pytest.mark.slow  # ≈ 15 s CPU
+def test_wiener_hammerstein_system_reproduced_to_the_noise_level():
+    """The same system trained 2000 epochs: free-run RMSE within 2 noise levels of the noise-free output
+    (measured 1.56×)."""
+    model, noise = _wh_fit(2000)
+    assert _free_run_rmse(model) < 2 * noise
 
 
 def test_every_horizon_is_the_free_run_and_save_load_round_trips(wh_fit, tmp_path):
