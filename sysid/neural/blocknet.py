@@ -100,12 +100,14 @@ def _masks(pairs: Sequence[tuple[np.ndarray, np.ndarray]], warmup: int, val_frac
     return out
 
 
-def train_records(model: BlockNet, pairs: Sequence[tuple[np.ndarray, np.ndarray]], warmup: int, epochs: int,
+def train_records(model: torch.nn.Module, pairs: Sequence[tuple[np.ndarray, np.ndarray]], warmup: int, epochs: int,
                   lr: float = 1e-3, lr_min: float = 1e-5, val_fraction: float = 0.0, patience: int = 0,
                   device: torch.device = torch.device("cpu"), log: Callable[[str], None] | None = None,
                   log_every: int = 100, max_seconds: float | None = None) -> BlockTrainResult:
     """Full-batch Adam on the simulation MSE of ``pairs`` (normalised ``(u (N, n_in), y (N, n_out))``), see the module
-    docstring. Without a hold-out the last epoch's weights are kept; a non-finite loss restores the best weights and
+    docstring. ``model`` is any float64 module mapping ``u`` (1, N, n_in) to ``ŷ`` (1, N, n_out) from rest (a
+    :class:`BlockNet`, or a single :class:`~sysid.neural.iir.LinearDynamic` layer). ``best_epoch`` counts the Adam
+    steps behind the kept weights (0: the initial ones). Without a hold-out the last epoch's weights are kept; a non-finite loss restores the best weights and
     stops. ``max_seconds`` (wall clock) is a guard for shared machines, not a setting results should depend on."""
     us = [torch.as_tensor(u, dtype=torch.float64, device=device)[None] for u, _ in pairs]
     ys = [torch.as_tensor(y, dtype=torch.float64, device=device) for _, y in pairs]
