@@ -24,6 +24,7 @@ IDENTIFIERS: dict[str, str] = {
     "narx-mlp-sim": "sysid.neural.narx_mlp:NARXMLPSim",
     "rnn": "sysid.neural.rnn:RNNStateSpace",
     "ss-encoder": "sysid.neural.ss_encoder:SSEncoder",
+    "wh-net": "sysid.neural.wh_net:WHNet",
     "narx-poly-sim": "sysid.polysim:NARXPolySim",
 }
 

@@ -32,6 +32,7 @@ SETTINGS = {
     "bj": "nb=2,nf=2,nc=1,nd=1,nk=1",
     "n4sid": "nx=2",
     "ss-encoder": "nx=2,ny=3,nu=3,f_hidden=4,h_hidden=4,e_hidden=4,T=10,epochs=1,device=cpu",
+    "wh-net": "channels=2,hidden=4,nb=2,na=2,epochs=2,warmup=2,device=cpu",
 }
 
 

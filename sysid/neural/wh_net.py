@@ -1,0 +1,272 @@
+"""Block-oriented Wiener–Hammerstein network (registry id ``wh-net``) trained on simulation error.
+
+The model is :class:`sysid.neural.blocknet.BlockNet` (dynoNet, Forgione & Piga 2021):
+
+    ŷ(t) = G2(q) F(G1(q) u(t)) [+ G0(q) u(t)],   G(q) = q^{-nk} B(q)/A(q) per input–output pair,
+
+with G1 (input → ``channels``), the static network F (``channels`` → ``hidden`` tanh → ``channels``) and G2
+(``channels`` → output) differentiable IIR layers (:mod:`sysid.neural.iir`), trained by
+:func:`sysid.neural.blocknet.train_records` on the free-run MSE of the whole normalised estimation records
+(full batch, Adam with a cosine learning-rate schedule, early stopping on a held-out tail).
+
+Initial state and prediction. Every record is simulated from rest: the filters' states start at zero at the
+record's first sample (normalised units, i.e. at the estimation data's mean input and output). That start is a
+transient, so the first ``warmup`` samples of each record are left out of the training loss, and ``max_lag_ =
+warmup``: a prediction copies the first ``warmup`` measured outputs, and the benchmark scores a test from
+``max(init window, warmup)`` on. With ``warmup`` equal to the benchmark's initialisation window (50 samples for
+Wiener–Hammerstein), the filters run over the window's measured input from rest and the transient of the zero
+initial state falls in the samples that are not scored.
+
+The model is output-error: it never reads the measured output, so ``predict(record, k)`` for any horizon ``k``
+(one step included) is the free run ``predict(record, None)``. Predictions are computed in float64 on the CPU.
+
+``device``: the static network and the optimiser run on the chosen device; the IIR filtering is ``scipy.signal.lfilter``
+on the CPU in any case (a sequential recursion over time), so a GPU gains little here.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from typing import Any, Sequence
+
+import numpy as np
+import torch
+
+from sysid._blas import blas_threads
+from sysid.base import Identifier, as_record_list
+from sysid.errors import ConfigError, DataError
+from sysid.neural.blocknet import BlockNet, train_records
+from sysid.neural.device import configure_threads, select_device
+from sysid.neural.persist import TorchFileSave
+from sysid.neural.records import _as2d, check_channels, check_predict_input, fit_normaliser, normalised_pairs
+from sysid.record import Normaliser, Record
+
+__all__ = ["WHNet"]
+
+_LOG = logging.getLogger(__name__)  # training progress at INFO (the library configures no handler)
+_ACTIVATIONS = ("tanh", "relu", "sigmoid")
+MAX_ORDER = 64
+
+
+def _widths(v: Any, name: str) -> list[int]:
+    if isinstance(v, (int, np.integer)) and not isinstance(v, bool):
+        v = [v] if v > 0 else []
+    if not isinstance(v, (list, tuple)) or not all(isinstance(w, (int, np.integer)) and not isinstance(w, bool)
+                                                   and 1 <= w <= 4096 for w in v):
+        raise ConfigError(f"{name}: hidden={v!r} must be a list of hidden widths (e.g. 16 or 16-16; 0 for none)")
+    return [int(w) for w in v]
+
+
+class WHNet(TorchFileSave, Identifier):
+    """dynoNet-style G1 → F → G2 block network trained on the free-run (simulation) error.
+
+    Parameters
+    ----------
+    channels : int
+        Outputs of G1 = inputs of F = outputs of F = inputs of G2 (paper: a few to 16).
+    hidden : list of int
+        Hidden widths of the static network F (``0`` / ``[]``: F is affine).
+    nb, na : int
+        Numerator coefficients b_0 … b_{nb-1} and denominator coefficients a_1 … a_na of every pair of G1
+        (and of the linear path).
+    nb2, na2 : int or None
+        The same for G2 (``None``: as G1).
+    nk : int
+        Input delay of G1 and the linear path in samples (0: direct feedthrough b_0 u(t)).
+    linear : bool
+        Add a linear path G0(q) u in parallel with the block chain.
+    activation : str
+        ``tanh`` (paper), ``relu`` or ``sigmoid``.
+    warmup : int
+        Leading samples of every record treated as the zero-initial-state transient: out of the training loss,
+        copied from the measurement in predictions (``max_lag_``). Set it to the benchmark's initialisation window.
+    epochs, lr, lr_min : int, float, float
+        Full-batch Adam steps (one per pass over the estimation records) and the cosine schedule's start and end
+        step sizes.
+    val_fraction : float
+        Last fraction (0 … 0.5) of the last estimation record held out for early stopping (0: keep the last weights).
+    patience : int
+        Epochs without a better hold-out RMSE before stopping (0: run all ``epochs``).
+    seed, device :
+        Seeds the initial weights; ``auto`` | ``cpu`` | ``cuda`` (see :mod:`sysid.neural.device`).
+    """
+
+    name = "wh-net"
+
+    def __init__(self, channels: int = 8, hidden: Sequence[int] = (16,), nb: int = 8, na: int = 8,
+                 nb2: int | None = None, na2: int | None = None, nk: int = 0, linear: bool = False,
+                 activation: str = "tanh", warmup: int = 50, epochs: int = 2000, lr: float = 1e-2,
+                 lr_min: float = 1e-4, val_fraction: float = 0.1, patience: int = 0, seed: int = 0,
+                 device: str = "auto"):
+        self.channels = channels
+        self.hidden = list(hidden) if isinstance(hidden, tuple) else hidden
+        self.nb = nb
+        self.na = na
+        self.nb2 = nb2
+        self.na2 = na2
+        self.nk = nk
+        self.linear = linear
+        self.activation = activation
+        self.warmup = warmup
+        self.epochs = epochs
+        self.lr = lr
+        self.lr_min = lr_min
+        self.val_fraction = val_fraction
+        self.patience = patience
+        self.seed = seed
+        self.device = device
+
+    # ------------------------------------------------------------------ checks
+    def _check_params(self, check_device: bool = True) -> None:
+        def integer(key: str, lo: int, hi: int, none_ok: bool = False) -> None:
+            v = getattr(self, key)
+            if none_ok and v is None:
+                return
+            if not isinstance(v, (int, np.integer)) or isinstance(v, bool) or not lo <= v <= hi:
+                raise ConfigError(f"{self.name}: {key}={v!r} must be an integer in [{lo}, {hi}]")
+
+        integer("channels", 1, 1024)
+        integer("nb", 1, MAX_ORDER)
+        integer("na", 0, MAX_ORDER)
+        integer("nb2", 1, MAX_ORDER, none_ok=True)
+        integer("na2", 0, MAX_ORDER, none_ok=True)
+        integer("nk", 0, MAX_ORDER)
+        integer("warmup", 0, 1_000_000)
+        integer("epochs", 0, 10_000_000)
+        integer("patience", 0, 10_000_000)
+        self.hidden = _widths(self.hidden, self.name)
+        if self.activation not in _ACTIVATIONS:
+            raise ConfigError(f"{self.name}: activation={self.activation!r} not one of: {', '.join(_ACTIVATIONS)}")
+        if not isinstance(self.linear, (bool, np.bool_)):
+            raise ConfigError(f"{self.name}: linear={self.linear!r} must be true or false")
+        for key in ("lr", "lr_min"):
+            v = getattr(self, key)
+            if not (isinstance(v, (int, float)) and not isinstance(v, bool) and 0 < v < 10):
+                raise ConfigError(f"{self.name}: {key}={v!r} must be a positive number below 10")
+        if self.lr_min > self.lr:
+            raise ConfigError(f"{self.name}: lr_min={self.lr_min!r} must not exceed lr={self.lr!r}")
+        if not (isinstance(self.val_fraction, (int, float)) and not isinstance(self.val_fraction, bool)
+                and 0 <= self.val_fraction <= 0.5):
+            raise ConfigError(f"{self.name}: val_fraction={self.val_fraction!r} must be a fraction in [0, 0.5]")
+        if not isinstance(self.seed, (int, np.integer)) or isinstance(self.seed, bool):
+            raise ConfigError(f"{self.name}: seed={self.seed!r} must be an integer")
+        if check_device:  # a model trained on a GPU must still load (and predict) on a CPU machine
+            select_device(self.device)
+
+    def _build(self, n_in: int, n_out: int, generator: torch.Generator | None = None) -> BlockNet:
+        nb2 = self.nb if self.nb2 is None else self.nb2
+        na2 = self.na if self.na2 is None else self.na2
+        return BlockNet(n_in, n_out, int(self.channels), int(self.channels), self.hidden, int(self.nb), int(self.na),
+                        int(nb2), int(na2), int(self.nk), bool(self.linear), self.activation, generator)
+
+    # ------------------------------------------------------------------ fit
+    def fit(self, data: Record | Sequence[Record]) -> "WHNet":
+        """Train on one Record or a list (separate experiments, each simulated from rest). Returns self."""
+        self._check_params()
+        recs = as_record_list(data)
+        warmup = int(self.warmup)
+        n_in, n_out = check_channels(recs, warmup, self.name)
+        last = len(recs[-1])
+        cut = last - int(round(self.val_fraction * last))
+        if self.val_fraction and (last - cut < 1 or sum(len(r) for r in recs[:-1]) + cut <= warmup * len(recs)):
+            raise DataError(f"{self.name}: val_fraction={self.val_fraction} leaves no training samples after the "
+                            f"warm-up of {warmup} in {recs[-1].source}; lower val_fraction or warmup")
+        t0, c0 = time.perf_counter(), time.process_time()
+        configure_threads()
+        device = select_device(self.device)
+        torch.manual_seed(int(self.seed))
+        gen = torch.Generator().manual_seed(int(self.seed))
+        self.normaliser_ = fit_normaliser(recs)
+        pairs = normalised_pairs(recs, self.normaliser_)
+        model = self._build(n_in, n_out, gen).to(device)
+        with blas_threads():
+            res = train_records(model, pairs, warmup, int(self.epochs), float(self.lr), float(self.lr_min),
+                                float(self.val_fraction), int(self.patience), device=device,
+                                log=lambda msg: _LOG.info("%s: %s", self.name, msg), log_every=100)
+        self._set_weights(model.to("cpu"))
+        self.loss_history_ = res.loss_history
+        self.val_history_ = res.val_history
+        self.best_epoch_ = res.best_epoch
+        self.restarts_ = res.restarts
+        self.n_inputs_, self.n_outputs_ = n_in, n_out
+        self.max_lag_ = warmup
+        self.device_used_ = str(device)
+        self.fit_seconds_ = time.perf_counter() - t0
+        self.fit_cpu_seconds_ = time.process_time() - c0
+        self.diverged_at_ = None
+        return self
+
+    def _set_weights(self, model: BlockNet) -> None:
+        self.model_ = model.eval()
+        for p in model.parameters():
+            p.requires_grad_(False)
+        self.n_parameters_ = int(sum(p.numel() for p in model.parameters()))
+
+    # ------------------------------------------------------------------ predict
+    def _check_fitted(self) -> None:
+        if not hasattr(self, "model_"):
+            raise ConfigError(f"{self.name}: model is not fitted; call fit() first")
+
+    def predict(self, record: Record, horizon: int | None = 1) -> np.ndarray:
+        """Free-run simulation from rest, for every ``horizon`` (an output-error model: see the module docstring).
+        Shaped like ``record.y``; the first ``max_lag_`` samples are the measurement."""
+        self._check_fitted()
+        check_predict_input(self, record, horizon)
+        (un, _), = normalised_pairs([record], self.normaliser_)
+        configure_threads()
+        with torch.no_grad(), blas_threads():
+            yn = self.model_(torch.as_tensor(un, dtype=torch.float64)[None])[0].numpy()
+        out = self.normaliser_.inverse_y(yn)
+        lag = self.max_lag_
+        out[:lag] = _as2d(record.y)[:lag]
+        self.diverged_at_ = None
+        return out[:, 0] if record.y.ndim == 1 else out
+
+    # ------------------------------------------------------------------ description / persistence
+    def describe(self) -> dict[str, Any]:
+        d = super().describe()
+        if hasattr(self, "model_"):
+            d.update({"structure": {"channels": int(self.channels), "hidden": list(self.hidden), "nb": self.nb,
+                                    "na": self.na, "nb2": self.nb2, "na2": self.na2, "nk": self.nk,
+                                    "linear": bool(self.linear), "activation": self.activation},
+                      "terms": [], "max_lag": self.max_lag_, "device": self.device_used_,
+                      "epochs_run": len(self.loss_history_), "best_epoch": self.best_epoch_,
+                      "final_loss": self.loss_history_[-1] if self.loss_history_ else None,
+                      "best_validation_rmse_normalised": min(self.val_history_) if self.val_history_ else None})
+        return d
+
+    def _state(self) -> dict[str, Any]:
+        self._check_fitted()
+        weights = {k: v.detach().cpu().numpy().astype(np.float64) for k, v in self.model_.state_dict().items()}
+        return {"weights": weights, "normaliser": self.normaliser_.to_dict(), "n_inputs": int(self.n_inputs_),
+                "n_outputs": int(self.n_outputs_), "loss_history": [float(v) for v in self.loss_history_],
+                "val_history": [float(v) for v in self.val_history_],
+                "best_epoch": None if self.best_epoch_ is None else int(self.best_epoch_),
+                "device_used": self.device_used_, "fit_seconds": float(self.fit_seconds_)}
+
+    def _load_state(self, state: dict[str, Any]) -> None:
+        self._check_params(check_device=False)
+        self.n_inputs_, self.n_outputs_ = int(state["n_inputs"]), int(state["n_outputs"])
+        model = self._build(self.n_inputs_, self.n_outputs_)
+        ref = model.state_dict()
+        saved = state["weights"]
+        loaded = {}
+        for key, like in ref.items():
+            if key not in saved:
+                raise DataError(f"{self.name}: saved state lacks {key}")
+            arr = np.asarray(saved[key], dtype=np.float64)
+            if arr.size != like.numel():
+                raise DataError(f"{self.name}: saved {key} has {arr.size} values, the options give {like.numel()}")
+            loaded[key] = torch.as_tensor(arr.reshape(tuple(like.shape)), dtype=torch.float64)
+        model.load_state_dict(loaded)
+        self._set_weights(model)
+        self.normaliser_ = Normaliser.from_dict(state["normaliser"])
+        self.loss_history_ = [float(v) for v in state.get("loss_history", [])]
+        self.val_history_ = [float(v) for v in state.get("val_history", [])]
+        self.best_epoch_ = state.get("best_epoch")
+        self.restarts_ = 0
+        self.device_used_ = state.get("device_used", "cpu")
+        self.fit_seconds_ = float(state.get("fit_seconds", float("nan")))
+        self.max_lag_ = int(self.warmup)
+        self.diverged_at_ = None
