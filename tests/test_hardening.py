@@ -113,8 +113,12 @@ def test_signal_during_write_leaves_old_output(tmp_path, sig, code):
     deadline = time.time() + 120
     while time.time() < deadline and not list(tmp_path.glob(".g.npz.tmp-*")):
         time.sleep(0.005)
-    assert list(tmp_path.glob(".g.npz.tmp-*")), "the writer never started"
+    # Freeze the writer the moment its temporary file exists, so that the signal lands inside the write however
+    # fast this machine writes 128 MB (on an idle one the whole write can finish between two polls).
+    proc.send_signal(signal.SIGSTOP)
+    assert list(tmp_path.glob(".g.npz.tmp-*")), "the writer never started or finished before it was stopped"
     proc.send_signal(sig)
+    proc.send_signal(signal.SIGCONT)
     _, err = proc.communicate(timeout=120)
     assert proc.returncode == code, err
     assert "Traceback" not in err and len(err.strip().splitlines()) == 1, err
