@@ -320,6 +320,7 @@ def test_readme_states_the_figures_of_records_json():
     rows, _ = records.load_rows(records.load_entries(), records.STORED_DIR)
     data = json.loads(records.RECORDS_JSON.read_text(encoding="utf-8"))
     for dname, test in [("silverbox", "multisine"), ("silverbox", "arrow-no-extrapolation"),
+                        ("wiener-hammerstein", "test"), ("bouc-wen", "multisine"),
                         ("cascaded-tanks", "test"), ("piezo-tue", "test")]:
         unit = next(r["units"] for r in records.score_rows(rows[dname]) if r["test"] == test)
         assert f"**{records.fmt_value(data[dname]['rmse'][test]['mean'], unit)}**" in text, (dname, test)
