@@ -115,6 +115,7 @@ def _band_noise(rng, fs, n, amp):
     return amp * x / np.max(np.abs(x))
 
 
+@pytest.mark.slow  # ≈ 95 s (the longest default test); the acoustic compression and crosstalk cases stay in the default suite
 def test_acoustic_echo_injected_as_delayed_copy():
     """Echo = 0.25 × the output delayed by 21.3 µs, added to the echo-free twin's output; band-limited noise in."""
     fs, n = 5e6, 10_000
