@@ -97,9 +97,17 @@ def test_refused_option_leaves_no_file(d, capsys):
              "--storage", d / "st.db"], d, capsys, "--trials")
 
 
+def _default_signals() -> None:
+    """In the child before exec: SIGINT and SIGTERM back to their defaults. A disposition this test process
+    inherited or an earlier test left (SIGINT ignored) would otherwise pass to the CLI, whose Python then
+    never raises KeyboardInterrupt, and the test would check the harness, not the CLI."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
+
+
 def _spawn(args: list[str], cwd: Path) -> subprocess.Popen:
     return subprocess.Popen([sys.executable, "-m", "benchmarks.cli", *map(str, args)], cwd=cwd,
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, preexec_fn=_default_signals,
                             env={**os.environ, "PYTHONPATH": str(ROOT), "OPENBLAS_NUM_THREADS": "1"})
 
 
