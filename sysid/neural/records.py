@@ -14,7 +14,8 @@ from sysid.base import Identifier, check_records
 from sysid.errors import ConfigError, DataError
 from sysid.record import Normaliser, Record
 
-__all__ = ["MAX_LAG", "DIVERGENCE_BOUND", "normalised_pairs", "fit_normaliser", "check_channels", "check_predict_input"]
+__all__ = ["MAX_LAG", "DIVERGENCE_BOUND", "normalised_pairs", "fit_normaliser", "check_channels", "check_predict_input",
+           "hidden_widths"]
 
 MAX_LAG = 1024
 # A simulated output beyond this many standard deviations of the estimation output is a divergence.
@@ -57,3 +58,16 @@ def check_predict_input(model: Identifier, record: Record, horizon: int | None) 
         raise DataError(f"{record.source}: {len(record)} samples, need more than the model's lag {model.max_lag_}")
     if horizon is not None and (not isinstance(horizon, (int, np.integer)) or isinstance(horizon, bool) or horizon < 1):
         raise ConfigError(f"{model.name}: horizon must be a positive integer or None (free run), got {horizon!r}")
+
+
+def hidden_widths(v, key: str, name: str) -> list[int]:
+    """Hidden layer widths of a network option ``key`` of identifier ``name``: an int (``0``: none), a list, or
+    ``[0]`` (what ``--set key=0`` gives) for none; each width 1 … 65536."""
+    if isinstance(v, (int, np.integer)) and not isinstance(v, bool):
+        v = [v] if v > 0 else []
+    if isinstance(v, (list, tuple)) and len(v) == 1 and isinstance(v[0], (int, np.integer)) and v[0] == 0:
+        v = []
+    if not isinstance(v, (list, tuple)) or not all(isinstance(w, (int, np.integer)) and not isinstance(w, bool)
+                                                   and 1 <= w <= 65536 for w in v):
+        raise ConfigError(f"{name}: {key}={v!r} must be a list of hidden widths (e.g. 64 or 64-64; 0 or [] for none)")
+    return [int(w) for w in v]

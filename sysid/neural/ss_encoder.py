@@ -27,7 +27,8 @@ import torch
 from sysid.base import Identifier, as_record_list
 from sysid.errors import ConfigError, DataError, DivergenceWarning
 from sysid.neural.device import configure_threads, select_device
-from sysid.neural.records import DIVERGENCE_BOUND, MAX_LAG, _as2d, check_channels, check_predict_input, fit_normaliser, normalised_pairs
+from sysid.neural.records import (DIVERGENCE_BOUND, MAX_LAG, _as2d, check_channels, check_predict_input, fit_normaliser,
+                                  hidden_widths, normalised_pairs)
 from sysid.neural.persist import TorchFileSave
 from sysid.neural.subnet import SubnetModel, encode_np, export_weights, simulate_np
 from sysid.neural.train_sim import train_simulation
@@ -37,16 +38,6 @@ __all__ = ["SSEncoder"]
 
 _LOG = logging.getLogger(__name__)  # per-epoch progress at INFO (the library configures no handler)
 _ACT_NP = {"tanh": np.tanh, "relu": lambda a: np.maximum(a, 0.0), "sigmoid": lambda a: 1.0 / (1.0 + np.exp(-a))}
-
-
-def _widths(v: Any, key: str, name: str) -> list[int]:
-    if isinstance(v, (int, np.integer)) and not isinstance(v, bool):
-        v = [v] if v > 0 else []
-    if isinstance(v, (list, tuple)) and len(v) == 1 and isinstance(v[0], (int, np.integer)) and v[0] == 0:
-        v = []  # "--set f_hidden=0": linear
-    if not isinstance(v, (list, tuple)) or not all(isinstance(w, (int, np.integer)) and not isinstance(w, bool) and 1 <= w <= 65536 for w in v):
-        raise ConfigError(f"{name}: {key}={v!r} must be a list of hidden widths (e.g. 64 or 64-64; 0 or [] for linear)")
-    return [int(w) for w in v]
 
 
 class SSEncoder(TorchFileSave, Identifier):
@@ -126,7 +117,7 @@ class SSEncoder(TorchFileSave, Identifier):
         integer("epochs", 0, 1_000_000)
         integer("patience", 0, 1_000_000)
         for key in ("f_hidden", "h_hidden", "e_hidden"):
-            setattr(self, key, _widths(getattr(self, key), key, self.name))
+            setattr(self, key, hidden_widths(getattr(self, key), key, self.name))
         if self.activation not in _ACT_NP:
             raise ConfigError(f"{self.name}: activation={self.activation!r} not one of: {', '.join(_ACT_NP)}")
         if not isinstance(self.feedthrough, (bool, np.bool_)):

@@ -39,7 +39,7 @@ from sysid.errors import ConfigError, DataError
 from sysid.neural.blocknet import BlockNet, train_records
 from sysid.neural.device import configure_threads, select_device
 from sysid.neural.persist import TorchFileSave
-from sysid.neural.records import _as2d, check_channels, check_predict_input, fit_normaliser, normalised_pairs
+from sysid.neural.records import _as2d, check_channels, check_predict_input, fit_normaliser, hidden_widths, normalised_pairs
 from sysid.record import Normaliser, Record
 
 __all__ = ["WHNet"]
@@ -47,15 +47,6 @@ __all__ = ["WHNet"]
 _LOG = logging.getLogger(__name__)  # training progress at INFO (the library configures no handler)
 _ACTIVATIONS = ("tanh", "relu", "sigmoid")
 MAX_ORDER = 64
-
-
-def _widths(v: Any, name: str) -> list[int]:
-    if isinstance(v, (int, np.integer)) and not isinstance(v, bool):
-        v = [v] if v > 0 else []
-    if not isinstance(v, (list, tuple)) or not all(isinstance(w, (int, np.integer)) and not isinstance(w, bool)
-                                                   and 1 <= w <= 4096 for w in v):
-        raise ConfigError(f"{name}: hidden={v!r} must be a list of hidden widths (e.g. 16 or 16-16; 0 for none)")
-    return [int(w) for w in v]
 
 
 class WHNet(TorchFileSave, Identifier):
@@ -135,7 +126,7 @@ class WHNet(TorchFileSave, Identifier):
         integer("warmup", 0, 1_000_000)
         integer("epochs", 0, 10_000_000)
         integer("patience", 0, 10_000_000)
-        self.hidden = _widths(self.hidden, self.name)
+        self.hidden = hidden_widths(self.hidden, "hidden", self.name)
         if self.activation not in _ACTIVATIONS:
             raise ConfigError(f"{self.name}: activation={self.activation!r} not one of: {', '.join(_ACTIVATIONS)}")
         if not isinstance(self.linear, (bool, np.bool_)):
