@@ -22,13 +22,14 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Callable, Sequence
 
 import numpy as np
 import torch
 
 from sysid.neural.iir import LinearDynamic
+from sysid.neural.train_sim import SimTrainResult
 
 __all__ = ["BlockNet", "BlockTrainResult", "train_records"]
 
@@ -75,16 +76,11 @@ class BlockNet(torch.nn.Module):
 
 
 @dataclass
-class BlockTrainResult:
-    """Per-epoch training loss (MSE, normalised units), hold-out RMSE after each epoch's forward pass (the RMSE of
-    the weights before that epoch's step), the epoch whose weights were kept and the seconds spent."""
+class BlockTrainResult(SimTrainResult):
+    """What :func:`train_records` did, as :class:`~sysid.neural.train_sim.SimTrainResult` says, except that the
+    hold-out RMSE of an epoch is that of its forward pass (the weights before that epoch's step); plus why the
+    training stopped and how many unstable steps were undone."""
 
-    loss_history: list[float] = field(default_factory=list)
-    val_history: list[float] = field(default_factory=list)
-    best_epoch: int | None = None
-    epochs_run: int = 0
-    cpu_seconds: float = 0.0
-    wall_seconds: float = 0.0
     stopped: str = "epochs"
     restarts: int = 0
 
