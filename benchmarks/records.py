@@ -37,7 +37,6 @@ TEMPLATE = "benchmarks.md.j2"
 #: training seeds of every row (a deterministic identifier is fitted once and says so)
 DEFAULT_SEEDS: tuple[int, ...] = (0, 1, 2)
 # keys of a score run that measure time, not accuracy: they differ between two runs of the same command
-TIMING_KEYS = ("seconds", "fit_seconds", "fit_seconds_mean")
 
 
 @dataclass(frozen=True)
@@ -227,15 +226,6 @@ def summary(entries: Sequence[Entry], rows: dict[str, dict[str, Any]]) -> dict[s
     """``records.json``: dataset -> :func:`summarise_row`, in the order of ``records.toml``; rows not stored yet
     are left out (:func:`load_rows` names them)."""
     return {e.dataset: summarise_row(rows[e.dataset]) for e in entries if e.dataset in rows}
-
-
-def strip_timing(obj: Any) -> Any:
-    """A score run without its timing keys: what two runs of the same command share exactly."""
-    if isinstance(obj, dict):
-        return {k: strip_timing(v) for k, v in obj.items() if k not in TIMING_KEYS}
-    if isinstance(obj, list):
-        return [strip_timing(v) for v in obj]
-    return obj
 
 
 def fmt_value(x: Any, unit: str = "") -> str:

@@ -19,17 +19,7 @@ import pytest
 pytest.importorskip("distributed")
 
 from benchmarks.execution import Executor, make_executor  # noqa: E402
-
-TIMING_KEYS = ("seconds", "fit_seconds", "fit_seconds_mean")
-
-
-def strip_timing(obj):
-    if isinstance(obj, dict):
-        return {k: strip_timing(v) for k, v in obj.items() if k not in TIMING_KEYS}
-    if isinstance(obj, list):
-        return [strip_timing(v) for v in obj]
-    return obj
-
+from benchmarks.scoring import strip_timing  # noqa: E402
 
 @pytest.fixture(scope="module")
 def cluster():

@@ -247,7 +247,7 @@ def _same_score(stored: dict, fresh: dict) -> None:
 
 def _same(a, b, path="") -> None:
     """Equal JSON, numbers to 1e-9 relative (the same fit in another process), timing keys left out."""
-    a, b = records.strip_timing(a), records.strip_timing(b)
+    a, b = scoring.strip_timing(a), scoring.strip_timing(b)
     if isinstance(a, dict):
         assert isinstance(b, dict) and set(a) == set(b), (path, set(a) ^ set(b))
         for k in a:

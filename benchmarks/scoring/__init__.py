@@ -24,6 +24,7 @@ from benchmarks.scoring.core import (
     score,
     score_pair,
     score_pair_task,
+    strip_timing,
 )
 from benchmarks.scoring.core import _finite as _finite
 from benchmarks.scoring.core import _fmt as _fmt
@@ -72,6 +73,6 @@ __all__ = [
     "SETTINGS", "SETTINGS_DIR", "SYSIDENTPY_QUICK_MAX_EST", "SYSIDENTPY_SETTINGS", "ConfigError", "InputError",
     "Normalised", "NormalisedModel", "Record", "ScoreRun", "check", "check_rules", "dropped_pairs", "environment",
     "evaluate", "format_row", "is_seeded", "load_baselines", "load_identifier_settings", "make_floors",
-    "markdown_table", "prepare_dataset", "score", "score_pair", "score_pair_task", "seeds_for", "settings_for",
+    "markdown_table", "prepare_dataset", "score", "score_pair", "score_pair_task", "seeds_for", "settings_for", "strip_timing",
     "sysidentpy_frols", "sysidentpy_settings", "write_report",
 ]

@@ -95,6 +95,20 @@ class ScoreRun:
                 "selection": self.selection, "environment": self.environment}
 
 
+#: keys of a score run that measure time: two runs of the same command differ in them only
+TIMING_KEYS = ("seconds", "fit_seconds", "fit_seconds_mean")
+
+
+def strip_timing(obj: Any) -> Any:
+    """A score run (or any part of its JSON) without its :data:`TIMING_KEYS`: what two runs of the same
+    command share exactly, wherever they ran."""
+    if isinstance(obj, dict):
+        return {k: strip_timing(v) for k, v in obj.items() if k not in TIMING_KEYS}
+    if isinstance(obj, list):
+        return [strip_timing(v) for v in obj]
+    return obj
+
+
 def environment() -> dict[str, Any]:
     """What a floor measured in this process depends on: CPU, torch's kernel set, thread settings, versions."""
     import os

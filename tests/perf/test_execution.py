@@ -31,18 +31,10 @@ WALL: dict[str, float] = {}
 JSON: dict[str, str] = {}
 
 
-def _strip(obj):
-    if isinstance(obj, dict):
-        return {k: _strip(v) for k, v in obj.items() if k not in ("seconds", "fit_seconds")}
-    if isinstance(obj, list):
-        return [_strip(v) for v in obj]
-    return obj
-
-
 def _run(executor=None) -> str:
     res = scoring.score(IDENTIFIERS, DATASETS, quick=True, sysidentpy=False, executor=executor)
     assert len({(r["identifier"], r["dataset"]) for r in res.rows}) == len(IDENTIFIERS) * len(DATASETS)
-    return json.dumps(_strip(scoring._clean(res.to_dict())), sort_keys=True)
+    return json.dumps(scoring.strip_timing(scoring._clean(res.to_dict())), sort_keys=True)
 
 
 @pytest.fixture(scope="module", autouse=True)
