@@ -21,7 +21,7 @@ import torch
 
 from sysid.errors import DataError
 
-__all__ = ["save_torch", "load", "TorchFileSave"]
+__all__ = ["save_torch", "load", "TorchFileSave", "saved_array"]
 
 FORMAT = "piezotwin-model/1"
 
@@ -86,3 +86,15 @@ def load(path: str | Path):
     payload = dict(payload)
     payload["state"] = _from_torch(payload.get("state", {}))
     return build_model(path, payload, legacy=True)
+
+
+def saved_array(name: str, saved: dict[str, Any], key: str, shape: tuple[int, ...]) -> np.ndarray:
+    """The saved weight array ``saved[key]`` as float64 of ``shape`` (the model the options build); a missing key
+    or another number of values is a one-line :class:`DataError` of identifier ``name``."""
+    if key not in saved:
+        raise DataError(f"{name}: saved state lacks {key}")
+    arr = np.asarray(saved[key], dtype=np.float64)
+    size = int(np.prod(shape))
+    if arr.size != size:
+        raise DataError(f"{name}: saved {key} has {arr.size} values, the options give {size}")
+    return arr.reshape(shape)

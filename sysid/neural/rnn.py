@@ -37,7 +37,7 @@ from sysid.base import Identifier, as_record_list
 from sysid.errors import ConfigError, DataError, DivergenceWarning
 from sysid.neural.core import LagData, lag_matrix_np, least_squares_linear
 from sysid.neural.device import configure_threads, select_device, train_dtype
-from sysid.neural.persist import TorchFileSave
+from sysid.neural.persist import TorchFileSave, saved_array
 from sysid.progress import progress
 from sysid.neural.records import MAX_LAG, _as2d, check_channels, check_predict_input, fit_normaliser, normalised_pairs
 from sysid.record import Normaliser, Record
@@ -322,12 +322,7 @@ class RNNStateSpace(TorchFileSave, Identifier):
         self._check_params(check_device=False)
         self.n_inputs_, self.n_outputs_ = int(state["n_inputs"]), int(state["n_outputs"])
         ref = self._build(self.n_inputs_, self.n_outputs_).state_dict()
-        sd = {}
-        for k, v in ref.items():
-            if k not in state["state_dict"]:
-                raise DataError(f"{self.name}: saved state lacks {k}")
-            arr = np.asarray(state["state_dict"][k], dtype=np.float64).reshape(tuple(v.shape))
-            sd[k] = arr
+        sd = {k: saved_array(self.name, state["state_dict"], k, tuple(v.shape)) for k, v in ref.items()}
         self.state_dict_ = sd
         self.normaliser_ = Normaliser.from_dict(state["normaliser"])
         self.loss_history_ = [float(v) for v in state.get("loss_history", [])]

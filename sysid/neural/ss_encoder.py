@@ -29,7 +29,7 @@ from sysid.errors import ConfigError, DataError, DivergenceWarning
 from sysid.neural.device import configure_threads, select_device
 from sysid.neural.records import (DIVERGENCE_BOUND, MAX_LAG, _as2d, check_channels, check_predict_input, fit_normaliser,
                                   hidden_widths, normalised_pairs)
-from sysid.neural.persist import TorchFileSave
+from sysid.neural.persist import TorchFileSave, saved_array
 from sysid.neural.subnet import SubnetModel, encode_np, export_weights, simulate_np
 from sysid.neural.train_sim import train_simulation
 from sysid.record import Normaliser, Record
@@ -281,12 +281,7 @@ class SSEncoder(TorchFileSave, Identifier):
         flat = state["weights"]
 
         def get(key: str, like: np.ndarray) -> np.ndarray:
-            if key not in flat:
-                raise DataError(f"{self.name}: saved state lacks {key}")
-            arr = np.asarray(flat[key], dtype=np.float64)
-            if arr.size != like.size:
-                raise DataError(f"{self.name}: saved {key} has {arr.size} values, the options give {like.size}")
-            return arr.reshape(like.shape)
+            return saved_array(self.name, flat, key, like.shape)
 
         self.weights_ = {part: {"W": get(f"{part}.W", g["W"]), "b": get(f"{part}.b", g["b"]),
                                 "layers": [(get(f"{part}.{i}.W", W), get(f"{part}.{i}.b", b)) for i, (W, b) in enumerate(g["layers"])]}

@@ -38,7 +38,7 @@ from sysid.base import Identifier, as_record_list
 from sysid.errors import ConfigError, DataError
 from sysid.neural.blocknet import BlockNet, train_records
 from sysid.neural.device import configure_threads, select_device
-from sysid.neural.persist import TorchFileSave
+from sysid.neural.persist import TorchFileSave, saved_array
 from sysid.neural.records import _as2d, check_channels, check_predict_input, fit_normaliser, hidden_widths, normalised_pairs
 from sysid.record import Normaliser, Record
 
@@ -240,17 +240,8 @@ class WHNet(TorchFileSave, Identifier):
         self._check_params(check_device=False)
         self.n_inputs_, self.n_outputs_ = int(state["n_inputs"]), int(state["n_outputs"])
         model = self._build(self.n_inputs_, self.n_outputs_)
-        ref = model.state_dict()
-        saved = state["weights"]
-        loaded = {}
-        for key, like in ref.items():
-            if key not in saved:
-                raise DataError(f"{self.name}: saved state lacks {key}")
-            arr = np.asarray(saved[key], dtype=np.float64)
-            if arr.size != like.numel():
-                raise DataError(f"{self.name}: saved {key} has {arr.size} values, the options give {like.numel()}")
-            loaded[key] = torch.as_tensor(arr.reshape(tuple(like.shape)), dtype=torch.float64)
-        model.load_state_dict(loaded)
+        model.load_state_dict({key: torch.as_tensor(saved_array(self.name, state["weights"], key, tuple(like.shape)))
+                               for key, like in model.state_dict().items()})
         self._set_weights(model)
         self.normaliser_ = Normaliser.from_dict(state["normaliser"])
         self.loss_history_ = [float(v) for v in state.get("loss_history", [])]
