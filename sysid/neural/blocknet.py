@@ -96,15 +96,66 @@ def _masks(pairs: Sequence[tuple[np.ndarray, np.ndarray]], warmup: int, val_frac
     return out
 
 
+def _full_pass(model: torch.nn.Module, us, ys, masks, n_train: int, n_val: int, backward: bool) -> tuple[float, float]:
+    """Simulate every record from rest: (training MSE, hold-out sum of squares); gradients of the training MSE are
+    accumulated when ``backward``."""
+    sse, vse = 0.0, 0.0
+    for u, y, (tr, va) in zip(us, ys, masks):
+        with torch.set_grad_enabled(backward):
+            yhat = model(u)[0]
+            d = yhat[tr] - y[tr]
+            part = (d * d).sum() / (n_train * y.shape[1])
+        if backward:
+            part.backward()
+        sse += float(part.item())
+        if va is not None:
+            dv = (yhat[va] - y[va]).detach()
+            vse += float((dv * dv).sum().item())
+    return sse, vse
+
+
+def _window_steps(model: torch.nn.Module, opt: torch.optim.Optimizer, us, ys, masks, window: int, batch: int,
+                  warmup: int, n_train: int, gen: torch.Generator) -> float:
+    """One epoch of mini-batch Adam steps on sections of ``window`` samples drawn at random (``gen``) from the
+    training parts of the records, each simulated from rest with its first ``warmup`` samples out of the loss;
+    as many steps as cover the training samples once on average. Returns the epoch's mean section MSE (inf as soon
+    as one step's loss is not finite, before that step is taken)."""
+    starts = [(k, tr.start, tr.stop - window) for k, (tr, _) in enumerate(masks) if tr.stop - tr.start >= window]
+    steps = max(1, math.ceil(n_train / (batch * (window - warmup))))
+    total = 0.0
+    for _ in range(steps):
+        pick = torch.randint(len(starts), (batch,), generator=gen).tolist()
+        offs = torch.rand(batch, generator=gen, dtype=torch.float64).tolist()
+        secs = [(starts[p][0], starts[p][1] + int(o * (starts[p][2] - starts[p][1] + 1))) for p, o in zip(pick, offs)]
+        u = torch.stack([us[k][0, s:s + window] for k, s in secs])
+        y = torch.stack([ys[k][s:s + window] for k, s in secs])
+        opt.zero_grad(set_to_none=True)
+        d = model(u)[:, warmup:] - y[:, warmup:]
+        loss = (d * d).mean()
+        if not math.isfinite(float(loss.item())):
+            return math.inf
+        loss.backward()
+        opt.step()
+        total += float(loss.item())
+    return total / steps
+
+
 def train_records(model: torch.nn.Module, pairs: Sequence[tuple[np.ndarray, np.ndarray]], warmup: int, epochs: int,
                   lr: float = 1e-3, lr_min: float = 1e-5, val_fraction: float = 0.0, patience: int = 0,
                   device: torch.device = torch.device("cpu"), log: Callable[[str], None] | None = None,
-                  log_every: int = 100, max_seconds: float | None = None) -> BlockTrainResult:
-    """Full-batch Adam on the simulation MSE of ``pairs`` (normalised ``(u (N, n_in), y (N, n_out))``), see the module
-    docstring. ``model`` is any float64 module mapping ``u`` (1, N, n_in) to ``ŷ`` (1, N, n_out) from rest (a
-    :class:`BlockNet`, or a single :class:`~sysid.neural.iir.LinearDynamic` layer). ``best_epoch`` counts the Adam
-    steps behind the kept weights (0: the initial ones). Without a hold-out the last epoch's weights are kept; a non-finite loss restores the best weights and
-    stops. ``max_seconds`` (wall clock) is a guard for shared machines, not a setting results should depend on."""
+                  log_every: int = 100, max_seconds: float | None = None, window: int = 0, batch: int = 1,
+                  seed: int = 0) -> BlockTrainResult:
+    """Adam on the simulation MSE of ``pairs`` (normalised ``(u (N, n_in), y (N, n_out))``), see the module
+    docstring. ``model`` is any float64 module mapping ``u`` (B, N, n_in) to ``ŷ`` (B, N, n_out) from rest (a
+    :class:`BlockNet`, or a single :class:`~sysid.neural.iir.LinearDynamic` layer).
+
+    ``window = 0``: full batch, one step per epoch on the whole records. ``window > warmup``: mini-batches of
+    ``batch`` sections of ``window`` samples (drawn with a generator seeded by ``seed``), as many steps per epoch as
+    cover the training samples once; the hold-out is then simulated once per epoch after its steps. ``best_epoch``
+    counts the epochs behind the kept weights (0: the initial ones). Without a hold-out the last epoch's weights
+    are kept; a non-finite loss restores the last good weights, halves the step size and goes on (at most
+    ``MAX_RESTARTS`` times). ``max_seconds`` (wall clock) is a guard for shared machines, not a setting results
+    should depend on."""
     us = [torch.as_tensor(u, dtype=torch.float64, device=device)[None] for u, _ in pairs]
     ys = [torch.as_tensor(y, dtype=torch.float64, device=device) for _, y in pairs]
     masks = _masks(pairs, warmup, val_fraction)
@@ -112,26 +163,26 @@ def train_records(model: torch.nn.Module, pairs: Sequence[tuple[np.ndarray, np.n
     n_val = sum(v.stop - v.start for _, v in masks if v is not None)
     if n_train < 1:
         raise ValueError("no training samples after the warm-up and the hold-out")
+    window = int(window)
+    if window and (window <= warmup or not any(m.stop - m.start >= window for m, _ in masks)):
+        raise ValueError(f"window={window} must exceed the warm-up ({warmup}) and fit in a record's training part")
+    gen = torch.Generator().manual_seed(int(seed))
     opt = torch.optim.Adam(model.parameters(), lr=float(lr))
     sched = torch.optim.lr_scheduler.CosineAnnealingLR(opt, T_max=max(1, int(epochs)), eta_min=float(lr_min))
     res = BlockTrainResult()
     c0, w0 = time.process_time(), time.perf_counter()
-    best, best_state, prev_state, since_best = math.inf, None, None, 0
+    best, best_state, since_best = math.inf, None, 0
+    prev_state = {k: v.detach().clone() for k, v in model.state_dict().items()} if window else None
     for ep in range(1, int(epochs) + 1):
-        opt.zero_grad(set_to_none=True)
-        sse, vse = 0.0, 0.0
-        for u, y, (tr, va) in zip(us, ys, masks):
-            yhat = model(u)[0]
-            d = yhat[tr] - y[tr]
-            part = (d * d).sum() / (n_train * y.shape[1])
-            part.backward()
-            sse += float(part.item())
-            if va is not None:
-                dv = (yhat[va] - y[va]).detach()
-                vse += float((dv * dv).sum().item())
+        if window:  # the steps first, then the hold-out of the weights they reached
+            sse = _window_steps(model, opt, us, ys, masks, window, int(batch), warmup, n_train, gen)
+            vse = _full_pass(model, us, ys, masks, n_train, n_val, backward=False)[1] if math.isfinite(sse) else math.inf
+        else:  # the hold-out of this forward pass: the weights before the step
+            opt.zero_grad(set_to_none=True)
+            sse, vse = _full_pass(model, us, ys, masks, n_train, n_val, backward=True)
         res.loss_history.append(sse)
         res.epochs_run = ep
-        if not math.isfinite(sse) or sse > 1e6:  # the last step left a denominator unstable
+        if not (math.isfinite(sse) and math.isfinite(vse)) or sse > 1e6:  # a step left a denominator unstable
             if prev_state is None or res.restarts >= MAX_RESTARTS:
                 res.stopped = "non-finite loss"
                 break
@@ -143,11 +194,12 @@ def train_records(model: torch.nn.Module, pairs: Sequence[tuple[np.ndarray, np.n
             sched.eta_min *= 0.5
             opt.state.clear()
             continue
-        prev_state = {k: v.detach().clone() for k, v in model.state_dict().items()}
+        if not window:
+            prev_state = {k: v.detach().clone() for k, v in model.state_dict().items()}
         current = math.sqrt(vse / (n_val * ys[-1].shape[1])) if n_val else math.nan
         res.val_history.append(current)
-        if n_val and current < best:  # the weights of this forward pass, before the step
-            best, since_best, res.best_epoch = current, 0, ep - 1
+        if n_val and current < best:
+            best, since_best, res.best_epoch = current, 0, ep - (0 if window else 1)
             best_state = {k: v.detach().clone() for k, v in model.state_dict().items()}
         elif n_val:
             since_best += 1
@@ -156,7 +208,10 @@ def train_records(model: torch.nn.Module, pairs: Sequence[tuple[np.ndarray, np.n
         if patience and n_val and since_best >= int(patience):
             res.stopped = "patience"
             break
-        opt.step()
+        if window:
+            prev_state = {k: v.detach().clone() for k, v in model.state_dict().items()}
+        else:
+            opt.step()
         sched.step()
         if max_seconds is not None and time.perf_counter() - w0 > float(max_seconds):
             res.stopped = "max_seconds"

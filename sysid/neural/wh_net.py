@@ -79,6 +79,10 @@ class WHNet(TorchFileSave, Identifier):
         Last fraction (0 … 0.5) of the last estimation record held out for early stopping (0: keep the last weights).
     patience : int
         Epochs without a better hold-out RMSE before stopping (0: run all ``epochs``).
+    window, batch : int
+        ``window = 0``: full batch, one Adam step per epoch on the whole records. ``window > warmup``: each epoch
+        takes as many steps as cover the training samples once, each on ``batch`` sections of ``window`` samples
+        drawn at random (seeded by ``seed``) and simulated from rest, their first ``warmup`` samples out of the loss.
     seed, device :
         Seeds the initial weights; ``auto`` | ``cpu`` | ``cuda`` (see :mod:`sysid.neural.device`).
     """
@@ -88,8 +92,8 @@ class WHNet(TorchFileSave, Identifier):
     def __init__(self, channels: int = 8, hidden: Sequence[int] = (16,), nb: int = 8, na: int = 8,
                  nb2: int | None = None, na2: int | None = None, nk: int = 0, linear: bool = False,
                  activation: str = "tanh", warmup: int = 50, epochs: int = 2000, lr: float = 1e-2,
-                 lr_min: float = 1e-4, val_fraction: float = 0.1, patience: int = 0, seed: int = 0,
-                 device: str = "auto"):
+                 lr_min: float = 1e-4, val_fraction: float = 0.1, patience: int = 0, window: int = 0,
+                 batch: int = 16, seed: int = 0, device: str = "auto"):
         self.channels = channels
         self.hidden = list(hidden) if isinstance(hidden, tuple) else hidden
         self.nb = nb
@@ -105,6 +109,8 @@ class WHNet(TorchFileSave, Identifier):
         self.lr_min = lr_min
         self.val_fraction = val_fraction
         self.patience = patience
+        self.window = window
+        self.batch = batch
         self.seed = seed
         self.device = device
 
@@ -126,6 +132,10 @@ class WHNet(TorchFileSave, Identifier):
         integer("warmup", 0, 1_000_000)
         integer("epochs", 0, 10_000_000)
         integer("patience", 0, 10_000_000)
+        integer("window", 0, 100_000_000)
+        integer("batch", 1, 100_000)
+        if self.window and self.window <= self.warmup:
+            raise ConfigError(f"{self.name}: window={self.window} must exceed warmup={self.warmup} (or be 0: full batch)")
         self.hidden = hidden_widths(self.hidden, "hidden", self.name)
         if self.activation not in _ACTIVATIONS:
             raise ConfigError(f"{self.name}: activation={self.activation!r} not one of: {', '.join(_ACTIVATIONS)}")
@@ -174,7 +184,8 @@ class WHNet(TorchFileSave, Identifier):
         with blas_threads():
             res = train_records(model, pairs, warmup, int(self.epochs), float(self.lr), float(self.lr_min),
                                 float(self.val_fraction), int(self.patience), device=device,
-                                log=lambda msg: _LOG.info("%s: %s", self.name, msg), log_every=100)
+                                log=lambda msg: _LOG.info("%s: %s", self.name, msg), log_every=100,
+                                window=int(self.window), batch=int(self.batch), seed=int(self.seed))
         self._set_weights(model.to("cpu"))
         self.loss_history_ = res.loss_history
         self.val_history_ = res.val_history
