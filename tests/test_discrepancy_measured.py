@@ -99,6 +99,23 @@ def test_bandwidth_chosen_substep_meets_its_bound_against_a_1us_solution(kind):
         assert tw.with_params(max_substep_s=h).substeps(fs) <= 5
 
 
+def test_substep_is_rechosen_for_an_adopted_configuration():
+    """The step chosen from the starting twin misses its bound once an asymmetry is added (1.5× on the step
+    protocol); the diagnosis re-chooses it for every configuration it adopts."""
+    tw = CantileverTwin().noise_free()
+    u = tw.generate("steps", fs=1000.0, hold_s=1.0, level_v=80.0).u
+    rec = Record(u=u, y=np.zeros(u.size), fs=1000.0)
+    start, _ = ranges.follow_record(tw, rec, rec)
+    asym = start.with_effects(set(start.effects) | {"asymmetric_hysteresis"}).with_params(asym_factor=1.2)
+    new = ranges.substep_for(asym, rec, rec)
+    assert new.params.max_substep_s < start.params.max_substep_s
+    assert ranges.substep_for(start, rec, rec).params.max_substep_s == start.params.max_substep_s
+    fine = asym.with_params(max_substep_s=1e-6).simulate(u, rec.fs)
+    budget = 1e-4 * asym.params.gain_um_per_v * np.ptp(u)
+    assert np.max(np.abs(asym.simulate(u, rec.fs) - fine)) > budget
+    assert np.max(np.abs(new.simulate(u, rec.fs) - fine)) <= budget
+
+
 # ------------------------------------------------------------------------------------------ noise
 def test_noise_level_from_holds_matches_the_known_sigma():
     rng = np.random.default_rng(2)

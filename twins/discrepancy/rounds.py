@@ -34,13 +34,14 @@ from twins.base import Twin
 
 from . import defaults as dflt
 from . import features as ft
+from . import ranges as rg
 from .fields import core_for, effect_fields
 from .options import DiagnoseOptions
 from .prediction import NOISE_EFFECTS, significance, sse, unpredictable
 from .ranking import cause_from, rank_round
 from .trials import Stage, Trial, make_stage, run_trial
 
-__all__ = ["Extension", "extend", "revisit", "round_trials"]
+__all__ = ["Extension", "adopt", "extend", "revisit", "round_trials"]
 
 #: the failures that mean "this candidate cannot run here" (it is left out of the round)
 _TRIAL_ERRORS = (ConfigError, DataError, ValueError, np.linalg.LinAlgError)
@@ -107,7 +108,17 @@ def _greedy(loop: _Loop, ext: Extension, n_max: int) -> None:
         ext.causes.append(cause_from(ranking, stage, inp.twin, cal.prior, rnd))
         if top.retest:
             loop.retest_left.remove(top.effect)
-        ext.stage = make_stage(top.twin, inp.est, inp.val, opts)
+        ext.stage = adopt(inp, top.twin, opts)
+
+
+def adopt(inp: Any, twin: Twin, opts: DiagnoseOptions) -> Stage:
+    """The stage of a configuration the diagnosis adopts (the calibration, a round's leader, a revisit's), its
+    integration sub-step re-chosen for it where the records chose it (:func:`.ranges.substep_for`): the step
+    chosen from the starting twin can miss its error bound once the hysteresis is calibrated or an asymmetry is
+    added (steps at 1 kHz: 1.5× the bound with asym_factor 1.2, 2.2× with α, β, γ at 0.6, 0.05, 0.03)."""
+    if getattr(inp, "substep_auto", False):
+        twin = rg.substep_for(twin, inp.est, inp.val)
+    return make_stage(twin, inp.est, inp.val, opts)
 
 
 def revisit(loop: _Loop, ext: Extension) -> bool:
@@ -143,7 +154,7 @@ def revisit(loop: _Loop, ext: Extension) -> bool:
         new["replaces"] = eff
         new["evidence"] += f"; replaces {eff}, which the first rounds named in its place"
         ext.causes[i] = new
-        ext.stage = make_stage(top.twin, inp.est, inp.val, opts)
+        ext.stage = adopt(inp, top.twin, opts)
         row["replaced_by"] = top.effect
         if retest:  # back at its configured size: the next rounds may re-test it again
             loop.retest_left.append(eff)
@@ -167,7 +178,7 @@ def _keep_refit(ext: Extension, cause: dict[str, Any], tr: Trial, inp: Any, opts
     beside a creep-free core is 16 % short and leaves the residual above the noise)."""
     if not (tr.sse_val <= ext.stage.sse_val and tr.sse_est < sse(inp.est.y, ext.stage.yhat_est, opts.skip)):
         return
-    ext.stage = make_stage(tr.twin, inp.est, inp.val, opts)
+    ext.stage = adopt(inp, tr.twin, opts)
     _refresh_params(ext, [c["effect"] for c in ext.causes])
 
 
