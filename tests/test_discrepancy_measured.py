@@ -162,6 +162,40 @@ def _named(out):
     return {c["effect"] for c in out["causes"]} | {g for c in out["causes"] for g in c.get("group", [])}
 
 
+def _recheck(stage_twin, truth):
+    """The final re-check of mis-sized defaults on a short broadband record of ``truth`` (with its noise), with one
+    added cause beside a sensor named mis-sized at 3× its configured bandwidth."""
+    from types import SimpleNamespace
+
+    from twins.discrepancy import rounds
+    from twins.discrepancy.options import DiagnoseOptions
+    from twins.discrepancy.trials import make_stage
+
+    fs, rng = 10_000.0, np.random.default_rng(3)
+    u = np.repeat(rng.uniform(-60, 60, 400), 5)
+    est, val = (Record(u=x, y=truth.simulate(x, fs), fs=fs) for x in (u[:1200], u[1200:]))
+    opts = DiagnoseOptions()
+    prior = CantileverTwin().noise_free()
+    loop = SimpleNamespace(inp=SimpleNamespace(est=est, val=val), cal=SimpleNamespace(prior=prior), opts=opts)
+    causes = [{"effect": "input_delay", "round": 1, "params": {}},
+              {"effect": "sensor_lowpass", "kind": "mis-sized default", "round": 2,
+               "params": {"sensor_bandwidth_hz": 15000.0}}]
+    ext = rounds.Extension(make_stage(stage_twin, est, val, opts), causes, [])
+    rounds._recheck_defaults(loop, ext)
+    return ext
+
+
+def test_mis_sized_default_back_at_its_size_is_withdrawn_after_the_revisit():
+    truth = CantileverTwin(seed=4)
+    tw = truth.noise_free()
+    ext = _recheck(tw, truth)  # the final configuration has the sensor at its configured 5 kHz: nothing to name
+    assert [c["effect"] for c in ext.causes] == ["input_delay"]
+    assert ext.rounds[-1]["withdrawn"] == "sensor_lowpass"
+    ext = _recheck(tw.with_params(sensor_bandwidth_hz=15000.0), truth.with_params(sensor_bandwidth_hz=15000.0))  # the data do have the 3× bandwidth: kept, reported as refitted
+    sensor = ext.causes[1]
+    assert sensor["effect"] == "sensor_lowpass" and sensor["ratio_to_configured"]["sensor_bandwidth_hz"] == 3.0
+
+
 @pytest.mark.slow  # ≈ 100 s: three rounds of the whole catalog on steps; the toy two-effect test runs by default
 def test_two_hidden_effects_creep_and_thermal_drift():
     """Creep + thermal drift on steps (seed 0), both named with their parameters within 15 %: before the revisit
