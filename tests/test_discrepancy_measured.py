@@ -188,11 +188,14 @@ def _recheck(stage_twin, truth):
 def test_mis_sized_default_back_at_its_size_is_withdrawn_after_the_revisit():
     truth = CantileverTwin(seed=4)
     tw = truth.noise_free()
-    ext = _recheck(tw, truth)  # the final configuration has the sensor at its configured 5 kHz: nothing to name
-    assert [c["effect"] for c in ext.causes] == ["input_delay"]
-    assert ext.rounds[-1]["withdrawn"] == "sensor_lowpass"
-    ext = _recheck(tw.with_params(sensor_bandwidth_hz=15000.0), truth.with_params(sensor_bandwidth_hz=15000.0))  # the data do have the 3× bandwidth: kept, reported as refitted
-    sensor = ext.causes[1]
+    ext = _recheck(tw.with_params(sensor_bandwidth_hz=5100.0), truth)  # refitted to 2 % of the configured size
+    assert [c["effect"] for c in ext.causes] == ["input_delay"] and "within 5 %" in ext.rounds[-1]["note"]
+    assert ext.rounds[-1]["withdrawn"] == "sensor_lowpass" and ext.stage.twin.params.sensor_bandwidth_hz == 5100.0
+    ext = _recheck(tw.with_params(sensor_bandwidth_hz=6000.0), truth)  # the configured size fits better: put back
+    assert [c["effect"] for c in ext.causes] == ["input_delay"] and "not significantly worse" in ext.rounds[-1]["note"]
+    assert ext.stage.twin.params.sensor_bandwidth_hz == 5000.0
+    ext = _recheck(tw.with_params(sensor_bandwidth_hz=15000.0), truth.with_params(sensor_bandwidth_hz=15000.0))
+    sensor = ext.causes[1]  # the data do have the 3× bandwidth: kept, reported as refitted
     assert sensor["effect"] == "sensor_lowpass" and sensor["ratio_to_configured"]["sensor_bandwidth_hz"] == 3.0
 
 

@@ -24,6 +24,7 @@ is revisited.
 from __future__ import annotations
 
 import dataclasses
+import math
 from typing import Any
 
 import numpy as np
@@ -91,27 +92,37 @@ def _recheck_defaults(loop: _Loop, ext: Extension) -> None:
     """Each mis-sized default named beside other causes, judged again in the final configuration.
 
     The revisit refits every cause's parameters with the core, and a default re-tested in a late round only to
-    make up for an earlier cause's first fit (a sensor bandwidth ×3 standing in for a delay fitted 10 % long
-    before the saturation was known) is back near its configured size there. Its parameters are reported as
-    refitted (the round's values under ``params_first_fit``); where putting them back at the configured values
-    no longer makes the fit significantly worse (F-test at ``alpha``, relative gain ``min_rel_gain``) the cause
-    is withdrawn, the configured values are put back and ``rounds`` gets a row with ``withdrawn``."""
+    make up for an earlier cause's first fit (a sensor bandwidth 3–5× wider standing in for a delay fitted 10 %
+    long before the saturation was known) is back near its configured size there. Its parameters are reported
+    as refitted (the round's values under ``params_first_fit``). The cause is withdrawn (a ``rounds`` row with
+    ``withdrawn``) where every parameter is within 5 % of its configured value (the refit stays: a size that
+    close is no mis-sizing to report), or where putting the configured values back no longer makes the fit
+    significantly worse (F-test at ``alpha``, relative gain ``min_rel_gain``; the configured values are put
+    back)."""
     inp, prior, opts, skip = loop.inp, loop.cal.prior, loop.opts, loop.opts.skip
     for cause in [c for c in ext.causes if c.get("kind") == "mis-sized default"]:
         twin, eff = ext.stage.twin, cause["effect"]
         fields = effect_fields(twin, twin.EFFECTS[eff].params.values())
         cause.setdefault("params_first_fit", dict(cause["params"]))
         cause["params"] = {f: float(getattr(twin.params, f)) for f in fields}
-        cause["ratio_to_configured"] = {f: (cause["params"][f] / float(getattr(prior.params, f))
-                                            if float(getattr(prior.params, f)) != 0 else float("inf")) for f in fields}
-        n_eff = ft.effective_samples(inp.val.y[skip:] - ext.stage.yhat_val[skip:])
-        if dflt.holds(twin, eff, ext.stage.sse_val, len(fields), inp.est, inp.val, prior, n_eff, opts.alpha,
-                      opts.min_rel_gain, skip):
-            continue
+        ratio = {f: (cause["params"][f] / float(getattr(prior.params, f)) if float(getattr(prior.params, f)) != 0
+                     else float("inf")) for f in fields}
+        cause["ratio_to_configured"] = ratio
+        if all(abs(math.log(max(r, 1e-300))) <= math.log(_SAME_SIZE) for r in ratio.values()):
+            note = f"refitted to within {100 * (_SAME_SIZE - 1):.0f} % of its configured size"
+        else:
+            n_eff = ft.effective_samples(inp.val.y[skip:] - ext.stage.yhat_val[skip:])
+            if dflt.holds(twin, eff, ext.stage.sse_val, len(fields), inp.est, inp.val, prior, n_eff, opts.alpha,
+                          opts.min_rel_gain, skip):
+                continue
+            note = "back at its configured size the final configuration fits not significantly worse"
+            ext.stage = adopt(inp, _taken_out(twin, eff, True, prior), opts)
         ext.causes.remove(cause)
-        ext.stage = adopt(inp, _taken_out(twin, eff, True, prior), opts)
-        ext.rounds.append({"round": cause["round"], "withdrawn": eff, "params": cause["params"],
-                           "note": "back at its configured size in the final configuration, not significantly worse"})
+        ext.rounds.append({"round": cause["round"], "withdrawn": eff, "params": cause["params"], "note": note})
+
+
+#: parameters within this factor of their configured values are the configured size (as in the cause's text)
+_SAME_SIZE = 1.05
 
 
 def _greedy(loop: _Loop, ext: Extension, n_max: int) -> None:
