@@ -41,7 +41,7 @@ from .options import DiagnoseOptions
 from .prediction import significance, simulate_val, sse
 from .trials import Trial, run_trial
 
-__all__ = ["retestable", "owned_fields", "retest_trials", "attributable", "cause_fields", "contributions"]
+__all__ = ["retestable", "owned_fields", "retest_trials", "attributable", "holds", "cause_fields", "contributions"]
 
 
 def retestable(twin: Twin, unpredictable: set[str], noise: Sequence[str]) -> list[str]:
@@ -89,13 +89,20 @@ def retest_trials(bases: Sequence[Twin], effects: Sequence[str], est: Record, va
 def attributable(tr: Trial, est: Record, val: Record, configured: Twin, n_eff: float, level: float, min_rel_gain: float,
                  skip: int) -> bool:
     """Step 2 of the module docstring: P_e back at their configured values must be significantly worse."""
-    fields = _fields(configured, tr.effect)
-    yv0 = simulate_val(tr.twin.with_params(**{f: getattr(configured.params, f) for f in fields}), est, val)
+    return holds(tr.twin, tr.effect, tr.sse_val, tr.n_added, est, val, configured, n_eff, level, min_rel_gain, skip)
+
+
+def holds(twin: Twin, effect: str, sse_val: float, n_added: int, est: Record, val: Record, configured: Twin,
+          n_eff: float, level: float, min_rel_gain: float, skip: int) -> bool:
+    """``twin`` (validation SSE ``sse_val``) with ``effect``'s parameters back at their configured values is
+    significantly worse (F-test below ``level`` and a relative gain of at least ``min_rel_gain``)."""
+    fields = _fields(configured, effect)
+    yv0 = simulate_val(twin.with_params(**{f: getattr(configured.params, f) for f in fields}), est, val)
     sse0 = sse(val.y, yv0, skip)
     if not (math.isfinite(sse0) and sse0 > 0):
         return True
-    g0 = 1.0 - math.sqrt(tr.sse_val / sse0)
-    return bool(significance(sse0, tr.sse_val, n_eff, tr.n_added) < level and g0 >= min_rel_gain)
+    g0 = 1.0 - math.sqrt(sse_val / sse0)
+    return bool(significance(sse0, sse_val, n_eff, n_added) < level and g0 >= min_rel_gain)
 
 
 def cause_fields(tr: Trial, nrmse_before: float, configured: Twin) -> dict[str, Any]:

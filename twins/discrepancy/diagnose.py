@@ -56,14 +56,15 @@ from twins.calibration import calibrate as ls_calibrate
 from . import defaults as dflt
 from . import evidence as ev
 from . import features as ft
+from . import ranges as rg
 from . import realdata
 from .fields import core_for, numeric_fields, quant_params
 from .options import DiagnoseOptions
 from .prediction import (NOISE_EFFECTS, deterministic, significance, simulate, simulate_val, sse, unpredictable,
                          with_rails)
 from .result import Diagnosis
-from .rounds import Extension, extend
-from .trials import Stage, make_stage
+from .rounds import Extension, adopt, extend
+from .trials import Stage
 from .unexplained import generic_residual_model
 
 __all__ = ["diagnose", "run_diagnosis", "NOISE_EFFECTS", "significance"]
@@ -100,7 +101,7 @@ def run_diagnosis(twin: Twin, data: Record, val: Record | None = None, max_round
     with _numba_threads(nt):
         inp = _prepare(twin, data, val, opts)
         cal = _calibrate(inp, opts)
-        base = make_stage(cal.twin, inp.est, inp.val, opts)
+        base = adopt(inp, cal.twin, opts)
         ext = _extend(inp, cal, base, max_rounds, opts)
         return _conclude(inp, cal, base, ext, opts)
 
@@ -147,6 +148,7 @@ class _Inputs:
     ranges: list[str]
     saturation: dict[str, Any]
     t_start: float
+    substep_auto: bool = False  # the integration sub-step follows the configuration (:func:`.ranges.substep_for`)
 
     @property
     def railed(self) -> bool:
@@ -158,6 +160,7 @@ def _prepare(twin: Twin, data: Record, val: Record | None, opts: DiagnoseOptions
     """Check the input, split, follow the ranges, and detect the saturation rails of both records."""
     if not isinstance(twin, Twin):
         raise ConfigError("diagnose: twin must be a Twin instance")
+    substep_auto = bool(opts.follow_ranges and rg.substep_followed(twin))
     twin, data, val, split_info, range_notes = realdata.prepare(twin, data, val, opts.split, opts.follow_ranges)
     if data.n_inputs != 1 or data.n_outputs != 1:
         raise DataError(f"{data.source}: diagnose handles single-input single-output records")
@@ -174,7 +177,7 @@ def _prepare(twin: Twin, data: Record, val: Record | None, opts: DiagnoseOptions
     saturation = {"estimation": ft.saturation_rails(data.y, simulate(given, data)),
                   "validation": ft.saturation_rails(val.y, simulate_val(given, data, val))}
     data, val = with_rails(data, saturation["estimation"]), with_rails(val, saturation["validation"])
-    return _Inputs(twin, given, data, val, core, split_info, range_notes, saturation, t_start)
+    return _Inputs(twin, given, data, val, core, split_info, range_notes, saturation, t_start, substep_auto)
 
 
 # ---------------------------------------------------------------------------------------------- 1. calibrate

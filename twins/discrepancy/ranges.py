@@ -13,7 +13,9 @@ widened.
   (≤ 8, the documented maximum) for its longest time constant to reach the record's duration (a chain
   that stops at 100 s cannot follow a creep record of minutes).
 - **integration step**: :func:`twins.cantilever.substep.choose_substep` (bandwidth- and mode-chosen;
-  only when ``max_substep_s`` is the default, a value the user set is kept).
+  only when ``max_substep_s`` is the default, a value the user set is kept); :func:`substep_for` re-chooses
+  it (only finer) for each configuration the diagnosis adopts, since the calibrated hysteresis or an added
+  asymmetry can need a finer step than the starting twin.
 
 :func:`at_bounds` lists fitted parameters within 1 % (of the range width) of a bound; :func:`widened` returns
 the twin with those bounds widened once (×10 away from zero for a positive range, by the range width
@@ -33,7 +35,8 @@ from sysid.errors import DataError
 from sysid.record import Record
 from twins.base import Twin, param_info
 
-__all__ = ["AMPLITUDE_OPTIONS", "follow_record", "at_bounds", "widened", "BOUND_TOL"]
+__all__ = ["AMPLITUDE_OPTIONS", "follow_record", "substep_followed", "substep_for", "at_bounds", "widened",
+           "BOUND_TOL"]
 
 #: twin → parameters that must reach max|u| [V] (the second only for the PI operator)
 AMPLITUDE_OPTIONS: dict[str, tuple[str, ...]] = {"cantilever": ("amp_limit_v", "pi_r_max_v")}
@@ -75,18 +78,45 @@ def follow_record(twin: Twin, est: Record, val: Record) -> tuple[Twin, list[str]
                 notes.append(f"creep_elements {n} -> {n_new}: longest creep time constant "
                              f"{tau1 * 10 ** (n_new - 1):g} s for a {duration:.4g} s record")
     tw = twin.with_params(**changes) if changes else twin
-    if twin.name == "cantilever" and "max_substep_s" in info:
+    if substep_followed(twin):
         cur = float(tw.params.max_substep_s)
-        if cur == float(info["max_substep_s"].default):
-            from twins.cantilever.substep import choose_substep
-
-            u_all = np.concatenate([np.asarray(est.u, float), np.asarray(val.u, float)])
-            h = choose_substep(tw, u_all, est.fs)
-            if h > cur * (1 + 1e-9):
-                tw = tw.with_params(max_substep_s=h)
-                notes.append(f"max_substep_s {cur:g} -> {h:.3g} s: {tw.substeps(est.fs)} sub-steps per sample "
-                             "suffice for this record's bandwidth (FOH error bound ≤ 1e-4 of the span)")
+        h = _chosen_substep(tw, est, val)
+        if h > cur * (1 + 1e-9):
+            tw = tw.with_params(max_substep_s=h)
+            notes.append(f"max_substep_s {cur:g} -> {h:.3g} s: {tw.substeps(est.fs)} sub-steps per sample "
+                         "suffice for this record's bandwidth (FOH error bound ≤ 1e-4 of the span)")
     return tw, notes
+
+
+def substep_followed(twin: Twin) -> bool:
+    """The twin's integration sub-step is chosen from the records (a cantilever at the default ``max_substep_s``;
+    a value the user set is kept)."""
+    info = param_info(type(twin.params))
+    return (twin.name == "cantilever" and "max_substep_s" in info
+            and float(twin.params.max_substep_s) == float(info["max_substep_s"].default))
+
+
+def _chosen_substep(twin: Twin, est: Record, val: Record) -> float:
+    """:func:`twins.cantilever.substep.choose_substep` for ``twin`` at its default sub-step, over both records."""
+    from twins.cantilever.substep import choose_substep
+
+    info = param_info(type(twin.params))
+    base = twin.with_params(max_substep_s=float(info["max_substep_s"].default))
+    u_all = np.concatenate([np.asarray(est.u, float), np.asarray(val.u, float)])
+    return choose_substep(base, u_all, est.fs)
+
+
+def substep_for(twin: Twin, est: Record, val: Record) -> Twin:
+    """``twin`` with its sub-step made finer where its present configuration needs it.
+
+    The sub-step is chosen once from the starting configuration; the bound depends on the hysteresis curvature
+    (Bouc–Wen α, β, γ as calibrated, an added asymmetry), so a configuration the diagnosis adopts gets it
+    re-chosen. Only finer: a configuration that drops an effect keeps the step it had."""
+    if twin.name != "cantilever":
+        return twin
+    cur = float(twin.params.max_substep_s)
+    h = _chosen_substep(twin, est, val)
+    return twin.with_params(max_substep_s=h) if h < cur * (1 - 1e-9) else twin
 
 
 def at_bounds(twin: Twin, names: Iterable[str], tol: float = BOUND_TOL) -> list[dict[str, Any]]:
