@@ -96,6 +96,11 @@ def _masks(pairs: Sequence[tuple[np.ndarray, np.ndarray]], warmup: int, val_frac
     return out
 
 
+def _weights(model: torch.nn.Module) -> dict[str, torch.Tensor]:
+    """A detached copy of the model's parameters (to step back to, or to keep as the best)."""
+    return {k: v.detach().clone() for k, v in model.state_dict().items()}
+
+
 def _full_pass(model: torch.nn.Module, us, ys, masks, n_train: int, n_val: int, backward: bool) -> tuple[float, float]:
     """Simulate every record from rest: (training MSE, hold-out sum of squares); gradients of the training MSE are
     accumulated when ``backward``."""
@@ -172,11 +177,12 @@ def train_records(model: torch.nn.Module, pairs: Sequence[tuple[np.ndarray, np.n
     res = BlockTrainResult()
     c0, w0 = time.process_time(), time.perf_counter()
     best, best_state, since_best = math.inf, None, 0
-    prev_state = {k: v.detach().clone() for k, v in model.state_dict().items()} if window else None
+    prev_state = _weights(model) if window else None  # sections step before the first check
     for ep in range(1, int(epochs) + 1):
         if window:  # the steps first, then the hold-out of the weights they reached
             sse = _window_steps(model, opt, us, ys, masks, window, int(batch), warmup, n_train, gen)
-            vse = _full_pass(model, us, ys, masks, n_train, n_val, backward=False)[1] if math.isfinite(sse) else math.inf
+            vse = math.inf if not math.isfinite(sse) else (
+                _full_pass(model, us, ys, masks, n_train, n_val, backward=False)[1] if n_val else 0.0)
         else:  # the hold-out of this forward pass: the weights before the step
             opt.zero_grad(set_to_none=True)
             sse, vse = _full_pass(model, us, ys, masks, n_train, n_val, backward=True)
@@ -194,13 +200,12 @@ def train_records(model: torch.nn.Module, pairs: Sequence[tuple[np.ndarray, np.n
             sched.eta_min *= 0.5
             opt.state.clear()
             continue
-        if not window:
-            prev_state = {k: v.detach().clone() for k, v in model.state_dict().items()}
+        prev_state = _weights(model)  # checked finite: the weights to step back to
         current = math.sqrt(vse / (n_val * ys[-1].shape[1])) if n_val else math.nan
         res.val_history.append(current)
         if n_val and current < best:
             best, since_best, res.best_epoch = current, 0, ep - (0 if window else 1)
-            best_state = {k: v.detach().clone() for k, v in model.state_dict().items()}
+            best_state = _weights(model)
         elif n_val:
             since_best += 1
         if log and (ep == 1 or ep % int(log_every) == 0):
@@ -208,9 +213,7 @@ def train_records(model: torch.nn.Module, pairs: Sequence[tuple[np.ndarray, np.n
         if patience and n_val and since_best >= int(patience):
             res.stopped = "patience"
             break
-        if window:
-            prev_state = {k: v.detach().clone() for k, v in model.state_dict().items()}
-        else:
+        if not window:
             opt.step()
         sched.step()
         if max_seconds is not None and time.perf_counter() - w0 > float(max_seconds):
