@@ -203,7 +203,7 @@ def _score_stage(ctx: Context, datasets: list[str], key: str, title: str, syside
     if not datasets:
         raise StageSkipped("no dataset available")
     # every available identifier, as the regression check selects them (quick mode leaves out the identifiers of
-    # QUICK_SKIP_IDENTIFIERS, listed under `skipped` with the reason)
+    # QUICK_SKIP_IDENTIFIERS and the pairs outside QUICK_ONLY_DATASETS, listed under `skipped` with the reason)
     run = scoring.score(None, datasets, quick=ctx.quick, sysidentpy=sysidentpy, progress=ctx.verbose)
     idents = run.selection.get("identifiers", idents)
     ctx.data[key] = run

@@ -26,6 +26,7 @@ IDENTIFIERS: dict[str, str] = {
     "ss-encoder": "sysid.neural.ss_encoder:SSEncoder",
     "wh-net": "sysid.neural.wh_net:WHNet",
     "narx-poly-sim": "sysid.polysim:NARXPolySim",
+    "oe-echo": "sysid.echo_oe:EchoOE",
 }
 
 # Binary (non-JSON) model files: suffix -> "module:function(path) -> Identifier".

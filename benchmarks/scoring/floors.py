@@ -19,7 +19,7 @@ from sysid.errors import ConfigError
 
 BASELINES_PATH = Path(__file__).resolve().parent.parent / "baselines.json"
 BASELINES_FORMAT = "piezotwin-baselines/1"
-LINEAR_IDENTIFIERS = ("arx", "armax", "bla", "oe", "bj", "n4sid")
+LINEAR_IDENTIFIERS = ("arx", "armax", "bla", "oe", "bj", "n4sid", "oe-echo")
 
 
 def load_baselines(path: str | Path | None = None) -> dict[str, Any]:

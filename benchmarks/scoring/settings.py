@@ -76,6 +76,8 @@ QUICK_DATASETS: tuple[str, ...] = tuple(_QUICK["datasets"])
 QUICK_MAX_SAMPLES: dict[str, dict[str, int]] = _QUICK.get("max_samples", {})
 #: identifiers left out of the default quick run, with the reason (``--identifiers`` still runs them quick)
 QUICK_SKIP_IDENTIFIERS: dict[str, str] = _QUICK.get("skip_identifiers", {})
+#: identifiers that the default quick run scores on some datasets only: {identifier: {"datasets": [...], "why": ...}}
+QUICK_ONLY_DATASETS: dict[str, dict[str, Any]] = _QUICK.get("only_datasets", {})
 #: training seeds of the seeded identifiers in quick mode, each test scored by the run of median free-run RMSE
 QUICK_SEEDS: tuple[int, ...] = tuple(_QUICK["seeds"])
 
