@@ -156,13 +156,15 @@ def test_bad_options_are_refused():
         SSEncoder(T=500, device="cpu").fit(Record(u=np.sin(np.arange(100.0)), y=np.cos(np.arange(100.0)), fs=1.0))
 
 
-def test_default_quick_run_skips_ss_encoder_with_the_reason(monkeypatch):
-    """The quick check's budget has no room for simulation-error training: the default quick run lists ss-encoder
-    as skipped (an explicit --identifiers still runs it)."""
+def test_default_quick_run_scores_ss_encoder_on_its_quick_datasets_only(monkeypatch):
+    """The quick check's budget has room for simulation-error training on Silverbox only: the default quick run
+    lists ss-encoder × cascaded tanks as skipped with the reason (an explicit --identifiers still runs it)."""
     import sysid.registry
     from benchmarks import scoring
 
+    assert scoring.QUICK_ONLY_DATASETS["ss-encoder"]["datasets"] == ["silverbox"]
     monkeypatch.setattr(sysid.registry, "available_identifiers", lambda: ["ss-encoder"])
     run = scoring.score(None, ["cascaded-tanks"], quick=True, sysidentpy=False)
     assert run.rows == []
-    assert {"identifier": "ss-encoder", "reason": scoring.QUICK_SKIP_IDENTIFIERS["ss-encoder"]} in run.skipped
+    reason = scoring.QUICK_ONLY_DATASETS["ss-encoder"]["why"]
+    assert {"identifier": "ss-encoder", "dataset": "cascaded-tanks", "reason": reason} in run.skipped
