@@ -363,6 +363,22 @@ class EchoOE(Identifier):
                      fit=self.fit_status_, max_lag=self.max_lag_, terms=[])
         return d
 
+    def summary(self) -> str:
+        """Orders, where the delay and the round trip came from, and the loop gain (printed by ``identify``)."""
+        s, found = self.structure_, self.structure_["found"] or {}
+        lines = [f"{self.name}: nb={s['nb']}, nf={s['nf']}, nk={s['nk']}"
+                 + (" (found: first arrival at lag %d)" % found["onset"] if self.nk is None and found else "")]
+        if s["echo_lag"]:
+            how = (f" (found: cepstral peak {found['echo_snr']:.1f}x the median)" if self.echo_lag is None and found
+                   else "")
+            lines.append(f"  echo round trip {s['echo_lag']} samples{how}, C over lags "
+                         f"{s['echo_lag'] - s['echo_width']}..{s['echo_lag'] + s['echo_width']}, "
+                         f"loop gain max|C/F| = {self.loop_gain_:.4f}")
+        elif self.echo_lag is None and found:
+            lines.append(f"  no echo term: the largest cepstral peak is {found['echo_snr']:.1f}x the median "
+                         f"(needs {float(self.echo_snr):g}x)")
+        return "\n".join(lines)
+
     def _state(self) -> dict[str, Any]:
         return {"structure": self.structure_, "theta": self.theta_.tolist(), "noise_variance": self.noise_variance_,
                 "y_bound": self.y_bound_, "fit": self.fit_status_}

@@ -65,6 +65,7 @@ def test_the_true_system_is_learned_exactly_from_noise_free_data(fitted):
     assert fitted.loop_gain_ < 1.0
     val = record(3000, 1)
     assert fitted.score(val) > 1 - 1e-10
+    assert f"echo round trip {TAU} samples (found: cepstral peak" in fitted.summary()
 
 
 def test_noisy_data_give_the_response_to_the_noise_level():
@@ -78,6 +79,7 @@ def test_noisy_data_give_the_response_to_the_noise_level():
 def test_without_an_echo_the_model_is_an_output_error_model():
     m = EchoOE(nb=16, nf=2, echo_width=3).fit(record(6000, 3, echo=False))
     assert m.structure_["echo_lag"] == 0 and m.c_.size == 0 and m.n_parameters_ == 16 + 2
+    assert "no echo term" in m.summary()
     w = np.linspace(0.01, np.pi - 0.01, 200)
     G = m.frequency_response(w / (2 * np.pi), 1.0)["G"]
     G_true = response(*true_polys(echo=False), w)
