@@ -217,3 +217,22 @@ def test_narx_mlp_bypass_saved_and_loaded(plant, tmp_path):
         assert m2.linear is True and m2.n_parameters_ == m.n_parameters_
         for h, p in preds.items():
             np.testing.assert_array_equal(m2.predict(val, h), p)
+
+
+def test_rnn_linear_path_filter_equals_the_loop():
+    """The compiled filter that prediction takes for long float64 sequences gives the per-step recursion's values."""
+    from sysid.neural.rnn import FILTER_MIN_STEPS, _Net
+
+    torch.manual_seed(1)
+    k, n_enc = 3, 4
+    net = _Net(n_enc * 2, [6], 5, 1, 1, "gru", linear=k, n_enc=n_enc).double()
+    with torch.no_grad():
+        net.arx.weight.copy_(torch.tensor([[0.6, -0.3, 0.1, 0.8, -0.4, 0.2]], dtype=torch.float64))
+        net.arx.bias.fill_(0.05)
+    rng = np.random.default_rng(3)
+    x0 = torch.from_numpy(rng.normal(size=(3, n_enc * 2)))
+    useq = torch.from_numpy(rng.normal(size=(3, 4 * FILTER_MIN_STEPS, 1)))
+    loop = net.linear_path(x0, useq).detach()  # gradients enabled: the per-step loop
+    with torch.no_grad():
+        fast = net.linear_path(x0, useq)
+    np.testing.assert_allclose(fast.numpy(), loop.numpy(), rtol=1e-12, atol=1e-12)

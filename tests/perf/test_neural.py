@@ -103,3 +103,34 @@ def test_rnn_free_run_80k(benchmark, rec80k):
     benchmark.extra_info.update({"items": N})
     y = benchmark.pedantic(lambda: m.predict(rec80k, None), rounds=3, iterations=1)
     assert np.isfinite(y).all()
+
+
+@pytest.fixture(scope="module")
+def rnn_linear():
+    """The rnn's ARX path (4 lags, float64) and an 80 000-step free run's inputs."""
+    from sysid.neural.rnn import _Net
+
+    torch.manual_seed(0)
+    net = _Net(8 * 2, [8], 4, 1, 1, "gru", linear=4, n_enc=8).double()
+    with torch.no_grad():
+        net.arx.weight.copy_(torch.tensor([[1.2, -0.5, 0.1, -0.05, 0.4, 0.1, 0.0, 0.0]], dtype=torch.float64))
+    rng = np.random.default_rng(0)
+    return net, torch.from_numpy(rng.normal(size=(1, 16))), torch.from_numpy(rng.normal(size=(1, N, 1)))
+
+
+def test_rnn_linear_path_loop_reference(benchmark, rnn_linear):
+    """Reference: the per-step recursion (what training runs, with gradients)."""
+    net, x0, useq = rnn_linear
+    benchmark.extra_info.update({"items": N})
+    with torch.enable_grad():
+        benchmark.pedantic(lambda: net.linear_path(x0, useq).detach(), rounds=1, iterations=1)
+
+
+def test_rnn_linear_path_filter(benchmark, rnn_linear):
+    """Prediction's filter path (scipy.signal.lfilter): the same values as the loop."""
+    net, x0, useq = rnn_linear
+    benchmark.extra_info.update({"items": N, "reference": "test_rnn_linear_path_loop_reference"})
+    with torch.no_grad():
+        fast = benchmark.pedantic(lambda: net.linear_path(x0, useq), rounds=5, iterations=1, warmup_rounds=1)
+    loop = net.linear_path(x0, useq).detach()
+    np.testing.assert_allclose(fast.numpy(), loop.numpy(), rtol=1e-9, atol=1e-9)
