@@ -35,10 +35,11 @@ from typing import Any, ClassVar, Sequence
 
 import numpy as np
 
-from sysid.errors import ConfigError, DataError
+from sysid.errors import ConfigError, DataError, DivergenceWarning
 from sysid.record import Record
 
-__all__ = ["Identifier", "as_record_list", "check_records", "load_model", "as_fit_data", "as_predict_record"]
+__all__ = ["Identifier", "as_record_list", "check_records", "load_model", "as_fit_data", "as_predict_record",
+           "check_prediction", "stop_at_divergence"]
 
 _UNSET: Any = object()  # "argument not given" (None is a meaningful horizon: free run)
 
@@ -85,6 +86,32 @@ def check_records(records: Sequence[Record], max_lag: int, min_rows: int, what: 
         if np.ptp(y_all[:, ch]) == 0.0:
             name = "y" if y_all.shape[1] == 1 else f"y{ch + 1}"
             raise DataError(f"{records[0].source}: output {name} is constant ({y_all[0, ch]:g}); nothing to identify")
+
+def check_prediction(model: "Identifier", record: Record, horizon: Any) -> None:
+    """What ``predict`` refuses for every simulation model: a record without output, other channel counts than the
+    model was fitted on, a horizon that is not a positive integer or ``None`` (free run)."""
+    record.require_output()
+    if record.n_inputs != model.n_inputs_ or record.n_outputs != model.n_outputs_:
+        raise DataError(f"{record.source}: {record.n_inputs} inputs / {record.n_outputs} outputs, model was fitted "
+                        f"on {model.n_inputs_} / {model.n_outputs_}")
+    if horizon is not None and (isinstance(horizon, bool) or int(horizon) != horizon or horizon < 1):
+        raise ConfigError(f"horizon must be a positive integer or None (free run), got {horizon!r}")
+
+
+def stop_at_divergence(model: "Identifier", yhat: np.ndarray, what: str = "prediction") -> np.ndarray:
+    """The divergence rule of the module docstring on ``yhat`` (one row per sample), in place: from the first
+    sample with any output outside ``±model.y_bound_`` on, ``nan``; ``model.diverged_at_`` holds that index (None
+    when there is none) and a :class:`~sysid.errors.DivergenceWarning` names it."""
+    outside = ~(np.abs(yhat) <= model.y_bound_)
+    bad = np.flatnonzero(outside if outside.ndim == 1 else outside.any(axis=1))
+    model.diverged_at_ = None
+    if bad.size:
+        model.diverged_at_ = int(bad[0])
+        yhat[bad[0]:] = np.nan
+        warnings.warn(f"{model.name}: {what} left ±{model.y_bound_:.3g} at sample {bad[0]}; the rest is nan",
+                      DivergenceWarning, stacklevel=3)
+    return yhat
+
 
 def as_fit_data(data: Any, y: Any = None, fs: float | None = None, units: dict[str, str] | None = None
                 ) -> Record | list[Record]:

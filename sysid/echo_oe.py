@@ -41,7 +41,6 @@ that leaves this set is refused (the residual returns a large constant), as in :
 
 from __future__ import annotations
 
-import warnings
 from typing import Any, Sequence
 
 import numpy as np
@@ -50,8 +49,8 @@ import scipy.signal
 from scipy.optimize import least_squares
 from scipy.signal import hilbert, lfilter, lfiltic
 
-from sysid.base import Identifier, as_record_list, check_records
-from sysid.errors import ConfigError, DataError, DivergenceWarning
+from sysid.base import Identifier, as_record_list, check_prediction, check_records, stop_at_divergence
+from sysid.errors import ConfigError, DataError
 from sysid.pem_init import is_stable, shift, sriv, stabilise
 from sysid.record import Record
 
@@ -328,22 +327,10 @@ class EchoOE(Identifier):
         its simulation (its noise model is 1), so ``horizon`` only has to be valid."""
         if not hasattr(self, "theta_"):
             raise ConfigError(f"{self.name}: model is not fitted (call fit first)")
-        record.require_output()
-        if record.n_inputs != 1 or record.n_outputs != 1:
-            raise DataError(f"{record.source}: {record.n_inputs} inputs / {record.n_outputs} outputs, model was fitted "
-                            "on 1 / 1")
-        if horizon is not None and (isinstance(horizon, bool) or int(horizon) != horizon or horizon < 1):
-            raise ConfigError(f"horizon must be a positive integer or None (free run), got {horizon!r}")
+        check_prediction(self, record, horizon)
         u, y = record.u.reshape(-1).astype(float), record.y.reshape(-1).astype(float)
         yhat = self._run(self.b_, self.a_, u, y, min(self.max_lag_, u.size))
-        self.diverged_at_ = None
-        bad = np.flatnonzero(~(np.abs(yhat) <= self.y_bound_))
-        if bad.size:
-            self.diverged_at_ = int(bad[0])
-            yhat[bad[0]:] = np.nan
-            warnings.warn(f"{self.name}: prediction left ±{self.y_bound_:.3g} at sample {bad[0]}; the rest is nan",
-                          DivergenceWarning, stacklevel=2)
-        return yhat.reshape(record.y.shape)
+        return stop_at_divergence(self, yhat).reshape(record.y.shape)
 
     def frequency_response(self, f_hz: Any, fs: float) -> dict[str, np.ndarray]:
         """G(e^{iωT}) = B/A at ``f_hz`` [Hz] for the sampling rate ``fs`` [Hz] (delay included)."""

@@ -35,15 +35,14 @@ Prediction: free run x = Σ B_i/F_i u_i with the initial filter state fitted by 
 
 from __future__ import annotations
 
-import warnings
 from typing import Any, Sequence
 
 import numpy as np
 from scipy.optimize import least_squares as _scipy_lsq
 from scipy.signal import lfilter
 
-from sysid.base import Identifier, as_record_list, check_records
-from sysid.errors import ConfigError, DataError, DivergenceWarning
+from sysid.base import Identifier, as_record_list, check_prediction, check_records, stop_at_divergence
+from sysid.errors import ConfigError
 from sysid.pem_init import hannan_rissanen, is_stable, oe_sim, shift, sriv, stabilise
 from sysid.record import Record
 from sysid.uncertainty import monte_carlo_band, poles_with_std, tf_response_with_std
@@ -318,12 +317,7 @@ class _PolyPEM(Identifier):
     def predict(self, record: Record, horizon: int | None = 1) -> np.ndarray:
         """One-step (``horizon=1``), k-step at every sample (``horizon=k``) or free run (``None``); module docstring."""
         self._check_fitted()
-        record.require_output()
-        if record.n_inputs != self.n_inputs_ or record.n_outputs != 1:
-            raise DataError(f"{record.source}: {record.n_inputs} inputs / {record.n_outputs} outputs, model was fitted "
-                            f"on {self.n_inputs_} / 1")
-        if horizon is not None and (isinstance(horizon, bool) or int(horizon) != horizon or horizon < 1):
-            raise ConfigError(f"horizon must be a positive integer or None (free run), got {horizon!r}")
+        check_prediction(self, record, horizon)
         u = record.u.reshape(len(record), -1)
         y = record.y.reshape(-1)
         x = self._simulate(u, y)
@@ -335,14 +329,7 @@ class _PolyPEM(Identifier):
         yhat = np.array(yhat, float)
         L = min(self.max_lag_, len(y))
         yhat[:L] = y[:L]
-        self.diverged_at_ = None
-        bad = np.flatnonzero(~(np.abs(yhat) <= self.y_bound_))
-        if bad.size:
-            self.diverged_at_ = int(bad[0])
-            yhat[bad[0]:] = np.nan
-            warnings.warn(f"{self.name}: prediction left ±{self.y_bound_:.3g} at sample {bad[0]}; the rest is nan",
-                          DivergenceWarning, stacklevel=2)
-        return yhat.reshape(record.y.shape)
+        return stop_at_divergence(self, yhat).reshape(record.y.shape)
 
     # ---- reporting
     def parameter_names(self) -> list[str]:

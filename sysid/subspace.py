@@ -36,7 +36,6 @@ frequency response, and a band on the simulated output.
 from __future__ import annotations
 
 import math
-import warnings
 from typing import Any, Sequence
 
 import numpy as np
@@ -44,8 +43,8 @@ from numba import njit
 from numpy.lib.stride_tricks import sliding_window_view
 from scipy.optimize import linear_sum_assignment
 
-from sysid.base import Identifier, as_record_list, check_records
-from sysid.errors import ConfigError, DataError, DivergenceWarning
+from sysid.base import Identifier, as_record_list, check_prediction, check_records, stop_at_divergence
+from sysid.errors import ConfigError
 from sysid.record import Record
 
 __all__ = ["N4SID", "ss_simulate", "choose_order"]
@@ -373,25 +372,13 @@ class N4SID(Identifier):
     def predict(self, record: Record, horizon: int | None = 1) -> np.ndarray:
         """Simulated output for every ``horizon`` (no noise model: one-step = k-step = free run)."""
         self._check_fitted()
-        record.require_output()
-        if record.n_inputs != self.n_inputs_ or record.n_outputs != self.n_outputs_:
-            raise DataError(f"{record.source}: {record.n_inputs} inputs / {record.n_outputs} outputs, model was fitted "
-                            f"on {self.n_inputs_} / {self.n_outputs_}")
-        if horizon is not None and (isinstance(horizon, bool) or int(horizon) != horizon or horizon < 1):
-            raise ConfigError(f"horizon must be a positive integer or None (free run), got {horizon!r}")
+        check_prediction(self, record, horizon)
         u = record.u.reshape(len(record), -1)
         y = record.y.reshape(len(record), -1)
         yhat = self._simulate(u, y)
         L = min(self.max_lag_, len(y))
         yhat[:L] = y[:L]
-        self.diverged_at_ = None
-        bad = np.flatnonzero(~(np.abs(yhat) <= self.y_bound_).all(axis=1))
-        if bad.size:
-            self.diverged_at_ = int(bad[0])
-            yhat[bad[0]:] = np.nan
-            warnings.warn(f"n4sid: simulation left ±{self.y_bound_:.3g} at sample {bad[0]}; the rest is nan",
-                          DivergenceWarning, stacklevel=2)
-        return yhat.reshape(record.y.shape)
+        return stop_at_divergence(self, yhat, "simulation").reshape(record.y.shape)
 
     # ------------------------------------------------------------------ uncertainty and reporting
     def _jack_std(self, est: np.ndarray, reps: list[np.ndarray]) -> np.ndarray:

@@ -185,3 +185,20 @@ def test_registered_and_bad_options():
         N4SID(segments=1).fit(rec)
     with pytest.raises(ConfigError):
         OE(nb=2, nf=2, nk=1).predict(rec)
+
+
+def test_a_prediction_outside_the_bound_stops_there_with_a_warning():
+    """The shared divergence rule (sysid.base.stop_at_divergence): nan from the first sample outside ±y_bound_,
+    its index in diverged_at_, one warning naming it; a later prediction inside the bound clears it."""
+    from sysid.errors import DivergenceWarning
+
+    rec = _data(0, n=500)
+    for model, what in ((OE(nb=4, nf=4, nk=1).fit(rec), "oe: prediction"), (N4SID(nx=4).fit(rec), "n4sid: simulation")):
+        bound, ref = model.y_bound_, model.predict(rec, None)
+        first = int(np.flatnonzero(np.abs(ref) > 0.5 * np.max(np.abs(ref)))[0])
+        model.y_bound_ = 0.5 * float(np.max(np.abs(ref)))
+        with pytest.warns(DivergenceWarning, match=f"{what} left ±.* at sample {first}; the rest is nan"):
+            yh = model.predict(rec, None)
+        assert model.diverged_at_ == first and np.isnan(yh[first:]).all() and np.array_equal(yh[:first], ref[:first])
+        model.y_bound_ = bound
+        assert np.array_equal(model.predict(rec, None), ref) and model.diverged_at_ is None
