@@ -152,9 +152,9 @@ class EchoOE(Identifier):
         tau = int(self.echo_lag) if self.echo_lag is not None else found["echo_lag"]
         if tau and tau - w <= nf:
             raise ConfigError(f"{self.name}: echo lag {tau} minus echo_width {w} must exceed nf={nf}")
-        width = w if tau else -1  # no echo: C is empty
-        return {"nb": nb, "nf": nf, "nk": nk, "echo_lag": tau, "echo_width": max(width, 0) if tau else 0,
-                "n_echo": 2 * width + 1 if tau else 0, "found": found}
+        w = w if tau else 0  # no echo: C is empty
+        return {"nb": nb, "nf": nf, "nk": nk, "echo_lag": tau, "echo_width": w, "n_echo": 2 * w + 1 if tau else 0,
+                "found": found}
 
     def _polys(self, theta: np.ndarray, s: dict[str, Any] | None = None):
         s = self.structure_ if s is None else s
@@ -173,7 +173,8 @@ class EchoOE(Identifier):
     def _max_lag(s: dict[str, Any]) -> int:
         return max(s["nk"] + s["nb"] - 1, s["nf"], s["echo_lag"] + s["echo_width"] if s["echo_lag"] else 0)
 
-    def _loop_gain(self, f: np.ndarray, c: np.ndarray, s: dict[str, Any]) -> float:
+    @staticmethod
+    def _loop_gain(f: np.ndarray, c: np.ndarray) -> float:
         """max over ω of |C(e^{iω})/F(e^{iω})| (C placed at its own lags −w…w; the delay τ has modulus 1)."""
         if c.size == 0:
             return 0.0
@@ -181,8 +182,26 @@ class EchoOE(Identifier):
         F = np.fft.rfft(f, GRID)
         return float(np.max(np.abs(C) / np.maximum(np.abs(F), 1e-300)))
 
-    def _admissible(self, f, c, s) -> bool:
-        return is_stable(f) and self._loop_gain(f, c, s) < LOOP_MARGIN
+    def _admissible(self, f, c) -> bool:
+        return is_stable(f) and self._loop_gain(f, c) < LOOP_MARGIN
+
+    @staticmethod
+    def _columns(s: dict[str, Any], xu: np.ndarray, xy: np.ndarray) -> np.ndarray:
+        """The model's regressors in θ order from an input-side and an output-side signal: xu(t − nk − k) for the
+        nb taps of B, −xy(t − k) for F's k = 1 … nf, xy(t − k) for C's lags τ − w … τ + w."""
+        nb, nf, nk, tau, w = s["nb"], s["nf"], s["nk"], s["echo_lag"], s["echo_width"]
+        echo = range(tau - w, tau + w + 1) if tau else range(0)
+        return np.column_stack([shift(xu, nk + k) for k in range(nb)] + [-shift(xy, k) for k in range(1, nf + 1)]
+                               + [shift(xy, k) for k in echo])
+
+    def _free_runs(self, theta, us, ys, s, L) -> list[np.ndarray] | None:
+        """The free run of every record (the first L samples measured), or None where θ is not admissible or a
+        run is not finite."""
+        b, f, c, a = self._polys(theta, s)
+        if not self._admissible(f, c):
+            return None
+        runs = [self._run(b, a, u_, y_, L) for u_, y_ in zip(us, ys)]
+        return runs if all(np.isfinite(r).all() for r in runs) else None
 
     # ------------------------------------------------------------------ simulation
     @staticmethod
@@ -224,7 +243,7 @@ class EchoOE(Identifier):
             ZZ = Z.T @ Z
             lam = float(self.ridge) * float(np.trace(ZZ)) / ZZ.shape[0]
             c0 = np.linalg.solve(ZZ + lam * np.eye(ZZ.shape[0]), Z.T @ v)
-            gain = self._loop_gain(f0, c0, s)
+            gain = self._loop_gain(f0, c0)
             if gain >= INIT_LOOP_GAIN:
                 c0 *= INIT_LOOP_GAIN / gain
         theta0 = self._refine_iv(np.concatenate([b0, f0[1:], c0]), us, ys, s, L)
@@ -232,29 +251,30 @@ class EchoOE(Identifier):
         y_all = np.concatenate(ys)
         penalty = 1e3 * (max(float(np.std(y_all)), 1e-300) + float(np.max(np.abs(y_all))))
 
+        last: dict[str, Any] = {}  # the runs of the θ the residual was last evaluated at: the Jacobian's point
+
         def residual(theta):
-            b, f, c, a = self._polys(theta, s)
-            if not self._admissible(f, c, s):
-                return np.full(n_res, penalty)
-            r = np.concatenate([(y_ - self._run(b, a, u_, y_, L))[L:] for u_, y_ in zip(us, ys)])
-            return r if np.isfinite(r).all() else np.full(n_res, penalty)
+            runs = self._free_runs(theta, us, ys, s, L)
+            last.update(theta=np.array(theta), runs=runs)
+            return np.full(n_res, penalty) if runs is None else np.concatenate(
+                [(y_ - r)[L:] for y_, r in zip(ys, runs)])
 
         def jac(theta):
             b, f, c, a = self._polys(theta, s)
+            runs = last["runs"] if np.array_equal(last.get("theta"), theta) else None
+            if runs is None:
+                runs = [self._run(b, a, u_, y_, L) for u_, y_ in zip(us, ys)]
             blocks = []
-            for u_, y_ in zip(us, ys):
-                yh = self._run(b, a, u_, y_, L)
+            for u_, r in zip(us, runs):
                 mask = np.zeros_like(u_)
                 mask[L:] = 1.0  # the initial window is measured: no sensitivity before L
                 wu = lfilter([1.0], a, u_ * mask)
-                wy = lfilter([1.0], a, yh * mask)
-                cols = ([shift(wu, nk + k) for k in range(nb)] + [-shift(wy, k) for k in range(1, nf + 1)]
-                        + ([shift(wy, k) for k in range(tau - w, tau + w + 1)] if tau else []))
-                blocks.append(-np.column_stack(cols)[L:])
+                wy = lfilter([1.0], a, r * mask)
+                blocks.append(-self._columns(s, wu, wy)[L:])
             return np.vstack(blocks)
 
         theta, status = theta0, "initial estimate (max_iter=0)"
-        if not self._admissible(f0, c0, s):  # pragma: no cover - sriv stabilises F and c0 is scaled
+        if not self._admissible(f0, c0):  # pragma: no cover - sriv stabilises F and c0 is scaled
             raise DataError(f"{self.name}: no stable initial estimate")
         if int(self.max_iter) > 0:
             sol = least_squares(residual, theta0, jac=jac, method="lm", x_scale="jac", xtol=1e-10, ftol=1e-10,
@@ -271,11 +291,10 @@ class EchoOE(Identifier):
         return self
 
     def _cost(self, theta, us, ys, s, L) -> float:
-        b, f, c, a = self._polys(theta, s)
-        if not self._admissible(f, c, s):
+        runs = self._free_runs(theta, us, ys, s, L)
+        if runs is None:
             return np.inf
-        e = [(y_ - self._run(b, a, u_, y_, L))[L:] for u_, y_ in zip(us, ys)]
-        v = float(sum(np.sum(x * x) for x in e))
+        v = float(sum(np.sum((y_ - r)[L:] ** 2) for y_, r in zip(ys, runs)))
         return v if np.isfinite(v) else np.inf
 
     def _refine_iv(self, theta, us, ys, s, L) -> np.ndarray:
@@ -283,7 +302,7 @@ class EchoOE(Identifier):
         prefiltered by 1/A of the current model and the output lags instrumented by its noise-free simulation;
         F is stabilised and C scaled to the initial loop gain after each solve. Returns the iterate of least
         simulation error (the starting point when no iterate improves on it)."""
-        nb, nf, nk, tau, w = s["nb"], s["nf"], s["nk"], s["echo_lag"], s["echo_width"]
+        nb, nf = s["nb"], s["nf"]
         best = (self._cost(theta, us, ys, s, L), theta)
         for _ in range(IV_ITERATIONS):
             b, f, c, a = self._polys(theta, s)
@@ -291,10 +310,7 @@ class EchoOE(Identifier):
             for u_, y_ in zip(us, ys):
                 uf, yf = lfilter([1.0], a, u_), lfilter([1.0], a, y_)
                 xf = lfilter([1.0], a, self._run(b, a, u_, np.zeros_like(y_), 0))
-                cols_u = [shift(uf, nk + k) for k in range(nb)]
-                echo = list(range(tau - w, tau + w + 1)) if tau else []
-                P = np.column_stack(cols_u + [-shift(yf, k) for k in range(1, nf + 1)] + [shift(yf, k) for k in echo])[L:]
-                Z = np.column_stack(cols_u + [-shift(xf, k) for k in range(1, nf + 1)] + [shift(xf, k) for k in echo])[L:]
+                P, Z = self._columns(s, uf, yf)[L:], self._columns(s, uf, xf)[L:]
                 ZP = ZP + Z.T @ P
                 Zy = Zy + Z.T @ yf[L:]
             try:
@@ -303,7 +319,7 @@ class EchoOE(Identifier):
                 break
             f_new = stabilise(np.r_[1.0, new[nb:nb + nf]])
             new[nb:nb + nf] = f_new[1:]
-            gain = self._loop_gain(f_new, new[nb + nf:], s)
+            gain = self._loop_gain(f_new, new[nb + nf:])
             if gain >= INIT_LOOP_GAIN:
                 new[nb + nf:] *= INIT_LOOP_GAIN / gain
             theta = new
@@ -315,7 +331,7 @@ class EchoOE(Identifier):
     def _set_common(self) -> None:
         s = self.structure_
         self.b_, self.f_, self.c_, self.a_ = self._polys(self.theta_, s)
-        self.loop_gain_ = self._loop_gain(self.f_, self.c_, s)
+        self.loop_gain_ = self._loop_gain(self.f_, self.c_)
         self.n_parameters_ = int(self.theta_.size)
         self.max_lag_ = int(self._max_lag(s))
         self.n_inputs_ = self.n_outputs_ = 1
