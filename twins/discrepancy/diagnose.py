@@ -65,6 +65,7 @@ from .prediction import (NOISE_EFFECTS, deterministic, significance, simulate, s
 from .result import Diagnosis
 from .rounds import Extension, adopt, extend
 from .trials import Stage
+from . import unexplained as unx
 from .unexplained import generic_residual_model
 
 __all__ = ["diagnose", "run_diagnosis", "NOISE_EFFECTS", "significance"]
@@ -149,6 +150,7 @@ class _Inputs:
     saturation: dict[str, Any]
     t_start: float
     substep_auto: bool = False  # the integration sub-step follows the configuration (:func:`.ranges.substep_for`)
+    noise: dict[str, Any] | None = None  # the noise level of both records (:func:`.unexplained.noise_level`)
 
     @property
     def railed(self) -> bool:
@@ -177,7 +179,8 @@ def _prepare(twin: Twin, data: Record, val: Record | None, opts: DiagnoseOptions
     saturation = {"estimation": ft.saturation_rails(data.y, simulate(given, data)),
                   "validation": ft.saturation_rails(val.y, simulate_val(given, data, val))}
     data, val = with_rails(data, saturation["estimation"]), with_rails(val, saturation["validation"])
-    return _Inputs(twin, given, data, val, core, split_info, range_notes, saturation, t_start, substep_auto)
+    noise = unx.noise_level(np.concatenate([data.u, val.u]), np.concatenate([data.y, val.y]), data.fs)
+    return _Inputs(twin, given, data, val, core, split_info, range_notes, saturation, t_start, substep_auto, noise)
 
 
 # ---------------------------------------------------------------------------------------------- 1. calibrate
@@ -258,8 +261,8 @@ def _conclude(inp: _Inputs, cal: _Calibrated, base: Stage, ext: Extension, opts:
                                     f"validation residual variance; {unexplained['description']}"),
                        "params": {}})
     causes.sort(key=lambda c: -float(c["confidence"]))  # strongest first (stable: round order among equals)
-    verdict, beyond, at_bound = realdata.final_verdict(inp.est, inp.val, stage.yhat_val, causes, stage.twin,
-                                                       cal.info, opts.skip)
+    verdict, beyond, at_bound = realdata.final_verdict(inp.val, stage.yhat_val, causes, stage.twin, cal.info,
+                                                       opts.skip, inp.noise)
     opts.say(f"verdict {verdict}")
     defaults = dflt.contributions(stage.twin, cal.retest, inp.est, inp.val, opts.skip)
     return Diagnosis(verdict=verdict, causes=causes, baseline=base, extended=stage, twin=inp.twin,

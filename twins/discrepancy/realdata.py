@@ -55,12 +55,12 @@ def refit_at_bounds(fitted: Twin, names: list[str], data: Record, sse: Callable[
     return fitted, None
 
 
-def final_verdict(data: Record, val: Record, yhat_val: np.ndarray, causes: list[dict[str, Any]], twin: Twin,
-                  calib_info: dict[str, Any], skip: int) -> tuple[str, dict[str, Any], list[dict[str, Any]]]:
+def final_verdict(val: Record, yhat_val: np.ndarray, causes: list[dict[str, Any]], twin: Twin,
+                  calib_info: dict[str, Any], skip: int, noise: dict[str, Any]
+                  ) -> tuple[str, dict[str, Any], list[dict[str, Any]]]:
     """(verdict, residual against noise, parameters at a bound): ``unexplained`` when the validation residual
-    after the extension is far above the noise measured from the data, else ``discrepancy`` with causes or
-    ``none``."""
-    noise = unx.noise_level(np.concatenate([data.u, val.u]), np.concatenate([data.y, val.y]), data.fs)
+    after the extension is far above ``noise`` (:func:`.unexplained.noise_level` of both records, measured from
+    the data), else ``discrepancy`` with causes or ``none``."""
     beyond = unx.judge(val.u, val.y, yhat_val, val.fs, skip, noise=noise)
     verdict = "unexplained" if beyond["outside"] else ("discrepancy" if causes else "none")
     names = set(calib_info.get("fitted", {})) | {k for c in causes for k in c.get("params", {})}

@@ -133,12 +133,9 @@ def _branch(loop: _Loop, ext: Extension, base: Stage, n_max: int) -> None:
 
 
 def _beyond_noise(inp: Any, stage: Stage, skip: int) -> bool:
-    """The validation residual of ``stage`` is far above the noise measured from the data (the verdict's rule)."""
-    noise = unx.noise_level(np.concatenate([inp.est.u, inp.val.u]), np.concatenate([inp.est.y, inp.val.y]),
-                            inp.est.fs)
-    e = inp.val.y[skip:] - stage.yhat_val[skip:]
-    p_e, s2 = float(np.mean(e * e)), float(noise["sigma2"])
-    return bool(p_e > unx.EXCESS_LIMIT * s2)
+    """The validation residual of ``stage`` is far above the noise measured from the data (the verdict's rule,
+    :func:`.unexplained.outside`, on the noise level measured once from the records)."""
+    return unx.outside(inp.val.y[skip:] - stage.yhat_val[skip:], inp.noise)
 
 
 def _recheck_defaults(loop: _Loop, ext: Extension) -> None:

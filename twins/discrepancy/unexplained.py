@@ -39,7 +39,7 @@ from sysid.record import Record
 from .features import effective_samples
 from .prediction import significance
 
-__all__ = ["EXCESS_LIMIT", "noise_level", "judge", "generic_residual_model"]
+__all__ = ["EXCESS_LIMIT", "noise_level", "excess_ratio", "outside", "judge", "generic_residual_model"]
 
 #: residual power / noise power above which the residual is "far above the noise"
 EXCESS_LIMIT = 9.0
@@ -91,6 +91,17 @@ def noise_level(u: np.ndarray, y: np.ndarray, fs: float) -> dict[str, Any]:
     return {"sigma2": 0.0, "source": "none", "estimates": est}
 
 
+def excess_ratio(p_e: float, s2: float) -> float:
+    """R = mean(e²)/σ² (inf for a residual over noise-free data, 1 for no residual at all)."""
+    return p_e / s2 if s2 > 0 else (float("inf") if p_e > 0 else 1.0)
+
+
+def outside(e: np.ndarray, noise: dict[str, Any]) -> bool:
+    """The verdict's rule: the residual ``e`` lies far above the noise level ``noise`` (:func:`noise_level`),
+    R > :data:`EXCESS_LIMIT`."""
+    return bool(excess_ratio(float(np.mean(e * e)), float(noise["sigma2"])) > EXCESS_LIMIT)
+
+
 def judge(u: np.ndarray, y: np.ndarray, yhat: np.ndarray, fs: float, skip: int = 0,
           noise: dict[str, Any] | None = None) -> dict[str, Any]:
     """Compare the residual y − ŷ with the noise level; ``outside`` True when it is far above it."""
@@ -100,7 +111,7 @@ def judge(u: np.ndarray, y: np.ndarray, yhat: np.ndarray, fs: float, skip: int =
     nl = noise or noise_level(u, y, fs)
     s2 = float(nl["sigma2"])
     p_e = float(np.mean(e * e))
-    ratio = p_e / s2 if s2 > 0 else (float("inf") if p_e > 0 else 1.0)
+    ratio = excess_ratio(p_e, s2)
     frac = max(0.0, 1.0 - s2 / p_e) if p_e > 0 else 0.0
     out: dict[str, Any] = {"noise_var": s2, "noise_source": nl["source"], "noise_estimates": nl["estimates"],
                            "residual_var": p_e, "excess_ratio": ratio, "unexplained_fraction": frac,
