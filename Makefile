@@ -7,15 +7,33 @@ STAMP  := $(VENV)/.installed
 # on a 2-core machine (measured 9 ms vs <1 ms per 8x8 expm when both cores are busy).
 export OPENBLAS_NUM_THREADS ?= 1
 
-.PHONY: run run-quick test test-all bench fmus docs install clean floors
+.PHONY: run run-quick test test-all bench fmus docs install clean floors lock
 
-$(STAMP): pyproject.toml
+# Exact versions: requirements.lock holds every package of the environment the floors and stored rows were
+# measured with (docs/regression-check.md); `make lock` refreshes it from pyproject.toml.
+LOCK   := requirements.lock
+
+$(STAMP): pyproject.toml $(LOCK)
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install -q --upgrade pip
 	# CPU build of torch first: an unpinned torch requirement would pull several GB of CUDA packages.
 	$(PY) -m pip install -q torch==2.13.0
-	$(PY) -m pip install -q -e ".[test]"
+	$(PY) -m pip install -q -r $(LOCK)
+	$(PY) -m pip install -q --no-deps -e .
+	$(PY) -m pip check
 	touch $(STAMP)
+
+# A fresh environment resolved from pyproject.toml (test and lint extras), frozen into requirements.lock.
+lock:
+	rm -rf .lock-venv
+	$(PYTHON) -m venv .lock-venv
+	.lock-venv/bin/pip install -q --upgrade pip
+	.lock-venv/bin/pip install -q torch==2.13.0
+	.lock-venv/bin/pip install -q ".[test,lint]"
+	{ echo "# Exact versions installed by make install (refresh: make lock; then re-measure the floors: make floors)."; \
+	  .lock-venv/bin/pip freeze --exclude piezotwin; } > $(LOCK).tmp
+	mv $(LOCK).tmp $(LOCK)
+	rm -rf .lock-venv
 
 install: $(STAMP)
 
@@ -50,8 +68,11 @@ clean:
 	rm -rf $(VENV) report .pytest_cache .benchmarks
 
 # Accuracy floors of the quick check, measured as CI meets them on any x86-64 CPU: the quick run with torch's
-# generic, AVX2 and native kernels, each with 1 and 2 BLAS threads, plus seeds 5-19 of the seeded identifiers; the
-# worst value of each pair sets its floor (docs/regression-check.md). FLOORS_ARGS narrows it, e.g. FLOORS_ARGS="--identifiers oe,bj".
+# generic, AVX2 and native kernels, each with 1 and 2 BLAS threads; then with each OpenBLAS kernel set a CPU may
+# pick (OPENBLAS_CORETYPE, set for that run only; SkylakeX where the CPU has AVX-512); plus seeds 5-19 of the
+# seeded identifiers. The worst value of each pair sets its floor (docs/regression-check.md). FLOORS_ARGS narrows
+# it, e.g. FLOORS_ARGS="--identifiers oe,bj".
+CORETYPES := Prescott Haswell Zen $(shell grep -qw avx512f /proc/cpuinfo 2>/dev/null && echo SkylakeX)
 floors: $(STAMP)
 	mkdir -p .floors
 	for isa in default avx2 native; do for th in 1 2; do \
@@ -59,5 +80,9 @@ floors: $(STAMP)
 	  $$e OPENBLAS_NUM_THREADS=$$th $(VENV)/bin/piezotwin score --quick --json $(FLOORS_ARGS) \
 	    > .floors/run_$${isa}_$${th}.json || exit 1; \
 	done; done
+	for ct in $(CORETYPES); do \
+	  env OPENBLAS_CORETYPE=$$ct OPENBLAS_NUM_THREADS=1 $(VENV)/bin/piezotwin score --quick --json $(FLOORS_ARGS) \
+	    > .floors/run_blas_$$ct.json || exit 1; \
+	done
 	$(VENV)/bin/piezotwin score --quick --json --seeds 5-19 $(FLOORS_ARGS) > .floors/extra_seeds.json
 	$(VENV)/bin/piezotwin score --quick --update-baselines --from-runs .floors/run_*.json .floors/extra_seeds.json

@@ -84,6 +84,10 @@ def run(args: argparse.Namespace) -> int:
     if args.check:
         failures = scoring.check(res, baselines)
         out["check"] = {"passed": not failures, "failures": failures}
+        warning = scoring.version_mismatch(res, baselines)
+        if warning:
+            out["check"]["version_warning"] = warning
+            print(warning, file=sys.stderr)
     if args.report:
         paths = scoring.write_report(res, args.report)
         out["report"] = {k: str(v) for k, v in paths.items()}

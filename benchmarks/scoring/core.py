@@ -110,8 +110,21 @@ def strip_timing(obj: Any) -> Any:
     return obj
 
 
+def blas_kernels() -> str:
+    """The kernel set each loaded BLAS runs ("openblas:SkylakeX"), as threadpoolctl reads it from the library.
+
+    OpenBLAS picks its kernels from the CPU unless ``OPENBLAS_CORETYPE`` names a set; the floors are measured
+    over several sets (docs/regression-check.md), so a run records which one it had."""
+    from threadpoolctl import threadpool_info
+
+    sets = sorted({f"{i.get('internal_api', '?')}:{i.get('architecture') or '?'}" for i in threadpool_info()
+                   if i.get("user_api") == "blas"})
+    return ",".join(sets)
+
+
 def environment() -> dict[str, Any]:
-    """What a floor measured in this process depends on: CPU, torch's kernel set, thread settings, versions."""
+    """What a floor measured in this process depends on: CPU, torch's and OpenBLAS's kernel sets, thread
+    settings, versions."""
     import os
     import platform
 
@@ -125,6 +138,8 @@ def environment() -> dict[str, Any]:
         pass
     env["ATEN_CPU_CAPABILITY"] = os.environ.get("ATEN_CPU_CAPABILITY", "")
     env["OPENBLAS_NUM_THREADS"] = os.environ.get("OPENBLAS_NUM_THREADS", "")
+    env["OPENBLAS_CORETYPE"] = os.environ.get("OPENBLAS_CORETYPE", "")
+    env["blas_kernels"] = blas_kernels()
     versions = {"python": platform.python_version(), "numpy": np.__version__, "scipy": scipy.__version__}
     try:
         import torch

@@ -120,6 +120,25 @@ def check(run: ScoreRun | dict[str, Any], baselines: dict[str, Any] | None = Non
     return failures + check_rules(data, base)
 
 
+VERSIONED = ("numpy", "scipy", "torch")  # the packages whose kernels and algorithms the floors were measured with
+
+
+def version_mismatch(run: ScoreRun | dict[str, Any], baselines: dict[str, Any]) -> str | None:
+    """One line naming the packages whose running version differs from the one the mode's latest floors were
+    measured with (``provenance[mode][-1].versions``), or None. A mismatch does not fail the check: the floors
+    may still hold, but a pair below its floor may then be the new version's doing (requirements.lock)."""
+    data = run.to_dict() if isinstance(run, ScoreRun) else run
+    updates = (baselines.get("provenance") or {}).get(data["mode"]) or []
+    measured = (updates[-1].get("versions") or {}) if updates else {}
+    running = (data.get("environment") or {}).get("versions") or {}
+    diff = [f"{k} {running.get(k)} (floors: {measured[k]})" for k in VERSIONED
+            if k in measured and running.get(k) != measured[k]]
+    if not diff:
+        return None
+    return ("score --check: warning: running versions differ from those the floors were measured with: "
+            + ", ".join(diff) + "; install requirements.lock (make install) to compare like with like")
+
+
 def check_rules(run: ScoreRun | dict[str, Any], baselines: dict[str, Any]) -> list[str]:
     """The failures of ``run`` against the baselines' rules alone (beats the linear baseline, beats a value)."""
     data = run.to_dict() if isinstance(run, ScoreRun) else run
@@ -249,7 +268,8 @@ def make_floors(runs: ScoreRun | dict[str, Any] | list, margin: float = DEFAULT_
                 f"over training seeds {list(QUICK_SEEDS) if mode == 'quick' else [0]} in each run, their max_rmse = "
                 "max(worst median x (1 + seeded_margin), worst single seed of all runs x (1 + margin))"),
         "margin": margin, "seeded_margin": seeded_margin,
-        "runs": [{k: e.get(k) for k in ("cpu", "ATEN_CPU_CAPABILITY", "torch_cpu_capability", "OPENBLAS_NUM_THREADS")}
+        "runs": [{k: e.get(k) for k in ("cpu", "ATEN_CPU_CAPABILITY", "torch_cpu_capability", "OPENBLAS_NUM_THREADS",
+                                        "OPENBLAS_CORETYPE", "blas_kernels")}
                  for e in envs],
         "versions": envs[0].get("versions", {}) if envs else {},
     })
