@@ -25,14 +25,12 @@ prefiltered by 1/F and the regressors' output lags are instrumented by the model
 several inputs by back-fitting (each channel on what the others leave). BJ then fits C/D to the OE residual by
 Hannan–Rissanen (long AR → innovations → least squares of D v = C ê).
 
-Several starts (one input): every SRIV iterate is a candidate start; Levenberg–Marquardt runs from the
-``N_STARTS`` of least prediction-error cost and the solution of least final cost V(θ) is kept (``pem_starts_``
-lists each run's start and final cost). On an over-parameterised model the SRIV iteration need not converge — its
-iterates wander among near pole–zero cancellations, and a last-bit difference in one solve (another BLAS kernel
-set) sends them elsewhere; several starts make the kept optimum depend less on which iterate came first. They do
-not cure a model that is ill-posed on its data (cascaded tanks at nb = nf = 4: test free run 1.5 V or 17 V by
-kernel set, three starts or one): the benchmark settings then choose an order the data determine
-(benchmarks/settings/identifiers/oe.toml, bj.toml).
+Uncertainty: P = σ̂² (JᵀJ)⁻¹ with σ̂² = V/(N − p) (eq. 9.17/9.18); valid for OE when the disturbance is white
+and for BJ when its noise model is right. Orders left as ``None`` are chosen by :mod:`sysid.order` (hold-out
+free-run error over a grid), ``nk=None`` by :func:`sysid.order.delay_estimate`; both are reported.
+Prediction: free run x = Σ B_i/F_i u_i with the initial filter state fitted by least squares to the first
+``max_lag_`` samples (the polynomial models copy those samples likewise); k-step (§3.2, eq. 3.31)
+ŷ(t|t−k) = y − W_k·(y − x), W_k = H̄_k D/C, H̄_k the first k impulse-response terms of H = C/D (OE: ŷ = x).
 """
 
 from __future__ import annotations
@@ -45,7 +43,7 @@ from scipy.signal import lfilter
 
 from sysid.base import Identifier, as_record_list, check_prediction, check_records, stop_at_divergence
 from sysid.errors import ConfigError
-from sysid.pem_init import hannan_rissanen, is_stable, oe_sim, shift, sriv, sriv_candidates, stabilise
+from sysid.pem_init import hannan_rissanen, is_stable, oe_sim, shift, sriv, stabilise
 from sysid.record import Record
 from sysid.uncertainty import monte_carlo_band, poles_with_std, tf_response_with_std
 
@@ -53,7 +51,6 @@ __all__ = ["OE", "BJ", "sriv", "stabilise"]
 
 DIVERGENCE_FACTOR = 1e3
 BACKFIT_SWEEPS = 3
-N_STARTS = 3  # Levenberg–Marquardt runs from the best SRIV iterates (one input; module docstring)
 
 
 # --------------------------------------------------------------------------------------- helpers
@@ -158,15 +155,6 @@ class _PolyPEM(Identifier):
         u = rec.u.reshape(len(rec), -1)
         return rec.y.reshape(-1) - sum(oe_sim(bs[i], fs[i], nk[i], u[:, i]) for i in range(len(bs)))
 
-    def _g_starts(self, records, nb, nf, nk) -> list[tuple[list[np.ndarray], list[np.ndarray]]]:
-        """Starting values of B/F: with one input every SRIV iterate (least output-error cost first), with
-        several the back-fitted SRIV estimate alone."""
-        if records[0].n_inputs > 1 or nb[0] == 0:
-            return [self._init_g(records, nb, nf, nk)]
-        cands = sriv_candidates([r.u.reshape(-1) for r in records], [r.y.reshape(-1) for r in records],
-                                nb[0], nf[0], nk[0])
-        return [([b], [f]) for b, f in cands]
-
     def _layout(self, o) -> list[tuple[str, int, int]]:
         """(kind, input index, k) per parameter, in θ order: per input b1..b_nb, f1..f_nf; then c…, d…."""
         lay = []
@@ -197,6 +185,11 @@ class _PolyPEM(Identifier):
         lay = self._layout(o)
         L0 = max([o["nk"][i] + o["nb"][i] for i in range(len(o["nb"]))] + o["nf"] + [o["nc"], o["nd"]])
         check_records(records, L0, len(lay) + 1, self.name)
+        bs, fs = self._init_g(records, o["nb"], o["nf"], o["nk"])
+        c = d = np.ones(1)
+        if self._noise:
+            c, d = hannan_rissanen([self._v(r, bs, fs, o["nk"]) for r in records], o["nc"], o["nd"])
+        theta0 = np.concatenate([np.concatenate([bs[i], fs[i][1:]]) for i in range(len(bs))] + [c[1:], d[1:]])
         us = [r.u.reshape(len(r), -1) for r in records]
         ys = [r.y.reshape(-1) for r in records]
         n_res = sum(len(r) for r in records)
@@ -250,29 +243,13 @@ class _PolyPEM(Identifier):
                 blocks.append(J)
             return np.vstack(blocks)
 
-        def cost(theta):
-            r = residual(theta)
-            return float(r @ r)
-
-        starts = []
-        for bs, fs in self._g_starts(records, o["nb"], o["nf"], o["nk"]):
-            c = d = np.ones(1)
-            if self._noise:
-                c, d = hannan_rissanen([self._v(r, bs, fs, o["nk"]) for r in records], o["nc"], o["nd"])
-            th0 = np.concatenate([np.concatenate([bs[i], fs[i][1:]]) for i in range(len(bs))] + [c[1:], d[1:]])
-            starts.append((cost(th0), len(starts), th0))
-        starts.sort(key=lambda t: (t[0], t[1]))
-        starts = starts[:N_STARTS] if int(self.max_iter) > 0 else starts[:1]
-        theta, status, best = starts[0][2], "initial estimate (max_iter=0)", starts[0][0]
-        runs = []
-        for c0, _, th0 in starts if int(self.max_iter) > 0 else []:
-            sol = _scipy_lsq(residual, th0, jac=jac, method="lm", x_scale="jac", xtol=1e-10, ftol=1e-10,
+        status = "initial estimate (max_iter=0)"
+        theta = theta0
+        if int(self.max_iter) > 0:
+            sol = _scipy_lsq(residual, theta0, jac=jac, method="lm", x_scale="jac", xtol=1e-10, ftol=1e-10,
                              gtol=1e-10, max_nfev=int(self.max_iter))
-            c1 = float(np.sum(sol.fun ** 2))
-            runs.append({"start_cost": c0, "final_cost": c1, "nfev": int(sol.nfev), "message": str(sol.message)})
-            if c1 <= best:
-                theta, status, best = sol.x, str(sol.message), c1
-        self.pem_starts_ = runs
+            if np.sum(sol.fun ** 2) <= np.sum(residual(theta0) ** 2):
+                theta, status = sol.x, str(sol.message)
         r = residual(theta)
         J = jac(theta)
         n, p = r.size, theta.size
@@ -412,8 +389,6 @@ class _PolyPEM(Identifier):
                      max_lag=self.max_lag_, terms=[])
             if getattr(self, "order_table_", None):
                 d["order_selection"] = self.order_table_
-            if getattr(self, "pem_starts_", None):
-                d["pem_starts"] = self.pem_starts_
         return d
 
     def summary(self) -> str:

@@ -16,7 +16,7 @@ from typing import Sequence
 import numpy as np
 from scipy.signal import lfilter
 
-__all__ = ["sriv", "sriv_candidates", "hannan_rissanen", "stabilise", "is_stable", "oe_sim", "shift", "lags"]
+__all__ = ["sriv", "hannan_rissanen", "stabilise", "is_stable", "oe_sim", "shift", "lags"]
 
 SRIV_ITERATIONS = 8
 HR_AR_ORDER = 30  # long-AR order of the Hannan–Rissanen noise-model initialisation
@@ -64,17 +64,6 @@ def sriv(us: list[np.ndarray], ys: list[np.ndarray], nb: int, nf: int, nk: int,
          iterations: int = SRIV_ITERATIONS) -> tuple[np.ndarray, np.ndarray]:
     """SISO B/F by the simplified refined instrumental-variable method (Ljung §7.6; Young 1976) on records
     (lists of 1-D arrays). Returns (b, f) with f monic and stable; the iterate of least output-error cost."""
-    return sriv_candidates(us, ys, nb, nf, nk, iterations)[0]
-
-
-def sriv_candidates(us: list[np.ndarray], ys: list[np.ndarray], nb: int, nf: int, nk: int,
-                    iterations: int = SRIV_ITERATIONS) -> list[tuple[np.ndarray, np.ndarray]]:
-    """Every iterate of :func:`sriv` (the ARX start first, then each IV iteration), as (b, f) pairs sorted by
-    output-error cost Σ (y − B/F u)², least first.
-
-    On an over-parameterised model (near pole–zero cancellations) the SRIV iteration need not converge: its
-    iterates wander, and a last-bit difference in one solve (another BLAS kernel set) sends them elsewhere. The
-    prediction-error fit therefore starts Levenberg–Marquardt from several of them (:mod:`sysid.pem`)."""
     ulags = list(range(nk, nk + nb))
     ylags = list(range(1, nf + 1))
 
@@ -94,22 +83,22 @@ def sriv_candidates(us: list[np.ndarray], ys: list[np.ndarray], nb: int, nf: int
 
     b, f = solve(us, ys, [None] * len(us))  # ARX least squares
     f = stabilise(f)
-    found = [(cost(b, f), b, f)]
-    if nf > 0:
-        for _ in range(int(iterations)):
-            uf = [lfilter([1.0], f, u_) for u_ in us]
-            yf = [lfilter([1.0], f, y_) for y_ in ys]
-            xf = [lfilter([1.0], f, oe_sim(b, f, nk, u_)) for u_ in us]
-            try:
-                b, f = solve(uf, yf, xf)
-            except np.linalg.LinAlgError:  # pragma: no cover - singular instruments
-                break
-            f = stabilise(f)
-            c = cost(b, f)
-            if np.isfinite(c):
-                found.append((c, b, f))
-    found.sort(key=lambda t: t[0])  # stable: equal costs keep the order of the iterations
-    return [(b_, f_) for _, b_, f_ in found]
+    best = (cost(b, f), b, f)
+    if nf == 0:
+        return b, f
+    for _ in range(int(iterations)):
+        uf = [lfilter([1.0], f, u_) for u_ in us]
+        yf = [lfilter([1.0], f, y_) for y_ in ys]
+        xf = [lfilter([1.0], f, oe_sim(b, f, nk, u_)) for u_ in us]
+        try:
+            b, f = solve(uf, yf, xf)
+        except np.linalg.LinAlgError:  # pragma: no cover - singular instruments
+            break
+        f = stabilise(f)
+        c = cost(b, f)
+        if np.isfinite(c) and c < best[0]:
+            best = (c, b, f)
+    return best[1], best[2]
 
 
 def hannan_rissanen(vs: list[np.ndarray], nc: int, nd: int) -> tuple[np.ndarray, np.ndarray]:

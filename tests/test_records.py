@@ -239,25 +239,33 @@ def _fresh_score(command: str, capsys) -> dict:
     return json.loads(capsys.readouterr().out)
 
 
-def _same_score(stored: dict, fresh: dict) -> None:
+#: Relative agreement of a committed row with a fresh run on another machine. OpenBLAS picks its kernel set from
+#: the CPU; the stored cascaded-tanks row (narx-poly-sim, measured with the Haswell kernels) re-run with
+#: OPENBLAS_CORETYPE = Prescott / Haswell / Zen / SkylakeX differed from it by at most 6.9e-6 / 7.1e-14 / 7.1e-14 /
+#: 7.0e-6 relative over every number of the row (2026-11-26). Ten times the largest spread:
+KERNEL_SET_REL = 7e-5
+
+
+def _same_score(stored: dict, fresh: dict, rel: float = 1e-9) -> None:
     """Two score runs agree: every result, not the timings nor the environment of the process that ran them
-    (thread settings an earlier test left, another CPU)."""
-    _same({k: v for k, v in stored.items() if k != "environment"}, {k: v for k, v in fresh.items() if k != "environment"})
+    (thread settings an earlier test left, another CPU); numbers to ``rel`` relative."""
+    _same({k: v for k, v in stored.items() if k != "environment"}, {k: v for k, v in fresh.items() if k != "environment"},
+          rel=rel)
 
 
-def _same(a, b, path="") -> None:
-    """Equal JSON, numbers to 1e-9 relative (the same fit in another process), timing keys left out."""
+def _same(a, b, path="", rel: float = 1e-9) -> None:
+    """Equal JSON, numbers to ``rel`` relative (1e-9: the same fit in another process), timing keys left out."""
     a, b = scoring.strip_timing(a), scoring.strip_timing(b)
     if isinstance(a, dict):
         assert isinstance(b, dict) and set(a) == set(b), (path, set(a) ^ set(b))
         for k in a:
-            _same(a[k], b[k], f"{path}/{k}")
+            _same(a[k], b[k], f"{path}/{k}", rel)
     elif isinstance(a, list):
         assert isinstance(b, list) and len(a) == len(b), path
         for i, (x, y) in enumerate(zip(a, b)):
-            _same(x, y, f"{path}[{i}]")
+            _same(x, y, f"{path}[{i}]", rel)
     elif isinstance(a, float) and isinstance(b, float):
-        assert a == pytest.approx(b, rel=1e-9, abs=1e-300), path
+        assert a == pytest.approx(b, rel=rel, abs=1e-300), path
     else:
         assert a == b, path
 
@@ -291,9 +299,10 @@ def test_a_row_is_measured_in_a_fresh_process():
 
 
 def test_committed_cheap_row_is_reproduced_by_its_command(capsys):
-    """The stored cascaded-tanks row of docs/records equals a fresh run of the command it prints."""
+    """The stored cascaded-tanks row of docs/records equals a fresh run of the command it prints, to the spread
+    that OpenBLAS's kernel sets give (:data:`KERNEL_SET_REL`)."""
     row = json.loads((records.STORED_DIR / "cascaded-tanks.json").read_text())
-    _same_score(row["score"], _fresh_score(row["command"], capsys))
+    _same_score(row["score"], _fresh_score(row["command"], capsys), rel=KERNEL_SET_REL)
 
 
 def test_committed_page_and_records_are_generated_from_the_stored_rows():
