@@ -7,7 +7,8 @@ are shared with other work, OpenBLAS's worker threads spin-wait for each other a
 
 The limiting itself is :func:`threadpoolctl.threadpool_limits` (the library scikit-learn uses), which finds every
 loaded BLAS (OpenBLAS, MKL, BLIS, FlexiBLAS) and restores the previous counts on exit; a BLAS it does not know
-is left alone.
+is left alone, and so is every BLAS where threadpoolctl is not installed: the ``sysid`` package also runs inside an
+exported FMU, whose host needs only numpy, scipy and numba (docs/fmu.md), and the limit changes speed, not results.
 """
 
 from __future__ import annotations
@@ -18,8 +19,11 @@ from typing import Iterator
 
 import numpy  # noqa: F401  (loads numpy's BLAS before the limits are taken)
 import scipy.linalg  # noqa: F401  (loads scipy's BLAS)
-from threadpoolctl import threadpool_limits
 
+try:
+    from threadpoolctl import threadpool_limits
+except ImportError:  # pragma: no cover - an FMU host without threadpoolctl: threads left as they are
+    threadpool_limits = None
 __all__ = ["blas_threads"]
 
 
@@ -31,5 +35,8 @@ def blas_threads(n: int | None = None) -> Iterator[None]:
             n = int(os.environ.get("PIEZOTWIN_BLAS_THREADS", "1"))
         except ValueError:
             n = 1
+    if threadpool_limits is None:  # pragma: no cover
+        yield
+        return
     with threadpool_limits(limits=max(1, int(n)), user_api="blas"):
         yield
