@@ -37,9 +37,9 @@ from dataclasses import asdict
 from typing import Any, Callable
 
 from sysid.errors import ConfigError
-from sysid.neural.sweep import (SweepSpec, _grid_configs, _make_objective, _make_sampler, _requeue_failed,
+from sysid.search.sweep import (SweepSpec, _grid_configs, _make_objective, _make_sampler, _requeue_failed,
                                 config_key, heartbeat_settings, open_study, storage_url)
-from sysid.neural.sweep_results import collect, summarise
+from sysid.search.sweep_results import collect, summarise
 
 HOST = socket.gethostname()
 MAX_FAILURES = 2  # a configuration whose fit raised this often in one process is given up (reported missing)
@@ -205,7 +205,7 @@ def _worker_main(spec_d: dict, url: str, study_name: str, est, val, target: int,
 
 def run_sweep(spec, est, val, storage: str | None = None, study: str = "piezotwin-search", trials: int | None = None,
               workers: int = 1, progress: bool = True, executor=None) -> dict[str, Any]:
-    """Run (or resume) a sweep; returns :func:`~sysid.neural.search.summarise` of everything the study holds,
+    """Run (or resume) a sweep; returns :func:`~sysid.search.summarise` of everything the study holds,
     plus ``requested``, ``complete`` and ``missing`` (configurations)."""
     from tqdm import tqdm
 

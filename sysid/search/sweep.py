@@ -2,8 +2,8 @@
 the Optuna storage and study (:func:`storage_url`, :func:`open_study`), fitting one configuration's repeats
 (:func:`run_one`, :func:`run_config`) and the trial objective.
 
-What a sweep is and how SPEC is written: :mod:`sysid.neural.search`; how several processes share one study:
-:mod:`sysid.neural.study` (which passes its claim rule down to :func:`_make_objective`).
+What a sweep is and how SPEC is written: :mod:`sysid.search`; how several processes share one study:
+:mod:`sysid.search.study` (which passes its claim rule down to :func:`_make_objective`).
 """
 
 from __future__ import annotations
@@ -294,7 +294,7 @@ def _clean(obj: Any) -> Any:
 def _make_objective(spec: SweepSpec, est, val, claim: Callable[[Any, str, int], str | None],
                     target: int | None = None, executor=None, state: dict[str, Any] | None = None) -> Callable:
     """The trial: ``claim(trial, key, target)`` the configuration (the coordination of the processes sharing
-    the study passes its rule in: :func:`sysid.neural.study.claim`), then fit its repeats."""
+    the study passes its rule in: :func:`sysid.search.study.claim`), then fit its repeats."""
     import optuna
 
     state = {} if state is None else state
