@@ -30,7 +30,6 @@ import multiprocessing as mp
 import os
 import random
 import socket
-import sys
 import time
 import warnings
 from dataclasses import asdict
@@ -207,7 +206,7 @@ def run_sweep(spec, est, val, storage: str | None = None, study: str = "piezotwi
               workers: int = 1, progress: bool = True, executor=None) -> dict[str, Any]:
     """Run (or resume) a sweep; returns :func:`~sysid.search.summarise` of everything the study holds,
     plus ``requested``, ``complete`` and ``missing`` (configurations)."""
-    from tqdm import tqdm
+    from sysid.progress import progress as progress_bar
 
     url = storage_url(storage, study)
     st = open_study(spec, url, study)
@@ -217,12 +216,6 @@ def run_sweep(spec, est, val, storage: str | None = None, study: str = "piezotwi
         raise ConfigError(f"--trials must be ≥ 1, got {trials}")
     target = min(target, n_all)
     reap(st, spec)
-    try:  # the project's one switch for bars (off without a terminal or with --quiet), where it exists
-        from sysid.progress import progress as progress_bar
-    except ImportError:
-        def progress_bar(total, initial, unit, desc, show, leave):
-            return tqdm(total=total, initial=initial, unit=unit, desc=desc, disable=not (show and sys.stderr.isatty()),
-                        file=sys.stderr, dynamic_ncols=True, leave=leave)
     bar = progress_bar(total=target, initial=min(len(done_keys(st)), target), unit="config",
                        desc=f"{spec.identifier} sweep", show=progress, leave=True)
 
