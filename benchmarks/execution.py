@@ -14,7 +14,7 @@ Every task is a pure function of its arguments (identifier, dataset, settings, s
 put back in the order of the tasks, so the output does not depend on where or in which order the tasks ran:
 the same JSON as the serial run, timings aside. A worker that dies mid-task (killed, out of memory) loses the
 task to the scheduler, which runs it again on another worker (Dask's ``allowed-failures``, 3 by default).
-Progress: a tqdm bar over the completed tasks on stderr, shown only on a terminal.
+Progress: a tqdm bar over the completed tasks on stderr (:func:`sysid.progress.progress`), shown only on a terminal.
 
 Dask starts its worker processes with ``OMP/MKL/OPENBLAS_NUM_THREADS=1``; the serial path gives the same
 numbers when BLAS runs one thread too (``OPENBLAS_NUM_THREADS=1``, as CI sets it). Neural training sets
@@ -25,7 +25,6 @@ from __future__ import annotations
 
 import argparse
 import os
-import sys
 from typing import Any, Callable, Sequence
 
 from sysid.errors import ConfigError
@@ -92,12 +91,11 @@ class Executor:
         a task is raised here (the other tasks are cancelled): tasks that can fail as a result must catch and
         return their errors.
         """
-        from tqdm import tqdm
+        from sysid.progress import progress as progress_bar
 
         tasks = list(tasks)
-        show = bool(progress) and _bars_enabled()
         results: list[Any] = [None] * len(tasks)
-        with tqdm(total=len(tasks), desc=desc, disable=not show, leave=False, file=sys.stderr) as bar:
+        with progress_bar(total=len(tasks), desc=desc, show=bool(progress)) as bar:
             if self.client is None:
                 for i, task in enumerate(tasks):
                     res = fn(*task)
@@ -139,15 +137,6 @@ class Executor:
 
     def __exit__(self, *exc) -> None:
         self.close()
-
-
-def _bars_enabled() -> bool:
-    """Progress bars only on a terminal (and not switched off with the project's --quiet, where it exists)."""
-    try:
-        from sysid.progress import enabled
-    except ImportError:
-        return sys.stderr.isatty()
-    return enabled()
 
 
 class _Blob:

@@ -187,7 +187,7 @@ def test_search_repeats_on_the_cluster_equal_the_serial_sweep(cluster, tmp_path,
     drop = ("storage",)
     assert strip_timing({k: v for k, v in dask.items() if k not in drop}) == \
         strip_timing({k: v for k, v in serial.items() if k not in drop})
-    from sysid.neural.search import collect, storage_url
+    from sysid.search import collect, storage_url
 
     runs = collect(storage_url(str(tmp_path / "dask.db"), "piezotwin-search"), "piezotwin-search")
     assert os.getpid() not in {r["pid"] for r in runs}  # fitted on the workers

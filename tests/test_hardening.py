@@ -301,7 +301,7 @@ def test_search_storage_refused(storage, expected, d, capsys):
 def test_two_processes_create_a_new_sqlite_store(tmp_path):
     """Three processes opening the same new SQLite store at once all succeed (table creation under a lock).
     Without the lock this fails most of the time ('table studies already exists', alembic_version UNIQUE)."""
-    script = ("import sys, optuna; from sysid.neural.search import _open_storage; from sysid.neural.storage_check "
+    script = ("import sys, optuna; from sysid.search import _open_storage; from sysid.search.storage_check "
               "import init_sqlite; init_sqlite(sys.argv[1], _open_storage); optuna.create_study(study_name='s', "
               "storage=_open_storage(sys.argv[1]), load_if_exists=True); print('ok')")
     url = f"sqlite:///{tmp_path / 'new.db'}"

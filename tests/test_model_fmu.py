@@ -73,6 +73,14 @@ def test_exported_model_fmu_validates_and_equals_free_run(name, est, tmp_path, c
     y_fmu = fmu_simulate(fmu, u, 2000.0)
     ref = m.predict(u)
     np.testing.assert_allclose(y_fmu, ref, rtol=1e-9, atol=1e-9 * np.max(np.abs(ref)))
+    if name == "arx":  # the step check shared with the twins' slave: a discrete-time model takes exactly 1/fs
+        import fmpy
+
+        log = []
+        with pytest.raises(Exception, match="fmi2DoStep failed"):
+            fmpy.simulate_fmu(str(fmu), stop_time=0.01, output_interval=1e-3, debug_logging=True,
+                              logger=lambda c, i, s, cat, msg: log.append(msg.decode() if isinstance(msg, bytes) else str(msg)))
+        assert "must be 1/fs = 0.0005 s" in "\n".join(log)
 
 
 def test_export_refuses_model_without_stepper_and_bad_choice(est, tmp_path, capsys):

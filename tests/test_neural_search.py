@@ -1,4 +1,4 @@
-"""Structure sweeps (sysid.neural.search / `piezotwin search`): grid parsing, repeats, resume, two workers."""
+"""Structure sweeps (sysid.search / `piezotwin search`): grid parsing, repeats, resume, two workers."""
 
 from __future__ import annotations
 
@@ -12,7 +12,7 @@ pytest.importorskip("torch")
 from benchmarks.cli import main  # noqa: E402
 from sysid.errors import ConfigError  # noqa: E402
 from sysid.io import write_record  # noqa: E402
-from sysid.neural.search import SweepSpec, collect, parse_grid, run_sweep, storage_url  # noqa: E402
+from sysid.search import SweepSpec, collect, parse_grid, run_sweep, storage_url  # noqa: E402
 from tests.neural_systems import bouc_wen_record, multisine_input  # noqa: E402
 
 FIXED = {"epochs": "2", "lr": "1e-3", "device": "cpu"}
@@ -100,8 +100,8 @@ def test_cli_search_json_and_export(tmp_path, data, capsys):
 def test_interrupted_sweep_resumes(tmp_path, data, monkeypatch):
     """Ctrl-C in the middle of the second configuration: the rerun keeps the finished one, reruns the
     interrupted one and runs the rest."""
-    import sysid.neural.search as S
-    import sysid.neural.sweep as W  # where the objective looks run_config up
+    import sysid.search as S
+    import sysid.search.sweep as W  # where the objective looks run_config up
 
     est, val = data
     spec = SweepSpec("narx-mlp", parse_grid("lags=2,3,4", "narx-mlp"), repeats=1, fixed=FIXED)

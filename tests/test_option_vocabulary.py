@@ -123,7 +123,7 @@ def test_old_model_files_with_old_names_load(tmp_path, est_file):
 
 
 def test_search_grid_and_set_accept_old_names():
-    from sysid.neural.search import SweepSpec, parse_grid
+    from sysid.search import SweepSpec, parse_grid
 
     with pytest.warns(DeprecationWarning):
         grid = parse_grid("n_y=2,3;hidden=4", "narx-mlp")

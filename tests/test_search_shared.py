@@ -174,7 +174,7 @@ def test_search_that_cannot_complete_says_how_many_are_missing_and_exits_1(tmp_p
     the number of missing configurations; the others complete."""
     import numpy as np
 
-    import sysid.neural.sweep as S  # run_config looks run_one up here
+    import sysid.search.sweep as S  # run_config looks run_one up here
     from benchmarks.cli import main
     from sysid.record import Record
 

@@ -12,8 +12,9 @@ torch = pytest.importorskip("torch")
 
 from sysid.base import load_model  # noqa: E402
 from sysid.errors import ConfigError  # noqa: E402
-from sysid.neural.blocknet import BlockNet, train_records  # noqa: E402
+from sysid.neural.blocknet import BlockNet  # noqa: E402
 from sysid.neural.iir import LinearDynamic, MIMOFilter, filter_np, iir_filter  # noqa: E402
+from sysid.neural.training import train_records  # noqa: E402
 from sysid.neural.wh_net import WHNet  # noqa: E402
 from sysid.record import Record  # noqa: E402
 

@@ -1,7 +1,7 @@
 """``piezotwin search IDENTIFIER --est FILE --val FILE --grid SPEC [--repeats R] [--json]``.
 
 Structure sweep with repeated runs (dissertation Tables 4.2, 5.4–5.6, Fig. 5.13) on Optuna; see
-:mod:`sysid.neural.search`. SPEC: ``KEY=V1,V2,...`` items separated by ``;`` — identifier options as for
+:mod:`sysid.search`. SPEC: ``KEY=V1,V2,...`` items separated by ``;`` — identifier options as for
 ``identify --set``; list values with dashes (``hidden=25-25,25-25-25-25``); integer ranges ``a..b``; ``lags``
 sets ny and nu together. Example::
 
@@ -65,10 +65,10 @@ def _fmt(v) -> str:
 
 def run(args: argparse.Namespace) -> int:
     from sysid.errors import ConfigError
-    from sysid.neural.search import SweepSpec, collect, export_jsonl, parse_grid, plot_r2_distribution, run_sweep, storage_url
+    from sysid.search import SweepSpec, collect, export_jsonl, parse_grid, plot_r2_distribution, run_sweep, storage_url
 
-    from sysid.neural.search import _open_storage
-    from sysid.neural.storage_check import check_storage, init_sqlite
+    from sysid.search import _open_storage
+    from sysid.search.storage_check import check_storage, init_sqlite
 
     if args.workers < 1:
         raise ConfigError(f"--workers must be ≥ 1, got {args.workers}")

@@ -15,8 +15,10 @@ learns the nonlinear correction (a linear model refined by a network: BLA-initia
 
 The encoder estimates the initial state from ``n_enc`` past measured samples (the same regressor as a NARX
 with ny = nu = n_enc, eq. 2-14); afterwards the model runs on the input alone, so every prediction is a
-simulation. Training minimises the free-run (simulation) MSE over windows of ``window`` samples started at
-random positions (multiple shooting, many windows as one batch), with Adam and gradient-norm clipping.
+simulation. Training (:func:`sysid.neural.training.train_simulation`, the loop ``ss-encoder`` uses too) minimises
+the free-run (simulation) MSE over windows of ``window`` samples started at random positions (multiple shooting,
+ceil(rows / window) windows drawn with replacement per epoch, many as one batch), with Adam and gradient-norm
+clipping. The network is called as every section-trained model is, ``net(ypast, upast, useq)``.
 
 ``predict(record, None)`` encodes the state from the first ``n_enc`` samples and simulates the rest;
 ``predict(record, k)`` encodes at every ``t − k`` and simulates k steps (all windows as one batch).
@@ -26,21 +28,21 @@ Prediction runs on the CPU in float64 from the saved weights, so it is identical
 from __future__ import annotations
 
 import math
-import time
 import warnings
 from typing import Any, Sequence
 
 import numpy as np
 import torch
 
-from sysid.base import Identifier, as_record_list
+from sysid.base import as_record_list
 from sysid.errors import ConfigError, DataError, DivergenceWarning
-from sysid.neural.core import LagData, lag_matrix_np, least_squares_linear
-from sysid.neural.device import configure_threads, select_device, train_dtype
-from sysid.neural.persist import TorchFileSave, saved_array
-from sysid.progress import progress
-from sysid.neural.records import MAX_LAG, _as2d, check_channels, check_predict_input, fit_normaliser, normalised_pairs
-from sysid.record import Normaliser, Record
+from sysid.neural.core import least_squares_linear
+from sysid.neural.device import configure_threads, train_dtype
+from sysid.neural.persist import saved_array
+from sysid.neural.records import MAX_LAG, check_channels, check_predict_input, normalised_pairs
+from sysid.neural.sequence import SequenceIdentifier
+from sysid.neural.training import train_simulation
+from sysid.record import Record
 
 __all__ = ["RNNStateSpace"]
 
@@ -74,7 +76,16 @@ class _Net(torch.nn.Module):
         # ARX path on [y(t-1) … y(t-k), u(t-1) … u(t-k)] (lag-major, as the NARX regressor of eq. 2-14)
         self.arx = torch.nn.Linear(self.k * (ny + nu), ny) if self.k else None
 
-    def forward(self, x0: torch.Tensor, useq: torch.Tensor) -> torch.Tensor:
+    def forward(self, ypast: torch.Tensor, upast: torch.Tensor, useq: torch.Tensor) -> torch.Tensor:
+        """``ypast`` (B, n_enc, ny), ``upast`` (B, n_enc, nu) the samples before t0 (oldest first), ``useq``
+        (B, T, nu) the inputs u(t0) … u(t0+T-1) → ŷ(t0) … ŷ(t0+T-1) (B, T, ny), as
+        :class:`sysid.neural.subnet.SubnetModel` is called. ŷ(t) reads u up to t-1: the recurrence runs on
+        u(t0-1) … u(t0+T-2)."""
+        B = ypast.shape[0]
+        x0 = torch.cat([ypast.flip(1).reshape(B, -1), upast.flip(1).reshape(B, -1)], dim=1)  # lag-major, eq. 2-14
+        return self.simulate(x0, torch.cat([upast[:, -1:], useq[:, :-1]], dim=1))
+
+    def simulate(self, x0: torch.Tensor, useq: torch.Tensor) -> torch.Tensor:
         """``x0`` (B, n_enc_in) past regressor, ``useq`` (B, T, nu) inputs u(t0-1) … u(t0+T-2) → ŷ (B, T, ny)."""
         z = self.encoder(x0)
         if self.cell == "lstm":
@@ -131,7 +142,7 @@ class _Net(torch.nn.Module):
         self.readout.bias.zero_()
 
 
-class RNNStateSpace(TorchFileSave, Identifier):
+class RNNStateSpace(SequenceIdentifier):
     """GRU/LSTM state-space model with a learned initial-state encoder, trained on simulation error.
 
     Parameters
@@ -158,6 +169,7 @@ class RNNStateSpace(TorchFileSave, Identifier):
     """
 
     name = "rnn"
+    _fitted_attr = "state_dict_"
 
     def __init__(self, n_state: int = 32, n_enc: int = 20, enc_hidden: Sequence[int] = (64,), cell: str = "gru",
                  window: int = 100, batch_size: int = 32, epochs: int = 30, lr: float = 3e-3, clip: float = 1.0,
@@ -178,32 +190,22 @@ class RNNStateSpace(TorchFileSave, Identifier):
 
     # ------------------------------------------------------------------ checks
     def _check_params(self, check_device: bool = True) -> None:
-        def pos_int(key: str, lo: int, hi: int) -> None:
-            v = getattr(self, key)
-            if not isinstance(v, (int, np.integer)) or isinstance(v, bool) or not lo <= v <= hi:
-                raise ConfigError(f"{self.name}: {key}={v!r} must be an integer in [{lo}, {hi}]")
-
-        pos_int("n_state", 1, 4096)
-        pos_int("n_enc", 1, MAX_LAG)
-        pos_int("window", 1, 100_000)
-        pos_int("batch_size", 1, 1_000_000)
-        pos_int("epochs", 0, 1_000_000)
-        pos_int("linear", 0, int(self.n_enc))
+        self._check_int("n_state", 1, 4096)
+        self._check_int("n_enc", 1, MAX_LAG)
+        self._check_int("window", 1, 100_000)
+        self._check_int("batch_size", 1, 1_000_000)
+        self._check_int("epochs", 0, 1_000_000)
+        self._check_int("linear", 0, int(self.n_enc))
         eh = self.enc_hidden
         if not isinstance(eh, (list, tuple)) or not all(isinstance(w, (int, np.integer)) and not isinstance(w, bool) and w >= 1 for w in eh):
             raise ConfigError(f"{self.name}: enc_hidden={eh!r} must be a list of widths, e.g. enc_hidden=64 or 64-64")
         self.enc_hidden = [int(w) for w in eh]
         if self.cell not in CELLS:
             raise ConfigError(f"{self.name}: cell={self.cell!r} not one of: {', '.join(CELLS)}")
-        if not (isinstance(self.lr, (int, float)) and 0 < self.lr < 10):
-            raise ConfigError(f"{self.name}: lr={self.lr!r} must be a positive number below 10")
-        if not (isinstance(self.clip, (int, float)) and self.clip >= 0):
-            raise ConfigError(f"{self.name}: clip={self.clip!r} must be ≥ 0")
-        if not isinstance(self.seed, (int, np.integer)) or isinstance(self.seed, bool):
-            raise ConfigError(f"{self.name}: seed={self.seed!r} must be an integer")
+        self._check_step_size("lr")
+        self._check_clip()
         train_dtype(getattr(self, "dtype", "float32"), self.name)
-        if check_device:  # a saved model trained on a GPU must still load (and predict) on a CPU machine
-            select_device(self.device)
+        self._check_seed_device(check_device)
 
     def _build(self, nu: int, ny: int) -> _Net:
         return _Net(self.n_enc * (nu + ny), self.enc_hidden, int(self.n_state), nu, ny, self.cell,
@@ -213,20 +215,12 @@ class RNNStateSpace(TorchFileSave, Identifier):
     def fit(self, data: Record | Sequence[Record]) -> "RNNStateSpace":
         self._check_params()
         recs = as_record_list(data)
-        nu, ny = check_channels(recs, int(self.n_enc), self.name)
-        t0 = time.perf_counter()
-        configure_threads()
-        device = select_device(self.device)
-        torch.manual_seed(int(self.seed))
-        gen = torch.Generator().manual_seed(int(self.seed))
-        self.normaliser_ = fit_normaliser(recs)
-        pairs = normalised_pairs(recs, self.normaliser_)
+        lag, T = int(self.n_enc), int(self.window)
+        nu, ny = check_channels(recs, lag, self.name)
+        device, gen, pairs = self._start_fit(recs)
         dtype = train_dtype(getattr(self, "dtype", "float32"), self.name)
-        data_t = LagData(pairs, self.n_enc, self.n_enc, device, dtype=dtype)
-        T = int(self.window)
-        starts = data_t.window_starts(T)
-        if starts.size == 0:
-            raise DataError(f"{self.name}: no record has {T + self.n_enc} samples for one window; lower window or n_enc")
+        if not any(u.shape[0] >= lag + T for u, _ in pairs):
+            raise DataError(f"{self.name}: no record has {T + lag} samples for one window; lower window or n_enc")
         net = self._build(nu, ny)
         if self.linear:
             # the ARX path is the least-squares ARX, kept fixed; the recurrent network learns the residual of its
@@ -236,36 +230,13 @@ class RNNStateSpace(TorchFileSave, Identifier):
             net.init_linear(*least_squares_linear(pairs, int(self.linear), int(self.linear)))
             net.arx.requires_grad_(False)
         net = net.to(device=device, dtype=dtype)
-        opt = torch.optim.Adam([p for p in net.parameters() if p.requires_grad], lr=float(self.lr))
-        starts_t = torch.as_tensor(starts, device=device)
-        steps = torch.arange(T, device=device)
-        n_win = max(1, math.ceil(data_t.n_rows / T))
-        self.loss_history_ = []
-        for _ in progress(range(int(self.epochs)), desc=self.name, unit="epoch"):
-            pick = torch.randint(0, starts.size, (n_win,), generator=gen).to(device)
-            total = torch.zeros((), device=device, dtype=dtype)
-            for sel in pick.split(int(self.batch_size)):
-                s = starts_t[sel]
-                rows = (s[:, None] + steps[None, :]).reshape(-1)
-                x0 = data_t.x(s)
-                useq = data_t.u[data_t.row_time[rows] - 1].view(s.shape[0], T, nu)
-                target = data_t.Y[rows].view(s.shape[0], T, ny)
-                d = net(x0, useq) - target
-                loss = (d * d).mean()
-                opt.zero_grad(set_to_none=True)
-                loss.backward()
-                if self.clip:
-                    torch.nn.utils.clip_grad_norm_(net.parameters(), float(self.clip))
-                opt.step()
-                total += loss.detach() * s.shape[0]
-            self.loss_history_.append(float(total.item()) / n_win)
+        n_rows = sum(max(0, u.shape[0] - lag) for u, _ in pairs)  # targets with a full encoder window
+        res = train_simulation(net, pairs, lag, T, int(self.epochs), int(self.batch_size), float(self.lr),
+                               clip=float(self.clip), generator=gen, device=device, dtype=dtype,
+                               draws=max(1, math.ceil(n_rows / T)), desc=self.name)
         self.state_dict_ = {k: v.detach().to("cpu", torch.float64).numpy().copy() for k, v in net.state_dict().items()}
-        self.n_inputs_, self.n_outputs_ = nu, ny
-        self.max_lag_ = int(self.n_enc)
         self.n_parameters_ = int(sum(v.size for v in self.state_dict_.values()))
-        self.device_used_ = str(device)
-        self.fit_seconds_ = time.perf_counter() - t0
-        self.diverged_at_ = None
+        self._end_fit(res, nu, ny, lag, device)
         self._net64 = None
         return self
 
@@ -280,8 +251,7 @@ class RNNStateSpace(TorchFileSave, Identifier):
 
     def predict(self, record: Record, horizon: int | None = 1) -> np.ndarray:
         """Free run (``None``) or k-step-ahead at every sample (``horizon=k``; 1 = one step). Shaped like y."""
-        if not hasattr(self, "state_dict_"):
-            raise ConfigError(f"{self.name}: model is not fitted; call fit() first")
+        self._check_fitted()
         check_predict_input(self, record, horizon)
         lag = self.max_lag_
         n = len(record)
@@ -292,9 +262,8 @@ class RNNStateSpace(TorchFileSave, Identifier):
         yhat = yn.copy()
         with torch.no_grad():
             if horizon is None or horizon >= n - lag:
-                x0 = np.concatenate([lag_matrix_np(yn, lag, np.array([lag])), lag_matrix_np(un, lag, np.array([lag]))], axis=1)
-                useq = un[lag - 1 : n - 1][None]
-                yhat[lag:] = net(torch.from_numpy(x0), torch.from_numpy(np.ascontiguousarray(useq))).numpy()[0]
+                yhat[lag:] = net(torch.from_numpy(yn[None, :lag]), torch.from_numpy(un[None, :lag]),
+                                 torch.from_numpy(un[None, lag:])).numpy()[0]
             else:
                 k = int(horizon)
                 targets = np.arange(lag, n)
@@ -304,10 +273,10 @@ class RNNStateSpace(TorchFileSave, Identifier):
                 for a in range(0, targets.size, chunk):
                     sl = slice(a, a + chunk)
                     tt0 = t0[sl]
-                    x0 = np.concatenate([lag_matrix_np(yn, lag, tt0), lag_matrix_np(un, lag, tt0)], axis=1)
-                    idx = np.clip(tt0[:, None] - 1 + np.arange(k)[None, :], 0, n - 1)
-                    useq = un[idx]  # (B, k, nu); steps past a short window are simply not read
-                    out = net(torch.from_numpy(x0), torch.from_numpy(useq)).numpy()
+                    past = tt0[:, None] + np.arange(-lag, 0)[None, :]
+                    idx = np.clip(tt0[:, None] + np.arange(k)[None, :], 0, n - 1)
+                    # (B, k, nu) inputs u(t0) …; steps past a short window are simply not read
+                    out = net(torch.from_numpy(yn[past]), torch.from_numpy(un[past]), torch.from_numpy(un[idx])).numpy()
                     yhat[targets[sl]] = out[np.arange(out.shape[0]), steps[sl] - 1]
         bad = ~np.isfinite(yhat).all(axis=1)
         if bad.any():
@@ -316,9 +285,7 @@ class RNNStateSpace(TorchFileSave, Identifier):
             if horizon is None:
                 yhat[first:] = np.nan
             warnings.warn(f"{self.name}: non-finite predictions from sample {first}", DivergenceWarning, stacklevel=2)
-        out = self.normaliser_.inverse_y(yhat)
-        out[:lag] = _as2d(record.y)[:lag]
-        return out[:, 0] if record.y.ndim == 1 else out
+        return self._in_units(yhat, record)
 
     # ------------------------------------------------------------------ description / persistence
     def describe(self) -> dict[str, Any]:
@@ -327,30 +294,20 @@ class RNNStateSpace(TorchFileSave, Identifier):
             d.update({"structure": {"cell": self.cell, "n_state": self.n_state, "n_enc": self.n_enc,
                                     "enc_hidden": list(self.enc_hidden), "linear": int(self.linear),
                                     "linear_order": int(self.linear)},  # old key, kept for readers
-                      "terms": [], "max_lag": self.max_lag_, "device": self.device_used_,
-                      "final_loss": self.loss_history_[-1] if self.loss_history_ else None})
+                      **self._training_summary()})
         return d
 
     def _state(self) -> dict[str, Any]:
         if not hasattr(self, "state_dict_"):
             raise ConfigError(f"{self.name}: model is not fitted; nothing to save")
-        return {"state_dict": {k: np.asarray(v) for k, v in self.state_dict_.items()},
-                "normaliser": self.normaliser_.to_dict(), "n_inputs": int(self.n_inputs_),
-                "n_outputs": int(self.n_outputs_), "loss_history": [float(v) for v in self.loss_history_],
-                "device_used": self.device_used_, "fit_seconds": float(self.fit_seconds_)}
+        return {"state_dict": {k: np.asarray(v) for k, v in self.state_dict_.items()}, **self._common_state()}
 
     def _load_state(self, state: dict[str, Any]) -> None:
         self._check_params(check_device=False)
-        self.n_inputs_, self.n_outputs_ = int(state["n_inputs"]), int(state["n_outputs"])
+        self._load_common(state, int(self.n_enc))
         ref = self._build(self.n_inputs_, self.n_outputs_).state_dict()
         sd = {k: saved_array(self.name, state["state_dict"], k, tuple(v.shape)) for k, v in ref.items()}
         self.state_dict_ = sd
-        self.normaliser_ = Normaliser.from_dict(state["normaliser"])
-        self.loss_history_ = [float(v) for v in state.get("loss_history", [])]
-        self.device_used_ = state.get("device_used", "cpu")
-        self.fit_seconds_ = float(state.get("fit_seconds", float("nan")))
-        self.max_lag_ = int(self.n_enc)
         self.n_parameters_ = int(sum(v.size for v in sd.values()))
-        self.diverged_at_ = None
         self._net64 = None
 

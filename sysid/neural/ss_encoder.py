@@ -1,7 +1,7 @@
 """Encoder state-space identifier (registry id ``ss-encoder``): SUBNET trained on simulation error.
 
 The model is :class:`sysid.neural.subnet.SubnetModel` (x(k+1) = f(x, u), y = h(x), initial state from the
-encoder ψ over the ``lag = max(ny, nu)`` samples before it), trained by :func:`sysid.neural.train_sim.train_simulation`
+encoder ψ over the ``lag = max(ny, nu)`` samples before it), trained by :func:`sysid.neural.training.train_simulation`
 on the truncated T-step simulation loss (Beintema, Tóth & Schoukens, Automatica 2023) in normalised units, with
 Adam and early stopping on the free-run RMSE of a held-out tail of the estimation data (``val_fraction``).
 
@@ -17,22 +17,26 @@ Prediction (float64 numpy on the CPU, from the saved weights):
 from __future__ import annotations
 
 import logging
-import time
 import warnings
 from typing import Any, Sequence
 
 import numpy as np
-import torch
 
-from sysid.base import Identifier, as_record_list
+from sysid.base import as_record_list
 from sysid.errors import ConfigError, DataError, DivergenceWarning
-from sysid.neural.device import configure_threads, select_device
-from sysid.neural.records import (DIVERGENCE_BOUND, MAX_LAG, _as2d, check_channels, check_predict_input, fit_normaliser,
-                                  hidden_widths, normalised_pairs)
-from sysid.neural.persist import TorchFileSave, saved_array
+from sysid.neural.persist import saved_array
+from sysid.neural.records import (
+    DIVERGENCE_BOUND,
+    MAX_LAG,
+    check_channels,
+    check_predict_input,
+    hidden_widths,
+    normalised_pairs,
+)
+from sysid.neural.sequence import SequenceIdentifier
 from sysid.neural.subnet import SubnetModel, encode_np, export_weights, simulate_np
-from sysid.neural.train_sim import train_simulation
-from sysid.record import Normaliser, Record
+from sysid.neural.training import train_simulation
+from sysid.record import Record
 
 __all__ = ["SSEncoder"]
 
@@ -40,7 +44,7 @@ _LOG = logging.getLogger(__name__)  # per-epoch progress at INFO (the library co
 _ACT_NP = {"tanh": np.tanh, "relu": lambda a: np.maximum(a, 0.0), "sigmoid": lambda a: 1.0 / (1.0 + np.exp(-a))}
 
 
-class SSEncoder(TorchFileSave, Identifier):
+class SSEncoder(SequenceIdentifier):
     """SUBNET encoder state-space model trained on truncated simulation error.
 
     Parameters
@@ -102,40 +106,28 @@ class SSEncoder(TorchFileSave, Identifier):
 
     # ------------------------------------------------------------------ checks
     def _check_params(self, check_device: bool = True) -> None:
-        def integer(key: str, lo: int, hi: int) -> None:
-            v = getattr(self, key)
-            if not isinstance(v, (int, np.integer)) or isinstance(v, bool) or not lo <= v <= hi:
-                raise ConfigError(f"{self.name}: {key}={v!r} must be an integer in [{lo}, {hi}]")
-
-        integer("nx", 1, 4096)
-        integer("ny", 0, MAX_LAG)
-        integer("nu", 0, MAX_LAG)
+        self._check_int("nx", 1, 4096)
+        self._check_int("ny", 0, MAX_LAG)
+        self._check_int("nu", 0, MAX_LAG)
         if self.ny + self.nu < 1:
             raise ConfigError(f"{self.name}: ny + nu must be at least 1 (the encoder needs a past window)")
-        integer("T", 1, 100_000)
-        integer("batch_size", 1, 1_000_000)
-        integer("epochs", 0, 1_000_000)
-        integer("patience", 0, 1_000_000)
+        self._check_int("T", 1, 100_000)
+        self._check_int("batch_size", 1, 1_000_000)
+        self._check_int("epochs", 0, 1_000_000)
+        self._check_int("patience", 0, 1_000_000)
         for key in ("f_hidden", "h_hidden", "e_hidden"):
             setattr(self, key, hidden_widths(getattr(self, key), key, self.name))
         if self.activation not in _ACT_NP:
             raise ConfigError(f"{self.name}: activation={self.activation!r} not one of: {', '.join(_ACT_NP)}")
         if not isinstance(self.feedthrough, (bool, np.bool_)):
             raise ConfigError(f"{self.name}: feedthrough={self.feedthrough!r} must be true or false")
-        if not (isinstance(self.lr, (int, float)) and 0 < self.lr < 10):
-            raise ConfigError(f"{self.name}: lr={self.lr!r} must be a positive number below 10")
+        self._check_step_size("lr")
         if self.lr_min is not None and not (isinstance(self.lr_min, (int, float)) and not isinstance(self.lr_min, bool)
                                             and 0 <= self.lr_min <= self.lr):
             raise ConfigError(f"{self.name}: lr_min={self.lr_min!r} must be a number in [0, lr={self.lr}]")
-        if not (isinstance(self.val_fraction, (int, float)) and not isinstance(self.val_fraction, bool)
-                and 0 <= self.val_fraction <= 0.5):
-            raise ConfigError(f"{self.name}: val_fraction={self.val_fraction!r} must be a fraction in [0, 0.5]")
-        if not (isinstance(self.clip, (int, float)) and self.clip >= 0):
-            raise ConfigError(f"{self.name}: clip={self.clip!r} must be ≥ 0")
-        if not isinstance(self.seed, (int, np.integer)) or isinstance(self.seed, bool):
-            raise ConfigError(f"{self.name}: seed={self.seed!r} must be an integer")
-        if check_device:  # a model trained on a GPU must still load (and predict) on a CPU machine
-            select_device(self.device)
+        self._check_val_fraction()
+        self._check_clip()
+        self._check_seed_device(check_device)
 
     @property
     def lag(self) -> int:
@@ -161,14 +153,7 @@ class SSEncoder(TorchFileSave, Identifier):
                                 f"{last.source}, need lag + T = {lag + T}; lower val_fraction, T or ny/nu")
             val_recs = [last[cut - lag:]]  # the held-out tail with its encoder window
             recs = [*recs[:-1], last[:cut]]
-        t0 = time.perf_counter()
-        c0 = time.process_time()
-        configure_threads()
-        device = select_device(self.device)
-        torch.manual_seed(int(self.seed))
-        gen = torch.Generator().manual_seed(int(self.seed))
-        self.normaliser_ = fit_normaliser(recs)
-        pairs = normalised_pairs(recs, self.normaliser_)
+        device, gen, pairs = self._start_fit(recs)
         if not any(u.shape[0] >= lag + T for u, _ in pairs):
             raise DataError(f"{self.name}: no estimation record has lag + T = {lag + T} samples; lower T or ny/nu")
         model = self._build(n_in, n_out).to(device)
@@ -177,23 +162,11 @@ class SSEncoder(TorchFileSave, Identifier):
                                patience=int(self.patience), clip=float(self.clip), generator=gen, device=device,
                                lr_min=None if self.lr_min is None else float(self.lr_min), log=lambda msg: _LOG.info("%s: %s", self.name, msg))
         self.weights_ = export_weights(model)
-        self.loss_history_ = res.loss_history
-        self.val_history_ = res.val_history
-        self.best_epoch_ = res.best_epoch
-        self.n_inputs_, self.n_outputs_ = n_in, n_out
-        self.max_lag_ = lag
         self.n_parameters_ = int(sum(p.numel() for p in model.parameters()))
-        self.device_used_ = str(device)
-        self.fit_seconds_ = time.perf_counter() - t0
-        self.fit_cpu_seconds_ = time.process_time() - c0
-        self.diverged_at_ = None
+        self._end_fit(res, n_in, n_out, lag, device)
         return self
 
     # ------------------------------------------------------------------ predict
-    def _check_fitted(self) -> None:
-        if not hasattr(self, "weights_"):
-            raise ConfigError(f"{self.name}: model is not fitted; call fit() first")
-
     def initial_state(self, record: Record, at: int | None = None) -> np.ndarray:
         """The encoder's state estimate x(at) (normalised-model coordinates) from the ``lag`` samples before
         ``at`` (default: ``at = lag``, the first simulated sample of a free run)."""
@@ -244,9 +217,7 @@ class SSEncoder(TorchFileSave, Identifier):
                 yhat[bad] = np.nan
                 warnings.warn(f"{self.name}: {int(bad.sum())} non-finite {k}-step predictions, first at sample {first}",
                               DivergenceWarning, stacklevel=2)
-        out = self.normaliser_.inverse_y(yhat)
-        out[:lag] = _as2d(record.y)[:lag]  # the encoder window is the measurement
-        return out[:, 0] if record.y.ndim == 1 else out
+        return self._in_units(yhat, record)  # the encoder window is the measurement
 
     # ------------------------------------------------------------------ description / persistence
     def describe(self) -> dict[str, Any]:
@@ -255,10 +226,7 @@ class SSEncoder(TorchFileSave, Identifier):
             d.update({"structure": {"nx": self.nx, "ny": self.ny, "nu": self.nu, "f_hidden": list(self.f_hidden),
                                     "h_hidden": list(self.h_hidden), "e_hidden": list(self.e_hidden),
                                     "activation": self.activation, "feedthrough": bool(self.feedthrough)},
-                      "terms": [], "max_lag": self.max_lag_, "device": self.device_used_,
-                      "epochs_run": len(self.loss_history_), "best_epoch": self.best_epoch_,
-                      "final_loss": self.loss_history_[-1] if self.loss_history_ else None,
-                      "best_validation_rmse_normalised": min(self.val_history_) if self.val_history_ else None})
+                      **self._training_summary()})
         return d
 
     def _state(self) -> dict[str, Any]:
@@ -268,15 +236,11 @@ class SSEncoder(TorchFileSave, Identifier):
             flat[f"{part}.W"], flat[f"{part}.b"] = g["W"], g["b"]
             for i, (W, b) in enumerate(g["layers"]):
                 flat[f"{part}.{i}.W"], flat[f"{part}.{i}.b"] = W, b
-        return {"weights": flat, "normaliser": self.normaliser_.to_dict(), "n_inputs": int(self.n_inputs_),
-                "n_outputs": int(self.n_outputs_), "loss_history": [float(v) for v in self.loss_history_],
-                "val_history": [float(v) for v in self.val_history_],
-                "best_epoch": None if self.best_epoch_ is None else int(self.best_epoch_),
-                "device_used": self.device_used_, "fit_seconds": float(self.fit_seconds_)}
+        return {"weights": flat, **self._common_state()}
 
     def _load_state(self, state: dict[str, Any]) -> None:
         self._check_params(check_device=False)
-        self.n_inputs_, self.n_outputs_ = int(state["n_inputs"]), int(state["n_outputs"])
+        self._load_common(state, self.lag)
         ref = export_weights(self._build(self.n_inputs_, self.n_outputs_))
         flat = state["weights"]
 
@@ -286,13 +250,5 @@ class SSEncoder(TorchFileSave, Identifier):
         self.weights_ = {part: {"W": get(f"{part}.W", g["W"]), "b": get(f"{part}.b", g["b"]),
                                 "layers": [(get(f"{part}.{i}.W", W), get(f"{part}.{i}.b", b)) for i, (W, b) in enumerate(g["layers"])]}
                          for part, g in ref.items()}
-        self.normaliser_ = Normaliser.from_dict(state["normaliser"])
-        self.loss_history_ = [float(v) for v in state.get("loss_history", [])]
-        self.val_history_ = [float(v) for v in state.get("val_history", [])]
-        self.best_epoch_ = state.get("best_epoch")
-        self.device_used_ = state.get("device_used", "cpu")
-        self.fit_seconds_ = float(state.get("fit_seconds", float("nan")))
-        self.max_lag_ = self.lag
         self.n_parameters_ = int(sum(g["W"].size + g["b"].size + sum(W.size + b.size for W, b in g["layers"])
                                      for g in self.weights_.values()))
-        self.diverged_at_ = None

@@ -13,7 +13,7 @@ units by default): ``g(z) = W z + b + V σ(U z + c)`` (:class:`BypassMLP`). Hidd
 map alone, so with all three empty the model is a linear state-space model with a linear state observer.
 
 Training (the truncated T-step simulation loss over sections of the data) is in
-:mod:`sysid.neural.train_sim`; the identifier (normalisation, fit/predict/save) in
+:mod:`sysid.neural.training` (the loop shared with ``rnn`` and ``wh-net``); the identifier (normalisation, fit/predict/save) in
 :mod:`sysid.neural.ss_encoder`. Prediction runs in float64 numpy from the exported weights
 (:func:`export_weights`, :func:`simulate_np`), so it is the same on every machine.
 

@@ -6,7 +6,7 @@ The model is :class:`sysid.neural.blocknet.BlockNet` (dynoNet, Forgione & Piga 2
 
 with G1 (input → ``channels``), the static network F (``channels`` → ``hidden`` tanh → ``channels``) and G2
 (``channels`` → output) differentiable IIR layers (:mod:`sysid.neural.iir`), trained by
-:func:`sysid.neural.blocknet.train_records` on the free-run MSE of the whole normalised estimation records
+:func:`sysid.neural.training.train_records` on the free-run MSE of the whole normalised estimation records
 (full batch, Adam with a cosine learning-rate schedule, early stopping on a held-out tail).
 
 Initial state and prediction. Every record is simulated from rest: the filters' states start at zero at the
@@ -27,20 +27,21 @@ on the CPU in any case (a sequential recursion over time), so a GPU gains little
 from __future__ import annotations
 
 import logging
-import time
 from typing import Any, Sequence
 
 import numpy as np
 import torch
 
 from sysid._blas import blas_threads
-from sysid.base import Identifier, as_record_list
+from sysid.base import as_record_list
 from sysid.errors import ConfigError, DataError
-from sysid.neural.blocknet import BlockNet, train_records
-from sysid.neural.device import configure_threads, select_device
-from sysid.neural.persist import TorchFileSave, saved_array
-from sysid.neural.records import _as2d, check_channels, check_predict_input, fit_normaliser, hidden_widths, normalised_pairs
-from sysid.record import Normaliser, Record
+from sysid.neural.blocknet import BlockNet
+from sysid.neural.device import configure_threads
+from sysid.neural.persist import saved_array
+from sysid.neural.records import check_channels, check_predict_input, hidden_widths, normalised_pairs
+from sysid.neural.sequence import SequenceIdentifier
+from sysid.neural.training import train_records
+from sysid.record import Record
 
 __all__ = ["WHNet"]
 
@@ -49,7 +50,7 @@ _ACTIVATIONS = ("tanh", "relu", "sigmoid")
 MAX_ORDER = 64
 
 
-class WHNet(TorchFileSave, Identifier):
+class WHNet(SequenceIdentifier):
     """dynoNet-style G1 → F → G2 block network trained on the free-run (simulation) error.
 
     Parameters
@@ -88,6 +89,7 @@ class WHNet(TorchFileSave, Identifier):
     """
 
     name = "wh-net"
+    _fitted_attr = "model_"
 
     def __init__(self, channels: int = 8, hidden: Sequence[int] = (16,), nb: int = 8, na: int = 8,
                  nb2: int | None = None, na2: int | None = None, nk: int = 0, linear: bool = False,
@@ -116,24 +118,17 @@ class WHNet(TorchFileSave, Identifier):
 
     # ------------------------------------------------------------------ checks
     def _check_params(self, check_device: bool = True) -> None:
-        def integer(key: str, lo: int, hi: int, none_ok: bool = False) -> None:
-            v = getattr(self, key)
-            if none_ok and v is None:
-                return
-            if not isinstance(v, (int, np.integer)) or isinstance(v, bool) or not lo <= v <= hi:
-                raise ConfigError(f"{self.name}: {key}={v!r} must be an integer in [{lo}, {hi}]")
-
-        integer("channels", 1, 1024)
-        integer("nb", 1, MAX_ORDER)
-        integer("na", 0, MAX_ORDER)
-        integer("nb2", 1, MAX_ORDER, none_ok=True)
-        integer("na2", 0, MAX_ORDER, none_ok=True)
-        integer("nk", 0, MAX_ORDER)
-        integer("warmup", 0, 1_000_000)
-        integer("epochs", 0, 10_000_000)
-        integer("patience", 0, 10_000_000)
-        integer("window", 0, 100_000_000)
-        integer("batch", 1, 100_000)
+        self._check_int("channels", 1, 1024)
+        self._check_int("nb", 1, MAX_ORDER)
+        self._check_int("na", 0, MAX_ORDER)
+        self._check_int("nb2", 1, MAX_ORDER, none_ok=True)
+        self._check_int("na2", 0, MAX_ORDER, none_ok=True)
+        self._check_int("nk", 0, MAX_ORDER)
+        self._check_int("warmup", 0, 1_000_000)
+        self._check_int("epochs", 0, 10_000_000)
+        self._check_int("patience", 0, 10_000_000)
+        self._check_int("window", 0, 100_000_000)
+        self._check_int("batch", 1, 100_000)
         if self.window and self.window <= self.warmup:
             raise ConfigError(f"{self.name}: window={self.window} must exceed warmup={self.warmup} (or be 0: full batch)")
         self.hidden = hidden_widths(self.hidden, "hidden", self.name)
@@ -141,19 +136,12 @@ class WHNet(TorchFileSave, Identifier):
             raise ConfigError(f"{self.name}: activation={self.activation!r} not one of: {', '.join(_ACTIVATIONS)}")
         if not isinstance(self.linear, (bool, np.bool_)):
             raise ConfigError(f"{self.name}: linear={self.linear!r} must be true or false")
-        for key in ("lr", "lr_min"):
-            v = getattr(self, key)
-            if not (isinstance(v, (int, float)) and not isinstance(v, bool) and 0 < v < 10):
-                raise ConfigError(f"{self.name}: {key}={v!r} must be a positive number below 10")
+        self._check_step_size("lr")
+        self._check_step_size("lr_min")
         if self.lr_min > self.lr:
             raise ConfigError(f"{self.name}: lr_min={self.lr_min!r} must not exceed lr={self.lr!r}")
-        if not (isinstance(self.val_fraction, (int, float)) and not isinstance(self.val_fraction, bool)
-                and 0 <= self.val_fraction <= 0.5):
-            raise ConfigError(f"{self.name}: val_fraction={self.val_fraction!r} must be a fraction in [0, 0.5]")
-        if not isinstance(self.seed, (int, np.integer)) or isinstance(self.seed, bool):
-            raise ConfigError(f"{self.name}: seed={self.seed!r} must be an integer")
-        if check_device:  # a model trained on a GPU must still load (and predict) on a CPU machine
-            select_device(self.device)
+        self._check_val_fraction()
+        self._check_seed_device(check_device)
 
     def _build(self, n_in: int, n_out: int, generator: torch.Generator | None = None) -> BlockNet:
         nb2 = self.nb if self.nb2 is None else self.nb2
@@ -173,13 +161,7 @@ class WHNet(TorchFileSave, Identifier):
         if self.val_fraction and (last - cut < 1 or sum(len(r) for r in recs[:-1]) + cut <= warmup * len(recs)):
             raise DataError(f"{self.name}: val_fraction={self.val_fraction} leaves no training samples after the "
                             f"warm-up of {warmup} in {recs[-1].source}; lower val_fraction or warmup")
-        t0, c0 = time.perf_counter(), time.process_time()
-        configure_threads()
-        device = select_device(self.device)
-        torch.manual_seed(int(self.seed))
-        gen = torch.Generator().manual_seed(int(self.seed))
-        self.normaliser_ = fit_normaliser(recs)
-        pairs = normalised_pairs(recs, self.normaliser_)
+        device, gen, pairs = self._start_fit(recs)
         model = self._build(n_in, n_out, gen).to(device)
         with blas_threads():
             res = train_records(model, pairs, warmup, int(self.epochs), float(self.lr), float(self.lr_min),
@@ -187,16 +169,8 @@ class WHNet(TorchFileSave, Identifier):
                                 log=lambda msg: _LOG.info("%s: %s", self.name, msg), log_every=100,
                                 window=int(self.window), batch=int(self.batch), seed=int(self.seed))
         self._set_weights(model.to("cpu"))
-        self.loss_history_ = res.loss_history
-        self.val_history_ = res.val_history
-        self.best_epoch_ = res.best_epoch
         self.restarts_ = res.restarts
-        self.n_inputs_, self.n_outputs_ = n_in, n_out
-        self.max_lag_ = warmup
-        self.device_used_ = str(device)
-        self.fit_seconds_ = time.perf_counter() - t0
-        self.fit_cpu_seconds_ = time.process_time() - c0
-        self.diverged_at_ = None
+        self._end_fit(res, n_in, n_out, warmup, device)
         return self
 
     def _set_weights(self, model: BlockNet) -> None:
@@ -206,10 +180,6 @@ class WHNet(TorchFileSave, Identifier):
         self.n_parameters_ = int(sum(p.numel() for p in model.parameters()))
 
     # ------------------------------------------------------------------ predict
-    def _check_fitted(self) -> None:
-        if not hasattr(self, "model_"):
-            raise ConfigError(f"{self.name}: model is not fitted; call fit() first")
-
     def predict(self, record: Record, horizon: int | None = 1) -> np.ndarray:
         """Free-run simulation from rest, for every ``horizon`` (an output-error model: see the module docstring).
         Shaped like ``record.y``; the first ``max_lag_`` samples are the measurement."""
@@ -219,11 +189,8 @@ class WHNet(TorchFileSave, Identifier):
         configure_threads()
         with torch.no_grad(), blas_threads():
             yn = self.model_(torch.as_tensor(un, dtype=torch.float64)[None])[0].numpy()
-        out = self.normaliser_.inverse_y(yn)
-        lag = self.max_lag_
-        out[:lag] = _as2d(record.y)[:lag]
         self.diverged_at_ = None
-        return out[:, 0] if record.y.ndim == 1 else out
+        return self._in_units(yn, record)
 
     # ------------------------------------------------------------------ description / persistence
     def describe(self) -> dict[str, Any]:
@@ -232,34 +199,19 @@ class WHNet(TorchFileSave, Identifier):
             d.update({"structure": {"channels": int(self.channels), "hidden": list(self.hidden), "nb": self.nb,
                                     "na": self.na, "nb2": self.nb2, "na2": self.na2, "nk": self.nk,
                                     "linear": bool(self.linear), "activation": self.activation},
-                      "terms": [], "max_lag": self.max_lag_, "device": self.device_used_,
-                      "epochs_run": len(self.loss_history_), "best_epoch": self.best_epoch_,
-                      "final_loss": self.loss_history_[-1] if self.loss_history_ else None,
-                      "best_validation_rmse_normalised": min(self.val_history_) if self.val_history_ else None})
+                      **self._training_summary()})
         return d
 
     def _state(self) -> dict[str, Any]:
         self._check_fitted()
         weights = {k: v.detach().cpu().numpy().astype(np.float64) for k, v in self.model_.state_dict().items()}
-        return {"weights": weights, "normaliser": self.normaliser_.to_dict(), "n_inputs": int(self.n_inputs_),
-                "n_outputs": int(self.n_outputs_), "loss_history": [float(v) for v in self.loss_history_],
-                "val_history": [float(v) for v in self.val_history_],
-                "best_epoch": None if self.best_epoch_ is None else int(self.best_epoch_),
-                "device_used": self.device_used_, "fit_seconds": float(self.fit_seconds_)}
+        return {"weights": weights, **self._common_state()}
 
     def _load_state(self, state: dict[str, Any]) -> None:
         self._check_params(check_device=False)
-        self.n_inputs_, self.n_outputs_ = int(state["n_inputs"]), int(state["n_outputs"])
+        self._load_common(state, int(self.warmup))
         model = self._build(self.n_inputs_, self.n_outputs_)
         model.load_state_dict({key: torch.as_tensor(saved_array(self.name, state["weights"], key, tuple(like.shape)))
                                for key, like in model.state_dict().items()})
         self._set_weights(model)
-        self.normaliser_ = Normaliser.from_dict(state["normaliser"])
-        self.loss_history_ = [float(v) for v in state.get("loss_history", [])]
-        self.val_history_ = [float(v) for v in state.get("val_history", [])]
-        self.best_epoch_ = state.get("best_epoch")
         self.restarts_ = 0
-        self.device_used_ = state.get("device_used", "cpu")
-        self.fit_seconds_ = float(state.get("fit_seconds", float("nan")))
-        self.max_lag_ = int(self.warmup)
-        self.diverged_at_ = None

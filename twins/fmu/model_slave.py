@@ -13,16 +13,13 @@ discrete-time model at its identification rate); ``y`` at ``t_0`` is 0.
 
 from __future__ import annotations
 
-import json
-import math
 from pathlib import Path
 from typing import Any
 
-from pythonfmu import Fmi2Causality, Fmi2Initial, Fmi2Slave, Fmi2Variability, Real, String
-from pythonfmu.default_experiment import DefaultExperiment
+from pythonfmu import Fmi2Causality, Fmi2Variability, String
 from pythonfmu.enums import Fmi2Status
 
-from twins.fmu.slave import STEP_TOLERANCE, FastIO, _with_attrs, release_wrapper_state
+from twins.fmu.slave import PiezoSlave, read_config, release_wrapper_state
 
 __all__ = ["ModelSlave", "MODEL_CONFIG_NAME", "MODEL_FORMAT"]
 
@@ -31,58 +28,24 @@ MODEL_FORMAT = "piezotwin-model-fmu/1"
 
 
 def load_model_config(resources: str | Path) -> dict[str, Any]:
-    path = Path(resources) / MODEL_CONFIG_NAME
-    cfg = json.loads(path.read_text())
-    if cfg.get("format") != MODEL_FORMAT:
-        raise RuntimeError(f"{path}: not a {MODEL_FORMAT} FMU configuration")
-    return cfg
+    return read_config(resources, MODEL_CONFIG_NAME, MODEL_FORMAT)
 
 
-class ModelSlave(FastIO, Fmi2Slave):
+class ModelSlave(PiezoSlave):
     """An identified PiezoTwin model as an FMI 2.0 co-simulation slave (input ``u``, output ``y``)."""
 
-    author = "PiezoTwin"
-    license = "MIT"
+    whole_steps = False  # a discrete-time model at its identification rate: the step is exactly 1/fs
 
     def __init__(self, **kwargs):
         super().__init__(**kwargs)
         cfg = load_model_config(self.resources)
-        self._cfg = cfg
-        self.modelName = self.__class__.__name__
-        self.description = f"PiezoTwin identified {cfg['identifier']} model (free run at {cfg['fs']:g} Hz)"
-        self.version = str(cfg.get("project_version", ""))
-        self._fs = float(cfg["fs"])
-        self.default_experiment = DefaultExperiment(start_time=0.0, step_size=1.0 / self._fs)
-        self.u = 0.0
-        self.y = 0.0
+        self._header(cfg, f"PiezoTwin identified {cfg['identifier']} model (free run at {cfg['fs']:g} Hz)", "input",
+                     "model output sample for the last input sample")
         self.identifier = str(cfg["identifier"])
-        units = cfg.get("units", {})
-        self._units = {x for x in (units.get("u"), units.get("y")) if x}
-        self.register_variable(_with_attrs(
-            Real("u", causality=Fmi2Causality.input, variability=Fmi2Variability.continuous, description="input"),
-            unit=units.get("u") or None))
-        self.register_variable(_with_attrs(
-            Real("y", causality=Fmi2Causality.output, variability=Fmi2Variability.discrete,
-                 initial=Fmi2Initial.exact, description="model output sample for the last input sample"),
-            unit=units.get("y") or None))
         self.register_variable(String("identifier", causality=Fmi2Causality.parameter,
                                       variability=Fmi2Variability.fixed, description="identifier of the model"))
-        self._check_io_refs()
-        self._step_checked = None  # the communication step, once checked
         self._stepper = None
         release_wrapper_state(self.resources)  # pythonfmu 0.7: double release of its PyState at exit
-
-    def to_xml(self, model_options=dict()):  # noqa: B006 (signature of the base class)
-        from xml.etree.ElementTree import Element, SubElement
-
-        root = super().to_xml(model_options)
-        if self._units:
-            defs = Element("UnitDefinitions")
-            for unit in sorted(self._units):
-                SubElement(defs, "Unit", {"name": unit})
-            index = [i for i, child in enumerate(root) if child.tag == "CoSimulation"][0] + 1
-            root.insert(index, defs)
-        return root
 
     def _start(self) -> None:
         from sysid.base import load_model
@@ -95,23 +58,8 @@ class ModelSlave(FastIO, Fmi2Slave):
             self.log(f"{type(exc).__name__}: {exc}", Fmi2Status.error)
             raise
 
-    def exit_initialization_mode(self):
-        self._start()
+    def _stepping(self):
+        return self._stepper
 
-    def do_step(self, current_time: float, step_size: float) -> bool:
-        if self._stepper is None:
-            self._start()
-        if step_size != self._step_checked:  # a host keeps its step: checked once
-            if abs(step_size * self._fs - 1.0) > STEP_TOLERANCE:
-                msg = (f"communication step {step_size!r} s must be 1/fs = {1.0 / self._fs!r} s "
-                       "(a discrete-time model)")
-                self.log(msg, Fmi2Status.error)
-                raise RuntimeError(msg)
-            self._step_checked = step_size
-        u = float(self.u)
-        if not math.isfinite(u):
-            msg = f"input u={u!r} at t={current_time!r} s is not finite"
-            self.log(msg, Fmi2Status.error)
-            raise RuntimeError(msg)
-        self.y = self._stepper.step(u)
-        return True
+    def _step(self, u: float, n: int, current_time: float) -> float:
+        return self._stepper.step(u)

@@ -29,7 +29,7 @@ from pythonfmu.enums import Fmi2Status
 from twins.fmu.spec import CONFIG_NAME, FORMAT, decode_value
 
 
-__all__ = ["FastIO", "TwinSlave", "load_fmu_config", "release_wrapper_state"]
+__all__ = ["FastIO", "PiezoSlave", "TwinSlave", "load_fmu_config", "release_wrapper_state"]
 
 #: relative tolerance on ``step_size * fs`` being a whole number of samples
 STEP_TOLERANCE = 1e-6
@@ -134,12 +134,17 @@ def _finalize_at_exit(resources: str | Path) -> bool:
     return False
 
 
-def load_fmu_config(resources: str | Path) -> dict[str, Any]:
-    path = Path(resources) / CONFIG_NAME
+def read_config(resources: str | Path, name: str, fmt: str) -> dict[str, Any]:
+    """The JSON configuration ``name`` in an FMU's ``resources/``, refused unless its ``format`` is ``fmt``."""
+    path = Path(resources) / name
     cfg = json.loads(path.read_text())
-    if cfg.get("format") != FORMAT:
-        raise RuntimeError(f"{path}: not a {FORMAT} FMU configuration")
+    if cfg.get("format") != fmt:
+        raise RuntimeError(f"{path}: not a {fmt} FMU configuration")
     return cfg
+
+
+def load_fmu_config(resources: str | Path) -> dict[str, Any]:
+    return read_config(resources, CONFIG_NAME, FORMAT)
 
 
 def _resolve(path: str):
@@ -196,44 +201,125 @@ class FastIO:
         return super().get_real(vrs)
 
 
-class TwinSlave(FastIO, Fmi2Slave):
-    """A configured PiezoTwin twin as an FMI 2.0 co-simulation slave (input ``u``, output ``y``)."""
+class PiezoSlave(FastIO, Fmi2Slave):
+    """What the twin and the identified-model slaves share: the header of the FMU (name, description, version,
+    default experiment at ``1/fs``), the input ``u`` and output ``y`` with their units, the unit definitions
+    of the model description, the check of the communication step and of the input, and the error path.
+
+    A subclass calls :meth:`_header` from its ``__init__`` and implements ``_start`` (build what steps) and
+    ``_step(u, n)`` (advance ``n`` samples with input ``u``, return ``y``). ``whole_steps``: a communication step
+    may be any whole number of sampling periods (True) or exactly one (False: a discrete-time model)."""
 
     author = "PiezoTwin"
     license = "MIT"
+    whole_steps = True
+
+    def _header(self, cfg: dict[str, Any], description: str, u_text: str, y_text: str) -> None:
+        """Configuration ``cfg`` (with ``fs``, ``units`` and ``project_version``), description and the
+        registered ``u`` (input, continuous) and ``y`` (output, discrete, exact start 0) variables."""
+        self._cfg = cfg
+        self.modelName = self.__class__.__name__
+        self.description = description
+        self.version = str(cfg.get("project_version", ""))
+        self._fs = float(cfg["fs"])
+        self.default_experiment = DefaultExperiment(start_time=0.0, step_size=1.0 / self._fs)
+        self.u = 0.0
+        self.y = 0.0
+        units = cfg.get("units", {})
+        self._units = {x for x in (units.get("u"), units.get("y")) if x}
+        self.register_variable(_with_attrs(
+            Real("u", causality=Fmi2Causality.input, variability=Fmi2Variability.continuous, description=u_text),
+            unit=units.get("u") or None))
+        # initial=exact: the output is defined from the start, so InitialUnknowns is consistent (notes C.4)
+        self.register_variable(_with_attrs(
+            Real("y", causality=Fmi2Causality.output, variability=Fmi2Variability.discrete,
+                 initial=Fmi2Initial.exact, description=y_text), unit=units.get("y") or None))
+        self._check_io_refs()
+        self._step_samples = (None, 0)  # (communication step, samples per step) last checked
+
+    def to_xml(self, model_options=dict()) -> Element:  # noqa: B006 (signature of the base class)
+        root = super().to_xml(model_options)
+        if self._units:
+            defs = Element("UnitDefinitions")
+            for unit in sorted(self._units):
+                SubElement(defs, "Unit", {"name": unit})
+            index = [i for i, child in enumerate(root) if child.tag == "CoSimulation"][0] + 1
+            root.insert(index, defs)
+        return root
+
+    def exit_initialization_mode(self):
+        try:
+            self._start()
+        except BaseException:
+            self._before_raise()
+            raise
+
+    def do_step(self, current_time: float, step_size: float) -> bool:
+        try:
+            if self._stepping() is None:
+                self._start()
+            checked, n = self._step_samples
+            if step_size != checked:  # a host keeps its step: checked once
+                n = self._samples_per_step(step_size)
+            u = float(self.u)
+            if not math.isfinite(u):
+                return self._fail(f"input u={u!r} at t={current_time!r} s is not finite")
+            self.y = float(self._step(u, n, current_time))
+            return True
+        except BaseException:
+            self._before_raise()
+            raise
+
+    def _samples_per_step(self, step_size: float) -> int:
+        """Sampling periods in the communication step ``step_size``, which must be a whole number of them (or
+        exactly one where not ``whole_steps``); remembered, so that a host's constant step is checked once."""
+        ratio = step_size * self._fs
+        n = round(ratio)
+        if not self.whole_steps and abs(ratio - 1.0) > STEP_TOLERANCE:
+            return self._fail(f"communication step {step_size!r} s must be 1/fs = {1.0 / self._fs!r} s "
+                              "(a discrete-time model)")
+        if n < 1 or abs(ratio - n) > STEP_TOLERANCE * n:
+            return self._fail(f"communication step {step_size!r} s is not a whole number of sampling periods "
+                              f"1/fs = {1.0 / self._fs!r} s")
+        self._step_samples = (step_size, n)
+        return n
+
+    def _fail(self, message: str) -> Any:
+        """Log ``message`` for the importing tool and raise: pythonfmu turns the exception into an error
+        status of the FMI call (a plain ``False`` would only discard the step)."""
+        self.log(message, Fmi2Status.error)
+        raise RuntimeError(message)
+
+    def _before_raise(self) -> None:
+        """Keep pythonfmu 0.7's error path from freeing live objects.
+
+        On a Python exception its C++ wrapper (``handle_py_exception``) releases its references to the slave
+        class, the instance and the log queue, and releases them once more when the instance is freed
+        (``cleanPyObject`` twice); the second release would free objects still in use. One extra reference
+        to each before the exception propagates balances the count (at worst it keeps three small objects
+        alive after an error). The abort at exit seen with these FMUs had another cause: see
+        :func:`release_wrapper_state`.
+        """
+        import ctypes
+
+        for obj in (type(self), self, self.log_queue):
+            ctypes.pythonapi.Py_IncRef(ctypes.py_object(obj))
+
+
+class TwinSlave(PiezoSlave):
+    """A configured PiezoTwin twin as an FMI 2.0 co-simulation slave (input ``u``, output ``y``)."""
 
     def __init__(self, **kwargs):
         super().__init__(**kwargs)
         cfg = load_fmu_config(self.resources)
-        self._cfg = cfg
-        self.modelName = self.__class__.__name__
-        self.description = f"PiezoTwin {cfg['twin']} twin: {cfg['description']}"
-        self.version = str(cfg.get("project_version", ""))
         self._values: dict[str, Any] = {}
         self._tunable = {v["name"] for v in cfg["variables"] if v.get("tunable")}
         self._retune = False  # a tunable parameter changed since the last step
         self._core = None
         self._twin_cls = _resolve(cfg["twin_class"])  # import errors surface at instantiation
         release_wrapper_state(self.resources)  # pythonfmu 0.7: double release of its PyState at exit
-        self._fs = float(cfg["fs"])
-        self.default_experiment = DefaultExperiment(start_time=0.0, step_size=1.0 / self._fs)
-        self.u = 0.0
-        self.y = 0.0
-        units = cfg.get("units", {})
-        self._units = set()
-        self.register_variable(_with_attrs(
-            Real("u", causality=Fmi2Causality.input, variability=Fmi2Variability.continuous,
-                 description="input (drive voltage)"), unit=units.get("u") or None))
-        # initial=exact: the output is defined from the start, so InitialUnknowns is consistent (notes C.4)
-        self.register_variable(_with_attrs(
-            Real("y", causality=Fmi2Causality.output, variability=Fmi2Variability.discrete,
-                 initial=Fmi2Initial.exact, description="output sample of the twin for the last input sample"),
-            unit=units.get("y") or None))
-        for unit in (units.get("u"), units.get("y")):
-            if unit:
-                self._units.add(unit)
-        self._check_io_refs()
-        self._step_samples = (None, 0)  # (communication step, samples per step) last checked
+        self._header(cfg, f"PiezoTwin {cfg['twin']} twin: {cfg['description']}", "input (drive voltage)",
+                     "output sample of the twin for the last input sample")
         for v in cfg["variables"]:
             name = v["name"]
             self._values[name] = v["start"]
@@ -261,44 +347,10 @@ class TwinSlave(FastIO, Fmi2Slave):
                 self._retune = True  # applied at the next doStep (several changes may come together)
         self._values[name] = value
 
-    def to_xml(self, model_options=dict()) -> Element:  # noqa: B006 (signature of the base class)
-        root = super().to_xml(model_options)
-        if self._units:
-            defs = Element("UnitDefinitions")
-            for unit in sorted(self._units):
-                SubElement(defs, "Unit", {"name": unit})
-            index = [i for i, child in enumerate(root) if child.tag == "CoSimulation"][0] + 1
-            root.insert(index, defs)
-        return root
+    def _stepping(self):
+        return self._core
 
-    def exit_initialization_mode(self):
-        try:
-            self._start()
-        except BaseException:
-            self._before_raise()
-            raise
-
-    def do_step(self, current_time: float, step_size: float) -> bool:
-        try:
-            return self._do_step(current_time, step_size)
-        except BaseException:
-            self._before_raise()
-            raise
-
-    def _do_step(self, current_time: float, step_size: float) -> bool:
-        if self._core is None:
-            self._start()
-        checked, n = self._step_samples
-        if step_size != checked:  # a host keeps its step: checked once
-            ratio = step_size * self._fs
-            n = round(ratio)
-            if n < 1 or abs(ratio - n) > STEP_TOLERANCE * n:
-                return self._fail(f"communication step {step_size!r} s is not a whole number of sampling periods "
-                                  f"1/fs = {1.0 / self._fs!r} s")
-            self._step_samples = (step_size, n)
-        u = float(self.u)
-        if not math.isfinite(u):
-            return self._fail(f"input u={u!r} at t={current_time!r} s is not finite")
+    def _step(self, u: float, n: int, current_time: float) -> float:
         if self._retune:
             try:  # the new parameters act from this step on; the core keeps its dynamic state
                 self._core.retune(self.make_twin())
@@ -308,33 +360,10 @@ class TwinSlave(FastIO, Fmi2Slave):
             self._retune = False
         step = self._core.step
         if n == 1:
+            return step(u)
+        for _ in range(n):
             y = step(u)
-        else:
-            for _ in range(n):
-                y = step(u)
-        self.y = float(y)
-        return True
-
-    def _fail(self, message: str) -> bool:
-        """Log ``message`` for the importing tool and raise: pythonfmu turns the exception into an error
-        status of the FMI call (a plain ``False`` would only discard the step)."""
-        self.log(message, Fmi2Status.error)
-        raise RuntimeError(message)
-
-    def _before_raise(self) -> None:
-        """Keep pythonfmu 0.7's error path from freeing live objects.
-
-        On a Python exception its C++ wrapper (``handle_py_exception``) releases its references to the slave
-        class, the instance and the log queue, and releases them once more when the instance is freed
-        (``cleanPyObject`` twice); the second release would free objects still in use. One extra reference
-        to each before the exception propagates balances the count (at worst it keeps three small objects
-        alive after an error). The abort at exit seen with these FMUs had another cause: see
-        :func:`release_wrapper_state`.
-        """
-        import ctypes
-
-        for obj in (type(self), self, self.log_queue):
-            ctypes.pythonapi.Py_IncRef(ctypes.py_object(obj))
+        return y
 
     # ------------------------------------------------------------------ model
     def make_twin(self):

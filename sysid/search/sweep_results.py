@@ -10,7 +10,7 @@ from typing import Any
 
 import numpy as np
 
-from sysid.neural.sweep import R2_KEYS, _clean, _open_storage
+from sysid.search.sweep import R2_KEYS, _clean, _open_storage
 
 __all__ = ["collect", "summarise", "export_jsonl", "plot_r2_distribution"]
 

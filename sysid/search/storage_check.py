@@ -1,7 +1,7 @@
 """Validation and safe creation of a ``search --storage`` before any work, so that a bad path fails at once and
 not after hours of training.
 
-:func:`check_storage` turns the option into an Optuna storage URL (as :func:`sysid.neural.search.storage_url`)
+:func:`check_storage` turns the option into an Optuna storage URL (as :func:`sysid.search.storage_url`)
 and refuses, with one line, what would otherwise be a traceback later: text that is not a URL, an unknown
 database kind (``foo://``), a database whose Python driver is not installed (``postgresql://`` without
 psycopg), an SQLite file in a folder that does not exist, or an existing file that is not an SQLite database
@@ -38,7 +38,7 @@ def check_storage(storage: str | None, study: str) -> str:
     from sqlalchemy.engine import make_url
     from sqlalchemy.exc import ArgumentError, NoSuchModuleError
 
-    from sysid.neural.search import storage_url
+    from sysid.search import storage_url
 
     shown = storage if storage else f"{study}.db"
     if storage is not None and (not storage.strip() or any(c.isspace() for c in storage.split("://")[0])):

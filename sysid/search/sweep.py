@@ -2,8 +2,8 @@
 the Optuna storage and study (:func:`storage_url`, :func:`open_study`), fitting one configuration's repeats
 (:func:`run_one`, :func:`run_config`) and the trial objective.
 
-What a sweep is and how SPEC is written: :mod:`sysid.neural.search`; how several processes share one study:
-:mod:`sysid.neural.study` (which passes its claim rule down to :func:`_make_objective`).
+What a sweep is and how SPEC is written: :mod:`sysid.search`; how several processes share one study:
+:mod:`sysid.search.study` (which passes its claim rule down to :func:`_make_objective`).
 """
 
 from __future__ import annotations
@@ -162,6 +162,20 @@ def heartbeat_settings() -> tuple[int, int]:
     return beat, grace
 
 
+def _retried(call: Callable[[], Any], errors: tuple[type[BaseException], ...], attempts: int = 10,
+             pause_s: float = 0.2) -> Any:
+    """``call()``, called again while it raises one of ``errors``, after pauses of ``pause_s``, 2 ``pause_s``, …
+    (at most ``attempts`` calls; the last error propagates). For the races of processes that create the same new
+    store or study at once: the loser of a race succeeds once the winner is done."""
+    for attempt in range(attempts):
+        try:
+            return call()
+        except errors:
+            if attempt == attempts - 1:
+                raise
+            time.sleep(pause_s * (attempt + 1))
+
+
 def _open_storage(url: str):
     import inspect
 
@@ -185,13 +199,8 @@ def _open_storage(url: str):
         # an IntegrityError ('UNIQUE constraint failed: alembic_version') or 'database is locked'; retry.
         from sqlalchemy.exc import SQLAlchemyError
 
-        for attempt in range(10):
-            try:
-                return storages.RDBStorage(url, heartbeat_interval=beat, grace_period=grace, **kwargs)
-            except SQLAlchemyError:
-                if attempt == 9:
-                    raise
-                time.sleep(0.2 * (attempt + 1))
+        return _retried(lambda: storages.RDBStorage(url, heartbeat_interval=beat, grace_period=grace, **kwargs),
+                        (SQLAlchemyError,))
 
 
 def _make_sampler(spec: SweepSpec):
@@ -217,14 +226,9 @@ def _create_study(storage, study_name: str, spec: SweepSpec):
     import optuna
     from sqlalchemy.exc import SQLAlchemyError
 
-    for attempt in range(10):
-        try:
-            return optuna.create_study(study_name=study_name, storage=storage, sampler=_make_sampler(spec),
-                                       direction="maximize", load_if_exists=True)
-        except (optuna.exceptions.DuplicatedStudyError, SQLAlchemyError):
-            if attempt == 9:
-                raise
-            time.sleep(0.2 * (attempt + 1))
+    return _retried(lambda: optuna.create_study(study_name=study_name, storage=storage, sampler=_make_sampler(spec),
+                                                direction="maximize", load_if_exists=True),
+                    (optuna.exceptions.DuplicatedStudyError, SQLAlchemyError))
 
 
 def open_study(spec: SweepSpec, url: str, study_name: str, create: bool = True):
@@ -294,7 +298,7 @@ def _clean(obj: Any) -> Any:
 def _make_objective(spec: SweepSpec, est, val, claim: Callable[[Any, str, int], str | None],
                     target: int | None = None, executor=None, state: dict[str, Any] | None = None) -> Callable:
     """The trial: ``claim(trial, key, target)`` the configuration (the coordination of the processes sharing
-    the study passes its rule in: :func:`sysid.neural.study.claim`), then fit its repeats."""
+    the study passes its rule in: :func:`sysid.search.study.claim`), then fit its repeats."""
     import optuna
 
     state = {} if state is None else state

@@ -30,16 +30,15 @@ import multiprocessing as mp
 import os
 import random
 import socket
-import sys
 import time
 import warnings
 from dataclasses import asdict
 from typing import Any, Callable
 
 from sysid.errors import ConfigError
-from sysid.neural.sweep import (SweepSpec, _grid_configs, _make_objective, _make_sampler, _requeue_failed,
+from sysid.search.sweep import (SweepSpec, _grid_configs, _make_objective, _make_sampler, _requeue_failed,
                                 config_key, heartbeat_settings, open_study, storage_url)
-from sysid.neural.sweep_results import collect, summarise
+from sysid.search.sweep_results import collect, summarise
 
 HOST = socket.gethostname()
 MAX_FAILURES = 2  # a configuration whose fit raised this often in one process is given up (reported missing)
@@ -205,9 +204,9 @@ def _worker_main(spec_d: dict, url: str, study_name: str, est, val, target: int,
 
 def run_sweep(spec, est, val, storage: str | None = None, study: str = "piezotwin-search", trials: int | None = None,
               workers: int = 1, progress: bool = True, executor=None) -> dict[str, Any]:
-    """Run (or resume) a sweep; returns :func:`~sysid.neural.search.summarise` of everything the study holds,
+    """Run (or resume) a sweep; returns :func:`~sysid.search.summarise` of everything the study holds,
     plus ``requested``, ``complete`` and ``missing`` (configurations)."""
-    from tqdm import tqdm
+    from sysid.progress import progress as progress_bar
 
     url = storage_url(storage, study)
     st = open_study(spec, url, study)
@@ -217,12 +216,6 @@ def run_sweep(spec, est, val, storage: str | None = None, study: str = "piezotwi
         raise ConfigError(f"--trials must be ≥ 1, got {trials}")
     target = min(target, n_all)
     reap(st, spec)
-    try:  # the project's one switch for bars (off without a terminal or with --quiet), where it exists
-        from sysid.progress import progress as progress_bar
-    except ImportError:
-        def progress_bar(total, initial, unit, desc, show, leave):
-            return tqdm(total=total, initial=initial, unit=unit, desc=desc, disable=not (show and sys.stderr.isatty()),
-                        file=sys.stderr, dynamic_ncols=True, leave=leave)
     bar = progress_bar(total=target, initial=min(len(done_keys(st)), target), unit="config",
                        desc=f"{spec.identifier} sweep", show=progress, leave=True)
 
