@@ -26,7 +26,8 @@ from __future__ import annotations
 import argparse
 import os
 import sys
-from typing import Any, Callable, Sequence
+from collections.abc import Callable, Sequence
+from typing import Any
 
 from sysid.errors import ConfigError
 
@@ -134,7 +135,7 @@ class Executor:
             self.cluster.close()
         self.client = self.cluster = None
 
-    def __enter__(self) -> "Executor":
+    def __enter__(self) -> Executor:
         return self
 
     def __exit__(self, *exc) -> None:

@@ -20,7 +20,8 @@ import argparse
 import json
 import time
 import warnings
-from typing import Any, Sequence
+from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 

@@ -30,8 +30,9 @@ import functools
 import inspect
 import warnings
 from abc import ABC, abstractmethod
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Any, ClassVar, Sequence
+from typing import Any, ClassVar
 
 import numpy as np
 
@@ -87,7 +88,7 @@ def check_records(records: Sequence[Record], max_lag: int, min_rows: int, what: 
             name = "y" if y_all.shape[1] == 1 else f"y{ch + 1}"
             raise DataError(f"{records[0].source}: output {name} is constant ({y_all[0, ch]:g}); nothing to identify")
 
-def check_prediction(model: "Identifier", record: Record, horizon: Any) -> None:
+def check_prediction(model: Identifier, record: Record, horizon: Any) -> None:
     """What ``predict`` refuses for every simulation model: a record without output, other channel counts than the
     model was fitted on, a horizon that is not a positive integer or ``None`` (free run)."""
     record.require_output()
@@ -98,7 +99,7 @@ def check_prediction(model: "Identifier", record: Record, horizon: Any) -> None:
         raise ConfigError(f"horizon must be a positive integer or None (free run), got {horizon!r}")
 
 
-def stop_at_divergence(model: "Identifier", yhat: np.ndarray, what: str = "prediction") -> np.ndarray:
+def stop_at_divergence(model: Identifier, yhat: np.ndarray, what: str = "prediction") -> np.ndarray:
     """The divergence rule of the module docstring on ``yhat`` (one row per sample), in place: from the first
     sample with any output outside ``±model.y_bound_`` on, ``nan``; ``model.diverged_at_`` holds that index (None
     when there is none) and a :class:`~sysid.errors.DivergenceWarning` names it."""
@@ -125,7 +126,7 @@ def as_fit_data(data: Any, y: Any = None, fs: float | None = None, units: dict[s
     return Record(u=data, y=y, fs=1.0 if fs is None else fs, units=units or {"u": "", "y": ""}, source="array")
 
 
-def as_predict_record(model: "Identifier", data: Any, y: Any = None, fs: float | None = None) -> Record:
+def as_predict_record(model: Identifier, data: Any, y: Any = None, fs: float | None = None) -> Record:
     """A Record from ``predict``'s arguments (arrays get the model's estimation rate, or 1 Hz)."""
     if isinstance(data, Record):
         if y is not None:
@@ -135,7 +136,7 @@ def as_predict_record(model: "Identifier", data: Any, y: Any = None, fs: float |
     return Record(u=data, y=y, fs=rate, source="array")
 
 
-def _zero_output(model: "Identifier", rec: Record) -> Record:
+def _zero_output(model: Identifier, rec: Record) -> Record:
     """``rec`` with y = 0: the zero initial conditions of a free run from the input alone."""
     n_out = int(getattr(model, "n_outputs_", 1) or 1)
     shape = (len(rec),) if n_out == 1 else (len(rec), n_out)
@@ -235,7 +236,7 @@ class Identifier(ABC):
         """The constructor arguments of this instance."""
         return {k: getattr(self, k) for k in self._param_names()}
 
-    def set_params(self, **params: Any) -> "Identifier":
+    def set_params(self, **params: Any) -> Identifier:
         from sysid.config import resolve_aliases
 
         valid = self._param_names()
@@ -247,7 +248,7 @@ class Identifier(ABC):
         return self
 
     @classmethod
-    def from_assignments(cls, assignments: dict[str, str]) -> "Identifier":
+    def from_assignments(cls, assignments: dict[str, str]) -> Identifier:
         """Build from raw ``--set`` strings, coercing each to the type of the constructor default."""
         from sysid.config import apply_assignments
 
@@ -265,7 +266,7 @@ class Identifier(ABC):
 
     # ------------------------------------------------------------------ learning / prediction
     @abstractmethod
-    def fit(self, data: Record | Sequence[Record]) -> "Identifier":
+    def fit(self, data: Record | Sequence[Record]) -> Identifier:
         ...
 
     @abstractmethod
@@ -306,7 +307,7 @@ class Identifier(ABC):
         return write_model(self, path)
 
     @classmethod
-    def load(cls, path: str | Path) -> "Identifier":
+    def load(cls, path: str | Path) -> Identifier:
         """Load a model file; on a subclass, refuse a file that holds another identifier."""
         model = load_model(path)
         if cls is not Identifier and not isinstance(model, cls):

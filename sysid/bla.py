@@ -29,8 +29,9 @@ On a full grid (even lines excited) odd and even distortion fall on the same lin
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Any, Sequence
+from typing import Any
 
 import numpy as np
 import scipy.stats

@@ -15,7 +15,8 @@ coefficients, ``nf`` poles (``tfest``'s ``np``), ``nk`` delay; ``nperseg`` Welch
 
 from __future__ import annotations
 
-from typing import Any, Sequence
+from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 import scipy.signal
@@ -68,7 +69,7 @@ class BLAModel(Identifier):
         self.periods = periods
         self.drop = drop
 
-    def fit(self, data: Record | Sequence[Record]) -> "BLAModel":
+    def fit(self, data: Record | Sequence[Record]) -> BLAModel:
         from sysid.tfest import tfest
 
         recs = as_record_list(data)

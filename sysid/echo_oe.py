@@ -41,7 +41,8 @@ that leaves this set is refused (the residual returns a large constant), as in :
 
 from __future__ import annotations
 
-from typing import Any, Sequence
+from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 import scipy.ndimage
@@ -219,7 +220,7 @@ class EchoOE(Identifier):
         return out
 
     # ------------------------------------------------------------------ estimation
-    def fit(self, data: Record | Sequence[Record]) -> "EchoOE":
+    def fit(self, data: Record | Sequence[Record]) -> EchoOE:
         records = as_record_list(data)
         if records[0].n_inputs != 1 or records[0].n_outputs != 1:
             raise ConfigError(f"{self.name}: one input and one output supported, the data have "

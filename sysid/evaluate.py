@@ -10,7 +10,8 @@ scored on their concatenated samples. A diverged free run scores ``nan`` (JSON `
 from __future__ import annotations
 
 import warnings
-from typing import Any, Sequence
+from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 

@@ -22,9 +22,9 @@ over only the selected columns, with standard errors σ̂²(RᵀR)⁻¹.
 from __future__ import annotations
 
 import math
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
 from itertools import combinations_with_replacement
-from typing import Iterator, Sequence
 
 import numpy as np
 from numba import njit

@@ -35,7 +35,8 @@ Prediction: free run x = Σ B_i/F_i u_i with the initial filter state fitted by 
 
 from __future__ import annotations
 
-from typing import Any, Sequence
+from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 from scipy.optimize import least_squares as _scipy_lsq
@@ -174,7 +175,7 @@ class _PolyPEM(Identifier):
         d = np.concatenate([[1.0], theta[j:j + o["nd"]]])
         return bs, fs, c, d
 
-    def fit(self, data: Record | Sequence[Record]) -> "_PolyPEM":
+    def fit(self, data: Record | Sequence[Record]) -> _PolyPEM:
         records = as_record_list(data)
         if records[0].n_outputs != 1:
             raise ConfigError(f"{self.name}: one output supported (MISO), the data have {records[0].n_outputs}; "

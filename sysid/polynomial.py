@@ -22,7 +22,8 @@ from __future__ import annotations
 
 import math
 import warnings
-from typing import Any, Sequence
+from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 
@@ -58,7 +59,7 @@ class PolynomialModel(Identifier):
             raise ConfigError(f"{self.name}: no regressors (ny = nu = 0)")
         return fr.Structure(regs, fr.candidate_terms(len(regs), degree, constant), n_outputs, n_inputs)
 
-    def fit(self, data: Record | Sequence[Record]) -> "PolynomialModel":
+    def fit(self, data: Record | Sequence[Record]) -> PolynomialModel:
         records = as_record_list(data)
         self._fit_records(records)
         y_max = max(float(np.max(np.abs(r.y))) for r in records)

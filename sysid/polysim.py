@@ -27,7 +27,8 @@ Jacobian), σ̂² the mean squared simulation residual.
 
 from __future__ import annotations
 
-from typing import Any, Sequence
+from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 from numba import njit

@@ -24,14 +24,23 @@ Record level: :func:`apply_steps` applies a list of steps in order to ``u`` and 
 
 from __future__ import annotations
 
-from typing import Any, Iterable
+from collections.abc import Iterable
+from typing import Any
 
 from sysid.checks import _int_param
 from sysid.cleaning import detrend, fill_missing, hampel, remove_offset
 from sysid.config import positive
 from sysid.errors import ConfigError, DataError
-from sysid.filters import (ATTEN_DB_DEFAULT, PASSBAND_DEFAULT, antialias_filter, bandpass, bandpass_design, decimate,
-                           moving_average, resample)
+from sysid.filters import (
+    ATTEN_DB_DEFAULT,
+    PASSBAND_DEFAULT,
+    antialias_filter,
+    bandpass,
+    bandpass_design,
+    decimate,
+    moving_average,
+    resample,
+)
 from sysid.record import Record
 from sysid.sampling import autocovariance, segment, segment_bounds, suggest_rate
 

@@ -15,8 +15,9 @@ import shlex
 import subprocess
 import sys
 import time
+from collections.abc import Iterable
 from pathlib import Path
-from typing import Any, Iterable
+from typing import Any
 
 from sysid.report import REPORT_CSS, provenance_section  # noqa: F401  (REPORT_CSS: importable from its old home)
 

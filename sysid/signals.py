@@ -16,7 +16,7 @@ Every bad argument raises :class:`~sysid.errors.ConfigError` with one line namin
 from __future__ import annotations
 
 import math
-from typing import Sequence
+from collections.abc import Sequence
 
 import numpy as np
 import scipy.fft

@@ -36,7 +36,8 @@ frequency response, and a band on the simulated output.
 from __future__ import annotations
 
 import math
-from typing import Any, Sequence
+from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 from numba import njit
@@ -284,7 +285,7 @@ class N4SID(Identifier):
         g = sum(gr[1] for gr in keep)
         return unpack(_solve(G, g))
 
-    def fit(self, data: Record | Sequence[Record]) -> "N4SID":
+    def fit(self, data: Record | Sequence[Record]) -> N4SID:
         records = as_record_list(data)
         m, l = records[0].n_inputs, records[0].n_outputs
         n_fixed = None if self.nx is None or (isinstance(self.nx, str) and self.nx.lower() in ("none", "auto")) \

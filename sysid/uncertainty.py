@@ -14,7 +14,7 @@ frequency response value) the reported "std" is the standard deviation of the co
 
 from __future__ import annotations
 
-from typing import Callable
+from collections.abc import Callable
 
 import numpy as np
 

@@ -11,11 +11,10 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from discrepancy_cases import records
 from scipy import signal as sps
 
 from sysid.record import Record
-
-from discrepancy_cases import records
 
 # default effect → (parameter, factor, data kind)
 MISSIZED = {

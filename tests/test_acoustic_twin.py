@@ -180,7 +180,6 @@ def test_chirp_100ms_protocol_and_recipe():
 
 def test_chirp_prefix_is_the_start_of_the_sysid_chirp():
     from sysid.signals import chirp
-
     from twins.acoustic.protocols import chirp_prefix
 
     full = chirp(2e6, 0.1, 900e3, 950e3, amplitude=0.04)  # 2e5 samples: cheap

@@ -8,8 +8,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from benchmarks.datasets import Dataset, dataset_names, list_datasets, load_dataset
-from benchmarks.datasets import lab, twin as twin_ds
+from benchmarks.datasets import Dataset, dataset_names, lab, list_datasets, load_dataset
+from benchmarks.datasets import twin as twin_ds
 from sysid.errors import ConfigError, DataError, InputError
 
 REPO = Path(__file__).resolve().parents[1]

@@ -18,12 +18,11 @@ import os
 
 import numpy as np
 import pytest
+from discrepancy_cases import CATALOG, check_case, hidden_case
 from scipy import signal as sps
 
 from sysid.record import Record
 from twins.discrepancy import diagnose
-
-from discrepancy_cases import CATALOG, check_case, hidden_case
 
 cantilever = pytest.importorskip("twins.cantilever")
 acoustic = pytest.importorskip("twins.acoustic")

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from sysid.errors import ConfigError
-from sysid.linear import ARX, ARMAX
+from sysid.linear import ARMAX, ARX
 from sysid.neural.narx_mlp import NARXMLP
 from sysid.polynomial import NARMAXPoly, NARXPoly
 from sysid.stepper import make_stepper

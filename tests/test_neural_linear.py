@@ -16,8 +16,14 @@ torch = pytest.importorskip("torch")
 from sysid.base import load_model  # noqa: E402
 from sysid.errors import ConfigError  # noqa: E402
 from sysid.linear import ARX  # noqa: E402
-from sysid.neural.core import (FlatMLP, count_mlp_parameters, free_run_mlp, k_step_mlp,  # noqa: E402
-                               least_squares_linear, mlp_forward_np)
+from sysid.neural.core import (  # noqa: E402
+    FlatMLP,
+    count_mlp_parameters,
+    free_run_mlp,
+    k_step_mlp,
+    least_squares_linear,
+    mlp_forward_np,
+)
 from sysid.neural.narx_mlp import NARXMLP, NARXMLPSim  # noqa: E402
 from sysid.neural.rnn import RNNStateSpace  # noqa: E402
 from tests.neural_systems import bouc_wen_record, multisine_input  # noqa: E402

@@ -10,8 +10,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
 from _toy_models import ToyARX
+
 from benchmarks import records, scoring
 from benchmarks.cli import main
 from benchmarks.datasets import load_dataset

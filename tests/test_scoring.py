@@ -6,8 +6,8 @@ import json
 
 import numpy as np
 import pytest
-
 from _toy_models import ToyARX
+
 from benchmarks import scoring
 from benchmarks.cli import main
 from benchmarks.datasets import load_dataset

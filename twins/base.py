@@ -12,9 +12,10 @@ import dataclasses
 import json
 import math
 from abc import ABC, abstractmethod
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, ClassVar, Iterable, Mapping
+from typing import Any, ClassVar
 
 import numpy as np
 
@@ -110,11 +111,11 @@ class Twin(ABC):
             if info.choices is not None and value not in info.choices:
                 raise ConfigError(f"{self.name} parameter {name}={value!r} not one of: {', '.join(map(str, info.choices))}")
 
-    def with_params(self, **changes: Any) -> "Twin":
+    def with_params(self, **changes: Any) -> Twin:
         """A new twin of the same class, effects and seed, with some parameters changed."""
         return type(self)(dataclasses.replace(self.params, **changes), self.effects, self.seed)
 
-    def with_effects(self, effects: Iterable[str]) -> "Twin":
+    def with_effects(self, effects: Iterable[str]) -> Twin:
         return type(self)(self.params, effects, self.seed)
 
     def config(self) -> dict[str, Any]:
@@ -167,7 +168,7 @@ class Twin(ABC):
     @classmethod
     def from_options(cls, params_file: str | Path | None = None, set_: Iterable[str] | None = None,
                      effect: Iterable[str] | None = None, without: Iterable[str] | None = None,
-                     effects: str | None = None, seed: int | None = 0) -> "Twin":
+                     effects: str | None = None, seed: int | None = 0) -> Twin:
         """Build a configured twin from the options every twin command takes (``--params``, ``--set``,
         ``--effect``, ``--without``, ``--effects``, ``--seed``).
 

@@ -8,8 +8,9 @@ without importing the twin base class that calls it.
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Iterable
 from dataclasses import dataclass, field
-from typing import Any, Iterable
+from typing import Any
 
 __all__ = ["pfield", "ParamInfo", "param_info"]
 

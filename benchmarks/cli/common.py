@@ -9,7 +9,6 @@ import sys
 from pathlib import Path
 from typing import Any
 
-
 from sysid.io import read_record, write_record
 from sysid.jsonio import clean_json
 from sysid.record import FS_MAX, FS_MIN, Record

@@ -10,7 +10,16 @@ from __future__ import annotations
 import argparse
 import sys
 
-from benchmarks.cli.common import NONNEG_INT, add_data_args, add_twin_args, emit_json, number, read_data, same_fs, twin_from_args
+from benchmarks.cli.common import (
+    NONNEG_INT,
+    add_data_args,
+    add_twin_args,
+    emit_json,
+    number,
+    read_data,
+    same_fs,
+    twin_from_args,
+)
 from sysid.errors import ConfigError
 
 

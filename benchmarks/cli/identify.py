@@ -12,7 +12,8 @@ from __future__ import annotations
 
 import argparse
 import time
-from typing import Any, Sequence
+from collections.abc import Sequence
+from typing import Any
 
 from benchmarks.cli.common import add_data_args, emit_json, read_data, same_fs
 from sysid.config import parse_assignments

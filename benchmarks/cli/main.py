@@ -134,7 +134,7 @@ class _Session:
         self.level = logging.ERROR if quiet else (logging.DEBUG if verbose else logging.INFO)
         self.quiet = quiet
 
-    def __enter__(self) -> "_Session":
+    def __enter__(self) -> _Session:
         from sysid.progress import set_enabled
 
         root = logging.getLogger()

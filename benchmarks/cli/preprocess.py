@@ -17,8 +17,8 @@ import math
 
 from benchmarks.cli.common import add_data_args, emit_json, read_data
 from sysid.errors import ConfigError
-from sysid.record import FS_MAX, FS_MIN
 from sysid.io import write_record
+from sysid.record import FS_MAX, FS_MIN
 
 
 class _Step(argparse.Action):

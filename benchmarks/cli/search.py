@@ -19,7 +19,6 @@ repeats as tasks on a Dask cluster (:mod:`benchmarks.execution`).
 from __future__ import annotations
 
 import argparse
-
 import sys
 
 from benchmarks.cli.common import COUNT, SEED, add_data_args, emit_json, number, read_data, same_fs
@@ -65,9 +64,16 @@ def _fmt(v) -> str:
 
 def run(args: argparse.Namespace) -> int:
     from sysid.errors import ConfigError
-    from sysid.neural.search import SweepSpec, collect, export_jsonl, parse_grid, plot_r2_distribution, run_sweep, storage_url
-
-    from sysid.neural.search import _open_storage
+    from sysid.neural.search import (
+        SweepSpec,
+        _open_storage,
+        collect,
+        export_jsonl,
+        parse_grid,
+        plot_r2_distribution,
+        run_sweep,
+        storage_url,
+    )
     from sysid.neural.storage_check import check_storage, init_sqlite
 
     if args.workers < 1:

@@ -10,8 +10,8 @@ from __future__ import annotations
 import argparse
 
 from benchmarks.cli.common import add_data_args, add_twin_args, read_data, twin_from_args
-from sysid.errors import ConfigError
 from benchmarks.execution import add_execution_args, executor_from_args
+from sysid.errors import ConfigError
 from sysid.io import write_record
 
 

@@ -18,11 +18,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from sysid.errors import ConfigError
-from sysid.record import Record
-
 from benchmarks.datasets import lab, twin
 from benchmarks.datasets.references import references_for
+from sysid.errors import ConfigError
+from sysid.record import Record
 
 __all__ = ["Dataset", "list_datasets", "load_dataset", "dataset_names", "LAB_DESCRIPTIONS"]
 

@@ -16,9 +16,9 @@ published files (``load_dataset("silverbox", source="path/to/SilverboxFiles")``)
 from __future__ import annotations
 
 import csv
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable
 
 import numpy as np
 

@@ -25,15 +25,14 @@ from benchmarks.scoring.settings import (
     NORMALISE,
     QUICK_DATASETS,
     QUICK_MAX_SAMPLES,
-    QUICK_SEEDS,
     QUICK_ONLY_DATASETS,
+    QUICK_SEEDS,
     QUICK_SKIP_IDENTIFIERS,
     seeds_for,
     settings_for,
 )
 from sysid.errors import ConfigError, InputError
 from sysid.record import NormalisedModel, Record
-
 
 
 class _Scored:

@@ -23,19 +23,40 @@ from __future__ import annotations
 import math
 import time
 import warnings
-from typing import Any, Sequence
+from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 import torch
 
 from sysid.base import Identifier, as_record_list
 from sysid.errors import ConfigError, DataError, DivergenceWarning
-from sysid.neural.core import (ACT_CODE, ACTIVATIONS, FlatMLP, LagData, RMSprop, count_mlp_parameters, free_run_mlp,
-                               k_step_mlp, lag_matrix_np, least_squares_linear, merge_ensemble, mlp_forward_np, regressor_lag)
+from sysid.neural.core import (
+    ACT_CODE,
+    ACTIVATIONS,
+    FlatMLP,
+    LagData,
+    RMSprop,
+    count_mlp_parameters,
+    free_run_mlp,
+    k_step_mlp,
+    lag_matrix_np,
+    least_squares_linear,
+    merge_ensemble,
+    mlp_forward_np,
+    regressor_lag,
+)
 from sysid.neural.device import configure_threads, select_device, train_dtype
 from sysid.neural.persist import TorchFileSave
-from sysid.neural.records import (DIVERGENCE_BOUND, MAX_LAG, _as2d, check_channels, check_predict_input, fit_normaliser,
-                                  normalised_pairs)
+from sysid.neural.records import (
+    DIVERGENCE_BOUND,
+    MAX_LAG,
+    _as2d,
+    check_channels,
+    check_predict_input,
+    fit_normaliser,
+    normalised_pairs,
+)
 from sysid.progress import progress
 from sysid.record import Normaliser, Record
 
@@ -94,7 +115,7 @@ class _NeuralNARXBase(TorchFileSave, Identifier):
             select_device(self.device)
 
     # ------------------------------------------------------------------ fit
-    def fit(self, data: Record | Sequence[Record]) -> "_NeuralNARXBase":
+    def fit(self, data: Record | Sequence[Record]) -> _NeuralNARXBase:
         """Train on one Record or a list of them (no regressor spans two records). Returns self.
 
         With ``select_tail`` > 0 the last fraction of the last estimation record is held out of training and
@@ -135,7 +156,7 @@ class _NeuralNARXBase(TorchFileSave, Identifier):
         k = int(getattr(self, "ensemble", 1))
         return [int(self.seed) * k + i for i in range(k)]
 
-    def _fit(self, recs: list[Record]) -> "_NeuralNARXBase":
+    def _fit(self, recs: list[Record]) -> _NeuralNARXBase:
         lag = regressor_lag(self.ny, self.nu, self.nk)
         nu, ny = check_channels(recs, lag, self.name)
         t0 = time.perf_counter()

@@ -28,7 +28,8 @@ from __future__ import annotations
 import math
 import time
 import warnings
-from typing import Any, Sequence
+from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 import torch
@@ -38,8 +39,8 @@ from sysid.errors import ConfigError, DataError, DivergenceWarning
 from sysid.neural.core import LagData, lag_matrix_np, least_squares_linear
 from sysid.neural.device import configure_threads, select_device, train_dtype
 from sysid.neural.persist import TorchFileSave, saved_array
-from sysid.progress import progress
 from sysid.neural.records import MAX_LAG, _as2d, check_channels, check_predict_input, fit_normaliser, normalised_pairs
+from sysid.progress import progress
 from sysid.record import Normaliser, Record
 
 __all__ = ["RNNStateSpace"]
@@ -210,7 +211,7 @@ class RNNStateSpace(TorchFileSave, Identifier):
                     int(self.linear), int(self.n_enc))
 
     # ------------------------------------------------------------------ fit
-    def fit(self, data: Record | Sequence[Record]) -> "RNNStateSpace":
+    def fit(self, data: Record | Sequence[Record]) -> RNNStateSpace:
         self._check_params()
         recs = as_record_list(data)
         nu, ny = check_channels(recs, int(self.n_enc), self.name)

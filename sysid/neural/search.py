@@ -31,8 +31,19 @@ This module gathers the public names: the sweep's definition, storage and single
 """
 
 from sysid.neural.study import run_sweep
-from sysid.neural.sweep import (DIVERGED_OBJECTIVE, R2_KEYS, SAMPLERS, SweepSpec, _open_storage, config_key,
-                                open_study, parse_grid, run_config, run_one, storage_url)
+from sysid.neural.sweep import (
+                                DIVERGED_OBJECTIVE,
+                                R2_KEYS,
+                                SAMPLERS,
+                                SweepSpec,
+                                _open_storage,
+                                config_key,
+                                open_study,
+                                parse_grid,
+                                run_config,
+                                run_one,
+                                storage_url,
+)
 from sysid.neural.sweep_results import collect, export_jsonl, plot_r2_distribution, summarise
 
 __all__ = ["SweepSpec", "parse_grid", "storage_url", "run_sweep", "collect", "summarise", "export_jsonl",

@@ -19,7 +19,8 @@ from __future__ import annotations
 import logging
 import time
 import warnings
-from typing import Any, Sequence
+from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 import torch
@@ -27,9 +28,17 @@ import torch
 from sysid.base import Identifier, as_record_list
 from sysid.errors import ConfigError, DataError, DivergenceWarning
 from sysid.neural.device import configure_threads, select_device
-from sysid.neural.records import (DIVERGENCE_BOUND, MAX_LAG, _as2d, check_channels, check_predict_input, fit_normaliser,
-                                  hidden_widths, normalised_pairs)
 from sysid.neural.persist import TorchFileSave, saved_array
+from sysid.neural.records import (
+    DIVERGENCE_BOUND,
+    MAX_LAG,
+    _as2d,
+    check_channels,
+    check_predict_input,
+    fit_normaliser,
+    hidden_widths,
+    normalised_pairs,
+)
 from sysid.neural.subnet import SubnetModel, encode_np, export_weights, simulate_np
 from sysid.neural.train_sim import train_simulation
 from sysid.record import Normaliser, Record
@@ -146,7 +155,7 @@ class SSEncoder(TorchFileSave, Identifier):
                            self.activation, bool(self.feedthrough))
 
     # ------------------------------------------------------------------ fit
-    def fit(self, data: Record | Sequence[Record]) -> "SSEncoder":
+    def fit(self, data: Record | Sequence[Record]) -> SSEncoder:
         """Train on one Record or a list (separate experiments). Returns self."""
         self._check_params()
         recs = as_record_list(data)

@@ -33,12 +33,22 @@ import socket
 import sys
 import time
 import warnings
+from collections.abc import Callable
 from dataclasses import asdict
-from typing import Any, Callable
+from typing import Any
 
 from sysid.errors import ConfigError
-from sysid.neural.sweep import (SweepSpec, _grid_configs, _make_objective, _make_sampler, _requeue_failed,
-                                config_key, heartbeat_settings, open_study, storage_url)
+from sysid.neural.sweep import (
+    SweepSpec,
+    _grid_configs,
+    _make_objective,
+    _make_sampler,
+    _requeue_failed,
+    config_key,
+    heartbeat_settings,
+    open_study,
+    storage_url,
+)
 from sysid.neural.sweep_results import collect, summarise
 
 HOST = socket.gethostname()

@@ -24,7 +24,7 @@ the output (B, T, ny) is ŷ(k) … ŷ(k+T-1).
 
 from __future__ import annotations
 
-from typing import Sequence
+from collections.abc import Sequence
 
 import numpy as np
 import torch

@@ -13,9 +13,10 @@ import math
 import os
 import time
 import warnings
+from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Any, Callable, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -300,7 +301,7 @@ def _make_objective(spec: SweepSpec, est, val, claim: Callable[[Any, str, int], 
     state = {} if state is None else state
     limit = spec.n_configs if target is None else target
 
-    def objective(trial: "optuna.Trial") -> float:
+    def objective(trial: optuna.Trial) -> float:
         config = {k: trial.suggest_categorical(k, v) for k, v in spec.grid.items()}
         key = config_key(config)
         reason = claim(trial, key, limit)

@@ -28,7 +28,8 @@ from __future__ import annotations
 
 import logging
 import time
-from typing import Any, Sequence
+from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 import torch
@@ -39,7 +40,14 @@ from sysid.errors import ConfigError, DataError
 from sysid.neural.blocknet import BlockNet, train_records
 from sysid.neural.device import configure_threads, select_device
 from sysid.neural.persist import TorchFileSave, saved_array
-from sysid.neural.records import _as2d, check_channels, check_predict_input, fit_normaliser, hidden_widths, normalised_pairs
+from sysid.neural.records import (
+    _as2d,
+    check_channels,
+    check_predict_input,
+    fit_normaliser,
+    hidden_widths,
+    normalised_pairs,
+)
 from sysid.record import Normaliser, Record
 
 __all__ = ["WHNet"]
@@ -162,7 +170,7 @@ class WHNet(TorchFileSave, Identifier):
                         int(nb2), int(na2), int(self.nk), bool(self.linear), self.activation, generator)
 
     # ------------------------------------------------------------------ fit
-    def fit(self, data: Record | Sequence[Record]) -> "WHNet":
+    def fit(self, data: Record | Sequence[Record]) -> WHNet:
         """Train on one Record or a list (separate experiments, each simulated from rest). Returns self."""
         self._check_params()
         recs = as_record_list(data)

@@ -25,7 +25,8 @@ from __future__ import annotations
 
 import itertools
 import time
-from typing import Any, Iterable
+from collections.abc import Iterable
+from typing import Any
 
 import numpy as np
 from scipy import signal as sps

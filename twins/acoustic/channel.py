@@ -41,8 +41,14 @@ from twins.acoustic.amplifier import amplifier_bandwidth
 from twins.acoustic.fluids import FluidState, fluid_state
 from twins.acoustic.layers import Layer, chain, input_impedance, layer_matrix, propagate_forward
 from twins.acoustic.materials import PIEZOS, SOLIDS, Piezo
-from twins.acoustic.transducer import (electrical_impedance, face_impedance, parallel_rc, plate_two_port,
-                                       receive_voltage, transmit)
+from twins.acoustic.transducer import (
+    electrical_impedance,
+    face_impedance,
+    parallel_rc,
+    plate_two_port,
+    receive_voltage,
+    transmit,
+)
 
 __all__ = ["ChannelGeometry", "geometry", "channel_parts", "frequency_response", "spreading_factor",
            "misalignment_factor", "wall_path_length"]

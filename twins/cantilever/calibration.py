@@ -23,7 +23,8 @@ hysteresis memory from rest in the middle of an experiment.
 
 from __future__ import annotations
 
-from typing import Any, Iterable
+from collections.abc import Iterable
+from typing import Any
 
 import numpy as np
 

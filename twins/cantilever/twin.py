@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from typing import Any, Iterable
+from collections.abc import Iterable
+from typing import Any
 
 import numpy as np
 
@@ -249,11 +250,11 @@ class CantileverTwin(Twin):
         _run(u, noise, out, cfg, st)
         return out
 
-    def make_stepper(self, fs: float) -> "CantileverStepper":
+    def make_stepper(self, fs: float) -> CantileverStepper:
         """Sample-by-sample simulator for FMU export: ``reset()``, ``step(u) -> y`` (same kernel as simulate)."""
         return CantileverStepper(self, fs)
 
-    def noise_free(self) -> "CantileverTwin":
+    def noise_free(self) -> CantileverTwin:
         """The same twin without measurement noise and quantisation (for fitting and loop analysis)."""
         return self.with_effects(self.effects - {"measurement_noise", "sensor_quantization"})
 

@@ -27,7 +27,8 @@ to the configured values, e.g. "creep: creep_per_decade 3× the configured 0.015
 from __future__ import annotations
 
 import math
-from typing import Any, Sequence
+from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 

@@ -58,14 +58,22 @@ from . import evidence as ev
 from . import features as ft
 from . import ranges as rg
 from . import realdata
+from . import unexplained as unx
 from .fields import core_for, numeric_fields, quant_params
 from .options import DiagnoseOptions
-from .prediction import (NOISE_EFFECTS, deterministic, significance, simulate, simulate_val, sse, unpredictable,
-                         with_rails)
+from .prediction import (
+    NOISE_EFFECTS,
+    deterministic,
+    significance,
+    simulate,
+    simulate_val,
+    sse,
+    unpredictable,
+    with_rails,
+)
 from .result import Diagnosis
 from .rounds import Extension, adopt, extend
 from .trials import Stage
-from . import unexplained as unx
 from .unexplained import generic_residual_model
 
 __all__ = ["diagnose", "run_diagnosis", "NOISE_EFFECTS", "significance"]

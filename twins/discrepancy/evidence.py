@@ -13,7 +13,8 @@ Families whose members the data cannot tell apart from one signature alone are l
 from __future__ import annotations
 
 import math
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 

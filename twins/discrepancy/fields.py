@@ -8,7 +8,8 @@ delays and amplitudes, timing shifts, the path lengths an echo delay implies).
 from __future__ import annotations
 
 import math
-from typing import Any, Iterable, Sequence
+from collections.abc import Iterable, Sequence
+from typing import Any
 
 import numpy as np
 

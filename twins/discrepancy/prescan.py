@@ -11,7 +11,8 @@ and finally each echo-delay-consistent path length refined within ±5 %.
 from __future__ import annotations
 
 import itertools
-from typing import Any, Sequence
+from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 from scipy.optimize import minimize_scalar

@@ -4,7 +4,8 @@ the split and ranges before anything is fitted (:mod:`.splitting`, :mod:`.ranges
 
 from __future__ import annotations
 
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 

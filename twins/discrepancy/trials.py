@@ -10,7 +10,8 @@ from __future__ import annotations
 import dataclasses
 import itertools
 import time
-from typing import Any, Iterable
+from collections.abc import Iterable
+from typing import Any
 
 import numpy as np
 
@@ -22,8 +23,8 @@ from twins.calibration import calibrate as ls_calibrate
 from . import features as ft
 from .fields import choice_fields, core_for, effect_fields, int_fields
 from .options import DiagnoseOptions
-from .prescan import prescan
 from .prediction import simulate, simulate_val, sse
+from .prescan import prescan
 
 __all__ = ["Trial", "run_trial", "Stage", "make_stage"]
 

@@ -154,7 +154,7 @@ class ResponseCore:
         self.reset()
 
     @classmethod
-    def for_twin(cls, twin, fs: float, core: dict[str, Any] | None = None, resources=None) -> "ResponseCore":
+    def for_twin(cls, twin, fs: float, core: dict[str, Any] | None = None, resources=None) -> ResponseCore:
         core = core or {}
         opts = {k: core.get(k, v) for k, v in DEFAULTS.items() if k != "merge_gap"}
         return cls(impulse_response(twin, fs), amplifier_of(twin), measure_of(twin, fs), fs, twin.seed, **opts)

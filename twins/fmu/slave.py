@@ -28,7 +28,6 @@ from pythonfmu.enums import Fmi2Status
 
 from twins.fmu.spec import CONFIG_NAME, FORMAT, decode_value
 
-
 __all__ = ["FastIO", "TwinSlave", "load_fmu_config", "release_wrapper_state"]
 
 #: relative tolerance on ``step_size * fs`` being a whole number of samples
