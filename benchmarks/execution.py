@@ -111,7 +111,10 @@ class Executor:
             from distributed import as_completed
 
             prio = [0.0] * len(tasks) if priorities is None else [float(p) for p in priorities]
-            futures = [self.client.submit(_call, fn, *task, pure=False, priority=p) for task, p in zip(tasks, prio, strict=True)]
+            futures = [
+                self.client.submit(_call, fn, *task, pure=False, priority=p)
+                for task, p in zip(tasks, prio, strict=True)
+            ]
             index = {f.key: i for i, f in enumerate(futures)}
             try:
                 for fut in as_completed(futures):

@@ -30,7 +30,8 @@ from sysid.metrics import r2
 from sysid.record import Record
 from sysid.registry import get_identifier
 
-__all__ = ["cantilever_data", "cantilever_sines", "acoustic_data", "acoustic_osa_vs_sim", "ACOUSTIC_STRUCTURE", "ACOUSTIC_NK"]
+__all__ = ["cantilever_data", "cantilever_sines", "acoustic_data", "acoustic_osa_vs_sim", "ACOUSTIC_STRUCTURE",
+           "ACOUSTIC_NK"]
 
 # The network of Table 4.1 / 4.3
 CANTILEVER_STRUCTURE = {"ny": 10, "nu": 10, "hidden": [25, 25, 25, 25], "activation": "relu"}
@@ -130,8 +131,11 @@ def acoustic_osa_vs_sim(seeds: Sequence[int] = (0, 1, 2, 3, 4), structure: dict[
         out[f"{tag}_r2_val_frs_mean"] = float(np.nanmean(v)) if np.isfinite(v).any() else float("nan")
         out[f"{tag}_r2_val_frs_sd"] = float(np.nanstd(v, ddof=1)) if np.isfinite(v).sum() > 1 else float("nan")
         out[f"{tag}_diverged"] = int((~np.isfinite(v)).sum())
-    wins = [r["sim_r2_val_frs"] > r["osa_r2_val_frs"] or (np.isfinite(r["sim_r2_val_frs"]) and not np.isfinite(r["osa_r2_val_frs"]))
-            for r in out["runs"]]
+    wins = [
+        r["sim_r2_val_frs"] > r["osa_r2_val_frs"]
+        or (np.isfinite(r["sim_r2_val_frs"]) and not np.isfinite(r["osa_r2_val_frs"]))
+        for r in out["runs"]
+    ]
     out["sim_wins"] = int(sum(wins))
     return out
 

@@ -285,12 +285,20 @@ def page_context(entries: Sequence[Entry], rows: dict[str, dict[str, Any]],
                           "command": row["command"]})
         m = row["measured"]
         versions = m.get("versions") or {}
-        measurements.append({
-            "dataset": e.dataset, "date": m.get("date", "?"), "cpu": (m.get("machine") or {}).get("cpu", "?"),
-            "cores": (m.get("machine") or {}).get("cores", "?"),
-            "load": " → ".join(f"{(m.get(k) or [math.nan])[0]:.1f}" for k in ("load_average_before", "load_average_after")),
-            "wall": f"{m.get('wall_seconds', math.nan):.1f}", "cpu_s": f"{m.get('cpu_seconds', math.nan):.1f}",
-            "versions": ", ".join(f"{k} {v}" for k, v in versions.items() if v)})
+        measurements.append(
+            {
+                "dataset": e.dataset,
+                "date": m.get("date", "?"),
+                "cpu": (m.get("machine") or {}).get("cpu", "?"),
+                "cores": (m.get("machine") or {}).get("cores", "?"),
+                "load": " → ".join(
+                    f"{(m.get(k) or [math.nan])[0]:.1f}" for k in ("load_average_before", "load_average_after")
+                ),
+                "wall": f"{m.get('wall_seconds', math.nan):.1f}",
+                "cpu_s": f"{m.get('cpu_seconds', math.nan):.1f}",
+                "versions": ", ".join(f"{k} {v}" for k, v in versions.items() if v),
+            }
+        )
     return {"lines": lines, "measurements": measurements, "why": [(e.dataset, e.identifier, e.why) for e in entries],
             "missing": [{"dataset": e.dataset, "identifier": e.identifier,
                          "command": f"piezotwin records --datasets {e.dataset}"} for e in missing],

@@ -80,7 +80,11 @@ def _pole_warning(model, est) -> str | None:
     if not bad:
         return None
     p = max(bad, key=lambda q: q["abs"])
-    kind = "integrator (or near-integrator)" if abs(p["abs"] - 1.0) < 1e-3 else ("unstable" if p["abs"] > 1.0 else "marginal")
+    kind = (
+        "integrator (or near-integrator)"
+        if abs(p["abs"] - 1.0) < 1e-3
+        else ("unstable" if p["abs"] > 1.0 else "marginal")
+    )
     msg = (f"pole at {p['re']:.5f}{p['im']:+.5f}j (|p| = {p['abs']:.5f}) on or outside the unit circle: "
            f"{kind} model")
     cl = closed_loop_correlation(est)

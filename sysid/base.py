@@ -117,7 +117,9 @@ def stop_at_divergence(model: Identifier, yhat: np.ndarray, what: str = "predict
 def as_fit_data(data: Any, y: Any = None, fs: float | None = None, units: dict[str, str] | None = None
                 ) -> Record | list[Record]:
     """What ``fit`` accepts: a Record, a list of Records, or arrays ``u, y`` (with ``fs`` [Hz], default 1)."""
-    if isinstance(data, Record) or (isinstance(data, (list, tuple)) and data and all(isinstance(r, Record) for r in data)):
+    if isinstance(data, Record) or (
+        isinstance(data, (list, tuple)) and data and all(isinstance(r, Record) for r in data)
+    ):
         if y is not None:
             raise ConfigError("fit: give either records or arrays u, y, not a record and y")
         return data if isinstance(data, Record) else list(data)
@@ -200,7 +202,11 @@ class Identifier(ABC):
         super().__init_subclass__(**kwargs)
         for attr, wrap in (("fit", _wrap_fit), ("predict", _wrap_predict)):
             fn = cls.__dict__.get(attr)
-            if fn is not None and not getattr(fn, "__isabstractmethod__", False) and not getattr(fn, "_piezotwin_wrapped", False):
+            if (
+                fn is not None
+                and not getattr(fn, "__isabstractmethod__", False)
+                and not getattr(fn, "_piezotwin_wrapped", False)
+            ):
                 setattr(cls, attr, wrap(fn))
         if "__init__" not in cls.__dict__:
             return
@@ -275,7 +281,11 @@ class Identifier(ABC):
 
     def describe(self) -> dict[str, Any]:
         """JSON-able summary of the fitted model (subclasses add terms, structure...)."""
-        return {"identifier": self.name, "params": self.get_params(), "n_parameters": getattr(self, "n_parameters_", None)}
+        return {
+            "identifier": self.name,
+            "params": self.get_params(),
+            "n_parameters": getattr(self, "n_parameters_", None),
+        }
 
     # ------------------------------------------------------------------ persistence
     @abstractmethod
@@ -297,7 +307,9 @@ class Identifier(ABC):
         rec = as_predict_record(self, data, y, fs)
         rec.require_output()
         yh = self.predict(rec, horizon)
-        return metrics.score(rec.y, np.asarray(yh).reshape(rec.y.shape), skip=int(getattr(self, "max_lag_", 0) or 0))["r2"]
+        return metrics.score(rec.y, np.asarray(yh).reshape(rec.y.shape), skip=int(getattr(self, "max_lag_", 0) or 0))[
+            "r2"
+        ]
 
     def save(self, path: str | Path) -> Path:
         """Write the fitted model to ``path`` (atomically): the npz container, or JSON for ``.json``

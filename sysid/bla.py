@@ -167,9 +167,9 @@ def detect_nonlinearity(Y: np.ndarray, var_Y: np.ndarray, excited: np.ndarray, p
     """Odd / even nonlinear distortion levels at the detection lines.
 
     ``Y`` and ``var_Y`` are the period-averaged output spectra and the variances of those means, shape
-    ``(M, n0//2 + 1)``; ``excited`` the excited lines (one array for all, or one per realisation). Detection lines are the non-excited lines from 1 up to
-    the highest excited line: when every excited line is odd, the even ones carry even distortion and the odd
-    ones odd distortion; otherwise all of them carry both (``classified`` False).
+    ``(M, n0//2 + 1)``; ``excited`` the excited lines (one array for all, or one per realisation). Detection lines are
+    the non-excited lines from 1 up to the highest excited line: when every excited line is odd, the even ones carry
+    even distortion and the odd ones odd distortion; otherwise all of them carry both (``classified`` False).
 
     Returns ``(nonlinearity, detection)``: ``nonlinearity`` = {``verdict``, ``odd_db``, ``even_db``,
     ``odd_detected``, ``even_detected``, ``classified``, ``threshold_db`` ...}; levels are

@@ -68,7 +68,9 @@ def _predict(model, record: Record, horizon: int | None) -> np.ndarray:
         return np.asarray(model.predict(record, horizon), dtype=float)
 
 
-def predict_scores(model, record: Record, horizon: int | None, skip: int | None = None) -> tuple[np.ndarray, dict[str, Any]]:
+def predict_scores(
+    model, record: Record, horizon: int | None, skip: int | None = None
+) -> tuple[np.ndarray, dict[str, Any]]:
     """(prediction, summary). Summary: ``horizon, initial_conditions, skip, diverged_at`` and ``metrics``
     (``fit_percent, r2, rmse, nrmse, mse``; ``None`` when the record has no measured ``y``)."""
     if record.y is None and horizon is not None:

@@ -61,7 +61,9 @@ class CsvTable:
 
     def prefetch(self, names: list[str]) -> None:
         """Parse all these columns (those present) in one pass, so later :meth:`columns` calls are free."""
-        todo = sorted({self.index[n] for n in names if n in self.index and self.header.count(n) == 1} - set(self._cache))
+        todo = sorted(
+            {self.index[n] for n in names if n in self.index and self.header.count(n) == 1} - set(self._cache)
+        )
         if self.verify_width:
             self._parse(list(range(len(self.header))), keep=todo)
             self.verify_width = False

@@ -228,7 +228,9 @@ def _json_container(path: Path, doc: Any) -> tuple[dict[str, Any], dict[str, np.
         try:
             arrays[name] = np.asarray(a["data"], dtype=np.dtype(a["dtype"])).reshape(a["shape"])
         except (KeyError, TypeError, ValueError) as exc:
-            raise DataError(f"{path}: array {name!r} of the model file is damaged ({type(exc).__name__}: {exc})") from None
+            raise DataError(
+                f"{path}: array {name!r} of the model file is damaged ({type(exc).__name__}: {exc})"
+            ) from None
     return doc, arrays
 
 

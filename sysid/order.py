@@ -183,8 +183,12 @@ def order_table(identifier: str, est: Record | Sequence[Record], val: Record | S
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", DivergenceWarning)
             skip = int(model.max_lag_)
-            e = np.concatenate([(np.asarray(r.y, float) - np.asarray(model.predict(r, 1), float)).reshape(len(r), -1)[skip:]
-                                for r in est_l])
+            e = np.concatenate(
+                [
+                    (np.asarray(r.y, float) - np.asarray(model.predict(r, 1), float)).reshape(len(r), -1)[skip:]
+                    for r in est_l
+                ]
+            )
         N, p = e.shape[0], int(model.n_parameters_)
         V = float(np.mean(e ** 2)) if np.isfinite(e).all() else math.inf
         row = {"order": int(n), "n_parameters": p,

@@ -341,7 +341,9 @@ class _PolyPEM(Identifier):
         """``[{"name": "b1", "value", "std"}]`` in θ order (module docstring for the polynomial convention)."""
         self._check_fitted()
         std = np.sqrt(np.maximum(np.diag(self.cov_), 0.0))
-        return [{"name": n, "value": float(v), "std": float(s)} for n, v, s in zip(self.parameter_names(), self.theta_, std)]
+        return [
+            {"name": n, "value": float(v), "std": float(s)} for n, v, s in zip(self.parameter_names(), self.theta_, std)
+        ]
 
     def _index(self, kind: str, i: int) -> list[int]:
         return [j for j, (kd, ii, _) in enumerate(self.layout_) if kd == kind and ii == i]

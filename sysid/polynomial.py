@@ -53,7 +53,9 @@ class PolynomialModel(Identifier):
     """
 
     # -------------------------------------------------------------- common learned state
-    def _structure(self, n_outputs: int, n_inputs: int, ne: int = 0, degree: int = 1, constant: bool = True) -> fr.Structure:
+    def _structure(
+        self, n_outputs: int, n_inputs: int, ne: int = 0, degree: int = 1, constant: bool = True
+    ) -> fr.Structure:
         regs = fr.make_regressors(self.ny, self.nu, ne, self.nk, n_outputs, n_inputs)
         if not regs:
             raise ConfigError(f"{self.name}: no regressors (ny = nu = 0)")
@@ -252,8 +254,12 @@ class NARXPoly(PolynomialModel):
     def _fit_records(self, records: list[Record]) -> None:
         _check_common(self)
         s = self._structure(records[0].n_outputs, records[0].n_inputs, 0, self.degree, self.constant)
-        check_records(records, s.max_lag, len(s.terms) + 1 if self.max_terms is None else min(len(s.terms), self.max_terms) + 1,
-                      self.name)
+        check_records(
+            records,
+            s.max_lag,
+            len(s.terms) + 1 if self.max_terms is None else min(len(s.terms), self.max_terms) + 1,
+            self.name,
+        )
         G, n = fr.gram_matrix(records, s, chunk=self.chunk)
         self.structure_ = s
         self.terms_, self.theta_, self.stderr_, self.err_ = [], [], [], []
@@ -510,8 +516,10 @@ class NARMAXPoly(PolynomialModel):
             what += (f"; the noise models of iterations {self.els_unstable_} had an unstable residual recursion "
                      "(ELS continued from the plain residual)")
         if removed:
-            what += (f"; the final noise model's residual recursion diverged on the estimation data: removed "
-                     f"{', '.join(removed)} (process parameters unchanged, the remaining noise parameters re-estimated)")
+            what += (
+                f"; the final noise model's residual recursion diverged on the estimation data: removed "
+                f"{', '.join(removed)} (process parameters unchanged, the remaining noise parameters re-estimated)"
+            )
         self.els_status_ = what
         self.els_removed_terms_ = removed
         del self._last_plain

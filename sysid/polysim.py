@@ -125,8 +125,8 @@ def simulate_sensitivity(structure: fr.Structure, terms_per_output, theta: np.nd
     kind, ch, lag, fac, out_of = _tables(structure, terms_per_output)
     u2 = np.ascontiguousarray(np.asarray(u, dtype=float).reshape(len(u), -1))
     y2 = np.ascontiguousarray(np.asarray(y, dtype=float).reshape(len(y), -1))
-    return _sim_sens(y2, u2, kind, ch, lag, fac, out_of, np.ascontiguousarray(theta, dtype=float), int(structure.max_lag),
-                     float(bound), bool(jacobian))
+    return _sim_sens(y2, u2, kind, ch, lag, fac, out_of, np.ascontiguousarray(theta, dtype=float),
+                     int(structure.max_lag), float(bound), bool(jacobian))
 
 
 class NARXPolySim(NARXPoly):
@@ -205,7 +205,8 @@ class NARXPolySim(NARXPoly):
 
         def solve(theta: np.ndarray, n: int | None):
             return least_squares(lambda th: run(th, n)[0], theta, jac=lambda th: run(th, n)[1], method="lm",
-                                 x_scale="jac", max_nfev=int(self.max_nfev), xtol=float(self.xtol), ftol=float(self.ftol))
+                                 x_scale="jac", max_nfev=int(self.max_nfev), xtol=float(self.xtol),
+                                 ftol=float(self.ftol))
 
         r0, _, div0 = run(theta0)
         # Continuation when the least-squares start diverges in simulation: refine on each record's first n samples,

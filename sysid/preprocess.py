@@ -154,7 +154,9 @@ def apply_steps(record: Record, steps: Iterable[Any]) -> Record:
                 changes.setdefault("trend_coefficients", {})[t] = coef.T.tolist()
         elif name == "hampel":
             for t in targets:
-                new[t], ch = hampel(getattr(rec, t), window=params.get("window", 10), n_sigma=params.get("n_sigma", 3.0))
+                new[t], ch = hampel(
+                    getattr(rec, t), window=params.get("window", 10), n_sigma=params.get("n_sigma", 3.0)
+                )
                 changes.setdefault("replaced", {})[t] = ch
             changes["n_replaced"] = {t: len(changes["replaced"][t]) for t in targets}
         elif name == "fill_missing":
@@ -182,8 +184,8 @@ def apply_steps(record: Record, steps: Iterable[Any]) -> Record:
                                         params.get("atten_db", ATTEN_DB_DEFAULT), return_filter=True)
             for t in targets:
                 new[t], h = fn(getattr(rec, t))
-            changes.update({"fs_before": fs, "fs_after": fs_new, "n_before": len(rec), "n_after": int(new["u"].shape[0]),
-                            "filter_taps": int(h.size)})
+            changes.update({"fs_before": fs, "fs_after": fs_new, "n_before": len(rec),
+                            "n_after": int(new["u"].shape[0]), "filter_taps": int(h.size)})
             new["fs"] = fs_new
         elif name == "bandpass":
             if "fmin" not in params or "fmax" not in params:

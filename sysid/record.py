@@ -148,7 +148,9 @@ class Record:
     # ------------------------------------------------------------------ derived records
     def replace(self, **changes: Any) -> Record:
         """A copy with some fields replaced (arrays are not copied unless replaced)."""
-        kw = dict(u=self.u, y=self.y, fs=self.fs, units=dict(self.units), meta=copy.deepcopy(self.meta), source=self.source)
+        kw = dict(
+            u=self.u, y=self.y, fs=self.fs, units=dict(self.units), meta=copy.deepcopy(self.meta), source=self.source
+        )
         kw.update(changes)
         return Record(**kw)
 
@@ -222,7 +224,9 @@ class Normaliser:
         u = recs[0].u if len(recs) == 1 else np.concatenate([r.u for r in recs])
         self.u_mean_, self.u_scale_ = self._stats(u)
         if all(r.y is not None for r in recs):
-            self.y_mean_, self.y_scale_ = self._stats(recs[0].y if len(recs) == 1 else np.concatenate([r.y for r in recs]))
+            self.y_mean_, self.y_scale_ = self._stats(
+                recs[0].y if len(recs) == 1 else np.concatenate([r.y for r in recs])
+            )
         else:
             self.y_mean_, self.y_scale_ = np.float64(0.0), np.float64(1.0)
         return self

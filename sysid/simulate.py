@@ -96,7 +96,9 @@ def _one_step(Z, x, n_out, e_col0, has_e, L, fac, theta, n_exo, n_dyn, n_terms):
 
 @njit(cache=True)
 def _free_run(Z, x, n_out, L, fac, theta, n_exo, n_dyn, bound):
-    """Simulate in place in the y columns of Z (noise terms are zero and skipped). Returns the divergence index or -1."""
+    """Simulate in place in the y columns of Z (noise terms are zero and skipped).
+
+    Returns the divergence index or -1."""
     N, ncol = Z.shape
     W = Z.reshape(N * ncol)
     for t in range(L, N):

@@ -11,8 +11,8 @@ inputs U_f, past inputs and outputs Z_p = [U_p; Y_p] and future outputs Y_f, the
     [U_f; Z_p; Y_f] = [[L11, 0, 0], [L21, L22, 0], [L31, L32, L33]] Q
 
 gives the extended observability matrix Γ_i from the column space of L32 (SVD; the order n is chosen from its
-singular values when not given: the last step by a factor ≥ 2 between neighbours, :func:`choose_order`), C as the first block
-row of Γ_i and A from its shift invariance (least squares). B and D follow linearly: with Γ⊥ the orthogonal
+singular values when not given: the last step by a factor ≥ 2 between neighbours, :func:`choose_order`), C as the first
+block row of Γ_i and A from its shift invariance (least squares). B and D follow linearly: with Γ⊥ the orthogonal
 complement of Γ_i and M = Γ⊥ᵀ L31 L11⁻¹ = Γ⊥ᵀ H_i (H_i the block-Toeplitz matrix of D, CB, CAB, …), column block
 c gives M_c = L_c D + [L_{c+1} … L_i] Γ_{i−c} B (L_c the c-th block column of Γ⊥ᵀ), solved by least squares
 (``focus="subspace"``). By default, poles outside the unit circle are reflected (λ → 1/λ̄, counted in

@@ -30,7 +30,9 @@ def test_time_of_flight_through_100mm_water(bare):
 
 def test_time_of_flight_temperature_sensitivity(bare):
     """dTOF/dT = −L/c² dc/dT ≈ −123 ns/K at 100 mm, 24 °C (notes B.5), central difference ±0.5 K."""
-    slope = bare.with_params(temperature_c=24.5).time_of_flight() - bare.with_params(temperature_c=23.5).time_of_flight()
+    slope = (
+        bare.with_params(temperature_c=24.5).time_of_flight() - bare.with_params(temperature_c=23.5).time_of_flight()
+    )
     assert slope == pytest.approx(-123e-9, rel=0.03)
 
 

@@ -16,7 +16,11 @@ REPO = Path(__file__).resolve().parents[1]
 
 
 def _shared_data() -> Path | None:
-    for cand in (os.environ.get("PIEZOTWIN_SHARED_DATA"), REPO.parent / "shared" / "data", REPO.parents[1] / "shared" / "data"):
+    for cand in (
+        os.environ.get("PIEZOTWIN_SHARED_DATA"),
+        REPO.parent / "shared" / "data",
+        REPO.parents[1] / "shared" / "data",
+    ):
         if cand and Path(cand).is_dir():
             return Path(cand)
     return None

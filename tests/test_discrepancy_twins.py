@@ -1,9 +1,10 @@
 """Hidden-effect tests of the discrepancy analysis on the two twins.
 
-Default suite (about a minute): the echo injected as a delayed scaled copy. ``slow``: effects injected with a few lines of independent code written
-here — creep as a sum of first-order lags, a delay as a shift, an echo as a delayed scaled copy of the output,
-compression as a soft clip of the input, crosstalk as a scaled derivative of the input — at parameters the catalog defaults do not use, on inputs the
-protocols do not generate; plus one catalog effect per twin and a noise-only case.
+Default suite (about a minute): the echo injected as a delayed scaled copy. ``slow``: effects injected with a few lines
+of independent code written here — creep as a sum of first-order lags, a delay as a shift, an echo as a delayed scaled
+copy of the output, compression as a soft clip of the input, crosstalk as a scaled derivative of the input — at
+parameters the catalog defaults do not use, on inputs the protocols do not generate; plus one catalog effect per twin
+and a noise-only case.
 
 ``slow`` suite: every catalog effect of both twins at random plausible parameters over several seeds from
 the protocols (multisine estimation, sine/chirp validation, steps), noise-only cases, two effects at once;
@@ -114,7 +115,8 @@ def _band_noise(rng, fs, n, amp):
     return amp * x / np.max(np.abs(x))
 
 
-@pytest.mark.slow  # ≈ 95 s (the longest default test); the acoustic compression and crosstalk cases stay in the default suite
+# ≈ 95 s (the longest default test); the acoustic compression and crosstalk cases stay in the default suite
+@pytest.mark.slow
 def test_acoustic_echo_injected_as_delayed_copy():
     """Echo = 0.25 × the output delayed by 21.3 µs, added to the echo-free twin's output; band-limited noise in."""
     fs, n = 5e6, 10_000

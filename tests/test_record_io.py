@@ -42,7 +42,9 @@ def test_csv_mat_round_trip_bit_exact(tmp_path, suffix):
 def test_csv_extra_columns_and_custom_names(tmp_path):
     rec = _rec()
     path = tmp_path / "r.csv"
-    lines = ["t,vin,xout,extra,"] + [f"{i / rec.fs!r},{float(a)!r},{float(b)!r},junk," for i, (a, b) in enumerate(zip(rec.u, rec.y))]
+    lines = ["t,vin,xout,extra,"] + [
+        f"{i / rec.fs!r},{float(a)!r},{float(b)!r},junk," for i, (a, b) in enumerate(zip(rec.u, rec.y))
+    ]
     path.write_text("\n".join(lines) + "\n")
     back = read_record(path, u_col="vin", y_col="xout")
     assert np.array_equal(back.u, rec.u) and np.array_equal(back.y, rec.y)

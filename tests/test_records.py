@@ -242,7 +242,9 @@ def _fresh_score(command: str, capsys) -> dict:
 def _same_score(stored: dict, fresh: dict) -> None:
     """Two score runs agree: every result, not the timings nor the environment of the process that ran them
     (thread settings an earlier test left, another CPU)."""
-    _same({k: v for k, v in stored.items() if k != "environment"}, {k: v for k, v in fresh.items() if k != "environment"})
+    _same(
+        {k: v for k, v in stored.items() if k != "environment"}, {k: v for k, v in fresh.items() if k != "environment"}
+    )
 
 
 def _same(a, b, path="") -> None:
@@ -275,7 +277,12 @@ def test_one_real_row_end_to_end_equals_score_json(tmp_path, capsys):
     cmd = "piezotwin score --datasets cascaded-tanks --identifiers arx --seeds 0-2 --json"
     assert row["command"] == cmd and cmd in out and cmd in md.read_text()
     m = row["measured"]
-    assert m["process"] == "in-process" and m["wall_seconds"] > 0 and m["cpu_seconds"] > 0 and len(m["load_average_before"]) == 3
+    assert (
+        m["process"] == "in-process"
+        and m["wall_seconds"] > 0
+        and m["cpu_seconds"] > 0
+        and len(m["load_average_before"]) == 3
+    )
     assert m["versions"]["numpy"] == np.__version__ and m["machine"]["cores"] >= 1
     _same_score(row["score"], _fresh_score(cmd, capsys))
     entry = json.loads(js.read_text())["cascaded-tanks"]

@@ -109,7 +109,9 @@ class Twin(ABC):
                 if (lo is not None and value < lo) or (hi is not None and value > hi):
                     raise ConfigError(f"{self.name} parameter {name}={value} out of range [{lo}, {hi}] {info.unit}")
             if info.choices is not None and value not in info.choices:
-                raise ConfigError(f"{self.name} parameter {name}={value!r} not one of: {', '.join(map(str, info.choices))}")
+                raise ConfigError(
+                    f"{self.name} parameter {name}={value!r} not one of: {', '.join(map(str, info.choices))}"
+                )
 
     def with_params(self, **changes: Any) -> Twin:
         """A new twin of the same class, effects and seed, with some parameters changed."""
@@ -181,7 +183,9 @@ class Twin(ABC):
             data = load_params_file(params_file, cls.name)
             params = data.get("params", {})
             if not isinstance(params, dict):
-                raise DataError(f"{params_file}: 'params' must be an object of name: value, got {type(params).__name__}")
+                raise DataError(
+                    f"{params_file}: 'params' must be an object of name: value, got {type(params).__name__}"
+                )
             values.update(_coerce_all(cls, params, str(params_file)))
             if "effects" in data:
                 eff = data["effects"]
@@ -199,7 +203,9 @@ class Twin(ABC):
             for key, text in parse_assignments([kv], f"--effect {name}").items():
                 fname = spec.params.get(key, key if key in spec.params.values() else None)
                 if fname is None:
-                    raise ConfigError(f"effect {name} has no parameter {key!r}; valid: {', '.join(spec.params) or 'none'}")
+                    raise ConfigError(
+                        f"effect {name} has no parameter {key!r}; valid: {', '.join(spec.params) or 'none'}"
+                    )
                 values.update(_coerce_all(cls, {fname: text}, f"--effect {name}"))
         for name in without or []:
             for n in str(name).split(","):

@@ -37,7 +37,9 @@ def number(lo: float | None = None, hi: float | None = None, integer: bool = Fal
         try:
             v = float(text)
         except (TypeError, ValueError):
-            raise argparse.ArgumentTypeError(f"expected {'an integer' if integer else 'a number'}, got {text!r}") from None
+            raise argparse.ArgumentTypeError(
+                f"expected {'an integer' if integer else 'a number'}, got {text!r}"
+            ) from None
         if not math.isfinite(v):
             raise argparse.ArgumentTypeError(f"must be finite, got {text!r}")
         if integer:
@@ -88,7 +90,9 @@ def add_data_args(p: argparse.ArgumentParser) -> None:
     g.add_argument("--y-col", default="y", help="CSV column(s) of the output; default y")
     g.add_argument("--u-var", default="u", help="MAT variable of the input; default u")
     g.add_argument("--y-var", default="y", help="MAT variable of the output; default y")
-    g.add_argument("--fill-missing", action="store_true", help="interpolate missing (NaN/empty) samples instead of refusing them")
+    g.add_argument(
+        "--fill-missing", action="store_true", help="interpolate missing (NaN/empty) samples instead of refusing them"
+    )
 
 
 def read_data(args: argparse.Namespace, path: str, require_y: bool = True) -> Record:

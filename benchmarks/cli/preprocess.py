@@ -48,7 +48,9 @@ def register(sub) -> None:
     g.add_argument("--moving-average", action=_Step, step="moving_average", metavar="N",
                    help="centred moving average of N samples (the dissertation used 100)")
     g.add_argument("--decimate", action=_Step, step="decimate", metavar="Q", help="anti-aliased decimation by Q")
-    g.add_argument("--resample", action=_Step, step="resample", metavar="FS", help="anti-aliased rational resampling to FS Hz")
+    g.add_argument(
+        "--resample", action=_Step, step="resample", metavar="FS", help="anti-aliased rational resampling to FS Hz"
+    )
     g.add_argument("--bandpass", action=_Step, step="bandpass", metavar="FMIN:FMAX[:ORDER]",
                    help="zero-phase Butterworth band-pass (default order 5)")
     g.add_argument("--segment", action=_Step, step="segment", metavar="LENGTH[:OVERLAP]",
@@ -140,7 +142,12 @@ def run(args: argparse.Namespace) -> int:
     write_record(out, args.output)
     log = out.meta["preprocessing"]
     first = n0
-    if n0 and log[n0 - 1].get("step") == "fill_missing" and log[n0 - 1].get("params", {}).get("at") == "read" and args.fill_missing:
+    if (
+        n0
+        and log[n0 - 1].get("step") == "fill_missing"
+        and log[n0 - 1].get("params", {}).get("at") == "read"
+        and args.fill_missing
+    ):
         first = n0 - 1  # filled while reading this file
     done = log[first:]
     if args.json:
@@ -149,8 +156,10 @@ def run(args: argparse.Namespace) -> int:
     for entry in done:
         ch = entry.get("changes", {})
         if entry["step"] == "suggest_rate":
-            extra = (f": tau_linear={ch['tau_linear']}, tau_nonlinear={ch['tau_nonlinear']} samples -> decimation factor"
-                     f" {ch['factor']} (fs {ch.get('fs_suggested', float('nan')):g} Hz)")
+            extra = (
+                f": tau_linear={ch['tau_linear']}, tau_nonlinear={ch['tau_nonlinear']} samples -> decimation factor"
+                f" {ch['factor']} (fs {ch.get('fs_suggested', float('nan')):g} Hz)"
+            )
         elif entry["step"] == "hampel":
             extra = f": replaced {ch.get('n_replaced')}"
         elif "fs_after" in ch:

@@ -39,7 +39,9 @@ def register(sub) -> None:
     p.add_argument("--val", required=True, metavar="FILE", help="validation record")
     p.add_argument("--grid", required=True, metavar="SPEC",
                    help="choices, e.g. 'lags=5,10;hidden=25-25,25-25-25-25;activation=relu,tanh'")
-    p.add_argument("--repeats", type=COUNT, default=1, metavar="R", help="runs per configuration (seeds seed..seed+R-1)")
+    p.add_argument(
+        "--repeats", type=COUNT, default=1, metavar="R", help="runs per configuration (seeds seed..seed+R-1)"
+    )
     p.add_argument("--seed", type=SEED, default=0, help="first seed (default 0)")
     p.add_argument("--set", dest="set_", action="append", default=[], metavar="KEY=VALUE[,...]",
                    help="options fixed for every run (e.g. epochs=20)")
@@ -112,8 +114,10 @@ def run(args: argparse.Namespace) -> int:
     if args.json:
         emit_json(summary)
         return 1 if missing else 0
-    print(f"{args.identifier}: {summary['n_configs']} configurations, {summary['n_runs']} runs  (storage {url}, study {args.study})")
-    print(f"  {'configuration':<44} {'params':>7}  {'R2 OSA est':>10} {'R2 FRS est':>17} {'R2 OSA val':>10} {'R2 FRS val':>17}")
+    print(f"{args.identifier}: {summary['n_configs']} configurations, {summary['n_runs']} runs  "
+          f"(storage {url}, study {args.study})")
+    print(f"  {'configuration':<44} {'params':>7}  {'R2 OSA est':>10} {'R2 FRS est':>17} {'R2 OSA val':>10} "
+          f"{'R2 FRS val':>17}")
     for c in summary["configs"]:
         print(f"  {c['config_key']:<44} {c['n_parameters']:>7}  {_fmt(c['r2_est_osa_mean']):>10} "
               f"{_fmt(c['r2_est_frs_mean'])} ± {_fmt(c['r2_est_frs_sd'])} {_fmt(c['r2_val_osa_mean']):>10} "

@@ -65,7 +65,9 @@ def run_generate(args: argparse.Namespace) -> int:
         except ValueError:
             v = math.nan  # not a number: the twin's own check names it
         if math.isfinite(v) and v > 0 and not FS_MIN <= v <= FS_MAX:
-            raise ConfigError(f"--option fs: sampling rate {v:g} Hz outside the accepted range {FS_MIN:g}..{FS_MAX:g} Hz")
+            raise ConfigError(
+                f"--option fs: sampling rate {v:g} Hz outside the accepted range {FS_MIN:g}..{FS_MAX:g} Hz"
+            )
     if args.grid or args.seeds:
         return _run_collection(args, twin)
     rec = twin.generate(args.protocol, **opts)

@@ -164,7 +164,8 @@ def _median_run(runs: list[dict[str, Any]]) -> dict[str, Any]:
 
 
 def score_pair(identifier: str, ds, quick: bool = False, factory: Callable[[str], Any] | None = None,
-               params: dict[str, Any] | None = None, seeds: Sequence[int] | None = None) -> tuple[list[dict[str, Any]], dict[str, np.ndarray]]:
+               params: dict[str, Any] | None = None,
+               seeds: Sequence[int] | None = None) -> tuple[list[dict[str, Any]], dict[str, np.ndarray]]:
     """Fit ``identifier`` on ``ds.est`` and score every test of ``ds``; returns (rows, free-run predictions).
 
     A seeded identifier is fitted once per seed of ``seeds`` (default: :data:`QUICK_SEEDS` in quick mode, the
@@ -177,7 +178,9 @@ def score_pair(identifier: str, ds, quick: bool = False, factory: Callable[[str]
         return _score_pair(identifier, ds, quick, factory, params, seeds)
 
 
-def _score_pair(identifier, ds, quick, factory, params, seeds=None) -> tuple[list[dict[str, Any]], dict[str, np.ndarray]]:
+def _score_pair(
+    identifier, ds, quick, factory, params, seeds=None
+) -> tuple[list[dict[str, Any]], dict[str, np.ndarray]]:
     outcomes = [_fit_seed(identifier, ds, quick, factory, params, seeds, k) for k in range(_max_seeds(quick, seeds))]
     return _assemble(identifier, ds, quick, params, outcomes, seeds)
 
@@ -228,7 +231,9 @@ def _fit_seed(identifier, ds, quick, factory, params, seeds, k: int) -> dict[str
     return out
 
 
-def _assemble(identifier, ds, quick, params, outcomes, seeds=None) -> tuple[list[dict[str, Any]], dict[str, np.ndarray]]:
+def _assemble(
+    identifier, ds, quick, params, outcomes, seeds=None
+) -> tuple[list[dict[str, Any]], dict[str, np.ndarray]]:
     """Rows and free-run predictions of one pair from its seeds' evaluations (in seed order; None for a seed
     the pair does not have). Needs no identifier class, so the parent of Dask tasks does not import one.
 
@@ -247,7 +252,8 @@ def _assemble(identifier, ds, quick, params, outcomes, seeds=None) -> tuple[list
         preds[test] = ev.pop("_yhat_free_run")
         seed, fit_s, n_par = ev.pop("seed"), ev.pop("fit_seconds"), ev.pop("n_parameters")
         row = {
-            "identifier": identifier, "dataset": ds.name, "test": test, "status": "diverged" if ev["diverged"] else "ok",
+            "identifier": identifier, "dataset": ds.name, "test": test,
+            "status": "diverged" if ev["diverged"] else "ok",
             "params": params, "n_parameters": n_par, "fit_seconds": fit_s,
             "n_est": sum(len(r) for r in ds.est_records), "n_test": len(rec), "units": ds.units.get("y", ""),
             **ev, "references": ds.references.get(test, {}),

@@ -85,7 +85,9 @@ class BlockTrainResult(SimTrainResult):
     restarts: int = 0
 
 
-def _masks(pairs: Sequence[tuple[np.ndarray, np.ndarray]], warmup: int, val_fraction: float) -> list[tuple[slice, slice | None]]:
+def _masks(
+    pairs: Sequence[tuple[np.ndarray, np.ndarray]], warmup: int, val_fraction: float
+) -> list[tuple[slice, slice | None]]:
     """(training samples, hold-out samples) of each record: training skips the first ``warmup``; the hold-out is the
     last ``val_fraction`` of the last record."""
     out = []

@@ -89,8 +89,10 @@ class _NeuralNARXBase(TorchFileSave, Identifier):
         if not isinstance(nk, (int, np.integer)) or isinstance(nk, bool) or not 0 <= nk <= 100_000:
             raise ConfigError(f"{self.name}: nk={nk!r} must be an integer in [0, 100000] (input delay in samples)")
         hidden = list(self.hidden) if isinstance(self.hidden, (list, tuple)) else None
-        if hidden is None or not all(isinstance(h, (int, np.integer)) and not isinstance(h, bool) and 1 <= h <= 65536 for h in hidden):
-            raise ConfigError(f"{self.name}: hidden={self.hidden!r} must be a list of layer widths ≥ 1, e.g. hidden=25-25-25-25")
+        if hidden is None or not all(isinstance(h, (int, np.integer)) and not isinstance(h, bool) and 1 <= h <= 65536
+                                     for h in hidden):
+            raise ConfigError(f"{self.name}: hidden={self.hidden!r} must be a list of layer widths ≥ 1, "
+                              "e.g. hidden=25-25-25-25")
         self.hidden = [int(h) for h in hidden]
         if self.activation not in ACTIVATIONS:
             raise ConfigError(f"{self.name}: activation={self.activation!r} not one of: {', '.join(ACTIVATIONS)}")
@@ -109,7 +111,8 @@ class _NeuralNARXBase(TorchFileSave, Identifier):
             raise ConfigError(f"{self.name}: select_tail={self.select_tail!r} must be a fraction in [0, 0.5)")
         k = getattr(self, "ensemble", 1)
         if not isinstance(k, (int, np.integer)) or isinstance(k, bool) or not 1 <= k <= MAX_ENSEMBLE:
-            raise ConfigError(f"{self.name}: ensemble={k!r} must be an integer in [1, {MAX_ENSEMBLE}] (networks averaged)")
+            raise ConfigError(f"{self.name}: ensemble={k!r} must be an integer in [1, {MAX_ENSEMBLE}] "
+                              "(networks averaged)")
         train_dtype(getattr(self, "dtype", "float32"), self.name)
         if check_device:  # a saved model trained on a GPU must still load (and predict) on a CPU machine
             select_device(self.device)
@@ -131,8 +134,9 @@ class _NeuralNARXBase(TorchFileSave, Identifier):
             lag = regressor_lag(self.ny, self.nu, self.nk)
             cut = len(last) - n_hold
             if n_hold < 1 or cut - lag < max(1, int(getattr(self, "window", 1))) or cut < lag + 1:
-                raise DataError(f"{self.name}: select_tail={self.select_tail} leaves {cut} training / {n_hold} held-out "
-                                f"samples of {last.source}, need more than the lag {lag} and one window in each")
+                raise DataError(f"{self.name}: select_tail={self.select_tail} leaves {cut} training / {n_hold} "
+                                f"held-out samples of {last.source}, need more than the lag {lag} and one window "
+                                "in each")
             self._tail = last[cut - lag:]  # the held-out samples with their lag of measured initial conditions
             recs = [*recs[:-1], last[:cut]]
         try:
@@ -204,8 +208,8 @@ class _NeuralNARXBase(TorchFileSave, Identifier):
         self.fit_seconds_ = time.perf_counter() - t0
         self.diverged_at_ = None
         if not np.isfinite(self.weights_).all():
-            warnings.warn(f"{self.name}: training diverged (non-finite weights); predictions will be nan", DivergenceWarning,
-                          stacklevel=2)
+            warnings.warn(f"{self.name}: training diverged (non-finite weights); predictions will be nan",
+                          DivergenceWarning, stacklevel=2)
         return self
 
     def _real_n_parameters(self, n_in: int, n_out: int) -> int:
@@ -213,7 +217,8 @@ class _NeuralNARXBase(TorchFileSave, Identifier):
         same least-squares ARX, fixed, in every member). The zeros between members in the merged network
         (:func:`merge_ensemble`) are not parameters and are not counted."""
         k = int(getattr(self, "ensemble", 1))
-        return k * count_mlp_parameters(n_in, self.hidden, n_out, False) + (int(n_in) * int(n_out) if self.linear else 0)
+        return (k * count_mlp_parameters(n_in, self.hidden, n_out, False)
+                + (int(n_in) * int(n_out) if self.linear else 0))
 
     def _train_one_step(self, net: FlatMLP, data: LagData, gen: torch.Generator, epochs: int, lr: float,
                         batch_size: int | None = None, select: bool = False) -> None:
@@ -270,21 +275,22 @@ class _NeuralNARXBase(TorchFileSave, Identifier):
         code = ACT_CODE[self.activation]
         self.diverged_at_ = None
         if horizon is None or horizon >= n - lag:
-            yhat, div = free_run_mlp(self.weights_, self.sizes_, code, yn, un, self.ny, self.nu, DIVERGENCE_BOUND, self.nk,
-                                     self.linear)
+            yhat, div = free_run_mlp(self.weights_, self.sizes_, code, yn, un, self.ny, self.nu, DIVERGENCE_BOUND,
+                                     self.nk, self.linear)
             if div >= 0:
                 self.diverged_at_ = int(div)
                 warnings.warn(f"{self.name}: free-run simulation diverged at sample {div} of {n}; the rest is nan",
                               DivergenceWarning, stacklevel=2)
         elif horizon == 1:
             times = np.arange(lag, n)
-            x = np.concatenate([lag_matrix_np(yn, self.ny, times), lag_matrix_np(un, self.nu, times, first=self.nk)], axis=1)
+            x = np.concatenate([lag_matrix_np(yn, self.ny, times), lag_matrix_np(un, self.nu, times, first=self.nk)],
+                               axis=1)
             yhat = yn.copy()
             with np.errstate(over="ignore", invalid="ignore"):
                 yhat[lag:] = mlp_forward_np(self.weights_, self.sizes_, code, x, self.linear)
         else:
-            yhat = k_step_mlp(self.weights_, self.sizes_, code, yn, un, self.ny, self.nu, int(horizon), DIVERGENCE_BOUND,
-                              self.nk, self.linear)
+            yhat = k_step_mlp(self.weights_, self.sizes_, code, yn, un, self.ny, self.nu, int(horizon),
+                              DIVERGENCE_BOUND, self.nk, self.linear)
         if horizon is not None and not np.isfinite(yhat).all():
             bad = np.flatnonzero(~np.isfinite(yhat).all(axis=1))
             self.diverged_at_ = int(bad[0])
@@ -374,7 +380,8 @@ class NARXMLP(_NeuralNARXBase):
     linear : bool
         Linear bypass: ŷ = L φ + MLP(φ) (φ the regressor of eq. 2-14), with L and the output bias started at the
         least-squares ARX of the same lags (L kept fixed in training) and the network's output layer at zero, so
-        training starts from the ARX model and learns a nonlinear correction. False (default): the dissertation's plain network.
+        training starts from the ARX model and learns a nonlinear correction. False (default): the dissertation's
+        plain network.
     select_tail : float
         Fraction (0 … 0.5) of the last estimation record held out of training; the weights kept are those,
         initial or after any epoch, with the best free-run R² on that tail (``selected_epoch_`` 0 = the initial
@@ -398,7 +405,8 @@ class NARXMLP(_NeuralNARXBase):
 
     def __init__(self, ny: int = 10, nu: int = 10, hidden: Sequence[int] = (25, 25, 25, 25), activation: str = "relu",
                  lr: float = 1e-4, batch_size: int = 128, epochs: int = 100, seed: int = 0, device: str = "auto",
-                 nk: int = 1, linear: bool = False, select_tail: float = 0.0, ensemble: int = 1, dtype: str = "float32"):
+                 nk: int = 1, linear: bool = False, select_tail: float = 0.0, ensemble: int = 1,
+                 dtype: str = "float32"):
         self.dtype = dtype
         self.linear = linear
         self.select_tail = select_tail
@@ -482,8 +490,10 @@ class NARXMLPSim(_NeuralNARXBase):
         super()._check_params(check_device)
         pb = self.pretrain_batch_size
         if pb is not None and (not isinstance(pb, (int, np.integer)) or isinstance(pb, bool) or pb < 1):
-            raise ConfigError(f"{self.name}: pretrain_batch_size={pb!r} must be a positive integer (or None: batch_size)")
-        if not isinstance(self.window, (int, np.integer)) or isinstance(self.window, bool) or not 1 <= self.window <= 100_000:
+            raise ConfigError(f"{self.name}: pretrain_batch_size={pb!r} must be a positive integer "
+                              "(or None: batch_size)")
+        if (not isinstance(self.window, (int, np.integer)) or isinstance(self.window, bool)
+                or not 1 <= self.window <= 100_000):
             raise ConfigError(f"{self.name}: window={self.window!r} must be an integer in [1, 100000]")
         if not isinstance(self.pretrain_epochs, (int, np.integer)) or self.pretrain_epochs < 0:
             raise ConfigError(f"{self.name}: pretrain_epochs={self.pretrain_epochs!r} must be a non-negative integer")

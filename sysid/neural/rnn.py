@@ -191,7 +191,8 @@ class RNNStateSpace(TorchFileSave, Identifier):
         pos_int("epochs", 0, 1_000_000)
         pos_int("linear", 0, int(self.n_enc))
         eh = self.enc_hidden
-        if not isinstance(eh, (list, tuple)) or not all(isinstance(w, (int, np.integer)) and not isinstance(w, bool) and w >= 1 for w in eh):
+        if not isinstance(eh, (list, tuple)) or not all(isinstance(w, (int, np.integer)) and not isinstance(w, bool)
+                                                        and w >= 1 for w in eh):
             raise ConfigError(f"{self.name}: enc_hidden={eh!r} must be a list of widths, e.g. enc_hidden=64 or 64-64")
         self.enc_hidden = [int(w) for w in eh]
         if self.cell not in CELLS:
@@ -227,7 +228,8 @@ class RNNStateSpace(TorchFileSave, Identifier):
         T = int(self.window)
         starts = data_t.window_starts(T)
         if starts.size == 0:
-            raise DataError(f"{self.name}: no record has {T + self.n_enc} samples for one window; lower window or n_enc")
+            raise DataError(f"{self.name}: no record has {T + self.n_enc} samples for one window; "
+                            "lower window or n_enc")
         net = self._build(nu, ny)
         if self.linear:
             # the ARX path is the least-squares ARX, kept fixed; the recurrent network learns the residual of its
@@ -293,7 +295,8 @@ class RNNStateSpace(TorchFileSave, Identifier):
         yhat = yn.copy()
         with torch.no_grad():
             if horizon is None or horizon >= n - lag:
-                x0 = np.concatenate([lag_matrix_np(yn, lag, np.array([lag])), lag_matrix_np(un, lag, np.array([lag]))], axis=1)
+                x0 = np.concatenate([lag_matrix_np(yn, lag, np.array([lag])), lag_matrix_np(un, lag, np.array([lag]))],
+                                    axis=1)
                 useq = un[lag - 1 : n - 1][None]
                 yhat[lag:] = net(torch.from_numpy(x0), torch.from_numpy(np.ascontiguousarray(useq))).numpy()[0]
             else:

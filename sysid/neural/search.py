@@ -11,9 +11,9 @@ to b; the key ``lags`` sets ``ny`` and ``nu`` together (``n_enc`` for ``rnn``). 
 
     lags=5,10;hidden=25-25,25-25-25-25;activation=relu,tanh
 
-Samplers: ``grid`` (every combination; workers claim configurations one at a time), ``random`` and ``tpe`` (Bayesian, Optuna's Tree-structured Parzen
-Estimator) draw ``trials`` distinct configurations from the same choices. One Optuna trial is one
-configuration with all its repeats (per-run results in the trial's user attributes).
+Samplers: ``grid`` (every combination; workers claim configurations one at a time), ``random`` and ``tpe``
+(Bayesian, Optuna's Tree-structured Parzen Estimator) draw ``trials`` distinct configurations from the same choices. One
+Optuna trial is one configuration with all its repeats (per-run results in the trial's user attributes).
 
 Storage: an Optuna storage URL — by default an SQLite file; ``postgresql://user:pw@host/db`` lets workers on
 several machines share one study. Re-running the same command resumes: finished configurations are kept,

@@ -89,7 +89,8 @@ class SSEncoder(TorchFileSave, Identifier):
     def __init__(self, nx: int = 4, ny: int = 20, nu: int = 20, f_hidden: Sequence[int] = (64,),
                  h_hidden: Sequence[int] = (64,), e_hidden: Sequence[int] = (64,), activation: str = "tanh",
                  feedthrough: bool = False, T: int = 50, batch_size: int = 256, epochs: int = 50, lr: float = 1e-3,
-                 lr_min: float | None = None, val_fraction: float = 0.2, patience: int = 0, clip: float = 0.0, seed: int = 0, device: str = "auto"):
+                 lr_min: float | None = None, val_fraction: float = 0.2, patience: int = 0, clip: float = 0.0,
+                 seed: int = 0, device: str = "auto"):
         self.nx = nx
         self.ny = ny
         self.nu = nu
@@ -184,7 +185,8 @@ class SSEncoder(TorchFileSave, Identifier):
         res = train_simulation(model, pairs, lag, T, int(self.epochs), int(self.batch_size), float(self.lr),
                                val=normalised_pairs(val_recs, self.normaliser_) if val_recs else None,
                                patience=int(self.patience), clip=float(self.clip), generator=gen, device=device,
-                               lr_min=None if self.lr_min is None else float(self.lr_min), log=lambda msg: _LOG.info("%s: %s", self.name, msg))
+                               lr_min=None if self.lr_min is None else float(self.lr_min),
+                               log=lambda msg: _LOG.info("%s: %s", self.name, msg))
         self.weights_ = export_weights(model)
         self.loss_history_ = res.loss_history
         self.val_history_ = res.val_history
@@ -230,8 +232,8 @@ class SSEncoder(TorchFileSave, Identifier):
             yhat[lag:] = out[0]
             if div >= 0:
                 self.diverged_at_ = lag + div
-                warnings.warn(f"{self.name}: free-run simulation diverged at sample {lag + div} of {n}; the rest is nan",
-                              DivergenceWarning, stacklevel=2)
+                warnings.warn(f"{self.name}: free-run simulation diverged at sample {lag + div} of {n}; "
+                              "the rest is nan", DivergenceWarning, stacklevel=2)
         else:
             k = int(horizon)
             targets = np.arange(lag, n)
@@ -293,7 +295,8 @@ class SSEncoder(TorchFileSave, Identifier):
             return saved_array(self.name, flat, key, like.shape)
 
         self.weights_ = {part: {"W": get(f"{part}.W", g["W"]), "b": get(f"{part}.b", g["b"]),
-                                "layers": [(get(f"{part}.{i}.W", W), get(f"{part}.{i}.b", b)) for i, (W, b) in enumerate(g["layers"])]}
+                                "layers": [(get(f"{part}.{i}.W", W), get(f"{part}.{i}.b", b))
+                                           for i, (W, b) in enumerate(g["layers"])]}
                          for part, g in ref.items()}
         self.normaliser_ = Normaliser.from_dict(state["normaliser"])
         self.loss_history_ = [float(v) for v in state.get("loss_history", [])]

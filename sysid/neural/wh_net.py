@@ -143,7 +143,8 @@ class WHNet(TorchFileSave, Identifier):
         integer("window", 0, 100_000_000)
         integer("batch", 1, 100_000)
         if self.window and self.window <= self.warmup:
-            raise ConfigError(f"{self.name}: window={self.window} must exceed warmup={self.warmup} (or be 0: full batch)")
+            raise ConfigError(f"{self.name}: window={self.window} must exceed warmup={self.warmup} "
+                              "(or be 0: full batch)")
         self.hidden = hidden_widths(self.hidden, "hidden", self.name)
         if self.activation not in _ACTIVATIONS:
             raise ConfigError(f"{self.name}: activation={self.activation!r} not one of: {', '.join(_ACTIVATIONS)}")

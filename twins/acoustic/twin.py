@@ -339,14 +339,18 @@ class AcousticTwin(Twin):
                 "preprocess": False, "start": 0, "keep": RECIPE_KEEP[protocol]}
         unknown = set(options) - set(opts)
         if unknown:
-            raise ConfigError(f"protocol {protocol}: unknown option(s) {', '.join(sorted(unknown))}; valid: {', '.join(opts)}")
+            raise ConfigError(
+                f"protocol {protocol}: unknown option(s) {', '.join(sorted(unknown))}; valid: {', '.join(opts)}"
+            )
         for k, v in options.items():
             opts[k] = coerce(v, opts[k], k)
         fs, duration = float(opts["fs"]), float(opts["duration"])
         if not (fs > 0 and duration > 0 and float(opts["awg_rate_hz"]) > 0 and float(opts["warmup_s"]) >= 0):
             raise ConfigError(f"protocol {protocol}: fs, duration and awg_rate_hz must be positive, warmup_s >= 0")
         if not opts["preprocess"] and {"start", "keep"} & set(options):
-            raise ConfigError(f"protocol {protocol}: options start/keep cut the preprocessed record; give preprocess=true")
+            raise ConfigError(
+                f"protocol {protocol}: options start/keep cut the preprocessed record; give preprocess=true"
+            )
         n = int(round(duration * fs))
         periodic = protocol != "thesis-chirp-100ms"
         warm = int(round(float(opts["warmup_s"]) * fs)) if periodic else 0
@@ -368,7 +372,9 @@ class AcousticTwin(Twin):
         opts = {"f_start": 100e3, "f_stop": 2.0e6, "points": 2000, "gated": False, "preprocess": False}
         unknown = set(options) - set(opts)
         if unknown:
-            raise ConfigError(f"protocol vna-sweep: unknown option(s) {', '.join(sorted(unknown))}; valid: {', '.join(opts)}")
+            raise ConfigError(
+                f"protocol vna-sweep: unknown option(s) {', '.join(sorted(unknown))}; valid: {', '.join(opts)}"
+            )
         for k, v in options.items():
             opts[k] = coerce(v, opts[k], k)
         f0, f1, npts = float(opts["f_start"]), float(opts["f_stop"]), int(opts["points"])

@@ -196,7 +196,12 @@ class CantileverTwin(Twin):
         fcfg[K.F_VS], fcfg[K.F_SATP], fcfg[K.F_LIM] = p.sat_voltage_v, p.sat_sharpness, p.amp_limit_v
         a_lp, b0_lp, b1_lp = _first_order_foh(1.0 / (2 * math.pi * p.amp_bandwidth_hz), h)
         fcfg[K.F_LPA], fcfg[K.F_LPB0], fcfg[K.F_LPB1] = a_lp, b0_lp, b1_lp
-        fcfg[K.F_D], fcfg[K.F_ALPHA], fcfg[K.F_BETA], fcfg[K.F_GAMMA] = p.gain_um_per_v, p.bw_alpha, p.bw_beta, p.bw_gamma
+        fcfg[K.F_D], fcfg[K.F_ALPHA], fcfg[K.F_BETA], fcfg[K.F_GAMMA] = (
+            p.gain_um_per_v,
+            p.bw_alpha,
+            p.bw_beta,
+            p.bw_gamma,
+        )
         fcfg[K.F_RATEREF], fcfg[K.F_ASYM] = p.rate_ref_v_per_s, p.asym_factor
         fcfg[K.F_OFFSET], fcfg[K.F_DRIFT], fcfg[K.F_DRIFTTAU] = p.offset_um, p.thermal_drift_um, p.thermal_tau_s
         fcfg[K.F_Q] = p.quant_um

@@ -93,7 +93,9 @@ def _shift_guesses(s: _Search, fields: list[str]) -> dict[str, list[float]]:
     big = np.flatnonzero(np.abs(y0) > 0.05 * (np.max(np.abs(y0)) or 1.0))
     i0 = max(int(big[0]) - 16, 0) if big.size else 0
     win = slice(i0, min(m, i0 + max(128, len(est) // 16)))
-    shifts = ft.delay_candidates(part.y[win], y0[win], part.fs, max_shift_s=max(32, (win.stop - win.start) // 8) / part.fs)
+    shifts = ft.delay_candidates(
+        part.y[win], y0[win], part.fs, max_shift_s=max(32, (win.stop - win.start) // 8) / part.fs
+    )
     if not (shifts and max(abs(v) for v in shifts) * est.fs > 0.02):
         return lin_guess
     for f in fields:

@@ -1,6 +1,7 @@
 """The steps that make the diagnosis hold on measured records, around its loop (:func:`twins.discrepancy.diagnose`):
-the split and ranges before anything is fitted (:mod:`.splitting`, :mod:`.ranges`), the widened refit of a baseline that ends at a bound, and the verdict against the noise measured from the data
-(:mod:`.unexplained`). The default-effect re-test is :mod:`.defaults`."""
+the split and ranges before anything is fitted (:mod:`.splitting`, :mod:`.ranges`), the widened refit of a baseline that
+ends at a bound, and the verdict against the noise measured from the data (:mod:`.unexplained`). The default-effect
+re-test is :mod:`.defaults`."""
 
 from __future__ import annotations
 

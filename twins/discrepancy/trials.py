@@ -133,8 +133,12 @@ class Stage:
     sse_val: float
 
     def summary(self, also: Iterable[str] = ()) -> dict[str, Any]:
-        return {"effects": sorted(set(self.twin.effects) | set(also)), "r2_val": self.r2_val, "nrmse_val": self.nrmse_val,
-                "tests": ft.tests_summary(self.analysis_val["_tests_full"])}
+        return {
+            "effects": sorted(set(self.twin.effects) | set(also)),
+            "r2_val": self.r2_val,
+            "nrmse_val": self.nrmse_val,
+            "tests": ft.tests_summary(self.analysis_val["_tests_full"]),
+        }
 
 
 def make_stage(twin: Twin, est: Record, val: Record, opts: DiagnoseOptions) -> Stage:

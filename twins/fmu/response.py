@@ -223,8 +223,8 @@ class ResponseCore:
 
 def amplifier_of(twin):
     """``twin.amplifier`` as a float -> float function (identity when the twin has none): the twin's
-    ``sample_amplifier()`` where it gives one, else ``amplifier`` itself, which it calls on a Python float when that gives the same value as on a one-element array (numpy ufunc
-    code does, ~1 us), else on a one-element array."""
+    ``sample_amplifier()`` where it gives one, else ``amplifier`` itself, which it calls on a Python float when that
+    gives the same value as on a one-element array (numpy ufunc code does, ~1 us), else on a one-element array."""
     own = getattr(twin, "sample_amplifier", None)
     fn = own() if own is not None else None
     if fn is not None:  # the twin's own per-sample form (same arithmetic, no array per call)
