@@ -72,7 +72,7 @@ def water_records(distance_mm: int = 20, seed: int = 0) -> tuple[Record, Record]
     u_val = signals.chirp(fs, n / fs, 0.9e6, 1.5e6, amplitude=1.0, method="linear")
     y_est = np.convolve(u_est, h[0])[:n]
     y_val = np.convolve(u_val, h[5])[:n]
-    meta = {"source": "USbodyComm charac_water_%d" % distance_mm, "fir": "measured impulse response convolved"}
+    meta = {"source": f"USbodyComm charac_water_{int(distance_mm)}", "fir": "measured impulse response convolved"}
     return (Record(u=u_est, y=y_est, fs=fs, meta={**meta, "fir_index": 0}, source="water_est"),
             Record(u=u_val, y=y_val, fs=fs, meta={**meta, "fir_index": 5}, source="water_val"))
 

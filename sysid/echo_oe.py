@@ -375,7 +375,7 @@ class EchoOE(Identifier):
         """Orders, where the delay and the round trip came from, and the loop gain (printed by ``identify``)."""
         s, found = self.structure_, self.structure_["found"] or {}
         lines = [f"{self.name}: nb={s['nb']}, nf={s['nf']}, nk={s['nk']}"
-                 + (" (found: first arrival at lag %d)" % found["onset"] if self.nk is None and found else "")]
+                 + (f" (found: first arrival at lag {int(found['onset'])})" if self.nk is None and found else "")]
         if s["echo_lag"]:
             how = (f" (found: cepstral peak {found['echo_snr']:.1f}x the median)" if self.echo_lag is None and found
                    else "")

@@ -169,9 +169,12 @@ class _PolyPEM(Identifier):
     def _unpack(self, theta, o):
         bs, fs, j = [], [], 0
         for i in range(len(o["nb"])):
-            bs.append(np.asarray(theta[j:j + o["nb"][i]], float)); j += o["nb"][i]
-            fs.append(np.concatenate([[1.0], theta[j:j + o["nf"][i]]])); j += o["nf"][i]
-        c = np.concatenate([[1.0], theta[j:j + o["nc"]]]); j += o["nc"]
+            bs.append(np.asarray(theta[j:j + o["nb"][i]], float))
+            j += o["nb"][i]
+            fs.append(np.concatenate([[1.0], theta[j:j + o["nf"][i]]]))
+            j += o["nf"][i]
+        c = np.concatenate([[1.0], theta[j:j + o["nc"]]])
+        j += o["nc"]
         d = np.concatenate([[1.0], theta[j:j + o["nd"]]])
         return bs, fs, c, d
 

@@ -174,14 +174,15 @@ def apply_steps(record: Record, steps: Iterable[Any]) -> Record:
                     raise ConfigError("preprocessing step decimate needs q")
                 q = _int_param("decimation factor q", params["q"], 1)
                 fs_new = fs / q
-                fn = lambda x: decimate(x, q, params.get("passband", PASSBAND_DEFAULT),  # noqa: E731
-                                        params.get("atten_db", ATTEN_DB_DEFAULT), return_filter=True)
+                # fn is called below, in this same step: binding late to q and params is harmless
+                fn = lambda x: decimate(x, q, params.get("passband", PASSBAND_DEFAULT),  # noqa: E731, B023
+                                        params.get("atten_db", ATTEN_DB_DEFAULT), return_filter=True)  # noqa: B023
             else:
                 if "fs_new" not in params:
                     raise ConfigError("preprocessing step resample needs fs_new")
                 fs_new = positive("new sampling rate", params["fs_new"])
-                fn = lambda x: resample(x, fs, fs_new, params.get("passband", PASSBAND_DEFAULT),  # noqa: E731
-                                        params.get("atten_db", ATTEN_DB_DEFAULT), return_filter=True)
+                fn = lambda x: resample(x, fs, fs_new, params.get("passband", PASSBAND_DEFAULT),  # noqa: E731, B023
+                                        params.get("atten_db", ATTEN_DB_DEFAULT), return_filter=True)  # noqa: B023
             for t in targets:
                 new[t], h = fn(getattr(rec, t))
             changes.update({"fs_before": fs, "fs_after": fs_new, "n_before": len(rec),

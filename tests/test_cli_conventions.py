@@ -36,7 +36,7 @@ def chatty(monkeypatch):
         log = logging.getLogger("sysid.fake")
         log.debug("debug detail")
         log.info("working on it")
-        warnings.warn("dependency says something\nover two lines", UserWarning)
+        warnings.warn("dependency says something\nover two lines", UserWarning, stacklevel=1)
         print("RESULT 42")
         return 0
 

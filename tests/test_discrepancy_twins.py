@@ -88,7 +88,7 @@ def test_cantilever_delay_injected_as_shift():
     tau = 2.7e-4
     half = t.size // 2
     y = CantileverTwin(start.params, start.effects, 5).simulate(_shift(u, tau * fs), fs)
-    est, val = Record(u=u[:half], y=y[:half], fs=fs), Record(u=u[half:], y=y[half:], fs=fs)
+    est = Record(u=u[:half], y=y[:half], fs=fs)
     # validation continues the same sweep: the twin is simulated from rest, so give it the whole record
     val_full = Record(u=u, y=y, fs=fs)
     out = diagnose(start, est, val_full, max_rounds=1)

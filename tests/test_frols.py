@@ -124,7 +124,7 @@ def _naive_k_step(m, rec, k):
         s = max(t - k + 1, L)
         y = rec.y.copy()
         for j in range(s, t + 1):
-            env = {"y": lambda lag, j=j: y[j - lag], "u": lambda lag, j=j: rec.u[j - lag]}
+            env = {"y": lambda lag, j=j: y[j - lag], "u": lambda lag, j=j: rec.u[j - lag]}  # noqa: B023 (this t's y)
             acc = 0.0
             for r in rows:
                 v = r["parameter"]

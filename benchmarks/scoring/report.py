@@ -30,8 +30,8 @@ def markdown_table(run: ScoreRun | dict[str, Any]) -> str:
         else:
             stxt = f"skipped: {s.get('reason', '')}"
 
-        def refv(k: str) -> str:
-            v = ref.get(k)
+        def refv(k: str) -> str:  # called only in this iteration: ref is this row's
+            v = ref.get(k)  # noqa: B023
             return f"{_fmt(v['value'])} ({v['model']})" if v else "—"
 
         if r.get("status") == "error":

@@ -180,7 +180,8 @@ def _echo_basins(s: _Search, f: str, a: dict[str, Any]) -> None:
         h = float(grid_[1] - grid_[0]) if grid_.size > 1 else 0.0
         if h > 0:
             best = s.best
-            r = minimize_scalar(lambda v: s.cost({**best, f: float(v)}), bounds=(max(lo, x - h), min(hi, x + h)),
+            r = minimize_scalar(lambda v: s.cost({**best, f: float(v)}),  # noqa: B023 (used up in this iteration)
+                                bounds=(max(lo, x - h), min(hi, x + h)),
                                 method="bounded", options={"maxiter": 12, "xatol": h * 1e-3})
             if r.fun < cx:
                 x, cx = float(r.x), float(r.fun)
@@ -219,7 +220,8 @@ def continuation_scan(tw: Twin, est: Record, vals: dict[str, Any], f: str, lo: f
     best_x = min(cands)[1]
     for frac in (4, 2, 1):
         part = est[: max(n // frac, min(n, 64))]
-        r = minimize_scalar(lambda x: cost_on(part, x), bounds=(max(lo, best_x - step / 4), min(hi, best_x + step / 4)),
+        r = minimize_scalar(lambda x: cost_on(part, x),  # noqa: B023 (used up in this iteration)
+                            bounds=(max(lo, best_x - step / 4), min(hi, best_x + step / 4)),
                             method="bounded", options={"maxiter": 14, "xatol": step * 1e-4})
         if r.fun <= cost_on(part, best_x):
             best_x = float(r.x)
