@@ -228,7 +228,7 @@ def _score_stage(ctx: Context, datasets: list[str], key: str, title: str, syside
                 + f"<p>JSON: <a href='{key}/score.json'>{key}/score.json</a>, "
                 f"Markdown: <a href='{key}/score.md'>{key}/score.md</a></p>")
     ok = [r for r in run.rows if r.get("status") == "ok"]
-    best = {}
+    best: dict[tuple[str, str], dict[str, Any]] = {}
     for r in ok:
         k2 = (r["dataset"], r["test"])
         if k2 not in best or r["free_run"]["nrmse"] < best[k2]["free_run"]["nrmse"]:

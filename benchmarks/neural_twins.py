@@ -153,8 +153,8 @@ def main(argv: list[str] | None = None) -> int:
     seeds = [int(s) for s in a.seeds.split(",") if s]
     params = {k: json.loads(v) for k, v in (kv.split("=", 1) for kv in a.set.split(";") if kv)} if a.set else {}
     if a.experiment == "cantilever":
-        data = cantilever_data()
-        res = [cantilever_sines(a.identifier, params, s, data) for s in seeds]
+        sines_data = cantilever_data()
+        res = [cantilever_sines(a.identifier, params, s, sines_data) for s in seeds]
         for r in res:
             print(json.dumps(clean_json(r)), flush=True)
         m = [r["r2_mean"] for r in res]

@@ -159,7 +159,7 @@ def _wrap_fit(fn):
         self.fs_ = float(recs[0].fs)
         return out
 
-    fit._piezotwin_wrapped = True
+    fit._piezotwin_wrapped = True  # type: ignore[attr-defined]
     return fit
 
 
@@ -186,7 +186,7 @@ def _wrap_predict(fn):
             return fn(self, _zero_output(self, rec), None)
         return fn(self, rec, h)
 
-    predict._piezotwin_wrapped = True
+    predict._piezotwin_wrapped = True  # type: ignore[attr-defined]
     return predict
 
 
@@ -195,6 +195,8 @@ class Identifier(ABC):
     """Base class of all identifiers. Subclasses set ``name`` (the registry id) and implement fit/predict."""
 
     name: ClassVar[str] = "identifier"
+    #: first sample at which the last prediction left its bound (None: it did not), set by predict
+    diverged_at_: int | None
 
     def __init_subclass__(cls, **kwargs: Any) -> None:
         """Give every identifier the array API (see the module docstring) by wrapping its own fit/predict, and

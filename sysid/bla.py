@@ -162,8 +162,9 @@ def best_linear_approximation(realisations: Sequence[tuple[Any, Any]], fs: float
                      "fs": fs, "resolution_hz": fs / n0})
 
 
-def detect_nonlinearity(Y: np.ndarray, var_Y: np.ndarray, excited: np.ndarray, periods_used: int,
-                        resolution_hz: float, alpha: float = 1e-3) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
+def detect_nonlinearity(Y: np.ndarray, var_Y: np.ndarray, excited: np.ndarray | Sequence[np.ndarray],
+                        periods_used: int, resolution_hz: float,
+                        alpha: float = 1e-3) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
     """Odd / even nonlinear distortion levels at the detection lines.
 
     ``Y`` and ``var_Y`` are the period-averaged output spectra and the variances of those means, shape

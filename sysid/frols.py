@@ -438,7 +438,7 @@ def least_squares(records, structure: Structure, terms, output: int = 0, e_list=
                 buf = np.empty((n, k + 1), order="F")
             term_columns(X, terms, buf[:, :k])
             buf[:, k] = Y[:, output]
-            R = np.linalg.qr(np.vstack([R, buf]), mode="r")
+            R = np.linalg.qr(np.vstack([R, buf]), mode="r")  # type: ignore[assignment]  # numpy stubs: QRResult
             n_rows += n
     if n_rows <= k:
         raise DataError(f"too few samples ({n_rows} usable rows) for {k} parameters")

@@ -310,7 +310,7 @@ def _read_csv(p: Path, src: str, u_col: str, y_col: str | None, explicit_y: bool
         name = time_cols[0]
         t = table.columns([name])[0] * TIME_COLUMNS[name.strip().lower()]
         fs = _fs_from_time(t, src, name)
-    meta = {"provenance": {"file": p.name, "u_col": u_col, "y_col": y_col}}
+    meta: dict[str, Any] = {"provenance": {"file": p.name, "u_col": u_col, "y_col": y_col}}
     if time_cols:
         meta["provenance"]["time_col"] = time_cols[0]
         meta["_fs_from"] = f"its time column {time_cols[0]!r}"
@@ -386,7 +386,7 @@ def _read_mat(p: Path, src: str, u_var: str, y_var: str | None, fs_var: str, exp
     # MATLAB row and column vectors are squeezed to 1-D (one channel); matrices must be samples x channels
     u = _check_orientation(u, u_var, src)
     y = None if y is None else _check_orientation(y, y_var, src)
-    meta = {"provenance": {"file": p.name, "u_var": u_var, "y_var": y_var}}
+    meta: dict[str, Any] = {"provenance": {"file": p.name, "u_var": u_var, "y_var": y_var}}
     if rates:
         meta["_fs_from"] = rates[0][1]
     return u, y, fs, {"u": "", "y": ""}, meta

@@ -270,7 +270,7 @@ class ARMAX(_LinearBase):
     # ---------------------------------------------------------------- PEM
     def _layout(self, s, terms):
         """Indices of the y, u, e and constant terms in ``terms`` (degree-1 structure)."""
-        idx = {"y": [], "u": [], "e": [], "c": []}
+        idx: dict[str, list[int]] = {"y": [], "u": [], "e": [], "c": []}
         for j, t in enumerate(terms):
             if not t:
                 idx["c"].append(j)

@@ -151,7 +151,8 @@ def write_model(model, path: str | os.PathLike) -> Path:
             tmp.write_text(json.dumps(doc, default=json_default))
         else:
             with open(tmp, "wb") as fh:  # a handle: np.savez would append ".npz" to other names
-                np.savez(fh, header=np.array(json.dumps(header)), **arrays)
+                named: dict[str, Any] = arrays  # names a0, a1, ... (never savez's allow_pickle)
+                np.savez(fh, header=np.array(json.dumps(header)), **named)
     return Path(path)
 
 

@@ -226,7 +226,7 @@ class _PolyPEM(Identifier):
             blocks = []
             for u_, X, v, e in out:
                 J = np.empty((len(e), len(lay)))
-                cache = {}
+                cache: dict[Any, np.ndarray] = {}
                 for j, (kind, i, k) in enumerate(lay):
                     if kind in ("b", "f"):
                         if (kind, i) not in cache:
@@ -351,7 +351,7 @@ class _PolyPEM(Identifier):
     def _index(self, kind: str, i: int) -> list[int]:
         return [j for j, (kd, ii, _) in enumerate(self.layout_) if kd == kind and ii == i]
 
-    def poles(self) -> list[dict[str, float]]:
+    def poles(self) -> list[dict[str, float | None]]:
         """Poles of G (roots of every F_i) with their complex std (:func:`sysid.uncertainty.poles_with_std`)."""
         self._check_fitted()
         out = []

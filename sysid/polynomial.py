@@ -52,6 +52,8 @@ class PolynomialModel(Identifier):
     term tuples), ``theta_``, ``stderr_``, ``err_``.
     """
 
+    _compiled: sim.CompiledModel | None
+
     # -------------------------------------------------------------- common learned state
     def _structure(
         self, n_outputs: int, n_inputs: int, ne: int = 0, degree: int = 1, constant: bool = True
@@ -79,7 +81,8 @@ class PolynomialModel(Identifier):
 
     # -------------------------------------------------------------- prediction
     def compiled(self) -> sim.CompiledModel:
-        if getattr(self, "_compiled", None) is None:
+        compiled = getattr(self, "_compiled", None)
+        if compiled is None:
             s = self.structure_
             n_out = s.n_outputs
             t_max = max([len(t) for t in self.terms_] + [1])
@@ -92,10 +95,10 @@ class PolynomialModel(Identifier):
                     theta[o, i] = self.theta_[o][i]
             col = [s.column_of(r) for r in range(len(s.regressors))]
             lag = [lg for _, _, lg in s.regressors]
-            self._compiled = sim.CompiledModel(n_out, s.n_inputs, s.has_e, col, lag, terms,
-                                               [len(t) for t in self.terms_], theta, s.max_lag,
-                                               kinds=[k for k, _, _ in s.regressors])
-        return self._compiled
+            compiled = self._compiled = sim.CompiledModel(n_out, s.n_inputs, s.has_e, col, lag, terms,
+                                                          [len(t) for t in self.terms_], theta, s.max_lag,
+                                                          kinds=[k for k, _, _ in s.regressors])
+        return compiled
 
     def _check_fitted(self) -> None:
         if not hasattr(self, "terms_"):

@@ -164,7 +164,7 @@ class NARXPolySim(NARXPoly):
         super()._fit_records(records)
         self.theta_ls_ = [np.asarray(t, dtype=float).copy() for t in self.theta_]
         self.refine_info_ = {"nfev": 0, "status": "not run", "rms_ls": None, "rms_sim": None}
-        if self.max_nfev > 0 and sum(len(t) for t in self.terms_):
+        if self.max_nfev > 0 and any(len(t) > 0 for t in self.terms_):
             self._refine(records)
 
     def _refine(self, records: list[Record]) -> None:

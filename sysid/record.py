@@ -148,7 +148,7 @@ class Record:
     # ------------------------------------------------------------------ derived records
     def replace(self, **changes: Any) -> Record:
         """A copy with some fields replaced (arrays are not copied unless replaced)."""
-        kw = dict(
+        kw: dict[str, Any] = dict(
             u=self.u, y=self.y, fs=self.fs, units=dict(self.units), meta=copy.deepcopy(self.meta), source=self.source
         )
         kw.update(changes)
@@ -182,12 +182,12 @@ class Record:
 
     def split(self, fraction: float | None = None, index: int | None = None) -> tuple[Record, Record]:
         """Split into (estimation, validation) at a sample ``index`` or a ``fraction`` of the length."""
-        if (fraction is None) == (index is None):
-            raise DataError("split: give exactly one of fraction or index")
-        if index is None:
+        if fraction is not None and index is None:
             if not 0.0 < float(fraction) < 1.0:
                 raise DataError(f"split: fraction must lie in (0, 1), got {fraction}")
             index = int(round(len(self) * float(fraction)))
+        elif index is None or fraction is not None:
+            raise DataError("split: give exactly one of fraction or index")
         if not 0 < index < len(self):
             raise DataError(f"split: index {index} outside 1..{len(self) - 1}")
         return self[:index], self[index:]
@@ -218,15 +218,17 @@ class Normaliser:
     nothing divides by zero. The inverse reproduces the original to floating-point round-off.
     """
 
+    y_mean_: np.ndarray | np.float64  # a scalar 0 / 1 when the records have no output
+    y_scale_: np.ndarray | np.float64
+
     def fit(self, data: Record | Sequence[Record]) -> Normaliser:
         """Scale from ``data``: one record, or several taken together (one mean and deviation per channel)."""
         recs = [data] if isinstance(data, Record) else list(data)
         u = recs[0].u if len(recs) == 1 else np.concatenate([r.u for r in recs])
         self.u_mean_, self.u_scale_ = self._stats(u)
-        if all(r.y is not None for r in recs):
-            self.y_mean_, self.y_scale_ = self._stats(
-                recs[0].y if len(recs) == 1 else np.concatenate([r.y for r in recs])
-            )
+        ys = [r.y for r in recs if r.y is not None]
+        if len(ys) == len(recs):
+            self.y_mean_, self.y_scale_ = self._stats(ys[0] if len(ys) == 1 else np.concatenate(ys))
         else:
             self.y_mean_, self.y_scale_ = np.float64(0.0), np.float64(1.0)
         return self

@@ -195,7 +195,7 @@ class CompiledModel:
         self.n_exo = np.zeros(self.n_out, dtype=np.int64)
         self.n_dyn = np.zeros(self.n_out, dtype=np.int64)
         for o in range(self.n_out):
-            groups = ([], [], [])
+            groups: tuple[list[int], list[int], list[int]] = ([], [], [])
             for i in range(int(n_terms[o])):
                 ks = {kinds[r] for r in terms[o, i] if r >= 0}
                 groups[2 if "e" in ks else (1 if "y" in ks else 0)].append(i)

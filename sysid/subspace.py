@@ -110,7 +110,8 @@ def _hankel_rows(u: np.ndarray, y: np.ndarray, i: int, j0: int, j1: int) -> np.n
 
 
 def _qr_r(M: np.ndarray) -> np.ndarray:
-    return np.linalg.qr(M, mode="r")
+    # numpy's stubs type every mode as QRResult; mode="r" returns the array R alone
+    return np.linalg.qr(M, mode="r")  # type: ignore[return-value]
 
 
 def _bd_grams(A, C, us, ys, K: int, chunk: int):
@@ -389,7 +390,7 @@ class N4SID(Identifier):
         R = np.stack(reps)
         return np.sqrt((K - 1) / K * np.sum(np.abs(R - R.mean(axis=0)) ** 2, axis=0))
 
-    def poles(self) -> list[dict[str, float]]:
+    def poles(self) -> list[dict[str, float | None]]:
         """Eigenvalues of A with their jackknife complex std (replicate poles matched to these ones)."""
         self._check_fitted()
         p = np.linalg.eigvals(self.A_)
@@ -460,7 +461,8 @@ class N4SID(Identifier):
 
     def _load_state(self, state: dict[str, Any]) -> None:
         self.A_, self.B_, self.C_, self.D_ = (np.asarray(state[k], float) for k in "ABCD")
-        self.replicates_ = [tuple(np.asarray(M, float) for M in rep) for rep in state["replicates"]]
+        reps = [[np.asarray(M, float) for M in rep] for rep in state["replicates"]]
+        self.replicates_ = [(A, B, C, D) for A, B, C, D in reps]
         self.singular_values_ = list(state["singular_values"])
         self.chosen_orders_ = dict(state["chosen"])
         self.block_rows_ = int(state["block_rows"])

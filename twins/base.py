@@ -15,7 +15,7 @@ from abc import ABC, abstractmethod
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, ClassVar
+from typing import Any, ClassVar, Self
 
 import numpy as np
 
@@ -113,11 +113,11 @@ class Twin(ABC):
                     f"{self.name} parameter {name}={value!r} not one of: {', '.join(map(str, info.choices))}"
                 )
 
-    def with_params(self, **changes: Any) -> Twin:
+    def with_params(self, **changes: Any) -> Self:
         """A new twin of the same class, effects and seed, with some parameters changed."""
         return type(self)(dataclasses.replace(self.params, **changes), self.effects, self.seed)
 
-    def with_effects(self, effects: Iterable[str]) -> Twin:
+    def with_effects(self, effects: Iterable[str]) -> Self:
         return type(self)(self.params, effects, self.seed)
 
     def config(self) -> dict[str, Any]:

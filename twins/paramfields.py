@@ -8,7 +8,8 @@ without importing the twin base class that calls it.
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Iterable
+import functools
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -25,7 +26,7 @@ def pfield(default: Any, unit: str, lo: float | None = None, hi: float | None = 
     meta = {"unit": unit, "range": (lo, hi), "doc": doc, "source": source,
             "choices": tuple(choices) if choices is not None else None}
     if isinstance(default, (list, dict)):
-        return field(default_factory=lambda d=default: type(d)(d), metadata=meta)
+        return field(default_factory=functools.partial(type(default), default), metadata=meta)  # a fresh copy each
     return field(default=default, metadata=meta)
 
 
@@ -44,9 +45,9 @@ def param_info(params_cls: type) -> dict[str, ParamInfo]:
     """Field name → :class:`ParamInfo` for a parameter dataclass."""
     out = {}
     for f in dataclasses.fields(params_cls):
-        md = f.metadata or {}
+        md: Mapping[str, Any] = f.metadata or {}
         default = f.default if f.default is not dataclasses.MISSING else (
-            f.default_factory() if f.default_factory is not dataclasses.MISSING else None)  # type: ignore[misc]
+            f.default_factory() if f.default_factory is not dataclasses.MISSING else None)
         out[f.name] = ParamInfo(f.name, default, md.get("unit", ""), tuple(md.get("range", (None, None))),
                                 md.get("doc", ""), md.get("source", ""), md.get("choices"))
     return out

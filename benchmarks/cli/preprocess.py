@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import argparse
 import math
+from typing import Any
 
 from benchmarks.cli.common import add_data_args, emit_json, read_data
 from sysid.errors import ConfigError
@@ -64,7 +65,7 @@ def register(sub) -> None:
     p.set_defaults(func=run, steps=[])
 
 
-def _num(text: str, option: str, integer: bool = False, lo: float | None = None, hi: float | None = None) -> float:
+def _num(text: Any, option: str, integer: bool = False, lo: float | None = None, hi: float | None = None) -> float:
     try:
         v = float(text)
     except (TypeError, ValueError):

@@ -103,15 +103,14 @@ def run(args: argparse.Namespace) -> int:
         for s in res.skipped:
             what = " on ".join(x for x in (s.get("identifier"), s.get("dataset")) if x)
             print(f"skipped {what}: {s['reason']}")
-        for s in res.sysidentpy:
-            if s.get("status") == "ok":
-                print(
-                    f"{'sysidentpy':<12} {s['dataset']:<20} {s['test']:<22} "
-                    f"free-run RMSE {scoring._fmt(s['free_run']['rmse'])} "
-                    f"(R2 {scoring._fmt(s['free_run']['r2'])})  fit {s['fit_seconds']:.2f} s  {s['n_parameters']} terms"
-                )
+        for row in res.sysidentpy:
+            if row.get("status") == "ok":
+                print(f"{'sysidentpy':<12} {row['dataset']:<20} {row['test']:<22} "
+                      f"free-run RMSE {scoring._fmt(row['free_run']['rmse'])} "
+                      f"(R2 {scoring._fmt(row['free_run']['r2'])})  fit {row['fit_seconds']:.2f} s  "
+                      f"{row['n_parameters']} terms")
             else:
-                print(f"{'sysidentpy':<12} {s['dataset']:<20} {s['test']:<22} skipped: {s.get('reason', '')}")
+                print(f"{'sysidentpy':<12} {row['dataset']:<20} {row['test']:<22} skipped: {row.get('reason', '')}")
         if args.report:
             print(f"report -> {args.report}/score.md")
         if args.update_baselines:

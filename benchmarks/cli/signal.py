@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import argparse
 import math
+from typing import Any
 
 import numpy as np
 
@@ -194,7 +195,7 @@ def run(args: argparse.Namespace) -> int:
                "peak": float(np.max(np.abs(u))), "rms": float(np.sqrt(np.mean(u * u))),
                "crest_factor": signals.crest_factor(u)}
     info = {k: v for k, v in info.items() if k != "phases_rad"}  # the signal itself is saved; keep meta small
-    meta = {"signal": {"kind": args.kind, "params": params, "info": info,
+    meta: dict[str, Any] = {"signal": {"kind": args.kind, "params": params, "info": info,
                        **{k: summary[k] for k in ("peak", "rms", "crest_factor")}}}
     if "steps" in info:
         meta["segments"] = [

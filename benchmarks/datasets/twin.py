@@ -130,11 +130,11 @@ def generate_records(
 # The dissertation's estimation → validation pairs. Cantilever §3.1: thesis-multisine (80 000 samples at
 # 10 kHz) → thesis-sines. Acoustic §3.2 (second dataset): multisine → 1 ms linear chirp, both after the
 # preprocessing recipe (100-point moving average, resampling to 6.75 MHz, band-pass).
-_CANTILEVER = dict(twin="cantilever", est=("thesis-multisine", {}), tests={"thesis-sines": ("thesis-sines", {})},
-                   fs=10_000.0, init_samples=0)
+_CANTILEVER: dict[str, Any] = dict(twin="cantilever", est=("thesis-multisine", {}),
+                                   tests={"thesis-sines": ("thesis-sines", {})}, fs=10_000.0, init_samples=0)
 # The dissertation truncated to 2000 / 1000 samples because its tools could not take more; here the
 # estimation keeps 20 000 preprocessed samples (10 ms recorded) and the test one whole 1 ms sweep (6750).
-_ACOUSTIC = dict(
+_ACOUSTIC: dict[str, Any] = dict(
     twin="acoustic",
     est=("thesis-multisine", {"preprocess": True, "duration": 0.01, "keep": 20000}),
     tests={"thesis-chirp-1ms": ("thesis-chirp-1ms", {"preprocess": True, "duration": 0.002, "keep": 6750})},

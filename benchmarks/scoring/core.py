@@ -40,7 +40,8 @@ class _Scored:
     (max of the dataset's initialisation window and the model's own lags) and keeps the predictions."""
 
     def __init__(self, model, skip: int):
-        self.model, self.max_lag_, self.outputs = model, skip, {}
+        self.model, self.max_lag_ = model, skip
+        self.outputs: dict[Any, np.ndarray] = {}
 
     def predict(self, record: Record, horizon: int | None = 1) -> np.ndarray:
         y = self.model.predict(record, horizon=horizon)

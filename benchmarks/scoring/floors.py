@@ -217,7 +217,8 @@ def make_floors(runs: ScoreRun | dict[str, Any] | list, margin: float = DEFAULT_
     for m in (margin, seeded_margin):
         if not (_finite(m) and m >= 0):
             raise ConfigError(f"margin must be a finite number >= 0, got {m!r}")
-    base = json.loads(json.dumps(previous)) if previous else {"format": BASELINES_FORMAT, "modes": {}, "rules": []}
+    base: dict[str, Any] = (json.loads(json.dumps(previous)) if previous
+                            else {"format": BASELINES_FORMAT, "modes": {}, "rules": []})
     base["format"] = BASELINES_FORMAT
     values: dict[tuple[str, str, str], list[tuple[dict[str, Any], float | None]]] = {}
     draws: dict[tuple[str, str, str], list[float | None]] = {}  # single-seed free-run RMSEs of seeded rows

@@ -94,10 +94,10 @@ def merge_ensemble(
             bias = np.concatenate(bs)
         else:
             W, bias = np.concatenate(Ws, axis=1) / k, sum(bs) / k
-        parts += [W.reshape(-1), bias]
+        parts += [W.reshape(-1), bias]  # type: ignore[union-attr, list-item]  # sum() of arrays is an array
     if linear:
         Ls = [m[o:o + sizes[0] * sizes[-1]] for m in members]
-        parts.append(Ls[0].copy() if all(np.array_equal(L, Ls[0]) for L in Ls) else sum(Ls) / k)
+        parts.append(Ls[0].copy() if all(np.array_equal(L, Ls[0]) for L in Ls) else sum(Ls) / k)  # type: ignore[arg-type]
     return np.concatenate(parts), merged_sizes
 
 

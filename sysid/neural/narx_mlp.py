@@ -23,7 +23,7 @@ from __future__ import annotations
 import math
 import time
 import warnings
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from typing import Any
 
 import numpy as np
@@ -76,6 +76,11 @@ class _NeuralNARXBase(TorchFileSave, Identifier):
     """Shared fit/predict/persistence of the two NARX-MLP identifiers (training differs)."""
 
     name = "narx-mlp-base"
+    hidden: Sequence[int]
+    loss_history_: list[float]
+    selected_epoch_: int | list[int] | None  # one per ensemble member after an ensemble fit
+    selection_r2_: float | list[float] | None
+    _tail: Record | None
 
     # ------------------------------------------------------------------ checks
     def _check_params(self, check_device: bool = True) -> None:
@@ -231,6 +236,7 @@ class _NeuralNARXBase(TorchFileSave, Identifier):
         for ep in progress(range(int(epochs)), desc=f"{self.name} one-step", unit="epoch"):
             perm = torch.randperm(M, generator=gen).to(dev)
             losses: list[torch.Tensor] = []
+            batches: Iterable[tuple[torch.Tensor, torch.Tensor]]
             if data.X is not None:
                 batches = zip(data.X[perm].split(B), data.Y[perm].split(B))
             else:

@@ -269,17 +269,18 @@ class RNNStateSpace(TorchFileSave, Identifier):
         self.device_used_ = str(device)
         self.fit_seconds_ = time.perf_counter() - t0
         self.diverged_at_ = None
-        self._net64 = None
+        self._net64: _Net | None = None
         return self
 
     # ------------------------------------------------------------------ predict
     def _cpu_net(self) -> _Net:
-        if getattr(self, "_net64", None) is None:
+        net: _Net | None = getattr(self, "_net64", None)
+        if net is None:
             net = self._build(self.n_inputs_, self.n_outputs_).to(torch.float64)
             net.load_state_dict({k: torch.as_tensor(v, dtype=torch.float64) for k, v in self.state_dict_.items()})
             net.eval()
             self._net64 = net
-        return self._net64
+        return net
 
     def predict(self, record: Record, horizon: int | None = 1) -> np.ndarray:
         """Free run (``None``) or k-step-ahead at every sample (``horizon=k``; 1 = one step). Shaped like y."""

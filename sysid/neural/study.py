@@ -153,7 +153,7 @@ def worker_loop(spec, url: str, study_name: str, est, val, target: int, on_trial
 
     study = open_study(spec, url, study_name, create=False)
     failed: dict[str, int] = {}
-    state = {"clash": False}
+    state: dict[str, Any] = {"clash": False}
     objective = _make_objective(spec, est, val, claim, target=target, executor=executor, state=state)
     base = _make_sampler(spec)
     rng = random.Random(f"{HOST}:{os.getpid()}:{time.time_ns()}")
@@ -230,7 +230,7 @@ def run_sweep(spec, est, val, storage: str | None = None, study: str = "piezotwi
     try:  # the project's one switch for bars (off without a terminal or with --quiet), where it exists
         from sysid.progress import progress as progress_bar
     except ImportError:
-        def progress_bar(total, initial, unit, desc, show, leave):
+        def progress_bar(total, initial, unit, desc, show, leave):  # type: ignore[misc]  # fallback, same use
             return tqdm(total=total, initial=initial, unit=unit, desc=desc, disable=not (show and sys.stderr.isatty()),
                         file=sys.stderr, dynamic_ncols=True, leave=leave)
     bar = progress_bar(total=target, initial=min(len(done_keys(st)), target), unit="config",

@@ -25,6 +25,7 @@ the output (B, T, ny) is ŷ(k) … ŷ(k+T-1).
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import cast
 
 import numpy as np
 import torch
@@ -93,7 +94,7 @@ class SubnetModel(torch.nn.Module):
         f, nx, T = self.f, self.nx, useq.shape[1]
         out = []
         if f.net is not None and len(f.net) == 3:
-            first, act, last = f.net[0], f.net[1], f.net[2]
+            first, act, last = cast(torch.nn.Linear, f.net[0]), f.net[1], cast(torch.nn.Linear, f.net[2])
             # input shares for all steps at once; unbind (not indexing) keeps the backward pass O(T)
             lin_u = (torch.matmul(useq, f.linear.weight[:, nx:].t()) + (f.linear.bias + last.bias)).unbind(1)
             hid_u = (torch.matmul(useq, first.weight[:, nx:].t()) + first.bias).unbind(1)

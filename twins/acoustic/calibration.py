@@ -181,7 +181,7 @@ def calibrate_acoustic(twin, data: Record, val: Record | None = None, names: Ite
                                      f"{f.size} frequencies): {res.message}")
 
 
-def _score(tw, rec: Record, model_db, target) -> dict[str, float]:
+def _score(tw, rec: Record, model_db, target) -> dict[str, Any]:
     if is_frequency_record(rec):
         gated = bool(rec.meta.get("protocol_options", {}).get("gated", False))
         yh = 20 * np.log10(np.abs(tw.frequency_response(rec.u, include_amplifier=False, direct_only=gated)) + 1e-300)

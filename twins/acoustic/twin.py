@@ -272,11 +272,12 @@ class AcousticTwin(Twin):
         spec[: f.size] = 2.0 * H * win
         env = np.abs(np.fft.ifft(spec))
         i = int(np.argmax(env))
-        if 0 < i < n - 1:
+        peak = float(i)
+        if 0 < i < n - 1:  # parabolic interpolation of the peak
             a, b, c = env[i - 1], env[i], env[i + 1]
             den = a - 2 * b + c
-            i = i + (0.5 * (a - c) / den if den != 0 else 0.0)
-        return float(i / fs)
+            peak = i + (0.5 * (a - c) / den if den != 0 else 0.0)
+        return float(peak / fs)
 
     def response_duration_direct(self) -> float:
         g = geometry(self.params, self.effects)

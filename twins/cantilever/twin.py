@@ -62,7 +62,7 @@ class CantileverTwin(Twin):
 
     def __init__(self, params: Any = None, effects: Iterable[str] | None = None, seed: int | None = 0):
         super().__init__(params, effects, seed)
-        self._cache: dict[float, dict[str, np.ndarray]] = {}
+        self._cache: dict[float, dict[str, Any]] = {}
 
     # ------------------------------------------------------------------ derived quantities
     def pi_weights(self) -> tuple[np.ndarray, float, np.ndarray]:
@@ -207,7 +207,7 @@ class CantileverTwin(Twin):
         fcfg[K.F_Q] = p.quant_um
         fcfg[K.F_RATEA] = math.exp(-h / p.rate_tau_s)
         cr = np.array([_first_order_foh(tau, T) for tau in taus]).reshape(-1, 3)
-        cfg = dict(icfg=icfg, fcfg=fcfg, Phi=np.ascontiguousarray(Phi), G0=G0, G1=G1, Cout=C,
+        cfg: dict[str, Any] = dict(icfg=icfg, fcfg=fcfg, Phi=np.ascontiguousarray(Phi), G0=G0, G1=G1, Cout=C,
                    cr_a=cr[:, 0].copy(), cr_b0=cr[:, 1].copy(), cr_b1=cr[:, 2].copy(),
                    cr_g=np.full(taus.size, p.creep_per_decade), pi_r=r, pi_p=np.concatenate(([p0], pw)),
                    buf_len=D + 2, M=M)

@@ -122,7 +122,8 @@ class _numba_threads:
     """Context manager: numba's thread count for the current thread (thread-local in numba), restored after."""
 
     def __init__(self, n: int | None):
-        self.n, self.prev = n, None
+        self.n = n
+        self.prev: int | None = None
 
     def __enter__(self):
         if self.n is not None:
@@ -130,7 +131,9 @@ class _numba_threads:
                 import numba
 
                 self.prev = numba.get_num_threads()
-                numba.set_num_threads(max(1, min(int(self.n), numba.config.NUMBA_NUM_THREADS)))
+                # NUMBA_NUM_THREADS is set on numba.config at import from the environment, unseen by the checker
+                cap = numba.config.NUMBA_NUM_THREADS  # type: ignore[attr-defined]
+                numba.set_num_threads(max(1, min(int(self.n), cap)))
             except ImportError:  # pragma: no cover - numba is a dependency; without it nothing to set
                 self.prev = None
         return self
@@ -224,7 +227,7 @@ def _fit_baseline(current: Twin, core0: list[str], inp: _Inputs, opts: DiagnoseO
     else:
         res = current.calibrate(est, val=inp.val, names=core0)
     fitted = deterministic(res.twin)
-    info = {"fitted": res.fitted, "stderr": res.stderr}
+    info: dict[str, Any] = {"fitted": res.fitted, "stderr": res.stderr}
 
     def cost(tw: Twin) -> float:
         return sse(est.y, simulate(tw, est), skip)

@@ -84,7 +84,8 @@ def follow_record(twin: Twin, est: Record, val: Record) -> tuple[Twin, list[str]
         h = _chosen_substep(tw, est, val)
         if h > cur * (1 + 1e-9):
             tw = tw.with_params(max_substep_s=h)
-            notes.append(f"max_substep_s {cur:g} -> {h:.3g} s: {tw.substeps(est.fs)} sub-steps per sample "
+            steps = tw.substeps(est.fs)  # type: ignore[attr-defined]  # substep_followed: a cantilever twin
+            notes.append(f"max_substep_s {cur:g} -> {h:.3g} s: {steps} sub-steps per sample "
                          "suffice for this record's bandwidth (FOH error bound ≤ 1e-4 of the span)")
     return tw, notes
 

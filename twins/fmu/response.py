@@ -36,7 +36,7 @@ import scipy.fft
 
 __all__ = ["impulse_response", "sparse_segments", "plan", "ResponseCore", "prepare_response_core", "check_accuracy"]
 
-DEFAULTS = {"energy_tol": 1e-14, "block_min": 64, "block_max": 8192, "merge_gap": 1024}
+DEFAULTS: dict[str, Any] = {"energy_tol": 1e-14, "block_min": 64, "block_max": 8192, "merge_gap": 1024}
 
 
 def impulse_response(twin, fs: float, tail_tol: float = 1e-12, n_min: int = 2 ** 15,
@@ -167,7 +167,7 @@ class ResponseCore:
         self.acc = np.zeros(self.n_acc)
         self.apos = 0
         self.rng = np.random.default_rng(self.seed)
-        self._u = None
+        self._u: float | None = None
         self._a = 0.0
 
     def step(self, u: float) -> float:

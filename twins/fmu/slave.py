@@ -232,7 +232,7 @@ class TwinSlave(FastIO, Fmi2Slave):
             if unit:
                 self._units.add(unit)
         self._check_io_refs()
-        self._step_samples = (None, 0)  # (communication step, samples per step) last checked
+        self._step_samples: tuple[float | None, int] = (None, 0)  # (communication step, samples per step) last checked
         for v in cfg["variables"]:
             name = v["name"]
             self._values[name] = v["start"]

@@ -78,13 +78,13 @@ def product_bands(e: np.ndarray, u: np.ndarray, fs: float) -> dict[str, Any]:
         sel = (f >= lo) & (f <= hi)
         return float(np.mean(p[sel])) if sel.sum() >= 2 else float("nan")
 
-    bands = {
+    bands: dict[str, float] = {
         "in": dens(f0 + guard, f1 - guard),
         "diff": dens(max(0.05 * b, f[1] if f.size > 1 else 0.0), b - guard),
         "sum": dens(2 * f0 + guard, min(2 * f1, 0.98 * nyq)),
-        "skirt": np.nanmean(
+        "skirt": float(np.nanmean(
             [dens(2 * f0 - f1 + guard, f0 - guard), dens(f1 + guard, min(2 * f1 - f0, 2 * f0) - guard)]
-        ),
+        )),
     }
     vals = [v for v in bands.values() if np.isfinite(v) and v > 0]
     if len(vals) < 3:
