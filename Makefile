@@ -7,14 +7,14 @@ STAMP  := $(VENV)/.installed
 # on a 2-core machine (measured 9 ms vs <1 ms per 8x8 expm when both cores are busy).
 export OPENBLAS_NUM_THREADS ?= 1
 
-.PHONY: run run-quick test test-all bench fmus docs install clean floors
+.PHONY: run run-quick test test-all lint bench fmus docs install clean floors
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install -q --upgrade pip
 	# CPU build of torch first: an unpinned torch requirement would pull several GB of CUDA packages.
 	$(PY) -m pip install -q torch==2.13.0
-	$(PY) -m pip install -q -e ".[test]"
+	$(PY) -m pip install -q -e ".[test,lint]"
 	touch $(STAMP)
 
 install: $(STAMP)
@@ -30,6 +30,12 @@ test: $(STAMP)
 
 test-all: $(STAMP)
 	$(PY) -m pytest -q -m "not perf"
+
+# The guards of every change (configuration in pyproject.toml, reasons in docs/development.md): ruff's lint rules
+# and mypy over the library and the CLI. `ruff format` is not adopted yet (docs/development.md says why).
+lint: $(STAMP)
+	$(VENV)/bin/ruff check .
+	$(VENV)/bin/mypy
 
 bench: $(STAMP)
 	mkdir -p docs/perf
