@@ -127,7 +127,7 @@ def _narmax_case(rec: Record, orders: dict[str, Any], n_est: int) -> dict[str, A
         ef = (r.y - yf)[skip:]
         ct1 = correlation_tests(e1, r.u[skip:], max_lag=20)
         ctf = correlation_tests(ef, r.u[skip:], max_lag=20)
-        a = ft.analyse(r.u[skip:], r.y[skip:], yf[skip:], r.fs, {})
+        a = ft.analyse(r.u[skip:], r.output[skip:], yf[skip:], r.fs, {})
         out[part] = {
             "r2_free_run": r2(r.y, yf, skip), "r2_one_step": r2(r.y, y1, skip),
             "tests_one_step": ft.tests_summary(ct1), "tests_free_run": ft.tests_summary(ctf),

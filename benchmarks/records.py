@@ -206,7 +206,7 @@ def _record(r: dict[str, Any]) -> dict[str, Any] | None:
     of the measurement, so a corrected or added one shows without refitting), else as the row stored it."""
     from benchmarks.datasets.references import references_for
 
-    best = (references_for(r.get("dataset", "")).get(r.get("test"), {}).get("best_published")
+    best = (references_for(r.get("dataset", "")).get(r.get("test", ""), {}).get("best_published")
             or (r.get("references") or {}).get("best_published"))
     return {k: best[k] for k in ("value", "unit", "model")} if best else None
 

@@ -42,10 +42,10 @@ def closed_loop_correlation(data: Record | Sequence[Record], max_lag: int = CORR
                             ar_order: int = AR_ORDER) -> dict[str, Any]:
     """Largest |corr(ε_u(t), y(t − k))|, k = 1..max_lag, over input/output pairs (module docstring), its lag and the
     threshold CORR_SIGMAS/√N."""
-    best = {"rho": 0.0, "lag": None, "threshold": math.inf}
+    best: dict[str, Any] = {"rho": 0.0, "lag": None, "threshold": math.inf}
     for rec in _recs(data):
         u = rec.u.reshape(len(rec), -1)
-        y = rec.y.reshape(len(rec), -1)
+        y = rec.output.reshape(len(rec), -1)
         N = len(rec)
         p = min(ar_order, max(N // 10, 1))
         if N <= p + max_lag + 10:

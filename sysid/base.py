@@ -65,7 +65,7 @@ def check_records(records: Sequence[Record], max_lag: int, min_rows: int, what: 
         if rec.n_inputs != n_in or rec.n_outputs != n_out:
             raise DataError(f"{rec.source}: {rec.n_inputs} inputs / {rec.n_outputs} outputs, but the first record has "
                             f"{n_in} / {n_out}")
-        for name, arr in (("u", rec.u), ("y", rec.y)):
+        for name, arr in (("u", rec.u), ("y", rec.output)):
             if not np.isfinite(arr).all():
                 i = int(np.flatnonzero(~np.isfinite(arr.reshape(arr.shape[0], -1)).any(axis=1))[0])
                 raise DataError(f"{rec.source}: {name} has non-finite (NaN/inf) samples, first at index {i}")
@@ -82,7 +82,7 @@ def check_records(records: Sequence[Record], max_lag: int, min_rows: int, what: 
             name = "u" if u_all.shape[1] == 1 else f"u{ch + 1}"
             raise DataError(f"{records[0].source}: input {name} is constant ({u_all[0, ch]:g}); "
                             "a constant input does not excite the system, nothing to identify")
-    y_all = np.concatenate([r.y.reshape(len(r), -1) for r in records])
+    y_all = np.concatenate([r.output.reshape(len(r), -1) for r in records])
     for ch in range(y_all.shape[1]):
         if np.ptp(y_all[:, ch]) == 0.0:
             name = "y" if y_all.shape[1] == 1 else f"y{ch + 1}"
@@ -309,9 +309,9 @@ class Identifier(ABC):
         rec = as_predict_record(self, data, y, fs)
         rec.require_output()
         yh = self.predict(rec, horizon)
-        return metrics.score(rec.y, np.asarray(yh).reshape(rec.y.shape), skip=int(getattr(self, "max_lag_", 0) or 0))[
-            "r2"
-        ]
+        y_meas = rec.output
+        skip = int(getattr(self, "max_lag_", 0) or 0)
+        return metrics.score(y_meas, np.asarray(yh).reshape(y_meas.shape), skip=skip)["r2"]
 
     def save(self, path: str | Path) -> Path:
         """Write the fitted model to ``path`` (atomically): the npz container, or JSON for ``.json``

@@ -111,7 +111,7 @@ def compare_report(models: Sequence[Any], names: Sequence[str], record: Record, 
 
     out = Path(out_dir)
     skip = rows[0]["skip"] if rows else 0
-    y = record.y if record.y.ndim == 1 else record.y[:, 0]
+    y = record.output if record.output.ndim == 1 else record.output[:, 0]
     u = record.u if record.u.ndim == 1 else record.u[:, 0]
     labels = []
     for row in rows:

@@ -49,7 +49,7 @@ def evaluate(model, data: Record | Sequence[Record], horizons: dict[str, int | N
             if getattr(model, "diverged_at_", None) is not None and diverged is None:
                 diverged = int(model.diverged_at_)
             ys.append(np.asarray(rec.y, dtype=float)[skip:])
-            yhs.append(yh.reshape(np.shape(rec.y))[skip:])
+            yhs.append(yh.reshape(np.shape(rec.output))[skip:])
         y = np.concatenate(ys)
         yh = np.concatenate(yhs)
         s = metrics.score(y, yh)

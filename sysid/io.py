@@ -234,7 +234,7 @@ def _read_npz(p: Path, src: str):
     return u, y, fs, units, meta
 
 
-def _check_orientation(x: Any, name: str, src: str) -> np.ndarray:
+def _check_orientation(x: Any, name: str | None, src: str) -> np.ndarray:
     """Samples run along the first axis; a 2-D array with fewer rows than columns is refused, never
     transposed silently (a (1, N) array would be 1 sample of N channels)."""
     a = np.asarray(x)
@@ -255,8 +255,8 @@ def _check_meta(meta: dict, units: Any, src: str) -> None:
         if key in meta and not isinstance(meta[key], list):
             raise DataError(f"{src}: meta {key!r} must be a list, got {type(meta[key]).__name__}")
     for i, seg in enumerate(meta.get("segments", [])):
-        if not (isinstance(seg, dict) and all(isinstance(seg.get(k), int) and not isinstance(seg.get(k), bool)
-                                              and seg.get(k) >= 0 for k in ("start", "stop"))):
+        if not (isinstance(seg, dict) and all(isinstance(v := seg.get(k), int) and not isinstance(v, bool) and v >= 0
+                                              for k in ("start", "stop"))):
             raise DataError(f"{src}: meta 'segments'[{i}] must be an object with integer start and stop >= 0")
     for key in ("provenance", "signal", "twin_config"):
         if key in meta and not isinstance(meta[key], dict):

@@ -53,7 +53,7 @@ def delay_estimate(data: Record | Sequence[Record], max_delay: int = 30, n_extra
     yy, n = 0.0, 0
     for rec in recs:
         u = rec.u.reshape(len(rec), -1)
-        y = rec.y.reshape(len(rec), -1)[:, 0]
+        y = rec.output.reshape(len(rec), -1)[:, 0]
         if len(rec) <= M:
             raise DataError(f"{rec.source}: {len(rec)} samples are too few for a delay estimate over {M} lags")
         for t0 in range(M - 1, len(rec), CHUNK):

@@ -66,7 +66,7 @@ class PolynomialModel(Identifier):
     def fit(self, data: Record | Sequence[Record]) -> PolynomialModel:
         records = as_record_list(data)
         self._fit_records(records)
-        y_max = max(float(np.max(np.abs(r.y))) for r in records)
+        y_max = max(float(np.max(np.abs(r.output))) for r in records)
         self.y_bound_ = DIVERGENCE_FACTOR * max(y_max, 1e-300)
         self.n_outputs_ = records[0].n_outputs
         self.n_inputs_ = records[0].n_inputs
@@ -117,7 +117,7 @@ class PolynomialModel(Identifier):
                             f"on {self.n_inputs_} / {self.n_outputs_}")
         m = self.compiled()
         u = record.u.reshape(len(record), -1)
-        y = record.y.reshape(len(record), -1)
+        y = record.output.reshape(len(record), -1)
         self.diverged_at_ = None
         if horizon is None:
             yhat, bad = sim.free_run(m, u, y, self.y_bound_)
@@ -138,7 +138,7 @@ class PolynomialModel(Identifier):
             what = "free run" if horizon is None else f"{horizon}-step prediction"
             warnings.warn(f"{self.name}: {what} diverged at sample {bad} (beyond ±{self.y_bound_:.3g} or non-finite); "
                           "the remaining samples are nan", DivergenceWarning, stacklevel=2)
-        return yhat.reshape(record.y.shape)
+        return yhat.reshape(record.output.shape)
 
     def residuals(self, record: Record) -> np.ndarray:
         """One-step residuals e(t) = y(t) − ŷ(t|t−1) (eq. 2-16/2-30), zeros for the first max_lag_ samples."""
@@ -284,7 +284,7 @@ def _recursive_residuals_impl(model: PolynomialModel, records, s, terms_all, the
     m = model.compiled()
     out = []
     for rec in records:
-        _, e = sim.one_step(m, rec.u.reshape(len(rec), -1), rec.y.reshape(len(rec), -1))
+        _, e = sim.one_step(m, rec.u.reshape(len(rec), -1), rec.output.reshape(len(rec), -1))
         out.append(e)
     model._compiled = None
     return out

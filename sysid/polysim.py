@@ -174,7 +174,7 @@ class NARXPolySim(NARXPoly):
         terms = self.terms_
         sizes = [len(t) for t in terms]
         theta0 = np.concatenate([np.asarray(t, dtype=float) for t in self.theta_])
-        ys = [r.y.reshape(len(r), -1) for r in records]
+        ys = [r.output.reshape(len(r), -1) for r in records]
         us = [r.u.reshape(len(r), -1) for r in records]
         y_all = np.concatenate(ys)
         scale = np.where(y_all.std(axis=0) > 0, y_all.std(axis=0), 1.0)

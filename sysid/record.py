@@ -141,9 +141,16 @@ class Record:
 
     def require_output(self) -> Record:
         """Raise :class:`DataError` unless the record has an output ``y``; return self."""
+        _ = self.output  # DataError on an input-only record
+        return self
+
+    @property
+    def output(self) -> np.ndarray:
+        """The output ``y`` of a record that must have one: :class:`DataError` naming the record when it has none
+        (an input-only record). Code that needs ``y`` reads it here, so the type checker knows it is an array."""
         if self.y is None:
             raise DataError(f"{self.source}: record has no output y (input-only record)")
-        return self
+        return self.y
 
     # ------------------------------------------------------------------ derived records
     def replace(self, **changes: Any) -> Record:

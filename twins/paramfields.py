@@ -13,6 +13,8 @@ from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
+from sysid.errors import ConfigError
+
 __all__ = ["pfield", "ParamInfo", "param_info"]
 
 
@@ -39,6 +41,13 @@ class ParamInfo:
     doc: str
     source: str
     choices: tuple[Any, ...] | None
+
+    def bounds(self) -> tuple[float, float]:
+        """The documented range [lo, hi] as floats; :class:`ConfigError` for a parameter without one."""
+        lo, hi = self.range
+        if lo is None or hi is None:
+            raise ConfigError(f"parameter {self.name} has no documented range [lo, hi]")
+        return float(lo), float(hi)
 
 
 def param_info(params_cls: type) -> dict[str, ParamInfo]:

@@ -25,7 +25,7 @@ def seed_range(text: str) -> list[int]:
         lo, hi = (int(parts[0]), int(parts[-1])) if len(parts) in (1, 2) else (None, None)
     except ValueError:
         lo = hi = None
-    if lo is None or lo < 0 or hi < lo or hi - lo >= 1000:
+    if lo is None or hi is None or lo < 0 or hi < lo or hi - lo >= 1000:
         raise argparse.ArgumentTypeError(f"expected seeds as A-B with 0 <= A <= B < A + 1000, got {text!r}")
     return list(range(lo, hi + 1))
 

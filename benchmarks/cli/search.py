@@ -99,9 +99,7 @@ def run(args: argparse.Namespace) -> int:
     url = storage_url(args.storage, args.study)
     summary.update({"identifier": args.identifier, "study": args.study, "storage": url, "sampler": args.sampler,
                     "repeats": args.repeats, "grid": spec.grid})
-    runs = None
-    if args.export or args.plot:
-        runs = collect(url, args.study)
+    runs = collect(url, args.study) if args.export or args.plot else []
     if args.export:
         summary["runs_file"] = str(export_jsonl(runs, args.export))
     if args.plot and summary["best"] is not None:

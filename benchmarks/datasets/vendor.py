@@ -68,7 +68,8 @@ def vendor(name: str, shared_data: Path, out_dir: Path = lab.DATA_DIR) -> list[P
         np.savez_compressed(path, u=np.asarray(rec.u, dtype=np.float64), y=np.asarray(rec.y, dtype=np.float64),
                             fs=np.float64(rec.fs), meta=np.array(json.dumps(meta)))
         written.append(path)
-        lines.append(f"  {path.name}: n={len(rec)}, fs={rec.fs:g} Hz, u {sha256_array(rec.u)}, y {sha256_array(rec.y)}")
+        lines.append(f"  {path.name}: n={len(rec)}, fs={rec.fs:g} Hz, u {sha256_array(rec.u)}, "
+                     f"y {sha256_array(rec.output)}")
     for pattern in COPY_PATTERNS:
         for f in sorted(src.glob(pattern)):
             shutil.copyfile(f, dst / f.name)

@@ -107,7 +107,7 @@ def calibrate_acoustic(twin, data: Record, val: Record | None = None, names: Ite
     """Fit ``names`` (default ``twin.CALIBRATION_PARAMS``) of ``twin`` to ``data`` (see module docstring)."""
     names = list(names) if names is not None else list(twin.CALIBRATION_PARAMS)
     check_calibration_data(data, names, "acoustic calibration")
-    if data.u.ndim != 1 or data.y.ndim != 1:
+    if data.u.ndim != 1 or data.output.ndim != 1:
         raise ConfigError("acoustic calibration: data must be SISO (one drive voltage, one received voltage)")
     freq_mode = is_frequency_record(data)
     if not freq_mode and not set(names) <= MAGNITUDE_PARAMS:

@@ -187,8 +187,8 @@ def _prepare(twin: Twin, data: Record, val: Record | None, opts: DiagnoseOptions
     core = numeric_fields(twin, core)
     opts.say(f"diagnose {twin.name}: {len(data)} + {len(val)} samples" + "".join(f"; {n}" for n in range_notes))
     given = deterministic(twin)
-    saturation = {"estimation": ft.saturation_rails(data.y, simulate(given, data)),
-                  "validation": ft.saturation_rails(val.y, simulate_val(given, data, val))}
+    saturation = {"estimation": ft.saturation_rails(data.output, simulate(given, data)),
+                  "validation": ft.saturation_rails(val.output, simulate_val(given, data, val))}
     data, val = with_rails(data, saturation["estimation"]), with_rails(val, saturation["validation"])
     noise = unx.noise_level(np.concatenate([data.u, val.u]), np.concatenate([data.y, val.y]), data.fs)
     return _Inputs(twin, given, data, val, core, split_info, range_notes, saturation, t_start, substep_auto, noise)
@@ -230,7 +230,7 @@ def _fit_baseline(current: Twin, core0: list[str], inp: _Inputs, opts: DiagnoseO
     info: dict[str, Any] = {"fitted": res.fitted, "stderr": res.stderr}
 
     def cost(tw: Twin) -> float:
-        return sse(est.y, simulate(tw, est), skip)
+        return sse(est.output, simulate(tw, est), skip)
 
     # parameters that end at a bound: the bound widened once and the fit retried
     fitted, wide_info = realdata.refit_at_bounds(fitted, core0, est, cost, simulate, opts.say)

@@ -39,7 +39,7 @@ class _Search:
 
     def cost(self, vals: dict[str, Any]) -> float:
         try:
-            return sse(self.est.y, simulate(self.tw.with_params(**vals), self.est), self.skip)
+            return sse(self.est.output, simulate(self.tw.with_params(**vals), self.est), self.skip)
         except (ConfigError, DataError, ValueError, FloatingPointError):
             return float("inf")
 
@@ -51,7 +51,7 @@ class _Search:
         return c
 
     def range(self, f: str) -> tuple[float, float]:
-        lo, hi = (float(v) for v in self.info[f].range)
+        lo, hi = self.info[f].bounds()
         return lo, hi
 
     def is_int(self, f: str) -> bool:
@@ -94,7 +94,7 @@ def _shift_guesses(s: _Search, fields: list[str]) -> dict[str, list[float]]:
     i0 = max(int(big[0]) - 16, 0) if big.size else 0
     win = slice(i0, min(m, i0 + max(128, len(est) // 16)))
     shifts = ft.delay_candidates(
-        part.y[win], y0[win], part.fs, max_shift_s=max(32, (win.stop - win.start) // 8) / part.fs
+        part.output[win], y0[win], part.fs, max_shift_s=max(32, (win.stop - win.start) // 8) / part.fs
     )
     if not (shifts and max(abs(v) for v in shifts) * est.fs > 0.02):
         return lin_guess
@@ -199,7 +199,7 @@ def continuation_scan(tw: Twin, est: Record, vals: dict[str, Any], f: str, lo: f
 
     def cost_on(part: Record, v: float) -> float:
         try:
-            return sse(part.y, simulate(tw.with_params(**{**vals, f: float(v)}), part), min(skip, len(part) - 1))
+            return sse(part.output, simulate(tw.with_params(**{**vals, f: float(v)}), part), min(skip, len(part) - 1))
         except (ConfigError, DataError, ValueError, FloatingPointError):
             return float("inf")
 

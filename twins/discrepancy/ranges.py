@@ -156,7 +156,7 @@ def widened(twin: Twin, hits: list[dict[str, Any]]) -> tuple[Twin, list[dict[str
         n = h["param"]
         if info[n].unit in ("1", "") or n in new_ranges:
             continue
-        lo, hi = float(info[n].range[0]), float(info[n].range[1])
+        lo, hi = info[n].bounds()
         if lo > 0:
             lo2, hi2 = (lo / 10.0, hi) if h["side"] == "lower" else (lo, hi * 10.0)
         else:

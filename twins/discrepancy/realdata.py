@@ -63,7 +63,7 @@ def final_verdict(val: Record, yhat_val: np.ndarray, causes: list[dict[str, Any]
     """(verdict, residual against noise, parameters at a bound): ``unexplained`` when the validation residual
     after the extension is far above ``noise`` (:func:`.unexplained.noise_level` of both records, measured from
     the data), else ``discrepancy`` with causes or ``none``."""
-    beyond = unx.judge(val.u, val.y, yhat_val, val.fs, skip, noise=noise)
+    beyond = unx.judge(val.u, val.output, yhat_val, val.fs, skip, noise=noise)
     verdict = "unexplained" if beyond["outside"] else ("discrepancy" if causes else "none")
     names = set(calib_info.get("fitted", {})) | {k for c in causes for k in c.get("params", {})}
     at_bound = rg.at_bounds(twin, sorted(names)) + [
