@@ -239,7 +239,8 @@ class N4SID(Identifier):
                 for c0 in range(a, b, int(self.chunk)):
                     c1 = min(c0 + int(self.chunk), b)
                     H = _hankel_rows(u, y, i, c0, c1)
-                    Rs[s] = _qr_r(H if Rs[s] is None else np.vstack([Rs[s], H]))
+                    prev = Rs[s]
+                    Rs[s] = _qr_r(H if prev is None else np.vstack([prev, H]))
             g0 += J
         return [np.zeros((0, width)) if R is None else R for R in Rs]
 
@@ -309,7 +310,7 @@ class N4SID(Identifier):
         width = 2 * i * (m + l)
         check_records(records, 2 * i, width * 2, self.name)
         us = [r.u.reshape(len(r), -1).astype(float) for r in records]
-        ys = [r.y.reshape(len(r), -1).astype(float) for r in records]
+        ys = [r.output.reshape(len(r), -1).astype(float) for r in records]
         su = np.sqrt(np.mean(np.vstack(us) ** 2, axis=0))
         sy = np.sqrt(np.mean(np.vstack(ys) ** 2, axis=0))
         Rs = self._r_factors([u / su for u in us], [y / sy for y in ys], i, K)
@@ -376,11 +377,11 @@ class N4SID(Identifier):
         self._check_fitted()
         check_prediction(self, record, horizon)
         u = record.u.reshape(len(record), -1)
-        y = record.y.reshape(len(record), -1)
+        y = record.output.reshape(len(record), -1)
         yhat = self._simulate(u, y)
         L = min(self.max_lag_, len(y))
         yhat[:L] = y[:L]
-        return stop_at_divergence(self, yhat, "simulation").reshape(record.y.shape)
+        return stop_at_divergence(self, yhat, "simulation").reshape(record.output.shape)
 
     # ------------------------------------------------------------------ uncertainty and reporting
     def _jack_std(self, est: np.ndarray, reps: list[np.ndarray]) -> np.ndarray:
@@ -424,7 +425,7 @@ class N4SID(Identifier):
         the polynomial models' Monte-Carlo band)."""
         self._check_fitted()
         u = record.u.reshape(len(record), -1)
-        y = record.y.reshape(len(record), -1)
+        y = record.output.reshape(len(record), -1)
         base = self._simulate(u, y)
         reps = []
         for rep in self.replicates_:
@@ -432,7 +433,7 @@ class N4SID(Identifier):
                 yk = self._simulate(u, y, *rep)
             if np.isfinite(yk).all():
                 reps.append(yk)
-        return base.reshape(record.y.shape), self._jack_std(base, reps).reshape(record.y.shape)
+        return base.reshape(record.output.shape), self._jack_std(base, reps).reshape(record.output.shape)
 
     def describe(self) -> dict[str, Any]:
         d = super().describe()
