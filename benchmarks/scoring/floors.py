@@ -172,10 +172,10 @@ def _check_rule(rule: dict[str, Any], by_key: dict[tuple[str, str, str], dict[st
     elif kind == "beats_value":
         ident, dname = rule["identifier"], rule["dataset"]
         for test, value in rule["tests"].items():
-            r = by_key.get((ident, dname, test))
-            if r is None:
+            row = by_key.get((ident, dname, test))
+            if row is None:
                 continue
-            rmse = (r.get("free_run") or {}).get("rmse")
+            rmse = (row.get("free_run") or {}).get("rmse")
             if not (_finite(rmse) and rmse < value):
                 out.append(
                     f"{ident} on {dname}/{test}: free-run RMSE {_fmt(rmse)} "
@@ -245,10 +245,12 @@ def make_floors(runs: ScoreRun | dict[str, Any] | list, margin: float = DEFAULT_
                             "reason": f"diverged or failed in {bad} of the measured runs/seeds: no stable floor"})
             floors.get(ident, {}).get(dname, {}).pop(test, None)
             continue
-        worst, best = max(v for _, v in vals), min(v for _, v in vals)
+        rmses = [v for _, v in vals if v is not None]  # every one (a None was dropped above)
+        seed_rmses = [x for x in singles if x is not None]
+        worst, best = max(rmses), min(rmses)
         ceiling = worst * (1.0 + margin)
         if singles:  # scored as a median over seeds: a new CPU redraws the seeds
-            ceiling = max(worst * (1.0 + seeded_margin), max(singles) * (1.0 + margin))
+            ceiling = max(worst * (1.0 + seeded_margin), max(seed_rmses) * (1.0 + margin))
         floor = {
             "max_rmse": float(f"{ceiling:.4g}"),
             "measured": float(f"{worst:.6g}"),
@@ -258,9 +260,8 @@ def make_floors(runs: ScoreRun | dict[str, Any] | list, margin: float = DEFAULT_
         if len(vals) > 1:
             floor.update(measured_min=float(f"{best:.6g}"), runs=len(vals))
         if singles:
-            floor.update(
-                seeds=rows[0]["seeds"], worst_single_seed=float(f"{max(singles):.6g}"), single_seed_draws=len(singles)
-            )
+            floor.update(seeds=rows[0]["seeds"], worst_single_seed=float(f"{max(seed_rmses):.6g}"),
+                         single_seed_draws=len(singles))
         floors.setdefault(ident, {}).setdefault(dname, {})[test] = floor
     base.setdefault("dropped", {})[mode] = sorted(
         dropped, key=lambda e: (e["identifier"], e["dataset"], e.get("test", "*"))
