@@ -7,7 +7,7 @@ STAMP  := $(VENV)/.installed
 # on a 2-core machine (measured 9 ms vs <1 ms per 8x8 expm when both cores are busy).
 export OPENBLAS_NUM_THREADS ?= 1
 
-.PHONY: run run-quick test test-all bench fmus docs install clean floors lock
+.PHONY: run run-quick test test-all lint bench fmus docs install clean floors lock
 
 # Exact versions: requirements.lock holds every package of the environment the floors and stored rows were
 # measured with (docs/regression-check.md); `make lock` refreshes it from pyproject.toml.
@@ -48,6 +48,12 @@ test: $(STAMP)
 
 test-all: $(STAMP)
 	$(PY) -m pytest -q -m "not perf"
+
+# The guards of every change (configuration in pyproject.toml, reasons in docs/development.md): ruff's lint rules
+# and mypy over the library and the CLI. `ruff format` is not adopted yet (docs/development.md says why).
+lint: $(STAMP)
+	$(VENV)/bin/ruff check .
+	$(VENV)/bin/mypy
 
 bench: $(STAMP)
 	mkdir -p docs/perf

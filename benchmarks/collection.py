@@ -120,7 +120,8 @@ class CollectionWriter:
         self.index_path = self.path.with_name(self.path.stem + "_index.csv")
         self.path.parent.mkdir(parents=True, exist_ok=True)
         self._tmp = self.path.with_name(f".{self.path.name}.tmp-{os.getpid()}")
-        self.grid, self.rows = grid, {}
+        self.grid = grid
+        self.rows: dict[int, dict[str, Any]] = {}
         self.h5 = h5py.File(self._tmp, "w")
         self.h5.attrs.update({"format": FORMAT, "twin": twin, "protocol": protocol, "grid": _json(grid, sort=False),
                               "seeds": _json(seeds)})

@@ -25,7 +25,8 @@ from __future__ import annotations
 
 import argparse
 import os
-from typing import Any, Callable, Sequence
+from collections.abc import Callable, Sequence
+from typing import Any
 
 from sysid.errors import ConfigError
 
@@ -108,7 +109,10 @@ class Executor:
             from distributed import as_completed
 
             prio = [0.0] * len(tasks) if priorities is None else [float(p) for p in priorities]
-            futures = [self.client.submit(_call, fn, *task, pure=False, priority=p) for task, p in zip(tasks, prio, strict=True)]
+            futures = [
+                self.client.submit(_call, fn, *task, pure=False, priority=p)
+                for task, p in zip(tasks, prio, strict=True)
+            ]
             index = {f.key: i for i, f in enumerate(futures)}
             try:
                 for fut in as_completed(futures):
@@ -132,7 +136,7 @@ class Executor:
             self.cluster.close()
         self.client = self.cluster = None
 
-    def __enter__(self) -> "Executor":
+    def __enter__(self) -> Executor:
         return self
 
     def __exit__(self, *exc) -> None:
@@ -199,14 +203,21 @@ def make_executor(workers: int | None = None, scheduler: str | None = None) -> E
     # with it). Unset for the workers started here (see docs/running-at-scale.md for `dask worker`). The
     # workers' statistical profiler (a thread sampling the task's stack every 10 ms, for the dashboard, which
     # is not started here) is switched off too.
-    settings = {"distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None,
-                "distributed.worker.profile.enabled": False}
+    settings = {
+        "distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None,
+        "distributed.worker.profile.enabled": False,
+    }
     with warnings.catch_warnings(), dask.config.set(settings):
         # "Port 8787 is already in use ... Hosting the HTTP server on port N instead": another cluster on this
         # machine; harmless (no dashboard is started)
         warnings.filterwarnings("ignore", message="Port .* is already in use", category=UserWarning)
-        cluster = LocalCluster(n_workers=int(workers), processes=True, threads_per_worker=1, dashboard_address=None,
-                               silence_logs=logging.ERROR)
+        cluster = LocalCluster(
+            n_workers=int(workers),
+            processes=True,
+            threads_per_worker=1,
+            dashboard_address=None,
+            silence_logs=logging.ERROR,
+        )
     return Executor(Client(cluster), cluster)
 
 

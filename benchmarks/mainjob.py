@@ -18,9 +18,10 @@ from __future__ import annotations
 import logging
 import time
 import traceback
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 
@@ -141,7 +142,9 @@ def _stage_cantilever_figures(ctx: Context) -> str:
     ax[1].set_xlabel("frequency [Hz]")
     fig.suptitle("cantilever twin: thesis-multisine spectra (Figure 3.4 analogue)")
     fig.tight_layout()
-    ctx.save_figure(fig, "cantilever_multisine_spectra", "Cantilever twin: input and output spectra of the thesis multisine")
+    ctx.save_figure(
+        fig, "cantilever_multisine_spectra", "Cantilever twin: input and output spectra of the thesis multisine"
+    )
     widths = []
     for seg in segs[:2]:
         last = whole_periods(len(seg), seg.fs, seg.meta["segment"].get("freq_hz"))
@@ -164,7 +167,9 @@ def _stage_acoustic_figures(ctx: Context) -> str:
         raise StageSkipped("no acoustic dataset (acoustic twin not built)")
     plt = pyplot()
     fig, axes = plt.subplots(2, 2, figsize=(11, 5.5))
-    for col, (title, rec) in enumerate((("multisine (estimation)", ds.est), ("1 ms chirp (test)", next(iter(ds.tests.values()))))):
+    for col, (title, rec) in enumerate(
+        (("multisine (estimation)", ds.est), ("1 ms chirp (test)", next(iter(ds.tests.values()))))
+    ):
         for row, (x, lab) in enumerate(((rec.u, "input [V]"), (rec.y, "output [V]"))):
             f, s = _spectrum(x, rec.fs)
             axes[row, col].plot(f / 1e3, s, lw=0.5)
@@ -209,7 +214,7 @@ def _score_stage(ctx: Context, datasets: list[str], key: str, title: str, syside
     ctx.data[key] = run
     sub = ctx.report_dir / key
     paths = scoring.write_report(run, sub)
-    for k, p in paths.items():
+    for p in paths.values():
         if p.suffix == ".png":
             ctx.figures.append((f"{title}: {p.stem.replace('_', ' ')}", f"{key}/{p.name}"))
     failures = scoring.check(run)
@@ -220,9 +225,10 @@ def _score_stage(ctx: Context, datasets: list[str], key: str, title: str, syside
     skipped = "".join(f"<li>{esc(' on '.join(x for x in (s.get('identifier'), s.get('dataset')) if x))}: "
                       f"{esc(s['reason'])}</li>" for s in run.skipped)
     ctx.section(title, scores + chk + (f"<p>Skipped:</p><ul>{skipped}</ul>" if skipped else "")
-                + f"<p>JSON: <a href='{key}/score.json'>{key}/score.json</a>, Markdown: <a href='{key}/score.md'>{key}/score.md</a></p>")
+                + f"<p>JSON: <a href='{key}/score.json'>{key}/score.json</a>, "
+                f"Markdown: <a href='{key}/score.md'>{key}/score.md</a></p>")
     ok = [r for r in run.rows if r.get("status") == "ok"]
-    best = {}
+    best: dict[tuple[str, str], dict[str, Any]] = {}
     for r in ok:
         k2 = (r["dataset"], r["test"])
         if k2 not in best or r["free_run"]["nrmse"] < best[k2]["free_run"]["nrmse"]:
@@ -248,12 +254,18 @@ def _html_score_table(run) -> str:
     rows = []
     for r in run.rows:
         s = sidp.get((r["dataset"], r["test"]))
-        st = "" if s is None else (_fmt(s["free_run"]["rmse"]) if s.get("status") == "ok" else f"skipped: {esc(s.get('reason', ''))}")
+        st = (
+            ""
+            if s is None
+            else (_fmt(s["free_run"]["rmse"]) if s.get("status") == "ok" else f"skipped: {esc(s.get('reason', ''))}")
+        )
         if r.get("status") == "error":
-            cells = [f"{r['dataset']} / {r['test']}", r["identifier"], "error: " + esc(r.get("message", "")), "", "", "", ""]
+            cells = [f"{r['dataset']} / {r['test']}", r["identifier"], "error: " + esc(r.get("message", "")),
+                     "", "", "", ""]
         else:
-            cells = [f"{r['dataset']} / {r['test']}", r["identifier"], f"{_fmt(r['free_run']['rmse'])} {esc(r['units'])}",
-                     _fmt(r["free_run"]["r2"]), _fmt(r["one_step"]["rmse"]), f"{r['fit_seconds']:.2f}", str(r["n_parameters"])]
+            cells = [f"{r['dataset']} / {r['test']}", r["identifier"],
+                     f"{_fmt(r['free_run']['rmse'])} {esc(r['units'])}", _fmt(r["free_run"]["r2"]),
+                     _fmt(r["one_step"]["rmse"]), f"{r['fit_seconds']:.2f}", str(r["n_parameters"])]
         rows.append(cells + [st] + [ref_cell(r, k) for k in ("linear_baseline", "best_published", "sysidentpy")])
     return table(_SCORE_HEADER, rows, cls="score")
 
@@ -306,10 +318,16 @@ def _residual_figure(ctx: Context) -> None:
     fig, axes = plt.subplots(1, len(res["tests"]), figsize=(13, 2.8))
     for ax, t in zip(np.atleast_1d(axes), res["tests"]):
         draw_correlation_test(ax, t)  # y-axis scaled to the data, band shaded
-    fig.suptitle(f"residual tests (95 % band): {r['identifier']} one-step residuals on the {r['dataset']} estimation data",
-                 fontsize=10)
+    fig.suptitle(
+        f"residual tests (95 % band): {r['identifier']} one-step residuals on the {r['dataset']} estimation data",
+        fontsize=10,
+    )
     fig.tight_layout()
-    ctx.save_figure(fig, "residual_tests", f"Residual correlation tests (eq. 2-32): {r['identifier']} on the {r['dataset']} estimation data")
+    ctx.save_figure(
+        fig,
+        "residual_tests",
+        f"Residual correlation tests (eq. 2-32): {r['identifier']} on the {r['dataset']} estimation data",
+    )
 
 
 def _stage_lab(ctx: Context) -> str:
@@ -347,9 +365,12 @@ def _stage_discrepancy(ctx: Context) -> str:
         ctx.figures.append((f"Discrepancy diagnosis: {png.stem.replace('_', ' ')}", f"discrepancy/{png.name}"))
     causes = ", ".join(c["effect"] for c in res.get("causes", [])) or "none"
     b, e = res["baseline"], res["extended"]
-    ctx.section("Discrepancy diagnosis", f"<p>Cantilever twin without creep vs data from the twin with creep (steps): "
-                f"verdict <b>{esc(res['verdict'])}</b>, causes: {esc(causes)}; validation NRMSE "
-                f"{b['nrmse_val']:.4g} → {e['nrmse_val']:.4g}. <a href='discrepancy/{index.name}'>full diagnosis</a></p>")
+    ctx.section(
+        "Discrepancy diagnosis",
+        f"<p>Cantilever twin without creep vs data from the twin with creep (steps): "
+        f"verdict <b>{esc(res['verdict'])}</b>, causes: {esc(causes)}; validation NRMSE "
+        f"{b['nrmse_val']:.4g} → {e['nrmse_val']:.4g}. <a href='discrepancy/{index.name}'>full diagnosis</a></p>",
+    )
     return f"hidden effect creep -> found: {causes}; validation NRMSE {b['nrmse_val']:.4g} -> {e['nrmse_val']:.4g}"
 
 
@@ -398,10 +419,13 @@ def _stage_sweep(ctx: Context) -> str:
     ax3.set_ylabel("time of flight [µs]", color="C1")
     fig.suptitle("acoustic twin: distance and temperature sweeps")
     fig.tight_layout()
-    ctx.save_figure(fig, "acoustic_sweep", "Acoustic twin: response, peak gain and time of flight against distance and temperature")
-    tab = table(["parameter", "value", "peak frequency [kHz]", "peak gain [dB]", "-3 dB bandwidth [kHz]", "time of flight [µs]"],
-                [[p, f"{v:g}", f"{m['peak_frequency_hz'] / 1e3:.1f}", f"{m['peak_gain_db']:.2f}", f"{m['bandwidth_hz'] / 1e3:.1f}",
-                  f"{m['time_of_flight_s'] * 1e6:.2f}"] for p, v, m in rows], cls="score")
+    ctx.save_figure(fig, "acoustic_sweep",
+                    "Acoustic twin: response, peak gain and time of flight against distance and temperature")
+    tab = table(["parameter", "value", "peak frequency [kHz]", "peak gain [dB]", "-3 dB bandwidth [kHz]",
+                 "time of flight [µs]"],
+                [[p, f"{v:g}", f"{m['peak_frequency_hz'] / 1e3:.1f}", f"{m['peak_gain_db']:.2f}",
+                  f"{m['bandwidth_hz'] / 1e3:.1f}", f"{m['time_of_flight_s'] * 1e6:.2f}"] for p, v, m in rows],
+                cls="score")
     ctx.section("Acoustic channel sweep", tab)
     tof = [m["time_of_flight_s"] for _, m in dd]
     return (f"{len(distances)} distances, {len(temps)} temperatures; time of flight {tof[0] * 1e6:.1f} -> "
@@ -430,10 +454,15 @@ def _write_report(ctx: Context, rows: list[dict[str, Any]]) -> Path:
 
     ctx.report_dir.mkdir(parents=True, exist_ok=True)
     mode = "quick" if ctx.quick else "default"
-    body = [f"<h1>PiezoTwin main job</h1><p>Mode: {mode}. Generated {time.strftime('%Y-%m-%d %H:%M:%S UTC', time.gmtime())}.</p>",
-            table(["stage", "status", "result", "s"],
-                  [[esc(r["stage"]), r["status"], esc(r["message"]), f"{r['seconds']:.1f}"] for r in rows],
-                  row_classes=[r["status"] for r in rows])]
+    body = [
+        f"<h1>PiezoTwin main job</h1><p>Mode: {mode}. "
+        f"Generated {time.strftime('%Y-%m-%d %H:%M:%S UTC', time.gmtime())}.</p>",
+        table(
+            ["stage", "status", "result", "s"],
+            [[esc(r["stage"]), r["status"], esc(r["message"]), f"{r['seconds']:.1f}"] for r in rows],
+            row_classes=[r["status"] for r in rows],
+        ),
+    ]
     body += [f"<h2>{esc(title)}</h2>{content}" for title, content in ctx.sections]
     if ctx.figures:
         body.append("<h2>Figures</h2>")

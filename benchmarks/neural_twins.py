@@ -20,7 +20,8 @@ import argparse
 import json
 import time
 import warnings
-from typing import Any, Sequence
+from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 
@@ -29,7 +30,8 @@ from sysid.metrics import r2
 from sysid.record import Record
 from sysid.registry import get_identifier
 
-__all__ = ["cantilever_data", "cantilever_sines", "acoustic_data", "acoustic_osa_vs_sim", "ACOUSTIC_STRUCTURE", "ACOUSTIC_NK"]
+__all__ = ["cantilever_data", "cantilever_sines", "acoustic_data", "acoustic_osa_vs_sim", "ACOUSTIC_STRUCTURE",
+           "ACOUSTIC_NK"]
 
 # The network of Table 4.1 / 4.3
 CANTILEVER_STRUCTURE = {"ny": 10, "nu": 10, "hidden": [25, 25, 25, 25], "activation": "relu"}
@@ -129,8 +131,11 @@ def acoustic_osa_vs_sim(seeds: Sequence[int] = (0, 1, 2, 3, 4), structure: dict[
         out[f"{tag}_r2_val_frs_mean"] = float(np.nanmean(v)) if np.isfinite(v).any() else float("nan")
         out[f"{tag}_r2_val_frs_sd"] = float(np.nanstd(v, ddof=1)) if np.isfinite(v).sum() > 1 else float("nan")
         out[f"{tag}_diverged"] = int((~np.isfinite(v)).sum())
-    wins = [r["sim_r2_val_frs"] > r["osa_r2_val_frs"] or (np.isfinite(r["sim_r2_val_frs"]) and not np.isfinite(r["osa_r2_val_frs"]))
-            for r in out["runs"]]
+    wins = [
+        r["sim_r2_val_frs"] > r["osa_r2_val_frs"]
+        or (np.isfinite(r["sim_r2_val_frs"]) and not np.isfinite(r["osa_r2_val_frs"]))
+        for r in out["runs"]
+    ]
     out["sim_wins"] = int(sum(wins))
     return out
 
@@ -148,8 +153,8 @@ def main(argv: list[str] | None = None) -> int:
     seeds = [int(s) for s in a.seeds.split(",") if s]
     params = {k: json.loads(v) for k, v in (kv.split("=", 1) for kv in a.set.split(";") if kv)} if a.set else {}
     if a.experiment == "cantilever":
-        data = cantilever_data()
-        res = [cantilever_sines(a.identifier, params, s, data) for s in seeds]
+        sines_data = cantilever_data()
+        res = [cantilever_sines(a.identifier, params, s, sines_data) for s in seeds]
         for r in res:
             print(json.dumps(clean_json(r)), flush=True)
         m = [r["r2_mean"] for r in res]

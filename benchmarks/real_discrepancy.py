@@ -61,8 +61,8 @@ def piezo(out: Path) -> dict[str, Any]:
 
 def water_records(distance_mm: int = 20, seed: int = 0) -> tuple[Record, Record]:
     """Measured I/O records from the measured FIRs: multisine through FIR #1, chirp through FIR #6."""
-    from sysid import signals
     from benchmarks.datasets import files
+    from sysid import signals
     from twins.acoustic.labdata import FS_FIR, load_charac
 
     h = load_charac(distance_mm, files.water_fir())
@@ -72,7 +72,7 @@ def water_records(distance_mm: int = 20, seed: int = 0) -> tuple[Record, Record]
     u_val = signals.chirp(fs, n / fs, 0.9e6, 1.5e6, amplitude=1.0, method="linear")
     y_est = np.convolve(u_est, h[0])[:n]
     y_val = np.convolve(u_val, h[5])[:n]
-    meta = {"source": "USbodyComm charac_water_%d" % distance_mm, "fir": "measured impulse response convolved"}
+    meta = {"source": f"USbodyComm charac_water_{int(distance_mm)}", "fir": "measured impulse response convolved"}
     return (Record(u=u_est, y=y_est, fs=fs, meta={**meta, "fir_index": 0}, source="water_est"),
             Record(u=u_val, y=y_val, fs=fs, meta={**meta, "fir_index": 5}, source="water_val"))
 
@@ -80,14 +80,12 @@ def water_records(distance_mm: int = 20, seed: int = 0) -> tuple[Record, Record]
 def water(out: Path, distance_mm: int = 20) -> dict[str, Any]:
     import dataclasses
 
+    from benchmarks.datasets import files
     from twins.acoustic import AcousticTwin
+    from twins.acoustic.amplifier import voltage_gain
     from twins.acoustic.labdata import fit_transducer
     from twins.discrepancy import DiagnoseOptions, run_diagnosis
     from twins.discrepancy.report import write_report
-
-    from twins.acoustic.amplifier import voltage_gain
-
-    from benchmarks.datasets import files
 
     p40, fit = fit_transducer(40, files.water_fir())
     # the FIR is the electro-acoustic response V_rx/V_oc: the twin's amplifier (V_oc = 2·G_v·u) is divided out
@@ -111,10 +109,9 @@ NARMAX_ORDERS = {"nu": 1, "ny": 2, "ne": 3, "degree": 2, "rho_p": 1e-4, "rho_n":
 
 
 def _narmax_case(rec: Record, orders: dict[str, Any], n_est: int) -> dict[str, Any]:
+    from sysid.metrics import r2
     from sysid.polynomial import NARMAXPoly
     from sysid.residuals import correlation_tests
-    from sysid.metrics import r2
-
     from twins.discrepancy import features as ft
 
     est, val = rec[:n_est], rec[n_est:]
@@ -130,7 +127,7 @@ def _narmax_case(rec: Record, orders: dict[str, Any], n_est: int) -> dict[str, A
         ef = (r.y - yf)[skip:]
         ct1 = correlation_tests(e1, r.u[skip:], max_lag=20)
         ctf = correlation_tests(ef, r.u[skip:], max_lag=20)
-        a = ft.analyse(r.u[skip:], r.y[skip:], yf[skip:], r.fs, {})
+        a = ft.analyse(r.u[skip:], r.output[skip:], yf[skip:], r.fs, {})
         out[part] = {
             "r2_free_run": r2(r.y, yf, skip), "r2_one_step": r2(r.y, y1, skip),
             "tests_one_step": ft.tests_summary(ct1), "tests_free_run": ft.tests_summary(ctf),

@@ -206,7 +206,7 @@ def _record(r: dict[str, Any]) -> dict[str, Any] | None:
     of the measurement, so a corrected or added one shows without refitting), else as the row stored it."""
     from benchmarks.datasets.references import references_for
 
-    best = (references_for(r.get("dataset", "")).get(r.get("test"), {}).get("best_published")
+    best = (references_for(r.get("dataset", "")).get(r.get("test", ""), {}).get("best_published")
             or (r.get("references") or {}).get("best_published"))
     return {k: best[k] for k in ("value", "unit", "model")} if best else None
 
@@ -285,12 +285,20 @@ def page_context(entries: Sequence[Entry], rows: dict[str, dict[str, Any]],
                           "command": row["command"]})
         m = row["measured"]
         versions = m.get("versions") or {}
-        measurements.append({
-            "dataset": e.dataset, "date": m.get("date", "?"), "cpu": (m.get("machine") or {}).get("cpu", "?"),
-            "cores": (m.get("machine") or {}).get("cores", "?"),
-            "load": " → ".join(f"{(m.get(k) or [math.nan])[0]:.1f}" for k in ("load_average_before", "load_average_after")),
-            "wall": f"{m.get('wall_seconds', math.nan):.1f}", "cpu_s": f"{m.get('cpu_seconds', math.nan):.1f}",
-            "versions": ", ".join(f"{k} {v}" for k, v in versions.items() if v)})
+        measurements.append(
+            {
+                "dataset": e.dataset,
+                "date": m.get("date", "?"),
+                "cpu": (m.get("machine") or {}).get("cpu", "?"),
+                "cores": (m.get("machine") or {}).get("cores", "?"),
+                "load": " → ".join(
+                    f"{(m.get(k) or [math.nan])[0]:.1f}" for k in ("load_average_before", "load_average_after")
+                ),
+                "wall": f"{m.get('wall_seconds', math.nan):.1f}",
+                "cpu_s": f"{m.get('cpu_seconds', math.nan):.1f}",
+                "versions": ", ".join(f"{k} {v}" for k, v in versions.items() if v),
+            }
+        )
     return {"lines": lines, "measurements": measurements, "why": [(e.dataset, e.identifier, e.why) for e in entries],
             "missing": [{"dataset": e.dataset, "identifier": e.identifier,
                          "command": f"piezotwin records --datasets {e.dataset}"} for e in missing],

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import contextlib
 import os
-from typing import Iterator
+from collections.abc import Iterator
 
 import numpy  # noqa: F401  (loads numpy's BLAS before the limits are taken)
 import scipy.linalg  # noqa: F401  (loads scipy's BLAS)

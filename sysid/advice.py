@@ -16,7 +16,8 @@
 from __future__ import annotations
 
 import math
-from typing import Any, Sequence
+from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 
@@ -41,10 +42,10 @@ def closed_loop_correlation(data: Record | Sequence[Record], max_lag: int = CORR
                             ar_order: int = AR_ORDER) -> dict[str, Any]:
     """Largest |corr(ε_u(t), y(t − k))|, k = 1..max_lag, over input/output pairs (module docstring), its lag and the
     threshold CORR_SIGMAS/√N."""
-    best = {"rho": 0.0, "lag": None, "threshold": math.inf}
+    best: dict[str, Any] = {"rho": 0.0, "lag": None, "threshold": math.inf}
     for rec in _recs(data):
         u = rec.u.reshape(len(rec), -1)
-        y = rec.y.reshape(len(rec), -1)
+        y = rec.output.reshape(len(rec), -1)
         N = len(rec)
         p = min(ar_order, max(N // 10, 1))
         if N <= p + max_lag + 10:
@@ -79,7 +80,11 @@ def _pole_warning(model, est) -> str | None:
     if not bad:
         return None
     p = max(bad, key=lambda q: q["abs"])
-    kind = "integrator (or near-integrator)" if abs(p["abs"] - 1.0) < 1e-3 else ("unstable" if p["abs"] > 1.0 else "marginal")
+    kind = (
+        "integrator (or near-integrator)"
+        if abs(p["abs"] - 1.0) < 1e-3
+        else ("unstable" if p["abs"] > 1.0 else "marginal")
+    )
     msg = (f"pole at {p['re']:.5f}{p['im']:+.5f}j (|p| = {p['abs']:.5f}) on or outside the unit circle: "
            f"{kind} model")
     cl = closed_loop_correlation(est)

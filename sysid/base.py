@@ -30,8 +30,9 @@ import functools
 import inspect
 import warnings
 from abc import ABC, abstractmethod
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Any, ClassVar, Sequence
+from typing import Any, ClassVar
 
 import numpy as np
 
@@ -64,7 +65,7 @@ def check_records(records: Sequence[Record], max_lag: int, min_rows: int, what: 
         if rec.n_inputs != n_in or rec.n_outputs != n_out:
             raise DataError(f"{rec.source}: {rec.n_inputs} inputs / {rec.n_outputs} outputs, but the first record has "
                             f"{n_in} / {n_out}")
-        for name, arr in (("u", rec.u), ("y", rec.y)):
+        for name, arr in (("u", rec.u), ("y", rec.output)):
             if not np.isfinite(arr).all():
                 i = int(np.flatnonzero(~np.isfinite(arr.reshape(arr.shape[0], -1)).any(axis=1))[0])
                 raise DataError(f"{rec.source}: {name} has non-finite (NaN/inf) samples, first at index {i}")
@@ -81,13 +82,13 @@ def check_records(records: Sequence[Record], max_lag: int, min_rows: int, what: 
             name = "u" if u_all.shape[1] == 1 else f"u{ch + 1}"
             raise DataError(f"{records[0].source}: input {name} is constant ({u_all[0, ch]:g}); "
                             "a constant input does not excite the system, nothing to identify")
-    y_all = np.concatenate([r.y.reshape(len(r), -1) for r in records])
+    y_all = np.concatenate([r.output.reshape(len(r), -1) for r in records])
     for ch in range(y_all.shape[1]):
         if np.ptp(y_all[:, ch]) == 0.0:
             name = "y" if y_all.shape[1] == 1 else f"y{ch + 1}"
             raise DataError(f"{records[0].source}: output {name} is constant ({y_all[0, ch]:g}); nothing to identify")
 
-def check_prediction(model: "Identifier", record: Record, horizon: Any) -> None:
+def check_prediction(model: Identifier, record: Record, horizon: Any) -> None:
     """What ``predict`` refuses for every simulation model: a record without output, other channel counts than the
     model was fitted on, a horizon that is not a positive integer or ``None`` (free run)."""
     record.require_output()
@@ -98,7 +99,7 @@ def check_prediction(model: "Identifier", record: Record, horizon: Any) -> None:
         raise ConfigError(f"horizon must be a positive integer or None (free run), got {horizon!r}")
 
 
-def stop_at_divergence(model: "Identifier", yhat: np.ndarray, what: str = "prediction") -> np.ndarray:
+def stop_at_divergence(model: Identifier, yhat: np.ndarray, what: str = "prediction") -> np.ndarray:
     """The divergence rule of the module docstring on ``yhat`` (one row per sample), in place: from the first
     sample with any output outside ``±model.y_bound_`` on, ``nan``; ``model.diverged_at_`` holds that index (None
     when there is none) and a :class:`~sysid.errors.DivergenceWarning` names it."""
@@ -116,7 +117,9 @@ def stop_at_divergence(model: "Identifier", yhat: np.ndarray, what: str = "predi
 def as_fit_data(data: Any, y: Any = None, fs: float | None = None, units: dict[str, str] | None = None
                 ) -> Record | list[Record]:
     """What ``fit`` accepts: a Record, a list of Records, or arrays ``u, y`` (with ``fs`` [Hz], default 1)."""
-    if isinstance(data, Record) or (isinstance(data, (list, tuple)) and data and all(isinstance(r, Record) for r in data)):
+    if isinstance(data, Record) or (
+        isinstance(data, (list, tuple)) and data and all(isinstance(r, Record) for r in data)
+    ):
         if y is not None:
             raise ConfigError("fit: give either records or arrays u, y, not a record and y")
         return data if isinstance(data, Record) else list(data)
@@ -125,7 +128,7 @@ def as_fit_data(data: Any, y: Any = None, fs: float | None = None, units: dict[s
     return Record(u=data, y=y, fs=1.0 if fs is None else fs, units=units or {"u": "", "y": ""}, source="array")
 
 
-def as_predict_record(model: "Identifier", data: Any, y: Any = None, fs: float | None = None) -> Record:
+def as_predict_record(model: Identifier, data: Any, y: Any = None, fs: float | None = None) -> Record:
     """A Record from ``predict``'s arguments (arrays get the model's estimation rate, or 1 Hz)."""
     if isinstance(data, Record):
         if y is not None:
@@ -135,7 +138,7 @@ def as_predict_record(model: "Identifier", data: Any, y: Any = None, fs: float |
     return Record(u=data, y=y, fs=rate, source="array")
 
 
-def _zero_output(model: "Identifier", rec: Record) -> Record:
+def _zero_output(model: Identifier, rec: Record) -> Record:
     """``rec`` with y = 0: the zero initial conditions of a free run from the input alone."""
     n_out = int(getattr(model, "n_outputs_", 1) or 1)
     shape = (len(rec),) if n_out == 1 else (len(rec), n_out)
@@ -156,7 +159,7 @@ def _wrap_fit(fn):
         self.fs_ = float(recs[0].fs)
         return out
 
-    fit._piezotwin_wrapped = True
+    fit._piezotwin_wrapped = True  # type: ignore[attr-defined]
     return fit
 
 
@@ -183,7 +186,7 @@ def _wrap_predict(fn):
             return fn(self, _zero_output(self, rec), None)
         return fn(self, rec, h)
 
-    predict._piezotwin_wrapped = True
+    predict._piezotwin_wrapped = True  # type: ignore[attr-defined]
     return predict
 
 
@@ -192,6 +195,8 @@ class Identifier(ABC):
     """Base class of all identifiers. Subclasses set ``name`` (the registry id) and implement fit/predict."""
 
     name: ClassVar[str] = "identifier"
+    #: first sample at which the last prediction left its bound (None: it did not), set by predict
+    diverged_at_: int | None
 
     def __init_subclass__(cls, **kwargs: Any) -> None:
         """Give every identifier the array API (see the module docstring) by wrapping its own fit/predict, and
@@ -199,7 +204,11 @@ class Identifier(ABC):
         super().__init_subclass__(**kwargs)
         for attr, wrap in (("fit", _wrap_fit), ("predict", _wrap_predict)):
             fn = cls.__dict__.get(attr)
-            if fn is not None and not getattr(fn, "__isabstractmethod__", False) and not getattr(fn, "_piezotwin_wrapped", False):
+            if (
+                fn is not None
+                and not getattr(fn, "__isabstractmethod__", False)
+                and not getattr(fn, "_piezotwin_wrapped", False)
+            ):
                 setattr(cls, attr, wrap(fn))
         if "__init__" not in cls.__dict__:
             return
@@ -235,7 +244,7 @@ class Identifier(ABC):
         """The constructor arguments of this instance."""
         return {k: getattr(self, k) for k in self._param_names()}
 
-    def set_params(self, **params: Any) -> "Identifier":
+    def set_params(self, **params: Any) -> Identifier:
         from sysid.config import resolve_aliases
 
         valid = self._param_names()
@@ -247,7 +256,7 @@ class Identifier(ABC):
         return self
 
     @classmethod
-    def from_assignments(cls, assignments: dict[str, str]) -> "Identifier":
+    def from_assignments(cls, assignments: dict[str, str]) -> Identifier:
         """Build from raw ``--set`` strings, coercing each to the type of the constructor default."""
         from sysid.config import apply_assignments
 
@@ -265,7 +274,7 @@ class Identifier(ABC):
 
     # ------------------------------------------------------------------ learning / prediction
     @abstractmethod
-    def fit(self, data: Record | Sequence[Record]) -> "Identifier":
+    def fit(self, data: Record | Sequence[Record]) -> Identifier:
         ...
 
     @abstractmethod
@@ -274,7 +283,11 @@ class Identifier(ABC):
 
     def describe(self) -> dict[str, Any]:
         """JSON-able summary of the fitted model (subclasses add terms, structure...)."""
-        return {"identifier": self.name, "params": self.get_params(), "n_parameters": getattr(self, "n_parameters_", None)}
+        return {
+            "identifier": self.name,
+            "params": self.get_params(),
+            "n_parameters": getattr(self, "n_parameters_", None),
+        }
 
     # ------------------------------------------------------------------ persistence
     @abstractmethod
@@ -296,7 +309,9 @@ class Identifier(ABC):
         rec = as_predict_record(self, data, y, fs)
         rec.require_output()
         yh = self.predict(rec, horizon)
-        return metrics.score(rec.y, np.asarray(yh).reshape(rec.y.shape), skip=int(getattr(self, "max_lag_", 0) or 0))["r2"]
+        y_meas = rec.output
+        skip = int(getattr(self, "max_lag_", 0) or 0)
+        return metrics.score(y_meas, np.asarray(yh).reshape(y_meas.shape), skip=skip)["r2"]
 
     def save(self, path: str | Path) -> Path:
         """Write the fitted model to ``path`` (atomically): the npz container, or JSON for ``.json``
@@ -306,7 +321,7 @@ class Identifier(ABC):
         return write_model(self, path)
 
     @classmethod
-    def load(cls, path: str | Path) -> "Identifier":
+    def load(cls, path: str | Path) -> Identifier:
         """Load a model file; on a subclass, refuse a file that holds another identifier."""
         model = load_model(path)
         if cls is not Identifier and not isinstance(model, cls):

@@ -29,8 +29,9 @@ On a full grid (even lines excited) odd and even distortion fall on the same lin
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Any, Sequence
+from typing import Any
 
 import numpy as np
 import scipy.stats
@@ -161,14 +162,15 @@ def best_linear_approximation(realisations: Sequence[tuple[Any, Any]], fs: float
                      "fs": fs, "resolution_hz": fs / n0})
 
 
-def detect_nonlinearity(Y: np.ndarray, var_Y: np.ndarray, excited: np.ndarray, periods_used: int,
-                        resolution_hz: float, alpha: float = 1e-3) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
+def detect_nonlinearity(Y: np.ndarray, var_Y: np.ndarray, excited: np.ndarray | Sequence[np.ndarray],
+                        periods_used: int, resolution_hz: float,
+                        alpha: float = 1e-3) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
     """Odd / even nonlinear distortion levels at the detection lines.
 
     ``Y`` and ``var_Y`` are the period-averaged output spectra and the variances of those means, shape
-    ``(M, n0//2 + 1)``; ``excited`` the excited lines (one array for all, or one per realisation). Detection lines are the non-excited lines from 1 up to
-    the highest excited line: when every excited line is odd, the even ones carry even distortion and the odd
-    ones odd distortion; otherwise all of them carry both (``classified`` False).
+    ``(M, n0//2 + 1)``; ``excited`` the excited lines (one array for all, or one per realisation). Detection lines are
+    the non-excited lines from 1 up to the highest excited line: when every excited line is odd, the even ones carry
+    even distortion and the odd ones odd distortion; otherwise all of them carry both (``classified`` False).
 
     Returns ``(nonlinearity, detection)``: ``nonlinearity`` = {``verdict``, ``odd_db``, ``even_db``,
     ``odd_detected``, ``even_detected``, ``classified``, ``threshold_db`` ...}; levels are

@@ -15,7 +15,8 @@ coefficients, ``nf`` poles (``tfest``'s ``np``), ``nk`` delay; ``nperseg`` Welch
 
 from __future__ import annotations
 
-from typing import Any, Sequence
+from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 import scipy.signal
@@ -68,13 +69,13 @@ class BLAModel(Identifier):
         self.periods = periods
         self.drop = drop
 
-    def fit(self, data: Record | Sequence[Record]) -> "BLAModel":
+    def fit(self, data: Record | Sequence[Record]) -> BLAModel:
         from sysid.tfest import tfest
 
         recs = as_record_list(data)
         for r in recs:
-            if r.u.ndim != 1 or r.y.ndim != 1:
-                raise DataError(f"{r.source}: bla is single-input single-output (got u{r.u.shape}, y{r.y.shape})")
+            if r.u.ndim != 1 or r.output.ndim != 1:
+                raise DataError(f"{r.source}: bla is single-input single-output (got u{r.u.shape}, y{r.output.shape})")
             if abs(r.fs - recs[0].fs) > 1e-9 * recs[0].fs:
                 raise DataError(f"{r.source}: fs {r.fs:g} Hz differs from the first record's {recs[0].fs:g} Hz")
         nb, nf, nk, periods = int(self.nb), int(self.nf), int(self.nk), int(self.periods)
@@ -116,8 +117,8 @@ class BLAModel(Identifier):
                 continue
             kw = dict(fs=fs, nperseg=nper, noverlap=nper // 2)
             f, puu = scipy.signal.welch(r.u - self.u_mean_, **kw)
-            _, puy = scipy.signal.csd(r.u - self.u_mean_, r.y - self.y_mean_, **kw)
-            _, pyy = scipy.signal.welch(r.y - self.y_mean_, **kw)
+            _, puy = scipy.signal.csd(r.u - self.u_mean_, r.output - self.y_mean_, **kw)
+            _, pyy = scipy.signal.welch(r.output - self.y_mean_, **kw)
             s_uu = s_uu + len(r) * puu
             s_uy = s_uy + len(r) * puy
             s_yy = s_yy + len(r) * pyy
@@ -153,8 +154,9 @@ class BLAModel(Identifier):
             names = [f"b{i + 1}" for i in range(int(self.nb))] + [f"f{i + 1}" for i in range(int(self.nf))]
             values = list(self.b_[int(self.nk):]) + list(self.a_[1:])
             info = getattr(self, "fit_info_", {})
+            stds: list[float | None]
             if "std_b" in info:
-                stds = [float(x) for x in info["std_b"]] + [float(x) for x in info["std_a"]]
+                stds = [float(x) for x in (*info["std_b"], *info["std_a"])]
             else:
                 stds = [None] * len(names)
             d.update(terms=names, parameters=[{"name": n, "value": float(v), "std": sd}

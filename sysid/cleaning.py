@@ -129,7 +129,9 @@ def hampel(x: np.ndarray, window: int = 10, n_sigma: float = 3.0):
         out, med, _ = _hampel_1d(X[:, c], window, n_sigma)
         idx = np.flatnonzero(out)
         Y[idx, c] = med[idx]
-        changes.extend({"index": int(i), "channel": c, "value": float(X[i, c]), "replacement": float(med[i])} for i in idx)
+        changes.extend(
+            {"index": int(i), "channel": c, "value": float(X[i, c]), "replacement": float(med[i])} for i in idx
+        )
     changes.sort(key=lambda d: (d["index"], d["channel"]))
     return Y.reshape(x.shape), changes
 

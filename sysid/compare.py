@@ -14,8 +14,9 @@ from __future__ import annotations
 
 import math
 import warnings
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -67,7 +68,9 @@ def _predict(model, record: Record, horizon: int | None) -> np.ndarray:
         return np.asarray(model.predict(record, horizon), dtype=float)
 
 
-def predict_scores(model, record: Record, horizon: int | None, skip: int | None = None) -> tuple[np.ndarray, dict[str, Any]]:
+def predict_scores(
+    model, record: Record, horizon: int | None, skip: int | None = None
+) -> tuple[np.ndarray, dict[str, Any]]:
     """(prediction, summary). Summary: ``horizon, initial_conditions, skip, diverged_at`` and ``metrics``
     (``fit_percent, r2, rmse, nrmse, mse``; ``None`` when the record has no measured ``y``)."""
     if record.y is None and horizon is not None:
@@ -108,7 +111,7 @@ def compare_report(models: Sequence[Any], names: Sequence[str], record: Record, 
 
     out = Path(out_dir)
     skip = rows[0]["skip"] if rows else 0
-    y = record.y if record.y.ndim == 1 else record.y[:, 0]
+    y = record.output if record.output.ndim == 1 else record.output[:, 0]
     u = record.u if record.u.ndim == 1 else record.u[:, 0]
     labels = []
     for row in rows:

@@ -9,7 +9,8 @@ from __future__ import annotations
 
 import typing
 import warnings
-from typing import Any, Iterable, Mapping
+from collections.abc import Iterable, Mapping
+from typing import Any
 
 from sysid.errors import ConfigError
 

@@ -61,7 +61,9 @@ class CsvTable:
 
     def prefetch(self, names: list[str]) -> None:
         """Parse all these columns (those present) in one pass, so later :meth:`columns` calls are free."""
-        todo = sorted({self.index[n] for n in names if n in self.index and self.header.count(n) == 1} - set(self._cache))
+        todo = sorted(
+            {self.index[n] for n in names if n in self.index and self.header.count(n) == 1} - set(self._cache)
+        )
         if self.verify_width:
             self._parse(list(range(len(self.header))), keep=todo)
             self.verify_width = False
@@ -230,7 +232,7 @@ def _head_layout(raw: bytes, src: str) -> tuple[str, str, bool, list[str], int]:
 
 
 def _fast_layout(raw: bytes, source, src: str, delim: str, decimal: str, has_header: bool, header: list[str],
-                 first_data: int) -> "CsvTable | None":
+                 first_data: int) -> CsvTable | None:
     """The common case without a full scan: no quotes, comments, blank or indented lines after the header.
     Every row has ``width`` cells when the first does, the delimiters total ``rows * (width - 1)`` and no
     row has more (pandas refuses that while parsing every column: :meth:`CsvTable.prefetch`). ``None`` when

@@ -19,18 +19,19 @@ longer than anything a dense polynomial of practical order can hold.
 Chosen from the estimation data (:func:`echo_lags`), none of it hand-picked:
 
 - the round trip τ: the quefrency of the largest peak of the real cepstrum of log|Ĝ| (Ĝ the H1 FRF,
-  :func:`sysid.frf.frf_welch`, from the first to the last frequency where the input's power is ≥ 1 % of its peak) above ``min_echo_lag`` — the cepstral
-  echo detection of Bogert, Healy & Tukey (1963): an echo at lag τ puts a ripple of period 1/τ on log|G|. No echo
-  term when that peak is below ``echo_snr`` times the cepstrum's median (then the model is an OE of long delay);
+  :func:`sysid.frf.frf_welch`, from the first to the last frequency where the input's power is ≥ 1 % of its peak) above
+  ``min_echo_lag`` — the cepstral echo detection of Bogert, Healy & Tukey (1963): an echo at lag τ puts a ripple of
+  period 1/τ on log|G|. No echo term when that peak is below ``echo_snr`` times the cepstrum's median (then the model is
+  an OE of long delay);
 - the delay nk: the first arrival — the lag after which the envelope of the impulse response (the inverse
   transform of Ĝ at the excited frequencies) stays above the midpoint in dB between its median and its peak
   up to the peak — less nb/8 samples of margin.
 
 Estimation: B and F by the simplified refined IV method (:func:`sysid.pem_init.sriv`, Ljung §7.6), C by ridge
 least squares on that model's equation error F·y − B·u = q^{−τ}C·y, then the whole structure by further SRIV
-(Steiglitz–McBride) iterations with the echo lags among the instrumented output lags, then every parameter by Levenberg–Marquardt
-(``scipy.optimize.least_squares``) on the free-run simulation error with the analytic Jacobian (each column is a
-regressor filtered by 1/A, Ljung eq. 10.42). The simulation takes the first ``max_lag_`` measured outputs as
+(Steiglitz–McBride) iterations with the echo lags among the instrumented output lags, then every parameter by
+Levenberg–Marquardt (``scipy.optimize.least_squares``) on the free-run simulation error with the analytic Jacobian (each
+column is a regressor filtered by 1/A, Ljung eq. 10.42). The simulation takes the first ``max_lag_`` measured outputs as
 initial conditions (as the polynomial models do) and the residual starts after them.
 
 Stability: F keeps its roots inside the unit circle and |C(e^{iω})/F(e^{iω})| < 1 at every frequency (checked on a
@@ -41,7 +42,8 @@ that leaves this set is refused (the residual returns a large constant), as in :
 
 from __future__ import annotations
 
-from typing import Any, Sequence
+from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 import scipy.ndimage
@@ -67,8 +69,9 @@ IV_ITERATIONS = 8  # Steiglitz-McBride iterations of the whole structure before 
 def echo_lags(records: Sequence[Record], min_echo_lag: int = 50, echo_snr: float = 8.0) -> dict[str, Any]:
     """Delay and echo round trip of a SISO system from its records (module docstring).
 
-    Returns ``{"onset", "peak", "echo_lag", "echo_snr", "nperseg"}``: the first arrival's lag [samples], the impulse response's peak lag, the round trip (0 when no cepstral peak reaches
-    ``echo_snr`` times the median) and the peak's ratio to the median.
+    Returns ``{"onset", "peak", "echo_lag", "echo_snr", "nperseg"}``: the first arrival's lag [samples], the impulse
+    response's peak lag, the round trip (0 when no cepstral peak reaches ``echo_snr`` times the median) and the peak's
+    ratio to the median.
     """
     from sysid.frf import frf_welch
 
@@ -141,7 +144,9 @@ class EchoOE(Identifier):
             if v is not None and (isinstance(v, bool) or int(v) != v or v < 0):
                 raise ConfigError(f"{self.name}: {key} must be an integer >= 0 or None (found in the data), got {v!r}")
         if not (float(self.ridge) >= 0 and float(self.echo_snr) > 0):
-            raise ConfigError(f"{self.name}: ridge must be >= 0 and echo_snr > 0, got {self.ridge!r}, {self.echo_snr!r}")
+            raise ConfigError(
+                f"{self.name}: ridge must be >= 0 and echo_snr > 0, got {self.ridge!r}, {self.echo_snr!r}"
+            )
 
     def _structure(self, records: list[Record]) -> dict[str, Any]:
         nb, nf, w = int(self.nb), int(self.nf), int(self.echo_width)
@@ -219,7 +224,7 @@ class EchoOE(Identifier):
         return out
 
     # ------------------------------------------------------------------ estimation
-    def fit(self, data: Record | Sequence[Record]) -> "EchoOE":
+    def fit(self, data: Record | Sequence[Record]) -> EchoOE:
         records = as_record_list(data)
         if records[0].n_inputs != 1 or records[0].n_outputs != 1:
             raise ConfigError(f"{self.name}: one input and one output supported, the data have "
@@ -370,7 +375,7 @@ class EchoOE(Identifier):
         """Orders, where the delay and the round trip came from, and the loop gain (printed by ``identify``)."""
         s, found = self.structure_, self.structure_["found"] or {}
         lines = [f"{self.name}: nb={s['nb']}, nf={s['nf']}, nk={s['nk']}"
-                 + (" (found: first arrival at lag %d)" % found["onset"] if self.nk is None and found else "")]
+                 + (f" (found: first arrival at lag {int(found['onset'])})" if self.nk is None and found else "")]
         if s["echo_lag"]:
             how = (f" (found: cepstral peak {found['echo_snr']:.1f}x the median)" if self.echo_lag is None and found
                    else "")

@@ -10,7 +10,8 @@ scored on their concatenated samples. A diverged free run scores ``nan`` (JSON `
 from __future__ import annotations
 
 import warnings
-from typing import Any, Sequence
+from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 
@@ -48,7 +49,7 @@ def evaluate(model, data: Record | Sequence[Record], horizons: dict[str, int | N
             if getattr(model, "diverged_at_", None) is not None and diverged is None:
                 diverged = int(model.diverged_at_)
             ys.append(np.asarray(rec.y, dtype=float)[skip:])
-            yhs.append(yh.reshape(np.shape(rec.y))[skip:])
+            yhs.append(yh.reshape(np.shape(rec.output))[skip:])
         y = np.concatenate(ys)
         yh = np.concatenate(yhs)
         s = metrics.score(y, yh)

@@ -73,7 +73,9 @@ def moving_average(x: np.ndarray, span: int, mode: str = "centred") -> np.ndarra
 
 
 # ---------------------------------------------------------------------------------------------- decimation / resampling
-def antialias_filter(up: int, down: int, passband: float = PASSBAND_DEFAULT, atten_db: float = ATTEN_DB_DEFAULT) -> np.ndarray:
+def antialias_filter(
+    up: int, down: int, passband: float = PASSBAND_DEFAULT, atten_db: float = ATTEN_DB_DEFAULT
+) -> np.ndarray:
     """Linear-phase FIR low-pass for :func:`scipy.signal.resample_poly` with factors ``up/down``.
 
     Designed at the up-sampled rate (normalised to it): the pass band ends at ``passband`` x the lower of the

@@ -22,9 +22,9 @@ over only the selected columns, with standard errors σ̂²(RᵀR)⁻¹.
 from __future__ import annotations
 
 import math
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
 from itertools import combinations_with_replacement
-from typing import Iterator, Sequence
 
 import numpy as np
 from numba import njit
@@ -78,8 +78,10 @@ def candidate_terms(n_regressors: int, degree: int, constant: bool = True) -> li
         raise ConfigError(f"degree must be an integer >= 1, got {degree}")
     count = math.comb(n_regressors + int(degree), int(degree)) - 1 + bool(constant)
     if count > MAX_CANDIDATES:
-        raise ConfigError(f"degree {degree} over {n_regressors} regressors gives {count:.4g} candidate terms (limit "
-                          f"{MAX_CANDIDATES}: the Gram matrix needs {count * count * 8 / 1e9:.3g} GB); lower the degree or the lags")
+        raise ConfigError(
+            f"degree {degree} over {n_regressors} regressors gives {count:.4g} candidate terms (limit "
+            f"{MAX_CANDIDATES}: the Gram matrix needs {count * count * 8 / 1e9:.3g} GB); lower the degree or the lags"
+        )
     terms: list[tuple[int, ...]] = [()] if constant else []
     for d in range(1, degree + 1):
         terms += list(combinations_with_replacement(range(n_regressors), d))
@@ -124,7 +126,10 @@ class Structure:
         return any(k == "e" for k, _, _ in self.regressors)
 
     def names(self, terms=None) -> list[str]:
-        return [term_name(t, self.regressors, self.n_outputs, self.n_inputs) for t in (self.terms if terms is None else terms)]
+        return [
+            term_name(t, self.regressors, self.n_outputs, self.n_inputs)
+            for t in (self.terms if terms is None else terms)
+        ]
 
     def column_of(self, r: int) -> int:
         """Column of regressor r in the signal matrix [y | u | e] of :mod:`sysid.simulate`."""
@@ -140,7 +145,9 @@ def _as2d(a: np.ndarray) -> np.ndarray:
     return a.reshape(a.shape[0], -1)
 
 
-def lagged_chunks(records, structure: Structure, e_list=None, chunk: int = DEFAULT_CHUNK) -> Iterator[tuple[np.ndarray, np.ndarray]]:
+def lagged_chunks(
+    records, structure: Structure, e_list=None, chunk: int = DEFAULT_CHUNK
+) -> Iterator[tuple[np.ndarray, np.ndarray]]:
     """Yield ``(X, Y)``: lagged regressor values (rows, n_regressors) and outputs (rows, n_outputs) in chunks.
 
     Rows are the samples t ≥ max_lag of each record; no row mixes two records.
@@ -371,7 +378,11 @@ def frols(G: np.ndarray, n_candidates: int, output: int = 0, n_samples: int = 0,
         selected.append(j)
         errs.append(float(e))
         ssr.append(max(float(A[iy, iy]), 0.0))
-        ic.append(_info_criterion(criterion, len(selected), n_samples, ssr[-1] / n_samples) if criterion != "err" else math.nan)
+        ic.append(
+            _info_criterion(criterion, len(selected), n_samples, ssr[-1] / n_samples)
+            if criterion != "err"
+            else math.nan
+        )
         return e
 
     for j in forced:
@@ -427,7 +438,7 @@ def least_squares(records, structure: Structure, terms, output: int = 0, e_list=
                 buf = np.empty((n, k + 1), order="F")
             term_columns(X, terms, buf[:, :k])
             buf[:, k] = Y[:, output]
-            R = np.linalg.qr(np.vstack([R, buf]), mode="r")
+            R = np.linalg.qr(np.vstack([R, buf]), mode="r")  # type: ignore[assignment]  # numpy stubs: QRResult
             n_rows += n
     if n_rows <= k:
         raise DataError(f"too few samples ({n_rows} usable rows) for {k} parameters")

@@ -64,7 +64,9 @@ def write_record(record: Record, path: str | os.PathLike) -> Path:
     path = Path(path)
     suffix = path.suffix.lower()
     if suffix not in SUPPORTED_SUFFIXES:
-        raise DataError(f"{path}: unknown format {suffix or '(no suffix)'!r}; supported: {', '.join(SUPPORTED_SUFFIXES)}")
+        raise DataError(
+            f"{path}: unknown format {suffix or '(no suffix)'!r}; supported: {', '.join(SUPPORTED_SUFFIXES)}"
+        )
     with atomic_path(path) as tmp:
         if suffix == ".csv":
             _write_csv(record, tmp)
@@ -132,7 +134,9 @@ def read_record(
         raise DataError(f"{src}: is a directory, expected a data file")
     suffix = p.suffix.lower()
     if suffix not in SUPPORTED_SUFFIXES:
-        raise DataError(f"{src}: unknown format {suffix or '(no suffix)'!r}; supported: {', '.join(SUPPORTED_SUFFIXES)}")
+        raise DataError(
+            f"{src}: unknown format {suffix or '(no suffix)'!r}; supported: {', '.join(SUPPORTED_SUFFIXES)}"
+        )
     if p.stat().st_size == 0:
         raise DataError(f"{src}: file is empty")
     if fs is not None:
@@ -172,8 +176,10 @@ def read_record(
                 filled["y"] = filled_y
         if filled:
             # same schema as sysid.preprocess.apply_steps (step, params, changes); filled_indices kept at top level too
-            meta.setdefault("preprocessing", []).append({"step": "fill_missing", "params": {"method": "linear", "at": "read"},
-                                                         "changes": {"filled_indices": filled}, "filled_indices": filled})
+            meta.setdefault("preprocessing", []).append({"step": "fill_missing",
+                                                         "params": {"method": "linear", "at": "read"},
+                                                         "changes": {"filled_indices": filled},
+                                                         "filled_indices": filled})
     if y is not None and y.shape[0] != u.shape[0]:
         raise DataError(f"{src}: u and y have unequal lengths ({u.shape[0]} and {y.shape[0]} samples)")
     return Record(u=u, y=y, fs=fs, units=units, meta=meta, source=src)
@@ -228,7 +234,7 @@ def _read_npz(p: Path, src: str):
     return u, y, fs, units, meta
 
 
-def _check_orientation(x: Any, name: str, src: str) -> np.ndarray:
+def _check_orientation(x: Any, name: str | None, src: str) -> np.ndarray:
     """Samples run along the first axis; a 2-D array with fewer rows than columns is refused, never
     transposed silently (a (1, N) array would be 1 sample of N channels)."""
     a = np.asarray(x)
@@ -249,8 +255,8 @@ def _check_meta(meta: dict, units: Any, src: str) -> None:
         if key in meta and not isinstance(meta[key], list):
             raise DataError(f"{src}: meta {key!r} must be a list, got {type(meta[key]).__name__}")
     for i, seg in enumerate(meta.get("segments", [])):
-        if not (isinstance(seg, dict) and all(isinstance(seg.get(k), int) and not isinstance(seg.get(k), bool)
-                                              and seg.get(k) >= 0 for k in ("start", "stop"))):
+        if not (isinstance(seg, dict) and all(isinstance(v := seg.get(k), int) and not isinstance(v, bool) and v >= 0
+                                              for k in ("start", "stop"))):
             raise DataError(f"{src}: meta 'segments'[{i}] must be an object with integer start and stop >= 0")
     for key in ("provenance", "signal", "twin_config"):
         if key in meta and not isinstance(meta[key], dict):
@@ -304,7 +310,7 @@ def _read_csv(p: Path, src: str, u_col: str, y_col: str | None, explicit_y: bool
         name = time_cols[0]
         t = table.columns([name])[0] * TIME_COLUMNS[name.strip().lower()]
         fs = _fs_from_time(t, src, name)
-    meta = {"provenance": {"file": p.name, "u_col": u_col, "y_col": y_col}}
+    meta: dict[str, Any] = {"provenance": {"file": p.name, "u_col": u_col, "y_col": y_col}}
     if time_cols:
         meta["provenance"]["time_col"] = time_cols[0]
         meta["_fs_from"] = f"its time column {time_cols[0]!r}"
@@ -314,15 +320,19 @@ def _read_csv(p: Path, src: str, u_col: str, y_col: str | None, explicit_y: bool
 def _fs_from_time(t: np.ndarray, src: str, name: str = "t") -> float:
     """Sampling rate [Hz] of a uniform time vector ``t`` [s] (uniform to 1 % of the mean step)."""
     if t.size < 2 or not np.isfinite(t).all():
-        raise DataError(f"{src}: time column/variable {name!r} needs at least two finite values to give the sampling rate")
+        raise DataError(
+            f"{src}: time column/variable {name!r} needs at least two finite values to give the sampling rate"
+        )
     d = np.diff(t)
     span = t[-1] - t[0]
     if span <= 0:
         raise DataError(f"{src}: time column/variable {name!r} is not increasing")
     dt = span / (t.size - 1)
     if np.max(np.abs(d - dt)) > _UNIFORM_TOL * dt:
-        raise DataError(f"{src}: time column/variable {name!r} is not uniformly sampled (steps {d.min():.6g}..{d.max():.6g} s); "
-                        "resample first")
+        raise DataError(
+            f"{src}: time column/variable {name!r} is not uniformly sampled (steps {d.min():.6g}..{d.max():.6g} s); "
+            "resample first"
+        )
     return 1.0 / dt
 
 
@@ -338,14 +348,20 @@ def _read_mat(p: Path, src: str, u_var: str, y_var: str | None, fs_var: str, exp
     except Exception as exc:
         raise DataError(f"{src}: not a readable .mat file ({type(exc).__name__}: {exc})") from None
     if u_var not in variables:
-        raise DataError(f"{src}: missing variable {u_var!r} for u (variables: {', '.join(sorted(variables)) or 'none'}); choose with --u-var")
+        raise DataError(
+            f"{src}: missing variable {u_var!r} for u (variables: {', '.join(sorted(variables)) or 'none'}); "
+            "choose with --u-var"
+        )
     u = _mat_numeric(variables[u_var], u_var, src)
     y = None
     if y_var is not None:
         if y_var in variables:
             y = _mat_numeric(variables[y_var], y_var, src)
         elif explicit_y:
-            raise DataError(f"{src}: missing variable {y_var!r} for y (variables: {', '.join(sorted(variables))}); choose with --y-var")
+            raise DataError(
+                f"{src}: missing variable {y_var!r} for y (variables: {', '.join(sorted(variables))}); "
+                "choose with --y-var"
+            )
     # the rate: fs_var (default fs), else a scalar Ts [s], else a time vector t / time [s]; several must agree
     rates: list[tuple[float, str]] = []
     if fs_var in variables:
@@ -370,7 +386,7 @@ def _read_mat(p: Path, src: str, u_var: str, y_var: str | None, fs_var: str, exp
     # MATLAB row and column vectors are squeezed to 1-D (one channel); matrices must be samples x channels
     u = _check_orientation(u, u_var, src)
     y = None if y is None else _check_orientation(y, y_var, src)
-    meta = {"provenance": {"file": p.name, "u_var": u_var, "y_var": y_var}}
+    meta: dict[str, Any] = {"provenance": {"file": p.name, "u_var": u_var, "y_var": y_var}}
     if rates:
         meta["_fs_from"] = rates[0][1]
     return u, y, fs, {"u": "", "y": ""}, meta

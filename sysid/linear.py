@@ -256,7 +256,7 @@ class ARMAX(_LinearBase):
         e_list = fr.fitted_residuals(records, s, [proc] * n_out, th, e_list=zeros)
         theta_prev = None
         it = 0
-        for it in range(1, int(self.max_iter) + 1):
+        for it in range(1, int(self.max_iter) + 1):  # noqa: B007 (the count is returned)
             th = [fr.least_squares(records, s, terms[o], o, e_list=e_list).theta for o in range(n_out)]
             e_list = fr.fitted_residuals(records, s, terms, th, e_list=e_list)
             theta = np.concatenate(th)
@@ -270,7 +270,7 @@ class ARMAX(_LinearBase):
     # ---------------------------------------------------------------- PEM
     def _layout(self, s, terms):
         """Indices of the y, u, e and constant terms in ``terms`` (degree-1 structure)."""
-        idx = {"y": [], "u": [], "e": [], "c": []}
+        idx: dict[str, list[int]] = {"y": [], "u": [], "e": [], "c": []}
         for j, t in enumerate(terms):
             if not t:
                 idx["c"].append(j)

@@ -51,10 +51,14 @@ def plot_bode_with_std(model, fs: float, path, n_freq: int = 400) -> Path:
     fig, (a1, a2) = pyplot().subplots(2, 1, figsize=(7.0, 5.0), sharex=True)
     for k in range(G.shape[1]):
         mag = np.abs(G[:, k])
-        line, = a1.semilogx(f, 20 * np.log10(np.maximum(mag, 1e-300)), lw=1.0, label=None if G.shape[1] == 1 else f"G{k + 1}")
+        (line,) = a1.semilogx(
+            f, 20 * np.log10(np.maximum(mag, 1e-300)), lw=1.0, label=None if G.shape[1] == 1 else f"G{k + 1}"
+        )
         if std is not None:
             lo = np.maximum(mag - 2 * std[:, k], 1e-300 * np.ones_like(mag))
-            a1.fill_between(f, 20 * np.log10(lo), 20 * np.log10(mag + 2 * std[:, k]), color=line.get_color(), alpha=0.25)
+            a1.fill_between(
+                f, 20 * np.log10(lo), 20 * np.log10(mag + 2 * std[:, k]), color=line.get_color(), alpha=0.25
+            )
         a2.semilogx(f, np.degrees(np.unwrap(np.angle(G[:, k]))), lw=1.0, color=line.get_color())
     a1.set_ylabel("|G| [dB] (± 2 std)")
     a2.set_ylabel("phase [°]")

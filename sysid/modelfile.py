@@ -31,8 +31,9 @@ import hashlib
 import json
 import os
 import zipfile
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -150,7 +151,8 @@ def write_model(model, path: str | os.PathLike) -> Path:
             tmp.write_text(json.dumps(doc, default=json_default))
         else:
             with open(tmp, "wb") as fh:  # a handle: np.savez would append ".npz" to other names
-                np.savez(fh, header=np.array(json.dumps(header)), **arrays)
+                named: dict[str, Any] = arrays  # names a0, a1, ... (never savez's allow_pickle)
+                np.savez(fh, header=np.array(json.dumps(header)), **named)
     return Path(path)
 
 
@@ -227,7 +229,9 @@ def _json_container(path: Path, doc: Any) -> tuple[dict[str, Any], dict[str, np.
         try:
             arrays[name] = np.asarray(a["data"], dtype=np.dtype(a["dtype"])).reshape(a["shape"])
         except (KeyError, TypeError, ValueError) as exc:
-            raise DataError(f"{path}: array {name!r} of the model file is damaged ({type(exc).__name__}: {exc})") from None
+            raise DataError(
+                f"{path}: array {name!r} of the model file is damaged ({type(exc).__name__}: {exc})"
+            ) from None
     return doc, arrays
 
 

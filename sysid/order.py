@@ -21,8 +21,9 @@ from __future__ import annotations
 
 import math
 import warnings
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -52,7 +53,7 @@ def delay_estimate(data: Record | Sequence[Record], max_delay: int = 30, n_extra
     yy, n = 0.0, 0
     for rec in recs:
         u = rec.u.reshape(len(rec), -1)
-        y = rec.y.reshape(len(rec), -1)[:, 0]
+        y = rec.output.reshape(len(rec), -1)[:, 0]
         if len(rec) <= M:
             raise DataError(f"{rec.source}: {len(rec)} samples are too few for a delay estimate over {M} lags")
         for t0 in range(M - 1, len(rec), CHUNK):
@@ -182,8 +183,12 @@ def order_table(identifier: str, est: Record | Sequence[Record], val: Record | S
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", DivergenceWarning)
             skip = int(model.max_lag_)
-            e = np.concatenate([(np.asarray(r.y, float) - np.asarray(model.predict(r, 1), float)).reshape(len(r), -1)[skip:]
-                                for r in est_l])
+            e = np.concatenate(
+                [
+                    (np.asarray(r.y, float) - np.asarray(model.predict(r, 1), float)).reshape(len(r), -1)[skip:]
+                    for r in est_l
+                ]
+            )
         N, p = e.shape[0], int(model.n_parameters_)
         V = float(np.mean(e ** 2)) if np.isfinite(e).all() else math.inf
         row = {"order": int(n), "n_parameters": p,

@@ -35,7 +35,8 @@ Prediction: free run x = Σ B_i/F_i u_i with the initial filter state fitted by 
 
 from __future__ import annotations
 
-from typing import Any, Sequence
+from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 from scipy.optimize import least_squares as _scipy_lsq
@@ -168,13 +169,16 @@ class _PolyPEM(Identifier):
     def _unpack(self, theta, o):
         bs, fs, j = [], [], 0
         for i in range(len(o["nb"])):
-            bs.append(np.asarray(theta[j:j + o["nb"][i]], float)); j += o["nb"][i]
-            fs.append(np.concatenate([[1.0], theta[j:j + o["nf"][i]]])); j += o["nf"][i]
-        c = np.concatenate([[1.0], theta[j:j + o["nc"]]]); j += o["nc"]
+            bs.append(np.asarray(theta[j:j + o["nb"][i]], float))
+            j += o["nb"][i]
+            fs.append(np.concatenate([[1.0], theta[j:j + o["nf"][i]]]))
+            j += o["nf"][i]
+        c = np.concatenate([[1.0], theta[j:j + o["nc"]]])
+        j += o["nc"]
         d = np.concatenate([[1.0], theta[j:j + o["nd"]]])
         return bs, fs, c, d
 
-    def fit(self, data: Record | Sequence[Record]) -> "_PolyPEM":
+    def fit(self, data: Record | Sequence[Record]) -> _PolyPEM:
         records = as_record_list(data)
         if records[0].n_outputs != 1:
             raise ConfigError(f"{self.name}: one output supported (MISO), the data have {records[0].n_outputs}; "
@@ -222,7 +226,7 @@ class _PolyPEM(Identifier):
             blocks = []
             for u_, X, v, e in out:
                 J = np.empty((len(e), len(lay)))
-                cache = {}
+                cache: dict[Any, np.ndarray] = {}
                 for j, (kind, i, k) in enumerate(lay):
                     if kind in ("b", "f"):
                         if (kind, i) not in cache:
@@ -340,12 +344,14 @@ class _PolyPEM(Identifier):
         """``[{"name": "b1", "value", "std"}]`` in θ order (module docstring for the polynomial convention)."""
         self._check_fitted()
         std = np.sqrt(np.maximum(np.diag(self.cov_), 0.0))
-        return [{"name": n, "value": float(v), "std": float(s)} for n, v, s in zip(self.parameter_names(), self.theta_, std)]
+        return [
+            {"name": n, "value": float(v), "std": float(s)} for n, v, s in zip(self.parameter_names(), self.theta_, std)
+        ]
 
     def _index(self, kind: str, i: int) -> list[int]:
         return [j for j, (kd, ii, _) in enumerate(self.layout_) if kd == kind and ii == i]
 
-    def poles(self) -> list[dict[str, float]]:
+    def poles(self) -> list[dict[str, float | None]]:
         """Poles of G (roots of every F_i) with their complex std (:func:`sysid.uncertainty.poles_with_std`)."""
         self._check_fitted()
         out = []

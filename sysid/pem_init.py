@@ -11,7 +11,7 @@
 
 from __future__ import annotations
 
-from typing import Sequence
+from collections.abc import Sequence
 
 import numpy as np
 from scipy.signal import lfilter
@@ -73,7 +73,9 @@ def sriv(us: list[np.ndarray], ys: list[np.ndarray], nb: int, nf: int, nk: int,
         for u_, y_, x_ in zip(uf, yf, xf):
             P = np.hstack([-lags(y_, ylags), lags(u_, ulags)])[L:]
             Z = np.hstack([-lags(x_, ylags), lags(u_, ulags)])[L:] if x_ is not None else P
-            rows_P.append(P), rows_Z.append(Z), rows_y.append(y_[L:])
+            rows_P.append(P)
+            rows_Z.append(Z)
+            rows_y.append(y_[L:])
         P, Z, yv = np.vstack(rows_P), np.vstack(rows_Z), np.concatenate(rows_y)
         th = np.linalg.lstsq(Z.T @ P, Z.T @ yv, rcond=None)[0]
         return th[nf:], np.concatenate([[1.0], th[:nf]])

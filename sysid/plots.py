@@ -19,17 +19,18 @@ from __future__ import annotations
 
 import os
 import warnings
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any
 
 import numpy as np
 
 from sysid.errors import DivergenceWarning
 from sysid.residuals import correlation_tests, residual_spectrum
 
-__all__ = ["plot_residuals", "plot_correlation_tests", "plot_scatter", "plot_horizon_residuals", "plot_frf", "plot_bla", "plot_compare",
-           "identification_report", "plot_measured_vs_predicted", "draw_correlation_test", "whole_periods",
-           "BAND_COLOR", "ZOOM_COLOR", "pyplot", "save_and_close"]
+__all__ = ["plot_residuals", "plot_correlation_tests", "plot_scatter", "plot_horizon_residuals", "plot_frf", "plot_bla",
+           "plot_compare", "identification_report", "plot_measured_vs_predicted", "draw_correlation_test",
+           "whole_periods", "BAND_COLOR", "ZOOM_COLOR", "pyplot", "save_and_close"]
 
 # Colours that mean one thing in every report (the browser test looks for them): the 95 % confidence band of
 # a correlation test, and the span of the whole record that the zoomed panel shows.
@@ -187,7 +188,9 @@ def plot_measured_vs_predicted(t: np.ndarray, y: np.ndarray, predictions: dict[s
     ax[0].set_xlim(t[0], t[-1])
     ax[1].set_xlim(t[a], t[b - 1])
     ax[0].set_title(f"{title}: whole record, {n} samples", fontsize=10)
-    ax[1].set_title(f"zoom: samples {a}–{b - 1}" + (" (largest error of the first model)" if predictions else ""), fontsize=9)
+    ax[1].set_title(
+        f"zoom: samples {a}–{b - 1}" + (" (largest error of the first model)" if predictions else ""), fontsize=9
+    )
     for axis in ax:
         axis.set_ylabel(f"y [{unit}]" if unit else "y")
         axis.tick_params(labelsize=8)

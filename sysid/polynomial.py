@@ -22,7 +22,8 @@ from __future__ import annotations
 
 import math
 import warnings
-from typing import Any, Sequence
+from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 
@@ -51,17 +52,21 @@ class PolynomialModel(Identifier):
     term tuples), ``theta_``, ``stderr_``, ``err_``.
     """
 
+    _compiled: sim.CompiledModel | None
+
     # -------------------------------------------------------------- common learned state
-    def _structure(self, n_outputs: int, n_inputs: int, ne: int = 0, degree: int = 1, constant: bool = True) -> fr.Structure:
+    def _structure(
+        self, n_outputs: int, n_inputs: int, ne: int = 0, degree: int = 1, constant: bool = True
+    ) -> fr.Structure:
         regs = fr.make_regressors(self.ny, self.nu, ne, self.nk, n_outputs, n_inputs)
         if not regs:
             raise ConfigError(f"{self.name}: no regressors (ny = nu = 0)")
         return fr.Structure(regs, fr.candidate_terms(len(regs), degree, constant), n_outputs, n_inputs)
 
-    def fit(self, data: Record | Sequence[Record]) -> "PolynomialModel":
+    def fit(self, data: Record | Sequence[Record]) -> PolynomialModel:
         records = as_record_list(data)
         self._fit_records(records)
-        y_max = max(float(np.max(np.abs(r.y))) for r in records)
+        y_max = max(float(np.max(np.abs(r.output))) for r in records)
         self.y_bound_ = DIVERGENCE_FACTOR * max(y_max, 1e-300)
         self.n_outputs_ = records[0].n_outputs
         self.n_inputs_ = records[0].n_inputs
@@ -76,7 +81,8 @@ class PolynomialModel(Identifier):
 
     # -------------------------------------------------------------- prediction
     def compiled(self) -> sim.CompiledModel:
-        if getattr(self, "_compiled", None) is None:
+        compiled = getattr(self, "_compiled", None)
+        if compiled is None:
             s = self.structure_
             n_out = s.n_outputs
             t_max = max([len(t) for t in self.terms_] + [1])
@@ -89,10 +95,10 @@ class PolynomialModel(Identifier):
                     theta[o, i] = self.theta_[o][i]
             col = [s.column_of(r) for r in range(len(s.regressors))]
             lag = [lg for _, _, lg in s.regressors]
-            self._compiled = sim.CompiledModel(n_out, s.n_inputs, s.has_e, col, lag, terms,
-                                               [len(t) for t in self.terms_], theta, s.max_lag,
-                                               kinds=[k for k, _, _ in s.regressors])
-        return self._compiled
+            compiled = self._compiled = sim.CompiledModel(n_out, s.n_inputs, s.has_e, col, lag, terms,
+                                                          [len(t) for t in self.terms_], theta, s.max_lag,
+                                                          kinds=[k for k, _, _ in s.regressors])
+        return compiled
 
     def _check_fitted(self) -> None:
         if not hasattr(self, "terms_"):
@@ -111,7 +117,7 @@ class PolynomialModel(Identifier):
                             f"on {self.n_inputs_} / {self.n_outputs_}")
         m = self.compiled()
         u = record.u.reshape(len(record), -1)
-        y = record.y.reshape(len(record), -1)
+        y = record.output.reshape(len(record), -1)
         self.diverged_at_ = None
         if horizon is None:
             yhat, bad = sim.free_run(m, u, y, self.y_bound_)
@@ -132,7 +138,7 @@ class PolynomialModel(Identifier):
             what = "free run" if horizon is None else f"{horizon}-step prediction"
             warnings.warn(f"{self.name}: {what} diverged at sample {bad} (beyond ±{self.y_bound_:.3g} or non-finite); "
                           "the remaining samples are nan", DivergenceWarning, stacklevel=2)
-        return yhat.reshape(record.y.shape)
+        return yhat.reshape(record.output.shape)
 
     def residuals(self, record: Record) -> np.ndarray:
         """One-step residuals e(t) = y(t) − ŷ(t|t−1) (eq. 2-16/2-30), zeros for the first max_lag_ samples."""
@@ -251,8 +257,12 @@ class NARXPoly(PolynomialModel):
     def _fit_records(self, records: list[Record]) -> None:
         _check_common(self)
         s = self._structure(records[0].n_outputs, records[0].n_inputs, 0, self.degree, self.constant)
-        check_records(records, s.max_lag, len(s.terms) + 1 if self.max_terms is None else min(len(s.terms), self.max_terms) + 1,
-                      self.name)
+        check_records(
+            records,
+            s.max_lag,
+            len(s.terms) + 1 if self.max_terms is None else min(len(s.terms), self.max_terms) + 1,
+            self.name,
+        )
         G, n = fr.gram_matrix(records, s, chunk=self.chunk)
         self.structure_ = s
         self.terms_, self.theta_, self.stderr_, self.err_ = [], [], [], []
@@ -274,7 +284,7 @@ def _recursive_residuals_impl(model: PolynomialModel, records, s, terms_all, the
     m = model.compiled()
     out = []
     for rec in records:
-        _, e = sim.one_step(m, rec.u.reshape(len(rec), -1), rec.y.reshape(len(rec), -1))
+        _, e = sim.one_step(m, rec.u.reshape(len(rec), -1), rec.output.reshape(len(rec), -1))
         out.append(e)
     model._compiled = None
     return out
@@ -509,8 +519,10 @@ class NARMAXPoly(PolynomialModel):
             what += (f"; the noise models of iterations {self.els_unstable_} had an unstable residual recursion "
                      "(ELS continued from the plain residual)")
         if removed:
-            what += (f"; the final noise model's residual recursion diverged on the estimation data: removed "
-                     f"{', '.join(removed)} (process parameters unchanged, the remaining noise parameters re-estimated)")
+            what += (
+                f"; the final noise model's residual recursion diverged on the estimation data: removed "
+                f"{', '.join(removed)} (process parameters unchanged, the remaining noise parameters re-estimated)"
+            )
         self.els_status_ = what
         self.els_removed_terms_ = removed
         del self._last_plain

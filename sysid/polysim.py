@@ -27,7 +27,8 @@ Jacobian), σ̂² the mean squared simulation residual.
 
 from __future__ import annotations
 
-from typing import Any, Sequence
+from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 from numba import njit
@@ -124,8 +125,8 @@ def simulate_sensitivity(structure: fr.Structure, terms_per_output, theta: np.nd
     kind, ch, lag, fac, out_of = _tables(structure, terms_per_output)
     u2 = np.ascontiguousarray(np.asarray(u, dtype=float).reshape(len(u), -1))
     y2 = np.ascontiguousarray(np.asarray(y, dtype=float).reshape(len(y), -1))
-    return _sim_sens(y2, u2, kind, ch, lag, fac, out_of, np.ascontiguousarray(theta, dtype=float), int(structure.max_lag),
-                     float(bound), bool(jacobian))
+    return _sim_sens(y2, u2, kind, ch, lag, fac, out_of, np.ascontiguousarray(theta, dtype=float),
+                     int(structure.max_lag), float(bound), bool(jacobian))
 
 
 class NARXPolySim(NARXPoly):
@@ -163,7 +164,7 @@ class NARXPolySim(NARXPoly):
         super()._fit_records(records)
         self.theta_ls_ = [np.asarray(t, dtype=float).copy() for t in self.theta_]
         self.refine_info_ = {"nfev": 0, "status": "not run", "rms_ls": None, "rms_sim": None}
-        if self.max_nfev > 0 and sum(len(t) for t in self.terms_):
+        if self.max_nfev > 0 and any(len(t) > 0 for t in self.terms_):
             self._refine(records)
 
     def _refine(self, records: list[Record]) -> None:
@@ -173,7 +174,7 @@ class NARXPolySim(NARXPoly):
         terms = self.terms_
         sizes = [len(t) for t in terms]
         theta0 = np.concatenate([np.asarray(t, dtype=float) for t in self.theta_])
-        ys = [r.y.reshape(len(r), -1) for r in records]
+        ys = [r.output.reshape(len(r), -1) for r in records]
         us = [r.u.reshape(len(r), -1) for r in records]
         y_all = np.concatenate(ys)
         scale = np.where(y_all.std(axis=0) > 0, y_all.std(axis=0), 1.0)
@@ -204,7 +205,8 @@ class NARXPolySim(NARXPoly):
 
         def solve(theta: np.ndarray, n: int | None):
             return least_squares(lambda th: run(th, n)[0], theta, jac=lambda th: run(th, n)[1], method="lm",
-                                 x_scale="jac", max_nfev=int(self.max_nfev), xtol=float(self.xtol), ftol=float(self.ftol))
+                                 x_scale="jac", max_nfev=int(self.max_nfev), xtol=float(self.xtol),
+                                 ftol=float(self.ftol))
 
         r0, _, div0 = run(theta0)
         # Continuation when the least-squares start diverges in simulation: refine on each record's first n samples,

@@ -24,14 +24,23 @@ Record level: :func:`apply_steps` applies a list of steps in order to ``u`` and 
 
 from __future__ import annotations
 
-from typing import Any, Iterable
+from collections.abc import Iterable
+from typing import Any
 
 from sysid.checks import _int_param
 from sysid.cleaning import detrend, fill_missing, hampel, remove_offset
 from sysid.config import positive
 from sysid.errors import ConfigError, DataError
-from sysid.filters import (ATTEN_DB_DEFAULT, PASSBAND_DEFAULT, antialias_filter, bandpass, bandpass_design, decimate,
-                           moving_average, resample)
+from sysid.filters import (
+    ATTEN_DB_DEFAULT,
+    PASSBAND_DEFAULT,
+    antialias_filter,
+    bandpass,
+    bandpass_design,
+    decimate,
+    moving_average,
+    resample,
+)
 from sysid.record import Record
 from sysid.sampling import autocovariance, segment, segment_bounds, suggest_rate
 
@@ -145,7 +154,9 @@ def apply_steps(record: Record, steps: Iterable[Any]) -> Record:
                 changes.setdefault("trend_coefficients", {})[t] = coef.T.tolist()
         elif name == "hampel":
             for t in targets:
-                new[t], ch = hampel(getattr(rec, t), window=params.get("window", 10), n_sigma=params.get("n_sigma", 3.0))
+                new[t], ch = hampel(
+                    getattr(rec, t), window=params.get("window", 10), n_sigma=params.get("n_sigma", 3.0)
+                )
                 changes.setdefault("replaced", {})[t] = ch
             changes["n_replaced"] = {t: len(changes["replaced"][t]) for t in targets}
         elif name == "fill_missing":
@@ -163,18 +174,19 @@ def apply_steps(record: Record, steps: Iterable[Any]) -> Record:
                     raise ConfigError("preprocessing step decimate needs q")
                 q = _int_param("decimation factor q", params["q"], 1)
                 fs_new = fs / q
-                fn = lambda x: decimate(x, q, params.get("passband", PASSBAND_DEFAULT),  # noqa: E731
-                                        params.get("atten_db", ATTEN_DB_DEFAULT), return_filter=True)
+                # fn is called below, in this same step: binding late to q and params is harmless
+                fn = lambda x: decimate(x, q, params.get("passband", PASSBAND_DEFAULT),  # noqa: E731, B023
+                                        params.get("atten_db", ATTEN_DB_DEFAULT), return_filter=True)  # noqa: B023
             else:
                 if "fs_new" not in params:
                     raise ConfigError("preprocessing step resample needs fs_new")
                 fs_new = positive("new sampling rate", params["fs_new"])
-                fn = lambda x: resample(x, fs, fs_new, params.get("passband", PASSBAND_DEFAULT),  # noqa: E731
-                                        params.get("atten_db", ATTEN_DB_DEFAULT), return_filter=True)
+                fn = lambda x: resample(x, fs, fs_new, params.get("passband", PASSBAND_DEFAULT),  # noqa: E731, B023
+                                        params.get("atten_db", ATTEN_DB_DEFAULT), return_filter=True)  # noqa: B023
             for t in targets:
                 new[t], h = fn(getattr(rec, t))
-            changes.update({"fs_before": fs, "fs_after": fs_new, "n_before": len(rec), "n_after": int(new["u"].shape[0]),
-                            "filter_taps": int(h.size)})
+            changes.update({"fs_before": fs, "fs_after": fs_new, "n_before": len(rec),
+                            "n_after": int(new["u"].shape[0]), "filter_taps": int(h.size)})
             new["fs"] = fs_new
         elif name == "bandpass":
             if "fmin" not in params or "fmax" not in params:

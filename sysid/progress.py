@@ -8,7 +8,8 @@ a terminal, so pipes, log files and CI output stay clean. The command line switc
 from __future__ import annotations
 
 import sys
-from typing import Any, Iterable
+from collections.abc import Iterable
+from typing import Any
 
 __all__ = ["progress", "set_enabled", "enabled"]
 

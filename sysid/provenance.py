@@ -15,8 +15,9 @@ import shlex
 import subprocess
 import sys
 import time
+from collections.abc import Iterable
 from pathlib import Path
-from typing import Any, Iterable
+from typing import Any
 
 from sysid.report import REPORT_CSS, provenance_section  # noqa: F401  (REPORT_CSS: importable from its old home)
 
@@ -79,11 +80,13 @@ def collect(files: Iterable[str | os.PathLike] = (), records: Iterable[Any] = ()
     return {
         "package": "piezotwin",
         "version": _version(),
-        "commit": (commit + (" (with uncommitted changes)" if dirty else "")) if commit else "unknown (not a git checkout)",
+        "commit": (commit + (" (with uncommitted changes)" if dirty else ""))
+        if commit
+        else "unknown (not a git checkout)",
         "command": shlex.join(argv) if argv else "",
         "date_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
         "machine": f"{platform.node()} — {platform.platform()}, {platform.machine()}, {os.cpu_count()} CPUs, "
-                   f"Python {platform.python_version()}",
+        f"Python {platform.python_version()}",
         "data": data,
     }
 

@@ -139,20 +139,29 @@ class Record:
             return 0
         return 1 if self.y.ndim == 1 else int(self.y.shape[1])
 
-    def require_output(self) -> "Record":
+    def require_output(self) -> Record:
         """Raise :class:`DataError` unless the record has an output ``y``; return self."""
-        if self.y is None:
-            raise DataError(f"{self.source}: record has no output y (input-only record)")
+        _ = self.output  # DataError on an input-only record
         return self
 
+    @property
+    def output(self) -> np.ndarray:
+        """The output ``y`` of a record that must have one: :class:`DataError` naming the record when it has none
+        (an input-only record). Code that needs ``y`` reads it here, so the type checker knows it is an array."""
+        if self.y is None:
+            raise DataError(f"{self.source}: record has no output y (input-only record)")
+        return self.y
+
     # ------------------------------------------------------------------ derived records
-    def replace(self, **changes: Any) -> "Record":
+    def replace(self, **changes: Any) -> Record:
         """A copy with some fields replaced (arrays are not copied unless replaced)."""
-        kw = dict(u=self.u, y=self.y, fs=self.fs, units=dict(self.units), meta=copy.deepcopy(self.meta), source=self.source)
+        kw: dict[str, Any] = dict(
+            u=self.u, y=self.y, fs=self.fs, units=dict(self.units), meta=copy.deepcopy(self.meta), source=self.source
+        )
         kw.update(changes)
         return Record(**kw)
 
-    def __getitem__(self, index: slice) -> "Record":
+    def __getitem__(self, index: slice) -> Record:
         """Sample slice, e.g. ``rec[1000:5000]``; the time origin moves with the slice (``meta['t0']``)."""
         if not isinstance(index, slice):
             raise TypeError("Record supports slicing by a slice of sample indices only")
@@ -172,25 +181,25 @@ class Record:
             source=self.source,
         )
 
-    def time_slice(self, t_start: float, t_stop: float | None = None) -> "Record":
+    def time_slice(self, t_start: float, t_stop: float | None = None) -> Record:
         """Slice by time in seconds relative to the record's start."""
         i0 = int(round(t_start * self.fs))
         i1 = len(self) if t_stop is None else int(round(t_stop * self.fs))
         return self[i0:i1]
 
-    def split(self, fraction: float | None = None, index: int | None = None) -> tuple["Record", "Record"]:
+    def split(self, fraction: float | None = None, index: int | None = None) -> tuple[Record, Record]:
         """Split into (estimation, validation) at a sample ``index`` or a ``fraction`` of the length."""
-        if (fraction is None) == (index is None):
-            raise DataError("split: give exactly one of fraction or index")
-        if index is None:
+        if fraction is not None and index is None:
             if not 0.0 < float(fraction) < 1.0:
                 raise DataError(f"split: fraction must lie in (0, 1), got {fraction}")
             index = int(round(len(self) * float(fraction)))
+        elif index is None or fraction is not None:
+            raise DataError("split: give exactly one of fraction or index")
         if not 0 < index < len(self):
             raise DataError(f"split: index {index} outside 1..{len(self) - 1}")
         return self[:index], self[index:]
 
-    def segments(self) -> list["Record"]:
+    def segments(self) -> list[Record]:
         """Split at the boundaries listed in ``meta['segments']`` (list of dicts with start/stop indices)."""
         segs = self.meta.get("segments")
         if not segs:
@@ -216,13 +225,17 @@ class Normaliser:
     nothing divides by zero. The inverse reproduces the original to floating-point round-off.
     """
 
-    def fit(self, data: Record | Sequence[Record]) -> "Normaliser":
+    y_mean_: np.ndarray | np.float64  # a scalar 0 / 1 when the records have no output
+    y_scale_: np.ndarray | np.float64
+
+    def fit(self, data: Record | Sequence[Record]) -> Normaliser:
         """Scale from ``data``: one record, or several taken together (one mean and deviation per channel)."""
         recs = [data] if isinstance(data, Record) else list(data)
         u = recs[0].u if len(recs) == 1 else np.concatenate([r.u for r in recs])
         self.u_mean_, self.u_scale_ = self._stats(u)
-        if all(r.y is not None for r in recs):
-            self.y_mean_, self.y_scale_ = self._stats(recs[0].y if len(recs) == 1 else np.concatenate([r.y for r in recs]))
+        ys = [r.y for r in recs if r.y is not None]
+        if len(ys) == len(recs):
+            self.y_mean_, self.y_scale_ = self._stats(ys[0] if len(ys) == 1 else np.concatenate(ys))
         else:
             self.y_mean_, self.y_scale_ = np.float64(0.0), np.float64(1.0)
         return self
@@ -258,7 +271,7 @@ class Normaliser:
         return {k: np.asarray(getattr(self, k)).tolist() for k in ("u_mean_", "u_scale_", "y_mean_", "y_scale_")}
 
     @classmethod
-    def from_dict(cls, d: dict[str, Any]) -> "Normaliser":
+    def from_dict(cls, d: dict[str, Any]) -> Normaliser:
         obj = cls()
         for k, v in d.items():
             setattr(obj, k, np.asarray(v, dtype=float))

@@ -19,10 +19,12 @@ from typing import Any
 __all__ = ["REPORT_CSS", "esc", "table", "figure", "image", "provenance_section", "page", "write_page"]
 
 # Tables never wider than the page (they scroll or wrap inside themselves); images scale down to the page.
-REPORT_CSS = ("table{border-collapse:collapse;font-size:12px;margin:.5em 0;display:block;max-width:100%;overflow-x:auto}"
-              "td,th{border:1px solid #bbb;padding:3px 6px;vertical-align:top;overflow-wrap:anywhere}"
-              "th{background:#eee;text-align:left}code{font-size:11px;overflow-wrap:anywhere}"
-              "ul.files{margin:0;padding-left:1.2em}img{max-width:100%}")
+REPORT_CSS = (
+    "table{border-collapse:collapse;font-size:12px;margin:.5em 0;display:block;max-width:100%;overflow-x:auto}"
+    "td,th{border:1px solid #bbb;padding:3px 6px;vertical-align:top;overflow-wrap:anywhere}"
+    "th{background:#eee;text-align:left}code{font-size:11px;overflow-wrap:anywhere}"
+    "ul.files{margin:0;padding-left:1.2em}img{max-width:100%}"
+)
 
 
 def esc(text: Any) -> str:
@@ -64,7 +66,8 @@ def provenance_section(prov: dict[str, Any]) -> str:
     cells = "".join(f"<tr><th>{esc(k)}</th><td><code>{esc(v)}</code></td></tr>" for k, v in rows)
     if prov["data"]:
         files = "".join(f"<li><code>{esc(d['file'])}</code> — "
-                        + (f"{d['bytes']} bytes, sha256 <code>{d['sha256']}</code>" if d["sha256"] else "not a file (built in memory)")
+                        + (f"{d['bytes']} bytes, sha256 <code>{d['sha256']}</code>" if d["sha256"]
+                           else "not a file (built in memory)")
                         + "</li>" for d in prov["data"])
         cells += f"<tr><th>data</th><td><ul class='files'>{files}</ul></td></tr>"
     else:

@@ -113,12 +113,20 @@ def correlation_tests(e, u, max_lag: int = 20, alpha: float = 0.05) -> dict[str,
 def tests_summary(ct: dict[str, Any]) -> dict[str, Any]:
     """Compact form of a :func:`correlation_tests` result for JSON output: per test, passed, the number of
     failing lags, the first 40 failing lags, the largest |φ| and the band (the values themselves are left out)."""
-    return {"passed": bool(ct.get("passed")),
-            "tests": [{"name": t["name"], "passed": bool(t["passed"]), "n_failing": len(t.get("failing_lags", [])),
-                       "failing_lags": [int(v) for v in t.get("failing_lags", [])][:40],
-                       "max_abs": float(np.max(np.abs(t["values"]))) if len(t.get("values", [])) else 0.0,
-                       "band": float(np.atleast_1d(t.get("band", 0.0))[0]) if np.ndim(t.get("band", 0.0)) <= 1 else None}
-                      for t in ct.get("tests", [])]}
+    return {
+        "passed": bool(ct.get("passed")),
+        "tests": [
+            {
+                "name": t["name"],
+                "passed": bool(t["passed"]),
+                "n_failing": len(t.get("failing_lags", [])),
+                "failing_lags": [int(v) for v in t.get("failing_lags", [])][:40],
+                "max_abs": float(np.max(np.abs(t["values"]))) if len(t.get("values", [])) else 0.0,
+                "band": float(np.atleast_1d(t.get("band", 0.0))[0]) if np.ndim(t.get("band", 0.0)) <= 1 else None,
+            }
+            for t in ct.get("tests", [])
+        ],
+    }
 
 
 def residual_spectrum(e, fs: float, nperseg: int | None = None) -> dict[str, Any]:

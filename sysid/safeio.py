@@ -23,14 +23,14 @@ from __future__ import annotations
 
 import os
 import secrets
+from collections.abc import Iterable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Iterable, Iterator
 
 from sysid.errors import DataError
 
-__all__ = ["check_memory", "available_memory", "atomic_path", "atomic_write_text", "atomic_write_bytes", "save_figure", "check_output_path",
-           "check_output_dir", "protect_inputs", "protected_inputs", "same_file"]
+__all__ = ["check_memory", "available_memory", "atomic_path", "atomic_write_text", "atomic_write_bytes", "save_figure",
+           "check_output_path", "check_output_dir", "protect_inputs", "protected_inputs", "same_file"]
 
 _PROTECTED: list[str] = []  # input files of the running CLI command (set by protect_inputs)
 

@@ -16,7 +16,7 @@ Every bad argument raises :class:`~sysid.errors.ConfigError` with one line namin
 from __future__ import annotations
 
 import math
-from typing import Sequence
+from collections.abc import Sequence
 
 import numpy as np
 import scipy.fft
@@ -146,8 +146,10 @@ def multisine(
         if duration is not None:
             n_total = _n_samples(fs, positive("duration", duration))
             if periods != 1 and n_total != periods * n0:
-                raise ConfigError(f"periods={periods} disagrees with duration {duration} s and resolution {resolution:g} Hz;"
-                                  " give two of the three")
+                raise ConfigError(
+                    f"periods={periods} disagrees with duration {duration} s and resolution {resolution:g} Hz;"
+                    " give two of the three"
+                )
         else:
             n_total = periods * n0
     elif duration is not None:
@@ -191,7 +193,9 @@ def multisine(
         if nf > cand.size:
             raise ConfigError(
                 f"components={nf} do not fit the resolution: the band [{fmin:g}, {fmax:g}] Hz holds {cand.size}"
-                f" {grid}-grid lines of spacing {df:g} Hz (period {n0} samples); use a finer resolution or a longer period")
+                f" {grid}-grid lines of spacing {df:g} Hz (period {n0} samples); "
+                "use a finer resolution or a longer period"
+            )
         if nf < cand.size:
             pick = np.unique(np.round(np.linspace(0, cand.size - 1, nf)).astype(np.int64))
             cand = cand[pick]
@@ -203,7 +207,9 @@ def multisine(
         block = max(2, int(round(1.0 / detection_fraction)))
         nblocks = lines.size // block
         if nblocks == 0:
-            raise ConfigError(f"detection_fraction={detection_fraction} needs at least {block} lines, have {lines.size}")
+            raise ConfigError(
+                f"detection_fraction={detection_fraction} needs at least {block} lines, have {lines.size}"
+            )
         drop = np.arange(nblocks) * block + rng.integers(0, block, size=nblocks)
         detection = lines[drop]
         lines = np.delete(lines, drop)
@@ -391,7 +397,7 @@ def stepped_sine(
     return u
 
 
-# ---------------------------------------------------------------------------------------------- the dissertation's signals
+# ------------------------------------------------------------------------------------ the dissertation's signals
 def thesis_cantilever_multisine(seed: int = 0, return_info: bool = False):
     """The cantilever estimation multisine, dissertation §3.1: "up to 0.5 kHz frequency and maximum amplitude
     of 100 V ... constructed with n_f = 5000 sinusoidal signals and uniformly distributed with random phases",

@@ -96,7 +96,9 @@ def _one_step(Z, x, n_out, e_col0, has_e, L, fac, theta, n_exo, n_dyn, n_terms):
 
 @njit(cache=True)
 def _free_run(Z, x, n_out, L, fac, theta, n_exo, n_dyn, bound):
-    """Simulate in place in the y columns of Z (noise terms are zero and skipped). Returns the divergence index or -1."""
+    """Simulate in place in the y columns of Z (noise terms are zero and skipped).
+
+    Returns the divergence index or -1."""
     N, ncol = Z.shape
     W = Z.reshape(N * ncol)
     for t in range(L, N):
@@ -193,7 +195,7 @@ class CompiledModel:
         self.n_exo = np.zeros(self.n_out, dtype=np.int64)
         self.n_dyn = np.zeros(self.n_out, dtype=np.int64)
         for o in range(self.n_out):
-            groups = ([], [], [])
+            groups: tuple[list[int], list[int], list[int]] = ([], [], [])
             for i in range(int(n_terms[o])):
                 ks = {kinds[r] for r in terms[o, i] if r >= 0}
                 groups[2 if "e" in ks else (1 if "y" in ks else 0)].append(i)

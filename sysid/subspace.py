@@ -11,8 +11,8 @@ inputs U_f, past inputs and outputs Z_p = [U_p; Y_p] and future outputs Y_f, the
     [U_f; Z_p; Y_f] = [[L11, 0, 0], [L21, L22, 0], [L31, L32, L33]] Q
 
 gives the extended observability matrix Γ_i from the column space of L32 (SVD; the order n is chosen from its
-singular values when not given: the last step by a factor ≥ 2 between neighbours, :func:`choose_order`), C as the first block
-row of Γ_i and A from its shift invariance (least squares). B and D follow linearly: with Γ⊥ the orthogonal
+singular values when not given: the last step by a factor ≥ 2 between neighbours, :func:`choose_order`), C as the first
+block row of Γ_i and A from its shift invariance (least squares). B and D follow linearly: with Γ⊥ the orthogonal
 complement of Γ_i and M = Γ⊥ᵀ L31 L11⁻¹ = Γ⊥ᵀ H_i (H_i the block-Toeplitz matrix of D, CB, CAB, …), column block
 c gives M_c = L_c D + [L_{c+1} … L_i] Γ_{i−c} B (L_c the c-th block column of Γ⊥ᵀ), solved by least squares
 (``focus="subspace"``). By default, poles outside the unit circle are reflected (λ → 1/λ̄, counted in
@@ -36,7 +36,8 @@ frequency response, and a band on the simulated output.
 from __future__ import annotations
 
 import math
-from typing import Any, Sequence
+from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 from numba import njit
@@ -109,7 +110,8 @@ def _hankel_rows(u: np.ndarray, y: np.ndarray, i: int, j0: int, j1: int) -> np.n
 
 
 def _qr_r(M: np.ndarray) -> np.ndarray:
-    return np.linalg.qr(M, mode="r")
+    # numpy's stubs type every mode as QRResult; mode="r" returns the array R alone
+    return np.linalg.qr(M, mode="r")  # type: ignore[return-value]
 
 
 def _bd_grams(A, C, us, ys, K: int, chunk: int):
@@ -237,7 +239,8 @@ class N4SID(Identifier):
                 for c0 in range(a, b, int(self.chunk)):
                     c1 = min(c0 + int(self.chunk), b)
                     H = _hankel_rows(u, y, i, c0, c1)
-                    Rs[s] = _qr_r(H if Rs[s] is None else np.vstack([Rs[s], H]))
+                    prev = Rs[s]
+                    Rs[s] = _qr_r(H if prev is None else np.vstack([prev, H]))
             g0 += J
         return [np.zeros((0, width)) if R is None else R for R in Rs]
 
@@ -284,7 +287,7 @@ class N4SID(Identifier):
         g = sum(gr[1] for gr in keep)
         return unpack(_solve(G, g))
 
-    def fit(self, data: Record | Sequence[Record]) -> "N4SID":
+    def fit(self, data: Record | Sequence[Record]) -> N4SID:
         records = as_record_list(data)
         m, l = records[0].n_inputs, records[0].n_outputs
         n_fixed = None if self.nx is None or (isinstance(self.nx, str) and self.nx.lower() in ("none", "auto")) \
@@ -307,7 +310,7 @@ class N4SID(Identifier):
         width = 2 * i * (m + l)
         check_records(records, 2 * i, width * 2, self.name)
         us = [r.u.reshape(len(r), -1).astype(float) for r in records]
-        ys = [r.y.reshape(len(r), -1).astype(float) for r in records]
+        ys = [r.output.reshape(len(r), -1).astype(float) for r in records]
         su = np.sqrt(np.mean(np.vstack(us) ** 2, axis=0))
         sy = np.sqrt(np.mean(np.vstack(ys) ** 2, axis=0))
         Rs = self._r_factors([u / su for u in us], [y / sy for y in ys], i, K)
@@ -374,11 +377,11 @@ class N4SID(Identifier):
         self._check_fitted()
         check_prediction(self, record, horizon)
         u = record.u.reshape(len(record), -1)
-        y = record.y.reshape(len(record), -1)
+        y = record.output.reshape(len(record), -1)
         yhat = self._simulate(u, y)
         L = min(self.max_lag_, len(y))
         yhat[:L] = y[:L]
-        return stop_at_divergence(self, yhat, "simulation").reshape(record.y.shape)
+        return stop_at_divergence(self, yhat, "simulation").reshape(record.output.shape)
 
     # ------------------------------------------------------------------ uncertainty and reporting
     def _jack_std(self, est: np.ndarray, reps: list[np.ndarray]) -> np.ndarray:
@@ -388,7 +391,7 @@ class N4SID(Identifier):
         R = np.stack(reps)
         return np.sqrt((K - 1) / K * np.sum(np.abs(R - R.mean(axis=0)) ** 2, axis=0))
 
-    def poles(self) -> list[dict[str, float]]:
+    def poles(self) -> list[dict[str, float | None]]:
         """Eigenvalues of A with their jackknife complex std (replicate poles matched to these ones)."""
         self._check_fitted()
         p = np.linalg.eigvals(self.A_)
@@ -422,7 +425,7 @@ class N4SID(Identifier):
         the polynomial models' Monte-Carlo band)."""
         self._check_fitted()
         u = record.u.reshape(len(record), -1)
-        y = record.y.reshape(len(record), -1)
+        y = record.output.reshape(len(record), -1)
         base = self._simulate(u, y)
         reps = []
         for rep in self.replicates_:
@@ -430,7 +433,7 @@ class N4SID(Identifier):
                 yk = self._simulate(u, y, *rep)
             if np.isfinite(yk).all():
                 reps.append(yk)
-        return base.reshape(record.y.shape), self._jack_std(base, reps).reshape(record.y.shape)
+        return base.reshape(record.output.shape), self._jack_std(base, reps).reshape(record.output.shape)
 
     def describe(self) -> dict[str, Any]:
         d = super().describe()
@@ -459,7 +462,8 @@ class N4SID(Identifier):
 
     def _load_state(self, state: dict[str, Any]) -> None:
         self.A_, self.B_, self.C_, self.D_ = (np.asarray(state[k], float) for k in "ABCD")
-        self.replicates_ = [tuple(np.asarray(M, float) for M in rep) for rep in state["replicates"]]
+        reps = [[np.asarray(M, float) for M in rep] for rep in state["replicates"]]
+        self.replicates_ = [(A, B, C, D) for A, B, C, D in reps]
         self.singular_values_ = list(state["singular_values"])
         self.chosen_orders_ = dict(state["chosen"])
         self.block_rows_ = int(state["block_rows"])

@@ -190,6 +190,6 @@ def tfest(f_hz: Any, G: Any, fs: float, nb: int, na: int, nk: int = 0, weight: A
         sd = np.sqrt(np.maximum(np.diag(cov), 0.0))
         info_cov = {"cov": cov, "std_a": sd[:na], "std_b": sd[na:]}
     return TransferFunction(b=b_poly, a=a_poly, fs=fs,
-                            info={**info_cov, "nb": nb, "na": na, "nk": nk, "cost": cost, "reflected_poles": n_reflected,
-                                  "points": int(f.size), "method": "Levy + Sanathanan-Koerner"
-                                  + (" + nonlinear LS" if refine else "")})
+                            info={**info_cov, "nb": nb, "na": na, "nk": nk, "cost": cost,
+                                  "reflected_poles": n_reflected, "points": int(f.size),
+                                  "method": "Levy + Sanathanan-Koerner" + (" + nonlinear LS" if refine else "")})

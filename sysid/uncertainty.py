@@ -14,7 +14,7 @@ frequency response value) the reported "std" is the standard deviation of the co
 
 from __future__ import annotations
 
-from typing import Callable
+from collections.abc import Callable
 
 import numpy as np
 
@@ -43,7 +43,7 @@ def complex_std(grad: np.ndarray, cov: np.ndarray) -> np.ndarray:
     return np.sqrt(np.maximum(vr + vi, 0.0))
 
 
-def poles_with_std(a: np.ndarray, cov: np.ndarray | None) -> list[dict[str, float]]:
+def poles_with_std(a: np.ndarray, cov: np.ndarray | None) -> list[dict[str, float | None]]:
     """Poles (roots of ``a``) as ``[{"re", "im", "abs", "std"}]``, ``std`` = complex std (module docstring) from the
     covariance ``cov`` of (a₁ … aₙ); None without covariance."""
     p, grad = root_sensitivity(a)

@@ -130,7 +130,9 @@ class EchoTwin(Twin):
         u = np.asarray(u, dtype=float)
         x = self.amplifier(u)
         n = len(u)
-        nfft = 1 << int(np.ceil(np.log2(n + 4 * self.params.delay_s * fs + 20 * self.params.q * fs / self.params.f0_hz)))
+        nfft = 1 << int(
+            np.ceil(np.log2(n + 4 * self.params.delay_s * fs + 20 * self.params.q * fs / self.params.f0_hz))
+        )
         H = self.frequency_response(np.fft.rfftfreq(nfft, 1 / fs))
         y = np.fft.irfft(np.fft.rfft(x, nfft) * H, nfft)[:n]
         return self.measure(y, fs, np.random.default_rng(self.seed))

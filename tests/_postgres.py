@@ -67,7 +67,9 @@ class PostgresServer:
         if r.returncode != 0:
             raise RuntimeError(f"initdb failed: {r.stderr.strip() or r.stdout.strip()}")
         opts = f"-c listen_addresses=127.0.0.1 -p {self.port} -k {self.dir} -c fsync=off -c max_connections=60"
-        r = self._run([self.pg_ctl, "-D", str(data), "-l", str(self.dir / "log"), "-o", opts, "-w", "-t", "60", "start"])
+        r = self._run(
+            [self.pg_ctl, "-D", str(data), "-l", str(self.dir / "log"), "-o", opts, "-w", "-t", "60", "start"]
+        )
         if r.returncode != 0:
             log = (self.dir / "log").read_text()[-800:] if (self.dir / "log").exists() else ""
             raise RuntimeError(f"pg_ctl start failed: {r.stderr.strip() or r.stdout.strip()} {log}")

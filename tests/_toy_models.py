@@ -19,7 +19,9 @@ class ToyARX(Identifier):
 
     def _regressors(self, y, u):
         n = max(self.ny, self.nu)
-        cols = [y[n - k: len(y) - k] for k in range(1, self.ny + 1)] + [u[n - k: len(u) - k] for k in range(1, self.nu + 1)]
+        cols = [y[n - k : len(y) - k] for k in range(1, self.ny + 1)] + [
+            u[n - k : len(u) - k] for k in range(1, self.nu + 1)
+        ]
         return np.column_stack(cols + [np.ones(len(y) - n)]), y[n:]
 
     def fit(self, data):
@@ -38,7 +40,11 @@ class ToyARX(Identifier):
             out[n:] = X @ self.theta_
         else:
             for k in range(n, len(y)):
-                out[k] = sum(a[i] * out[k - 1 - i] for i in range(self.ny)) + sum(b[i] * u[k - 1 - i] for i in range(self.nu)) + c
+                out[k] = (
+                    sum(a[i] * out[k - 1 - i] for i in range(self.ny))
+                    + sum(b[i] * u[k - 1 - i] for i in range(self.nu))
+                    + c
+                )
         if self.degrade:
             out[n:] = out[n:] + self.degrade * np.std(y)
         return out

@@ -126,7 +126,8 @@ def check_case(out: dict, effect: str | None, params: dict, checked: list[str]) 
             errs[k] = abs(float(got) - float(want)) / abs(float(want)) if got is not None else float("nan")
     params_ok = all(math.isfinite(v) and v <= 0.10 for v in errs.values()) if found else False
     # quantisation adds error no prediction can follow: its evidence is the lattice, not a validation gain
-    gain_ok = (out["gain"]["nrmse_ratio"] < 1.0 and bool(top.get("p_value", 1.0) < 0.01)) or top.get("family") == "quantization"
+    gain_ok = ((out["gain"]["nrmse_ratio"] < 1.0 and bool(top.get("p_value", 1.0) < 0.01))
+               or top.get("family") == "quantization")
     return {"ok": found and params_ok and gain_ok, "found": found, "params_ok": params_ok, "gain_ok": gain_ok,
             "rel_err": errs, "top": top.get("effect"), "group": top.get("group"),
             "nrmse_ratio": out["gain"]["nrmse_ratio"]}

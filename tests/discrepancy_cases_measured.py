@@ -1,5 +1,5 @@
-"""Cases of measured-data robustness for the discrepancy tests: a default effect mis-sized ×3, two hidden effects at once, and
-effects outside the catalog written here independently of the twin (a dead zone and a backlash of the
+"""Cases of measured-data robustness for the discrepancy tests: a default effect mis-sized ×3, two hidden effects at
+once, and effects outside the catalog written here independently of the twin (a dead zone and a backlash of the
 amplifier input, an unmodelled resonance of the mount added to the output).
 
 Records reuse :func:`discrepancy_cases.records` (steps at 1 kHz, multisine / broadband at 10 kHz with sine
@@ -11,11 +11,10 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from discrepancy_cases import records
 from scipy import signal as sps
 
 from sysid.record import Record
-
-from discrepancy_cases import records
 
 # default effect → (parameter, factor, data kind)
 MISSIZED = {

@@ -9,8 +9,15 @@ from scipy.signal import find_peaks
 from twins.acoustic import AcousticTwin
 from twins.acoustic.amplifier import amplifier_voltage
 from twins.acoustic.channel import channel_parts, frequency_response, spreading_factor
-from twins.acoustic.fluids import (FLUIDS, WATER_T2_TYPO_KWAVE, fluid_state, francois_garrison, water_absorption,
-                                   water_density, water_sound_speed)
+from twins.acoustic.fluids import (
+    FLUIDS,
+    WATER_T2_TYPO_KWAVE,
+    fluid_state,
+    francois_garrison,
+    water_absorption,
+    water_density,
+    water_sound_speed,
+)
 from twins.acoustic.layers import Layer, chain, input_impedance, layer_matrix, propagate_forward, slab_coefficients
 from twins.acoustic.materials import PIEZOS, SOLIDS
 from twins.acoustic.params import AcousticParams

@@ -30,7 +30,9 @@ def test_time_of_flight_through_100mm_water(bare):
 
 def test_time_of_flight_temperature_sensitivity(bare):
     """dTOF/dT = −L/c² dc/dT ≈ −123 ns/K at 100 mm, 24 °C (notes B.5), central difference ±0.5 K."""
-    slope = bare.with_params(temperature_c=24.5).time_of_flight() - bare.with_params(temperature_c=23.5).time_of_flight()
+    slope = (
+        bare.with_params(temperature_c=24.5).time_of_flight() - bare.with_params(temperature_c=23.5).time_of_flight()
+    )
     assert slope == pytest.approx(-123e-9, rel=0.03)
 
 
@@ -180,7 +182,6 @@ def test_chirp_100ms_protocol_and_recipe():
 
 def test_chirp_prefix_is_the_start_of_the_sysid_chirp():
     from sysid.signals import chirp
-
     from twins.acoustic.protocols import chirp_prefix
 
     full = chirp(2e6, 0.1, 900e3, 950e3, amplitude=0.04)  # 2e5 samples: cheap

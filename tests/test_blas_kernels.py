@@ -38,13 +38,23 @@ def kernel_sets() -> list[str]:
     return ["Prescott"] + ([widest] if widest else [])
 
 
-def _score(coretype: str, identifiers: list[str], datasets: list[str]) -> tuple[dict[tuple[str, str, str], float | None], str]:
+def _score(
+    coretype: str, identifiers: list[str], datasets: list[str]
+) -> tuple[dict[tuple[str, str, str], float | None], str]:
     """Free-run RMSE per (identifier, dataset, test) of a quick score run in a subprocess with ``coretype``, and
     the kernel set OpenBLAS reported there (threadpoolctl's name: the generic Prescott set reads "Katmai")."""
     env = {**os.environ, "OPENBLAS_CORETYPE": coretype, "OPENBLAS_NUM_THREADS": "1"}
     code = "import sys; from benchmarks.cli import main; sys.exit(main(sys.argv[1:]))"
-    argv = ["score", "--quick", "--json", "--no-sysidentpy", "--identifiers", ",".join(identifiers),
-            "--datasets", ",".join(datasets)]
+    argv = [
+        "score",
+        "--quick",
+        "--json",
+        "--no-sysidentpy",
+        "--identifiers",
+        ",".join(identifiers),
+        "--datasets",
+        ",".join(datasets),
+    ]
     out = subprocess.run([sys.executable, "-c", code, *argv], capture_output=True, text=True, env=env, timeout=3000)
     assert out.returncode == 0, out.stderr[-2000:]
     data = json.loads(out.stdout)

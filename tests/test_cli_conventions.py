@@ -36,7 +36,7 @@ def chatty(monkeypatch):
         log = logging.getLogger("sysid.fake")
         log.debug("debug detail")
         log.info("working on it")
-        warnings.warn("dependency says something\nover two lines", UserWarning)
+        warnings.warn("dependency says something\nover two lines", UserWarning, stacklevel=1)
         print("RESULT 42")
         return 0
 
@@ -75,12 +75,15 @@ def test_progress_bars_only_on_a_terminal(capsys):
 
 
 def test_importing_the_library_configures_no_logging():
-    code = ("import logging, sysid, twins, benchmarks, sysid.registry, twins.registry, benchmarks.scoring, "
-            "benchmarks.mainjob, twins.discrepancy\n"
-            "r = logging.getLogger()\n"
-            "names = [n for n in logging.root.manager.loggerDict if n.split('.')[0] in ('sysid', 'twins', 'benchmarks')]\n"
-            "assert not r.handlers and r.level == logging.WARNING, (r.handlers, r.level)\n"
-            "assert all(logging.getLogger(n).level == logging.NOTSET and not logging.getLogger(n).handlers for n in names), names\n")
+    code = (
+        "import logging, sysid, twins, benchmarks, sysid.registry, twins.registry, benchmarks.scoring, "
+        "benchmarks.mainjob, twins.discrepancy\n"
+        "r = logging.getLogger()\n"
+        "names = [n for n in logging.root.manager.loggerDict if n.split('.')[0] in ('sysid', 'twins', 'benchmarks')]\n"
+        "assert not r.handlers and r.level == logging.WARNING, (r.handlers, r.level)\n"
+        "assert all(logging.getLogger(n).level == logging.NOTSET and not logging.getLogger(n).handlers\n"
+        "           for n in names), names\n"
+    )
     proc = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=120)
     assert proc.returncode == 0, proc.stderr[-2000:]
 

@@ -1,4 +1,5 @@
-"""CLI `piezotwin signal` and `piezotwin preprocess`: records written, steps in command-line order, bad values exit 2."""
+"""CLI `piezotwin signal` and `piezotwin preprocess`: records written, steps in command-line order, bad values
+exit 2."""
 
 import json
 import subprocess
@@ -25,8 +26,9 @@ def run_cli(args, capsys):
 
 def test_signal_multisine_writes_input_only_record(tmp_path, capsys):
     f = tmp_path / "ms.npz"
-    code, out, err = run_cli(["signal", "multisine", "--fs", 1000, "--duration", 2, "--band", "10:100", "--components", 20,
-                              "--amplitude", 3, "--phase", "schroeder", "--grid", "odd", "--periods", 2, "-o", f], capsys)
+    code, out, err = run_cli(["signal", "multisine", "--fs", 1000, "--duration", 2, "--band", "10:100",
+                              "--components", 20, "--amplitude", 3, "--phase", "schroeder", "--grid", "odd",
+                              "--periods", 2, "-o", f], capsys)
     assert code == 0, err
     rec = read_record(f)
     assert rec.y is None and rec.fs == 1000 and len(rec) == 2000
@@ -46,11 +48,15 @@ def test_signal_rms_and_other_kinds(tmp_path, capsys):
                    capsys)[0] == 0
     u = read_record(f).u
     assert np.sqrt(np.mean(u ** 2)) == pytest.approx(2.0) and np.max(np.abs(u)) == pytest.approx(2 * np.sqrt(2))
-    assert run_cli(["signal", "chirp", "--fs", 1e5, "--duration", 0.01, "--band", "1000:20000", "-o", f], capsys)[0] == 0
+    assert (
+        run_cli(["signal", "chirp", "--fs", 1e5, "--duration", 0.01, "--band", "1000:20000", "-o", f], capsys)[0] == 0
+    )
     np.testing.assert_array_equal(read_record(f).u, S.chirp(1e5, 0.01, 1000, 20000))
     assert run_cli(["signal", "prbs", "--fs", 100, "--order", 6, "-o", f], capsys)[0] == 0
     assert len(read_record(f)) == 63
-    assert run_cli(["signal", "stepped-sine", "--fs", 1000, "--freqs", "5,10", "--settle", 0.1, "-o", f], capsys)[0] == 0
+    assert (
+        run_cli(["signal", "stepped-sine", "--fs", 1000, "--freqs", "5,10", "--settle", 0.1, "-o", f], capsys)[0] == 0
+    )
     rec = read_record(f)
     assert [s["freq_hz"] for s in rec.meta["segments"]] == [5.0, 10.0]
     assert run_cli(["signal", "thesis-cantilever", "-o", f], capsys)[0] == 0

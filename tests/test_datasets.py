@@ -8,15 +8,19 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from benchmarks.datasets import Dataset, dataset_names, list_datasets, load_dataset
-from benchmarks.datasets import lab, twin as twin_ds
+from benchmarks.datasets import Dataset, dataset_names, lab, list_datasets, load_dataset
+from benchmarks.datasets import twin as twin_ds
 from sysid.errors import ConfigError, DataError, InputError
 
 REPO = Path(__file__).resolve().parents[1]
 
 
 def _shared_data() -> Path | None:
-    for cand in (os.environ.get("PIEZOTWIN_SHARED_DATA"), REPO.parent / "shared" / "data", REPO.parents[1] / "shared" / "data"):
+    for cand in (
+        os.environ.get("PIEZOTWIN_SHARED_DATA"),
+        REPO.parent / "shared" / "data",
+        REPO.parents[1] / "shared" / "data",
+    ):
         if cand and Path(cand).is_dir():
             return Path(cand)
     return None

@@ -10,17 +10,16 @@ from __future__ import annotations
 
 import json
 
+import discrepancy_cases_measured as C
 import numpy as np
 import pytest
+from discrepancy_cases import hidden_case
 
 from sysid.errors import DataError
 from sysid.record import Record
-from twins.discrepancy import diagnose, ranges, splitting, unexplained
 from twins.cantilever import CantileverTwin
 from twins.cantilever.substep import choose_substep
-
-import discrepancy_cases_measured as C
-from discrepancy_cases import hidden_case
+from twins.discrepancy import diagnose, ranges, splitting, unexplained
 
 
 # ------------------------------------------------------------------------------------------ split

@@ -1,9 +1,10 @@
 """Hidden-effect tests of the discrepancy analysis on the two twins.
 
-Default suite (about a minute): the echo injected as a delayed scaled copy. ``slow``: effects injected with a few lines of independent code written
-here — creep as a sum of first-order lags, a delay as a shift, an echo as a delayed scaled copy of the output,
-compression as a soft clip of the input, crosstalk as a scaled derivative of the input — at parameters the catalog defaults do not use, on inputs the
-protocols do not generate; plus one catalog effect per twin and a noise-only case.
+Default suite (about a minute): the echo injected as a delayed scaled copy. ``slow``: effects injected with a few lines
+of independent code written here — creep as a sum of first-order lags, a delay as a shift, an echo as a delayed scaled
+copy of the output, compression as a soft clip of the input, crosstalk as a scaled derivative of the input — at
+parameters the catalog defaults do not use, on inputs the protocols do not generate; plus one catalog effect per twin
+and a noise-only case.
 
 ``slow`` suite: every catalog effect of both twins at random plausible parameters over several seeds from
 the protocols (multisine estimation, sine/chirp validation, steps), noise-only cases, two effects at once;
@@ -18,12 +19,11 @@ import os
 
 import numpy as np
 import pytest
+from discrepancy_cases import CATALOG, check_case, hidden_case
 from scipy import signal as sps
 
 from sysid.record import Record
 from twins.discrepancy import diagnose
-
-from discrepancy_cases import CATALOG, check_case, hidden_case
 
 cantilever = pytest.importorskip("twins.cantilever")
 acoustic = pytest.importorskip("twins.acoustic")
@@ -88,7 +88,7 @@ def test_cantilever_delay_injected_as_shift():
     tau = 2.7e-4
     half = t.size // 2
     y = CantileverTwin(start.params, start.effects, 5).simulate(_shift(u, tau * fs), fs)
-    est, val = Record(u=u[:half], y=y[:half], fs=fs), Record(u=u[half:], y=y[half:], fs=fs)
+    est = Record(u=u[:half], y=y[:half], fs=fs)
     # validation continues the same sweep: the twin is simulated from rest, so give it the whole record
     val_full = Record(u=u, y=y, fs=fs)
     out = diagnose(start, est, val_full, max_rounds=1)
@@ -115,7 +115,8 @@ def _band_noise(rng, fs, n, amp):
     return amp * x / np.max(np.abs(x))
 
 
-@pytest.mark.slow  # ≈ 95 s (the longest default test); the acoustic compression and crosstalk cases stay in the default suite
+# ≈ 95 s (the longest default test); the acoustic compression and crosstalk cases stay in the default suite
+@pytest.mark.slow
 def test_acoustic_echo_injected_as_delayed_copy():
     """Echo = 0.25 × the output delayed by 21.3 µs, added to the echo-free twin's output; band-limited noise in."""
     fs, n = 5e6, 10_000

@@ -99,7 +99,9 @@ def test_cli_reference_is_generated_from_the_parser():
     from benchmarks.cli.clidoc import generate
 
     committed = (DOCS / "cli.md").read_text(encoding="utf-8")
-    assert committed == generate(), "docs/cli.md is stale: run `make docs` (python -m benchmarks.cli.clidoc -o docs/cli.md)"
+    assert committed == generate(), (
+        "docs/cli.md is stale: run `make docs` (python -m benchmarks.cli.clidoc -o docs/cli.md)"
+    )
 
 
 def test_cli_reference_lists_every_command_and_option():

@@ -21,6 +21,7 @@ pytest.importorskip("distributed")
 from benchmarks.execution import Executor, make_executor  # noqa: E402
 from benchmarks.scoring import strip_timing  # noqa: E402
 
+
 @pytest.fixture(scope="module")
 def cluster():
     """A real LocalCluster: 2 worker processes, 1 thread each (what --workers 2 starts)."""

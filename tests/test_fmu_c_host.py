@@ -13,8 +13,8 @@ import site
 import subprocess
 import sys
 import sysconfig
-import zipfile
 import xml.etree.ElementTree as ET
+import zipfile
 from pathlib import Path
 
 import numpy as np

@@ -124,7 +124,7 @@ def _naive_k_step(m, rec, k):
         s = max(t - k + 1, L)
         y = rec.y.copy()
         for j in range(s, t + 1):
-            env = {"y": lambda lag, j=j: y[j - lag], "u": lambda lag, j=j: rec.u[j - lag]}
+            env = {"y": lambda lag, j=j: y[j - lag], "u": lambda lag, j=j: rec.u[j - lag]}  # noqa: B023 (this t's y)
             acc = 0.0
             for r in rows:
                 v = r["parameter"]
@@ -339,7 +339,9 @@ def test_large_offset_keeps_precision_and_matches_sysidentpy():
     codes = {(0, 0): "1", (2002, 1001): "y(k-1)*u(k-2)", (1001, 0): "y(k-1)", (2001, 2001): "u(k-1)^2",
              (2002, 0): "u(k-2)"}
     assert [r["term"] for r in m.term_table()] == [codes[tuple(int(c) for c in row)] for row in ref.final_model]
-    np.testing.assert_allclose([r["err"] for r in m.term_table()], np.asarray(ref.err[:5]).ravel(), rtol=1e-5, atol=1e-15)
+    np.testing.assert_allclose(
+        [r["err"] for r in m.term_table()], np.asarray(ref.err[:5]).ravel(), rtol=1e-5, atol=1e-15
+    )
 
 
 def test_mimo_narmax_noise_term_per_output():

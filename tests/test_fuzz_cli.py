@@ -45,7 +45,9 @@ def mutate_csv(text: str, rng: np.random.Generator) -> bytes:
         return text.encode()[: int(rng.integers(0, len(text)))]
     if kind == 1:
         pos = int(rng.integers(0, len(text)))
-        return (text[:pos] + "".join(rng.choice(list(",;\t x.#\"\n\r-e"), size=int(rng.integers(1, 4)))) + text[pos:]).encode()
+        return (
+            text[:pos] + "".join(rng.choice(list(",;\t x.#\"\n\r-e"), size=int(rng.integers(1, 4)))) + text[pos:]
+        ).encode()
     if kind == 2:
         lines[k] += ",1"
     elif kind == 3:
@@ -56,7 +58,9 @@ def mutate_csv(text: str, rng: np.random.Generator) -> bytes:
         lines.insert(k, "# a comment")
     elif kind == 6:
         cells = lines[k].split(",")
-        cells[int(rng.integers(0, len(cells)))] = str(rng.choice(["inf", "nan", "1e999", "--1", "", "x", "0,5", "1.2.3"]))
+        cells[int(rng.integers(0, len(cells)))] = str(
+            rng.choice(["inf", "nan", "1e999", "--1", "", "x", "0,5", "1.2.3"])
+        )
         lines[k] = ",".join(cells)
     elif kind == 7:
         lines[0] = str(rng.choice(["u,t,y", "a,b,c", "t;u;y", "t,u", "t,u,y,z", '"t","u","y"', "time_ms,u,y", "t,u,u"]))

@@ -143,7 +143,9 @@ def test_file_size_limit_keeps_old_output(d):
     cmd = (f"ulimit -f 100; exec {sys.executable} -m benchmarks.cli preprocess {big} --segment 1000 -o {old}")
     proc = subprocess.run(["bash", "-c", cmd], capture_output=True, text=True, cwd=d, timeout=120,
                           env={**os.environ, "PYTHONPATH": str(ROOT)})
-    assert proc.returncode == 2 and "cannot write" in proc.stderr and len(proc.stderr.strip().splitlines()) == 1, proc.stderr
+    assert proc.returncode == 2 and "cannot write" in proc.stderr and len(proc.stderr.strip().splitlines()) == 1, (
+        proc.stderr
+    )
     assert old.read_bytes() == b"previous"
     assert not list(d.glob(".old.npz.tmp-*"))
 
@@ -252,11 +254,13 @@ def test_est_and_val_at_different_rates_refused(d, capsys):
     (["identify", "narx-mlp", "--est", "{d}/in.npz", "--set", "hidden=-4"], "hidden"),
     (["diagnose", "cantilever", "--data", "{d}/m.npz", "--skip", "-5"], "--skip"),
     (["score", "--margin", "nan", "--update-baselines", "--baselines", "{d}/b.json"], "--margin"),
-    (["simulate", "cantilever", "--input", "{d}/m.npz", "--fs", "1e308", "-o", "{d}/o.npz"], "outside the accepted range"),
-    (["simulate", "cantilever", "--input", "{d}/m.npz", "--fs", "1e-300", "-o", "{d}/o.npz"], "outside the accepted range"),
+    (["simulate", "cantilever", "--input", "{d}/m.npz", "--fs", "1e308", "-o", "{d}/o.npz"],
+     "outside the accepted range"),
+    (["simulate", "cantilever", "--input", "{d}/m.npz", "--fs", "1e-300", "-o", "{d}/o.npz"],
+     "outside the accepted range"),
     (["simulate", "cantilever", "--input", "{d}/m.npz", "--seed", "1e30", "-o", "{d}/o.npz"], "seed"),
-    (["search", "arx", "--est", "{d}/in.npz", "--val", "{d}/in.npz", "--grid", "ny=1", "--repeats", "99999999999999999999"],
-     "--repeats"),
+    (["search", "arx", "--est", "{d}/in.npz", "--val", "{d}/in.npz", "--grid", "ny=1", "--repeats",
+      "99999999999999999999"], "--repeats"),
     (["signal", "multisine", "--fs", "1e4", "--duration", "1e5", "-o", "{d}/s.npz"], "GiB"),
     (["preprocess", "{d}/in.npz", "--bandpass", "1:10:1000000000", "-o", "{d}/o.npz"], "--bandpass"),
     (["export-fmu", "cantilever", "--fs", "1e308", "-o", "{d}/x.fmu"], "outside the accepted range"),
@@ -288,10 +292,16 @@ def test_npz_metadata_types(meta, expected, tmp_path):
 
 
 # ------------------------------------------------------------------ storage and baselines
-@pytest.mark.parametrize("storage,expected", [
-    ("not a url://x", "not a"), ("sqlite:////nonexistent/dir/x.db", "does not exist"), ("{d}/data.csv", "not an SQLite"),
-    ("foo://bar", "unknown database kind"), ("postgresql://", "driver"),
-])
+@pytest.mark.parametrize(
+    "storage,expected",
+    [
+        ("not a url://x", "not a"),
+        ("sqlite:////nonexistent/dir/x.db", "does not exist"),
+        ("{d}/data.csv", "not an SQLite"),
+        ("foo://bar", "unknown database kind"),
+        ("postgresql://", "driver"),
+    ],
+)
 def test_search_storage_refused(storage, expected, d, capsys):
     (d / "data.csv").write_text("u,y\n1,2\n")
     refused(["search", "arx", "--est", d / "in.npz", "--val", d / "in.npz", "--grid", "ny=1",
@@ -323,7 +333,12 @@ def test_score_baselines_file_refused(content, expected, d, capsys):
 
 
 def test_generate_rate_option(d, capsys):
-    refused(["generate", "cantilever", "steps", "--option", "fs=1e308", "-o", d / "g.npz"], d, capsys, "outside the accepted range")
+    refused(
+        ["generate", "cantilever", "steps", "--option", "fs=1e308", "-o", d / "g.npz"],
+        d,
+        capsys,
+        "outside the accepted range",
+    )
 
 
 def test_csv_field_beyond_csv_module_limit(tmp_path):

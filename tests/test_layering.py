@@ -195,19 +195,24 @@ def _write(root: Path, files: dict[str, str]) -> None:
 
 
 def _toy_tree(root: Path) -> None:
-    _write(root, {
-        "sysid/__init__.py": '"""Mentions benchmarks.cli and twins.base in prose only."""\n',
-        "sysid/signals.py": "import numpy as np\n",
-        "sysid/record.py": "def load():\n    from twins.base import Twin  # upward, function-local\n    return Twin\n",
-        "twins/__init__.py": "",
-        "twins/base.py": "from sysid.signals import np\n\ndef fit():\n    from twins.calibration import go\n    return go\n",
-        "twins/calibration.py": "from twins.base import fit\n\ndef go():\n    return fit\n",
-        "twins/typed.py": "from typing import TYPE_CHECKING\nif TYPE_CHECKING:\n    from twins.quiet import Q\n",
-        "twins/quiet.py": "from twins import typed\n",
-        "benchmarks/__init__.py": "",
-        "benchmarks/scoring.py": "from . import cli\nfrom twins import base\n",
-        "benchmarks/cli/__init__.py": "from benchmarks.scoring import *\nfrom sysid import record\n",
-    })
+    _write(
+        root,
+        {
+            "sysid/__init__.py": '"""Mentions benchmarks.cli and twins.base in prose only."""\n',
+            "sysid/signals.py": "import numpy as np\n",
+            "sysid/record.py": ("def load():\n    from twins.base import Twin  # upward, function-local\n"
+                                "    return Twin\n"),
+            "twins/__init__.py": "",
+            "twins/base.py": ("from sysid.signals import np\n\ndef fit():\n    from twins.calibration import go\n"
+                              "    return go\n"),
+            "twins/calibration.py": "from twins.base import fit\n\ndef go():\n    return fit\n",
+            "twins/typed.py": "from typing import TYPE_CHECKING\nif TYPE_CHECKING:\n    from twins.quiet import Q\n",
+            "twins/quiet.py": "from twins import typed\n",
+            "benchmarks/__init__.py": "",
+            "benchmarks/scoring.py": "from . import cli\nfrom twins import base\n",
+            "benchmarks/cli/__init__.py": "from benchmarks.scoring import *\nfrom sysid import record\n",
+        },
+    )
 
 
 def test_checker_reports_a_wrong_import(tmp_path):

@@ -4,8 +4,8 @@ orders and the saved model behave as for one output."""
 import numpy as np
 import pytest
 
-from sysid.linear import ARMAX
 from sysid.base import load_model
+from sysid.linear import ARMAX
 from sysid.record import Record
 
 # y_o(t) = Σ_p A[o, p] y_p(t−1) + Σ_j B[o, j] u_j(t−1) + e_o(t) + C[o] e_o(t−1)

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from sysid.errors import ConfigError
-from sysid.linear import ARX, ARMAX
+from sysid.linear import ARMAX, ARX
 from sysid.neural.narx_mlp import NARXMLP
 from sysid.polynomial import NARMAXPoly, NARXPoly
 from sysid.stepper import make_stepper
@@ -78,8 +78,13 @@ def test_exported_model_fmu_validates_and_equals_free_run(name, est, tmp_path, c
 
         log = []
         with pytest.raises(Exception, match="fmi2DoStep failed"):
-            fmpy.simulate_fmu(str(fmu), stop_time=0.01, output_interval=1e-3, debug_logging=True,
-                              logger=lambda c, i, s, cat, msg: log.append(msg.decode() if isinstance(msg, bytes) else str(msg)))
+            fmpy.simulate_fmu(
+                str(fmu),
+                stop_time=0.01,
+                output_interval=1e-3,
+                debug_logging=True,
+                logger=lambda c, i, s, cat, msg: log.append(msg.decode() if isinstance(msg, bytes) else str(msg)),
+            )
         assert "must be 1/fs = 0.0005 s" in "\n".join(log)
 
 

@@ -69,7 +69,10 @@ def test_every_identifier_is_covered():
 def test_identify_predict_compare_cli(ident, data, tmp_path, capsys):
     d, est, val = data
     model = tmp_path / f"{ident}.npz"
-    assert main(["identify", ident, "--est", str(d / "est.npz"), "--set", SETTINGS[ident], "-o", str(model), "--json"]) == 0
+    assert (
+        main(["identify", ident, "--est", str(d / "est.npz"), "--set", SETTINGS[ident], "-o", str(model), "--json"])
+        == 0
+    )
     capsys.readouterr()
     m = load_model(model)
     assert m.name == ident and m.fs_ == 1.0
@@ -221,8 +224,8 @@ def _bad_files(tmp_path, est):
     trunc_json.write_text(js.read_text()[: len(js.read_text()) // 2])
     foreign = tmp_path / "settings.json"
     foreign.write_text(json.dumps({"name": "not a model", "values": [1, 2, 3]}))
-    return {trunc: "truncated", trunc_json: "truncated", edited: "checksum", edited_json: "checksum", legacy: "not a valid narx-mlp model",
-            foreign: "not a piezotwin model file"}
+    return {trunc: "truncated", trunc_json: "truncated", edited: "checksum", edited_json: "checksum",
+            legacy: "not a valid narx-mlp model", foreign: "not a piezotwin model file"}
 
 
 def test_bad_model_files_exit_2_with_one_line(data, tmp_path, capsys):

@@ -92,7 +92,9 @@ def test_divergence_gives_nan_and_warning():
     m.weights_, m.sizes_ = flat, sizes
     with pytest.warns(DivergenceWarning):
         yh = m.predict(rec, None)
-    assert m.diverged_at_ is not None and np.isnan(yh[m.diverged_at_:]).all() and np.isfinite(yh[: m.diverged_at_]).all()
+    assert (
+        m.diverged_at_ is not None and np.isnan(yh[m.diverged_at_ :]).all() and np.isfinite(yh[: m.diverged_at_]).all()
+    )
 
 
 # ------------------------------------------------------------------ training and persistence
@@ -128,8 +130,12 @@ def test_deterministic_on_cpu_for_a_seed(plant):
     np.testing.assert_array_equal(a.weights_, b.weights_)
     assert a.loss_history_ == b.loss_history_
     assert not np.array_equal(a.weights_, c.weights_)
-    s1 = NARXMLPSim(seed=2, epochs=1, pretrain_epochs=1, window=10, **{k: v for k, v in kw.items() if k != "epochs"}).fit(est)
-    s2 = NARXMLPSim(seed=2, epochs=1, pretrain_epochs=1, window=10, **{k: v for k, v in kw.items() if k != "epochs"}).fit(est)
+    s1 = NARXMLPSim(
+        seed=2, epochs=1, pretrain_epochs=1, window=10, **{k: v for k, v in kw.items() if k != "epochs"}
+    ).fit(est)
+    s2 = NARXMLPSim(
+        seed=2, epochs=1, pretrain_epochs=1, window=10, **{k: v for k, v in kw.items() if k != "epochs"}
+    ).fit(est)
     np.testing.assert_array_equal(s1.weights_, s2.weights_)
     r1 = RNNStateSpace(n_state=4, n_enc=4, enc_hidden=[8], window=20, epochs=1, seed=3, device="cpu").fit(est)
     r2_ = RNNStateSpace(n_state=4, n_enc=4, enc_hidden=[8], window=20, epochs=1, seed=3, device="cpu").fit(est)
@@ -250,7 +256,9 @@ def test_sim_warm_start_is_the_one_step_model_and_tail_selection(plant):
     est = est[:2000]
     kw = dict(ny=4, nu=4, hidden=[8], activation="tanh", seed=3, device="cpu")
     osa = NARXMLP(**kw, epochs=3, lr=1e-3, batch_size=64).fit(est)
-    warm = NARXMLPSim(**kw, epochs=0, pretrain_epochs=3, pretrain_lr=1e-3, pretrain_batch_size=64, batch_size=4).fit(est)
+    warm = NARXMLPSim(**kw, epochs=0, pretrain_epochs=3, pretrain_lr=1e-3, pretrain_batch_size=64, batch_size=4).fit(
+        est
+    )
     np.testing.assert_array_equal(warm.weights_, osa.weights_)
     sim = NARXMLPSim(**kw, epochs=4, lr=3e-3, window=20, pretrain_epochs=3, pretrain_lr=1e-3, select_tail=0.25).fit(est)
     assert 0 <= sim.selected_epoch_ <= 4

@@ -66,7 +66,12 @@ CASES = [
     ("mlp-relu-linear", NARXMLP, dict(epochs=2, linear=True, activation="relu"), False),
     ("mlp-tanh-plain-tail", NARXMLP, dict(epochs=2, activation="tanh", select_tail=0.2), False),
     ("mlp-sigmoid-linear-two-records", NARXMLP, dict(epochs=2, linear=True, activation="sigmoid", nk=2), True),
-    ("sim-relu-linear-tail", NARXMLPSim, dict(epochs=1, pretrain_epochs=1, window=10, linear=True, select_tail=0.2), False),
+    (
+        "sim-relu-linear-tail",
+        NARXMLPSim,
+        dict(epochs=1, pretrain_epochs=1, window=10, linear=True, select_tail=0.2),
+        False,
+    ),
 ]
 
 

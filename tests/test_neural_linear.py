@@ -16,8 +16,14 @@ torch = pytest.importorskip("torch")
 from sysid.base import load_model  # noqa: E402
 from sysid.errors import ConfigError  # noqa: E402
 from sysid.linear import ARX  # noqa: E402
-from sysid.neural.core import (FlatMLP, count_mlp_parameters, free_run_mlp, k_step_mlp,  # noqa: E402
-                               least_squares_linear, mlp_forward_np)
+from sysid.neural.core import (  # noqa: E402
+    FlatMLP,
+    count_mlp_parameters,
+    free_run_mlp,
+    k_step_mlp,
+    least_squares_linear,
+    mlp_forward_np,
+)
 from sysid.neural.narx_mlp import NARXMLP, NARXMLPSim  # noqa: E402
 from sysid.neural.rnn import RNNStateSpace  # noqa: E402
 from tests.neural_systems import bouc_wen_record, multisine_input  # noqa: E402
@@ -108,8 +114,10 @@ def test_free_run_and_k_step_kernels_with_bypass_equal_a_numpy_loop(code):
     # batched forward and k-step (k beyond the record = a free run from the start)
     X = rng.normal(size=(7, 5))
     np.testing.assert_allclose(mlp_forward_np(flat, sizes, code, X, linear=True),
-                               np.array([_reference_net(flat, sizes, code, x, True) for x in X]), rtol=1e-12, atol=1e-12)
-    np.testing.assert_allclose(k_step_mlp(flat, sizes, code, yn, un, 2, 3, 100, 1e6, linear=True), ref, rtol=1e-12, atol=1e-12)
+                               np.array([_reference_net(flat, sizes, code, x, True) for x in X]),
+                               rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(k_step_mlp(flat, sizes, code, yn, un, 2, 3, 100, 1e6, linear=True), ref,
+                               rtol=1e-12, atol=1e-12)
     ks = k_step_mlp(flat, sizes, code, yn, un, 2, 3, 3, 1e6, linear=True)
     for t in (3, 10, 69):
         sim = yn.copy()
@@ -136,9 +144,14 @@ def test_hand_written_gradient_with_bypass_equals_autograd(activation):
     np.testing.assert_allclose(manual.numpy(), net.flat.grad.numpy(), rtol=1e-12, atol=1e-14)
     assert np.abs(manual.numpy()[-12:]).max() > 0  # the bypass's own gradient (delta^T x) is in there
     assert net.check_grad_storage()
-    np.testing.assert_allclose(net(x).detach().numpy(),
-                               mlp_forward_np(net.weights_np(), net.sizes, {"relu": 0, "tanh": 1, "sigmoid": 2}[activation],
-                                              x.numpy(), linear=True), rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(
+        net(x).detach().numpy(),
+        mlp_forward_np(
+            net.weights_np(), net.sizes, {"relu": 0, "tanh": 1, "sigmoid": 2}[activation], x.numpy(), linear=True
+        ),
+        rtol=1e-12,
+        atol=1e-12,
+    )
     # frozen bypass: zero gradient for L, the rest unchanged
     net.freeze_linear()
     net.mse_grad_(x, y)
@@ -156,9 +169,13 @@ def test_rnn_linear_path_untrained_is_the_arx_simulation(plant):
     np.testing.assert_allclose(m.predict(val, 1)[n_enc:], arx.predict(val, 1)[n_enc:], rtol=0, atol=2e-5 * scale)
     # free run: the RNN starts from the measured y(0..n_enc-1); the ARX simulation started at the same sample
     shift = n_enc - k
-    np.testing.assert_allclose(m.predict(val, None)[n_enc:], arx.predict(val[shift:], None)[k:], rtol=0, atol=2e-5 * scale)
+    np.testing.assert_allclose(
+        m.predict(val, None)[n_enc:], arx.predict(val[shift:], None)[k:], rtol=0, atol=2e-5 * scale
+    )
     # k-step at every sample: the ARX k-step prediction
-    np.testing.assert_allclose(m.predict(val, 4)[n_enc + 4:], arx.predict(val, 4)[n_enc + 4:], rtol=0, atol=2e-5 * scale)
+    np.testing.assert_allclose(
+        m.predict(val, 4)[n_enc + 4 :], arx.predict(val, 4)[n_enc + 4 :], rtol=0, atol=2e-5 * scale
+    )
 
 
 def test_rnn_linear_path_equals_a_numpy_recursion():

@@ -26,7 +26,8 @@ def test_cantilever_reduced_budget_sim_training():
 @pytest.mark.slow
 def test_cantilever_table_4_3_full_budget_one_step():
     """Table 4.1 training (100 epochs, lr 1e-4, batch 128, one-step) on the full 80 000-sample multisine, all
-    twelve sines 0.1–500 Hz, three seeds: mean free-run R² over the sines ≥ 0.98 (measured 0.981 ± 0.006 over seeds 0-2)."""
+    twelve sines 0.1–500 Hz, three seeds: mean free-run R² over the sines ≥ 0.98 (measured 0.981 ± 0.006 over
+    seeds 0-2)."""
     data = cantilever_data()
     means = [cantilever_sines("narx-mlp", {}, seed=s, data=data)["r2_mean"] for s in (0, 1, 2)]
     assert np.mean(means) >= 0.98, means

@@ -125,7 +125,9 @@ def test_state_space_transfer_function_recovered_mimo():
     G = m.frequency_response(f, 10.0)
     G0 = N4SID._freq(A, Bm, Cm, Dm, np.exp(2j * np.pi * f / 10.0))
     assert np.max(np.abs(G["G"] - G0)) < 1e-2 * np.max(np.abs(G0))
-    np.testing.assert_allclose(np.sort(np.abs(np.linalg.eigvals(m.A_))), np.sort(np.abs(np.linalg.eigvals(A))), atol=2e-3)
+    np.testing.assert_allclose(
+        np.sort(np.abs(np.linalg.eigvals(m.A_))), np.sort(np.abs(np.linalg.eigvals(A))), atol=2e-3
+    )
 
 
 def test_n4sid_memory_independent_of_chunk():

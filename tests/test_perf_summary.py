@@ -12,12 +12,17 @@ def _b(module, name, mean, **extra):
             "extra_info": extra}
 
 
-DATA = {"machine_info": {"cpu": {"brand_raw": "TestCPU", "count": 2}, "python_version": "3.11"}, "datetime": "2026-01-01T00:00:00",
-        "benchmarks": [_b("test_signals", "test_decimate_10M_points", 0.5),
-                       _b("test_signals", "test_decimate_scipy_reference", 2.0),
-                       _b("test_signals", "test_chirp_10M_points", 0.1, target_s=0.05),
-                       _b("test_frols", "test_ours", 1.0, reference="test_theirs", items=1_000_000),
-                       _b("test_frols", "test_theirs", 30.0)]}
+DATA = {
+    "machine_info": {"cpu": {"brand_raw": "TestCPU", "count": 2}, "python_version": "3.11"},
+    "datetime": "2026-01-01T00:00:00",
+    "benchmarks": [
+        _b("test_signals", "test_decimate_10M_points", 0.5),
+        _b("test_signals", "test_decimate_scipy_reference", 2.0),
+        _b("test_signals", "test_chirp_10M_points", 0.1, target_s=0.05),
+        _b("test_frols", "test_ours", 1.0, reference="test_theirs", items=1_000_000),
+        _b("test_frols", "test_theirs", 30.0),
+    ],
+}
 
 
 def test_pairs_and_ratios(tmp_path):

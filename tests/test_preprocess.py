@@ -204,7 +204,9 @@ def test_bandpass_zero_phase_ripple_and_rejection():
     assert np.max(np.abs(butterworth_bp_gain_db(mid, fs, f1, f2, order))) < 0.1
     assert butterworth_bp_gain_db(f1, fs, f1, f2, order) == pytest.approx(-6.02, abs=0.01)
     # stop band: one octave below / above the band the design gives more than 60 dB
-    assert butterworth_bp_gain_db(45e3, fs, f1, f2, order) < -60 and butterworth_bp_gain_db(270e3, fs, f1, f2, order) < -60
+    assert (
+        butterworth_bp_gain_db(45e3, fs, f1, f2, order) < -60 and butterworth_bp_gain_db(270e3, fs, f1, f2, order) < -60
+    )
 
 
 @pytest.mark.parametrize("fmin, fmax", [(200.0, 100.0), (0.0, 100.0), (100.0, 600.0)])
@@ -296,7 +298,8 @@ def test_apply_steps_in_order_and_recorded():
         "suggest_rate",
     ])
     log = out.meta["preprocessing"]
-    assert [e["step"] for e in log] == ["remove_offset", "hampel", "moving_average", "decimate", "segment", "suggest_rate"]
+    assert [e["step"] for e in log] == ["remove_offset", "hampel", "moving_average", "decimate", "segment",
+                                        "suggest_rate"]
     assert log[0]["changes"]["offset"]["u"] == pytest.approx(0.5, abs=1e-9)
     assert [c["index"] for c in log[1]["changes"]["replaced"]["y"]] == [1234]
     assert log[3]["changes"]["fs_after"] == 250.0 and out.fs == 250.0 and len(out) == 1000

@@ -42,7 +42,9 @@ def test_csv_mat_round_trip_bit_exact(tmp_path, suffix):
 def test_csv_extra_columns_and_custom_names(tmp_path):
     rec = _rec()
     path = tmp_path / "r.csv"
-    lines = ["t,vin,xout,extra,"] + [f"{i / rec.fs!r},{float(a)!r},{float(b)!r},junk," for i, (a, b) in enumerate(zip(rec.u, rec.y))]
+    lines = ["t,vin,xout,extra,"] + [
+        f"{i / rec.fs!r},{float(a)!r},{float(b)!r},junk," for i, (a, b) in enumerate(zip(rec.u, rec.y))
+    ]
     path.write_text("\n".join(lines) + "\n")
     back = read_record(path, u_col="vin", y_col="xout")
     assert np.array_equal(back.u, rec.u) and np.array_equal(back.y, rec.y)
@@ -72,6 +74,22 @@ def test_slicing_split_and_time():
     assert b.t[0] == pytest.approx(30 / rec.fs)
     part = rec.time_slice(10 / rec.fs, 20 / rec.fs)
     assert len(part) == 10 and np.array_equal(part.y, rec.y[10:20])
+    a, b = rec.split(index=40)
+    assert len(a) == 40 and len(b) == 60
+    for kw in ({}, {"fraction": 0.5, "index": 50}):
+        with pytest.raises(DataError, match="exactly one of fraction or index"):
+            rec.split(**kw)
+    with pytest.raises(DataError, match=r"fraction must lie in \(0, 1\)"):
+        rec.split(fraction=1.5)
+
+
+def test_output_of_a_record_that_must_have_one():
+    rec = _rec(n=50)
+    assert rec.output is rec.y and rec.require_output() is rec
+    bare = Record(u=rec.u, y=None, fs=rec.fs, source="drive.csv")
+    for read in (lambda: bare.output, bare.require_output):
+        with pytest.raises(DataError, match=r"^drive.csv: record has no output y \(input-only record\)$"):
+            read()
 
 
 def test_normaliser_inverts_exactly():

@@ -10,8 +10,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
 from _toy_models import ToyARX
+
 from benchmarks import records, scoring
 from benchmarks.cli import main
 from benchmarks.datasets import load_dataset
@@ -249,8 +249,11 @@ KERNEL_SET_REL = 7e-5
 def _same_score(stored: dict, fresh: dict, rel: float = 1e-9) -> None:
     """Two score runs agree: every result, not the timings nor the environment of the process that ran them
     (thread settings an earlier test left, another CPU); numbers to ``rel`` relative."""
-    _same({k: v for k, v in stored.items() if k != "environment"}, {k: v for k, v in fresh.items() if k != "environment"},
-          rel=rel)
+    _same(
+        {k: v for k, v in stored.items() if k != "environment"},
+        {k: v for k, v in fresh.items() if k != "environment"},
+        rel=rel,
+    )
 
 
 def _same(a, b, path="", rel: float = 1e-9) -> None:
@@ -276,14 +279,36 @@ def test_one_real_row_end_to_end_equals_score_json(tmp_path, capsys):
     settings = tmp_path / "records.toml"
     settings.write_text('[cascaded-tanks]\nidentifier = "arx"\nwhy = "cheap real row"\n')
     stored, md, js = tmp_path / "stored", tmp_path / "b.md", tmp_path / "r.json"
-    assert main(["records", "--datasets", "cascaded-tanks", "--settings", str(settings), "--stored", str(stored),
-                 "--markdown", str(md), "--records-json", str(js), "--in-process"]) == 0
+    assert (
+        main(
+            [
+                "records",
+                "--datasets",
+                "cascaded-tanks",
+                "--settings",
+                str(settings),
+                "--stored",
+                str(stored),
+                "--markdown",
+                str(md),
+                "--records-json",
+                str(js),
+                "--in-process",
+            ]
+        )
+        == 0
+    )
     out = capsys.readouterr().out
     row = json.loads((stored / "cascaded-tanks.json").read_text())
     cmd = "piezotwin score --datasets cascaded-tanks --identifiers arx --seeds 0-2 --json"
     assert row["command"] == cmd and cmd in out and cmd in md.read_text()
     m = row["measured"]
-    assert m["process"] == "in-process" and m["wall_seconds"] > 0 and m["cpu_seconds"] > 0 and len(m["load_average_before"]) == 3
+    assert (
+        m["process"] == "in-process"
+        and m["wall_seconds"] > 0
+        and m["cpu_seconds"] > 0
+        and len(m["load_average_before"]) == 3
+    )
     assert m["versions"]["numpy"] == np.__version__ and m["machine"]["cores"] >= 1
     _same_score(row["score"], _fresh_score(cmd, capsys))
     entry = json.loads(js.read_text())["cascaded-tanks"]
@@ -318,8 +343,13 @@ def test_committed_page_and_records_are_generated_from_the_stored_rows():
 
 def test_shipped_settings_name_known_datasets_and_identifiers():
     entries = records.load_entries()
-    assert [e.dataset for e in entries][:5] == ["silverbox", "wiener-hammerstein", "bouc-wen", "cascaded-tanks",
-                                                "piezo-tue"]
+    assert [e.dataset for e in entries][:5] == [
+        "silverbox",
+        "wiener-hammerstein",
+        "bouc-wen",
+        "cascaded-tanks",
+        "piezo-tue",
+    ]
     assert all(e.why for e in entries)
 
 
@@ -328,8 +358,13 @@ def test_readme_states_the_figures_of_records_json():
     text = " ".join((ROOT / "README.md").read_text(encoding="utf-8").split())
     rows, _ = records.load_rows(records.load_entries(), records.STORED_DIR)
     data = json.loads(records.RECORDS_JSON.read_text(encoding="utf-8"))
-    for dname, test in [("silverbox", "multisine"), ("silverbox", "arrow-no-extrapolation"),
-                        ("wiener-hammerstein", "test"), ("bouc-wen", "multisine"),
-                        ("cascaded-tanks", "test"), ("piezo-tue", "test")]:
+    for dname, test in [
+        ("silverbox", "multisine"),
+        ("silverbox", "arrow-no-extrapolation"),
+        ("wiener-hammerstein", "test"),
+        ("bouc-wen", "multisine"),
+        ("cascaded-tanks", "test"),
+        ("piezo-tue", "test"),
+    ]:
         unit = next(r["units"] for r in records.score_rows(rows[dname]) if r["test"] == test)
         assert f"**{records.fmt_value(data[dname]['rmse'][test]['mean'], unit)}**" in text, (dname, test)

@@ -15,10 +15,12 @@ CHROMIUM = Path("/usr/bin/chromium")
 
 pytestmark = pytest.mark.browser
 
-_CHECK = ("<script>window.addEventListener('load',function(){var im=document.images,b=[];"
-          "for(var i=0;i<im.length;i++){if(!(im[i].complete&&im[i].naturalWidth>0))b.push(im[i].getAttribute('src'));}"
-          "var d=document.createElement('pre');d.id='imgcheck';d.textContent='IMGCHECK '+im.length+' '+JSON.stringify(b);"
-          "document.body.appendChild(d);});</script>")
+_CHECK = (
+    "<script>window.addEventListener('load',function(){var im=document.images,b=[];"
+    "for(var i=0;i<im.length;i++){if(!(im[i].complete&&im[i].naturalWidth>0))b.push(im[i].getAttribute('src'));}"
+    "var d=document.createElement('pre');d.id='imgcheck';d.textContent='IMGCHECK '+im.length+' '+JSON.stringify(b);"
+    "document.body.appendChild(d);});</script>"
+)
 
 
 def broken_images(index: Path, tmp: Path) -> tuple[int, list[str]]:
@@ -27,7 +29,8 @@ def broken_images(index: Path, tmp: Path) -> tuple[int, list[str]]:
     probe.write_text(index.read_text().replace("</body>", _CHECK + "</body>"))
     try:
         proc = subprocess.run([str(CHROMIUM), "--headless", "--no-sandbox", "--disable-gpu",
-                               "--disable-background-networking", "--no-first-run", f"--user-data-dir={tmp / 'chromium-profile'}",
+                               "--disable-background-networking", "--no-first-run",
+                               f"--user-data-dir={tmp / 'chromium-profile'}",
                                "--virtual-time-budget=10000", "--dump-dom", probe.resolve().as_uri()],
                               capture_output=True, text=True, timeout=120)
     finally:

@@ -44,7 +44,9 @@ def render(index: Path, tmp: Path) -> tuple[dict, np.ndarray]:
     assert m, f"chromium gave no layout (rc {proc.returncode}): {proc.stderr[-800:]}"
     layout = json.loads(m.group(1).replace("&amp;", "&").replace("&lt;", "<").replace("&gt;", ">"))
     shot = tmp / "page.png"
-    proc = _chromium([f"--window-size=1280,{int(layout['h']) + 10}", f"--screenshot={shot}", probe.resolve().as_uri()], tmp)
+    proc = _chromium(
+        [f"--window-size=1280,{int(layout['h']) + 10}", f"--screenshot={shot}", probe.resolve().as_uri()], tmp
+    )
     probe.unlink()
     assert shot.exists(), f"chromium wrote no screenshot (rc {proc.returncode}): {proc.stderr[-800:]}"
     import matplotlib.image as mpimg
@@ -155,7 +157,8 @@ def test_provenance_is_present(page):
     layout, img = page
     assert "prov" in layout and layout["prov"][3] > 50
     text = layout["provText"]
-    for key in ("Provenance", f"piezotwin {version('piezotwin')}", "git commit", "command", "date (UTC)", "machine", "data"):
+    for key in ("Provenance", f"piezotwin {version('piezotwin')}", "git commit", "command", "date (UTC)", "machine",
+                "data"):
         assert key in text, key
     assert re.search(r"[0-9a-f]{40}|not a git checkout", text)
     block = _crop(img, layout["prov"])

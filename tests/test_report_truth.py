@@ -30,8 +30,13 @@ def test_correlation_axes_scale_to_the_data_and_show_the_band():
     plt = pyplot()
 
     band = 1.96 / np.sqrt(20_000)
-    small = {"name": "r_ee", "passed": True, "lags": list(range(1, 21)), "values": list(0.5 * band * np.sin(np.arange(20))),
-             "band": band}
+    small = {
+        "name": "r_ee",
+        "passed": True,
+        "lags": list(range(1, 21)),
+        "values": list(0.5 * band * np.sin(np.arange(20))),
+        "band": band,
+    }
     big = {**small, "passed": False, "values": [0.6] + [0.0] * 19}
     fig, ax = plt.subplots(1, 2)
     draw_correlation_test(ax[0], small)
@@ -70,8 +75,13 @@ def test_one_page_template_escapes_data_and_ends_with_the_provenance(tmp_path):
     from sysid.report import figure, table, write_page
 
     prov = collect(files=[])
-    path = write_page(tmp_path / "index.html", "a <b> & c", [table(["k", "v"], [["x", "<i>ok</i>"]], row_classes=["done"]),
-                                                             figure("fig/a b.png", "A & B")], css="h1{}", provenance=prov)
+    path = write_page(
+        tmp_path / "index.html",
+        "a <b> & c",
+        [table(["k", "v"], [["x", "<i>ok</i>"]], row_classes=["done"]), figure("fig/a b.png", "A & B")],
+        css="h1{}",
+        provenance=prov,
+    )
     page = path.read_text()
     assert page.startswith("<!doctype html>") and page.endswith("</body></html>")
     assert "<title>a &lt;b&gt; &amp; c</title>" in page and "<style>h1{}table{" in page

@@ -6,8 +6,8 @@ import json
 
 import numpy as np
 import pytest
-
 from _toy_models import ToyARX
+
 from benchmarks import scoring
 from benchmarks.cli import main
 from benchmarks.datasets import load_dataset
@@ -73,7 +73,7 @@ def test_scores_match_an_independent_computation():
     assert r["skip"] == 4
     e = y[skip:] - yfr[skip:]
     assert r["free_run"]["rmse"] == pytest.approx(np.sqrt(np.mean(e ** 2)), rel=1e-12)
-    assert r["free_run"]["r2"] == pytest.approx(1 - np.sum(e ** 2) / np.sum((y[skip:] - y[skip:].mean()) ** 2), rel=1e-12)
+    assert r["free_run"]["r2"] == pytest.approx(1 - np.sum(e**2) / np.sum((y[skip:] - y[skip:].mean()) ** 2), rel=1e-12)
     assert np.array_equal(preds["test"], yfr)
     assert r["n_parameters"] == 5 and r["references"]["linear_baseline"]["value"] == 0.75
 
@@ -121,8 +121,10 @@ def test_settings_files_name_real_identifiers_and_datasets_and_say_why(tmp_path)
 
 
 def test_make_floors_adds_margin_and_keeps_rules():
-    run = {"mode": "quick", "rows": [_row("arx", "cascaded-tanks", "test", 1.0), _row("x", "d", "t", float("nan"), status="diverged")]}
-    prev = {"format": scoring.BASELINES_FORMAT, "modes": {"full": {"a": {}}}, "rules": [{"rule": "beats_linear", "datasets": []}]}
+    run = {"mode": "quick", "rows": [_row("arx", "cascaded-tanks", "test", 1.0),
+                                     _row("x", "d", "t", float("nan"), status="diverged")]}
+    prev = {"format": scoring.BASELINES_FORMAT, "modes": {"full": {"a": {}}},
+            "rules": [{"rule": "beats_linear", "datasets": []}]}
     new = scoring.make_floors(run, margin=0.1, previous=prev)
     assert new["modes"]["quick"] == {"arx": {"cascaded-tanks": {"test": {"max_rmse": 1.1, "measured": 1.0, "units": "V",
                                                                           "r2_measured": 0.0}}}}
@@ -158,7 +160,8 @@ def test_floors_from_several_runs_take_the_worst_and_a_seeded_margin():
     # a run over extra seeds adds single-seed draws (not a median): one bad seed of 9e-3 lifts the ceiling to
     # 9e-3 x 1.1, above the worst median x 1.5
     extra = {"mode": "quick", "rows": [{**_seeded_row("narx-mlp", [2e-3, 9e-3, 3e-3]), "seeds": [5, 6, 7]}]}
-    wide = scoring.make_floors([*runs, extra], margin=0.1, seeded_margin=0.5)["modes"]["quick"]["narx-mlp"]["silverbox"]["arrow"]
+    floors = scoring.make_floors([*runs, extra], margin=0.1, seeded_margin=0.5)
+    wide = floors["modes"]["quick"]["narx-mlp"]["silverbox"]["arrow"]
     assert wide["measured"] == pytest.approx(3.2e-3) and wide["runs"] == 2
     assert wide["max_rmse"] == pytest.approx(9e-3 * 1.1) and wide["single_seed_draws"] == 13
     assert [r["ATEN_CPU_CAPABILITY"] for r in new["provenance"]["quick"][0]["runs"]] == ["default", "avx2"]
@@ -176,14 +179,22 @@ def test_check_fails_for_missing_floors_unscored_floors_and_unknown_names():
         "nosuch-ident": {"cascaded-tanks": {"test": f}},
         "narx-poly": {"nosuch-data": {"test": f}}}},
         "dropped": {"quick": [{"identifier": "armax", "dataset": "cascaded-tanks", "test": "*", "reason": "unstable"}]}}
-    run = {"mode": "quick", "selection": {"identifiers": ["arx", "armax", "narx-poly"], "datasets": ["cascaded-tanks", "silverbox"]},
-           "skipped": [{"dataset": "silverbox", "reason": "data not found"}],
-           "rows": [_row("arx", "cascaded-tanks", "test", 1.0), _row("armax", "cascaded-tanks", "test", 9.0),
-                    _row("narx-poly", "cascaded-tanks", "test", 0.5)]}
+    run = {
+        "mode": "quick",
+        "selection": {"identifiers": ["arx", "armax", "narx-poly"], "datasets": ["cascaded-tanks", "silverbox"]},
+        "skipped": [{"dataset": "silverbox", "reason": "data not found"}],
+        "rows": [
+            _row("arx", "cascaded-tanks", "test", 1.0),
+            _row("armax", "cascaded-tanks", "test", 9.0),
+            _row("narx-poly", "cascaded-tanks", "test", 0.5),
+        ],
+    }
     fails = scoring.check(run, base)
     assert len(fails) == 4, fails
     assert any(x.startswith("narx-poly on cascaded-tanks/test: no quick floor") for x in fails)
-    assert any(x.startswith("arx on silverbox/arrow: has a floor but was not scored (skipped: data not found)") for x in fails)
+    assert any(
+        x.startswith("arx on silverbox/arrow: has a floor but was not scored (skipped: data not found)") for x in fails
+    )
     assert any("'nosuch-ident'" in x for x in fails) and any("'nosuch-data'" in x for x in fails)
     assert not any(x.startswith("armax") for x in fails)  # dropped on purpose, with its reason
 
@@ -206,15 +217,17 @@ def test_seeded_identifier_is_scored_by_its_median_seed():
     y, skip = ds.tests["test"].y, r["skip"]
     assert r["free_run"]["rmse"] == pytest.approx(np.sqrt(np.mean((y[skip:] - ref[skip:]) ** 2)), rel=1e-12)
     # a deterministic identifier, or a seed fixed by the settings, is fitted once
-    (r1,), _ = scoring.score_pair("toy", ds, quick=True, factory=lambda n: ToySeeded, params={"ny": 2, "nu": 2, "seed": 1})
+    (r1,), _ = scoring.score_pair(
+        "toy", ds, quick=True, factory=lambda n: ToySeeded, params={"ny": 2, "nu": 2, "seed": 1}
+    )
     assert "seeds" not in r1 and r1["free_run"]["rmse"] == pytest.approx(by_seed[1], rel=1e-12)
 
 
 @pytest.mark.parametrize("content, what", [("{not json", "not JSON"), ("[]", "not a baselines file"),
                                            ('{"format": "other"}', "not a baselines file"),
                                            (None, "not found"),
-                                           ('{"format": "piezotwin-baselines/1", "modes": {"quick": {"arx": {"d": {"t": '
-                                            '{"max_rmse": "x"}}}}}}', "max_rmse")])
+                                           ('{"format": "piezotwin-baselines/1", "modes": {"quick": {"arx": '
+                                            '{"d": {"t": {"max_rmse": "x"}}}}}}', "max_rmse")])
 def test_unreadable_baselines_exit_2_with_one_line(tmp_path, capsys, content, what):
     path = tmp_path / "b.json"
     if content is not None:
@@ -348,18 +361,27 @@ def test_update_baselines_from_saved_runs(tmp_path, capsys):
     runs = []
     for k, isa in enumerate(("default", "avx2")):
         p = tmp_path / f"run{k}.json"
-        p.write_text(json.dumps({"format": "piezotwin-score/1", "mode": "quick", "environment": {"ATEN_CPU_CAPABILITY": isa},
+        p.write_text(json.dumps({"format": "piezotwin-score/1", "mode": "quick",
+                                 "environment": {"ATEN_CPU_CAPABILITY": isa},
                                  "rows": [_row("arx", "cascaded-tanks", "test", 1.0 + k)]}))
         runs.append(str(p))
     out = tmp_path / "b.json"
-    assert main(["score", "--quick", "--update-baselines", "--margin", "0.1", "--baselines", str(out), "--from-runs", *runs]) == 0
+    assert (
+        main(
+            ["score", "--quick", "--update-baselines", "--margin", "0.1", "--baselines", str(out), "--from-runs", *runs]
+        )
+        == 0
+    )
     f = json.loads(out.read_text())["modes"]["quick"]["arx"]["cascaded-tanks"]["test"]
     assert f["measured"] == 2.0 and f["max_rmse"] == pytest.approx(2.2)
     with pytest.raises(SystemExit) as exc:  # argparse refuses it: exit 2, one line
-        main(["score", "--quick", "--update-baselines", "--margin", "nan", "--baselines", str(out), "--from-runs", *runs])
+        main(
+            ["score", "--quick", "--update-baselines", "--margin", "nan", "--baselines", str(out), "--from-runs", *runs]
+        )
     assert exc.value.code == 2
     (tmp_path / "bad.json").write_text("[1]")
-    assert main(["score", "--quick", "--update-baselines", "--baselines", str(out), "--from-runs", str(tmp_path / "bad.json")]) == 2
+    assert main(["score", "--quick", "--update-baselines", "--baselines", str(out),
+                 "--from-runs", str(tmp_path / "bad.json")]) == 2
     assert json.loads(out.read_text())["modes"]["quick"]["arx"]["cascaded-tanks"]["test"]["measured"] == 2.0
 
 

@@ -49,7 +49,10 @@ def test_multisine_equals_eq_2_1_sum_of_cosines():
     fs = 200.0
     u, info = S.multisine(fs, duration=1.0, band=(3, 20), components=6, seed=7, return_info=True)
     t = np.arange(u.size) / fs
-    ref = sum(info["line_amplitude"] * np.cos(2 * np.pi * f * t + p) for f, p in zip(info["frequencies_hz"], info["phases_rad"]))
+    ref = sum(
+        info["line_amplitude"] * np.cos(2 * np.pi * f * t + p)
+        for f, p in zip(info["frequencies_hz"], info["phases_rad"])
+    )
     np.testing.assert_allclose(u, ref, atol=1e-12)
     assert info["n_components"] == 6 and info["frequencies_hz"][0] == 3 and info["frequencies_hz"][-1] == 20
 
@@ -251,7 +254,8 @@ def test_aprbs_levels_and_holds():
 
 
 # ---------------------------------------------------------------------------------------------- properties
-from hypothesis import given, settings, strategies as st  # noqa: E402
+from hypothesis import given, settings  # noqa: E402
+from hypothesis import strategies as st  # noqa: E402
 
 
 @settings(max_examples=40, deadline=None)

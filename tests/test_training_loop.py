@@ -83,7 +83,10 @@ def test_rnn_reads_the_input_only_up_to_the_sample_before_each_output():
     torch.manual_seed(0)
     net = _Net(2 * LAG, [8], 3, 1, 1, "gru", n_enc=LAG).double()
     g = torch.Generator().manual_seed(0)
-    ypast, upast = torch.randn(2, LAG, 1, generator=g, dtype=torch.float64), torch.randn(2, LAG, 1, generator=g, dtype=torch.float64)
+    ypast, upast = (
+        torch.randn(2, LAG, 1, generator=g, dtype=torch.float64),
+        torch.randn(2, LAG, 1, generator=g, dtype=torch.float64),
+    )
     useq = torch.randn(2, T, 1, generator=g, dtype=torch.float64)
     base = net(ypast, upast, useq)
     last, first = useq.clone(), useq.clone()
@@ -98,13 +101,24 @@ def test_the_rnn_identifier_trains_through_the_shared_loop():
     """RNNStateSpace.fit = its network, seeded, trained by train_simulation with ceil(rows / window) draws."""
     pairs = _pairs()
     recs = [Record(u=u[:, 0], y=y[:, 0], fs=1.0) for u, y in pairs[:2]]
-    m = RNNStateSpace(n_state=3, n_enc=LAG, enc_hidden=[8], window=T, batch_size=BATCH, epochs=EPOCHS, lr=1e-2,
-                      seed=5, device="cpu").fit(recs)
+    m = RNNStateSpace(
+        n_state=3, n_enc=LAG, enc_hidden=[8], window=T, batch_size=BATCH, epochs=EPOCHS, lr=1e-2, seed=5, device="cpu"
+    ).fit(recs)
     norm = m.normaliser_
     scaled = [(norm.transform_u(r.u)[:, None], norm.transform_y(r.y)[:, None]) for r in recs]
     torch.manual_seed(5)
     net = m._build(1, 1)
     rows = sum(u.shape[0] - LAG for u, _ in scaled)
-    train_simulation(net, scaled, LAG, T, EPOCHS, BATCH, lr=1e-2, clip=1.0, draws=math.ceil(rows / T),
-                     generator=torch.Generator().manual_seed(5))
+    train_simulation(
+        net,
+        scaled,
+        LAG,
+        T,
+        EPOCHS,
+        BATCH,
+        lr=1e-2,
+        clip=1.0,
+        draws=math.ceil(rows / T),
+        generator=torch.Generator().manual_seed(5),
+    )
     assert all(np.array_equal(v.detach().double().numpy(), m.state_dict_[k]) for k, v in net.state_dict().items())

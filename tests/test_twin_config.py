@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from sysid.errors import ConfigError
-from twins.base import EffectSpec, Twin, pfield
+from twins.base import EffectSpec, Twin, param_info, pfield
 
 
 @dataclasses.dataclass
@@ -75,3 +75,16 @@ def test_params_file_round_trip_and_calibration(tmp_path):
     path = res.twin.save_params(tmp_path / "p.json")
     again = _Toy.from_options(params_file=path)
     assert again.params == res.twin.params and again.effects == res.twin.effects
+
+
+def test_parameter_bounds_for_the_searches():
+    """The searches over a parameter read its documented range as floats; a parameter without one is refused."""
+    @dataclasses.dataclass(frozen=True)
+    class P:
+        gain: float = pfield(2.0, "V/V", 1, 10, "gain")
+        offset: float = pfield(0.0, "V", doc="no documented range")
+
+    info = param_info(P)
+    assert info["gain"].bounds() == (1.0, 10.0) and all(type(v) is float for v in info["gain"].bounds())
+    with pytest.raises(ConfigError, match=r"^parameter offset has no documented range \[lo, hi\]$"):
+        info["offset"].bounds()

@@ -15,7 +15,8 @@ SHIPPED = ("pyproject.toml", "README.md", "LICENSE", "sysid", "twins", "benchmar
 
 
 def test_package_discovery_leaves_tests_out():
-    find = tomllib.loads((ROOT / "pyproject.toml").read_text(encoding="utf-8"))["tool"]["setuptools"]["packages"]["find"]
+    project = tomllib.loads((ROOT / "pyproject.toml").read_text(encoding="utf-8"))
+    find = project["tool"]["setuptools"]["packages"]["find"]
     assert sorted(find["include"]) == ["benchmarks*", "sysid*", "twins*"]
     assert not any(p.startswith("tests") for p in find["include"])
 

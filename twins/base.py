@@ -12,9 +12,10 @@ import dataclasses
 import json
 import math
 from abc import ABC, abstractmethod
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, ClassVar, Iterable, Mapping
+from typing import Any, ClassVar, Self
 
 import numpy as np
 
@@ -108,13 +109,15 @@ class Twin(ABC):
                 if (lo is not None and value < lo) or (hi is not None and value > hi):
                     raise ConfigError(f"{self.name} parameter {name}={value} out of range [{lo}, {hi}] {info.unit}")
             if info.choices is not None and value not in info.choices:
-                raise ConfigError(f"{self.name} parameter {name}={value!r} not one of: {', '.join(map(str, info.choices))}")
+                raise ConfigError(
+                    f"{self.name} parameter {name}={value!r} not one of: {', '.join(map(str, info.choices))}"
+                )
 
-    def with_params(self, **changes: Any) -> "Twin":
+    def with_params(self, **changes: Any) -> Self:
         """A new twin of the same class, effects and seed, with some parameters changed."""
         return type(self)(dataclasses.replace(self.params, **changes), self.effects, self.seed)
 
-    def with_effects(self, effects: Iterable[str]) -> "Twin":
+    def with_effects(self, effects: Iterable[str]) -> Self:
         return type(self)(self.params, effects, self.seed)
 
     def config(self) -> dict[str, Any]:
@@ -167,7 +170,7 @@ class Twin(ABC):
     @classmethod
     def from_options(cls, params_file: str | Path | None = None, set_: Iterable[str] | None = None,
                      effect: Iterable[str] | None = None, without: Iterable[str] | None = None,
-                     effects: str | None = None, seed: int | None = 0) -> "Twin":
+                     effects: str | None = None, seed: int | None = 0) -> Twin:
         """Build a configured twin from the options every twin command takes (``--params``, ``--set``,
         ``--effect``, ``--without``, ``--effects``, ``--seed``).
 
@@ -180,7 +183,9 @@ class Twin(ABC):
             data = load_params_file(params_file, cls.name)
             params = data.get("params", {})
             if not isinstance(params, dict):
-                raise DataError(f"{params_file}: 'params' must be an object of name: value, got {type(params).__name__}")
+                raise DataError(
+                    f"{params_file}: 'params' must be an object of name: value, got {type(params).__name__}"
+                )
             values.update(_coerce_all(cls, params, str(params_file)))
             if "effects" in data:
                 eff = data["effects"]
@@ -198,7 +203,9 @@ class Twin(ABC):
             for key, text in parse_assignments([kv], f"--effect {name}").items():
                 fname = spec.params.get(key, key if key in spec.params.values() else None)
                 if fname is None:
-                    raise ConfigError(f"effect {name} has no parameter {key!r}; valid: {', '.join(spec.params) or 'none'}")
+                    raise ConfigError(
+                        f"effect {name} has no parameter {key!r}; valid: {', '.join(spec.params) or 'none'}"
+                    )
                 values.update(_coerce_all(cls, {fname: text}, f"--effect {name}"))
         for name in without or []:
             for n in str(name).split(","):

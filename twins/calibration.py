@@ -9,8 +9,9 @@ respect to the physical parameters), which is the usual asymptotic estimate for 
 from __future__ import annotations
 
 import time
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any, Callable, Sequence
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from scipy.optimize import least_squares
@@ -61,7 +62,7 @@ def check_calibration_data(data: Record, names: Sequence[str], what: str = "cali
         raise ConfigError(f"{what}: no parameters to fit")
     if len(data) <= len(names):
         raise DataError(f"{data.source}: {len(data)} samples are too few to fit {len(names)} parameters")
-    if np.any(np.ptp(data.y, axis=0) == 0):
+    if np.any(np.ptp(data.output, axis=0) == 0):
         raise DataError(f"{data.source}: output y is constant; nothing to fit")
 
 

@@ -8,8 +8,12 @@ without importing the twin base class that calls it.
 from __future__ import annotations
 
 import dataclasses
+import functools
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
-from typing import Any, Iterable
+from typing import Any
+
+from sysid.errors import ConfigError
 
 __all__ = ["pfield", "ParamInfo", "param_info"]
 
@@ -24,7 +28,7 @@ def pfield(default: Any, unit: str, lo: float | None = None, hi: float | None = 
     meta = {"unit": unit, "range": (lo, hi), "doc": doc, "source": source,
             "choices": tuple(choices) if choices is not None else None}
     if isinstance(default, (list, dict)):
-        return field(default_factory=lambda d=default: type(d)(d), metadata=meta)
+        return field(default_factory=functools.partial(type(default), default), metadata=meta)  # a fresh copy each
     return field(default=default, metadata=meta)
 
 
@@ -38,14 +42,21 @@ class ParamInfo:
     source: str
     choices: tuple[Any, ...] | None
 
+    def bounds(self) -> tuple[float, float]:
+        """The documented range [lo, hi] as floats; :class:`ConfigError` for a parameter without one."""
+        lo, hi = self.range
+        if lo is None or hi is None:
+            raise ConfigError(f"parameter {self.name} has no documented range [lo, hi]")
+        return float(lo), float(hi)
+
 
 def param_info(params_cls: type) -> dict[str, ParamInfo]:
     """Field name → :class:`ParamInfo` for a parameter dataclass."""
     out = {}
     for f in dataclasses.fields(params_cls):
-        md = f.metadata or {}
+        md: Mapping[str, Any] = f.metadata or {}
         default = f.default if f.default is not dataclasses.MISSING else (
-            f.default_factory() if f.default_factory is not dataclasses.MISSING else None)  # type: ignore[misc]
+            f.default_factory() if f.default_factory is not dataclasses.MISSING else None)
         out[f.name] = ParamInfo(f.name, default, md.get("unit", ""), tuple(md.get("range", (None, None))),
                                 md.get("doc", ""), md.get("source", ""), md.get("choices"))
     return out

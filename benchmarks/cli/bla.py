@@ -118,7 +118,9 @@ def run(args: argparse.Namespace) -> int:
         snr = 10 * np.log10(g2 / np.nanmean(res.var_noise))
         print(f"noise level of G_BLA: {snr:.1f} dB below |G_BLA|")
         if np.isfinite(res.var_distortion).any():
-            print(f"distortion level of G_BLA: {10 * np.log10(g2 / np.nanmean(res.var_distortion)):.1f} dB below |G_BLA|")
+            print(
+                f"distortion level of G_BLA: {10 * np.log10(g2 / np.nanmean(res.var_distortion)):.1f} dB below |G_BLA|"
+            )
     print(sentence(nl))
     for note in nl.get("notes", []):
         print(f"note: {note}")

@@ -37,7 +37,11 @@ def run(args: argparse.Namespace) -> int:
     print(f"calibrated {args.twin} ({summary['n_evaluations']} simulations, {summary['seconds']:.1f} s)")
     for k, v in summary["parameters"].items():
         se = v["stderr"]
-        print(f"  {k:<22} {v['value']:.6g} ± {se:.2g} {v['unit']}" if se is not None else f"  {k:<22} {v['value']:.6g} {v['unit']}")
+        print(
+            f"  {k:<22} {v['value']:.6g} ± {se:.2g} {v['unit']}"
+            if se is not None
+            else f"  {k:<22} {v['value']:.6g} {v['unit']}"
+        )
     for part, s in summary["scores"].items():
         print(f"  {part:<11} R2 = {s['r2']:.5f}  NRMSE = {s['nrmse']:.5f}")
     if args.output:

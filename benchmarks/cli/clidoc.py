@@ -62,7 +62,7 @@ def _synopsis(prog: str, parser: argparse.ArgumentParser) -> str:
     for a in parser._actions:
         if a.option_strings or isinstance(a, argparse._SubParsersAction):
             continue
-        name = a.metavar or a.dest
+        name = " ".join(a.metavar) if isinstance(a.metavar, tuple) else (a.metavar or a.dest)
         if a.choices and not a.metavar:
             name = "{" + ",".join(map(str, a.choices)) + "}"
         parts.append(f"[{name} ...]" if a.nargs in ("*", "?") else f"{name} ..." if a.nargs == "+" else name)

@@ -9,7 +9,6 @@ import sys
 from pathlib import Path
 from typing import Any
 
-
 from sysid.io import read_record, write_record
 from sysid.jsonio import clean_json
 from sysid.record import FS_MAX, FS_MIN, Record
@@ -26,7 +25,7 @@ def seed_range(text: str) -> list[int]:
         lo, hi = (int(parts[0]), int(parts[-1])) if len(parts) in (1, 2) else (None, None)
     except ValueError:
         lo = hi = None
-    if lo is None or lo < 0 or hi < lo or hi - lo >= 1000:
+    if lo is None or hi is None or lo < 0 or hi < lo or hi - lo >= 1000:
         raise argparse.ArgumentTypeError(f"expected seeds as A-B with 0 <= A <= B < A + 1000, got {text!r}")
     return list(range(lo, hi + 1))
 
@@ -38,7 +37,9 @@ def number(lo: float | None = None, hi: float | None = None, integer: bool = Fal
         try:
             v = float(text)
         except (TypeError, ValueError):
-            raise argparse.ArgumentTypeError(f"expected {'an integer' if integer else 'a number'}, got {text!r}") from None
+            raise argparse.ArgumentTypeError(
+                f"expected {'an integer' if integer else 'a number'}, got {text!r}"
+            ) from None
         if not math.isfinite(v):
             raise argparse.ArgumentTypeError(f"must be finite, got {text!r}")
         if integer:
@@ -89,7 +90,9 @@ def add_data_args(p: argparse.ArgumentParser) -> None:
     g.add_argument("--y-col", default="y", help="CSV column(s) of the output; default y")
     g.add_argument("--u-var", default="u", help="MAT variable of the input; default u")
     g.add_argument("--y-var", default="y", help="MAT variable of the output; default y")
-    g.add_argument("--fill-missing", action="store_true", help="interpolate missing (NaN/empty) samples instead of refusing them")
+    g.add_argument(
+        "--fill-missing", action="store_true", help="interpolate missing (NaN/empty) samples instead of refusing them"
+    )
 
 
 def read_data(args: argparse.Namespace, path: str, require_y: bool = True) -> Record:

@@ -9,6 +9,7 @@ zoom) and ``residual_tests_<i>.png`` (the correlation tests of eq. 2-32 on model
 from __future__ import annotations
 
 import argparse
+from typing import Any
 
 from benchmarks.cli.common import add_data_args, emit_json, read_data
 from sysid.base import load_model
@@ -32,7 +33,7 @@ def run(args: argparse.Namespace) -> int:
     models = [load_model(path) for path in args.models]
     rec = read_data(args, args.data, require_y=True)
     preds, rows = compare(models, rec, horizon, names=list(args.models))
-    result = {"data": str(args.data), "n_samples": len(rec), "fs": rec.fs,
+    result: dict[str, Any] = {"data": str(args.data), "n_samples": len(rec), "fs": rec.fs,
               "horizon": "inf" if horizon is None else horizon, "models": rows}
     if args.report:
         result["report"] = compare_report(models, list(args.models), rec, preds, rows, args.report)

@@ -10,7 +10,16 @@ from __future__ import annotations
 import argparse
 import sys
 
-from benchmarks.cli.common import NONNEG_INT, add_data_args, add_twin_args, emit_json, number, read_data, same_fs, twin_from_args
+from benchmarks.cli.common import (
+    NONNEG_INT,
+    add_data_args,
+    add_twin_args,
+    emit_json,
+    number,
+    read_data,
+    same_fs,
+    twin_from_args,
+)
 from sysid.errors import ConfigError
 
 
@@ -19,7 +28,12 @@ def register(sub) -> None:
     p.add_argument("twin")
     p.add_argument("--data", required=True, metavar="FILE", help="measured (estimation) record")
     p.add_argument("--val", metavar="FILE", help="validation record (default: last 40 %% of --data)")
-    p.add_argument("--max-rounds", type=number(0, 100, integer=True), default=3, help="at most this many effects are added (default 3)")
+    p.add_argument(
+        "--max-rounds",
+        type=number(0, 100, integer=True),
+        default=3,
+        help="at most this many effects are added (default 3)",
+    )
     p.add_argument("--candidates", metavar="LIST", help="comma-separated catalog effects to try (default: all missing)")
     p.add_argument("--no-calibrate", action="store_true", help="do not re-fit the starting configuration")
     p.add_argument("--skip", type=NONNEG_INT, default=0, help="leading samples not scored (initial transient)")
@@ -43,8 +57,12 @@ def run(args: argparse.Namespace) -> int:
     same_fs([data] + ([val] if val is not None else []))
     cands = [c.strip() for c in args.candidates.split(",") if c.strip()] if args.candidates else None
     show = bool(getattr(args, "progress", False)) or sys.stderr.isatty()
-    opts = DiagnoseOptions(candidates=cands, calibrate_baseline=not args.no_calibrate, skip=args.skip,
-                           progress=(lambda msg: print(f"[diagnose] {msg}", file=sys.stderr, flush=True)) if show else None)
+    opts = DiagnoseOptions(
+        candidates=cands,
+        calibrate_baseline=not args.no_calibrate,
+        skip=args.skip,
+        progress=(lambda msg: print(f"[diagnose] {msg}", file=sys.stderr, flush=True)) if show else None,
+    )
     diagnosis = run_diagnosis(twin, data, val, max_rounds=args.max_rounds, options=opts)
     result = diagnosis.to_dict()
     if args.report:
@@ -60,9 +78,14 @@ def run(args: argparse.Namespace) -> int:
         print(f"  validation: {result['split']['note']}")
     for note in result.get("ranges", []):
         print(f"  range: {note}")
-    print(f"  validation NRMSE {b['nrmse_val']:.5g} -> {e['nrmse_val']:.5g} (ratio {result['gain']['nrmse_ratio']:.3f}),"
-          f" R2 {b['r2_val']:.5f} -> {e['r2_val']:.5f}")
-    print(f"  correlation tests {'pass' if b['tests']['passed'] else 'fail'} -> {'pass' if e['tests']['passed'] else 'fail'}")
+    print(
+        f"  validation NRMSE {b['nrmse_val']:.5g} -> {e['nrmse_val']:.5g} (ratio {result['gain']['nrmse_ratio']:.3f}),"
+        f" R2 {b['r2_val']:.5f} -> {e['r2_val']:.5f}"
+    )
+    print(
+        f"  correlation tests {'pass' if b['tests']['passed'] else 'fail'} -> "
+        f"{'pass' if e['tests']['passed'] else 'fail'}"
+    )
     for c in result["causes"]:
         params = ", ".join(f"{k}={v:.4g}" if isinstance(v, (int, float)) else f"{k}={v}"
                            for k, v in c.get("params", {}).items())

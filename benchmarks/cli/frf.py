@@ -60,8 +60,9 @@ def estimate(rec: Record, periods: int | None = None, drop: int = 0, window: str
     from sysid.frf import frf_periodic, frf_welch
 
     rec.require_output()
-    if rec.u.ndim != 1 or rec.y.ndim != 1:
-        raise ConfigError(f"{rec.source}: frf handles one input and one output (got u{rec.u.shape}, y{rec.y.shape})")
+    if rec.u.ndim != 1 or rec.output.ndim != 1:
+        raise ConfigError(f"{rec.source}: frf handles one input and one output "
+                          f"(got u{rec.u.shape}, y{rec.output.shape})")
     if periods is None:
         if drop:
             raise ConfigError("--drop needs --periods")

@@ -12,7 +12,8 @@ from __future__ import annotations
 
 import argparse
 import time
-from typing import Any, Sequence
+from collections.abc import Sequence
+from typing import Any
 
 from benchmarks.cli.common import add_data_args, emit_json, read_data, same_fs
 from sysid.config import parse_assignments
@@ -40,7 +41,9 @@ def identify(name: str, est: Record | Sequence[Record], val: Record | Sequence[R
 
 
 def register(sub) -> None:
-    p = sub.add_parser("identify", help="identify a black-box model (arx, armax, oe, bj, n4sid, narx-poly, narmax-poly, ...)")
+    p = sub.add_parser(
+        "identify", help="identify a black-box model (arx, armax, oe, bj, n4sid, narx-poly, narmax-poly, ...)"
+    )
     p.add_argument("identifier", help="identifier id (piezotwin list identifiers)")
     p.add_argument("--est", required=True, action="append", metavar="FILE",
                    help="estimation record; repeat for several separate experiments")

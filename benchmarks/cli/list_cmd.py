@@ -27,7 +27,11 @@ def collect(kind: str) -> list[dict]:
                         "default_effects": sorted(cls.default_effects())})
         return out
     if kind == "protocols":
-        return [{"twin": n, "id": pid, "description": d} for n in available_twins() for pid, d in get_twin(n).PROTOCOLS.items()]
+        return [
+            {"twin": n, "id": pid, "description": d}
+            for n in available_twins()
+            for pid, d in get_twin(n).PROTOCOLS.items()
+        ]
     if kind == "effects":
         return [e.to_dict(get_twin(n).Params) for n in available_twins() for e in get_twin(n).EFFECTS.values()]
     if kind == "identifiers":

@@ -76,14 +76,21 @@ def _add_common(p: argparse.ArgumentParser, top: bool) -> None:
     g = p.add_argument_group("output") if not top else p
     g.add_argument("--version", action="version", version=f"piezotwin {version()}", help="print the version and exit")
     default = {} if top else {"default": argparse.SUPPRESS}
-    g.add_argument("-q", "--quiet", action="store_true", help="print only results: no progress, information or warnings",
-                   **({"default": False} if top else default))
+    g.add_argument(
+        "-q",
+        "--quiet",
+        action="store_true",
+        help="print only results: no progress, information or warnings",
+        **({"default": False} if top else default),
+    )
     g.add_argument("-v", "--verbose", action="count", help="more messages (debug)",
                    **({"default": 0} if top else default))
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = _Parser(prog="piezotwin", description="Digital twins and black-box identification of piezoelectric systems.")
+    parser = _Parser(
+        prog="piezotwin", description="Digital twins and black-box identification of piezoelectric systems."
+    )
     _add_common(parser, top=True)
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
     for name in COMMAND_MODULES:
@@ -113,7 +120,7 @@ class _StderrHandler(logging.StreamHandler):
     def __init__(self) -> None:
         super().__init__(sys.stderr)
 
-    @property  # type: ignore[override]
+    @property
     def stream(self):
         return sys.stderr
 
@@ -134,7 +141,7 @@ class _Session:
         self.level = logging.ERROR if quiet else (logging.DEBUG if verbose else logging.INFO)
         self.quiet = quiet
 
-    def __enter__(self) -> "_Session":
+    def __enter__(self) -> _Session:
         from sysid.progress import set_enabled
 
         root = logging.getLogger()

@@ -14,11 +14,12 @@ from __future__ import annotations
 
 import argparse
 import math
+from typing import Any
 
 from benchmarks.cli.common import add_data_args, emit_json, read_data
 from sysid.errors import ConfigError
-from sysid.record import FS_MAX, FS_MIN
 from sysid.io import write_record
+from sysid.record import FS_MAX, FS_MIN
 
 
 class _Step(argparse.Action):
@@ -48,7 +49,9 @@ def register(sub) -> None:
     g.add_argument("--moving-average", action=_Step, step="moving_average", metavar="N",
                    help="centred moving average of N samples (the dissertation used 100)")
     g.add_argument("--decimate", action=_Step, step="decimate", metavar="Q", help="anti-aliased decimation by Q")
-    g.add_argument("--resample", action=_Step, step="resample", metavar="FS", help="anti-aliased rational resampling to FS Hz")
+    g.add_argument(
+        "--resample", action=_Step, step="resample", metavar="FS", help="anti-aliased rational resampling to FS Hz"
+    )
     g.add_argument("--bandpass", action=_Step, step="bandpass", metavar="FMIN:FMAX[:ORDER]",
                    help="zero-phase Butterworth band-pass (default order 5)")
     g.add_argument("--segment", action=_Step, step="segment", metavar="LENGTH[:OVERLAP]",
@@ -62,7 +65,7 @@ def register(sub) -> None:
     p.set_defaults(func=run, steps=[])
 
 
-def _num(text: str, option: str, integer: bool = False, lo: float | None = None, hi: float | None = None) -> float:
+def _num(text: Any, option: str, integer: bool = False, lo: float | None = None, hi: float | None = None) -> float:
     try:
         v = float(text)
     except (TypeError, ValueError):
@@ -140,7 +143,12 @@ def run(args: argparse.Namespace) -> int:
     write_record(out, args.output)
     log = out.meta["preprocessing"]
     first = n0
-    if n0 and log[n0 - 1].get("step") == "fill_missing" and log[n0 - 1].get("params", {}).get("at") == "read" and args.fill_missing:
+    if (
+        n0
+        and log[n0 - 1].get("step") == "fill_missing"
+        and log[n0 - 1].get("params", {}).get("at") == "read"
+        and args.fill_missing
+    ):
         first = n0 - 1  # filled while reading this file
     done = log[first:]
     if args.json:
@@ -149,8 +157,10 @@ def run(args: argparse.Namespace) -> int:
     for entry in done:
         ch = entry.get("changes", {})
         if entry["step"] == "suggest_rate":
-            extra = (f": tau_linear={ch['tau_linear']}, tau_nonlinear={ch['tau_nonlinear']} samples -> decimation factor"
-                     f" {ch['factor']} (fs {ch.get('fs_suggested', float('nan')):g} Hz)")
+            extra = (
+                f": tau_linear={ch['tau_linear']}, tau_nonlinear={ch['tau_nonlinear']} samples -> decimation factor"
+                f" {ch['factor']} (fs {ch.get('fs_suggested', float('nan')):g} Hz)"
+            )
         elif entry["step"] == "hampel":
             extra = f": replaced {ch.get('n_replaced')}"
         elif "fs_after" in ch:

@@ -17,7 +17,9 @@ from benchmarks.execution import add_execution_args, executor_from_args
 
 
 def register(sub) -> None:
-    p = sub.add_parser("records", help="measure the records rows and write docs/benchmarks.md and benchmarks/records.json")
+    p = sub.add_parser(
+        "records", help="measure the records rows and write docs/benchmarks.md and benchmarks/records.json"
+    )
     p.add_argument("--datasets", metavar="X,Y", help="measure only these rows of the records settings (default: every "
                                                      "row); the others are rendered as stored")
     p.add_argument("--render-only", action="store_true", help="fit nothing: render the page and records.json from the "

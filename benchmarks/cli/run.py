@@ -20,7 +20,9 @@ def register(sub) -> None:
 def run(args: argparse.Namespace) -> int:
     from benchmarks.mainjob import run_main_job
 
-    summary = run_main_job(report_dir=args.report, quick=args.quick, verbose=not (args.json or getattr(args, "quiet", False)))
+    summary = run_main_job(
+        report_dir=args.report, quick=args.quick, verbose=not (args.json or getattr(args, "quiet", False))
+    )
     if args.json:
         from benchmarks.cli.common import emit_json
 

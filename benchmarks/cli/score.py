@@ -29,10 +29,16 @@ def register(sub) -> None:
     p.add_argument("--datasets", metavar="X,Y", help="comma-separated dataset ids (default: every available one; "
                                                      "--quick: the quick set)")
     p.add_argument("--quick", action="store_true", help="reduced settings and data budgets (the CI check)")
-    p.add_argument("--check", action="store_true", help="exit 1 if any pair falls below its floor in benchmarks/baselines.json")
+    p.add_argument(
+        "--check", action="store_true", help="exit 1 if any pair falls below its floor in benchmarks/baselines.json"
+    )
     p.add_argument("--baselines", metavar="FILE", help="baselines file (default benchmarks/baselines.json)")
-    p.add_argument("--update-baselines", action="store_true", help="write floors measured in this run to the baselines file")
-    p.add_argument("--margin", type=number(0, 10), default=0.15, help="margin of --update-baselines (default 0.15 = 15 %%)")
+    p.add_argument(
+        "--update-baselines", action="store_true", help="write floors measured in this run to the baselines file"
+    )
+    p.add_argument(
+        "--margin", type=number(0, 10), default=0.15, help="margin of --update-baselines (default 0.15 = 15 %%)"
+    )
     p.add_argument("--seeded-margin", type=number(0, 10), default=0.5,
                    help="margin of --update-baselines for identifiers scored over several training seeds (default 0.5)")
     p.add_argument("--seeds", metavar="A-B", type=seed_range,
@@ -84,7 +90,7 @@ def run(args: argparse.Namespace) -> int:
     if args.check:
         failures = scoring.check(res, baselines)
         out["check"] = {"passed": not failures, "failures": failures}
-        warning = scoring.version_mismatch(res, baselines)
+        warning = scoring.version_mismatch(res, baselines or {})
         if warning:
             out["check"]["version_warning"] = warning
             print(warning, file=sys.stderr)
@@ -101,12 +107,14 @@ def run(args: argparse.Namespace) -> int:
         for s in res.skipped:
             what = " on ".join(x for x in (s.get("identifier"), s.get("dataset")) if x)
             print(f"skipped {what}: {s['reason']}")
-        for s in res.sysidentpy:
-            if s.get("status") == "ok":
-                print(f"{'sysidentpy':<12} {s['dataset']:<20} {s['test']:<22} free-run RMSE {scoring._fmt(s['free_run']['rmse'])} "
-                      f"(R2 {scoring._fmt(s['free_run']['r2'])})  fit {s['fit_seconds']:.2f} s  {s['n_parameters']} terms")
+        for row in res.sysidentpy:
+            if row.get("status") == "ok":
+                print(f"{'sysidentpy':<12} {row['dataset']:<20} {row['test']:<22} "
+                      f"free-run RMSE {scoring._fmt(row['free_run']['rmse'])} "
+                      f"(R2 {scoring._fmt(row['free_run']['r2'])})  fit {row['fit_seconds']:.2f} s  "
+                      f"{row['n_parameters']} terms")
             else:
-                print(f"{'sysidentpy':<12} {s['dataset']:<20} {s['test']:<22} skipped: {s.get('reason', '')}")
+                print(f"{'sysidentpy':<12} {row['dataset']:<20} {row['test']:<22} skipped: {row.get('reason', '')}")
         if args.report:
             print(f"report -> {args.report}/score.md")
         if args.update_baselines:
@@ -146,7 +154,11 @@ def _floors_from_runs(args: argparse.Namespace, bpath, baselines) -> int:
             data = json.loads(Path(name).read_text())
         except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
             raise ConfigError(f"{name}: cannot read a score run ({exc})") from None
-        if not isinstance(data, dict) or data.get("format") != "piezotwin-score/1" or not isinstance(data.get("rows"), list):
+        if (
+            not isinstance(data, dict)
+            or data.get("format") != "piezotwin-score/1"
+            or not isinstance(data.get("rows"), list)
+        ):
             raise ConfigError(f"{name}: not a `piezotwin score --json` run")
         runs.append(data)
     new = scoring.make_floors(runs, margin=args.margin, previous=baselines, seeded_margin=args.seeded_margin)

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import argparse
 import math
+from typing import Any
 
 import numpy as np
 
@@ -45,11 +46,16 @@ def register(sub) -> None:
     p.add_argument("kind", choices=KINDS)
     p.add_argument("--fs", type=FS, help="sampling rate [Hz]")
     p.add_argument("--duration", type=POSITIVE, help="length [s]")
-    p.add_argument("--band", metavar="FMIN:FMAX", help="multisine: excited band [Hz] (FMAX may be empty: up to Nyquist);"
-                   " chirp: start:end frequency [Hz]")
+    p.add_argument(
+        "--band",
+        metavar="FMIN:FMAX",
+        help="multisine: excited band [Hz] (FMAX may be empty: up to Nyquist); chirp: start:end frequency [Hz]",
+    )
     p.add_argument("--components", type=COUNT, help="multisine: number of lines (default: every grid line in the band)")
     p.add_argument("--resolution", type=POSITIVE, help="multisine: line spacing [Hz] (default 1/period)")
-    p.add_argument("--amplitude", type=number(-1e12, 1e12), default=1.0, help="peak value (RMS value with --rms); default 1")
+    p.add_argument(
+        "--amplitude", type=number(-1e12, 1e12), default=1.0, help="peak value (RMS value with --rms); default 1"
+    )
     p.add_argument("--rms", action="store_true", help="--amplitude is the RMS value")
     p.add_argument("--phase", choices=signals.PHASES, default="random", help="multisine phases (default random)")
     p.add_argument("--grid", choices=signals.GRIDS, default="full", help="multisine line grid (default full)")
@@ -60,15 +66,26 @@ def register(sub) -> None:
     p.add_argument("--method", choices=("linear", "log"), default="linear", help="chirp sweep law (default linear)")
     p.add_argument("--periodic", action="store_true", help="chirp: periodic chirp of eq. 2-2 (f*T0 integers)")
     p.add_argument("--freq", type=number(0, 1e9), help="sine: frequency [Hz]")
-    p.add_argument("--sine-phase", type=number(-1e6, 1e6), default=0.0, help="sine/chirp: initial phase [rad] (cos form, eq. 2-3)")
+    p.add_argument(
+        "--sine-phase", type=number(-1e6, 1e6), default=0.0, help="sine/chirp: initial phase [rad] (cos form, eq. 2-3)"
+    )
     p.add_argument("--freqs", help="stepped-sine: comma-separated frequencies [Hz]")
     p.add_argument("--settle", type=number(0, 1e6), default=0.0, help="stepped-sine: settling time per step [s]")
     p.add_argument("--cycles", type=COUNT, default=10, help="stepped-sine: periods measured per step (default 10)")
-    p.add_argument("--order", type=number(2, 40, integer=True), default=10, help="prbs: LFSR order, period 2^order-1 bits (default 10)")
+    p.add_argument(
+        "--order",
+        type=number(2, 40, integer=True),
+        default=10,
+        help="prbs: LFSR order, period 2^order-1 bits (default 10)",
+    )
     p.add_argument("--bit-samples", type=COUNT, default=1, help="prbs: samples per bit (default 1)")
     p.add_argument("--hold", metavar="MIN:MAX", help="aprbs: hold time range [s] (default 10..100 samples)")
-    p.add_argument("--levels", type=number(2, 10**6, integer=True), help="aprbs: number of discrete levels (default: continuous)")
-    p.add_argument("--truncate", type=COUNT, help="thesis-acoustic: keep the first N samples (the dissertation kept 5000)")
+    p.add_argument(
+        "--levels", type=number(2, 10**6, integer=True), help="aprbs: number of discrete levels (default: continuous)"
+    )
+    p.add_argument(
+        "--truncate", type=COUNT, help="thesis-acoustic: keep the first N samples (the dissertation kept 5000)"
+    )
     p.add_argument("--unit", default="V", help="unit of u (default V)")
     p.add_argument("--json", action="store_true", help="print a JSON summary")
     p.add_argument("-o", "--output", required=True, metavar="FILE", help="output record (.npz, .csv or .mat)")
@@ -178,10 +195,15 @@ def run(args: argparse.Namespace) -> int:
                "peak": float(np.max(np.abs(u))), "rms": float(np.sqrt(np.mean(u * u))),
                "crest_factor": signals.crest_factor(u)}
     info = {k: v for k, v in info.items() if k != "phases_rad"}  # the signal itself is saved; keep meta small
-    meta = {"signal": {"kind": args.kind, "params": params, "info": info, **{k: summary[k] for k in ("peak", "rms", "crest_factor")}}}
+    meta: dict[str, Any] = {"signal": {"kind": args.kind, "params": params, "info": info,
+                       **{k: summary[k] for k in ("peak", "rms", "crest_factor")}}}
     if "steps" in info:
-        meta["segments"] = [{"start": s["measure_start"], "stop": s["stop"], "freq_hz": s["freq_hz"]} for s in info["steps"]]
-    write_record(Record(u=u, y=None, fs=fs, units={"u": args.unit, "y": ""}, meta=meta, source=args.output), args.output)
+        meta["segments"] = [
+            {"start": s["measure_start"], "stop": s["stop"], "freq_hz": s["freq_hz"]} for s in info["steps"]
+        ]
+    write_record(
+        Record(u=u, y=None, fs=fs, units={"u": args.unit, "y": ""}, meta=meta, source=args.output), args.output
+    )
     if args.json:
         emit_json({**summary, "output": args.output})
     else:

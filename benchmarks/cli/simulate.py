@@ -10,8 +10,8 @@ from __future__ import annotations
 import argparse
 
 from benchmarks.cli.common import add_data_args, add_twin_args, read_data, twin_from_args
-from sysid.errors import ConfigError
 from benchmarks.execution import add_execution_args, executor_from_args
+from sysid.errors import ConfigError
 from sysid.io import write_record
 
 
@@ -65,7 +65,9 @@ def run_generate(args: argparse.Namespace) -> int:
         except ValueError:
             v = math.nan  # not a number: the twin's own check names it
         if math.isfinite(v) and v > 0 and not FS_MIN <= v <= FS_MAX:
-            raise ConfigError(f"--option fs: sampling rate {v:g} Hz outside the accepted range {FS_MIN:g}..{FS_MAX:g} Hz")
+            raise ConfigError(
+                f"--option fs: sampling rate {v:g} Hz outside the accepted range {FS_MIN:g}..{FS_MAX:g} Hz"
+            )
     if args.grid or args.seeds:
         return _run_collection(args, twin)
     rec = twin.generate(args.protocol, **opts)

@@ -18,11 +18,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from sysid.errors import ConfigError
-from sysid.record import Record
-
 from benchmarks.datasets import lab, twin
 from benchmarks.datasets.references import references_for
+from sysid.errors import ConfigError
+from sysid.record import Record
 
 __all__ = ["Dataset", "list_datasets", "load_dataset", "dataset_names", "LAB_DESCRIPTIONS"]
 
@@ -107,7 +106,9 @@ def list_datasets() -> list[dict[str, Any]]:
     return out
 
 
-def load_dataset(name: str, source: str | Path | None = None, use_cache: bool = True, progress: bool = False) -> Dataset:
+def load_dataset(
+    name: str, source: str | Path | None = None, use_cache: bool = True, progress: bool = False
+) -> Dataset:
     """The :class:`Dataset` registered as ``name``.
 
     ``source`` (lab datasets only): a folder (or file) with the original published files, read instead of the
@@ -120,7 +121,8 @@ def load_dataset(name: str, source: str | Path | None = None, use_cache: bool = 
         return Dataset(name=name, kind="lab", description=LAB_DESCRIPTIONS[name], est=est, tests=tests,
                        init_samples=lab.INIT_SAMPLES[name], fs=est.fs, units=dict(est.units),
                        references=references_for(name), nonlinear=True,
-                       meta={"source": str(source) if source is not None else f"benchmarks/data/{lab.LAB_SPECS[name].folder}",
+                       meta={"source": (str(source) if source is not None
+                                        else f"benchmarks/data/{lab.LAB_SPECS[name].folder}"),
                              "splits": lab.SPLITS[name]})
     if name in twin.TWIN_DATASETS:
         if source is not None:

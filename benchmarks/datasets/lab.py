@@ -16,9 +16,10 @@ published files (``load_dataset("silverbox", source="path/to/SilverboxFiles")``)
 from __future__ import annotations
 
 import csv
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable
+from typing import Any
 
 import numpy as np
 
@@ -202,7 +203,7 @@ def read_vendored_folder(name: str, folder: Path) -> dict[str, Record]:
 
 # ------------------------------------------------------------------------------------------ splits
 # Official splits as half-open sample ranges [start, stop) of the raw records.
-SPLITS = {
+SPLITS: dict[str, dict[str, Any]] = {
     # Silverbox: official dataloader (nonlinear_benchmarks): multisine part [40650, 127400), its first 75 %
     # estimation, last 25 % test; arrow (full) test [100, 40575); arrow without extrapolation = its first 32000.
     "silverbox": {"est": ("SNLS80mV", 40650, 105712),
@@ -233,6 +234,7 @@ def cut(raws: dict[str, Record], name: str) -> tuple[Record, dict[str, Record]]:
         out.meta["split"] = {"dataset": name, "part": part, "record": key, "start": a, "stop": b}
         return out
 
-    est = take(*split["est"], "est")
-    tests = {t: take(*spec, t) for t, spec in split["tests"].items()}
+    key, a, b = split["est"]
+    est = take(key, a, b, "est")
+    tests = {t: take(k, a, b, t) for t, (k, a, b) in split["tests"].items()}
     return est, tests

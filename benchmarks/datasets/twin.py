@@ -89,7 +89,9 @@ def cache_key(spec: TwinDatasetSpec, twin) -> str:
     return hashlib.sha256(text.encode()).hexdigest()[:16]
 
 
-def generate_records(spec: TwinDatasetSpec, use_cache: bool = True, progress: bool = False) -> tuple[Record, dict[str, Record], Path | None]:
+def generate_records(
+    spec: TwinDatasetSpec, use_cache: bool = True, progress: bool = False
+) -> tuple[Record, dict[str, Record], Path | None]:
     """(estimation record, test records, cache folder) of a twin dataset, from the cache when present."""
     twin = make_twin(spec)
     folder = cache_dir() / "datasets" / f"{spec.name}-{cache_key(spec, twin)}"
@@ -128,25 +130,47 @@ def generate_records(spec: TwinDatasetSpec, use_cache: bool = True, progress: bo
 # The dissertation's estimation → validation pairs. Cantilever §3.1: thesis-multisine (80 000 samples at
 # 10 kHz) → thesis-sines. Acoustic §3.2 (second dataset): multisine → 1 ms linear chirp, both after the
 # preprocessing recipe (100-point moving average, resampling to 6.75 MHz, band-pass).
-_CANTILEVER = dict(twin="cantilever", est=("thesis-multisine", {}), tests={"thesis-sines": ("thesis-sines", {})},
-                   fs=10_000.0, init_samples=0)
+_CANTILEVER: dict[str, Any] = dict(twin="cantilever", est=("thesis-multisine", {}),
+                                   tests={"thesis-sines": ("thesis-sines", {})}, fs=10_000.0, init_samples=0)
 # The dissertation truncated to 2000 / 1000 samples because its tools could not take more; here the
 # estimation keeps 20 000 preprocessed samples (10 ms recorded) and the test one whole 1 ms sweep (6750).
-_ACOUSTIC = dict(twin="acoustic", est=("thesis-multisine", {"preprocess": True, "duration": 0.01, "keep": 20000}),
-                 tests={"thesis-chirp-1ms": ("thesis-chirp-1ms", {"preprocess": True, "duration": 0.002, "keep": 6750})},
-                 fs=6.75e6, init_samples=0)
+_ACOUSTIC: dict[str, Any] = dict(
+    twin="acoustic",
+    est=("thesis-multisine", {"preprocess": True, "duration": 0.01, "keep": 20000}),
+    tests={"thesis-chirp-1ms": ("thesis-chirp-1ms", {"preprocess": True, "duration": 0.002, "keep": 6750})},
+    fs=6.75e6,
+    init_samples=0,
+)
 
 TWIN_DATASETS: dict[str, TwinDatasetSpec] = {
     "cantilever-thesis": TwinDatasetSpec(
-        name="cantilever-thesis", noise=True, seed=0, **_CANTILEVER,
-        description="cantilever twin, dissertation §3.1: thesis-multisine (estimation) -> thesis-sines (test), with measurement noise"),
+        name="cantilever-thesis",
+        noise=True,
+        seed=0,
+        **_CANTILEVER,
+        description="cantilever twin, dissertation §3.1: thesis-multisine (estimation) -> thesis-sines (test), "
+        "with measurement noise",
+    ),
     "cantilever-thesis-clean": TwinDatasetSpec(
-        name="cantilever-thesis-clean", noise=False, seed=0, **_CANTILEVER,
-        description="cantilever twin, dissertation §3.1: thesis-multisine -> thesis-sines, noise-free"),
+        name="cantilever-thesis-clean",
+        noise=False,
+        seed=0,
+        **_CANTILEVER,
+        description="cantilever twin, dissertation §3.1: thesis-multisine -> thesis-sines, noise-free",
+    ),
     "acoustic-thesis": TwinDatasetSpec(
-        name="acoustic-thesis", noise=True, seed=0, **_ACOUSTIC,
-        description="acoustic twin, dissertation §3.2: multisine (estimation) -> 1 ms chirp (test), preprocessed, with measurement noise"),
+        name="acoustic-thesis",
+        noise=True,
+        seed=0,
+        **_ACOUSTIC,
+        description="acoustic twin, dissertation §3.2: multisine (estimation) -> 1 ms chirp (test), preprocessed, "
+        "with measurement noise",
+    ),
     "acoustic-thesis-clean": TwinDatasetSpec(
-        name="acoustic-thesis-clean", noise=False, seed=0, **_ACOUSTIC,
-        description="acoustic twin, dissertation §3.2: multisine -> 1 ms chirp, preprocessed, noise-free"),
+        name="acoustic-thesis-clean",
+        noise=False,
+        seed=0,
+        **_ACOUSTIC,
+        description="acoustic twin, dissertation §3.2: multisine -> 1 ms chirp, preprocessed, noise-free",
+    ),
 }

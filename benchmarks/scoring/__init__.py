@@ -47,9 +47,9 @@ from benchmarks.scoring.settings import (
     NORMALISE,
     QUICK_DATASETS,
     QUICK_MAX_SAMPLES,
+    QUICK_ONLY_DATASETS,
     QUICK_SEEDS,
     QUICK_SETTINGS,
-    QUICK_ONLY_DATASETS,
     QUICK_SKIP_IDENTIFIERS,
     SETTINGS,
     SETTINGS_DIR,
@@ -71,10 +71,11 @@ Normalised = NormalisedModel
 
 __all__ = [
     "BASELINES_FORMAT", "BASELINES_PATH", "DEFAULT_MARGIN", "LINEAR_IDENTIFIERS", "METRICS", "NORMALISE",
-    "QUICK_DATASETS", "QUICK_MAX_SAMPLES", "QUICK_SEEDS", "QUICK_ONLY_DATASETS", "QUICK_SETTINGS", "QUICK_SKIP_IDENTIFIERS", "SEEDED_MARGIN",
+    "QUICK_DATASETS", "QUICK_MAX_SAMPLES", "QUICK_SEEDS", "QUICK_ONLY_DATASETS", "QUICK_SETTINGS",
+    "QUICK_SKIP_IDENTIFIERS", "SEEDED_MARGIN",
     "SETTINGS", "SETTINGS_DIR", "SYSIDENTPY_QUICK_MAX_EST", "SYSIDENTPY_SETTINGS", "ConfigError", "InputError",
     "Normalised", "NormalisedModel", "Record", "ScoreRun", "check", "check_rules", "dropped_pairs", "environment",
     "evaluate", "format_row", "is_seeded", "load_baselines", "load_identifier_settings", "make_floors",
-    "markdown_table", "prepare_dataset", "score", "score_pair", "score_pair_task", "seeds_for", "settings_for", "strip_timing",
-    "sysidentpy_frols", "sysidentpy_settings", "version_mismatch", "write_report",
+    "markdown_table", "prepare_dataset", "score", "score_pair", "score_pair_task", "seeds_for", "settings_for",
+    "strip_timing", "sysidentpy_frols", "sysidentpy_settings", "version_mismatch", "write_report",
 ]

@@ -16,7 +16,7 @@ import time
 import warnings
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, TypeGuard
 
 import numpy as np
 
@@ -25,8 +25,8 @@ from benchmarks.scoring.settings import (
     NORMALISE,
     QUICK_DATASETS,
     QUICK_MAX_SAMPLES,
-    QUICK_SEEDS,
     QUICK_ONLY_DATASETS,
+    QUICK_SEEDS,
     QUICK_SKIP_IDENTIFIERS,
     seeds_for,
     settings_for,
@@ -35,13 +35,13 @@ from sysid.errors import ConfigError, InputError
 from sysid.record import NormalisedModel, Record
 
 
-
 class _Scored:
     """Proxy of a fitted model for :func:`sysid.evaluate.evaluate`: reports ``max_lag_`` = the scoring skip
     (max of the dataset's initialisation window and the model's own lags) and keeps the predictions."""
 
     def __init__(self, model, skip: int):
-        self.model, self.max_lag_, self.outputs = model, skip, {}
+        self.model, self.max_lag_ = model, skip
+        self.outputs: dict[Any, np.ndarray] = {}
 
     def predict(self, record: Record, horizon: int | None = 1) -> np.ndarray:
         y = self.model.predict(record, horizon=horizon)
@@ -180,7 +180,8 @@ def _median_run(runs: list[dict[str, Any]]) -> dict[str, Any]:
 
 
 def score_pair(identifier: str, ds, quick: bool = False, factory: Callable[[str], Any] | None = None,
-               params: dict[str, Any] | None = None, seeds: Sequence[int] | None = None) -> tuple[list[dict[str, Any]], dict[str, np.ndarray]]:
+               params: dict[str, Any] | None = None,
+               seeds: Sequence[int] | None = None) -> tuple[list[dict[str, Any]], dict[str, np.ndarray]]:
     """Fit ``identifier`` on ``ds.est`` and score every test of ``ds``; returns (rows, free-run predictions).
 
     A seeded identifier is fitted once per seed of ``seeds`` (default: :data:`QUICK_SEEDS` in quick mode, the
@@ -193,7 +194,9 @@ def score_pair(identifier: str, ds, quick: bool = False, factory: Callable[[str]
         return _score_pair(identifier, ds, quick, factory, params, seeds)
 
 
-def _score_pair(identifier, ds, quick, factory, params, seeds=None) -> tuple[list[dict[str, Any]], dict[str, np.ndarray]]:
+def _score_pair(
+    identifier, ds, quick, factory, params, seeds=None
+) -> tuple[list[dict[str, Any]], dict[str, np.ndarray]]:
     outcomes = [_fit_seed(identifier, ds, quick, factory, params, seeds, k) for k in range(_max_seeds(quick, seeds))]
     return _assemble(identifier, ds, quick, params, outcomes, seeds)
 
@@ -244,7 +247,9 @@ def _fit_seed(identifier, ds, quick, factory, params, seeds, k: int) -> dict[str
     return out
 
 
-def _assemble(identifier, ds, quick, params, outcomes, seeds=None) -> tuple[list[dict[str, Any]], dict[str, np.ndarray]]:
+def _assemble(
+    identifier, ds, quick, params, outcomes, seeds=None
+) -> tuple[list[dict[str, Any]], dict[str, np.ndarray]]:
     """Rows and free-run predictions of one pair from its seeds' evaluations (in seed order; None for a seed
     the pair does not have). Needs no identifier class, so the parent of Dask tasks does not import one.
 
@@ -263,7 +268,8 @@ def _assemble(identifier, ds, quick, params, outcomes, seeds=None) -> tuple[list
         preds[test] = ev.pop("_yhat_free_run")
         seed, fit_s, n_par = ev.pop("seed"), ev.pop("fit_seconds"), ev.pop("n_parameters")
         row = {
-            "identifier": identifier, "dataset": ds.name, "test": test, "status": "diverged" if ev["diverged"] else "ok",
+            "identifier": identifier, "dataset": ds.name, "test": test,
+            "status": "diverged" if ev["diverged"] else "ok",
             "params": params, "n_parameters": n_par, "fit_seconds": fit_s,
             "n_est": sum(len(r) for r in ds.est_records), "n_test": len(rec), "units": ds.units.get("y", ""),
             **ev, "references": ds.references.get(test, {}),
@@ -457,5 +463,5 @@ def _fmt(x: Any) -> str:
     return "nan" if x is None or (isinstance(x, float) and not math.isfinite(x)) else f"{x:.4g}"
 
 
-def _finite(x: Any) -> bool:
+def _finite(x: Any) -> TypeGuard[float]:
     return isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)

@@ -41,12 +41,15 @@ def sysidentpy_frols(ds, quick: bool = False, use_cache: bool = True) -> list[di
     est = est[0]
     if quick and len(est) > SYSIDENTPY_QUICK_MAX_EST:
         return [{"dataset": ds.name, "test": t, "status": "skipped",
-                 "reason": f"quick run: estimation set of {len(est)} samples > {SYSIDENTPY_QUICK_MAX_EST}"} for t in ds.tests]
+                 "reason": f"quick run: estimation set of {len(est)} samples > {SYSIDENTPY_QUICK_MAX_EST}"}
+                for t in ds.tests]
     h = hashlib.sha256()
     for rec in [est, *ds.tests.values()]:
         h.update(np.ascontiguousarray(rec.u).tobytes())
         h.update(np.ascontiguousarray(rec.y).tobytes())
-    h.update(json.dumps({"cfg": cfg, "version": sysidentpy.__version__, "init": ds.init_samples}, sort_keys=True).encode())
+    h.update(
+        json.dumps({"cfg": cfg, "version": sysidentpy.__version__, "init": ds.init_samples}, sort_keys=True).encode()
+    )
     from benchmarks.datasets.twin import cache_dir
 
     cache = cache_dir() / "sysidentpy" / f"{ds.name}-{h.hexdigest()[:16]}.json"
@@ -72,7 +75,11 @@ def sysidentpy_frols(ds, quick: bool = False, use_cache: bool = True) -> list[di
                 yhat = np.asarray(model.predict(X=x, y=y[:max_lag], steps_ahead=None) if steps is None
                                   else model.predict(X=x, y=y, steps_ahead=1), dtype=float).reshape(-1)
                 # SysIdentPy returns the series aligned with the input; guard against off-by-one lengths
-                yhat = yhat[: len(rec)] if yhat.size >= len(rec) else np.concatenate([yhat, np.full(len(rec) - yhat.size, np.nan)])
+                yhat = (
+                    yhat[: len(rec)]
+                    if yhat.size >= len(rec)
+                    else np.concatenate([yhat, np.full(len(rec) - yhat.size, np.nan)])
+                )
                 s = metric_score(rec.y, yhat, skip=skip)
                 row[key] = {m: s[m] for m in METRICS}
         rows.append(row)

@@ -41,7 +41,11 @@ def load_baselines(path: str | Path | None = None) -> dict[str, Any]:
         got = data.get("format") if isinstance(data, dict) else type(data).__name__
         raise ConfigError(f"{p}: not a baselines file (format {got!r}, expected {BASELINES_FORMAT!r})")
     modes, rules = data.get("modes", {}), data.get("rules", [])
-    if not isinstance(modes, dict) or not all(isinstance(m, dict) for m in modes.values()) or not isinstance(rules, list):
+    if (
+        not isinstance(modes, dict)
+        or not all(isinstance(m, dict) for m in modes.values())
+        or not isinstance(rules, list)
+    ):
         raise ConfigError(f"{p}: baselines file malformed: 'modes' must map a mode to floors and 'rules' be a list")
     for mode, floors in modes.items():
         for ident, dsets in floors.items():
@@ -84,19 +88,28 @@ def check(run: ScoreRun | dict[str, Any], baselines: dict[str, Any] | None = Non
             continue
         floor = floors.get(ident, {}).get(dname, {}).get(test)
         if floor is None:
-            failures.append(f"{ident} on {dname}/{test}: no {mode} floor in the baselines (measure one with "
-                            f"`score{' --quick' if mode == 'quick' else ''} --update-baselines`, or list the pair under "
-                            "'dropped' with the reason)")
+            failures.append(
+                f"{ident} on {dname}/{test}: no {mode} floor in the baselines (measure one with "
+                f"`score{' --quick' if mode == 'quick' else ''} --update-baselines`, or list the pair under "
+                "'dropped' with the reason)"
+            )
             continue
         rmse = (r.get("free_run") or {}).get("rmse")
         lim = floor["max_rmse"]
         if r.get("status") == "error":
-            failures.append(f"{ident} on {dname}/{test}: failed to run ({r.get('message', '')}); floor is free-run RMSE <= {lim:.4g}")
+            failures.append(
+                f"{ident} on {dname}/{test}: failed to run ({r.get('message', '')}); "
+                f"floor is free-run RMSE <= {lim:.4g}"
+            )
         elif not _finite(rmse):
-            failures.append(f"{ident} on {dname}/{test}: free run diverged or not finite; floor is free-run RMSE <= {lim:.4g}")
+            failures.append(
+                f"{ident} on {dname}/{test}: free run diverged or not finite; floor is free-run RMSE <= {lim:.4g}"
+            )
         elif rmse > lim:
-            failures.append(f"{ident} on {dname}/{test}: free-run RMSE {rmse:.4g} {r.get('units', '')} > floor {lim:.4g} "
-                            f"(baseline measured {floor.get('measured', float('nan')):.4g})")
+            failures.append(
+                f"{ident} on {dname}/{test}: free-run RMSE {rmse:.4g} {r.get('units', '')} > floor {lim:.4g} "
+                f"(baseline measured {floor.get('measured', float('nan')):.4g})"
+            )
     # 2. floors that name nothing that exists, or that the run should have scored and did not
     sel = data.get("selection") or {}
     sel_i, sel_d = set(sel.get("identifiers", [])), set(sel.get("datasets", []))
@@ -178,13 +191,16 @@ def _check_rule(rule: dict[str, Any], by_key: dict[tuple[str, str, str], dict[st
     elif kind == "beats_value":
         ident, dname = rule["identifier"], rule["dataset"]
         for test, value in rule["tests"].items():
-            r = by_key.get((ident, dname, test))
-            if r is None:
+            row = by_key.get((ident, dname, test))
+            if row is None:
                 continue
-            rmse = (r.get("free_run") or {}).get("rmse")
+            rmse = (row.get("free_run") or {}).get("rmse")
             if not (_finite(rmse) and rmse < value):
-                out.append(f"{ident} on {dname}/{test}: free-run RMSE {_fmt(rmse)} does not beat {rule.get('what', 'the reference')} "
-                           f"({_fmt(value)})")
+                out.append(
+                    f"{ident} on {dname}/{test}: free-run RMSE {_fmt(rmse)} "
+                    f"does not beat {rule.get('what', 'the reference')} "
+                    f"({_fmt(value)})"
+                )
     else:
         raise ConfigError(f"baselines: unknown rule {kind!r}")
     return out
@@ -220,7 +236,8 @@ def make_floors(runs: ScoreRun | dict[str, Any] | list, margin: float = DEFAULT_
     for m in (margin, seeded_margin):
         if not (_finite(m) and m >= 0):
             raise ConfigError(f"margin must be a finite number >= 0, got {m!r}")
-    base = json.loads(json.dumps(previous)) if previous else {"format": BASELINES_FORMAT, "modes": {}, "rules": []}
+    base: dict[str, Any] = (json.loads(json.dumps(previous)) if previous
+                            else {"format": BASELINES_FORMAT, "modes": {}, "rules": []})
     base["format"] = BASELINES_FORMAT
     values: dict[tuple[str, str, str], list[tuple[dict[str, Any], float | None]]] = {}
     draws: dict[tuple[str, str, str], list[float | None]] = {}  # single-seed free-run RMSEs of seeded rows
@@ -247,18 +264,27 @@ def make_floors(runs: ScoreRun | dict[str, Any] | list, margin: float = DEFAULT_
                             "reason": f"diverged or failed in {bad} of the measured runs/seeds: no stable floor"})
             floors.get(ident, {}).get(dname, {}).pop(test, None)
             continue
-        worst, best = max(v for _, v in vals), min(v for _, v in vals)
+        rmses = [v for _, v in vals if v is not None]  # every one (a None was dropped above)
+        seed_rmses = [x for x in singles if x is not None]
+        worst, best = max(rmses), min(rmses)
         ceiling = worst * (1.0 + margin)
         if singles:  # scored as a median over seeds: a new CPU redraws the seeds
-            ceiling = max(worst * (1.0 + seeded_margin), max(singles) * (1.0 + margin))
-        floor = {"max_rmse": float(f"{ceiling:.4g}"), "measured": float(f"{worst:.6g}"),
-                 "units": rows[0].get("units", ""), "r2_measured": float(f"{min(r['free_run']['r2'] for r in rows):.6g}")}
+            ceiling = max(worst * (1.0 + seeded_margin), max(seed_rmses) * (1.0 + margin))
+        floor = {
+            "max_rmse": float(f"{ceiling:.4g}"),
+            "measured": float(f"{worst:.6g}"),
+            "units": rows[0].get("units", ""),
+            "r2_measured": float(f"{min(r['free_run']['r2'] for r in rows):.6g}"),
+        }
         if len(vals) > 1:
             floor.update(measured_min=float(f"{best:.6g}"), runs=len(vals))
         if singles:
-            floor.update(seeds=rows[0]["seeds"], worst_single_seed=float(f"{max(singles):.6g}"), single_seed_draws=len(singles))
+            floor.update(seeds=rows[0]["seeds"], worst_single_seed=float(f"{max(seed_rmses):.6g}"),
+                         single_seed_draws=len(singles))
         floors.setdefault(ident, {}).setdefault(dname, {})[test] = floor
-    base.setdefault("dropped", {})[mode] = sorted(dropped, key=lambda e: (e["identifier"], e["dataset"], e.get("test", "*")))
+    base.setdefault("dropped", {})[mode] = sorted(
+        dropped, key=lambda e: (e["identifier"], e["dataset"], e.get("test", "*"))
+    )
     envs = [d.get("environment") or {} for d in datas]
     updates = base.setdefault("provenance", {}).setdefault(mode, [])
     updates.append({

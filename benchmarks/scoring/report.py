@@ -30,8 +30,8 @@ def markdown_table(run: ScoreRun | dict[str, Any]) -> str:
         else:
             stxt = f"skipped: {s.get('reason', '')}"
 
-        def refv(k: str) -> str:
-            v = ref.get(k)
+        def refv(k: str) -> str:  # called only in this iteration: ref is this row's
+            v = ref.get(k)  # noqa: B023
             return f"{_fmt(v['value'])} ({v['model']})" if v else "—"
 
         if r.get("status") == "error":
@@ -39,9 +39,11 @@ def markdown_table(run: ScoreRun | dict[str, Any]) -> str:
                          f"{refv('linear_baseline')} | {refv('best_published')} | {refv('sysidentpy')} |")
             continue
         fr, os_ = r["free_run"], r["one_step"]
-        lines.append(f"| {r['dataset']} / {r['test']} | {r['identifier']} | {_fmt(fr['rmse'])} {u} | {_fmt(fr['r2'])} | "
-                     f"{_fmt(os_['rmse'])} | {r['fit_seconds']:.2f} | {r['n_parameters']} | {stxt} | "
-                     f"{refv('linear_baseline')} | {refv('best_published')} | {refv('sysidentpy')} |")
+        lines.append(
+            f"| {r['dataset']} / {r['test']} | {r['identifier']} | {_fmt(fr['rmse'])} {u} | {_fmt(fr['r2'])} | "
+            f"{_fmt(os_['rmse'])} | {r['fit_seconds']:.2f} | {r['n_parameters']} | {stxt} | "
+            f"{refv('linear_baseline')} | {refv('best_published')} | {refv('sysidentpy')} |"
+        )
     return "\n".join(lines) + "\n"
 
 

@@ -111,7 +111,9 @@ def is_seeded(cls: Any) -> bool:
         return False
 
 
-def seeds_for(cls: Any, params: dict[str, Any], quick: bool, seeds: Sequence[int] | None = None) -> tuple[int | None, ...]:
+def seeds_for(
+    cls: Any, params: dict[str, Any], quick: bool, seeds: Sequence[int] | None = None
+) -> tuple[int | None, ...]:
     """Training seeds scored for one pair: for a seeded identifier whose settings fix no seed, ``seeds`` when
     given (quick or full mode), else :data:`QUICK_SEEDS` in quick mode; otherwise one run with the settings as
     given (``None``: a full run without ``seeds`` trains the identifier's default seed)."""

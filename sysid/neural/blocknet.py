@@ -17,7 +17,7 @@ tail) is :func:`sysid.neural.training.train_records`, the fitting loop shared wi
 from __future__ import annotations
 
 import math
-from typing import Sequence
+from collections.abc import Sequence
 
 import torch
 

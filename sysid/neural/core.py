@@ -19,15 +19,15 @@
 
 from __future__ import annotations
 
-from typing import Sequence
+from collections.abc import Sequence
 
 import numpy as np
 import torch
 from numba import njit
 
 __all__ = [
-    "regressor_lag", "ACTIVATIONS", "LagData", "FlatMLP", "RMSprop", "mlp_forward_np", "free_run_mlp", "k_step_mlp", "count_mlp_parameters",
-    "n_mlp_weights", "least_squares_linear", "merge_ensemble",
+    "regressor_lag", "ACTIVATIONS", "LagData", "FlatMLP", "RMSprop", "mlp_forward_np", "free_run_mlp", "k_step_mlp",
+    "count_mlp_parameters", "n_mlp_weights", "least_squares_linear", "merge_ensemble",
 ]
 
 ACTIVATIONS = ("sigmoid", "tanh", "relu")
@@ -52,7 +52,9 @@ def n_mlp_weights(sizes: Sequence[int]) -> int:
     return int(sum(int(a) * int(b) + int(b) for a, b in zip(sizes[:-1], sizes[1:])))
 
 
-def merge_ensemble(members: Sequence[np.ndarray], sizes: Sequence[int], linear: bool = False) -> tuple[np.ndarray, list[int]]:
+def merge_ensemble(
+    members: Sequence[np.ndarray], sizes: Sequence[int], linear: bool = False
+) -> tuple[np.ndarray, list[int]]:
     """One dense network computing the MEAN of k networks of the same layer sizes (flat layout of
     :class:`FlatMLP`), so every prediction path of a single network (numba free run, k-step, save/load) serves
     an ensemble unchanged. In free run the mean is what is fed back: one model, not k simulations.
@@ -92,10 +94,10 @@ def merge_ensemble(members: Sequence[np.ndarray], sizes: Sequence[int], linear: 
             bias = np.concatenate(bs)
         else:
             W, bias = np.concatenate(Ws, axis=1) / k, sum(bs) / k
-        parts += [W.reshape(-1), bias]
+        parts += [W.reshape(-1), bias]  # type: ignore[union-attr, list-item]  # sum() of arrays is an array
     if linear:
         Ls = [m[o:o + sizes[0] * sizes[-1]] for m in members]
-        parts.append(Ls[0].copy() if all(np.array_equal(L, Ls[0]) for L in Ls) else sum(Ls) / k)
+        parts.append(Ls[0].copy() if all(np.array_equal(L, Ls[0]) for L in Ls) else sum(Ls) / k)  # type: ignore[arg-type]
     return np.concatenate(parts), merged_sizes
 
 
@@ -348,7 +350,9 @@ def _act_np(x: np.ndarray, code: int) -> np.ndarray:
     return 1.0 / (1.0 + np.exp(-x))
 
 
-def mlp_forward_np(flat: np.ndarray, sizes: Sequence[int], code: int, x: np.ndarray, linear: bool = False) -> np.ndarray:
+def mlp_forward_np(
+    flat: np.ndarray, sizes: Sequence[int], code: int, x: np.ndarray, linear: bool = False
+) -> np.ndarray:
     """Batched float64 forward pass of the flat network: ``x`` (B, n_in) → (B, n_out); with ``linear`` the
     bypass ``x Lᵀ`` (L stored after the layers) is added."""
     o = 0

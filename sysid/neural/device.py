@@ -34,7 +34,9 @@ def select_device(device: str = "auto") -> torch.device:
     """Resolve ``"auto" | "cpu" | "cuda" | "cuda:N"`` to a :class:`torch.device`; refuse CUDA when absent."""
     name = str(device or "auto").strip().lower()
     if name == "auto":
-        name = os.environ.get("PIEZOTWIN_DEVICE", "").strip().lower() or ("cuda" if torch.cuda.is_available() else "cpu")
+        name = os.environ.get("PIEZOTWIN_DEVICE", "").strip().lower() or (
+            "cuda" if torch.cuda.is_available() else "cpu"
+        )
     if name == "cpu":
         return torch.device("cpu")
     if name.startswith("cuda"):

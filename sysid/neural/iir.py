@@ -2,7 +2,8 @@
 
 The transfer function of one input–output pair, in the shift operator q (q⁻¹ u(t) = u(t-1)), is
 
-    G(q) = q^{-nk} B(q)/A(q),   B(q) = b_0 + b_1 q⁻¹ + … + b_{nb-1} q^{-(nb-1)},   A(q) = 1 + a_1 q⁻¹ + … + a_na q^{-na},
+    G(q) = q^{-nk} B(q)/A(q),   B(q) = b_0 + b_1 q⁻¹ + … + b_{nb-1} q^{-(nb-1)},
+                                 A(q) = 1 + a_1 q⁻¹ + … + a_na q^{-na},
 
 i.e. the difference equation y(t) = Σ_j b_j u(t-nk-j) − Σ_{j≥1} a_j y(t-j), run from rest (zero initial state,
 u = y = 0 before the first sample). This is the linear dynamical operator of Forgione & Piga, "dynoNet: a neural
@@ -117,8 +118,10 @@ class MIMOFilter(torch.autograd.Function):
                 gb[o, i], ga[o, i] = _pair_backward(g[o], un[i], ys[o, i], bn[o, i], an[o, i],
                                                     None if gun is None else gun[i])
         dtype, device = ctx.u_meta
-        gu = None if gun is None else torch.as_tensor(np.ascontiguousarray(np.moveaxis(gun, 0, 2)), dtype=dtype, device=device)
-        return gu, torch.as_tensor(gb, dtype=b.dtype, device=b.device), torch.as_tensor(ga, dtype=a.dtype, device=a.device)
+        gu = None if gun is None else torch.as_tensor(np.ascontiguousarray(np.moveaxis(gun, 0, 2)), dtype=dtype,
+                                                      device=device)
+        return (gu, torch.as_tensor(gb, dtype=b.dtype, device=b.device),
+                torch.as_tensor(ga, dtype=a.dtype, device=a.device))
 
 
 def filter_np(u: np.ndarray, b: np.ndarray, a: np.ndarray, nk: int = 0) -> np.ndarray:
@@ -149,7 +152,9 @@ class LinearDynamic(torch.nn.Module):
         self.n_in, self.n_out, self.nb, self.na, self.nk = int(n_in), int(n_out), int(nb), int(na), int(nk)
         gen = generator or torch.Generator().manual_seed(0)
         lim = 1.0 / np.sqrt(self.n_in * self.nb)
-        self.b = torch.nn.Parameter(((torch.rand(n_out, n_in, nb, generator=gen, dtype=torch.float64) * 2 - 1) * lim).to(dtype))
+        self.b = torch.nn.Parameter(
+            ((torch.rand(n_out, n_in, nb, generator=gen, dtype=torch.float64) * 2 - 1) * lim).to(dtype)
+        )
         self.a = torch.nn.Parameter((torch.randn(n_out, n_in, na, generator=gen, dtype=torch.float64) * 0.01).to(dtype))
 
     def forward(self, u: torch.Tensor) -> torch.Tensor:

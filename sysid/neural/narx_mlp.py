@@ -23,19 +23,40 @@ from __future__ import annotations
 import math
 import time
 import warnings
-from typing import Any, Sequence
+from collections.abc import Iterable, Sequence
+from typing import Any
 
 import numpy as np
 import torch
 
 from sysid.base import Identifier, as_record_list
 from sysid.errors import ConfigError, DataError, DivergenceWarning
-from sysid.neural.core import (ACT_CODE, ACTIVATIONS, FlatMLP, LagData, RMSprop, count_mlp_parameters, free_run_mlp,
-                               k_step_mlp, lag_matrix_np, least_squares_linear, merge_ensemble, mlp_forward_np, regressor_lag)
+from sysid.neural.core import (
+    ACT_CODE,
+    ACTIVATIONS,
+    FlatMLP,
+    LagData,
+    RMSprop,
+    count_mlp_parameters,
+    free_run_mlp,
+    k_step_mlp,
+    lag_matrix_np,
+    least_squares_linear,
+    merge_ensemble,
+    mlp_forward_np,
+    regressor_lag,
+)
 from sysid.neural.device import configure_threads, select_device, train_dtype
 from sysid.neural.persist import TorchFileSave
-from sysid.neural.records import (DIVERGENCE_BOUND, MAX_LAG, _as2d, check_channels, check_predict_input, fit_normaliser,
-                                  normalised_pairs)
+from sysid.neural.records import (
+    DIVERGENCE_BOUND,
+    MAX_LAG,
+    _as2d,
+    check_channels,
+    check_predict_input,
+    fit_normaliser,
+    normalised_pairs,
+)
 from sysid.progress import progress
 from sysid.record import Normaliser, Record
 
@@ -55,6 +76,11 @@ class _NeuralNARXBase(TorchFileSave, Identifier):
     """Shared fit/predict/persistence of the two NARX-MLP identifiers (training differs)."""
 
     name = "narx-mlp-base"
+    hidden: Sequence[int]
+    loss_history_: list[float]
+    selected_epoch_: int | list[int] | None  # one per ensemble member after an ensemble fit
+    selection_r2_: float | list[float] | None
+    _tail: Record | None
 
     # ------------------------------------------------------------------ checks
     def _check_params(self, check_device: bool = True) -> None:
@@ -68,8 +94,10 @@ class _NeuralNARXBase(TorchFileSave, Identifier):
         if not isinstance(nk, (int, np.integer)) or isinstance(nk, bool) or not 0 <= nk <= 100_000:
             raise ConfigError(f"{self.name}: nk={nk!r} must be an integer in [0, 100000] (input delay in samples)")
         hidden = list(self.hidden) if isinstance(self.hidden, (list, tuple)) else None
-        if hidden is None or not all(isinstance(h, (int, np.integer)) and not isinstance(h, bool) and 1 <= h <= 65536 for h in hidden):
-            raise ConfigError(f"{self.name}: hidden={self.hidden!r} must be a list of layer widths ≥ 1, e.g. hidden=25-25-25-25")
+        if hidden is None or not all(isinstance(h, (int, np.integer)) and not isinstance(h, bool) and 1 <= h <= 65536
+                                     for h in hidden):
+            raise ConfigError(f"{self.name}: hidden={self.hidden!r} must be a list of layer widths ≥ 1, "
+                              "e.g. hidden=25-25-25-25")
         self.hidden = [int(h) for h in hidden]
         if self.activation not in ACTIVATIONS:
             raise ConfigError(f"{self.name}: activation={self.activation!r} not one of: {', '.join(ACTIVATIONS)}")
@@ -88,13 +116,14 @@ class _NeuralNARXBase(TorchFileSave, Identifier):
             raise ConfigError(f"{self.name}: select_tail={self.select_tail!r} must be a fraction in [0, 0.5)")
         k = getattr(self, "ensemble", 1)
         if not isinstance(k, (int, np.integer)) or isinstance(k, bool) or not 1 <= k <= MAX_ENSEMBLE:
-            raise ConfigError(f"{self.name}: ensemble={k!r} must be an integer in [1, {MAX_ENSEMBLE}] (networks averaged)")
+            raise ConfigError(f"{self.name}: ensemble={k!r} must be an integer in [1, {MAX_ENSEMBLE}] "
+                              "(networks averaged)")
         train_dtype(getattr(self, "dtype", "float32"), self.name)
         if check_device:  # a saved model trained on a GPU must still load (and predict) on a CPU machine
             select_device(self.device)
 
     # ------------------------------------------------------------------ fit
-    def fit(self, data: Record | Sequence[Record]) -> "_NeuralNARXBase":
+    def fit(self, data: Record | Sequence[Record]) -> _NeuralNARXBase:
         """Train on one Record or a list of them (no regressor spans two records). Returns self.
 
         With ``select_tail`` > 0 the last fraction of the last estimation record is held out of training and
@@ -110,8 +139,9 @@ class _NeuralNARXBase(TorchFileSave, Identifier):
             lag = regressor_lag(self.ny, self.nu, self.nk)
             cut = len(last) - n_hold
             if n_hold < 1 or cut - lag < max(1, int(getattr(self, "window", 1))) or cut < lag + 1:
-                raise DataError(f"{self.name}: select_tail={self.select_tail} leaves {cut} training / {n_hold} held-out "
-                                f"samples of {last.source}, need more than the lag {lag} and one window in each")
+                raise DataError(f"{self.name}: select_tail={self.select_tail} leaves {cut} training / {n_hold} "
+                                f"held-out samples of {last.source}, need more than the lag {lag} and one window "
+                                "in each")
             self._tail = last[cut - lag:]  # the held-out samples with their lag of measured initial conditions
             recs = [*recs[:-1], last[:cut]]
         try:
@@ -135,7 +165,7 @@ class _NeuralNARXBase(TorchFileSave, Identifier):
         k = int(getattr(self, "ensemble", 1))
         return [int(self.seed) * k + i for i in range(k)]
 
-    def _fit(self, recs: list[Record]) -> "_NeuralNARXBase":
+    def _fit(self, recs: list[Record]) -> _NeuralNARXBase:
         lag = regressor_lag(self.ny, self.nu, self.nk)
         nu, ny = check_channels(recs, lag, self.name)
         t0 = time.perf_counter()
@@ -183,8 +213,8 @@ class _NeuralNARXBase(TorchFileSave, Identifier):
         self.fit_seconds_ = time.perf_counter() - t0
         self.diverged_at_ = None
         if not np.isfinite(self.weights_).all():
-            warnings.warn(f"{self.name}: training diverged (non-finite weights); predictions will be nan", DivergenceWarning,
-                          stacklevel=2)
+            warnings.warn(f"{self.name}: training diverged (non-finite weights); predictions will be nan",
+                          DivergenceWarning, stacklevel=2)
         return self
 
     def _real_n_parameters(self, n_in: int, n_out: int) -> int:
@@ -192,7 +222,8 @@ class _NeuralNARXBase(TorchFileSave, Identifier):
         same least-squares ARX, fixed, in every member). The zeros between members in the merged network
         (:func:`merge_ensemble`) are not parameters and are not counted."""
         k = int(getattr(self, "ensemble", 1))
-        return k * count_mlp_parameters(n_in, self.hidden, n_out, False) + (int(n_in) * int(n_out) if self.linear else 0)
+        return (k * count_mlp_parameters(n_in, self.hidden, n_out, False)
+                + (int(n_in) * int(n_out) if self.linear else 0))
 
     def _train_one_step(self, net: FlatMLP, data: LagData, gen: torch.Generator, epochs: int, lr: float,
                         batch_size: int | None = None, select: bool = False) -> None:
@@ -205,6 +236,7 @@ class _NeuralNARXBase(TorchFileSave, Identifier):
         for ep in progress(range(int(epochs)), desc=f"{self.name} one-step", unit="epoch"):
             perm = torch.randperm(M, generator=gen).to(dev)
             losses: list[torch.Tensor] = []
+            batches: Iterable[tuple[torch.Tensor, torch.Tensor]]
             if data.X is not None:
                 batches = zip(data.X[perm].split(B), data.Y[perm].split(B))
             else:
@@ -249,21 +281,22 @@ class _NeuralNARXBase(TorchFileSave, Identifier):
         code = ACT_CODE[self.activation]
         self.diverged_at_ = None
         if horizon is None or horizon >= n - lag:
-            yhat, div = free_run_mlp(self.weights_, self.sizes_, code, yn, un, self.ny, self.nu, DIVERGENCE_BOUND, self.nk,
-                                     self.linear)
+            yhat, div = free_run_mlp(self.weights_, self.sizes_, code, yn, un, self.ny, self.nu, DIVERGENCE_BOUND,
+                                     self.nk, self.linear)
             if div >= 0:
                 self.diverged_at_ = int(div)
                 warnings.warn(f"{self.name}: free-run simulation diverged at sample {div} of {n}; the rest is nan",
                               DivergenceWarning, stacklevel=2)
         elif horizon == 1:
             times = np.arange(lag, n)
-            x = np.concatenate([lag_matrix_np(yn, self.ny, times), lag_matrix_np(un, self.nu, times, first=self.nk)], axis=1)
+            x = np.concatenate([lag_matrix_np(yn, self.ny, times), lag_matrix_np(un, self.nu, times, first=self.nk)],
+                               axis=1)
             yhat = yn.copy()
             with np.errstate(over="ignore", invalid="ignore"):
                 yhat[lag:] = mlp_forward_np(self.weights_, self.sizes_, code, x, self.linear)
         else:
-            yhat = k_step_mlp(self.weights_, self.sizes_, code, yn, un, self.ny, self.nu, int(horizon), DIVERGENCE_BOUND,
-                              self.nk, self.linear)
+            yhat = k_step_mlp(self.weights_, self.sizes_, code, yn, un, self.ny, self.nu, int(horizon),
+                              DIVERGENCE_BOUND, self.nk, self.linear)
         if horizon is not None and not np.isfinite(yhat).all():
             bad = np.flatnonzero(~np.isfinite(yhat).all(axis=1))
             self.diverged_at_ = int(bad[0])
@@ -353,7 +386,8 @@ class NARXMLP(_NeuralNARXBase):
     linear : bool
         Linear bypass: ŷ = L φ + MLP(φ) (φ the regressor of eq. 2-14), with L and the output bias started at the
         least-squares ARX of the same lags (L kept fixed in training) and the network's output layer at zero, so
-        training starts from the ARX model and learns a nonlinear correction. False (default): the dissertation's plain network.
+        training starts from the ARX model and learns a nonlinear correction. False (default): the dissertation's
+        plain network.
     select_tail : float
         Fraction (0 … 0.5) of the last estimation record held out of training; the weights kept are those,
         initial or after any epoch, with the best free-run R² on that tail (``selected_epoch_`` 0 = the initial
@@ -377,7 +411,8 @@ class NARXMLP(_NeuralNARXBase):
 
     def __init__(self, ny: int = 10, nu: int = 10, hidden: Sequence[int] = (25, 25, 25, 25), activation: str = "relu",
                  lr: float = 1e-4, batch_size: int = 128, epochs: int = 100, seed: int = 0, device: str = "auto",
-                 nk: int = 1, linear: bool = False, select_tail: float = 0.0, ensemble: int = 1, dtype: str = "float32"):
+                 nk: int = 1, linear: bool = False, select_tail: float = 0.0, ensemble: int = 1,
+                 dtype: str = "float32"):
         self.dtype = dtype
         self.linear = linear
         self.select_tail = select_tail
@@ -461,8 +496,10 @@ class NARXMLPSim(_NeuralNARXBase):
         super()._check_params(check_device)
         pb = self.pretrain_batch_size
         if pb is not None and (not isinstance(pb, (int, np.integer)) or isinstance(pb, bool) or pb < 1):
-            raise ConfigError(f"{self.name}: pretrain_batch_size={pb!r} must be a positive integer (or None: batch_size)")
-        if not isinstance(self.window, (int, np.integer)) or isinstance(self.window, bool) or not 1 <= self.window <= 100_000:
+            raise ConfigError(f"{self.name}: pretrain_batch_size={pb!r} must be a positive integer "
+                              "(or None: batch_size)")
+        if (not isinstance(self.window, (int, np.integer)) or isinstance(self.window, bool)
+                or not 1 <= self.window <= 100_000):
             raise ConfigError(f"{self.name}: window={self.window!r} must be an integer in [1, 100000]")
         if not isinstance(self.pretrain_epochs, (int, np.integer)) or self.pretrain_epochs < 0:
             raise ConfigError(f"{self.name}: pretrain_epochs={self.pretrain_epochs!r} must be a non-negative integer")

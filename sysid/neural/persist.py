@@ -65,8 +65,13 @@ def save_torch(model, path: str | Path) -> Path:
     path = Path(path)
     from sysid.safeio import atomic_path
 
-    payload = {"format": FORMAT, "identifier": model.name, "params": model.get_params(), "state": _to_torch(model._state()),
-               "estimation": getattr(model, "estimation_", None)}
+    payload = {
+        "format": FORMAT,
+        "identifier": model.name,
+        "params": model.get_params(),
+        "state": _to_torch(model._state()),
+        "estimation": getattr(model, "estimation_", None),
+    }
     with atomic_path(path) as tmp:
         torch.save(payload, tmp)
     return path

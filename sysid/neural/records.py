@@ -6,7 +6,7 @@ Shared by :mod:`sysid.neural.narx_mlp`, :mod:`sysid.neural.rnn` and :mod:`sysid.
 
 from __future__ import annotations
 
-from typing import Sequence
+from collections.abc import Sequence
 
 import numpy as np
 

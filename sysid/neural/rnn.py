@@ -29,7 +29,8 @@ from __future__ import annotations
 
 import math
 import warnings
-from typing import Any, Sequence
+from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 import torch
@@ -197,7 +198,8 @@ class RNNStateSpace(SequenceIdentifier):
         self._check_int("epochs", 0, 1_000_000)
         self._check_int("linear", 0, int(self.n_enc))
         eh = self.enc_hidden
-        if not isinstance(eh, (list, tuple)) or not all(isinstance(w, (int, np.integer)) and not isinstance(w, bool) and w >= 1 for w in eh):
+        if not isinstance(eh, (list, tuple)) or not all(
+                isinstance(w, (int, np.integer)) and not isinstance(w, bool) and w >= 1 for w in eh):
             raise ConfigError(f"{self.name}: enc_hidden={eh!r} must be a list of widths, e.g. enc_hidden=64 or 64-64")
         self.enc_hidden = [int(w) for w in eh]
         if self.cell not in CELLS:
@@ -208,11 +210,19 @@ class RNNStateSpace(SequenceIdentifier):
         self._check_seed_device(check_device)
 
     def _build(self, nu: int, ny: int) -> _Net:
-        return _Net(self.n_enc * (nu + ny), self.enc_hidden, int(self.n_state), nu, ny, self.cell,
-                    int(self.linear), int(self.n_enc))
+        return _Net(
+            self.n_enc * (nu + ny),
+            self.enc_hidden,
+            int(self.n_state),
+            nu,
+            ny,
+            self.cell,
+            int(self.linear),
+            int(self.n_enc),
+        )
 
     # ------------------------------------------------------------------ fit
-    def fit(self, data: Record | Sequence[Record]) -> "RNNStateSpace":
+    def fit(self, data: Record | Sequence[Record]) -> RNNStateSpace:
         self._check_params()
         recs = as_record_list(data)
         lag, T = int(self.n_enc), int(self.window)
@@ -231,23 +241,36 @@ class RNNStateSpace(SequenceIdentifier):
             net.arx.requires_grad_(False)
         net = net.to(device=device, dtype=dtype)
         n_rows = sum(max(0, u.shape[0] - lag) for u, _ in pairs)  # targets with a full encoder window
-        res = train_simulation(net, pairs, lag, T, int(self.epochs), int(self.batch_size), float(self.lr),
-                               clip=float(self.clip), generator=gen, device=device, dtype=dtype,
-                               draws=max(1, math.ceil(n_rows / T)), desc=self.name)
+        res = train_simulation(
+            net,
+            pairs,
+            lag,
+            T,
+            int(self.epochs),
+            int(self.batch_size),
+            float(self.lr),
+            clip=float(self.clip),
+            generator=gen,
+            device=device,
+            dtype=dtype,
+            draws=max(1, math.ceil(n_rows / T)),
+            desc=self.name,
+        )
         self.state_dict_ = {k: v.detach().to("cpu", torch.float64).numpy().copy() for k, v in net.state_dict().items()}
         self.n_parameters_ = int(sum(v.size for v in self.state_dict_.values()))
         self._end_fit(res, nu, ny, lag, device)
-        self._net64 = None
+        self._net64: _Net | None = None
         return self
 
     # ------------------------------------------------------------------ predict
     def _cpu_net(self) -> _Net:
-        if getattr(self, "_net64", None) is None:
+        net: _Net | None = getattr(self, "_net64", None)
+        if net is None:
             net = self._build(self.n_inputs_, self.n_outputs_).to(torch.float64)
             net.load_state_dict({k: torch.as_tensor(v, dtype=torch.float64) for k, v in self.state_dict_.items()})
             net.eval()
             self._net64 = net
-        return self._net64
+        return net
 
     def predict(self, record: Record, horizon: int | None = 1) -> np.ndarray:
         """Free run (``None``) or k-step-ahead at every sample (``horizon=k``; 1 = one step). Shaped like y."""
@@ -256,19 +279,20 @@ class RNNStateSpace(SequenceIdentifier):
         lag = self.max_lag_
         n = len(record)
         configure_threads()
-        (un, yn), = normalised_pairs([record], self.normaliser_)
+        ((un, yn),) = normalised_pairs([record], self.normaliser_)
         net = self._cpu_net()
         self.diverged_at_ = None
         yhat = yn.copy()
         with torch.no_grad():
             if horizon is None or horizon >= n - lag:
-                yhat[lag:] = net(torch.from_numpy(yn[None, :lag]), torch.from_numpy(un[None, :lag]),
-                                 torch.from_numpy(un[None, lag:])).numpy()[0]
+                yhat[lag:] = net(
+                    torch.from_numpy(yn[None, :lag]), torch.from_numpy(un[None, :lag]), torch.from_numpy(un[None, lag:])
+                ).numpy()[0]
             else:
                 k = int(horizon)
                 targets = np.arange(lag, n)
                 t0 = np.maximum(targets - k + 1, lag)  # window start (first simulated target) per target
-                steps = targets - t0 + 1                 # ≤ k; shorter only at the record start
+                steps = targets - t0 + 1  # ≤ k; shorter only at the record start
                 chunk = max(1, 4_000_000 // max(1, k * int(self.n_state)))
                 for a in range(0, targets.size, chunk):
                     sl = slice(a, a + chunk)
@@ -291,10 +315,19 @@ class RNNStateSpace(SequenceIdentifier):
     def describe(self) -> dict[str, Any]:
         d = super().describe()
         if hasattr(self, "state_dict_"):
-            d.update({"structure": {"cell": self.cell, "n_state": self.n_state, "n_enc": self.n_enc,
-                                    "enc_hidden": list(self.enc_hidden), "linear": int(self.linear),
-                                    "linear_order": int(self.linear)},  # old key, kept for readers
-                      **self._training_summary()})
+            d.update(
+                {
+                    "structure": {
+                        "cell": self.cell,
+                        "n_state": self.n_state,
+                        "n_enc": self.n_enc,
+                        "enc_hidden": list(self.enc_hidden),
+                        "linear": int(self.linear),
+                        "linear_order": int(self.linear),
+                    },  # old key, kept for readers
+                    **self._training_summary(),
+                }
+            )
         return d
 
     def _state(self) -> dict[str, Any]:
@@ -310,4 +343,3 @@ class RNNStateSpace(SequenceIdentifier):
         self.state_dict_ = sd
         self.n_parameters_ = int(sum(v.size for v in sd.values()))
         self._net64 = None
-

@@ -11,7 +11,8 @@ is built and read back, and its prediction.
 from __future__ import annotations
 
 import time
-from typing import Any, Sequence
+from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 import torch
@@ -77,7 +78,9 @@ class SequenceIdentifier(TorchFileSave, Identifier):
             raise ConfigError(f"{self.name}: model is not fitted; call fit() first")
 
     # ------------------------------------------------------------------ fit
-    def _start_fit(self, recs: Sequence[Record]) -> tuple[torch.device, torch.Generator, list[tuple[np.ndarray, np.ndarray]]]:
+    def _start_fit(
+        self, recs: Sequence[Record]
+    ) -> tuple[torch.device, torch.Generator, list[tuple[np.ndarray, np.ndarray]]]:
         """Start the clocks, set the threads, pick the device, seed torch (the initial weights) and a generator
         (the order of the sections), and fit the normaliser on ``recs``: (device, generator, normalised pairs)."""
         self._clocks = (time.perf_counter(), time.process_time())
@@ -106,24 +109,34 @@ class SequenceIdentifier(TorchFileSave, Identifier):
         """A normalised prediction (N, ny) in the record's units and shape; the first ``max_lag_`` samples, which
         start the model, are the measurement."""
         out = self.normaliser_.inverse_y(yhat)
-        out[:self.max_lag_] = _as2d(record.y)[:self.max_lag_]
+        out[: self.max_lag_] = _as2d(record.y)[: self.max_lag_]
         return out[:, 0] if record.y.ndim == 1 else out
 
     # ------------------------------------------------------------------ description / persistence
     def _training_summary(self) -> dict[str, Any]:
         """The keys of :meth:`describe` about the training (epochs, kept epoch, last loss, best hold-out RMSE)."""
-        return {"terms": [], "max_lag": self.max_lag_, "device": self.device_used_,
-                "epochs_run": len(self.loss_history_), "best_epoch": self.best_epoch_,
-                "final_loss": self.loss_history_[-1] if self.loss_history_ else None,
-                "best_validation_rmse_normalised": min(self.val_history_) if self.val_history_ else None}
+        return {
+            "terms": [],
+            "max_lag": self.max_lag_,
+            "device": self.device_used_,
+            "epochs_run": len(self.loss_history_),
+            "best_epoch": self.best_epoch_,
+            "final_loss": self.loss_history_[-1] if self.loss_history_ else None,
+            "best_validation_rmse_normalised": min(self.val_history_) if self.val_history_ else None,
+        }
 
     def _common_state(self) -> dict[str, Any]:
         """The saved-state entries every sequence model has besides its weights."""
-        return {"normaliser": self.normaliser_.to_dict(), "n_inputs": int(self.n_inputs_),
-                "n_outputs": int(self.n_outputs_), "loss_history": [float(v) for v in self.loss_history_],
-                "val_history": [float(v) for v in self.val_history_],
-                "best_epoch": None if self.best_epoch_ is None else int(self.best_epoch_),
-                "device_used": self.device_used_, "fit_seconds": float(self.fit_seconds_)}
+        return {
+            "normaliser": self.normaliser_.to_dict(),
+            "n_inputs": int(self.n_inputs_),
+            "n_outputs": int(self.n_outputs_),
+            "loss_history": [float(v) for v in self.loss_history_],
+            "val_history": [float(v) for v in self.val_history_],
+            "best_epoch": None if self.best_epoch_ is None else int(self.best_epoch_),
+            "device_used": self.device_used_,
+            "fit_seconds": float(self.fit_seconds_),
+        }
 
     def _load_common(self, state: dict[str, Any], lag: int) -> None:
         """Read back what :meth:`_common_state` wrote (older files may lack the histories)."""

@@ -18,7 +18,8 @@ from __future__ import annotations
 
 import logging
 import warnings
-from typing import Any, Sequence
+from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 
@@ -81,10 +82,27 @@ class SSEncoder(SequenceIdentifier):
 
     name = "ss-encoder"
 
-    def __init__(self, nx: int = 4, ny: int = 20, nu: int = 20, f_hidden: Sequence[int] = (64,),
-                 h_hidden: Sequence[int] = (64,), e_hidden: Sequence[int] = (64,), activation: str = "tanh",
-                 feedthrough: bool = False, T: int = 50, batch_size: int = 256, epochs: int = 50, lr: float = 1e-3,
-                 lr_min: float | None = None, val_fraction: float = 0.2, patience: int = 0, clip: float = 0.0, seed: int = 0, device: str = "auto"):
+    def __init__(
+        self,
+        nx: int = 4,
+        ny: int = 20,
+        nu: int = 20,
+        f_hidden: Sequence[int] = (64,),
+        h_hidden: Sequence[int] = (64,),
+        e_hidden: Sequence[int] = (64,),
+        activation: str = "tanh",
+        feedthrough: bool = False,
+        T: int = 50,
+        batch_size: int = 256,
+        epochs: int = 50,
+        lr: float = 1e-3,
+        lr_min: float | None = None,
+        val_fraction: float = 0.2,
+        patience: int = 0,
+        clip: float = 0.0,
+        seed: int = 0,
+        device: str = "auto",
+    ):
         self.nx = nx
         self.ny = ny
         self.nu = nu
@@ -122,8 +140,9 @@ class SSEncoder(SequenceIdentifier):
         if not isinstance(self.feedthrough, (bool, np.bool_)):
             raise ConfigError(f"{self.name}: feedthrough={self.feedthrough!r} must be true or false")
         self._check_step_size("lr")
-        if self.lr_min is not None and not (isinstance(self.lr_min, (int, float)) and not isinstance(self.lr_min, bool)
-                                            and 0 <= self.lr_min <= self.lr):
+        if self.lr_min is not None and not (
+            isinstance(self.lr_min, (int, float)) and not isinstance(self.lr_min, bool) and 0 <= self.lr_min <= self.lr
+        ):
             raise ConfigError(f"{self.name}: lr_min={self.lr_min!r} must be a number in [0, lr={self.lr}]")
         self._check_val_fraction()
         self._check_clip()
@@ -134,11 +153,21 @@ class SSEncoder(SequenceIdentifier):
         return max(int(self.ny), int(self.nu))
 
     def _build(self, n_in: int, n_out: int) -> SubnetModel:
-        return SubnetModel(self.nx, n_in, n_out, self.ny, self.nu, self.f_hidden, self.h_hidden, self.e_hidden,
-                           self.activation, bool(self.feedthrough))
+        return SubnetModel(
+            self.nx,
+            n_in,
+            n_out,
+            self.ny,
+            self.nu,
+            self.f_hidden,
+            self.h_hidden,
+            self.e_hidden,
+            self.activation,
+            bool(self.feedthrough),
+        )
 
     # ------------------------------------------------------------------ fit
-    def fit(self, data: Record | Sequence[Record]) -> "SSEncoder":
+    def fit(self, data: Record | Sequence[Record]) -> SSEncoder:
         """Train on one Record or a list (separate experiments). Returns self."""
         self._check_params()
         recs = as_record_list(data)
@@ -149,18 +178,32 @@ class SSEncoder(SequenceIdentifier):
             last = recs[-1]
             cut = len(last) - int(round(self.val_fraction * len(last)))
             if cut < lag + T or len(last) - cut < 1:
-                raise DataError(f"{self.name}: val_fraction={self.val_fraction} leaves {cut} training samples of "
-                                f"{last.source}, need lag + T = {lag + T}; lower val_fraction, T or ny/nu")
-            val_recs = [last[cut - lag:]]  # the held-out tail with its encoder window
+                raise DataError(
+                    f"{self.name}: val_fraction={self.val_fraction} leaves {cut} training samples of "
+                    f"{last.source}, need lag + T = {lag + T}; lower val_fraction, T or ny/nu"
+                )
+            val_recs = [last[cut - lag :]]  # the held-out tail with its encoder window
             recs = [*recs[:-1], last[:cut]]
         device, gen, pairs = self._start_fit(recs)
         if not any(u.shape[0] >= lag + T for u, _ in pairs):
             raise DataError(f"{self.name}: no estimation record has lag + T = {lag + T} samples; lower T or ny/nu")
         model = self._build(n_in, n_out).to(device)
-        res = train_simulation(model, pairs, lag, T, int(self.epochs), int(self.batch_size), float(self.lr),
-                               val=normalised_pairs(val_recs, self.normaliser_) if val_recs else None,
-                               patience=int(self.patience), clip=float(self.clip), generator=gen, device=device,
-                               lr_min=None if self.lr_min is None else float(self.lr_min), log=lambda msg: _LOG.info("%s: %s", self.name, msg))
+        res = train_simulation(
+            model,
+            pairs,
+            lag,
+            T,
+            int(self.epochs),
+            int(self.batch_size),
+            float(self.lr),
+            val=normalised_pairs(val_recs, self.normaliser_) if val_recs else None,
+            patience=int(self.patience),
+            clip=float(self.clip),
+            generator=gen,
+            device=device,
+            lr_min=None if self.lr_min is None else float(self.lr_min),
+            log=lambda msg: _LOG.info("%s: %s", self.name, msg),
+        )
         self.weights_ = export_weights(model)
         self.n_parameters_ = int(sum(p.numel() for p in model.parameters()))
         self._end_fit(res, n_in, n_out, lag, device)
@@ -175,16 +218,17 @@ class SSEncoder(SequenceIdentifier):
         at = lag if at is None else int(at)
         if not lag <= at <= len(record):
             raise DataError(f"{record.source}: state at sample {at} needs {lag} samples before it")
-        (un, yn), = normalised_pairs([record], self.normaliser_)
-        return encode_np(self.weights_, yn[None, at - lag:at], un[None, at - lag:at], self.ny, self.nu,
-                         _ACT_NP[self.activation])[0]
+        ((un, yn),) = normalised_pairs([record], self.normaliser_)
+        return encode_np(
+            self.weights_, yn[None, at - lag : at], un[None, at - lag : at], self.ny, self.nu, _ACT_NP[self.activation]
+        )[0]
 
     def predict(self, record: Record, horizon: int | None = 1) -> np.ndarray:
         """Free run (``None``) or k-step-ahead at every sample (``horizon=k``). Shaped like ``record.y``."""
         self._check_fitted()
         check_predict_input(self, record, horizon)
         lag, n = self.max_lag_, len(record)
-        (un, yn), = normalised_pairs([record], self.normaliser_)
+        ((un, yn),) = normalised_pairs([record], self.normaliser_)
         act = _ACT_NP[self.activation]
         yhat = yn.copy()
         self.diverged_at_ = None
@@ -194,13 +238,16 @@ class SSEncoder(SequenceIdentifier):
             yhat[lag:] = out[0]
             if div >= 0:
                 self.diverged_at_ = lag + div
-                warnings.warn(f"{self.name}: free-run simulation diverged at sample {lag + div} of {n}; the rest is nan",
-                              DivergenceWarning, stacklevel=2)
+                warnings.warn(
+                    f"{self.name}: free-run simulation diverged at sample {lag + div} of {n}; the rest is nan",
+                    DivergenceWarning,
+                    stacklevel=2,
+                )
         else:
             k = int(horizon)
             targets = np.arange(lag, n)
-            t0 = np.maximum(targets - k + 1, lag)     # first simulated sample of each target's run
-            steps = targets - t0                       # index of the target in its run (< k)
+            t0 = np.maximum(targets - k + 1, lag)  # first simulated sample of each target's run
+            steps = targets - t0  # index of the target in its run (< k)
             chunk = max(1, 2_000_000 // max(1, k * (int(self.nx) + 64)))
             for a in range(0, targets.size, chunk):
                 sl = slice(a, a + chunk)
@@ -215,18 +262,32 @@ class SSEncoder(SequenceIdentifier):
                 first = int(np.flatnonzero(bad)[0])
                 self.diverged_at_ = first
                 yhat[bad] = np.nan
-                warnings.warn(f"{self.name}: {int(bad.sum())} non-finite {k}-step predictions, first at sample {first}",
-                              DivergenceWarning, stacklevel=2)
+                warnings.warn(
+                    f"{self.name}: {int(bad.sum())} non-finite {k}-step predictions, first at sample {first}",
+                    DivergenceWarning,
+                    stacklevel=2,
+                )
         return self._in_units(yhat, record)  # the encoder window is the measurement
 
     # ------------------------------------------------------------------ description / persistence
     def describe(self) -> dict[str, Any]:
         d = super().describe()
         if hasattr(self, "weights_"):
-            d.update({"structure": {"nx": self.nx, "ny": self.ny, "nu": self.nu, "f_hidden": list(self.f_hidden),
-                                    "h_hidden": list(self.h_hidden), "e_hidden": list(self.e_hidden),
-                                    "activation": self.activation, "feedthrough": bool(self.feedthrough)},
-                      **self._training_summary()})
+            d.update(
+                {
+                    "structure": {
+                        "nx": self.nx,
+                        "ny": self.ny,
+                        "nu": self.nu,
+                        "f_hidden": list(self.f_hidden),
+                        "h_hidden": list(self.h_hidden),
+                        "e_hidden": list(self.e_hidden),
+                        "activation": self.activation,
+                        "feedthrough": bool(self.feedthrough),
+                    },
+                    **self._training_summary(),
+                }
+            )
         return d
 
     def _state(self) -> dict[str, Any]:
@@ -247,8 +308,16 @@ class SSEncoder(SequenceIdentifier):
         def get(key: str, like: np.ndarray) -> np.ndarray:
             return saved_array(self.name, flat, key, like.shape)
 
-        self.weights_ = {part: {"W": get(f"{part}.W", g["W"]), "b": get(f"{part}.b", g["b"]),
-                                "layers": [(get(f"{part}.{i}.W", W), get(f"{part}.{i}.b", b)) for i, (W, b) in enumerate(g["layers"])]}
-                         for part, g in ref.items()}
-        self.n_parameters_ = int(sum(g["W"].size + g["b"].size + sum(W.size + b.size for W, b in g["layers"])
-                                     for g in self.weights_.values()))
+        self.weights_ = {
+            part: {
+                "W": get(f"{part}.W", g["W"]),
+                "b": get(f"{part}.b", g["b"]),
+                "layers": [(get(f"{part}.{i}.W", W), get(f"{part}.{i}.b", b)) for i, (W, b) in enumerate(g["layers"])],
+            }
+            for part, g in ref.items()
+        }
+        self.n_parameters_ = int(
+            sum(
+                g["W"].size + g["b"].size + sum(W.size + b.size for W, b in g["layers"]) for g in self.weights_.values()
+            )
+        )

@@ -13,8 +13,8 @@ units by default): ``g(z) = W z + b + V σ(U z + c)`` (:class:`BypassMLP`). Hidd
 map alone, so with all three empty the model is a linear state-space model with a linear state observer.
 
 Training (the truncated T-step simulation loss over sections of the data) is in
-:mod:`sysid.neural.training` (the loop shared with ``rnn`` and ``wh-net``); the identifier (normalisation, fit/predict/save) in
-:mod:`sysid.neural.ss_encoder`. Prediction runs in float64 numpy from the exported weights
+:mod:`sysid.neural.training` (the loop shared with ``rnn`` and ``wh-net``); the identifier (normalisation,
+fit/predict/save) in :mod:`sysid.neural.ss_encoder`. Prediction runs in float64 numpy from the exported weights
 (:func:`export_weights`, :func:`simulate_np`), so it is the same on every machine.
 
 Tensors: ``ypast`` (B, lag, ny) and ``upast`` (B, lag, nu) hold the ``lag = max(n_a, n_b)`` samples before
@@ -24,7 +24,8 @@ the output (B, T, ny) is ŷ(k) … ŷ(k+T-1).
 
 from __future__ import annotations
 
-from typing import Sequence
+from collections.abc import Sequence
+from typing import cast
 
 import numpy as np
 import torch
@@ -66,9 +67,19 @@ class SubnetModel(torch.nn.Module):
     feedthrough : h also reads u(k) (a direct term D u(k)); the paper's default is without.
     """
 
-    def __init__(self, nx: int, nu: int, ny: int, na: int, nb: int, f_hidden: Sequence[int] = (64,),
-                 h_hidden: Sequence[int] = (64,), e_hidden: Sequence[int] = (64,), activation: str = "tanh",
-                 feedthrough: bool = False):
+    def __init__(
+        self,
+        nx: int,
+        nu: int,
+        ny: int,
+        na: int,
+        nb: int,
+        f_hidden: Sequence[int] = (64,),
+        h_hidden: Sequence[int] = (64,),
+        e_hidden: Sequence[int] = (64,),
+        activation: str = "tanh",
+        feedthrough: bool = False,
+    ):
         super().__init__()
         self.nx, self.nu, self.ny, self.na, self.nb = int(nx), int(nu), int(ny), int(na), int(nb)
         self.feedthrough = bool(feedthrough)
@@ -80,8 +91,8 @@ class SubnetModel(torch.nn.Module):
     def encode(self, ypast: torch.Tensor, upast: torch.Tensor) -> torch.Tensor:
         """x(k) from y(k-1) … y(k-na), u(k-1) … u(k-nb): the last na / nb rows of the windows, newest first."""
         B = ypast.shape[0]
-        yp = ypast[:, ypast.shape[1] - self.na:].flip(1).reshape(B, -1)
-        up = upast[:, upast.shape[1] - self.nb:].flip(1).reshape(B, -1)
+        yp = ypast[:, ypast.shape[1] - self.na :].flip(1).reshape(B, -1)
+        up = upast[:, upast.shape[1] - self.nb :].flip(1).reshape(B, -1)
         return self.encoder(torch.cat([yp, up], dim=1))
 
     def states(self, x: torch.Tensor, useq: torch.Tensor) -> torch.Tensor:
@@ -93,7 +104,7 @@ class SubnetModel(torch.nn.Module):
         f, nx, T = self.f, self.nx, useq.shape[1]
         out = []
         if f.net is not None and len(f.net) == 3:
-            first, act, last = f.net[0], f.net[1], f.net[2]
+            first, act, last = cast(torch.nn.Linear, f.net[0]), f.net[1], cast(torch.nn.Linear, f.net[2])
             # input shares for all steps at once; unbind (not indexing) keeps the backward pass O(T)
             lin_u = (torch.matmul(useq, f.linear.weight[:, nx:].t()) + (f.linear.bias + last.bias)).unbind(1)
             hid_u = (torch.matmul(useq, first.weight[:, nx:].t()) + first.bias).unbind(1)
@@ -146,13 +157,14 @@ def bypass_np(g: dict, z: np.ndarray, act=np.tanh) -> np.ndarray:
 def encode_np(w: dict, ypast: np.ndarray, upast: np.ndarray, na: int, nb: int, act=np.tanh) -> np.ndarray:
     """x(k) for windows ``ypast`` (B, lag, ny), ``upast`` (B, lag, nu) (oldest first), as :meth:`SubnetModel.encode`."""
     B = ypast.shape[0]
-    yp = ypast[:, ypast.shape[1] - na:][:, ::-1].reshape(B, -1)
-    up = upast[:, upast.shape[1] - nb:][:, ::-1].reshape(B, -1)
+    yp = ypast[:, ypast.shape[1] - na :][:, ::-1].reshape(B, -1)
+    up = upast[:, upast.shape[1] - nb :][:, ::-1].reshape(B, -1)
     return bypass_np(w["encoder"], np.concatenate([yp, up], axis=1), act)
 
 
-def simulate_np(w: dict, x: np.ndarray, useq: np.ndarray, feedthrough: bool = False, bound: float = np.inf,
-                act=np.tanh) -> tuple[np.ndarray, int]:
+def simulate_np(
+    w: dict, x: np.ndarray, useq: np.ndarray, feedthrough: bool = False, bound: float = np.inf, act=np.tanh
+) -> tuple[np.ndarray, int]:
     """Free run in float64 from states ``x`` (B, nx) over ``useq`` (B, T, nu) → (ŷ (B, T, ny), first step at
     which some |ŷ| exceeds ``bound`` or is non-finite, or -1). Steps from a divergence on are nan."""
     B, T, _ = useq.shape

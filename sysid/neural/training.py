@@ -27,8 +27,8 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from typing import Callable, Sequence
 
 import numpy as np
 import torch
@@ -106,7 +106,10 @@ class BestWeights:
     """Early stopping: the lowest hold-out RMSE seen, the weights and epoch that gave it, and the epochs since."""
 
     def __init__(self) -> None:
-        self.value, self.state, self.epoch, self.since = math.inf, None, None, 0
+        self.value: float = math.inf
+        self.state: dict[str, torch.Tensor] | None = None
+        self.epoch: int | None = None
+        self.since = 0
 
     def update(self, value: float, model: torch.nn.Module, epoch: int, force: bool = False) -> None:
         """Keep ``model``'s weights when ``value`` is lower than the best so far (or ``force``)."""
@@ -229,7 +232,8 @@ def train_simulation(model: torch.nn.Module, train: Sequence[tuple[np.ndarray, n
 
 
 # ------------------------------------------------------------------------------------------------ from rest
-def _masks(pairs: Sequence[tuple[np.ndarray, np.ndarray]], warmup: int, val_fraction: float) -> list[tuple[slice, slice | None]]:
+def _masks(pairs: Sequence[tuple[np.ndarray, np.ndarray]], warmup: int,
+           val_fraction: float) -> list[tuple[slice, slice | None]]:
     """(training samples, hold-out samples) of each record: training skips the first ``warmup``; the hold-out is the
     last ``val_fraction`` of the last record."""
     out = []
@@ -258,8 +262,18 @@ def _full_pass(model: torch.nn.Module, us, ys, masks, n_train: int, n_val: int, 
     return sse, vse
 
 
-def _window_steps(model: torch.nn.Module, opt: torch.optim.Optimizer, us, ys, masks, window: int, batch: int,
-                  warmup: int, n_train: int, gen: torch.Generator) -> float:
+def _window_steps(
+    model: torch.nn.Module,
+    opt: torch.optim.Optimizer,
+    us,
+    ys,
+    masks,
+    window: int,
+    batch: int,
+    warmup: int,
+    n_train: int,
+    gen: torch.Generator,
+) -> float:
     """One epoch of mini-batch Adam steps on sections of ``window`` samples drawn at random (``gen``) from the
     training parts of the records, each simulated from rest with its first ``warmup`` samples out of the loss;
     as many steps as cover the training samples once on average. Returns the epoch's mean section MSE (inf as soon
@@ -271,8 +285,8 @@ def _window_steps(model: torch.nn.Module, opt: torch.optim.Optimizer, us, ys, ma
         pick = torch.randint(len(starts), (batch,), generator=gen).tolist()
         offs = torch.rand(batch, generator=gen, dtype=torch.float64).tolist()
         secs = [(starts[p][0], starts[p][1] + int(o * (starts[p][2] - starts[p][1] + 1))) for p, o in zip(pick, offs)]
-        u = torch.stack([us[k][0, s:s + window] for k, s in secs])
-        y = torch.stack([ys[k][s:s + window] for k, s in secs])
+        u = torch.stack([us[k][0, s : s + window] for k, s in secs])
+        y = torch.stack([ys[k][s : s + window] for k, s in secs])
         d = model(u)[:, warmup:] - y[:, warmup:]
         loss = (d * d).mean()
         if not math.isfinite(float(loss.item())):
@@ -282,11 +296,23 @@ def _window_steps(model: torch.nn.Module, opt: torch.optim.Optimizer, us, ys, ma
     return total / steps
 
 
-def train_records(model: torch.nn.Module, pairs: Sequence[tuple[np.ndarray, np.ndarray]], warmup: int, epochs: int,
-                  lr: float = 1e-3, lr_min: float = 1e-5, val_fraction: float = 0.0, patience: int = 0,
-                  device: torch.device = torch.device("cpu"), log: Callable[[str], None] | None = None,
-                  log_every: int = 100, max_seconds: float | None = None, window: int = 0, batch: int = 1,
-                  seed: int = 0) -> BlockTrainResult:
+def train_records(
+    model: torch.nn.Module,
+    pairs: Sequence[tuple[np.ndarray, np.ndarray]],
+    warmup: int,
+    epochs: int,
+    lr: float = 1e-3,
+    lr_min: float = 1e-5,
+    val_fraction: float = 0.0,
+    patience: int = 0,
+    device: torch.device = torch.device("cpu"),
+    log: Callable[[str], None] | None = None,
+    log_every: int = 100,
+    max_seconds: float | None = None,
+    window: int = 0,
+    batch: int = 1,
+    seed: int = 0,
+) -> BlockTrainResult:
     """Adam on the simulation MSE of ``pairs`` (normalised ``(u (N, n_in), y (N, n_out))``) simulated from rest, see
     the module docstring. ``model`` is any float64 module mapping ``u`` (B, N, n_in) to ``ŷ`` (B, N, n_out) from rest
     (a :class:`~sysid.neural.blocknet.BlockNet`, or a single :class:`~sysid.neural.iir.LinearDynamic` layer).
@@ -319,8 +345,11 @@ def train_records(model: torch.nn.Module, pairs: Sequence[tuple[np.ndarray, np.n
     for ep in range(1, int(epochs) + 1):
         if window:  # the steps first, then the hold-out of the weights they reached
             sse = _window_steps(model, opt, us, ys, masks, window, int(batch), warmup, n_train, gen)
-            vse = math.inf if not math.isfinite(sse) else (
-                _full_pass(model, us, ys, masks, n_train, n_val, backward=False)[1] if n_val else 0.0)
+            vse = (
+                math.inf
+                if not math.isfinite(sse)
+                else (_full_pass(model, us, ys, masks, n_train, n_val, backward=False)[1] if n_val else 0.0)
+            )
         else:  # the hold-out of this forward pass: the weights before the step
             opt.zero_grad(set_to_none=True)
             sse, vse = _full_pass(model, us, ys, masks, n_train, n_val, backward=True)

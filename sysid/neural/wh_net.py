@@ -27,7 +27,8 @@ on the CPU in any case (a sequential recursion over time), so a GPU gains little
 from __future__ import annotations
 
 import logging
-from typing import Any, Sequence
+from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 import torch
@@ -130,7 +131,8 @@ class WHNet(SequenceIdentifier):
         self._check_int("window", 0, 100_000_000)
         self._check_int("batch", 1, 100_000)
         if self.window and self.window <= self.warmup:
-            raise ConfigError(f"{self.name}: window={self.window} must exceed warmup={self.warmup} (or be 0: full batch)")
+            raise ConfigError(f"{self.name}: window={self.window} must exceed warmup={self.warmup} "
+                              "(or be 0: full batch)")
         self.hidden = hidden_widths(self.hidden, "hidden", self.name)
         if self.activation not in _ACTIVATIONS:
             raise ConfigError(f"{self.name}: activation={self.activation!r} not one of: {', '.join(_ACTIVATIONS)}")
@@ -146,11 +148,24 @@ class WHNet(SequenceIdentifier):
     def _build(self, n_in: int, n_out: int, generator: torch.Generator | None = None) -> BlockNet:
         nb2 = self.nb if self.nb2 is None else self.nb2
         na2 = self.na if self.na2 is None else self.na2
-        return BlockNet(n_in, n_out, int(self.channels), int(self.channels), self.hidden, int(self.nb), int(self.na),
-                        int(nb2), int(na2), int(self.nk), bool(self.linear), self.activation, generator)
+        return BlockNet(
+            n_in,
+            n_out,
+            int(self.channels),
+            int(self.channels),
+            self.hidden,
+            int(self.nb),
+            int(self.na),
+            int(nb2),
+            int(na2),
+            int(self.nk),
+            bool(self.linear),
+            self.activation,
+            generator,
+        )
 
     # ------------------------------------------------------------------ fit
-    def fit(self, data: Record | Sequence[Record]) -> "WHNet":
+    def fit(self, data: Record | Sequence[Record]) -> WHNet:
         """Train on one Record or a list (separate experiments, each simulated from rest). Returns self."""
         self._check_params()
         recs = as_record_list(data)
@@ -159,15 +174,29 @@ class WHNet(SequenceIdentifier):
         last = len(recs[-1])
         cut = last - int(round(self.val_fraction * last))
         if self.val_fraction and (last - cut < 1 or sum(len(r) for r in recs[:-1]) + cut <= warmup * len(recs)):
-            raise DataError(f"{self.name}: val_fraction={self.val_fraction} leaves no training samples after the "
-                            f"warm-up of {warmup} in {recs[-1].source}; lower val_fraction or warmup")
+            raise DataError(
+                f"{self.name}: val_fraction={self.val_fraction} leaves no training samples after the "
+                f"warm-up of {warmup} in {recs[-1].source}; lower val_fraction or warmup"
+            )
         device, gen, pairs = self._start_fit(recs)
         model = self._build(n_in, n_out, gen).to(device)
         with blas_threads():
-            res = train_records(model, pairs, warmup, int(self.epochs), float(self.lr), float(self.lr_min),
-                                float(self.val_fraction), int(self.patience), device=device,
-                                log=lambda msg: _LOG.info("%s: %s", self.name, msg), log_every=100,
-                                window=int(self.window), batch=int(self.batch), seed=int(self.seed))
+            res = train_records(
+                model,
+                pairs,
+                warmup,
+                int(self.epochs),
+                float(self.lr),
+                float(self.lr_min),
+                float(self.val_fraction),
+                int(self.patience),
+                device=device,
+                log=lambda msg: _LOG.info("%s: %s", self.name, msg),
+                log_every=100,
+                window=int(self.window),
+                batch=int(self.batch),
+                seed=int(self.seed),
+            )
         self._set_weights(model.to("cpu"))
         self.restarts_ = res.restarts
         self._end_fit(res, n_in, n_out, warmup, device)
@@ -185,7 +214,7 @@ class WHNet(SequenceIdentifier):
         Shaped like ``record.y``; the first ``max_lag_`` samples are the measurement."""
         self._check_fitted()
         check_predict_input(self, record, horizon)
-        (un, _), = normalised_pairs([record], self.normaliser_)
+        ((un, _),) = normalised_pairs([record], self.normaliser_)
         configure_threads()
         with torch.no_grad(), blas_threads():
             yn = self.model_(torch.as_tensor(un, dtype=torch.float64)[None])[0].numpy()
@@ -196,10 +225,22 @@ class WHNet(SequenceIdentifier):
     def describe(self) -> dict[str, Any]:
         d = super().describe()
         if hasattr(self, "model_"):
-            d.update({"structure": {"channels": int(self.channels), "hidden": list(self.hidden), "nb": self.nb,
-                                    "na": self.na, "nb2": self.nb2, "na2": self.na2, "nk": self.nk,
-                                    "linear": bool(self.linear), "activation": self.activation},
-                      **self._training_summary()})
+            d.update(
+                {
+                    "structure": {
+                        "channels": int(self.channels),
+                        "hidden": list(self.hidden),
+                        "nb": self.nb,
+                        "na": self.na,
+                        "nb2": self.nb2,
+                        "na2": self.na2,
+                        "nk": self.nk,
+                        "linear": bool(self.linear),
+                        "activation": self.activation,
+                    },
+                    **self._training_summary(),
+                }
+            )
         return d
 
     def _state(self) -> dict[str, Any]:
@@ -211,7 +252,11 @@ class WHNet(SequenceIdentifier):
         self._check_params(check_device=False)
         self._load_common(state, int(self.warmup))
         model = self._build(self.n_inputs_, self.n_outputs_)
-        model.load_state_dict({key: torch.as_tensor(saved_array(self.name, state["weights"], key, tuple(like.shape)))
-                               for key, like in model.state_dict().items()})
+        model.load_state_dict(
+            {
+                key: torch.as_tensor(saved_array(self.name, state["weights"], key, tuple(like.shape)))
+                for key, like in model.state_dict().items()
+            }
+        )
         self._set_weights(model)
         self.restarts_ = 0

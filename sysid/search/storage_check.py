@@ -12,9 +12,9 @@ an exclusive file lock, so that two processes started at once on a new store do 
 from __future__ import annotations
 
 import os
+from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Iterator
 
 from sysid.errors import ConfigError
 

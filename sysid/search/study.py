@@ -32,12 +32,22 @@ import random
 import socket
 import time
 import warnings
+from collections.abc import Callable
 from dataclasses import asdict
-from typing import Any, Callable
+from typing import Any
 
 from sysid.errors import ConfigError
-from sysid.search.sweep import (SweepSpec, _grid_configs, _make_objective, _make_sampler, _requeue_failed,
-                                config_key, heartbeat_settings, open_study, storage_url)
+from sysid.search.sweep import (
+    SweepSpec,
+    _grid_configs,
+    _make_objective,
+    _make_sampler,
+    _requeue_failed,
+    config_key,
+    heartbeat_settings,
+    open_study,
+    storage_url,
+)
 from sysid.search.sweep_results import collect, summarise
 
 HOST = socket.gethostname()
@@ -142,7 +152,7 @@ def worker_loop(spec, url: str, study_name: str, est, val, target: int, on_trial
 
     study = open_study(spec, url, study_name, create=False)
     failed: dict[str, int] = {}
-    state = {"clash": False}
+    state: dict[str, Any] = {"clash": False}
     objective = _make_objective(spec, est, val, claim, target=target, executor=executor, state=state)
     base = _make_sampler(spec)
     rng = random.Random(f"{HOST}:{os.getpid()}:{time.time_ns()}")

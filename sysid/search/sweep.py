@@ -13,9 +13,10 @@ import math
 import os
 import time
 import warnings
+from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Any, Callable, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -27,7 +28,8 @@ __all__ = ["SweepSpec", "parse_grid", "config_key", "storage_url", "heartbeat_se
            "run_config"]
 
 SAMPLERS = ("grid", "random", "tpe")
-R2_KEYS = (("estimation", "one_step"), ("estimation", "free_run"), ("validation", "one_step"), ("validation", "free_run"))
+R2_KEYS = (("estimation", "one_step"), ("estimation", "free_run"),
+           ("validation", "one_step"), ("validation", "free_run"))
 DIVERGED_OBJECTIVE = -1.0  # a diverged validation free run counts as R² = -1 in the objective only
 
 
@@ -39,7 +41,8 @@ def _identifier_defaults(identifier: str) -> dict[str, Any]:
 
     cls = get_identifier(identifier)
     sig = inspect.signature(cls.__init__)
-    return {p.name: p.default for p in sig.parameters.values() if p.name != "self" and p.kind is p.POSITIONAL_OR_KEYWORD}
+    return {p.name: p.default for p in sig.parameters.values()
+            if p.name != "self" and p.kind is p.POSITIONAL_OR_KEYWORD}
 
 
 def parse_grid(spec: str, identifier: str) -> dict[str, list[str]]:
@@ -117,7 +120,8 @@ class SweepSpec:
         self.fixed = resolve_aliases(self.fixed, defaults, "--set")
         for k in self.fixed:
             if k not in defaults:
-                raise ConfigError(f"--set: unknown option {k!r} of {self.identifier}; valid: {', '.join(sorted(defaults))}")
+                raise ConfigError(f"--set: unknown option {k!r} of {self.identifier}; "
+                                  f"valid: {', '.join(sorted(defaults))}")
             if k in self.grid or (k in ("n_enc", "ny", "nu") and "lags" in self.grid):
                 raise ConfigError(f"--set {k} conflicts with the same option in --grid")
         if "seed" in self.grid:
@@ -241,7 +245,8 @@ def open_study(spec: SweepSpec, url: str, study_name: str, create: bool = True):
         if saved is None:
             study.set_user_attr("spec", _spec_dict(spec))
         elif saved != json.loads(json.dumps(_spec_dict(spec))):
-            raise ConfigError(f"study {study_name!r} in {url} was made with another sweep ({saved}); use another --study")
+            raise ConfigError(f"study {study_name!r} in {url} was made with another sweep ({saved}); "
+                              "use another --study")
         return study
     return optuna.load_study(study_name=study_name, storage=storage, sampler=_make_sampler(spec))
 
@@ -304,7 +309,7 @@ def _make_objective(spec: SweepSpec, est, val, claim: Callable[[Any, str, int], 
     state = {} if state is None else state
     limit = spec.n_configs if target is None else target
 
-    def objective(trial: "optuna.Trial") -> float:
+    def objective(trial: optuna.Trial) -> float:
         config = {k: trial.suggest_categorical(k, v) for k, v in spec.grid.items()}
         key = config_key(config)
         reason = claim(trial, key, limit)

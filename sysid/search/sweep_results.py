@@ -64,12 +64,15 @@ def summarise(runs: list[dict[str, Any]]) -> dict[str, Any]:
     configs.sort(key=lambda e: -np.inf if e["r2_val_frs_mean"] is None else e["r2_val_frs_mean"], reverse=True)
     best = configs[0]["config_key"] if configs else None
     best_runs = sorted((r for r in runs if r["config_key"] == best),
-                       key=lambda r: -np.inf if r["validation"]["free_run"]["r2"] is None else r["validation"]["free_run"]["r2"])
+                       key=lambda r: (-np.inf if r["validation"]["free_run"]["r2"] is None
+                                      else r["validation"]["free_run"]["r2"]))
     return {"n_configs": len(configs), "n_runs": len(runs), "configs": configs,
             "best": configs[0] if configs else None,
             "best_runs": [{"repeat": r["repeat"], "seed": r["seed"],
-                           "r2_est_osa": r["estimation"]["one_step"]["r2"], "r2_est_frs": r["estimation"]["free_run"]["r2"],
-                           "r2_val_osa": r["validation"]["one_step"]["r2"], "r2_val_frs": r["validation"]["free_run"]["r2"]}
+                           "r2_est_osa": r["estimation"]["one_step"]["r2"],
+                           "r2_est_frs": r["estimation"]["free_run"]["r2"],
+                           "r2_val_osa": r["validation"]["one_step"]["r2"],
+                           "r2_val_frs": r["validation"]["free_run"]["r2"]}
                           for r in best_runs]}
 
 

@@ -3,9 +3,9 @@
 Runs N fresh Python processes, each with its own ``PYTHONHASHSEED``. Each one simulates the cantilever FMU
 in-process, either as a plain FMPy script (``--mode fmpy``: the project is not imported, the code shipped
 in the FMU runs) or through ``twins.fmu.check.fmu_simulate`` (``--mode project``: the host's ``twins``
-package, from ``--pythonpath``, runs the slave), (two instances: default and a changed parameter), then the two FMI error cases (a refused
-parameter value, a communication step that is not a whole number of periods), then exits normally.
-A process that aborts at exit (glibc "corrupted double-linked list", status 134) is counted. The child's
+package, from ``--pythonpath``, runs the slave), (two instances: default and a changed parameter), then the two FMI
+error cases (a refused parameter value, a communication step that is not a whole number of periods), then exits
+normally. A process that aborts at exit (glibc "corrupted double-linked list", status 134) is counted. The child's
 stdout goes to /dev/null: that layout of libgfortran's unit buffers made the abort most frequent.
 
     python tests/perf/fmu_exit_stress.py -n 30                 # FMU built from the current code
@@ -86,8 +86,8 @@ def main(argv=None) -> int:
             env["PYTHONHASHSEED"] = str(seed)
             if args.mode == "project":
                 env["PYTHONPATH"] = args.pythonpath
-            proc = subprocess.run([sys.executable, str(script), str(path), args.mode], env=env, stdout=subprocess.DEVNULL,
-                                  stderr=subprocess.PIPE, text=True, timeout=600)
+            proc = subprocess.run([sys.executable, str(script), str(path), args.mode], env=env,
+                                  stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, timeout=600)
             if proc.returncode == -6 or proc.returncode == 134:
                 aborts += 1
                 print(f"seed {seed}: abort ({proc.stderr.strip().splitlines()[-1:]})", flush=True)

@@ -3,9 +3,9 @@
 
 For every benchmark: mean and min time per call, throughput when ``extra_info['items']`` is given, its
 reference (``extra_info['reference']`` or the naming rule of :mod:`tests.perf.conftest`) with the speed
-ratio reference/ours (> 1 = faster than the reference; per item when both give ``items``), and its target (``extra_info['target_s']``) with the
-margin. The machine line comes from the JSON (CPU, cores) — timings on a shared machine are inflated.
-"""
+ratio reference/ours (> 1 = faster than the reference; per item when both give ``items``), and its target
+(``extra_info['target_s']``) with the margin. The machine line comes from the JSON (CPU, cores) — timings on a shared
+machine are inflated. """
 
 from __future__ import annotations
 
@@ -84,10 +84,13 @@ def summarise(data: dict[str, Any]) -> str:
     cores = (mi.get("cpu") or {}).get("count", "?")
     refs = pair_references(benches)
     by_full = {b["fullname"]: b for b in benches}
-    lines = [f"Machine: {cpu}, {cores} logical cores, Python {mi.get('python_version', '?')}; "
-             f"{data.get('datetime', '')[:19]}. Shared machine: absolute times are inflated.", "",
-             "| benchmark | mean | min | throughput | reference (mean) | speed-up vs reference | target | meets target |",
-             "|---|---|---|---|---|---|---|---|"]
+    lines = [
+        f"Machine: {cpu}, {cores} logical cores, Python {mi.get('python_version', '?')}; "
+        f"{data.get('datetime', '')[:19]}. Shared machine: absolute times are inflated.",
+        "",
+        "| benchmark | mean | min | throughput | reference (mean) | speed-up vs reference | target | meets target |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
     for b in sorted(benches, key=lambda x: x["fullname"]):
         st, info = b["stats"], b.get("extra_info") or {}
         mean, mn = st["mean"], st["min"]
@@ -109,7 +112,10 @@ def summarise(data: dict[str, Any]) -> str:
         ttxt = f"< {_fmt_s(float(tgt))}" if tgt else ""
         ok = ("yes" if mean <= float(tgt) else f"no ({mean / float(tgt):.2g}× over)") if tgt else ""
         module = b["fullname"].split("::")[0].rsplit("/", 1)[-1].removesuffix(".py").removeprefix("test_")
-        lines.append(f"| {module}: {_label(b['name'])} | {_fmt_s(mean)} | {_fmt_s(mn)} | {thr} | {rtxt} | {ratio} | {ttxt} | {ok} |")
+        lines.append(
+            f"| {module}: {_label(b['name'])} | {_fmt_s(mean)} | {_fmt_s(mn)} | {thr} | {rtxt} | {ratio} | "
+            f"{ttxt} | {ok} |"
+        )
     return "\n".join(lines) + "\n"
 
 

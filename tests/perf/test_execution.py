@@ -81,10 +81,13 @@ def test_score_grid_dask_2_workers(benchmark):
     benchmark.extra_info["ratio_to_serial"] = ratio
     benchmark.extra_info["target_ratio"] = 0.6
     benchmark.extra_info["load_average_1min"] = os.getloadavg()[0]
-    print(f"\nscore grid: serial {WALL['serial']:.1f} s, 2 workers {WALL['dask']:.1f} s, ratio {ratio:.2f} "
-          f"(cluster start {benchmark.extra_info['cluster_start_s']:.1f} s, load {os.getloadavg()[0]:.1f}); CPU: serial "
-          f"{WALL['serial_cpu']:.1f} s, workers {sorted(round(v, 1) for v in benchmark.extra_info['worker_cpu_s'].values())}"
-          f" s, parent {parent_cpu:.1f} s, estimated idle ratio {cpu_ratio:.2f}")
+    print(
+        f"\nscore grid: serial {WALL['serial']:.1f} s, 2 workers {WALL['dask']:.1f} s, ratio {ratio:.2f} "
+        f"(cluster start {benchmark.extra_info['cluster_start_s']:.1f} s, load {os.getloadavg()[0]:.1f}); CPU: serial "
+        f"{WALL['serial_cpu']:.1f} s, "
+        f"workers {sorted(round(v, 1) for v in benchmark.extra_info['worker_cpu_s'].values())}"
+        f" s, parent {parent_cpu:.1f} s, estimated idle ratio {cpu_ratio:.2f}"
+    )
     assert out == JSON["serial"]  # same JSON as the serial run
     if os.environ.get("PIEZOTWIN_ASSERT_SPEEDUP") == "1":
         assert ratio <= 0.6

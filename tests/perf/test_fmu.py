@@ -67,8 +67,7 @@ def test_acoustic_fmu_10000_steps(benchmark, acoustic):
 
 
 def test_acoustic_response_core_10000_samples(benchmark, acoustic):
-    from twins.fmu.cores import build_core
-    from twins.fmu.cores import choose_core
+    from twins.fmu.cores import build_core, choose_core
 
     twin, _ = acoustic
     core = build_core(twin, 100e6, choose_core(twin, 100e6))

@@ -95,9 +95,12 @@ def test_frols_1e6_samples_231_candidates(benchmark):
     benchmark.extra_info['sysidentpy'] = 'not run at this size (231 x 1e6 candidate matrix alone is 1.8 GB)'
     benchmark.extra_info.update({"n": 1_000_000, "candidates": 231, "seconds": seconds, "cpu_seconds": cpu[0],
                                  "subprocess": mem, "n_terms": model.n_parameters_})
-    print(f"\nFROLS N=1e6, 231 candidates: {seconds:.2f} s in-process ({cpu[0]:.2f} s CPU); fresh process {mem['seconds']:.2f} s, "
-          f"peak RSS {mem['peak_rss_mb']:.0f} MB (data alone {mem['data_rss_mb']:.0f} MB; the fit's own peak "
-          f"allocation {mem['fit_peak_alloc_mb']:.0f} MB)")
+    print(
+        f"\nFROLS N=1e6, 231 candidates: {seconds:.2f} s in-process ({cpu[0]:.2f} s CPU); "
+        f"fresh process {mem['seconds']:.2f} s, "
+        f"peak RSS {mem['peak_rss_mb']:.0f} MB (data alone {mem['data_rss_mb']:.0f} MB; the fit's own peak "
+        f"allocation {mem['fit_peak_alloc_mb']:.0f} MB)"
+    )
     assert seconds < 15.0
     assert mem["peak_rss_mb"] < 2048
 

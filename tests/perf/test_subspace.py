@@ -109,10 +109,12 @@ def test_n4sid_1e6_samples_2x2_10th_order(benchmark):
             "target_s": 30.0, "items": 1_000_000, "block_rows": model.block_rows_,
             "max_pole_modulus_error": float(np.max(np.abs(true - est)))}
     benchmark.extra_info.update(info)
-    print(f"\nn4sid N=1e6, 2x2, order chosen {model.nx_}: {seconds:.2f} s in-process ({cpu[0]:.2f} s CPU); fresh process "
-          f"{mem.get('seconds', float('nan')):.2f} s, peak RSS {mem.get('peak_rss_mb', float('nan')):.0f} MB "
-          f"(after making the data {mem.get('data_rss_mb', float('nan')):.0f} MB; the fit's own peak allocation "
-          f"{mem.get('fit_peak_alloc_mb', float('nan')):.0f} MB)")
+    print(
+        f"\nn4sid N=1e6, 2x2, order chosen {model.nx_}: {seconds:.2f} s in-process ({cpu[0]:.2f} s CPU); fresh process "
+        f"{mem.get('seconds', float('nan')):.2f} s, peak RSS {mem.get('peak_rss_mb', float('nan')):.0f} MB "
+        f"(after making the data {mem.get('data_rss_mb', float('nan')):.0f} MB; the fit's own peak allocation "
+        f"{mem.get('fit_peak_alloc_mb', float('nan')):.0f} MB)"
+    )
     assert model.nx_ == 10
     assert info["max_pole_modulus_error"] < 1e-3
     # On the shared 2-core machine the wall time counts other jobs' time slices (measured at load 10: 23 s wall,
@@ -134,7 +136,8 @@ def test_n4sid_vs_nfoursid_1e4(benchmark):
     nfoursid_fit(u, y)
     t_ref = time.perf_counter() - t0
     info = {"n": 10_000, "ours_s": t_ours, "nfoursid_s": t_ref, "ratio": t_ref / t_ours, "block_rows": BLOCK_ROWS,
-            "reference": "nfoursid 1.0 (same block rows and order)", "nfoursid_1e5": _fresh_process(100_000, "nfoursid")}
+            "reference": "nfoursid 1.0 (same block rows and order)",
+            "nfoursid_1e5": _fresh_process(100_000, "nfoursid")}
     benchmark.extra_info.update(info)
     print(f"\nPO-MOESP N=1e4 2x2 order 10, i={BLOCK_ROWS}: ours {t_ours:.3f} s, nfoursid {t_ref:.2f} s, "
           f"ratio {info['ratio']:.1f}x; nfoursid at N=1e5: {info['nfoursid_1e5']}")

@@ -76,7 +76,7 @@ def amplifier_bandwidth(f_hz: np.ndarray, f_low_hz: float, f_high_hz: float) -> 
     jf = 1j * np.asarray(f_hz, dtype=float)
     hp = (jf / f_low_hz) / (1.0 + jf / f_low_hz) if f_low_hz > 0 else 1.0
     lp = 1.0 / (1.0 + jf / f_high_hz) if np.isfinite(f_high_hz) else 1.0
-    return hp * lp
+    return np.asarray(hp * lp)
 
 
 #: below this many samples the serial kernel runs (per-sample FMU steps: a parallel launch per sample costs

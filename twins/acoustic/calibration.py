@@ -25,7 +25,8 @@ from __future__ import annotations
 
 import itertools
 import time
-from typing import Any, Iterable
+from collections.abc import Iterable
+from typing import Any
 
 import numpy as np
 from scipy import signal as sps
@@ -106,7 +107,7 @@ def calibrate_acoustic(twin, data: Record, val: Record | None = None, names: Ite
     """Fit ``names`` (default ``twin.CALIBRATION_PARAMS``) of ``twin`` to ``data`` (see module docstring)."""
     names = list(names) if names is not None else list(twin.CALIBRATION_PARAMS)
     check_calibration_data(data, names, "acoustic calibration")
-    if data.u.ndim != 1 or data.y.ndim != 1:
+    if data.u.ndim != 1 or data.output.ndim != 1:
         raise ConfigError("acoustic calibration: data must be SISO (one drive voltage, one received voltage)")
     freq_mode = is_frequency_record(data)
     if not freq_mode and not set(names) <= MAGNITUDE_PARAMS:
@@ -180,7 +181,7 @@ def calibrate_acoustic(twin, data: Record, val: Record | None = None, names: Ite
                                      f"{f.size} frequencies): {res.message}")
 
 
-def _score(tw, rec: Record, model_db, target) -> dict[str, float]:
+def _score(tw, rec: Record, model_db, target) -> dict[str, Any]:
     if is_frequency_record(rec):
         gated = bool(rec.meta.get("protocol_options", {}).get("gated", False))
         yh = 20 * np.log10(np.abs(tw.frequency_response(rec.u, include_amplifier=False, direct_only=gated)) + 1e-300)

@@ -32,6 +32,7 @@ The fluid gap is written as its Fabry–Pérot series, which for plane waves is 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numba import njit, prange
@@ -41,8 +42,14 @@ from twins.acoustic.amplifier import amplifier_bandwidth
 from twins.acoustic.fluids import FluidState, fluid_state
 from twins.acoustic.layers import Layer, chain, input_impedance, layer_matrix, propagate_forward
 from twins.acoustic.materials import PIEZOS, SOLIDS, Piezo
-from twins.acoustic.transducer import (electrical_impedance, face_impedance, parallel_rc, plate_two_port,
-                                       receive_voltage, transmit)
+from twins.acoustic.transducer import (
+    electrical_impedance,
+    face_impedance,
+    parallel_rc,
+    plate_two_port,
+    receive_voltage,
+    transmit,
+)
 
 __all__ = ["ChannelGeometry", "geometry", "channel_parts", "frequency_response", "spreading_factor",
            "misalignment_factor", "wall_path_length"]
@@ -126,7 +133,7 @@ def _layers(p, fl: FluidState) -> tuple[Layer, Layer]:
             Layer(st.density, st.speed, p.steel_thickness_m, st.alpha0_np_m, st.alpha_power))
 
 
-def channel_parts(f_hz: np.ndarray, p, effects=frozenset()) -> dict[str, np.ndarray]:
+def channel_parts(f_hz: np.ndarray, p, effects=frozenset()) -> dict[str, Any]:
     """All factors of H at positive frequencies ``f_hz`` (> 0): t_tx, r_tx, r_rx, r_v, v_tx, z_el, k, ..."""
     f = np.asarray(f_hz, dtype=float)
     if np.any(f <= 0):

@@ -189,7 +189,9 @@ def fluid_state(name: str, temperature_c: float, salinity_psu: float = 35.0) -> 
         return FluidState("water", T, float(water_density(T)), c, dcdt)
     if name == "seawater":
         c = float(seawater_sound_speed(T, salinity_psu))
-        dcdt = float((seawater_sound_speed(T + 0.01, salinity_psu) - seawater_sound_speed(T - 0.01, salinity_psu)) / 0.02)
+        dcdt = float(
+            (seawater_sound_speed(T + 0.01, salinity_psu) - seawater_sound_speed(T - 0.01, salinity_psu)) / 0.02
+        )
         return FluidState("seawater", T, float(seawater_density(T, salinity_psu)), c, dcdt, salinity_psu)
     fl = FLUIDS[name]
     assert isinstance(fl, TabulatedFluid)

@@ -11,9 +11,9 @@ does not read files; the benchmark package's dataset registry serves the vendore
 Twin configuration (:func:`lab_params`): water at 20 °C, no steel, no epoxy, circular PZT-4 discs of radius
 ``aperture_radius_m`` facing each other at the given distance, backed by ``backing_rayl``, driven from 50 Ω,
 received into 50 Ω, no inter-transducer reverberation (bare PZT faces would echo at 2d/c at −10…−20 dB; the
-measured responses show none — the holders are covered with absorber, says the dataset's readme); no amplifier (the FIR is the electro-acoustic
-response). The transducer (thickness → resonance, backing → bandwidth, output gain) is fitted to the
-magnitude spectrum at ONE distance (:func:`fit_transducer`, 40 mm) and the twin is then compared at the
+measured responses show none — the holders are covered with absorber, says the dataset's readme); no amplifier (the FIR
+is the electro-acoustic response). The transducer (thickness → resonance, backing → bandwidth, output gain) is fitted to
+the magnitude spectrum at ONE distance (:func:`fit_transducer`, 40 mm) and the twin is then compared at the
 others (:func:`compare`).
 
 The aperture is NOT fitted: a one-distance spectrum cannot determine it (its only trace is the gentle
@@ -135,7 +135,8 @@ def fit_transducer(distance_mm: int = 40, data: FirData | None = None,
                 best = (cost, x)
     res = least_squares(residual, best[1], bounds=(lo, hi))
     fitted = build(res.x)
-    return fitted, {"distance_mm": distance_mm, "band_hz": list(FIT_BAND_HZ), "rms_db": float(np.sqrt(np.mean(res.fun**2))),
+    return fitted, {"distance_mm": distance_mm, "band_hz": list(FIT_BAND_HZ),
+                    "rms_db": float(np.sqrt(np.mean(res.fun**2))),
                     "pzt_thickness_m": fitted.pzt_thickness_m, "backing_rayl": fitted.backing_rayl,
                     "output_gain": fitted.output_gain, "aperture_radius_m": fitted.aperture_radius_m}
 

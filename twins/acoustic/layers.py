@@ -14,8 +14,8 @@ stacking (…, 2, 2) arrays and multiplying with einsum.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Sequence
 
 import numpy as np
 

@@ -32,7 +32,8 @@ class AcousticParams:
     # ---------------------------------------------------------------- transducers (identical Tx and Rx)
     piezo: str = pfield("pzt4", "", doc="piezoceramic", choices=_PIEZO_NAMES, source="notes B.4")
     pzt_thickness_m: float = pfield(2.16e-3, "m", 0.2e-3, 10e-3, "PZT plate thickness",
-                                    source="notes B.7 candidate 1 (2.15 mm) retuned to 2.16 mm: peaks 939.4 / 1162.4 kHz")
+                                    source="notes B.7 candidate 1 (2.15 mm) retuned to 2.16 mm: "
+                                    "peaks 939.4 / 1162.4 kHz")
     pzt_qm: float = pfield(0.0, "", 0.0, 5000.0, "mechanical Q of the PZT (0 = material value)", source="notes B.4")
     epoxy_thickness_m: float = pfield(100e-6, "m", 0.0, 1e-3, "epoxy bond PZT–steel", source="notes B.7")
     steel: str = pfield("ss316", "", doc="plate steel", choices=_STEELS, source="notes B.4")
@@ -87,6 +88,8 @@ class AcousticParams:
     misalignment_offset_m: float = pfield(2e-3, "m", 0.0, 0.05, "lateral offset of the Rx (along the plate height)")
     misalignment_tilt_deg: float = pfield(0.3, "deg", 0.0, 10.0, "tilt of the Rx about the plate-width axis")
     # ---------------------------------------------------------------- acquisition
-    noise_v: float = pfield(0.02, "V", 0.0, 10.0, "white measurement noise std at the Rx", source="effect measurement_noise")
+    noise_v: float = pfield(
+        0.02, "V", 0.0, 10.0, "white measurement noise std at the Rx", source="effect measurement_noise"
+    )
     adc_bits: int = pfield(8, "bit", 2, 24, "ADC resolution (Tektronix MDO3024: 8 bit)", source="dissertation §3.2")
     adc_range_v: float = pfield(50.0, "V", 1e-3, 1e3, "ADC full scale ±range (Rx open-circuit voltage reaches ≈ 40 V)")

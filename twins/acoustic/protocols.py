@@ -39,8 +39,8 @@ MA_SPAN = 100  # §3.2: "moving average filter, with a span of 100 points"
 RECIPE_KEEP = {"thesis-chirp-100ms": 2000, "thesis-multisine": 2000, "thesis-chirp-1ms": 1000}
 
 PROTOCOLS = {
-    "thesis-chirp-100ms": "linear chirp 900-1350 kHz over 100 ms, 80 mVpp before the amplifier, 100 MHz (10 M samples); "
-                          "options duration, fs, preprocess, start, keep",
+    "thesis-chirp-100ms": "linear chirp 900-1350 kHz over 100 ms, 80 mVpp before the amplifier, 100 MHz "
+                          "(10 M samples); options duration, fs, preprocess, start, keep",
     "thesis-multisine": "45 000 random-phase lines 900-1350 kHz, 0.4 V peak, 10 MS/s file truncated to 5000 points "
                         "and repeated, 100 MHz; options duration, fs, awg_rate_hz, warmup_s, preprocess, start, keep",
     "thesis-chirp-1ms": "1 ms linear up-chirp 900-1350 kHz, 150 mVpp, repeated (validation signal), 100 MHz; "

@@ -272,11 +272,12 @@ class AcousticTwin(Twin):
         spec[: f.size] = 2.0 * H * win
         env = np.abs(np.fft.ifft(spec))
         i = int(np.argmax(env))
-        if 0 < i < n - 1:
+        peak = float(i)
+        if 0 < i < n - 1:  # parabolic interpolation of the peak
             a, b, c = env[i - 1], env[i], env[i + 1]
             den = a - 2 * b + c
-            i = i + (0.5 * (a - c) / den if den != 0 else 0.0)
-        return float(i / fs)
+            peak = i + (0.5 * (a - c) / den if den != 0 else 0.0)
+        return float(peak / fs)
 
     def response_duration_direct(self) -> float:
         g = geometry(self.params, self.effects)
@@ -339,14 +340,18 @@ class AcousticTwin(Twin):
                 "preprocess": False, "start": 0, "keep": RECIPE_KEEP[protocol]}
         unknown = set(options) - set(opts)
         if unknown:
-            raise ConfigError(f"protocol {protocol}: unknown option(s) {', '.join(sorted(unknown))}; valid: {', '.join(opts)}")
+            raise ConfigError(
+                f"protocol {protocol}: unknown option(s) {', '.join(sorted(unknown))}; valid: {', '.join(opts)}"
+            )
         for k, v in options.items():
             opts[k] = coerce(v, opts[k], k)
         fs, duration = float(opts["fs"]), float(opts["duration"])
         if not (fs > 0 and duration > 0 and float(opts["awg_rate_hz"]) > 0 and float(opts["warmup_s"]) >= 0):
             raise ConfigError(f"protocol {protocol}: fs, duration and awg_rate_hz must be positive, warmup_s >= 0")
         if not opts["preprocess"] and {"start", "keep"} & set(options):
-            raise ConfigError(f"protocol {protocol}: options start/keep cut the preprocessed record; give preprocess=true")
+            raise ConfigError(
+                f"protocol {protocol}: options start/keep cut the preprocessed record; give preprocess=true"
+            )
         n = int(round(duration * fs))
         periodic = protocol != "thesis-chirp-100ms"
         warm = int(round(float(opts["warmup_s"]) * fs)) if periodic else 0
@@ -368,7 +373,9 @@ class AcousticTwin(Twin):
         opts = {"f_start": 100e3, "f_stop": 2.0e6, "points": 2000, "gated": False, "preprocess": False}
         unknown = set(options) - set(opts)
         if unknown:
-            raise ConfigError(f"protocol vna-sweep: unknown option(s) {', '.join(sorted(unknown))}; valid: {', '.join(opts)}")
+            raise ConfigError(
+                f"protocol vna-sweep: unknown option(s) {', '.join(sorted(unknown))}; valid: {', '.join(opts)}"
+            )
         for k, v in options.items():
             opts[k] = coerce(v, opts[k], k)
         f0, f1, npts = float(opts["f_start"]), float(opts["f_stop"]), int(opts["points"])

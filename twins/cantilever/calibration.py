@@ -23,7 +23,8 @@ hysteresis memory from rest in the middle of an experiment.
 
 from __future__ import annotations
 
-from typing import Any, Iterable
+from collections.abc import Iterable
+from typing import Any
 
 import numpy as np
 
@@ -103,7 +104,7 @@ def calibrate_cantilever(twin, data: Record, val: Record | None = None, names: I
         unit = fit_twin.with_params(**x0, gain_um_per_v=1.0, offset_um=0.0, initial_state_um=0.0)
         y1 = unit.simulate(data.u, data.fs)
         A = np.column_stack([y1, np.ones_like(y1)])
-        coef, *_ = np.linalg.lstsq(A, data.y, rcond=None)
+        coef, *_ = np.linalg.lstsq(A, data.output, rcond=None)
         gain = float(coef[0])
         info_lo, info_hi = 0.02, 1.5
         if "gain_um_per_v" in names and np.isfinite(gain) and gain > 0:

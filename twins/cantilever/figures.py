@@ -75,14 +75,14 @@ def plot_sine_loops(measured: Record, twin, path: str | Path, title: str = "") -
         a, b, f = int(seg["start"]), int(seg["stop"]), float(seg["freq_hz"])
         sl = last_period(b - a, measured.fs, f)
         u = measured.u[a:b][sl]
-        ym = measured.y[a:b][sl]
+        ym = measured.output[a:b][sl]
         ys = y_sim[a:b][sl]
         u, ym, ys = (np.append(x, x[0]) for x in (u, ym, ys))  # close the loop
         un = (u - u.mean()) / (u.std() or 1.0)
         mu, sd = ym.mean(), ym.std() or 1.0
         ax.plot(un, (ym - mu) / sd, color="tab:blue", lw=1.0, label="measured")
         ax.plot(un, (ys - mu) / sd, color="tab:red", lw=0.9, ls="--", label="twin")
-        ax.set_title(f"{f:g} Hz  R² = {r2(measured.y[a:b], y_sim[a:b]):.4f}", fontsize=9)
+        ax.set_title(f"{f:g} Hz  R² = {r2(measured.output[a:b], y_sim[a:b]):.4f}", fontsize=9)
         ax.tick_params(labelsize=7)
         ax.grid(alpha=0.3)
     for ax in axes.ravel()[n:]:

@@ -43,7 +43,7 @@ def lab_split(rec: Record, split_s: float = SPLIT_S) -> tuple[Record, Record]:
 
 def static_line_r2(est: Record, val: Record) -> float:
     """R² on ``val`` of the least-squares line y = a·u + b fitted on ``est`` (the no-hysteresis baseline)."""
-    a, b = np.polyfit(est.u, est.y, 1)
+    a, b = np.polyfit(est.u, est.output, 1)
     return r2(val.y, a * val.u + b)
 
 
@@ -75,11 +75,11 @@ def plot_lab_loops(twin, path: str | Path, rec: Record, split_s: float = SPLIT_S
     y_sim = twin.noise_free().simulate(rec.u, rec.fs)
     k = int(round(split_s * rec.fs))
     fig, (a1, a2) = plt.subplots(1, 2, figsize=(12, 4.8))
-    a1.plot(rec.u[k:], rec.y[k:], lw=0.6, color="tab:blue", label="measured (last 5 s)")
+    a1.plot(rec.u[k:], rec.output[k:], lw=0.6, color="tab:blue", label="measured (last 5 s)")
     a1.plot(rec.u[k:], y_sim[k:], lw=0.8, ls="--", color="tab:red", label="twin, free run")
     a1.set_xlabel("voltage u [V]")
     a1.set_ylabel("displacement y [µm]")
-    a1.set_title(f"TU/e actuator, validation R² = {r2(rec.y[k:], y_sim[k:]):.5f}")
+    a1.set_title(f"TU/e actuator, validation R² = {r2(rec.output[k:], y_sim[k:]):.5f}")
     a1.legend(loc="upper left")
     a1.grid(alpha=0.3)
     t = rec.t

@@ -42,7 +42,8 @@ class CantileverParams:
     pi_r_max_v: float = pfield(100.0, "V", 1.0, 1e4, "largest play threshold r_n",
                                source=f"{_NOTES} A.4 (r_i = 10·i V for ±100 V)")
     pi_p0_fraction: float = pfield(0.55, "1", 0.05, 1.0, "share p_0/d of the linear (r_0 = 0) operator",
-                                   source=f"{_NOTES} A.4 check set p_0 = 0.2, p_i = 0.05e^(−0.25i) µm/V (p_0 share 0.55)")
+                                   source=f"{_NOTES} A.4 check set p_0 = 0.2, p_i = 0.05e^(−0.25i) µm/V "
+                                   "(p_0 share 0.55)")
     pi_decay: float = pfield(0.25, "1", 0.0, 3.0, "weights p_i ∝ exp(−decay·i) for i ≥ 1",
                              source=f"{_NOTES} A.4 check set")
 
@@ -54,7 +55,9 @@ class CantileverParams:
     # ---------------------------------------------------------------- modal dynamics D(s) (core)
     f1_hz: float = pfield(700.0, "Hz", 50.0, 3000.0, "first bending-mode frequency",
                           source=f"{_NOTES} A.2 (ideal clamp 680–840 Hz, prior 300–900 Hz), A.7")
-    zeta1: float = pfield(0.02, "1", 0.001, 0.5, "first-mode damping ratio", source=f"{_NOTES} A.2 (ζ ≈ 0.01–0.05 in air)")
+    zeta1: float = pfield(
+        0.02, "1", 0.001, 0.5, "first-mode damping ratio", source=f"{_NOTES} A.2 (ζ ≈ 0.01–0.05 in air)"
+    )
     mode_ratio: float = pfield(6.27, "1", 2.0, 10.0, "f₂/f₁ of the clamped-free beam",
                                source=f"{_NOTES} A.2 (Euler–Bernoulli, β₂²/β₁² = 6.27)")
     zeta2: float = pfield(0.02, "1", 0.001, 0.5, "second-mode damping ratio", source=f"{_NOTES} A.2 (as ζ₁)")
@@ -65,15 +68,21 @@ class CantileverParams:
     creep_per_decade: float = pfield(0.015, "1/decade", 0.0, 0.1,
                                      "logarithmic creep rate γ_c: weight of each Kelvin–Voigt element (× d)",
                                      source=f"{_NOTES} A.5 (PI tutorial: 1–2 %/decade; KV weights ≈ γ_c per decade)")
-    creep_tau_min_s: float = pfield(0.1, "s", 1e-3, 100.0, "shortest Kelvin–Voigt time constant τ_1; τ_i = τ_1·10^(i−1)",
+    creep_tau_min_s: float = pfield(0.1, "s", 1e-3, 100.0,
+                                    "shortest Kelvin–Voigt time constant τ_1; τ_i = τ_1·10^(i−1)",
                                     source=f"{_NOTES} A.5 (τ = 0.1, 1, 10, 100 … s)")
     creep_elements: int = pfield(4, "1", 1, 8, "number of Kelvin–Voigt elements (one per decade)",
                                  source=f"{_NOTES} A.5 (3 elements suffice for records of a few seconds)")
 
-    initial_state_um: float = pfield(0.0, "um", -50.0, 50.0,
-                                     "hysteresis output Γ at t = 0 with v = 0 (remanent state left by the actuator's "
-                                     "history; Bouc–Wen h₀ = −Γ₀, PI plays F_i = κ·r_i); the twin starts in equilibrium",
-                                     source="TU/e data: 0-V reading before the first step differs from the loop centre")
+    initial_state_um: float = pfield(
+        0.0,
+        "um",
+        -50.0,
+        50.0,
+        "hysteresis output Γ at t = 0 with v = 0 (remanent state left by the actuator's "
+        "history; Bouc–Wen h₀ = −Γ₀, PI plays F_i = κ·r_i); the twin starts in equilibrium",
+        source="TU/e data: 0-V reading before the first step differs from the loop centre",
+    )
 
     # ---------------------------------------------------------------- sensor (core offset; effects)
     offset_um: float = pfield(0.0, "um", -100.0, 100.0, "sensor zero offset (reading at zero deflection)",
@@ -92,18 +101,24 @@ class CantileverParams:
                                   source="amplifier/actuator compression (assumed); notes A.2 (coercive field)")
     sat_sharpness: float = pfield(4.0, "1", 1.0, 20.0, "exponent p of the soft saturation (large p → hard knee)",
                                   source="assumed")
-    input_delay_s: float = pfield(1.5e-4, "s", 0.0, 0.05, "pure input (transport/DAC) delay, fractional samples allowed",
+    input_delay_s: float = pfield(1.5e-4, "s", 0.0, 0.05,
+                                  "pure input (transport/DAC) delay, fractional samples allowed",
                                   source="dSPACE DS1104 I/O latency order 1–2 samples at 10 kHz (assumed)")
     thermal_drift_um: float = pfield(1.0, "um", -50.0, 50.0, "final value of the additive thermal drift",
                                      source="thermal expansion of the clamp/sensor mount (assumed order µm)")
     thermal_tau_s: float = pfield(20.0, "s", 0.01, 1e5, "time constant of the thermal drift D·(1 − e^(−t/τ))",
                                   source="assumed")
-    rate_ref_v_per_s: float = pfield(2.0e5, "V/s", 10.0, 1e9,
-                                     "rate envelope at which the hysteretic share doubles: α (BW, capped at 0.98) or the "
-                                     "play weights p_i (PI, p_0 lowered to keep d) × (1 + ρ/rate_ref), ρ = low-pass of |v̇|",
-                                     source=f"{_NOTES} A.4 (rate-dependent PI, Al Janaideh & Krejčí 2013, grow r_i "
-                                     "with |u̇|; at full amplitude that parks the largest plays and barely widens the "
-                                     "loop, so the weights are scaled here)")
+    rate_ref_v_per_s: float = pfield(
+        2.0e5,
+        "V/s",
+        10.0,
+        1e9,
+        "rate envelope at which the hysteretic share doubles: α (BW, capped at 0.98) or the "
+        "play weights p_i (PI, p_0 lowered to keep d) × (1 + ρ/rate_ref), ρ = low-pass of |v̇|",
+        source=f"{_NOTES} A.4 (rate-dependent PI, Al Janaideh & Krejčí 2013, grow r_i "
+        "with |u̇|; at full amplitude that parks the largest plays and barely widens the "
+        "loop, so the weights are scaled here)",
+    )
     rate_tau_s: float = pfield(0.01, "s", 1e-5, 10.0, "time constant of the rate envelope ρ (≈ mean |v̇| above 1/(2πτ))",
                                source="assumed; keeps the loop shape smooth within a period")
     asym_factor: float = pfield(1.0, "1", -0.9, 5.0,

@@ -107,7 +107,9 @@ def thesis_sines(options: dict[str, Any]) -> tuple[np.ndarray, float, dict[str, 
     try:
         freqs = [float(f) for f in freqs]
     except (TypeError, ValueError):
-        raise ConfigError(f"protocol option freqs_hz: expected frequencies in Hz separated by '-', got {text!r}") from None
+        raise ConfigError(
+            f"protocol option freqs_hz: expected frequencies in Hz separated by '-', got {text!r}"
+        ) from None
     if fs <= 0 or amp <= 0 or min_periods < 1 or not freqs or any(not 0 < f < fs / 2 for f in freqs):
         raise ConfigError("thesis-sines: need fs > 0, amplitude_v > 0, min_periods ≥ 1 and 0 < f < fs/2")
     parts, segs, start = [], [], 0

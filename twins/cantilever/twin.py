@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from typing import Any, Iterable
+from collections.abc import Iterable
+from typing import Any
 
 import numpy as np
 
@@ -61,7 +62,7 @@ class CantileverTwin(Twin):
 
     def __init__(self, params: Any = None, effects: Iterable[str] | None = None, seed: int | None = 0):
         super().__init__(params, effects, seed)
-        self._cache: dict[float, dict[str, np.ndarray]] = {}
+        self._cache: dict[float, dict[str, Any]] = {}
 
     # ------------------------------------------------------------------ derived quantities
     def pi_weights(self) -> tuple[np.ndarray, float, np.ndarray]:
@@ -195,13 +196,18 @@ class CantileverTwin(Twin):
         fcfg[K.F_VS], fcfg[K.F_SATP], fcfg[K.F_LIM] = p.sat_voltage_v, p.sat_sharpness, p.amp_limit_v
         a_lp, b0_lp, b1_lp = _first_order_foh(1.0 / (2 * math.pi * p.amp_bandwidth_hz), h)
         fcfg[K.F_LPA], fcfg[K.F_LPB0], fcfg[K.F_LPB1] = a_lp, b0_lp, b1_lp
-        fcfg[K.F_D], fcfg[K.F_ALPHA], fcfg[K.F_BETA], fcfg[K.F_GAMMA] = p.gain_um_per_v, p.bw_alpha, p.bw_beta, p.bw_gamma
+        fcfg[K.F_D], fcfg[K.F_ALPHA], fcfg[K.F_BETA], fcfg[K.F_GAMMA] = (
+            p.gain_um_per_v,
+            p.bw_alpha,
+            p.bw_beta,
+            p.bw_gamma,
+        )
         fcfg[K.F_RATEREF], fcfg[K.F_ASYM] = p.rate_ref_v_per_s, p.asym_factor
         fcfg[K.F_OFFSET], fcfg[K.F_DRIFT], fcfg[K.F_DRIFTTAU] = p.offset_um, p.thermal_drift_um, p.thermal_tau_s
         fcfg[K.F_Q] = p.quant_um
         fcfg[K.F_RATEA] = math.exp(-h / p.rate_tau_s)
         cr = np.array([_first_order_foh(tau, T) for tau in taus]).reshape(-1, 3)
-        cfg = dict(icfg=icfg, fcfg=fcfg, Phi=np.ascontiguousarray(Phi), G0=G0, G1=G1, Cout=C,
+        cfg: dict[str, Any] = dict(icfg=icfg, fcfg=fcfg, Phi=np.ascontiguousarray(Phi), G0=G0, G1=G1, Cout=C,
                    cr_a=cr[:, 0].copy(), cr_b0=cr[:, 1].copy(), cr_b1=cr[:, 2].copy(),
                    cr_g=np.full(taus.size, p.creep_per_decade), pi_r=r, pi_p=np.concatenate(([p0], pw)),
                    buf_len=D + 2, M=M)
@@ -249,11 +255,11 @@ class CantileverTwin(Twin):
         _run(u, noise, out, cfg, st)
         return out
 
-    def make_stepper(self, fs: float) -> "CantileverStepper":
+    def make_stepper(self, fs: float) -> CantileverStepper:
         """Sample-by-sample simulator for FMU export: ``reset()``, ``step(u) -> y`` (same kernel as simulate)."""
         return CantileverStepper(self, fs)
 
-    def noise_free(self) -> "CantileverTwin":
+    def noise_free(self) -> CantileverTwin:
         """The same twin without measurement noise and quantisation (for fitting and loop analysis)."""
         return self.with_effects(self.effects - {"measurement_noise", "sensor_quantization"})
 

@@ -27,7 +27,8 @@ to the configured values, e.g. "creep: creep_per_decade 3× the configured 0.015
 from __future__ import annotations
 
 import math
-from typing import Any, Sequence
+from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 
@@ -98,7 +99,7 @@ def holds(twin: Twin, effect: str, sse_val: float, n_added: int, est: Record, va
     significantly worse (F-test below ``level`` and a relative gain of at least ``min_rel_gain``)."""
     fields = _fields(configured, effect)
     yv0 = simulate_val(twin.with_params(**{f: getattr(configured.params, f) for f in fields}), est, val)
-    sse0 = sse(val.y, yv0, skip)
+    sse0 = sse(val.output, yv0, skip)
     if not (math.isfinite(sse0) and sse0 > 0):
         return True
     g0 = 1.0 - math.sqrt(sse_val / sse0)

@@ -58,14 +58,22 @@ from . import evidence as ev
 from . import features as ft
 from . import ranges as rg
 from . import realdata
+from . import unexplained as unx
 from .fields import core_for, numeric_fields, quant_params
 from .options import DiagnoseOptions
-from .prediction import (NOISE_EFFECTS, deterministic, significance, simulate, simulate_val, sse, unpredictable,
-                         with_rails)
+from .prediction import (
+    NOISE_EFFECTS,
+    deterministic,
+    significance,
+    simulate,
+    simulate_val,
+    sse,
+    unpredictable,
+    with_rails,
+)
 from .result import Diagnosis
 from .rounds import Extension, adopt, extend
 from .trials import Stage
-from . import unexplained as unx
 from .unexplained import generic_residual_model
 
 __all__ = ["diagnose", "run_diagnosis", "NOISE_EFFECTS", "significance"]
@@ -114,7 +122,8 @@ class _numba_threads:
     """Context manager: numba's thread count for the current thread (thread-local in numba), restored after."""
 
     def __init__(self, n: int | None):
-        self.n, self.prev = n, None
+        self.n = n
+        self.prev: int | None = None
 
     def __enter__(self):
         if self.n is not None:
@@ -122,7 +131,9 @@ class _numba_threads:
                 import numba
 
                 self.prev = numba.get_num_threads()
-                numba.set_num_threads(max(1, min(int(self.n), numba.config.NUMBA_NUM_THREADS)))
+                # NUMBA_NUM_THREADS is set on numba.config at import from the environment, unseen by the checker
+                cap = numba.config.NUMBA_NUM_THREADS  # type: ignore[attr-defined]
+                numba.set_num_threads(max(1, min(int(self.n), cap)))
             except ImportError:  # pragma: no cover - numba is a dependency; without it nothing to set
                 self.prev = None
         return self
@@ -176,8 +187,8 @@ def _prepare(twin: Twin, data: Record, val: Record | None, opts: DiagnoseOptions
     core = numeric_fields(twin, core)
     opts.say(f"diagnose {twin.name}: {len(data)} + {len(val)} samples" + "".join(f"; {n}" for n in range_notes))
     given = deterministic(twin)
-    saturation = {"estimation": ft.saturation_rails(data.y, simulate(given, data)),
-                  "validation": ft.saturation_rails(val.y, simulate_val(given, data, val))}
+    saturation = {"estimation": ft.saturation_rails(data.output, simulate(given, data)),
+                  "validation": ft.saturation_rails(val.output, simulate_val(given, data, val))}
     data, val = with_rails(data, saturation["estimation"]), with_rails(val, saturation["validation"])
     noise = unx.noise_level(np.concatenate([data.u, val.u]), np.concatenate([data.y, val.y]), data.fs)
     return _Inputs(twin, given, data, val, core, split_info, range_notes, saturation, t_start, substep_auto, noise)
@@ -216,10 +227,10 @@ def _fit_baseline(current: Twin, core0: list[str], inp: _Inputs, opts: DiagnoseO
     else:
         res = current.calibrate(est, val=inp.val, names=core0)
     fitted = deterministic(res.twin)
-    info = {"fitted": res.fitted, "stderr": res.stderr}
+    info: dict[str, Any] = {"fitted": res.fitted, "stderr": res.stderr}
 
     def cost(tw: Twin) -> float:
-        return sse(est.y, simulate(tw, est), skip)
+        return sse(est.output, simulate(tw, est), skip)
 
     # parameters that end at a bound: the bound widened once and the fit retried
     fitted, wide_info = realdata.refit_at_bounds(fitted, core0, est, cost, simulate, opts.say)

@@ -13,7 +13,8 @@ Families whose members the data cannot tell apart from one signature alone are l
 from __future__ import annotations
 
 import math
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 
@@ -168,10 +169,13 @@ def _even(a: dict, twin: Twin) -> tuple[float, str]:
         # band-pass input under an octave: even-order products land outside the band and its third-order skirts
         x = pb["even_db"] - max(pb["in_db"], pb["skirt_db"])
         score = max(score, _clip01((x - 3.0) / 10.0))
-        txt += (f"; residual density in the even-order product bands (difference 0–{(pb['band_hz'][1] - pb['band_hz'][0]) / 1e3:.0f} kHz "
-                f"{pb['diff_db']:.1f} dB, sum {2 * pb['band_hz'][0] / 1e3:.0f}–{2 * pb['band_hz'][1] / 1e3:.0f} kHz "
-                f"{pb['sum_db']:.1f} dB) vs the excited band {pb['in_db']:.1f} dB and the odd skirts "
-                f"{pb['skirt_db']:.1f} dB above the quietest band")
+        txt += (
+            "; residual density in the even-order product bands "
+            f"(difference 0–{(pb['band_hz'][1] - pb['band_hz'][0]) / 1e3:.0f} kHz "
+            f"{pb['diff_db']:.1f} dB, sum {2 * pb['band_hz'][0] / 1e3:.0f}–{2 * pb['band_hz'][1] / 1e3:.0f} kHz "
+            f"{pb['sum_db']:.1f} dB) vs the excited band {pb['in_db']:.1f} dB and the odd skirts "
+            f"{pb['skirt_db']:.1f} dB above the quietest band"
+        )
     return score, (f"residual correlates with the square of the input/output (|r| = {c2:.3f}, band {band:.3f}) "
                    f"more than with the cube (|r| = {c3:.3f}){txt}: even-order (asymmetric) distortion")
 
@@ -268,7 +272,9 @@ def describe_generic(a: dict[str, Any]) -> str:
     parts = [f"residual NRMSE {a['nrmse']:.4f}"]
     tr = a["trend"]
     if tr["drift_share"] > 0.2:
-        parts.append(f"{100 * tr['drift_share']:.0f} % of it is a slow trend ({tr['drift_total']:+.3g} over the record)")
+        parts.append(
+            f"{100 * tr['drift_share']:.0f} % of it is a slow trend ({tr['drift_total']:+.3g} over the record)"
+        )
     ec = a["echo"]
     if ec.get("z", 0) > 8:
         parts.append(f"a delayed copy of the output at {_us(ec['lag_s'])} (amplitude {ec['coef']:+.3f})")
@@ -287,12 +293,17 @@ def describe_generic(a: dict[str, Any]) -> str:
     for p in a["resonances"][:2]:
         parts.append(f"a spectral peak at {p['freq_hz']:.4g} Hz ({p['prominence_db']:.0f} dB)")
     b = a["bands"]
-    parts.append(f"{100 * b['in_share']:.0f} % of its power inside the excited band {b['band_hz'][0]:.4g}–{b['band_hz'][1]:.4g} Hz")
+    parts.append(
+        f"{100 * b['in_share']:.0f} % of its power inside the excited band "
+        f"{b['band_hz'][0]:.4g}–{b['band_hz'][1]:.4g} Hz"
+    )
     hy = [s for s in a["hysteresis"] if math.isfinite(s["width_measured"])]
     if hy:
         worst = max(hy, key=lambda s: abs(s["width_measured"] - s["width_simulated"]))
-        parts.append(f"loop width {100 * worst['width_measured']:.1f} % measured vs {100 * worst['width_simulated']:.1f} % "
-                     f"simulated at {worst['freq_hz']:.3g} Hz")
+        parts.append(
+            f"loop width {100 * worst['width_measured']:.1f} % measured vs {100 * worst['width_simulated']:.1f} % "
+            f"simulated at {worst['freq_hz']:.3g} Hz"
+        )
     failing = [f"{t['name']} ({t['n_failing']} lags)" for t in a["tests"]["tests"] if not t["passed"]]
     if failing:
         parts.append("correlation tests failing: " + ", ".join(failing))

@@ -8,7 +8,8 @@ delays and amplitudes, timing shifts, the path lengths an echo delay implies).
 from __future__ import annotations
 
 import math
-from typing import Any, Iterable, Sequence
+from collections.abc import Iterable, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -113,8 +114,8 @@ def echo_path_guesses(unit: str, a: dict[str, Any], twin: Twin) -> list[float]:
 def core_for(twin: Twin, core: Sequence[str]) -> list[str]:
     """Core calibration parameters that act in this configuration: a parameter that belongs only to effects
     that are switched off has no effect on the output and is not fitted."""
-    owned_off = set()
-    owned_on = set()
+    owned_off: set[str] = set()
+    owned_on: set[str] = set()
     for e, spec in twin.EFFECTS.items():
         (owned_on if e in twin.effects else owned_off).update(spec.params.values())
     return [c for c in core if c not in owned_off or c in owned_on]

@@ -11,7 +11,8 @@ and finally each echo-delay-consistent path length refined within ±5 %.
 from __future__ import annotations
 
 import itertools
-from typing import Any, Sequence
+from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 from scipy.optimize import minimize_scalar
@@ -38,7 +39,7 @@ class _Search:
 
     def cost(self, vals: dict[str, Any]) -> float:
         try:
-            return sse(self.est.y, simulate(self.tw.with_params(**vals), self.est), self.skip)
+            return sse(self.est.output, simulate(self.tw.with_params(**vals), self.est), self.skip)
         except (ConfigError, DataError, ValueError, FloatingPointError):
             return float("inf")
 
@@ -50,7 +51,7 @@ class _Search:
         return c
 
     def range(self, f: str) -> tuple[float, float]:
-        lo, hi = (float(v) for v in self.info[f].range)
+        lo, hi = self.info[f].bounds()
         return lo, hi
 
     def is_int(self, f: str) -> bool:
@@ -92,7 +93,9 @@ def _shift_guesses(s: _Search, fields: list[str]) -> dict[str, list[float]]:
     big = np.flatnonzero(np.abs(y0) > 0.05 * (np.max(np.abs(y0)) or 1.0))
     i0 = max(int(big[0]) - 16, 0) if big.size else 0
     win = slice(i0, min(m, i0 + max(128, len(est) // 16)))
-    shifts = ft.delay_candidates(part.y[win], y0[win], part.fs, max_shift_s=max(32, (win.stop - win.start) // 8) / part.fs)
+    shifts = ft.delay_candidates(
+        part.output[win], y0[win], part.fs, max_shift_s=max(32, (win.stop - win.start) // 8) / part.fs
+    )
     if not (shifts and max(abs(v) for v in shifts) * est.fs > 0.02):
         return lin_guess
     for f in fields:
@@ -177,7 +180,8 @@ def _echo_basins(s: _Search, f: str, a: dict[str, Any]) -> None:
         h = float(grid_[1] - grid_[0]) if grid_.size > 1 else 0.0
         if h > 0:
             best = s.best
-            r = minimize_scalar(lambda v: s.cost({**best, f: float(v)}), bounds=(max(lo, x - h), min(hi, x + h)),
+            r = minimize_scalar(lambda v: s.cost({**best, f: float(v)}),  # noqa: B023 (used up in this iteration)
+                                bounds=(max(lo, x - h), min(hi, x + h)),
                                 method="bounded", options={"maxiter": 12, "xatol": h * 1e-3})
             if r.fun < cx:
                 x, cx = float(r.x), float(r.fun)
@@ -195,7 +199,7 @@ def continuation_scan(tw: Twin, est: Record, vals: dict[str, Any], f: str, lo: f
 
     def cost_on(part: Record, v: float) -> float:
         try:
-            return sse(part.y, simulate(tw.with_params(**{**vals, f: float(v)}), part), min(skip, len(part) - 1))
+            return sse(part.output, simulate(tw.with_params(**{**vals, f: float(v)}), part), min(skip, len(part) - 1))
         except (ConfigError, DataError, ValueError, FloatingPointError):
             return float("inf")
 
@@ -216,7 +220,8 @@ def continuation_scan(tw: Twin, est: Record, vals: dict[str, Any], f: str, lo: f
     best_x = min(cands)[1]
     for frac in (4, 2, 1):
         part = est[: max(n // frac, min(n, 64))]
-        r = minimize_scalar(lambda x: cost_on(part, x), bounds=(max(lo, best_x - step / 4), min(hi, best_x + step / 4)),
+        r = minimize_scalar(lambda x: cost_on(part, x),  # noqa: B023 (used up in this iteration)
+                            bounds=(max(lo, best_x - step / 4), min(hi, best_x + step / 4)),
                             method="bounded", options={"maxiter": 14, "xatol": step * 1e-4})
         if r.fun <= cost_on(part, best_x):
             best_x = float(r.x)

@@ -27,7 +27,8 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from typing import Any, Iterable
+from collections.abc import Iterable
+from typing import Any
 
 import numpy as np
 
@@ -83,7 +84,8 @@ def follow_record(twin: Twin, est: Record, val: Record) -> tuple[Twin, list[str]
         h = _chosen_substep(tw, est, val)
         if h > cur * (1 + 1e-9):
             tw = tw.with_params(max_substep_s=h)
-            notes.append(f"max_substep_s {cur:g} -> {h:.3g} s: {tw.substeps(est.fs)} sub-steps per sample "
+            steps = tw.substeps(est.fs)  # type: ignore[attr-defined]  # substep_followed: a cantilever twin
+            notes.append(f"max_substep_s {cur:g} -> {h:.3g} s: {steps} sub-steps per sample "
                          "suffice for this record's bandwidth (FOH error bound ≤ 1e-4 of the span)")
     return tw, notes
 
@@ -154,7 +156,7 @@ def widened(twin: Twin, hits: list[dict[str, Any]]) -> tuple[Twin, list[dict[str
         n = h["param"]
         if info[n].unit in ("1", "") or n in new_ranges:
             continue
-        lo, hi = float(info[n].range[0]), float(info[n].range[1])
+        lo, hi = info[n].bounds()
         if lo > 0:
             lo2, hi2 = (lo / 10.0, hi) if h["side"] == "lower" else (lo, hi * 10.0)
         else:

@@ -71,7 +71,7 @@ def _judge(trials: list[Trial], stage: Stage, est: Record, val: Record, prior: T
     """p-value, gain and significance of each trial against ``stage`` (module docstring)."""
     skip = opts.skip
     for tr in trials:
-        n_eff = min(n_eff0, ft.effective_samples(val.y[skip:] - tr.yhat_val[skip:]))
+        n_eff = min(n_eff0, ft.effective_samples(val.output[skip:] - tr.yhat_val[skip:]))
         tr.p_value = significance(stage.sse_val, tr.sse_val, n_eff, tr.n_added)
         tr.gain = max(0.0, 1.0 - tr.nrmse_val / stage.nrmse_val) if stage.nrmse_val > 0 else 0.0
     level = opts.alpha / len(trials)
@@ -85,7 +85,7 @@ def _group(trials: list[Trial], twin: Twin, val: Record, opts: DiagnoseOptions) 
     """The leader and the candidates the data cannot tell from it (module docstring)."""
     skip = opts.skip
     top = trials[0]
-    n_eff_top = ft.effective_samples(val.y[skip:] - top.yhat_val[skip:])
+    n_eff_top = ft.effective_samples(val.output[skip:] - top.yhat_val[skip:])
     tol = 2.0 * math.sqrt(2.0 / max(n_eff_top, 1.0))
     e_rms_top = math.sqrt(top.sse_val / max(val.n - skip, 1))
     top_group = twin.EFFECTS[top.effect].group

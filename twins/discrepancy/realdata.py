@@ -1,10 +1,12 @@
 """The steps that make the diagnosis hold on measured records, around its loop (:func:`twins.discrepancy.diagnose`):
-the split and ranges before anything is fitted (:mod:`.splitting`, :mod:`.ranges`), the widened refit of a baseline that ends at a bound, and the verdict against the noise measured from the data
-(:mod:`.unexplained`). The default-effect re-test is :mod:`.defaults`."""
+the split and ranges before anything is fitted (:mod:`.splitting`, :mod:`.ranges`), the widened refit of a baseline that
+ends at a bound, and the verdict against the noise measured from the data (:mod:`.unexplained`). The default-effect
+re-test is :mod:`.defaults`."""
 
 from __future__ import annotations
 
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 
@@ -61,7 +63,7 @@ def final_verdict(val: Record, yhat_val: np.ndarray, causes: list[dict[str, Any]
     """(verdict, residual against noise, parameters at a bound): ``unexplained`` when the validation residual
     after the extension is far above ``noise`` (:func:`.unexplained.noise_level` of both records, measured from
     the data), else ``discrepancy`` with causes or ``none``."""
-    beyond = unx.judge(val.u, val.y, yhat_val, val.fs, skip, noise=noise)
+    beyond = unx.judge(val.u, val.output, yhat_val, val.fs, skip, noise=noise)
     verdict = "unexplained" if beyond["outside"] else ("discrepancy" if causes else "none")
     names = set(calib_info.get("fitted", {})) | {k for c in causes for k in c.get("params", {})}
     at_bound = rg.at_bounds(twin, sorted(names)) + [

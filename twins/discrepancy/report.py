@@ -112,24 +112,34 @@ def _hysteresis_png(hy0: list[dict[str, Any]], hy1: list[dict[str, Any]], path: 
 
 
 def _tests_txt(part: dict[str, Any]) -> str:
-    return ", ".join(f"{t['name']}: {'pass' if t['passed'] else 'fail ' + str(t['n_failing'])}" for t in part["tests"]["tests"])
+    return ", ".join(
+        f"{t['name']}: {'pass' if t['passed'] else 'fail ' + str(t['n_failing'])}" for t in part["tests"]["tests"]
+    )
 
 
 def _write_index(result: dict[str, Any], figures: list[str], records: list[Any], d: Path) -> Path:
     from sysid.provenance import collect
     from sysid.report import esc, image, table, write_page
 
-    causes = table(["effect", "confidence", "evidence", "params"],
-                   [[esc(c["effect"]), f"{c['confidence']:.2f}", esc(c["evidence"]), esc(json.dumps(c.get("params", {})))]
-                    for c in result["causes"]])
+    causes = table(
+        ["effect", "confidence", "evidence", "params"],
+        [
+            [esc(c["effect"]), f"{c['confidence']:.2f}", esc(c["evidence"]), esc(json.dumps(c.get("params", {})))]
+            for c in result["causes"]
+        ],
+    )
     b, x = result["baseline"], result["extended"]
     twin = result.get("twin", "")
-    body = [f"<h1>Discrepancy diagnosis — twin {esc(twin)}</h1>",
-            f"<p>Verdict: <b>{esc(result['verdict'])}</b>. Validation NRMSE {b['nrmse_val']:.4g} → {x['nrmse_val']:.4g} "
-            f"(ratio {result['gain']['nrmse_ratio']:.3f}), R² {b['r2_val']:.5f} → {x['r2_val']:.5f}.</p>",
-            f"<p>Effects before: {esc(', '.join(b['effects']) or 'none')}; after: {esc(', '.join(x['effects']) or 'none')}.</p>",
-            f"<h2>Causes</h2>{causes}",
-            f"<h2>Correlation tests (eq. 2-32), validation</h2><p>before: {esc(_tests_txt(b))}<br>after: {esc(_tests_txt(x))}</p>",
-            f"<h2>Not explained</h2><p>{esc(result['unexplained']['description'])}</p>",
-            "".join(f"<h2>{esc(f[:-4])}</h2>{image(f, style='max-width:100%')}" for f in figures)]
+    body = [
+        f"<h1>Discrepancy diagnosis — twin {esc(twin)}</h1>",
+        f"<p>Verdict: <b>{esc(result['verdict'])}</b>. Validation NRMSE {b['nrmse_val']:.4g} → {x['nrmse_val']:.4g} "
+        f"(ratio {result['gain']['nrmse_ratio']:.3f}), R² {b['r2_val']:.5f} → {x['r2_val']:.5f}.</p>",
+        f"<p>Effects before: {esc(', '.join(b['effects']) or 'none')}; "
+        f"after: {esc(', '.join(x['effects']) or 'none')}.</p>",
+        f"<h2>Causes</h2>{causes}",
+        "<h2>Correlation tests (eq. 2-32), validation</h2>"
+        f"<p>before: {esc(_tests_txt(b))}<br>after: {esc(_tests_txt(x))}</p>",
+        f"<h2>Not explained</h2><p>{esc(result['unexplained']['description'])}</p>",
+        "".join(f"<h2>{esc(f[:-4])}</h2>{image(f, style='max-width:100%')}" for f in figures),
+    ]
     return write_page(d / "index.html", f"diagnosis: {twin}", body, css=_CSS, provenance=collect(records=records))

@@ -53,8 +53,10 @@ class Diagnosis:
             "causes": self.causes,
             "baseline": base.summary(kept),
             "extended": ext.summary(kept),
-            "gain": {"nrmse_ratio": ext.nrmse_val / base.nrmse_val if base.nrmse_val > 0 else 1.0,
-                     "r2_delta": ext.r2_val - base.r2_val},
+            "gain": {
+                "nrmse_ratio": ext.nrmse_val / base.nrmse_val if base.nrmse_val > 0 else 1.0,
+                "r2_delta": ext.r2_val - base.r2_val,
+            },
             "twin": self.twin.name,
             "calibration": self.calibration,
             "saturation": self.saturation,
@@ -66,8 +68,10 @@ class Diagnosis:
             "ranges": self.ranges,
             "defaults": self.defaults,
             "at_bound": self.at_bound,
-            "analysis": {"baseline": {"estimation": _public(base.analysis_est), "validation": _public(base.analysis_val)},
-                         "extended": {"estimation": _public(ext.analysis_est), "validation": _public(ext.analysis_val)}},
+            "analysis": {
+                "baseline": {"estimation": _public(base.analysis_est), "validation": _public(base.analysis_val)},
+                "extended": {"estimation": _public(ext.analysis_est), "validation": _public(ext.analysis_val)},
+            },
             "seconds": self.seconds,
         }
         if keep_stages:

@@ -10,7 +10,8 @@ from __future__ import annotations
 import dataclasses
 import itertools
 import time
-from typing import Any, Iterable
+from collections.abc import Iterable
+from typing import Any
 
 import numpy as np
 
@@ -22,8 +23,8 @@ from twins.calibration import calibrate as ls_calibrate
 from . import features as ft
 from .fields import choice_fields, core_for, effect_fields, int_fields
 from .options import DiagnoseOptions
-from .prescan import prescan
 from .prediction import simulate, simulate_val, sse
+from .prescan import prescan
 
 __all__ = ["Trial", "run_trial", "Stage", "make_stage"]
 
@@ -112,7 +113,7 @@ def _fit(base: Twin, tw: Twin, effect: str, est: Record, val: Record, core: list
     return Trial(effect=effect, twin=fit_tw, fitted=fitted,
                  effect_params={f: fitted.get(f, getattr(fit_tw.params, f)) for f in eff_all},
                  stderr={f: stderr.get(f, float("nan")) for f in eff_fields},
-                 sse_est=sse(est.y, ye, opts.skip), sse_val=sse(val.y, yv, opts.skip), yhat_val=yv,
+                 sse_est=sse(est.output, ye, opts.skip), sse_val=sse(val.output, yv, opts.skip), yhat_val=yv,
                  nrmse_val=nrmse(val.y, yv, opts.skip) if ok else float("inf"),
                  r2_val=r2(val.y, yv, opts.skip) if ok else float("-inf"),
                  seconds=time.perf_counter() - t0, n_added=max(len(eff_fields), 1), base=base)
@@ -132,14 +133,19 @@ class Stage:
     sse_val: float
 
     def summary(self, also: Iterable[str] = ()) -> dict[str, Any]:
-        return {"effects": sorted(set(self.twin.effects) | set(also)), "r2_val": self.r2_val, "nrmse_val": self.nrmse_val,
-                "tests": ft.tests_summary(self.analysis_val["_tests_full"])}
+        return {
+            "effects": sorted(set(self.twin.effects) | set(also)),
+            "r2_val": self.r2_val,
+            "nrmse_val": self.nrmse_val,
+            "tests": ft.tests_summary(self.analysis_val["_tests_full"]),
+        }
 
 
 def make_stage(twin: Twin, est: Record, val: Record, opts: DiagnoseOptions) -> Stage:
     """Simulate both records with ``twin`` and analyse both residuals."""
     ye = simulate(twin, est)
     yv = simulate_val(twin, est, val)
-    ae = ft.analyse(est.u, est.y, ye, est.fs, est.meta, max_lag=opts.max_lag, max_echo_s=opts.max_echo_s)
-    av = ft.analyse(val.u, val.y, yv, val.fs, val.meta, max_lag=opts.max_lag, max_echo_s=opts.max_echo_s)
-    return Stage(twin, ye, yv, ae, av, nrmse(val.y, yv, opts.skip), r2(val.y, yv, opts.skip), sse(val.y, yv, opts.skip))
+    ae = ft.analyse(est.u, est.output, ye, est.fs, est.meta, max_lag=opts.max_lag, max_echo_s=opts.max_echo_s)
+    av = ft.analyse(val.u, val.output, yv, val.fs, val.meta, max_lag=opts.max_lag, max_echo_s=opts.max_echo_s)
+    yval = val.output
+    return Stage(twin, ye, yv, ae, av, nrmse(yval, yv, opts.skip), r2(yval, yv, opts.skip), sse(yval, yv, opts.skip))

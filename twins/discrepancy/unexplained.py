@@ -85,7 +85,7 @@ def noise_level(u: np.ndarray, y: np.ndarray, fs: float) -> dict[str, Any]:
         est["second_diff"] = (1.4826 * mad) ** 2 / 6.0
     pos = {k: v for k, v in est.items() if v > 0 and math.isfinite(v)}
     if pos:
-        src = min(pos, key=pos.get)
+        src = min(pos, key=lambda k: pos[k])
         return {"sigma2": pos[src], "source": src, "estimates": est}
     # exactly repeatable (noise-free, e.g. quantised and constant) data: a tiny floor from the value spacing
     return {"sigma2": 0.0, "source": "none", "estimates": est}

@@ -2,8 +2,9 @@
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any
 
 import numpy as np
 
@@ -14,7 +15,8 @@ __all__ = ["fmu_simulate", "relative_rms"]
 
 def fmu_simulate(path: str | Path, u: np.ndarray, fs: float, start_values: Mapping[str, Any] | None = None,
                  model_description=None) -> np.ndarray:
-    """Output of the FMU at ``path`` (a ``.fmu`` or a folder it was extracted to) for the input samples ``u`` at ``fs`` [Hz], aligned with ``simulate``.
+    """Output of the FMU at ``path`` (a ``.fmu`` or a folder it was extracted to) for the input samples ``u`` at ``fs``
+    [Hz], aligned with ``simulate``.
 
     fmpy co-simulates with communication step ``output_interval = 1/fs`` (physics notes C.4) for
     ``len(u)`` steps; the FMU's output at ``t_{k+1}`` is the twin's sample ``k`` (see

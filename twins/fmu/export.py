@@ -22,8 +22,9 @@ import shutil
 import sys
 import tempfile
 import zipfile
+from collections.abc import Iterable
 from pathlib import Path
-from typing import Any, Iterable
+from typing import Any
 
 from sysid.errors import ConfigError
 from sysid.jsonio import json_default as _json_default

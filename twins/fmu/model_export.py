@@ -12,8 +12,8 @@ from __future__ import annotations
 
 import json
 import tempfile
+from collections.abc import Iterable
 from pathlib import Path
-from typing import Iterable
 
 from sysid.errors import ConfigError
 from sysid.modelfile import write_model

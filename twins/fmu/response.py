@@ -36,7 +36,7 @@ import scipy.fft
 
 __all__ = ["impulse_response", "sparse_segments", "plan", "ResponseCore", "prepare_response_core", "check_accuracy"]
 
-DEFAULTS = {"energy_tol": 1e-14, "block_min": 64, "block_max": 8192, "merge_gap": 1024}
+DEFAULTS: dict[str, Any] = {"energy_tol": 1e-14, "block_min": 64, "block_max": 8192, "merge_gap": 1024}
 
 
 def impulse_response(twin, fs: float, tail_tol: float = 1e-12, n_min: int = 2 ** 15,
@@ -154,7 +154,7 @@ class ResponseCore:
         self.reset()
 
     @classmethod
-    def for_twin(cls, twin, fs: float, core: dict[str, Any] | None = None, resources=None) -> "ResponseCore":
+    def for_twin(cls, twin, fs: float, core: dict[str, Any] | None = None, resources=None) -> ResponseCore:
         core = core or {}
         opts = {k: core.get(k, v) for k, v in DEFAULTS.items() if k != "merge_gap"}
         return cls(impulse_response(twin, fs), amplifier_of(twin), measure_of(twin, fs), fs, twin.seed, **opts)
@@ -167,7 +167,7 @@ class ResponseCore:
         self.acc = np.zeros(self.n_acc)
         self.apos = 0
         self.rng = np.random.default_rng(self.seed)
-        self._u = None
+        self._u: float | None = None
         self._a = 0.0
 
     def step(self, u: float) -> float:
@@ -223,8 +223,8 @@ class ResponseCore:
 
 def amplifier_of(twin):
     """``twin.amplifier`` as a float -> float function (identity when the twin has none): the twin's
-    ``sample_amplifier()`` where it gives one, else ``amplifier`` itself, which it calls on a Python float when that gives the same value as on a one-element array (numpy ufunc
-    code does, ~1 us), else on a one-element array."""
+    ``sample_amplifier()`` where it gives one, else ``amplifier`` itself, which it calls on a Python float when that
+    gives the same value as on a one-element array (numpy ufunc code does, ~1 us), else on a one-element array."""
     own = getattr(twin, "sample_amplifier", None)
     fn = own() if own is not None else None
     if fn is not None:  # the twin's own per-sample form (same arithmetic, no array per call)

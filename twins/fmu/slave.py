@@ -28,7 +28,6 @@ from pythonfmu.enums import Fmi2Status
 
 from twins.fmu.spec import CONFIG_NAME, FORMAT, decode_value
 
-
 __all__ = ["FastIO", "PiezoSlave", "TwinSlave", "load_fmu_config", "release_wrapper_state"]
 
 #: relative tolerance on ``step_size * fs`` being a whole number of samples
@@ -235,7 +234,7 @@ class PiezoSlave(FastIO, Fmi2Slave):
             Real("y", causality=Fmi2Causality.output, variability=Fmi2Variability.discrete,
                  initial=Fmi2Initial.exact, description=y_text), unit=units.get("y") or None))
         self._check_io_refs()
-        self._step_samples = (None, 0)  # (communication step, samples per step) last checked
+        self._step_samples: tuple[float | None, int] = (None, 0)  # (communication step, samples per step) last checked
 
     def to_xml(self, model_options=dict()) -> Element:  # noqa: B006 (signature of the base class)
         root = super().to_xml(model_options)

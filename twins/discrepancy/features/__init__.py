@@ -47,10 +47,25 @@ from scipy import signal as sps
 from sysid.residuals import correlation_tests, tests_summary
 
 from .levels import _segments, clip_to_rails, hysteresis_by_segment, quantization_step, saturation_rails
-from .spectra import (band_powers, excited_band, harmonics, nonlinear_correlation, odd_even_lines, product_bands,
-                      resonance_peaks)
-from .timing import (delay_candidates, delay_estimate, early_input_correlation, effective_samples, io_delay,
-                     lag_regression, step_drift, trend)
+from .spectra import (
+    band_powers,
+    excited_band,
+    harmonics,
+    nonlinear_correlation,
+    odd_even_lines,
+    product_bands,
+    resonance_peaks,
+)
+from .timing import (
+    delay_candidates,
+    delay_estimate,
+    early_input_correlation,
+    effective_samples,
+    io_delay,
+    lag_regression,
+    step_drift,
+    trend,
+)
 
 __all__ = [
     "trend", "step_drift", "lag_regression", "delay_estimate", "band_powers", "harmonics", "odd_even_lines",

@@ -135,7 +135,9 @@ def _loop_metrics(u: np.ndarray, y: np.ndarray, f: float, fs: float) -> tuple[fl
     return float(np.max(gaps) / span), lag
 
 
-def hysteresis_by_segment(u: np.ndarray, y: np.ndarray, ysim: np.ndarray, fs: float, meta: dict[str, Any]) -> list[dict[str, float]]:
+def hysteresis_by_segment(
+    u: np.ndarray, y: np.ndarray, ysim: np.ndarray, fs: float, meta: dict[str, Any]
+) -> list[dict[str, float]]:
     """Loop width (share of span) and phase lag [deg], measured and simulated, for each sine segment listed in
     ``meta['segments']`` (dicts with ``start``, ``stop`` and the frequency ``freq_hz``)."""
     out = []

@@ -78,9 +78,14 @@ def product_bands(e: np.ndarray, u: np.ndarray, fs: float) -> dict[str, Any]:
         sel = (f >= lo) & (f <= hi)
         return float(np.mean(p[sel])) if sel.sum() >= 2 else float("nan")
 
-    bands = {"in": dens(f0 + guard, f1 - guard), "diff": dens(max(0.05 * b, f[1] if f.size > 1 else 0.0), b - guard),
-             "sum": dens(2 * f0 + guard, min(2 * f1, 0.98 * nyq)),
-             "skirt": np.nanmean([dens(2 * f0 - f1 + guard, f0 - guard), dens(f1 + guard, min(2 * f1 - f0, 2 * f0) - guard)])}
+    bands: dict[str, float] = {
+        "in": dens(f0 + guard, f1 - guard),
+        "diff": dens(max(0.05 * b, f[1] if f.size > 1 else 0.0), b - guard),
+        "sum": dens(2 * f0 + guard, min(2 * f1, 0.98 * nyq)),
+        "skirt": float(np.nanmean(
+            [dens(2 * f0 - f1 + guard, f0 - guard), dens(f1 + guard, min(2 * f1 - f0, 2 * f0) - guard)]
+        )),
+    }
     vals = [v for v in bands.values() if np.isfinite(v) and v > 0]
     if len(vals) < 3:
         return {"valid": False, "even_db": 0.0, "in_db": 0.0, "skirt_db": 0.0}
@@ -195,7 +200,9 @@ def nonlinear_correlation(e: np.ndarray, u: np.ndarray, ysim: np.ndarray, max_la
     return out
 
 
-def resonance_peaks(e: np.ndarray, y: np.ndarray, fs: float, min_db: float = 10.0, max_peaks: int = 3) -> list[dict[str, float]]:
+def resonance_peaks(
+    e: np.ndarray, y: np.ndarray, fs: float, min_db: float = 10.0, max_peaks: int = 3
+) -> list[dict[str, float]]:
     """Narrow peaks of the residual PSD that rise ``min_db`` above its running median (unmodelled modes).
 
     Each peak: frequency [Hz], prominence [dB] above the local median, and residual-to-output power ratio

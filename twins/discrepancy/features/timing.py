@@ -66,7 +66,9 @@ def trend(e: np.ndarray, fs: float) -> dict[str, float]:
             "drift_share": float(np.var(fit - fit.mean()) / var)}
 
 
-def step_drift(u: np.ndarray, e: np.ndarray, fs: float, min_hold_s: float = 0.05, rel_step: float = 0.2) -> dict[str, Any]:
+def step_drift(
+    u: np.ndarray, e: np.ndarray, fs: float, min_hold_s: float = 0.05, rel_step: float = 0.2
+) -> dict[str, Any]:
     """Slow residual drift after input steps, as creep would leave it.
 
     Steps are jumps of the input larger than ``rel_step`` of its range followed by a hold of at least
