@@ -113,3 +113,25 @@ def test_every_deterministic_identifier_on_the_quick_datasets_does_not_depend_on
     """Every pair of a deterministic identifier the quick check scores, under two kernel sets: about 4
     CPU-minutes per kernel set."""
     _compare(quick_pairs())
+
+
+def test_score_runs_record_the_blas_kernel_set():
+    from benchmarks.scoring import environment
+
+    env = environment()
+    assert env["blas_kernels"].startswith("openblas:") and env["OPENBLAS_CORETYPE"] == os.environ.get(
+        "OPENBLAS_CORETYPE", "")
+
+
+def test_check_warns_in_one_line_when_versions_differ_from_the_floors():
+    from benchmarks.scoring import environment, load_baselines, version_mismatch
+
+    base = load_baselines()
+    measured = base["provenance"]["quick"][-1]["versions"]
+    same = {"mode": "quick", "environment": {"versions": dict(measured)}}
+    assert version_mismatch(same, base) is None
+    other = {"mode": "quick", "environment": {"versions": {**measured, "numpy": "1.0.0"}}}
+    line = version_mismatch(other, base)
+    assert line is not None and "\n" not in line and f"numpy 1.0.0 (floors: {measured['numpy']})" in line
+    assert "scipy" not in line
+    assert version_mismatch({"mode": "quick", "environment": environment()}, {}) is None  # no provenance: no claim
