@@ -54,3 +54,11 @@ def test_cli_bad_input(delayed_files, tmp_path):
     assert r.returncode == 2 and "unknown effect" in r.stderr and "Traceback" not in r.stderr
     r = _cli("cantilever", "--data", str(tmp_path / "missing.npz"))
     assert r.returncode == 2 and "Traceback" not in r.stderr
+
+
+def test_cli_refuses_a_skip_that_leaves_nothing_to_score(delayed_files):
+    """A skip past the record's end is refused with one line (it ended in numpy's gradient error before)."""
+    d = delayed_files
+    r = _cli("cantilever", "--data", str(d / "est.npz"), "--skip", "999999999", "--max-rounds", "0", "--no-calibrate")
+    assert r.returncode == 2 and "Traceback" not in r.stderr, r.stderr
+    assert "skip=999999999 leaves 0 of the" in r.stderr and len(r.stderr.strip().splitlines()) == 1

@@ -115,6 +115,7 @@ def run_diagnosis(twin: Twin, data: Record, val: Record | None = None, max_round
         return _conclude(inp, cal, base, ext, opts)
 
 
+MIN_SCORED_SAMPLES = 32  # fewest samples after skip: residual gradients, spectra and correlation lags need a record
 _PARALLEL_FROM = 1 << 20  # samples (estimation + validation) from which numba's own thread count is kept
 
 
@@ -179,6 +180,11 @@ def _prepare(twin: Twin, data: Record, val: Record | None, opts: DiagnoseOptions
         raise DataError(f"{data.source}: diagnose handles single-input single-output records")
     if abs(data.fs - val.fs) > 1e-9 * data.fs:
         raise DataError(f"estimation and validation records have different fs ({data.fs} and {val.fs} Hz)")
+    short = min((len(data), "estimation"), (len(val), "validation"))
+    if short[0] - opts.skip < MIN_SCORED_SAMPLES:
+        raise DataError(f"skip={opts.skip} leaves {max(short[0] - opts.skip, 0)} of the {short[0]} {short[1]} samples "
+                        f"to score; the diagnosis needs at least {MIN_SCORED_SAMPLES} (skip <= "
+                        f"{max(short[0] - MIN_SCORED_SAMPLES, 0)})")
     unknown = [e for e in (opts.candidates or []) if e not in twin.EFFECTS]
     if unknown:
         raise ConfigError(f"unknown effect {unknown[0]!r} for twin {twin.name}; valid: {', '.join(twin.EFFECTS)}")
