@@ -25,8 +25,10 @@ run: $(STAMP)
 run-quick: $(STAMP)
 	$(VENV)/bin/piezotwin run --quick
 
+# Two pytest-xdist workers (the CI machine's two cores); tests that share a server or a file are grouped on one
+# worker with @pytest.mark.xdist_group (--dist loadgroup). `make test-all` runs everything in one process.
 test: $(STAMP)
-	$(PY) -m pytest -q
+	$(PY) -m pytest -q -n 2 --dist loadgroup
 
 test-all: $(STAMP)
 	$(PY) -m pytest -q -m "not perf"
