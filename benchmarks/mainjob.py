@@ -32,7 +32,7 @@ from benchmarks.mainjob_score import stage_identify_twins, stage_lab
 from sysid.plots import pyplot
 from sysid.report import esc, figure, table, write_page
 
-__all__ = ["Context", "StageSkipped", "STAGES", "run_main_job"]
+__all__ = ["STAGES", "Context", "StageSkipped", "floor_counts", "run_main_job"]
 
 
 log = logging.getLogger(__name__)

@@ -70,7 +70,7 @@ def _score_stage(ctx: Context, datasets: list[str], key: str, title: str, syside
     ctx.data[key] = run
     sub = ctx.report_dir / key
     paths = scoring.write_report(run, sub)
-    for k, p in paths.items():
+    for p in paths.values():
         if p.suffix == ".png":
             ctx.figures.append((f"{title}: {p.stem.replace('_', ' ')}", f"{key}/{p.name}"))
     base = scoring.load_baselines()

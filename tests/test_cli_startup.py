@@ -31,7 +31,7 @@ def _loaded(tmp_path: Path, args: list[str]) -> tuple[int, set[str]]:
     """Run ``piezotwin ARGS`` in a fresh interpreter; its exit code and the modules it had imported."""
     report = tmp_path / "modules.json"
     proc = subprocess.run([sys.executable, "-c", _PROBE, str(report), *args], cwd=REPO, capture_output=True, text=True,
-                          timeout=120)
+                          timeout=120, check=False)
     assert report.exists(), proc.stderr
     data = json.loads(report.read_text())
     return data["rc"], set(data["modules"])

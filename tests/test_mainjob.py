@@ -87,7 +87,7 @@ def test_stored_records_are_shown_as_stored_with_date_machine_and_command(tmp_pa
     assert mainjob_score.stored_records(ctx) == len(stored) >= 5
     title, html = ctx.sections[-1]
     assert "stored" in title and "not recomputed" in title
-    for dname, e in stored.items():
+    for e in stored.values():
         assert e["command"] in html and e["measured"]["date"] in html
         assert e["measured"]["machine"]["cpu"] in html
     assert [c for _, _, c in ctx.left] == [f"piezotwin records --datasets {d}" for d in stored]
