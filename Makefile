@@ -43,8 +43,11 @@ run: $(STAMP)
 run-quick: $(STAMP)
 	$(VENV)/bin/piezotwin run --quick
 
+# Two pytest-xdist workers (the CI machine's two cores), one test file at a time per worker (--dist loadfile): a
+# file's module fixtures (trained models, a compiled FMU host, exported FMUs) are built once, as in a serial run.
+# `make test-all` runs everything in one process.
 test: $(STAMP)
-	$(PY) -m pytest -q
+	$(PY) -m pytest -q -n 2 --dist loadfile
 
 test-all: $(STAMP)
 	$(PY) -m pytest -q -m "not perf"

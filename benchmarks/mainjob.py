@@ -4,13 +4,17 @@
 Stages, in order: the dissertation's excitation signals; the twins' datasets (cantilever thesis-multisine →
 thesis-sines, acoustic multisine → 1 ms chirp after the preprocessing recipe; with and without measurement
 noise); figures of the twins (hysteresis loops, spectra, the VNA-style response); every identifier on the twin
-datasets at CPU budgets; every identifier on the recorded lab benchmarks beside the published numbers and
-SysIdentPy; one discrepancy diagnosis; a distance/temperature sweep of the acoustic channel; then
+datasets; every identifier on the recorded lab benchmarks beside the published numbers, SysIdentPy and the
+stored records; one discrepancy diagnosis; a distance/temperature sweep of the acoustic channel; then
 ``report/index.html`` with every figure (relative paths, opens without a server).
 
 A stage whose parts are not built yet raises :class:`StageSkipped`; the job goes on and says so. A stage that
 fails is reported as failed (with the error) and the job goes on; ``piezotwin run`` then exits 1.
-Budgets: the default run is sized for ≤ 10 minutes on 2 cores, ``--quick`` for ≤ 2 minutes.
+Budgets: the default run is sized for ≤ 10 minutes on 2 cores, ``--quick`` for ≤ 2 minutes. The identifiers are
+fitted at the quick check's budgets and judged against the floors measured at those budgets; the records table's
+full-budget rows are shown as stored (:mod:`benchmarks.mainjob_score`). Each stage logs its time; the report's
+header says how long the run took, how many rows are below their floor, and names everything the run did not
+recompute with the command that does.
 """
 
 from __future__ import annotations
@@ -19,41 +23,20 @@ import logging
 import time
 import traceback
 from collections.abc import Callable
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from sysid.plots import pyplot, save_and_close
+from benchmarks.mainjob_context import Context, StageSkipped
+from benchmarks.mainjob_score import stage_identify_twins, stage_lab
+from sysid.plots import pyplot
 from sysid.report import esc, figure, table, write_page
 
-
-class StageSkipped(Exception):
-    """Raised by a stage whose prerequisites are not available; the message says why."""
+__all__ = ["STAGES", "Context", "StageSkipped", "floor_counts", "run_main_job"]
 
 
 log = logging.getLogger(__name__)
-
-
-@dataclass
-class Context:
-    report_dir: Path
-    quick: bool
-    figures: list[tuple[str, str]] = field(default_factory=list)  # (title, relative png path), in stage order
-    sections: list[tuple[str, str]] = field(default_factory=list)  # (title, html)
-    data: dict[str, Any] = field(default_factory=dict)
-    verbose: bool = True
-
-    def save_figure(self, fig, name: str, title: str) -> str:
-        """Save a matplotlib figure as ``fig/<name>.png`` under the report folder; returns the relative path."""
-        rel = f"fig/{name}.png"
-        save_and_close(fig, self.report_dir / rel, dpi=80)
-        self.figures.append((title, rel))
-        return rel
-
-    def section(self, title: str, content_html: str) -> None:
-        self.sections.append((title, content_html))
 
 
 def _not_built(exc: Exception, what: str) -> StageSkipped:
@@ -142,9 +125,8 @@ def _stage_cantilever_figures(ctx: Context) -> str:
     ax[1].set_xlabel("frequency [Hz]")
     fig.suptitle("cantilever twin: thesis-multisine spectra (Figure 3.4 analogue)")
     fig.tight_layout()
-    ctx.save_figure(
-        fig, "cantilever_multisine_spectra", "Cantilever twin: input and output spectra of the thesis multisine"
-    )
+    ctx.save_figure(fig, "cantilever_multisine_spectra",
+                    "Cantilever twin: input and output spectra of the thesis multisine")
     widths = []
     for seg in segs[:2]:
         last = whole_periods(len(seg), seg.fs, seg.meta["segment"].get("freq_hz"))
@@ -194,148 +176,10 @@ def _stage_acoustic_figures(ctx: Context) -> str:
     fig.tight_layout()
     ctx.save_figure(fig, "acoustic_vna", "Acoustic twin: magnitude response, useful band shaded")
     m = tw.spectrum_metrics()
-    return (f"spectra of {len(ds.est)}/{len(next(iter(ds.tests.values())))} preprocessed samples; peak "
-            f"{m['peak_frequency_hz'] / 1e3:.0f} kHz, -3 dB bandwidth {m['bandwidth_hz'] / 1e3:.0f} kHz")
-
-
-def _score_stage(ctx: Context, datasets: list[str], key: str, title: str, sysidentpy: bool) -> str:
-    from benchmarks import scoring
-    from sysid.registry import available_identifiers
-
-    idents = available_identifiers()
-    if not idents:
-        raise StageSkipped("no identifier built yet")
-    if not datasets:
-        raise StageSkipped("no dataset available")
-    # every available identifier, as the regression check selects them (quick mode leaves out the identifiers of
-    # QUICK_SKIP_IDENTIFIERS and the pairs outside QUICK_ONLY_DATASETS, listed under `skipped` with the reason)
-    run = scoring.score(None, datasets, quick=ctx.quick, sysidentpy=sysidentpy, progress=ctx.verbose)
-    idents = run.selection.get("identifiers", idents)
-    ctx.data[key] = run
-    sub = ctx.report_dir / key
-    paths = scoring.write_report(run, sub)
-    for p in paths.values():
-        if p.suffix == ".png":
-            ctx.figures.append((f"{title}: {p.stem.replace('_', ' ')}", f"{key}/{p.name}"))
-    failures = scoring.check(run)
-    ctx.data[f"{key}_check"] = failures
-    scores = _html_score_table(run)
-    chk = ("<p>Accuracy floors (benchmarks/baselines.json): all met.</p>" if not failures else
-           "<p><b>Below their floor:</b></p><ul>" + "".join(f"<li>{esc(f)}</li>" for f in failures) + "</ul>")
-    skipped = "".join(f"<li>{esc(' on '.join(x for x in (s.get('identifier'), s.get('dataset')) if x))}: "
-                      f"{esc(s['reason'])}</li>" for s in run.skipped)
-    ctx.section(title, scores + chk + (f"<p>Skipped:</p><ul>{skipped}</ul>" if skipped else "")
-                + f"<p>JSON: <a href='{key}/score.json'>{key}/score.json</a>, "
-                f"Markdown: <a href='{key}/score.md'>{key}/score.md</a></p>")
-    ok = [r for r in run.rows if r.get("status") == "ok"]
-    best: dict[tuple[str, str], dict[str, Any]] = {}
-    for r in ok:
-        k2 = (r["dataset"], r["test"])
-        if k2 not in best or r["free_run"]["nrmse"] < best[k2]["free_run"]["nrmse"]:
-            best[k2] = r
-    summary = ", ".join(f"{d}/{t}: {r['identifier']} NRMSE {r['free_run']['nrmse']:.3g}" for (d, t), r in best.items())
-    return (f"{len(run.rows)} rows ({len(idents)} identifiers x {len(datasets)} datasets) in {run.seconds:.0f} s; "
-            f"{len(failures)} below floor; best free run: {summary}")
-
-
-_SCORE_HEADER = ["dataset / test", "identifier", "free-run RMSE", "free-run R²", "one-step RMSE", "fit [s]", "params",
-                 "SysIdentPy FROLS", "linear baseline", "best published", "SysIdentPy published"]
-
-
-def _html_score_table(run) -> str:
-    from benchmarks.scoring import _fmt
-
-    sidp = {(r["dataset"], r["test"]): r for r in run.sysidentpy}
-
-    def ref_cell(r: dict[str, Any], kind: str) -> str:
-        v = (r.get("references") or {}).get(kind)
-        return f"{_fmt(v['value'])} ({esc(v['model'])})" if v else ""
-
-    rows = []
-    for r in run.rows:
-        s = sidp.get((r["dataset"], r["test"]))
-        st = (
-            ""
-            if s is None
-            else (_fmt(s["free_run"]["rmse"]) if s.get("status") == "ok" else f"skipped: {esc(s.get('reason', ''))}")
-        )
-        if r.get("status") == "error":
-            cells = [f"{r['dataset']} / {r['test']}", r["identifier"], "error: " + esc(r.get("message", "")),
-                     "", "", "", ""]
-        else:
-            cells = [f"{r['dataset']} / {r['test']}", r["identifier"],
-                     f"{_fmt(r['free_run']['rmse'])} {esc(r['units'])}", _fmt(r["free_run"]["r2"]),
-                     _fmt(r["one_step"]["rmse"]), f"{r['fit_seconds']:.2f}", str(r["n_parameters"])]
-        rows.append(cells + [st] + [ref_cell(r, k) for k in ("linear_baseline", "best_published", "sysidentpy")])
-    return table(_SCORE_HEADER, rows, cls="score")
-
-
-def _stage_identify_twins(ctx: Context) -> str:
-    names = list(ctx.data.get("twin_datasets", {}))
-    if ctx.quick:
-        names = [n for n in names if not n.endswith("-clean")]
-    if not names:
-        raise StageSkipped("no twin dataset available")
-    msg = _score_stage(ctx, names, "twins", "Identifiers on the twin datasets", sysidentpy=False)
-    _residual_figure(ctx)
-    return msg
-
-
-def _residual_figure(ctx: Context) -> None:
-    """Residual correlation tests (eq. 2-32, Figure 5.6 analogue) of the best one-step model on a twin test."""
-    try:
-        from sysid.residuals import correlation_tests
-    except ImportError:
-        return
-    run = ctx.data.get("twins")
-    if run is None:
-        return
-    ok = [r for r in run.rows if r.get("status") == "ok" and np.isfinite(r["one_step"]["rmse"] or np.nan)]
-    if not ok:
-        return
-    r = min(ok, key=lambda x: x["one_step"]["nrmse"])
-    from benchmarks import scoring
-
-    ds = run.datasets[r["dataset"]]
-    # residual tests on the estimation record (as the dissertation's Figure 5.6), first 20 000 samples
-    rec = ds.est_records[0]
-    rec = rec[: min(len(rec), 20000)]
-    cls_params = dict(r["params"])
-    norm = bool(cls_params.pop(scoring.NORMALISE, False))
-    from sysid.registry import get_identifier
-
-    model = get_identifier(r["identifier"])(**cls_params)
-    if norm:
-        model = scoring.Normalised(model)
-    model.fit(ds.est)
-    yhat = model.predict(rec, horizon=1)
-    skip = max(ds.init_samples, int(getattr(model, "max_lag_", 0)))
-    e = rec.y[skip:] - yhat[skip:]
-    res = correlation_tests(e, rec.u[skip:], max_lag=20)
-    plt = pyplot()
-    from sysid.plots import draw_correlation_test
-
-    fig, axes = plt.subplots(1, len(res["tests"]), figsize=(13, 2.8))
-    for ax, t in zip(np.atleast_1d(axes), res["tests"]):
-        draw_correlation_test(ax, t)  # y-axis scaled to the data, band shaded
-    fig.suptitle(
-        f"residual tests (95 % band): {r['identifier']} one-step residuals on the {r['dataset']} estimation data",
-        fontsize=10,
+    return (
+        f"spectra of {len(ds.est)}/{len(next(iter(ds.tests.values())))} preprocessed samples; peak "
+        f"{m['peak_frequency_hz'] / 1e3:.0f} kHz, -3 dB bandwidth {m['bandwidth_hz'] / 1e3:.0f} kHz"
     )
-    fig.tight_layout()
-    ctx.save_figure(
-        fig,
-        "residual_tests",
-        f"Residual correlation tests (eq. 2-32): {r['identifier']} on the {r['dataset']} estimation data",
-    )
-
-
-def _stage_lab(ctx: Context) -> str:
-    from benchmarks import scoring
-    from benchmarks.datasets import lab
-
-    names = list(scoring.QUICK_DATASETS) if ctx.quick else list(lab.LAB_SPECS)
-    return _score_stage(ctx, names, "lab", "Identifiers on recorded lab benchmarks", sysidentpy=True)
 
 
 def _stage_discrepancy(ctx: Context) -> str:
@@ -419,17 +263,37 @@ def _stage_sweep(ctx: Context) -> str:
     ax3.set_ylabel("time of flight [µs]", color="C1")
     fig.suptitle("acoustic twin: distance and temperature sweeps")
     fig.tight_layout()
-    ctx.save_figure(fig, "acoustic_sweep",
-                    "Acoustic twin: response, peak gain and time of flight against distance and temperature")
-    tab = table(["parameter", "value", "peak frequency [kHz]", "peak gain [dB]", "-3 dB bandwidth [kHz]",
-                 "time of flight [µs]"],
-                [[p, f"{v:g}", f"{m['peak_frequency_hz'] / 1e3:.1f}", f"{m['peak_gain_db']:.2f}",
-                  f"{m['bandwidth_hz'] / 1e3:.1f}", f"{m['time_of_flight_s'] * 1e6:.2f}"] for p, v, m in rows],
-                cls="score")
+    ctx.save_figure(
+        fig, "acoustic_sweep", "Acoustic twin: response, peak gain and time of flight against distance and temperature"
+    )
+    tab = table(
+        [
+            "parameter",
+            "value",
+            "peak frequency [kHz]",
+            "peak gain [dB]",
+            "-3 dB bandwidth [kHz]",
+            "time of flight [µs]",
+        ],
+        [
+            [
+                p,
+                f"{v:g}",
+                f"{m['peak_frequency_hz'] / 1e3:.1f}",
+                f"{m['peak_gain_db']:.2f}",
+                f"{m['bandwidth_hz'] / 1e3:.1f}",
+                f"{m['time_of_flight_s'] * 1e6:.2f}",
+            ]
+            for p, v, m in rows
+        ],
+        cls="score",
+    )
     ctx.section("Acoustic channel sweep", tab)
     tof = [m["time_of_flight_s"] for _, m in dd]
-    return (f"{len(distances)} distances, {len(temps)} temperatures; time of flight {tof[0] * 1e6:.1f} -> "
-            f"{tof[-1] * 1e6:.1f} µs over {distances[0] * 100:g}-{distances[-1] * 100:g} cm")
+    return (
+        f"{len(distances)} distances, {len(temps)} temperatures; time of flight {tof[0] * 1e6:.1f} -> "
+        f"{tof[-1] * 1e6:.1f} µs over {distances[0] * 100:g}-{distances[-1] * 100:g} cm"
+    )
 
 
 STAGES: list[tuple[str, Callable[[Context], str]]] = [
@@ -437,26 +301,66 @@ STAGES: list[tuple[str, Callable[[Context], str]]] = [
     ("twin datasets", _stage_twin_datasets),
     ("cantilever figures", _stage_cantilever_figures),
     ("acoustic figures", _stage_acoustic_figures),
-    ("identify twin datasets", _stage_identify_twins),
-    ("score lab benchmarks", _stage_lab),
+    ("identify twin datasets", stage_identify_twins),
+    ("score lab benchmarks", stage_lab),
     ("discrepancy diagnosis", _stage_discrepancy),
     ("acoustic sweep", _stage_sweep),
 ]
 
 
 # ---------------------------------------------------------------------------------------------- report
-_CSS = ("body{font-family:sans-serif;max-width:1200px;margin:1em auto;padding:0 1em}"
-        "figure{margin:1em 0}.skipped{color:#888}.failed{color:#b00}")
+_CSS = (
+    "body{font-family:sans-serif;max-width:1200px;margin:1em auto;padding:0 1em}"
+    "figure{margin:1em 0}.skipped{color:#888}.failed{color:#b00}"
+)
 
 
-def _write_report(ctx: Context, rows: list[dict[str, Any]]) -> Path:
+def _minutes(seconds: float) -> str:
+    return f"{int(seconds // 60)} min {seconds % 60:.0f} s"
+
+
+def floor_counts(ctx: Context) -> dict[str, int]:
+    """Rows of the scoring stages judged against a floor at their budget, below it, and not compared (no floor)."""
+    keys = [k for k in ("twins", "lab") if f"{k}_compared" in ctx.data]
+    return {
+        "compared": sum(ctx.data[f"{k}_compared"] for k in keys),
+        "below_floor": sum(len(ctx.data[f"{k}_check"]) for k in keys),
+        "not_compared": sum(len(ctx.data[f"{k}_not_compared"]) for k in keys),
+    }
+
+
+def _header(ctx: Context, seconds: float | None) -> str:
+    """How long the run took, how its rows compare with the floors, and what it left to other commands."""
+    mode = "quick" if ctx.quick else "default"
+    took = f" The run took {_minutes(seconds)}." if seconds is not None else ""
+    n = floor_counts(ctx)
+    floors = (
+        f"<p>Rows judged against a floor measured at the same budget: {n['compared']}, below their floor: "
+        f"<b>{n['below_floor']}</b>; without a floor at that budget (not compared): {n['not_compared']}.</p>"
+        if n["compared"] or n["not_compared"]
+        else ""
+    )
+    left = (
+        (
+            "<p>Not recomputed by this run (stored or left to the command shown):</p><ul>"
+            + "".join(f"<li>{esc(what)} ({esc(why)}): <code>{esc(cmd)}</code></li>" for what, why, cmd in ctx.left)
+            + "</ul>"
+        )
+        if ctx.left
+        else ""
+    )
+    return (
+        f"<h1>PiezoTwin main job</h1><p>Mode: {mode}. Generated "
+        f"{time.strftime('%Y-%m-%d %H:%M:%S UTC', time.gmtime())}.{took}</p>" + floors + left
+    )
+
+
+def _write_report(ctx: Context, rows: list[dict[str, Any]], seconds: float | None = None) -> Path:
     from sysid.provenance import collect
 
     ctx.report_dir.mkdir(parents=True, exist_ok=True)
-    mode = "quick" if ctx.quick else "default"
     body = [
-        f"<h1>PiezoTwin main job</h1><p>Mode: {mode}. "
-        f"Generated {time.strftime('%Y-%m-%d %H:%M:%S UTC', time.gmtime())}.</p>",
+        _header(ctx, seconds),
         table(
             ["stage", "status", "result", "s"],
             [[esc(r["stage"]), r["status"], esc(r["message"]), f"{r['seconds']:.1f}"] for r in rows],
@@ -470,8 +374,13 @@ def _write_report(ctx: Context, rows: list[dict[str, Any]]) -> Path:
     # the vendored lab data the lab stage reads; the twin datasets are generated in the run (their protocols
     # and the commit above define them)
     lab_done = any(r["stage"] == "score lab benchmarks" and r["status"] == "done" for r in rows)
-    return write_page(ctx.report_dir / "index.html", "PiezoTwin report", body, css=_CSS,
-                      provenance=collect(files=_scored_lab_files() if lab_done else []))
+    return write_page(
+        ctx.report_dir / "index.html",
+        "PiezoTwin report",
+        body,
+        css=_CSS,
+        provenance=collect(files=_scored_lab_files() if lab_done else []),
+    )
 
 
 def _scored_lab_files() -> list[Path]:
@@ -481,8 +390,9 @@ def _scored_lab_files() -> list[Path]:
     return sorted(p for name in files.SCORED_LAB for p in files.get(name).paths())
 
 
-def run_main_job(report_dir: str | Path = "report", quick: bool = False, verbose: bool = True,
-                 stages: list[str] | None = None) -> dict[str, Any]:
+def run_main_job(
+    report_dir: str | Path = "report", quick: bool = False, verbose: bool = True, stages: list[str] | None = None
+) -> dict[str, Any]:
     """Run the stages (all, or those named in ``stages``), write ``report_dir/index.html``; return a summary."""
     ctx = Context(report_dir=Path(report_dir), quick=quick, verbose=verbose)
     rows = []
@@ -499,7 +409,23 @@ def run_main_job(report_dir: str | Path = "report", quick: bool = False, verbose
             msg, status = f"failed: {type(exc).__name__}: {exc}", "failed"
             ctx.section(f"Stage '{name}' failed", f"<pre>{esc(traceback.format_exc())}</pre>")
         rows.append({"stage": name, "status": status, "message": msg, "seconds": time.perf_counter() - t0})
-        log.log(logging.WARNING if status == "failed" else logging.INFO, "[%7s] %s: %s", status, name, msg)
-    path = _write_report(ctx, rows)
-    log.info("main job finished in %.0f s", time.perf_counter() - t_all)
-    return {"stages": rows, "report": str(path), "seconds": time.perf_counter() - t_all}
+        log.log(
+            logging.WARNING if status == "failed" else logging.INFO,
+            "[%7s] %s (%.1f s): %s",
+            status,
+            name,
+            rows[-1]["seconds"],
+            msg,
+        )
+    seconds = time.perf_counter() - t_all
+    path = _write_report(ctx, rows, seconds)
+    log.info("main job finished in %s", _minutes(seconds))
+    for what, why, cmd in ctx.left:
+        log.info("not recomputed: %s (%s): %s", what, why, cmd)
+    return {
+        "stages": rows,
+        "report": str(path),
+        "seconds": seconds,
+        **floor_counts(ctx),
+        "left": [{"what": w, "why": y, "command": c} for w, y, c in ctx.left],
+    }

@@ -212,14 +212,18 @@ def _record(r: dict[str, Any]) -> dict[str, Any] | None:
 
 
 def summarise_row(row: dict[str, Any]) -> dict[str, Any]:
-    """One dataset's entry of ``records.json``: identifier, free-run RMSE per test (mean, sd, seeds), the mean
-    training time of one model (seconds), the reproducing command and the published record per test."""
+    """One dataset's entry of ``records.json``: identifier, free-run RMSE per test (mean, sd, seeds) and its unit,
+    the mean training time of one model (seconds), the reproducing command, the published record per test, and
+    when and on what machine the row was measured (``measured``: date, machine)."""
     tests = score_rows(row)
     fits = [r.get("fit_seconds_mean", r.get("fit_seconds")) for r in tests]
     fits = [f for f in fits if isinstance(f, (int, float))]
+    meas = row["measured"]
     return {"identifier": row["identifier"], "rmse": {r["test"]: _test_rmse(r) for r in tests},
+            "units": {r["test"]: r.get("units", "") for r in tests},
             "seconds": fits[0] if fits else None, "command": row["command"],
-            "record": {r["test"]: _record(r) for r in tests}}
+            "record": {r["test"]: _record(r) for r in tests},
+            "measured": {"date": meas.get("date"), "machine": meas.get("machine")}}
 
 
 def summary(entries: Sequence[Entry], rows: dict[str, dict[str, Any]]) -> dict[str, Any]:

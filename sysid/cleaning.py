@@ -7,7 +7,6 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
-from numba import njit
 
 from sysid.checks import _as_float, _finite, _int_param
 from sysid.config import positive
@@ -50,7 +49,6 @@ def detrend(x: np.ndarray, order: int = 1, return_coefficients: bool = False):
 
 
 # ---------------------------------------------------------------------------------------------- outliers / missing
-@njit(cache=True)
 def _hampel_core(xp: np.ndarray, n: int, k: int, med: np.ndarray, mad: np.ndarray) -> None:  # pragma: no cover - numba
     """Running median and MAD of the windows ``xp[i : i + 2k + 1]``, ``i = 0..n-1``, in O(window) per sample.
 
@@ -93,12 +91,25 @@ def _hampel_core(xp: np.ndarray, n: int, k: int, med: np.ndarray, mad: np.ndarra
         mad[i] = d
 
 
+_HAMPEL_JIT: list = []  # the compiled _hampel_core, made on first use
+
+
+def _hampel_kernel():
+    """:func:`_hampel_core` compiled by numba, on first use: importing numba takes 0.2-0.5 s, which every command
+    that only reads this module (``piezotwin preprocess --remove-offset``) would otherwise pay."""
+    if not _HAMPEL_JIT:
+        from numba import njit
+
+        _HAMPEL_JIT.append(njit(cache=True)(_hampel_core))
+    return _HAMPEL_JIT[0]
+
+
 def _hampel_1d(x: np.ndarray, k: int, n_sigma: float):
     n = x.size
     pad = np.pad(x, k, mode="reflect") if n > k else np.pad(x, k, mode="edge")
     med = np.empty(n)
     mad = np.empty(n)
-    _hampel_core(np.ascontiguousarray(pad), n, k, med, mad)
+    _hampel_kernel()(np.ascontiguousarray(pad), n, k, med, mad)
     sigma = 1.482602218505602 * mad  # MAD -> standard deviation of a Gaussian: 1/Phi^-1(3/4)
     out = np.abs(x - med) > n_sigma * sigma
     return out, med, sigma

@@ -8,7 +8,6 @@ import math
 from fractions import Fraction
 
 import numpy as np
-from scipy import signal as sps
 
 from sysid.checks import _as_float, _finite, _int_param
 from sysid.config import positive
@@ -16,6 +15,14 @@ from sysid.errors import ConfigError
 
 __all__ = ["moving_average", "decimate", "resample", "antialias_filter", "bandpass", "bandpass_design",
            "PASSBAND_DEFAULT", "ATTEN_DB_DEFAULT"]
+
+
+def _sps():
+    """:mod:`scipy.signal`, imported on first use: its import takes about 1 s, which every command that only
+    reads this module (``piezotwin preprocess --remove-offset``, ``--version``) would otherwise pay."""
+    from scipy import signal
+
+    return signal
 
 
 PASSBAND_DEFAULT = 0.8  # fraction of the new Nyquist frequency kept within the pass-band tolerance
@@ -93,9 +100,9 @@ def antialias_filter(
     # frequencies relative to the Nyquist frequency of the up-sampled rate
     f_stop = 1.0 / m
     f_pass = passband / m
-    numtaps, beta = sps.kaiserord(atten_db, f_stop - f_pass)
+    numtaps, beta = _sps().kaiserord(atten_db, f_stop - f_pass)
     numtaps |= 1  # odd: integer group delay, exactly compensated by resample_poly
-    return sps.firwin(numtaps, 0.5 * (f_pass + f_stop), window=("kaiser", beta), scale=True)
+    return _sps().firwin(numtaps, 0.5 * (f_pass + f_stop), window=("kaiser", beta), scale=True)
 
 
 def decimate(x: np.ndarray, q: int, passband: float = PASSBAND_DEFAULT, atten_db: float = ATTEN_DB_DEFAULT,
@@ -115,7 +122,7 @@ def decimate(x: np.ndarray, q: int, passband: float = PASSBAND_DEFAULT, atten_db
     if q > x.shape[0]:
         raise ConfigError(f"decimation factor {q} exceeds the signal length {x.shape[0]}")
     h = antialias_filter(1, q, passband, atten_db)
-    y = sps.resample_poly(x, 1, q, axis=0, window=h)
+    y = _sps().resample_poly(x, 1, q, axis=0, window=h)
     return (y, h) if return_filter else y
 
 
@@ -142,7 +149,7 @@ def resample(x: np.ndarray, fs: float, fs_new: float, passband: float = PASSBAND
     if x.shape[0] * up < down:
         raise ConfigError(f"resample {fs:g} -> {fs_new:g} Hz leaves no sample of a {x.shape[0]}-sample signal")
     h = antialias_filter(up, down, passband, atten_db)
-    y = sps.resample_poly(x, up, down, axis=0, window=h)
+    y = _sps().resample_poly(x, up, down, axis=0, window=h)
     return (y, h) if return_filter else y
 
 
@@ -162,7 +169,7 @@ def bandpass_design(fs: float, fmin: float, fmax: float, order: int = 5) -> np.n
         raise ConfigError(f"band-pass fmin ({fmin:g} Hz) must be below fmax ({fmax:g} Hz)")
     if fmax >= fs / 2:
         raise ConfigError(f"band-pass fmax ({fmax:g} Hz) must be below the Nyquist frequency fs/2 = {fs / 2:g} Hz")
-    return sps.butter(order, [fmin, fmax], btype="bandpass", fs=fs, output="sos")
+    return _sps().butter(order, [fmin, fmax], btype="bandpass", fs=fs, output="sos")
 
 
 def bandpass(x: np.ndarray, fs: float, fmin: float, fmax: float, order: int = 5) -> np.ndarray:
@@ -173,4 +180,4 @@ def bandpass(x: np.ndarray, fs: float, fmin: float, fmax: float, order: int = 5)
     _finite(x, "bandpass")
     sos = bandpass_design(fs, fmin, fmax, order)
     padlen = min(3 * (2 * sos.shape[0] + 1), x.shape[0] - 1)
-    return sps.sosfiltfilt(sos, x, axis=0, padlen=padlen)
+    return _sps().sosfiltfilt(sos, x, axis=0, padlen=padlen)

@@ -8,7 +8,6 @@ import math
 from typing import Any
 
 import numpy as np
-import scipy.fft
 
 from sysid.checks import _as_float, _finite, _int_param
 from sysid.config import positive
@@ -44,6 +43,8 @@ def segment(x: np.ndarray, length: int, overlap: int = 0) -> np.ndarray:
 # ---------------------------------------------------------------------------------------------- sampling rate (Aguirre)
 def autocovariance(x: np.ndarray, max_lag: int) -> np.ndarray:
     """Biased sample autocovariance ``r[k] = (1/N) sum (x[n]-m)(x[n+k]-m)``, ``k = 0..max_lag`` (FFT)."""
+    import scipy.fft  # here, not at the top: every CLI start would pay its import (~0.2 s)
+
     x = np.asarray(x, dtype=np.float64).ravel()
     n = x.size
     max_lag = min(int(max_lag), n - 1)

@@ -19,7 +19,6 @@ import math
 from collections.abc import Sequence
 
 import numpy as np
-import scipy.fft
 
 from sysid.checks import _integer_ratio, _n_samples
 from sysid.config import make_rng, positive
@@ -224,6 +223,8 @@ def multisine(
     # ---- one period by inverse real FFT: X[m] = (N0/2) e^{j phi} gives cos(2 pi m n / N0 + phi) of unit amplitude
     spec = np.zeros(n0 // 2 + 1, dtype=np.complex128)
     spec[lines] = (n0 / 2.0) * np.exp(1j * phi)
+    import scipy.fft  # here, not at the top: every CLI start (the parser lists this module's choices) would pay it
+
     one = scipy.fft.irfft(spec, n=n0, workers=-1)
     if n_total == n0:
         u = one

@@ -17,7 +17,7 @@ from benchmarks.cli import main
 from benchmarks.datasets import load_dataset
 
 ROOT = Path(__file__).resolve().parents[1]
-RECORD_KEYS = {"identifier", "rmse", "seconds", "command", "record"}
+RECORD_KEYS = {"identifier", "rmse", "units", "seconds", "command", "record", "measured"}
 
 
 class ToySeeded(ToyARX):

@@ -40,6 +40,7 @@ from benchmarks.scoring.floors import (
     dropped_pairs,
     load_baselines,
     make_floors,
+    unfloored,
     version_mismatch,
 )
 from benchmarks.scoring.report import markdown_table, write_report
@@ -77,5 +78,5 @@ __all__ = [
     "Normalised", "NormalisedModel", "Record", "ScoreRun", "check", "check_rules", "dropped_pairs", "environment",
     "evaluate", "format_row", "is_seeded", "load_baselines", "load_identifier_settings", "make_floors",
     "markdown_table", "prepare_dataset", "score", "score_pair", "score_pair_task", "seeds_for", "settings_for",
-    "strip_timing", "sysidentpy_frols", "sysidentpy_settings", "version_mismatch", "write_report",
+    "strip_timing", "sysidentpy_frols", "sysidentpy_settings", "unfloored", "version_mismatch", "write_report",
 ]

@@ -65,6 +65,25 @@ def dropped_pairs(baselines: dict[str, Any], mode: str) -> dict[tuple[str, str, 
     return out
 
 
+def unfloored(run: ScoreRun | dict[str, Any], baselines: dict[str, Any]) -> list[tuple[str, str, str]]:
+    """The scored (identifier, dataset, test) of ``run`` that have no floor in its mode and are not listed under
+    ``dropped``: rows that no floor measured at the same budget judges. :func:`check` counts each as a failure (the
+    regression check must cover every pair it scores); a run at another budget than the check's (the main job)
+    reports them as not compared instead, and checks the others."""
+    data = run.to_dict() if isinstance(run, ScoreRun) else run
+    mode = data["mode"]
+    floors = baselines.get("modes", {}).get(mode, {})
+    dropped = dropped_pairs(baselines, mode)
+    out = []
+    for r in data["rows"]:
+        key = (r["identifier"], r["dataset"], r["test"])
+        if key in dropped or key[:2] + ("*",) in dropped:
+            continue
+        if floors.get(key[0], {}).get(key[1], {}).get(key[2]) is None:
+            out.append(key)
+    return out
+
+
 def check(run: ScoreRun | dict[str, Any], baselines: dict[str, Any] | None = None) -> list[str]:
     """Every regression of ``run`` against ``baselines``: one line per failing pair (empty list = pass).
 
