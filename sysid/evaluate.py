@@ -75,9 +75,11 @@ def identification_summary(model, est: Record | Sequence[Record], val: Record | 
         "validation": evaluate(model, val) if val is not None else None,
     }
     # linear models: parameters with std, poles, automatically chosen orders
-    for key in ("parameters", "poles", "chosen_orders", "nx", "order_selection"):
+    for key in ("parameters", "poles", "chosen_orders", "nx", "order_selection", "order_search"):
         if d.get(key) is not None:
             out[key] = d[key]
+    if "order_search" not in out and getattr(model, "order_search_", None) and out.get("chosen_orders"):
+        out["order_search"] = model.order_search_  # oe / bj keep it beside their order table
     from sysid.advice import practitioner_warnings
 
     out["warnings"] = practitioner_warnings(model, est, val, out)

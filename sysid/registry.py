@@ -12,6 +12,7 @@ __all__ = ["IDENTIFIERS", "get_identifier", "available_identifiers", "binary_loa
 
 # id -> "module:Class". Each module owns its identifier; add a line here to register a new one.
 IDENTIFIERS: dict[str, str] = {
+    "fir": "sysid.fir:FIR",
     "arx": "sysid.linear:ARX",
     "armax": "sysid.linear:ARMAX",
     "bla": "sysid.bla_model:BLAModel",
