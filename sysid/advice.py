@@ -9,6 +9,9 @@
 - **One-step fit far above free-run fit**: one-step R² ≥ 0.5 while the free-run R² is lower by more than
   ``GAP_R2`` and its error variance (1 − R²) is over ``GAP_RATIO`` × the one-step one — a one-step score that says
   nothing about simulation (the issue's ARX with one-step 0.99995, free run 0.44).
+- **Automatic order on the corner of its grid, or short of the FIR**: the order chosen on the hold-out is the
+  largest the search tried (``order_search["corner"]``), or no order came near the least-squares FIR's hold-out
+  error (``order_search["below_reference"]``): a larger ``max_order`` or another structure may simulate better.
 - **Validation outside the estimation amplitude range**: a validation input or output exceeding the estimation
   range by more than ``RANGE_TOL`` of that range: the model extrapolates.
 """
@@ -133,6 +136,17 @@ def practitioner_warnings(model, est, val=None, summary: dict[str, Any] | None =
         w = _gap_warning((summary or {}).get(part), part)
         if w:
             out.append(w)
+    search = (summary or {}).get("order_search") or getattr(model, "order_search_", None)
+    if isinstance(search, dict) and (search.get("corner") or search.get("below_reference")):
+        chosen = ", ".join(f"{k}={v}" for k, v in ((summary or {}).get("chosen_orders") or {}).items())
+        top = max(search.get("grid") or [search.get("grid_max", 0)])
+        if search.get("corner"):
+            out.append(f"automatic order ({chosen}) is the largest of its grid (the corner, up to {top}): a larger "
+                       "max_order may simulate the hold-out better")
+        ref = search.get("reference") or {}
+        if search.get("below_reference") and ref.get("holdout_nrmse") is not None:
+            out.append(f"no automatic order up to {top} simulates the hold-out as well as a least-squares FIR "
+                       f"({ref.get('nb')} taps): try a larger max_order, another structure, or the fir identifier")
     if val is not None:
         out += _range_warnings(est, val)
     return out

@@ -39,7 +39,7 @@ import scipy.linalg
 import scipy.signal
 
 from sysid.base import Identifier, as_record_list, check_prediction, check_records
-from sysid.errors import ConfigError, DataError
+from sysid.errors import ConfigError, DataError, OrderSearchWarning
 
 __all__ = ["FIR", "fir_normal_equations", "holdout_fir_search", "holdout_tolerance", "tap_grid"]
 
@@ -237,7 +237,7 @@ class FIR(Identifier):
             if self.order_search_["corner"]:
                 warnings.warn(f"fir: the tap count chosen on the hold-out, {nb}, is the largest of the grid "
                               f"(max_order {self.order_search_['grid_max']}): the record may be too short for the "
-                              "system's memory; more taps or a longer record may fit better", UserWarning,
+                              "system's memory; more taps or a longer record may fit better", OrderSearchWarning,
                               stacklevel=2)
         short = [r for r in records if len(r) - nk < nb + 1]
         if short:

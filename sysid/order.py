@@ -20,8 +20,8 @@
   its hold-out NRMSE is the level a linear model of the right order reaches. The search stops early (``PATIENCE``
   grid points without improvement) only once a candidate is within ``REF_MARGIN_R2`` (in R² = 1 − NRMSE²) of that
   FIR — a lightly damped system's low orders can all simulate badly, so a plateau there is no reason to stop —
-  and otherwise runs to the end of the grid (``max_order``). A choice on the last grid point is flagged
-  (``corner``) with a :class:`OrderCornerWarning`. The table (one row per order) is the model's
+  and otherwise runs to the end of the grid (``max_order``). A choice on the last grid point (``corner``) and a best
+  candidate still short of the FIR (``below_reference``) are flagged with an :class:`OrderSearchWarning`. The table (one row per order) is the model's
   ``order_table_`` (JSON ``order_selection``), the rest (criterion, grid, corner, FIR reference, memory) its
   ``order_search_`` (JSON ``order_search``).
 """
@@ -35,13 +35,13 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from sysid.errors import ConfigError, DataError, DivergenceWarning
+from sysid.errors import ConfigError, DataError, DivergenceWarning, OrderSearchWarning
 from sysid.fir import holdout_tolerance
 from sysid.record import Record
 from sysid.registry import get_identifier
 
 __all__ = ["delay_estimate", "order_table", "plot_order_table", "select_oe_orders", "select_arx_orders",
-           "select_n4sid_order", "reference_fir", "OrderCornerWarning", "ORDER_GRID"]
+           "select_n4sid_order", "reference_fir", "OrderSearchWarning", "ORDER_GRID"]
 
 ORDER_GRID = (1, 2, 3, 4, 5, 6, 8, 10, 12, 16, 20, 24, 32, 40, 48, 64, 80, 100, 128)
 HOLDOUT = 0.3
@@ -120,10 +120,6 @@ def _nrmse_free_run(model, recs: list[Record]) -> float:
     return math.inf if v is None or not np.isfinite(v) else float(v)
 
 
-class OrderCornerWarning(UserWarning):
-    """An automatic order choice landed on the last point of its grid (a larger order may fit better)."""
-
-
 def reference_fir(records: list[Record], nk: int | Sequence[int]) -> dict[str, Any]:
     """The memory and reference level of the data: the least-squares FIR with its tap count chosen on the same
     hold-out as the order searches (:func:`sysid.fir.holdout_fir_search`); ``{identifier, nb, holdout_nrmse,
@@ -174,12 +170,18 @@ def _search(make, records: list[Record], grid: Sequence[int], what: str, ref: di
     for r in rows:
         r["chosen"] = r["order"] == chosen
     corner = len(grid) > 1 and chosen == max(grid)
+    short = not _close_to(best, ref)
     search = {"criterion": "hold-out free-run NRMSE", "holdout": HOLDOUT, "tolerance": tol,
-              "grid": [int(n) for n in grid], "stopped_early": stopped, "corner": bool(corner), "reference": ref,
+              "grid": [int(n) for n in grid], "stopped_early": stopped, "corner": bool(corner),
+              "below_reference": bool(short), "reference": ref,
               "memory_samples": None if ref is None else ref["memory_samples"]}
     if corner:
         warnings.warn(f"{what}: the chosen order {chosen} is the largest of the grid (raise max_order: a larger "
-                      "order may simulate the hold-out better)", OrderCornerWarning, stacklevel=4)
+                      "order may simulate the hold-out better)", OrderSearchWarning, stacklevel=4)
+    if short:
+        warnings.warn(f"{what}: no order up to {max(grid)} simulates the hold-out as well as a least-squares FIR "
+                      f"(hold-out R² {1 - best ** 2:.4f} against {1 - ref['holdout_nrmse'] ** 2:.4f}); try a larger "
+                      "max_order or another structure", OrderSearchWarning, stacklevel=4)
     return chosen, rows, search
 
 
