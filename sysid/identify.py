@@ -31,12 +31,10 @@ from sysid.config import coerce, parse_assignments
 from sysid.errors import DivergenceWarning
 from sysid.evaluate import identification_summary
 from sysid.record import Record
-from sysid.registry import get_identifier
+from sysid.registry import LINEAR_IDENTIFIERS, get_identifier
 
 __all__ = ["LINEAR_DEFAULT", "LINEAR_IDENTIFIERS", "free_run_r2", "identify", "linear_comparison"]
 
-#: identifiers whose models are linear in the input (no comparison with the linear default for them)
-LINEAR_IDENTIFIERS = frozenset({"fir", "arx", "armax", "oe", "bj", "n4sid", "bla"})
 LINEAR_DEFAULT = "arx"
 HOLDOUT = 0.3
 

@@ -102,3 +102,26 @@ def test_long_record_many_taps_in_seconds():
     m = FIR().fit(est)
     assert time.perf_counter() - t0 < 30.0
     assert m.nb_ >= 500 and m.score(val) > 0.9
+
+
+def test_compare_shows_the_fir_reference_beside_the_models(tmp_path, capsys):
+    est, val = modal_records(n=2048)
+    write_record(est, tmp_path / "est.npz")
+    write_record(val, tmp_path / "val.npz")
+    assert main(["identify", "arx", "--est", str(tmp_path / "est.npz"), "--set", "ny=2,nu=2",
+                 "-o", str(tmp_path / "arx.json")]) == 0
+    capsys.readouterr()
+    assert main(["compare", str(tmp_path / "arx.json"), "--data", str(tmp_path / "val.npz"),
+                 "--fir-est", str(tmp_path / "est.npz"), "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    arx_row, fir_row = out["models"]
+    assert fir_row["identifier"] == "fir" and fir_row["reference"] is True and "reference" not in arx_row
+    fir = FIR().fit(est)  # the same FIR as identify fir's defaults; every row scored after its taps
+    assert arx_row["skip"] == fir_row["skip"] == fir.max_lag_
+    yh = fir.predict(val, None)[fir.max_lag_:]
+    y = val.y[fir.max_lag_:]
+    assert fir_row["metrics"]["r2"] == pytest.approx(1 - np.sum((y - yh) ** 2) / np.sum((y - y.mean()) ** 2), rel=1e-9)
+    assert fir_row["metrics"]["r2"] > arx_row["metrics"]["r2"]  # ARX(2, 2) cannot simulate five light modes
+    assert main(["compare", str(tmp_path / "arx.json"), "--data", str(tmp_path / "val.npz"),
+                 "--fir-est", str(tmp_path / "est.npz")]) == 0
+    assert "fir (reference" in capsys.readouterr().out
