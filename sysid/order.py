@@ -15,7 +15,9 @@
   ``oe``/``bj`` and ``n4sid`` do when run without orders — hold out the last ``HOLDOUT`` of each estimation
   record, fit each order of the grid on the rest, score its free run on the held-out samples (NRMSE), and take the
   smallest order whose hold-out NRMSE is within 1 % (``sysid.fir.TOLERANCE``) of the best (or within the NRMSE's own standard
-  deviation on a short hold-out, :func:`sysid.fir.holdout_tolerance`). The system's memory is measured first
+  deviation on a short hold-out, :func:`sysid.fir.holdout_tolerance`). Searches use the first
+  ``SEARCH_MAX_SAMPLES`` of each record (the chosen order is then fitted on all of it), which bounds their cost.
+  The system's memory is measured first
   (:func:`reference_fir`: the least-squares FIR whose tap count is chosen on the same hold-out, :mod:`sysid.fir`):
   its hold-out NRMSE is the level a linear model of the right order reaches. The search stops early (``PATIENCE``
   grid points without improvement) only once a candidate is within ``REF_MARGIN_R2`` (in R² = 1 − NRMSE²) of that
@@ -48,6 +50,7 @@ HOLDOUT = 0.3
 PATIENCE = 3
 REF_MARGIN_R2 = 0.005
 FIR_MAX_ORDER = 2048
+SEARCH_MAX_SAMPLES = 32_768
 DELAY_MIN_EXTRA = 10
 DELAY_MAX_EXTRA = 512
 
@@ -128,11 +131,17 @@ def reference_fir(records: list[Record], nk: int | Sequence[int]) -> dict[str, A
 
     k = int(min(nk)) if isinstance(nk, (list, tuple)) else int(nk)
     try:
-        nb, _, search = holdout_fir_search(records, k, FIR_MAX_ORDER, HOLDOUT)
+        nb, _, search = holdout_fir_search(_budget(records), k, FIR_MAX_ORDER, HOLDOUT)
     except DataError:
         return None
     return {"identifier": "fir", "nb": int(nb), "holdout_nrmse": float(search["best_holdout_nrmse"]),
             "memory_samples": int(search["memory_samples"]), "corner": bool(search["corner"])}
+
+
+def _budget(records: list[Record]) -> list[Record]:
+    """The first ``SEARCH_MAX_SAMPLES`` of each record: what the order searches fit and score (the chosen model is
+    then fitted on all the data); bounds their cost on long records."""
+    return [r if len(r) <= SEARCH_MAX_SAMPLES else r.split(index=SEARCH_MAX_SAMPLES)[0] for r in records]
 
 
 def _close_to(err: float, ref: dict[str, Any] | None) -> bool:
@@ -142,7 +151,7 @@ def _close_to(err: float, ref: dict[str, Any] | None) -> bool:
 
 def _search(make, records: list[Record], grid: Sequence[int], what: str, ref: dict[str, Any] | None = None
             ) -> tuple[int, list[dict[str, Any]], dict[str, Any]]:
-    est, val = _split(records, HOLDOUT)
+    est, val = _split(_budget(records), HOLDOUT)
     rows: list[dict[str, Any]] = []
     best, since, stopped = math.inf, 0, False
     for n in grid:
