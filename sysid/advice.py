@@ -1,7 +1,11 @@
 """Warnings a practitioner would give about an identified model (``identify`` prints them, ``--json`` key
 ``warnings``). Each is one line; none stops anything.
 
-- **Unstable / integrating poles**: a pole with |p| ≥ 1 − ``POLE_TOL`` (on or outside the unit circle). The
+- **Unstable / integrating poles**: a pole with |p| ≥ 1 − ``POLE_TOL`` (on or outside the unit circle), except
+  the complex poles of a lightly damped resonance inside the circle — damping ratio ζ = −ln|p| / |ln p| (the
+  continuous pole s = ln(p)/T, ζ = −Re s/|s|) of at least ``MIN_RESONANCE_ZETA``: a structure's mode at 0.5 %
+  damping sampled 40 times faster than it oscillates has |p| = 0.9992 and is neither an integrator nor a sign of
+  feedback. The
   usual cause in measured data is feedback: the record was taken in closed loop, and u is then correlated with
   the past of y. The check (Ljung, *System Identification*, 2nd ed., §13.4 and §16.6): prewhiten u by a long AR
   model, ε_u = A_u(q) u; in open loop ε_u(t) is uncorrelated with y(t − k), k ≥ 1, and each sample correlation has
@@ -28,6 +32,7 @@ from sysid.record import Record
 __all__ = ["practitioner_warnings", "closed_loop_correlation"]
 
 POLE_TOL = 1e-3
+MIN_RESONANCE_ZETA = 1e-3
 CORR_SIGMAS = 4.0
 CORR_LAGS = 20
 AR_ORDER = 20
@@ -70,6 +75,15 @@ def closed_loop_correlation(data: Record | Sequence[Record], max_lag: int = CORR
     return best
 
 
+def _resonance(p: dict[str, Any]) -> bool:
+    """A complex pole inside the unit circle with damping ratio ≥ MIN_RESONANCE_ZETA (module docstring)."""
+    z = complex(p["re"], p["im"])
+    if abs(z.imag) == 0.0 or not 0.0 < abs(z) < 1.0:
+        return False
+    s = complex(math.log(abs(z)), math.atan2(z.imag, z.real))  # ln p (times 1/T: the continuous pole)
+    return -s.real / abs(s) >= MIN_RESONANCE_ZETA
+
+
 def _pole_warning(model, est) -> str | None:
     poles = getattr(model, "poles", None)
     if poles is None:
@@ -78,7 +92,7 @@ def _pole_warning(model, est) -> str | None:
         ps = poles()
     except Exception:  # noqa: BLE001 - a model without usable poles (e.g. MIMO ARX) simply gets no pole warning
         return None
-    bad = [p for p in ps if p["abs"] >= 1.0 - POLE_TOL]
+    bad = [p for p in ps if p["abs"] >= 1.0 - POLE_TOL and not _resonance(p)]
     if not bad:
         return None
     p = max(bad, key=lambda q: q["abs"])

@@ -92,3 +92,18 @@ def test_identify_cli_json_has_the_order_curve(tmp_path, capsys):
     assert out["chosen_orders"]["nx"] == sum(r["order"] for r in out["order_selection"] if r["chosen"])
     assert out["order_search"]["singular_value_choice"] >= 1
     assert np.isfinite([r["holdout_nrmse"] for r in out["order_selection"]]).all()
+
+
+def test_lightly_damped_modes_are_not_called_integrators_but_an_integrator_still_is():
+    """The modes' poles (|p| up to 0.9993, ζ ≥ 0.5 %) lie within 1e-3 of the unit circle: no pole warning for them;
+    a real pole at 0.9996 (an integrator in a feedback loop) keeps its warning."""
+    from sysid.advice import practitioner_warnings
+    from tests.test_linear_order import _closed_loop
+
+    est, _ = modal_records()
+    m = get_identifier("arx")(ny=48, nu=48).fit(est)  # the order the default chooses here
+    assert max(p["abs"] for p in m.poles()) > 0.999
+    assert not any("unit circle" in w for w in practitioner_warnings(m, est))
+    rec = _closed_loop()
+    w = practitioner_warnings(get_identifier("arx")(ny=1, nu=1).fit(rec), rec)
+    assert len(w) == 1 and "unit circle" in w[0] and "closed-loop" in w[0]
