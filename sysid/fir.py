@@ -204,6 +204,8 @@ class FIR(Identifier):
         squares sets near zero when the system has none).
     max_order : largest tap count of the search (default 2048; at most a quarter of the fitting samples).
 
+    No constant term: a record with offsets should have its means removed first (``piezotwin preprocess``).
+
     Attributes: ``taps_`` (outputs × inputs × nb impulse-response coefficients, units of y per unit of u),
     ``nb_``, ``max_lag_`` = nk + nb − 1 (samples whose prediction would need input from before the record).
     """

@@ -28,7 +28,7 @@ import numpy as np
 
 from sysid import metrics
 from sysid.config import coerce, parse_assignments
-from sysid.errors import DivergenceWarning
+from sysid.errors import ConfigError, DivergenceWarning
 from sysid.evaluate import identification_summary
 from sysid.record import Record
 from sysid.registry import LINEAR_IDENTIFIERS, get_identifier
@@ -101,6 +101,9 @@ def identify(name: str, est: Record | Sequence[Record], val: Record | Sequence[R
         assignments = parse_assignments(assignments)
     assignments = dict(assignments)
     auto = bool(coerce(assignments.pop("auto", False), False, "auto"))
+    if auto and name in LINEAR_IDENTIFIERS:
+        raise ConfigError(f"{name}: auto=true holds a nonlinear identifier against the default linear model; {name} is "
+                          "linear" + (" (its own orders are chosen with orders=auto)" if name in ("arx", "armax") else ""))
     model = cls.from_assignments(assignments)
     t0 = time.perf_counter()
     model.fit(est)

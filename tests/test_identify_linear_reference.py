@@ -66,3 +66,6 @@ def test_identify_cli_auto_writes_the_kept_model(modal, tmp_path, capsys):
     assert "linear reference arx" in text and "worse than the default linear model arx" in text
     assert main([*args, "--set", "auto=maybe"]) == 2
     assert "auto: expected a boolean" in capsys.readouterr().err
+    assert main(["identify", "arx", "--est", str(tmp_path / "est.npz"), "--set", "auto=true"]) == 2
+    err = capsys.readouterr().err
+    assert "arx is linear" in err and "orders=auto" in err and len(err.strip().splitlines()) == 1
