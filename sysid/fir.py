@@ -26,6 +26,16 @@ the rest and scored by the NRMSE of their free run on the held-out samples (the 
 input, whose past is known); the smallest nb within ``TOLERANCE`` of the best (or within the NRMSE's standard
 deviation on a short hold-out) is kept (the rule of :mod:`sysid.order`), and the model is refitted with it on all the data. A choice on the last grid point is flagged
 (``order_search["corner"]``): the record is too short for the system's memory, or ``max_order`` too small.
+
+Ridge (``ridge=None`` with the taps chosen): a band-limited input determines the taps only inside its band, and
+plain least squares fills the rest with large taps that cancel on the excited band (measured: a multisine over
+3–300 Hz at 1 kHz, 1059 taps, the largest tap 1.2e3 at lag 1052 where the true impulse response is below 1). For
+the chosen tap count the relative ridges of ``RIDGE_GRID`` (λ/mean diagonal of G, i.e. Tikhonov regularisation
+that damps the directions the input barely excites) are scored on the same hold-out and the largest within the
+tolerance of the best is kept: on that record 1e-2 (the grid's largest: a cap, so that the in-band taps keep their
+size), largest tap 2.0 at lag 2 (true: 1.9 at lag 2), validation R² 0.9681 against 0.9682.
+MATLAB's ``impulseest`` regularises its FIR by default for the same reason. Given ``nb`` without ``ridge`` is plain
+least squares; ``ridge`` (a number ≥ 0) sets λ/mean diagonal.
 """
 
 from __future__ import annotations
@@ -49,6 +59,7 @@ GRID_RATIO = 1.25
 GRID_START = 4
 MIN_FIT_PER_TAP = 4
 JITTER = 1e-10
+RIDGE_GRID = (1e-2, 1e-3, 1e-4, 1e-5, 1e-6, 1e-8)
 
 
 def holdout_tolerance(n_holdout: int) -> float:
@@ -101,10 +112,11 @@ def fir_normal_equations(pairs: Sequence[tuple[np.ndarray, np.ndarray]], M: int)
     return G, g, rows
 
 
-def _cholesky(G: np.ndarray) -> np.ndarray:
-    """Lower Cholesky factor of G + λI (module docstring: λ raised while the factorisation fails)."""
+def _cholesky(G: np.ndarray, ridge: float = JITTER) -> np.ndarray:
+    """Lower Cholesky factor of G + λI, λ = ``ridge`` × mean diagonal (module docstring: raised ×100 while the
+    factorisation fails)."""
     scale = max(float(np.mean(np.diag(G))), 1e-300)
-    lam = JITTER * scale
+    lam = max(float(ridge), JITTER) * scale
     for _ in range(6):
         try:
             return scipy.linalg.cholesky(G + lam * np.eye(len(G)), lower=True, check_finite=False)
@@ -186,10 +198,27 @@ def holdout_fir_search(records: Sequence[Any], nk: int, max_order: int,
     chosen = min(r["order"] for r in rows if r["holdout_nrmse"] <= best * (1.0 + tol))
     for r in rows:
         r["chosen"] = r["order"] == chosen
+    ridge, ridge_rows = _choose_ridge(G, g, chosen * m, m, nk, us, ys, cuts, ref, best, tol)
     search = {"criterion": "hold-out free-run NRMSE", "holdout": holdout, "tolerance": tol, "grid_max": int(cap),
               "corner": bool(chosen == rows[-1]["order"] and len(rows) > 1), "best_holdout_nrmse": best,
-              "memory_samples": int(chosen + nk)}
+              "memory_samples": int(chosen + nk), "ridge": ridge, "ridge_selection": ridge_rows}
     return chosen, rows, search
+
+
+def _choose_ridge(G, g, q, m, nk, us, ys, cuts, ref, best, tol) -> tuple[float, list[dict[str, Any]]]:
+    """The largest relative ridge of RIDGE_GRID whose FIR (q leading parameters) is within ``tol`` of the best
+    hold-out NRMSE (module docstring); JITTER when none is."""
+    Gq, rows = G[:q, :q], []
+    for ridge in RIDGE_GRID:
+        taps = _taps_from_theta(_solve_leading(_cholesky(Gq, ridge), g, q), m)
+        e = np.concatenate([y[c:] - _simulate(u, taps, nk)[c:] for u, y, c in zip(us, ys, cuts)])
+        rows.append({"ridge": ridge, "holdout_nrmse": float(np.linalg.norm(e) / max(ref, 1e-300))})
+    best = min([best] + [r["holdout_nrmse"] for r in rows])
+    ok = [r["ridge"] for r in rows if r["holdout_nrmse"] <= best * (1.0 + tol)]
+    chosen = max(ok) if ok else JITTER
+    for r in rows:
+        r["chosen"] = r["ridge"] == chosen
+    return chosen, rows
 
 
 # --------------------------------------------------------------------------------------- the identifier
@@ -203,6 +232,8 @@ class FIR(Identifier):
     nk : input delay [samples], ≥ 0, the same for every input (default 0: a direct feed-through tap, which least
         squares sets near zero when the system has none).
     max_order : largest tap count of the search (default 2048; at most a quarter of the fitting samples).
+    ridge : Tikhonov term λ / mean diagonal of the normal equations; ``None`` (default): chosen on the hold-out with
+        the taps (module docstring), plain least squares when ``nb`` is given.
 
     No constant term: a record with offsets should have its means removed first (``piezotwin preprocess``).
 
@@ -212,10 +243,11 @@ class FIR(Identifier):
 
     name = "fir"
 
-    def __init__(self, nb: Any = None, nk: int = 0, max_order: int = 2048):
+    def __init__(self, nb: Any = None, nk: int = 0, max_order: int = 2048, ridge: Any = None):
         self.nb = nb
         self.nk = nk
         self.max_order = max_order
+        self.ridge = ridge
 
     def _options(self) -> tuple[int | None, int]:
         nb = self.nb
@@ -233,9 +265,16 @@ class FIR(Identifier):
         nb, nk = self._options()
         check_records(records, nk, 2, self.name)
         self.chosen_orders_, self.order_table_, self.order_search_ = {}, None, None
+        ridge = JITTER
+        if self.ridge is not None:
+            if isinstance(self.ridge, bool) or not float(self.ridge) >= 0.0:
+                raise ConfigError(f"fir: ridge must be a number >= 0, got {self.ridge!r}")
+            ridge = float(self.ridge)
         if nb is None:
             nb, self.order_table_, self.order_search_ = holdout_fir_search(records, nk, int(float(self.max_order)))
             self.chosen_orders_ = {"nb": int(nb)}
+            if self.ridge is None:
+                ridge = float(self.order_search_["ridge"])
             if self.order_search_["corner"]:
                 warnings.warn(f"fir: the tap count chosen on the hold-out, {nb}, is the largest of the grid "
                               f"(max_order {self.order_search_['grid_max']}): the record may be too short for the "
@@ -252,7 +291,8 @@ class FIR(Identifier):
         if rows <= m * nb:
             raise DataError(f"fir: {rows} fitted samples are too few for {m * nb} taps (nb={nb} per input); give "
                             "fewer taps or more data")
-        theta = _solve_leading(_cholesky(G), g, m * nb)
+        theta = _solve_leading(_cholesky(G, ridge), g, m * nb)
+        self.ridge_ = ridge
         self.taps_ = _taps_from_theta(theta, m)
         res = np.concatenate([y[nk + nb - 1:] - _simulate(u, self.taps_, nk)[nk + nb - 1:] for u, y in zip(us, ys)])
         self.noise_variance_ = float(np.mean(res ** 2))
@@ -292,8 +332,8 @@ class FIR(Identifier):
         d = super().describe()
         if hasattr(self, "taps_"):
             taps = self.taps_[0, 0].tolist() if self.taps_.shape[:2] == (1, 1) else self.taps_.tolist()
-            d.update(nb=self.nb_, nk=self.nk_, taps=taps, noise_variance=self.noise_variance_, max_lag=self.max_lag_,
-                     terms=[], chosen_orders=self.chosen_orders_)
+            d.update(nb=self.nb_, nk=self.nk_, taps=taps, ridge=self.ridge_, noise_variance=self.noise_variance_,
+                     max_lag=self.max_lag_, terms=[], chosen_orders=self.chosen_orders_)
             if self.order_table_:
                 d["order_selection"] = self.order_table_
                 d["order_search"] = self.order_search_
@@ -308,7 +348,7 @@ class FIR(Identifier):
 
     def _state(self) -> dict[str, Any]:
         self._check_fitted()
-        return {"taps": np.asarray(self.taps_, float), "nk": self.nk_, "chosen": self.chosen_orders_,
+        return {"taps": np.asarray(self.taps_, float), "nk": self.nk_, "ridge": self.ridge_, "chosen": self.chosen_orders_,
                 "noise_variance": self.noise_variance_, "order_table": self.order_table_,
                 "order_search": self.order_search_}
 
@@ -318,6 +358,7 @@ class FIR(Identifier):
             raise ValueError(f"taps must be outputs × inputs × nb, got shape {taps.shape}")
         self.taps_ = taps
         self.nk_ = int(state["nk"])
+        self.ridge_ = float(state.get("ridge", JITTER))
         self.chosen_orders_ = dict(state.get("chosen") or {})
         self.noise_variance_ = float(state["noise_variance"])
         self.order_table_ = state.get("order_table")
