@@ -22,10 +22,11 @@ leading block of G, i.e. of the normal equations of a FIR with fewer taps: one f
 
 Tap count (``nb=None``, the default): the last ``HOLDOUT`` of each estimation record is held out; FIRs with nb on a
 geometric grid (ratio ``GRID_RATIO``) up to ``max_order`` — at most a quarter of the fitting part — are fitted on
-the rest and scored by the NRMSE of their free run on the held-out samples (the FIR simulation needs only the
-input, whose past is known); the smallest nb within ``TOLERANCE`` of the best (or within the NRMSE's standard
-deviation on a short hold-out) is kept (the rule of :mod:`sysid.order`), and the model is refitted with it on all the data. A choice on the last grid point is flagged
-(``order_search["corner"]``): the record is too short for the system's memory, or ``max_order`` too small.
+the rest and scored by the NRMSE of their free run on the held-out samples (the FIR simulation needs only the input,
+whose past is known); the smallest nb within ``TOLERANCE`` of the best (or within the NRMSE's standard deviation on
+a short hold-out) is kept (the rule of :mod:`sysid.order`), and the model is refitted with it on all the data. A
+choice on the last grid point is flagged (``order_search["corner"]``): the record is too short for the system's
+memory, or ``max_order`` too small.
 
 Ridge (``ridge=None`` with the taps chosen): a band-limited input determines the taps only inside its band, and
 plain least squares fills the rest with large taps that cancel on the excited band (measured: a multisine over
@@ -348,7 +349,8 @@ class FIR(Identifier):
 
     def _state(self) -> dict[str, Any]:
         self._check_fitted()
-        return {"taps": np.asarray(self.taps_, float), "nk": self.nk_, "ridge": self.ridge_, "chosen": self.chosen_orders_,
+        return {"taps": np.asarray(self.taps_, float), "nk": self.nk_, "ridge": self.ridge_,
+                "chosen": self.chosen_orders_,
                 "noise_variance": self.noise_variance_, "order_table": self.order_table_,
                 "order_search": self.order_search_}
 

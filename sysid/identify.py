@@ -102,8 +102,9 @@ def identify(name: str, est: Record | Sequence[Record], val: Record | Sequence[R
     assignments = dict(assignments)
     auto = bool(coerce(assignments.pop("auto", False), False, "auto"))
     if auto and name in LINEAR_IDENTIFIERS:
+        hint = " (its own orders are chosen with orders=auto)" if name in ("arx", "armax") else ""
         raise ConfigError(f"{name}: auto=true holds a nonlinear identifier against the default linear model; {name} is "
-                          "linear" + (" (its own orders are chosen with orders=auto)" if name in ("arx", "armax") else ""))
+                          f"linear{hint}")
     model = cls.from_assignments(assignments)
     t0 = time.perf_counter()
     model.fit(est)

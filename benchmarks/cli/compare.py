@@ -1,11 +1,12 @@
-"""``piezotwin compare MODEL... --data FILE [--horizon 1|K|inf] [--json] [--report DIR]``.
+"""``piezotwin compare MODEL... --data FILE [--horizon 1|K|inf] [--fir-est FILE] [--json] [--report DIR]``.
 
-The MATLAB ``compare`` of this tool: every model predicts the measured record (default: free run from the
-measured initial conditions) and gets its NRMSE fit %, R² and RMSE, all on the same samples (after the largest
-``max_lag`` of the models). ``--fir-est FILE`` adds a reference row: the least-squares FIR of ``identify fir``
-(taps chosen on a hold-out of FILE), fitted on that estimation record (JSON row key ``reference: true``); as its
-max_lag is its tap count, every model is then scored after it. ``--report DIR`` writes ``compare.png`` (measured vs predicted, whole record and a
-zoom) and ``residual_tests_<i>.png`` (the correlation tests of eq. 2-32 on model i's one-step residuals).
+The MATLAB ``compare`` of this tool: every model predicts the measured record (default: free run from the measured
+initial conditions) and gets its NRMSE fit %, R² and RMSE, all on the same samples (after the largest ``max_lag`` of
+the models). ``--fir-est FILE`` adds a reference row: the least-squares FIR of ``identify fir`` (taps chosen on a
+hold-out of FILE), fitted on that estimation record (JSON row key ``reference: true``); as its max_lag is its tap
+count, every model is then scored after it. ``--report DIR`` writes ``compare.png`` (measured vs predicted, whole
+record and a zoom) and ``residual_tests_<i>.png`` (the correlation tests of eq. 2-32 on model i's one-step
+residuals).
 """
 
 from __future__ import annotations
