@@ -12,8 +12,9 @@ and both are scored by their free-run R² on the same hold-out samples (after th
 - otherwise, with ``auto=true``, the last ``HOLDOUT`` of each estimation record: both are fitted on the rest for
   the comparison, and the one kept is refitted on all the estimation data.
 
-The result is the summary's ``linear_reference`` ({identifier, r2, model_r2, holdout, better}); when the
-nonlinear model loses, a warning gives both R². ``auto=true`` then keeps the linear model (summary
+The result is the summary's ``linear_reference`` ({identifier, r2, model_r2, holdout, better}; {identifier,
+error} when the comparison could not be made, e.g. a record too short for the hold-out); when the nonlinear model
+loses, a warning gives both R². ``auto=true`` then keeps the linear model (summary
 ``fallback``: {requested, kept, reason}; ``identifier`` is the kept one).
 """
 
@@ -28,7 +29,7 @@ import numpy as np
 
 from sysid import metrics
 from sysid.config import coerce, parse_assignments
-from sysid.errors import ConfigError, DivergenceWarning
+from sysid.errors import ConfigError, DataError, DivergenceWarning
 from sysid.evaluate import identification_summary
 from sysid.record import Record
 from sysid.registry import LINEAR_IDENTIFIERS, get_identifier
@@ -114,7 +115,11 @@ def identify(name: str, est: Record | Sequence[Record], val: Record | Sequence[R
     val_l = None if val is None else _as_list(val)
     if name in LINEAR_IDENTIFIERS or not (auto or not assignments) or (val_l is None and not auto):
         return model, summary
-    ref, lin = linear_comparison(name, model, est_l, val_l, lambda: cls.from_assignments(assignments))
+    try:
+        ref, lin = linear_comparison(name, model, est_l, val_l, lambda: cls.from_assignments(assignments))
+    except (DataError, ConfigError, np.linalg.LinAlgError) as exc:  # e.g. a record too short for the hold-out
+        summary["linear_reference"] = {"identifier": LINEAR_DEFAULT, "error": str(exc)}
+        return model, summary
     summary["linear_reference"] = ref
     if ref["better"] == name:
         return model, summary

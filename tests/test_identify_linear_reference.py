@@ -69,3 +69,15 @@ def test_identify_cli_auto_writes_the_kept_model(modal, tmp_path, capsys):
     assert main(["identify", "arx", "--est", str(tmp_path / "est.npz"), "--set", "auto=true"]) == 2
     err = capsys.readouterr().err
     assert "arx is linear" in err and "orders=auto" in err and len(err.strip().splitlines()) == 1
+
+
+def test_a_comparison_that_cannot_be_made_is_reported_not_raised(monkeypatch):
+    """When the linear reference cannot be fitted (here: the registry refuses it), the nonlinear model is still
+    returned, with the reason under linear_reference and no fallback."""
+    import sysid.identify as ident
+
+    monkeypatch.setattr(ident, "LINEAR_DEFAULT", "nosuch")
+    est, val = narx_record(600, seed=0, noise=0.01), narx_record(300, seed=1, noise=0.01)
+    model, s = ident.identify("narx-poly", est, val, {"auto": "true"})
+    assert model.name == "narx-poly" and "fallback" not in s
+    assert s["linear_reference"]["identifier"] == "nosuch" and "unknown identifier" in s["linear_reference"]["error"]
