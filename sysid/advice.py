@@ -1,7 +1,11 @@
 """Warnings a practitioner would give about an identified model (``identify`` prints them, ``--json`` key
 ``warnings``). Each is one line; none stops anything.
 
-- **Unstable / integrating poles**: a pole with |p| ≥ 1 − ``POLE_TOL`` (on or outside the unit circle). The
+- **Unstable / integrating poles**: a pole with |p| ≥ 1 − ``POLE_TOL`` (on or outside the unit circle), except
+  the complex poles of a lightly damped resonance inside the circle — damping ratio ζ = −ln|p| / |ln p| (the
+  continuous pole s = ln(p)/T, ζ = −Re s/|s|) of at least ``MIN_RESONANCE_ZETA``: a structure's mode at 0.5 %
+  damping sampled 40 times faster than it oscillates has |p| = 0.9992 and is neither an integrator nor a sign of
+  feedback. The
   usual cause in measured data is feedback: the record was taken in closed loop, and u is then correlated with
   the past of y. The check (Ljung, *System Identification*, 2nd ed., §13.4 and §16.6): prewhiten u by a long AR
   model, ε_u = A_u(q) u; in open loop ε_u(t) is uncorrelated with y(t − k), k ≥ 1, and each sample correlation has
@@ -9,6 +13,9 @@
 - **One-step fit far above free-run fit**: one-step R² ≥ 0.5 while the free-run R² is lower by more than
   ``GAP_R2`` and its error variance (1 − R²) is over ``GAP_RATIO`` × the one-step one — a one-step score that says
   nothing about simulation (the issue's ARX with one-step 0.99995, free run 0.44).
+- **Automatic order on the corner of its grid, or short of the FIR**: the order chosen on the hold-out is the
+  largest the search tried (``order_search["corner"]``), or no order came near the least-squares FIR's hold-out
+  error (``order_search["below_reference"]``): a larger ``max_order`` or another structure may simulate better.
 - **Validation outside the estimation amplitude range**: a validation input or output exceeding the estimation
   range by more than ``RANGE_TOL`` of that range: the model extrapolates.
 """
@@ -26,6 +33,7 @@ from sysid.record import Record
 __all__ = ["practitioner_warnings", "closed_loop_correlation"]
 
 POLE_TOL = 1e-3
+MIN_RESONANCE_ZETA = 1e-3
 CORR_SIGMAS = 4.0
 CORR_LAGS = 20
 AR_ORDER = 20
@@ -68,6 +76,15 @@ def closed_loop_correlation(data: Record | Sequence[Record], max_lag: int = CORR
     return best
 
 
+def _resonance(p: dict[str, Any]) -> bool:
+    """A complex pole inside the unit circle with damping ratio ≥ MIN_RESONANCE_ZETA (module docstring)."""
+    z = complex(p["re"], p["im"])
+    if abs(z.imag) == 0.0 or not 0.0 < abs(z) < 1.0:
+        return False
+    s = complex(math.log(abs(z)), math.atan2(z.imag, z.real))  # ln p (times 1/T: the continuous pole)
+    return -s.real / abs(s) >= MIN_RESONANCE_ZETA
+
+
 def _pole_warning(model, est) -> str | None:
     poles = getattr(model, "poles", None)
     if poles is None:
@@ -76,7 +93,7 @@ def _pole_warning(model, est) -> str | None:
         ps = poles()
     except Exception:  # noqa: BLE001 - a model without usable poles (e.g. MIMO ARX) simply gets no pole warning
         return None
-    bad = [p for p in ps if p["abs"] >= 1.0 - POLE_TOL]
+    bad = [p for p in ps if p["abs"] >= 1.0 - POLE_TOL and not _resonance(p)]
     if not bad:
         return None
     p = max(bad, key=lambda q: q["abs"])
@@ -138,6 +155,17 @@ def practitioner_warnings(model, est, val=None, summary: dict[str, Any] | None =
         w = _gap_warning((summary or {}).get(part), part)
         if w:
             out.append(w)
+    search = (summary or {}).get("order_search") or getattr(model, "order_search_", None)
+    if isinstance(search, dict) and (search.get("corner") or search.get("below_reference")):
+        chosen = ", ".join(f"{k}={v}" for k, v in ((summary or {}).get("chosen_orders") or {}).items())
+        top = max(search.get("grid") or [search.get("grid_max", 0)])
+        if search.get("corner"):
+            out.append(f"automatic order ({chosen}) is the largest of its grid (the corner, up to {top}): a larger "
+                       "max_order may simulate the hold-out better")
+        ref = search.get("reference") or {}
+        if search.get("below_reference") and ref.get("holdout_nrmse") is not None:
+            out.append(f"no automatic order up to {top} simulates the hold-out as well as a least-squares FIR "
+                       f"({ref.get('nb')} taps): try a larger max_order, another structure, or the fir identifier")
     if val is not None:
         out += _range_warnings(est, val)
     return out

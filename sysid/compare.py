@@ -6,6 +6,8 @@
   :mod:`sysid.metrics`: NRMSE fit % (MATLAB's ``fit = 100 (1 − ‖y − ŷ‖ / ‖y − ȳ‖)``), R² (eq. 2-31), RMSE;
 - :func:`compare` — several models on one record, scored on the same samples (after the largest ``max_lag_``
   of all of them, the initial conditions copied from the measurement);
+- :func:`fir_reference` — the least-squares FIR (``identify fir`` with its defaults) fitted on estimation data, the
+  baseline ``compare --fir-est`` shows beside the user's models;
 - :func:`compare_report` — the figures: measured vs predicted (whole record and a zoom) and the residual
   correlation tests (eq. 2-32) of each model's one-step residuals (what MATLAB's ``resid`` tests).
 """
@@ -24,7 +26,8 @@ from sysid import metrics
 from sysid.errors import ConfigError, DataError, DivergenceWarning
 from sysid.record import Record
 
-__all__ = ["parse_horizon", "horizon_label", "check_rate", "predict_scores", "compare", "compare_report"]
+__all__ = ["parse_horizon", "horizon_label", "check_rate", "predict_scores", "compare", "compare_report",
+           "fir_reference"]
 
 #: relative difference between the data's and the model's sampling rate still accepted
 RATE_TOLERANCE = 1e-6
@@ -100,6 +103,14 @@ def compare(models: Sequence[Any], record: Record, horizon: int | None = None,
         preds.append(yh)
         rows.append(s)
     return preds, rows
+
+
+def fir_reference(est: Record | Sequence[Record]):
+    """The least-squares FIR of the ``fir`` identifier with its defaults (taps chosen on a hold-out of ``est``):
+    the baseline every practitioner fits first, to be compared beside other models (:mod:`sysid.fir`)."""
+    from sysid.registry import get_identifier
+
+    return get_identifier("fir")().fit(est)
 
 
 def compare_report(models: Sequence[Any], names: Sequence[str], record: Record, preds: Sequence[np.ndarray],

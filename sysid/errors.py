@@ -26,3 +26,8 @@ class ConfigError(InputError):
 
 class DivergenceWarning(RuntimeWarning):
     """A free-run simulation diverged (non-finite or beyond its bound) and was stopped."""
+
+
+class OrderSearchWarning(UserWarning):
+    """An automatic order (or FIR tap count) choice landed on the last point of its grid, or no order of the grid
+    came near the least-squares FIR on the hold-out: a larger order or another structure may fit better."""

@@ -64,7 +64,8 @@ def identification_summary(model, est: Record | Sequence[Record], val: Record | 
                            fit_seconds: float | None = None) -> dict[str, Any]:
     """The ``identify`` JSON (interfaces.md): identifier, params, n_parameters, fit_seconds, terms, estimation,
     validation (``None`` without validation data); linear models add ``parameters`` ([{name, value, std}]),
-    ``poles`` and ``chosen_orders``; ``warnings`` lists practitioner warnings (:mod:`sysid.advice`)."""
+    ``poles`` and ``chosen_orders`` (with ``order_selection`` and ``order_search`` when chosen automatically), the
+    FIR its ``taps``; ``warnings`` lists practitioner warnings (:mod:`sysid.advice`)."""
     d = model.describe()
     out = {
         "identifier": d.get("identifier", getattr(model, "name", type(model).__name__)),
@@ -76,9 +77,11 @@ def identification_summary(model, est: Record | Sequence[Record], val: Record | 
         "validation": evaluate(model, val) if val is not None else None,
     }
     # linear models: parameters with std, poles, automatically chosen orders
-    for key in ("parameters", "poles", "chosen_orders", "nx", "order_selection"):
+    for key in ("parameters", "poles", "chosen_orders", "nx", "order_selection", "order_search", "taps"):
         if d.get(key) is not None:
             out[key] = d[key]
+    if "order_search" not in out and getattr(model, "order_search_", None) and out.get("chosen_orders"):
+        out["order_search"] = model.order_search_  # oe / bj keep it beside their order table
     from sysid.advice import practitioner_warnings
 
     out["warnings"] = practitioner_warnings(model, est, val, out)

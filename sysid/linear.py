@@ -107,6 +107,7 @@ class _LinearBase(PolynomialModel):
         if getattr(self, "chosen_orders_", None):
             d["chosen_orders"] = self.chosen_orders_
             d["order_selection"] = getattr(self, "order_table_", None)
+            d["order_search"] = getattr(self, "order_search_", None)
         return d
 
 
@@ -165,7 +166,7 @@ def _search_arx_order(model, records: list[Record]) -> int:
 
     check_records(records, max(1, int(model.nk)), 3, model.name)
     probe = ARX(nk=model.nk, intercept=model.intercept, orders="given")
-    n, model.order_table_ = select_arx_orders(records, model.nk, int(model.max_order), probe)
+    n, model.order_table_, model.order_search_ = select_arx_orders(records, model.nk, int(model.max_order), probe)
     return n
 
 

@@ -103,7 +103,7 @@ class _PolyPEM(Identifier):
         if nb is None or nf is None:
             from sysid.order import select_oe_orders
 
-            n, table = select_oe_orders(records, nk, max_order=int(self.max_order), nb=nb, nf=nf)
+            n, table, self.order_search_ = select_oe_orders(records, nk, max_order=int(self.max_order), nb=nb, nf=nf)
             nb = nb if nb is not None else [n] * m
             nf = nf if nf is not None else [n] * m
             chosen.update(nb=nb, nf=nf)
@@ -433,7 +433,7 @@ class OE(_PolyPEM):
 
     name = "oe"
 
-    def __init__(self, nb: Any = None, nf: Any = None, nk: Any = None, max_order: int = 12, max_iter: int = 200):
+    def __init__(self, nb: Any = None, nf: Any = None, nk: Any = None, max_order: int = 24, max_iter: int = 200):
         self.nb = nb
         self.nf = nf
         self.nk = nk
@@ -449,7 +449,7 @@ class BJ(_PolyPEM):
     _noise = True
 
     def __init__(self, nb: Any = None, nc: Any = None, nd: Any = None, nf: Any = None, nk: Any = None,
-                 max_order: int = 12, max_iter: int = 200):
+                 max_order: int = 24, max_iter: int = 200):
         self.nb = nb
         self.nc = nc
         self.nd = nd

@@ -8,10 +8,11 @@ from pathlib import Path
 
 from sysid.errors import ConfigError
 
-__all__ = ["IDENTIFIERS", "get_identifier", "available_identifiers", "binary_loader"]
+__all__ = ["IDENTIFIERS", "LINEAR_IDENTIFIERS", "get_identifier", "available_identifiers", "binary_loader"]
 
 # id -> "module:Class". Each module owns its identifier; add a line here to register a new one.
 IDENTIFIERS: dict[str, str] = {
+    "fir": "sysid.fir:FIR",
     "arx": "sysid.linear:ARX",
     "armax": "sysid.linear:ARMAX",
     "bla": "sysid.bla_model:BLAModel",
@@ -28,6 +29,10 @@ IDENTIFIERS: dict[str, str] = {
     "narx-poly-sim": "sysid.polysim:NARXPolySim",
     "oe-echo": "sysid.echo_oe:EchoOE",
 }
+
+# Identifiers whose models are linear in the input: the baselines a nonlinear model must beat (the scoring rule of
+# benchmarks.scoring.floors, the linear reference of sysid.identify).
+LINEAR_IDENTIFIERS: tuple[str, ...] = ("fir", "arx", "armax", "bla", "oe", "bj", "n4sid", "oe-echo")
 
 # Binary (non-JSON) model files: suffix -> "module:function(path) -> Identifier".
 BINARY_LOADERS: dict[str, str] = {

@@ -11,8 +11,9 @@ inputs U_f, past inputs and outputs Z_p = [U_p; Y_p] and future outputs Y_f, the
     [U_f; Z_p; Y_f] = [[L11, 0, 0], [L21, L22, 0], [L31, L32, L33]] Q
 
 gives the extended observability matrix Γ_i from the column space of L32 (SVD; the order n is chosen from its
-singular values when not given: the last step by a factor ≥ 2 between neighbours, :func:`choose_order`), C as the first
-block row of Γ_i and A from its shift invariance (least squares). B and D follow linearly: with Γ⊥ the orthogonal
+singular values by :func:`choose_order` — the last step by a factor ≥ 2 between neighbours — which is one candidate of
+the hold-out free-run search of :func:`sysid.order.select_n4sid_order` when ``nx`` is not given), C as the first block
+row of Γ_i and A from its shift invariance (least squares). B and D follow linearly: with Γ⊥ the orthogonal
 complement of Γ_i and M = Γ⊥ᵀ L31 L11⁻¹ = Γ⊥ᵀ H_i (H_i the block-Toeplitz matrix of D, CB, CAB, …), column block
 c gives M_c = L_c D + [L_{c+1} … L_i] Γ_{i−c} B (L_c the c-th block column of Γ⊥ᵀ), solved by least squares
 (``focus="subspace"``). By default, poles outside the unit circle are reflected (λ → 1/λ̄, counted in
@@ -205,7 +206,9 @@ class N4SID(Identifier):
 
     Parameters
     ----------
-    nx : state dimension; ``None`` = chosen from the singular values (reported as ``nx_`` / ``chosen_orders_``).
+    nx : state dimension; ``None`` = chosen by hold-out free-run error over the orders up to ``max_order`` and the
+        singular-value choice (:func:`sysid.order.select_n4sid_order`; reported as ``nx_`` / ``chosen_orders_``,
+        the table in ``order_table_``, the search in ``order_search_``).
     max_order : largest order considered when ``nx`` is None.
     block_rows : i (past and future horizon, samples); ``None`` = max(ceil((n_max + 1)/l) + 1, 10).
     segments : parts of the data for the jackknife uncertainty (≥ 2; more parts = finer std, same cost order).
@@ -315,7 +318,16 @@ class N4SID(Identifier):
         sy = np.sqrt(np.mean(np.vstack(ys) ** 2, axis=0))
         Rs = self._r_factors([u / su for u in us], [y / sy for y in ys], i, K)
         R = _qr_r(np.vstack(Rs))
-        A, B, C, D, s, n = self._estimate(R, i, m, l, n_fixed, n_max)
+        n_use = n_fixed
+        self.order_table_, self.order_search_ = None, None
+        if n_fixed is None:  # hold-out free-run search (sysid.order), the singular-value choice among the candidates
+            from sysid.order import select_n4sid_order
+
+            n_sv = self._estimate(R, i, m, l, None, n_max)[5]
+            n_use, self.order_table_, self.order_search_ = select_n4sid_order(
+                records, {"block_rows": i, "focus": self.focus, "chunk": self.chunk}, n_max, extra=[n_sv])
+            self.order_search_["singular_value_choice"] = int(n_sv)
+        A, B, C, D, s, n = self._estimate(R, i, m, l, n_use, n_max)
         un, yn = [u / su for u in us], [y / sy for y in ys]
         self.reflected_poles_ = 0
         if self.focus == "simulation":
@@ -442,11 +454,13 @@ class N4SID(Identifier):
                      reflected_poles=self.reflected_poles_,
                      singular_values=self.singular_values_[:2 * int(self.max_order) + 2], poles=self.poles(),
                      state_space={k: getattr(self, k + "_").tolist() for k in "ABCD"}, max_lag=self.max_lag_, terms=[])
+            if getattr(self, "order_table_", None):
+                d.update(order_selection=self.order_table_, order_search=self.order_search_)
         return d
 
     def summary(self) -> str:
         sv = ", ".join(f"{v:.3g}" for v in self.singular_values_[:min(len(self.singular_values_), self.nx_ + 4)])
-        how = "chosen from the singular values" if self.chosen_orders_ else "given"
+        how = "chosen on the hold-out" if self.chosen_orders_ else "given"
         lines = [f"n4sid: nx = {self.nx_} ({how}; block rows {self.block_rows_}); singular values {sv} ..."]
         for p in self.poles():
             sd = "" if p["std"] is None else f" ± {p['std']:.2g}"

@@ -19,6 +19,7 @@ from tests._polysys import narx_record
 torch = pytest.importorskip("torch")
 
 SETTINGS = {
+    "fir": "nb=8,nk=1",
     "arx": "ny=2,nu=2",
     "armax": "ny=2,nu=2,ne=1",
     "narx-poly": "ny=2,nu=2,degree=2",

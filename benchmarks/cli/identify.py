@@ -2,42 +2,23 @@
 
 Generic over the identifier registry (:mod:`sysid.registry`): any registered identifier (linear, polynomial,
 neural) is built with ``Identifier.from_assignments`` from the ``--set`` options, fitted on the estimation
-record(s) (several ``--est`` files are separate experiments) and scored by :func:`sysid.evaluate.evaluate`.
+record(s) (several ``--est`` files are separate experiments) and scored by :func:`sysid.evaluate.evaluate`; the
+work is the library's :func:`sysid.identify.identify` (which also holds a nonlinear default against the linear
+one and, with ``--set auto=true``, keeps the better).
 The JSON keys are the contract of interfaces.md: ``identifier, params, n_parameters, fit_seconds, terms,
 estimation: {one_step: {r2, nrmse}, free_run: {r2, nrmse}}, validation: {...}``.
-Other commands and teams reuse :func:`identify`.
+Other commands and teams reuse :func:`sysid.identify.identify` (re-exported here as before).
 """
 
 from __future__ import annotations
 
 import argparse
-import time
-from collections.abc import Sequence
-from typing import Any
 
 from benchmarks.cli.common import add_data_args, emit_json, read_data, same_fs
 from sysid.config import parse_assignments
-from sysid.evaluate import identification_summary
-from sysid.record import Record
-from sysid.registry import get_identifier
+from sysid.identify import identify
 
-
-def identify(name: str, est: Record | Sequence[Record], val: Record | Sequence[Record] | None = None,
-             assignments: dict[str, str] | Sequence[str] | None = None) -> tuple[Any, dict[str, Any]]:
-    """Build identifier ``name`` from ``--set``-style assignments, fit on ``est``, score on est/val.
-
-    Returns ``(model, summary)`` with the summary in the identify-JSON layout.
-    """
-    cls = get_identifier(name)
-    if assignments is None:
-        assignments = {}
-    elif not isinstance(assignments, dict):
-        assignments = parse_assignments(assignments)
-    model = cls.from_assignments(assignments)
-    t0 = time.perf_counter()
-    model.fit(est)
-    fit_seconds = time.perf_counter() - t0
-    return model, identification_summary(model, est, val, fit_seconds)
+__all__ = ["identify", "register", "run"]
 
 
 def register(sub) -> None:
@@ -45,15 +26,33 @@ def register(sub) -> None:
         "identify", help="identify a black-box model (arx, armax, oe, bj, n4sid, narx-poly, narmax-poly, ...)"
     )
     p.add_argument("identifier", help="identifier id (piezotwin list identifiers)")
-    p.add_argument("--est", required=True, action="append", metavar="FILE",
-                   help="estimation record; repeat for several separate experiments")
+    p.add_argument(
+        "--est",
+        required=True,
+        action="append",
+        metavar="FILE",
+        help="estimation record; repeat for several separate experiments",
+    )
     p.add_argument("--val", metavar="FILE", help="validation record")
-    p.add_argument("--set", dest="set_", action="append", default=[], metavar="KEY=VALUE[,...]",
-                   help="identifier options, e.g. ny=2,nu=2,degree=2,criterion=bic; may repeat")
+    p.add_argument(
+        "--set",
+        dest="set_",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE[,...]",
+        help="identifier options, e.g. ny=2,nu=2,degree=2,criterion=bic; may repeat. auto=true (nonlinear "
+        "identifiers): also fit the default linear model (arx) and keep whichever simulates the hold-out "
+        "(--val, else the last 30%% of the estimation data) better",
+    )
     add_data_args(p)
     p.add_argument("--json", action="store_true", help="print the result as JSON")
-    p.add_argument("-o", "--output", metavar="MODEL", help="save the fitted model: .npz (or .json, readable text); "
-                   "use it with predict / compare / export-fmu --model (docs/models-in-use.md)")
+    p.add_argument(
+        "-o",
+        "--output",
+        metavar="MODEL",
+        help="save the fitted model: .npz (or .json, readable text); "
+        "use it with predict / compare / export-fmu --model (docs/models-in-use.md)",
+    )
     p.add_argument("--plots", metavar="DIR", help="write residual / correlation-test / scatter PNGs to DIR")
     p.set_defaults(func=run)
 
@@ -81,9 +80,13 @@ def run(args: argparse.Namespace) -> int:
     if hasattr(model, "summary"):
         print(model.summary())
     if summary.get("chosen_orders"):
-        print("  orders chosen automatically (none given): "
-              + ", ".join(f"{k}={'-'.join(map(str, v)) if isinstance(v, list) else v}"
-                          for k, v in summary["chosen_orders"].items()))
+        print(
+            "  orders chosen automatically (none given): "
+            + ", ".join(
+                f"{k}={'-'.join(map(str, v)) if isinstance(v, list) else v}"
+                for k, v in summary["chosen_orders"].items()
+            )
+        )
     for part in ("estimation", "validation"):
         s = summary.get(part)
         if not s:
@@ -93,6 +96,14 @@ def run(args: argparse.Namespace) -> int:
             nr = "nan" if m["nrmse"] is None else f"{m['nrmse']:.5f}"
             extra = f"  (diverged at sample {m['diverged_at']})" if "diverged_at" in m else ""
             print(f"  {part:<10} {mode:<8} R2 = {r2}  NRMSE = {nr}{extra}")
+    ref = summary.get("linear_reference")
+    if ref:
+        print(
+            f"  linear reference {ref['identifier']}: free-run R2 = {ref['r2']:.5f} on the {ref['holdout']} "
+            f"({summary.get('fallback', {}).get('requested', summary['identifier'])}: {ref['model_r2']:.5f})"
+        )
+    if summary.get("fallback"):
+        print(f"  auto=true: kept {summary['fallback']['kept']} instead of {summary['fallback']['requested']}")
     for w in summary.get("warnings", []):
         print(f"  warning: {w}")
     if args.output:

@@ -16,10 +16,10 @@ from typing import Any
 from benchmarks.scoring.core import ScoreRun, _finite, _fmt
 from benchmarks.scoring.settings import QUICK_SEEDS
 from sysid.errors import ConfigError
+from sysid.registry import LINEAR_IDENTIFIERS
 
 BASELINES_PATH = Path(__file__).resolve().parent.parent / "baselines.json"
 BASELINES_FORMAT = "piezotwin-baselines/1"
-LINEAR_IDENTIFIERS = ("arx", "armax", "bla", "oe", "bj", "n4sid", "oe-echo")
 
 
 def load_baselines(path: str | Path | None = None) -> dict[str, Any]:
