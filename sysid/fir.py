@@ -48,7 +48,6 @@ from typing import Any
 
 import numpy as np
 import scipy.linalg
-import scipy.signal
 
 from sysid.base import Identifier, as_record_list, check_prediction, check_records
 from sysid.errors import ConfigError, DataError, OrderSearchWarning
@@ -75,6 +74,8 @@ def holdout_tolerance(n_holdout: int) -> float:
 def _lag_corr(x: np.ndarray, v: np.ndarray, M: int, L: int) -> np.ndarray:
     """c(j) = Σ_{t=L}^{N−1} x(t) v(t − j), j = 0 … M−1 (requires L ≥ M − 1)."""
     N = len(x)
+    import scipy.signal  # on first use: importing it costs about a second
+
     z = scipy.signal.correlate(v[L - M + 1:N], x[L:N], mode="valid")
     return z[::-1]
 
@@ -143,6 +144,8 @@ def _aligned(u: np.ndarray, y: np.ndarray, nk: int) -> tuple[np.ndarray, np.ndar
 
 def _simulate(u: np.ndarray, taps: np.ndarray, nk: int) -> np.ndarray:
     """Σ_i Σ_k h_{o,i}(k) u_i(t − nk − k) from zero past input; taps shaped (l, m, nb); returns (N, l)."""
+    import scipy.signal
+
     N = u.shape[0]
     n_out, m, _ = taps.shape
     out = np.zeros((N, n_out))

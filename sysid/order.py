@@ -39,7 +39,6 @@ from typing import Any
 import numpy as np
 
 from sysid.errors import ConfigError, DataError, DivergenceWarning, OrderSearchWarning
-from sysid.fir import holdout_tolerance
 from sysid.record import Record
 from sysid.registry import get_identifier
 
@@ -175,6 +174,8 @@ def _search(make, records: list[Record], grid: Sequence[int], what: str, ref: di
         raise DataError(f"{what}: no order of the grid {list(grid)} could be fitted and simulated on the hold-out "
                         "part of the estimation data; give the orders explicitly")
     best = min(r["holdout_nrmse"] for r in scored)
+    from sysid.fir import holdout_tolerance  # here: sysid.fir loads scipy, which the CLI's start-up must not
+
     tol = holdout_tolerance(sum(len(r) for r in val))
     chosen = min(r["order"] for r in scored if r["holdout_nrmse"] <= best * (1.0 + tol))
     for r in rows:
