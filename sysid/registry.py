@@ -27,6 +27,7 @@ IDENTIFIERS: dict[str, str] = {
     "wh-net": "sysid.neural.wh_net:WHNet",
     "narx-poly-sim": "sysid.polysim:NARXPolySim",
     "oe-echo": "sysid.echo_oe:EchoOE",
+    "pnlss": "sysid.pnlss:PNLSS",
 }
 
 # Binary (non-JSON) model files: suffix -> "module:function(path) -> Identifier".
