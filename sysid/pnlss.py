@@ -28,9 +28,9 @@ Hold-out: with ``val_fraction`` > 0 the last fraction of the last record is left
 the search stops after ``patience`` evaluations without improvement (0: runs to ``max_nfev``).
 
 Prediction: a free run (no noise model, so every ``horizon`` gives the same output), from the initial state that
-fits the first ``max_lag_`` measured outputs by least squares (Gauss–Newton on x(0) with the same Jacobian,
-started from the linear part's observability estimate); those samples are copied from the measurement as for
-every identifier. With the input alone (no y) the run starts from x(0) = 0.
+fits the first ``max_lag_`` measured outputs by least squares (on the nonlinear free run, with the same Jacobian
+and a small ridge towards the mean initial state of the estimation records); those samples are copied from the
+measurement as for every identifier. With the input alone (no y) the run starts from x(0) = 0.
 """
 
 from __future__ import annotations
@@ -50,10 +50,11 @@ __all__ = ["PNLSS"]
 
 DIVERGENCE_FACTOR = 1e3  # a simulation leaving this multiple of max|y| (or of the states' RMS, 1) has diverged
 DIVERGED_RESIDUAL = 1e3  # residual (in output RMS) of every sample from a divergence on
-X0_ITERATIONS = 20
+X0_ITERATIONS = 20  # most evaluations of the initial-state fit in predict
+X0_RIDGE = 1e-2  # weight of the initial-state prior (states and outputs are in RMS units)
 # The searches run by ``starts`` (scipy least_squares method, x_scale), in this order, all from the linear start:
 # other paths (trust region shapes) to a minimum; the lowest cost (hold-out RMSE when held out) is kept.
-SEARCHES = (("trf", "jac"), ("lm", "jac"), ("lm", 1.0))  # most Gauss-Newton evaluations of the initial-state fit in predict
+SEARCHES = (("trf", "jac"), ("lm", "jac"), ("lm", 1.0))
 
 
 class _Stop(Exception):
@@ -284,25 +285,27 @@ class PNLSS(Identifier):
             raise ConfigError("pnlss: model is not fitted (call fit first)")
 
     def _initial_state(self, u: np.ndarray, y: np.ndarray) -> np.ndarray:
-        """x(0) fitting the first ``max_lag_`` outputs (scaled): the linear part's observability least squares,
-        then Gauss–Newton on the nonlinear free run (the x(0) columns of the sensitivity Jacobian)."""
+        """x(0) fitting the first ``max_lag_`` outputs (scaled) by least squares on the nonlinear free run (the
+        x(0) columns of the sensitivity Jacobian), with a ridge of weight ``X0_RIDGE`` towards the mean initial
+        state of the estimation records: a few samples rarely determine every state (slow modes), and the
+        ridge keeps the undetermined directions at a state the system was seen in."""
         n, L = self.nx_, min(self.max_lag_, len(y))
+        prior = np.mean(self.x0_, axis=0)
+        if L == 0:
+            return prior
         theta = self._pack()
         Ps = ps.n_state_params(n, self.n_inputs_, self.facE_.shape[0])
-        O = np.vstack([self.C_ @ np.linalg.matrix_power(self.A_, t) for t in range(L)])
-        y_zero = self._run(theta, u[:L], np.zeros(n), False)[0]
-        x0 = np.linalg.lstsq(O, (y[:L] - y_zero).reshape(-1), rcond=None)[0]
 
         def res(x):
             yh = self._run(theta, u[:L], x, False)[0]
-            return np.nan_to_num((yh - y[:L]).reshape(-1), nan=DIVERGED_RESIDUAL)
+            e = np.nan_to_num((yh - y[:L]).reshape(-1), nan=DIVERGED_RESIDUAL)
+            return np.concatenate([e, X0_RIDGE * (x - prior)])
 
         def jac(x):
-            return self._run(theta, u[:L], x, True)[1][:, :, Ps:Ps + n].reshape(-1, n)
+            J = self._run(theta, u[:L], x, True)[1][:, :, Ps:Ps + n].reshape(-1, n)
+            return np.vstack([J, X0_RIDGE * np.eye(n)])
 
-        if L >= 1 and np.isfinite(x0).all():
-            x0 = least_squares(res, x0, jac=jac, method="trf", max_nfev=X0_ITERATIONS).x
-        return x0
+        return least_squares(res, prior, jac=jac, method="trf", max_nfev=X0_ITERATIONS).x
 
     def _simulate(self, u: np.ndarray, y: np.ndarray | None) -> np.ndarray:
         us = u / self.u_scale_

@@ -32,8 +32,9 @@ class Dataset:
     """One benchmark: estimation data, named test sets, the initialisation window and reference numbers.
 
     ``references[test][kind]`` holds published free-run RMSE values (``value`` in ``units['y']``, ``model``);
-    ``init_samples`` is the official initialisation window of every test (Silverbox and Wiener–Hammerstein 50,
-    Cascaded Tanks 4): scores are computed from sample ``max(init_samples, model.max_lag_)`` on.
+    ``init_samples`` is the initialisation window of the tests (Silverbox and Wiener–Hammerstein 50, Cascaded
+    Tanks 4), ``test_init`` a test's own window where it differs (Cascaded Tanks ``test-official``: 50, the official
+    dataloader's): scores of test T are computed from sample ``max(init_for(T), model.max_lag_)`` on.
     """
 
     name: str
@@ -47,6 +48,11 @@ class Dataset:
     references: dict[str, dict[str, dict[str, Any]]] = field(default_factory=dict)
     nonlinear: bool = True
     meta: dict[str, Any] = field(default_factory=dict)
+    test_init: dict[str, int] = field(default_factory=dict)
+
+    def init_for(self, test: str) -> int:
+        """The initialisation window [samples] of test ``test``."""
+        return int(self.test_init.get(test, self.init_samples))
 
     @property
     def est_records(self) -> list[Record]:
@@ -54,6 +60,7 @@ class Dataset:
 
     def summary(self) -> dict[str, Any]:
         return {"id": self.name, "kind": self.kind, "fs_hz": self.fs, "init_samples": self.init_samples,
+                "test_init_samples": {t: self.init_for(t) for t in self.tests},
                 "est_samples": sum(len(r) for r in self.est_records),
                 "tests": {k: len(v) for k, v in self.tests.items()}, "units": dict(self.units),
                 "references": self.references, "description": self.description}
@@ -97,12 +104,15 @@ def list_datasets() -> list[dict[str, Any]]:
         out.append({"id": name, "kind": "lab", "fs_hz": _LAB_FS[name],
                     "est_samples": split["est"][2] - split["est"][1],
                     "tests": {t: b - a for t, (_, a, b) in split["tests"].items()},
-                    "init_samples": lab.INIT_SAMPLES[name], "available": True,
+                    "init_samples": lab.INIT_SAMPLES[name],
+                    "test_init_samples": {t: lab.TEST_INIT_SAMPLES.get(name, {}).get(t, lab.INIT_SAMPLES[name])
+                                          for t in split["tests"]}, "available": True,
                     "description": LAB_DESCRIPTIONS[name]})
     for name, spec in twin.TWIN_DATASETS.items():
         ok, why = _twin_available(spec.twin)
         out.append({"id": name, "kind": "twin", "fs_hz": spec.fs, "est_samples": None,
                     "tests": {t: None for t in spec.tests}, "init_samples": spec.init_samples,
+                    "test_init_samples": {t: spec.init_samples for t in spec.tests},
                     "available": ok, "description": spec.description + ("" if ok else f" [not available: {why}]")})
     return out
 
@@ -120,6 +130,7 @@ def load_dataset(name: str, source: str | Path | None = None, use_cache: bool = 
         return Dataset(name=name, kind="lab", description=LAB_DESCRIPTIONS[name], est=est, tests=tests,
                        init_samples=lab.INIT_SAMPLES[name], fs=est.fs, units=dict(est.units),
                        references=references_for(name), nonlinear=True,
+                       test_init=dict(lab.TEST_INIT_SAMPLES.get(name, {})),
                        meta={"source": str(source) if source is not None else f"benchmarks/data/{lab.LAB_SPECS[name].folder}",
                              "splits": lab.SPLITS[name]})
     if name in twin.TWIN_DATASETS:

@@ -50,6 +50,7 @@ from benchmarks.scoring.settings import (
     QUICK_SETTINGS,
     QUICK_ONLY_DATASETS,
     QUICK_SKIP_IDENTIFIERS,
+    QUICK_SKIP_TESTS,
     SETTINGS,
     SETTINGS_DIR,
     SYSIDENTPY_QUICK_MAX_EST,
@@ -70,7 +71,8 @@ Normalised = NormalisedModel
 
 __all__ = [
     "BASELINES_FORMAT", "BASELINES_PATH", "DEFAULT_MARGIN", "LINEAR_IDENTIFIERS", "METRICS", "NORMALISE",
-    "QUICK_DATASETS", "QUICK_MAX_SAMPLES", "QUICK_SEEDS", "QUICK_ONLY_DATASETS", "QUICK_SETTINGS", "QUICK_SKIP_IDENTIFIERS", "SEEDED_MARGIN",
+    "QUICK_DATASETS", "QUICK_MAX_SAMPLES", "QUICK_SEEDS", "QUICK_ONLY_DATASETS", "QUICK_SETTINGS", "QUICK_SKIP_IDENTIFIERS", "QUICK_SKIP_TESTS",
+    "SEEDED_MARGIN",
     "SETTINGS", "SETTINGS_DIR", "SYSIDENTPY_QUICK_MAX_EST", "SYSIDENTPY_SETTINGS", "ConfigError", "InputError",
     "Normalised", "NormalisedModel", "Record", "ScoreRun", "check", "check_rules", "dropped_pairs", "environment",
     "evaluate", "format_row", "is_seeded", "load_baselines", "load_identifier_settings", "make_floors",
