@@ -7,7 +7,8 @@ Automatica 46 (2010) 647-656, eq. 3)::
     y(t)   = C x(t) + D u(t) + F η(x(t), u(t))
 
 ζ and η stack every monomial of the n + m variables z = [x; u] of total degree 2 … d (the "full" monomial set of
-the paper, §3.1); each is held as a row of factor indices into z (``-1`` pads), so ζ_k = Π_j z[fac_k,j].
+the paper, §3.1), optionally after the constant 1 (an affine model: offsets of measured data); each is held as a
+row of factor indices into z (``-1`` pads), so ζ_k = Π_j z[fac_k,j] (an empty product is 1).
 
 The Jacobian of the simulated output with respect to the parameters follows from the forward sensitivity
 recursion of the paper's §4.2 (eq. 18-20): with S(t) = ∂x(t)/∂θ_s (n × P_s) for the state-equation parameters
@@ -30,10 +31,12 @@ from numba import njit
 __all__ = ["monomials", "monomial_names", "simulate", "n_state_params", "n_output_params"]
 
 
-def monomials(n_vars: int, degree: int) -> np.ndarray:
+def monomials(n_vars: int, degree: int, constant: bool = False) -> np.ndarray:
     """Factor-index table of every monomial of ``n_vars`` variables of total degree 2 … ``degree`` (graded
-    lexicographic order): shape (count, max(degree, 1)), ``-1`` pads. Degree < 2 gives an empty table."""
-    rows = [c for d in range(2, int(degree) + 1) for c in combinations_with_replacement(range(n_vars), d)]
+    lexicographic order), after the constant 1 (a row of ``-1`` only) when ``constant``: shape (count,
+    max(degree, 1)), ``-1`` pads. Degree < 2 and no constant gives an empty table."""
+    rows = [()] if constant else []
+    rows += [c for d in range(2, int(degree) + 1) for c in combinations_with_replacement(range(n_vars), d)]
     fac = -np.ones((len(rows), max(int(degree), 1)), dtype=np.int64)
     for i, c in enumerate(rows):
         fac[i, :len(c)] = c
@@ -46,7 +49,7 @@ def monomial_names(fac: np.ndarray, n: int, m: int) -> list[str]:
     out = []
     for row in fac:
         idx = [int(r) for r in row if r >= 0]
-        out.append("*".join(f"{var[v]}^{idx.count(v)}" if idx.count(v) > 1 else var[v] for v in sorted(set(idx))))
+        out.append("*".join(f"{var[v]}^{idx.count(v)}" if idx.count(v) > 1 else var[v] for v in sorted(set(idx))) or "1")
     return out
 
 
