@@ -204,18 +204,22 @@ def _sim(A, B, C, D, E, F, facE, facF, u, x0, bound, want_jac):  # pragma: no co
         for t in range(diverged, N):
             for o in range(p):
                 y[t, o] = np.nan
-    return y, J, diverged
+    return y, J, diverged, x
 
 
-def simulate(A, B, C, D, E, F, facE, facF, u, x0=None, bound: float = np.inf, jacobian: bool = False):
+def simulate(A, B, C, D, E, F, facE, facF, u, x0=None, bound: float = np.inf, jacobian: bool = False,
+             final_state: bool = False):
     """Free run of the PNLSS model from x(0) = ``x0`` (zeros) on input ``u`` (N, m).
 
     Returns (y (N, p), J, diverged): J is ∂y/∂θ (N, p, P) over θ = [vec A, vec B, vec E, x(0), vec C, vec D,
     vec F] when ``jacobian`` (else a (1, p, P) zero array); from the first sample where an output or a state
-    leaves ±``bound`` (or is not finite) on, y is nan and ``diverged`` is that index (-1: none).
+    leaves ±``bound`` (or is not finite) on, y is nan and ``diverged`` is that index (-1: none). With
+    ``final_state`` the state after the last sample is returned fourth (a run continued from it is the same
+    arithmetic as one run: the per-sample stepper of an FMU uses this).
     """
     mats = [np.ascontiguousarray(np.asarray(M, dtype=float)) for M in (A, B, C, D, E, F)]
     n = mats[0].shape[0]
     u2 = np.ascontiguousarray(np.asarray(u, dtype=float).reshape(len(u), -1))
     x = np.zeros(n) if x0 is None else np.ascontiguousarray(np.asarray(x0, dtype=float).reshape(n))
-    return _sim(*mats, np.ascontiguousarray(facE), np.ascontiguousarray(facF), u2, x, float(bound), bool(jacobian))
+    out = _sim(*mats, np.ascontiguousarray(facE), np.ascontiguousarray(facF), u2, x, float(bound), bool(jacobian))
+    return out if final_state else out[:3]
