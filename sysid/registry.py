@@ -28,6 +28,7 @@ IDENTIFIERS: dict[str, str] = {
     "wh-net": "sysid.neural.wh_net:WHNet",
     "narx-poly-sim": "sysid.polysim:NARXPolySim",
     "oe-echo": "sysid.echo_oe:EchoOE",
+    "pnlss": "sysid.pnlss:PNLSS",
 }
 
 # Identifiers whose models are linear in the input: the baselines a nonlinear model must beat (the scoring rule of

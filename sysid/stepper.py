@@ -8,8 +8,9 @@ keeps the last ``max_lag_ + 1`` samples and runs the model's *own* compiled free
 computed by the same arithmetic in the same order as the whole-record free run: the two agree bit for bit.
 
 Supported: every identifier whose free run is a function of a finite past (``arx``, ``armax``, ``narx-poly``,
-``narmax-poly``, ``narx-mlp``, ``narx-mlp-sim``). The recurrent ``rnn`` (a hidden state started by an
-encoder) is not.
+``narmax-poly``, ``narx-mlp``, ``narx-mlp-sim``), and ``pnlss``, whose state is carried from one sample to the
+next through its own compiled kernel (:func:`sysid.pnlss_sim.simulate` with ``final_state``). The recurrent
+``rnn`` (a hidden state started by an encoder) is not.
 """
 
 from __future__ import annotations
@@ -22,7 +23,7 @@ from sysid.errors import ConfigError
 
 __all__ = ["make_stepper", "STEPPABLE"]
 
-STEPPABLE = ("arx", "armax", "narx-poly", "narmax-poly", "narx-mlp", "narx-mlp-sim")
+STEPPABLE = ("arx", "armax", "narx-poly", "narmax-poly", "narx-mlp", "narx-mlp-sim", "pnlss")
 
 
 class _WindowStepper:
@@ -101,6 +102,30 @@ class NeuralNARXStepper(_WindowStepper):
         return float(self.norm.inverse_y(np.array([[vn]]))[0, 0]) if math.isfinite(vn) else float("nan")
 
 
+class StateSpaceStepper:
+    """PNLSS: the state from the model's input-only start (``model.predict(u)``), advanced one sample per step by
+    the compiled kernel; outputs before ``max_lag_`` are the zero initial conditions, as in the free run."""
+
+    def __init__(self, model):
+        self.model = model
+        self.reset()
+
+    def reset(self) -> None:
+        self.x = np.mean(self.model.x0_, axis=0).astype(float)
+        self.k = 0
+
+    def step(self, u: float) -> float:
+        from sysid import pnlss_sim as ps
+
+        m = self.model
+        A, B, E, C, D, F = m._unpack(m._pack())
+        with np.errstate(all="ignore"):
+            y, _, _, self.x = ps.simulate(A, B, C, D, E, F, m.facE_, m.facF_, np.array([[u]]) / m.u_scale_, self.x,
+                                          m.bound_, False, final_state=True)
+        self.k += 1
+        return 0.0 if self.k <= m.max_lag_ else float(y[0, 0] * m.y_scale_[0])
+
+
 def make_stepper(model):
     """A fresh stepper (state at rest) for a fitted single-input single-output ``model``."""
     if model.name not in STEPPABLE:
@@ -110,4 +135,6 @@ def make_stepper(model):
                           f"{model.n_inputs_} / {model.n_outputs_}")
     if model.name.startswith("narx-mlp"):
         return NeuralNARXStepper(model)
+    if model.name == "pnlss":
+        return StateSpaceStepper(model)
     return PolynomialStepper(model)

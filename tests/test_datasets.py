@@ -31,8 +31,8 @@ def _shared_data() -> Path | None:
 PUBLISHED = {
     "silverbox": (610.35, 105712 - 40650, {"multisine": 127400 - 105712, "arrow": 40575 - 100,
                                            "arrow-no-extrapolation": 32000}, 50, ("V", "V")),
-    "wiener-hammerstein": (51200.0, 100000, {"test": 88000}, 50, ("V", "V")),
-    "cascaded-tanks": (0.25, 1024, {"test": 1024}, 4, ("V", "V")),
+    "wiener-hammerstein": (51200.0, 100000, {"test": 88000, "test-official": 184000 - 105200}, 50, ("V", "V")),
+    "cascaded-tanks": (0.25, 1024, {"test": 1024, "test-official": 1024}, 4, ("V", "V")),
     "bouc-wen": (750.0, 40960, {"multisine": 8192, "sinesweep": 153000}, 0, ("N", "m")),
     "piezo-tue": (5000.0, 25000, {"test": 25001}, 0, ("V", "um")),
 }

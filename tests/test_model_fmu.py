@@ -1,5 +1,5 @@
-"""Identified models as FMUs: per-sample stepper == free run bit for bit; exported ARX, narx-poly and
-a NARX network validate with fmpy and their FMPy simulation equals the model's own free run (1e-9 relative)."""
+"""Identified models as FMUs: per-sample stepper == free run bit for bit; exported ARX, narx-poly, a NARX network
+and a PNLSS model validate with fmpy and their FMPy simulation equals the model's own free run (1e-9 relative)."""
 
 import json
 import zipfile
@@ -10,6 +10,7 @@ import pytest
 from sysid.errors import ConfigError
 from sysid.linear import ARMAX, ARX
 from sysid.neural.narx_mlp import NARXMLP
+from sysid.pnlss import PNLSS
 from sysid.polynomial import NARMAXPoly, NARXPoly
 from sysid.stepper import make_stepper
 from tests._polysys import narx_record
@@ -35,6 +36,7 @@ def _models(est):
         "narx-poly": NARXPoly(degree=2).fit(est),
         "narmax-poly": NARMAXPoly(ne=1).fit(est),
         "narx-mlp": NARXMLP(ny=3, nu=3, hidden=[8, 8], epochs=3, device="cpu", linear=True, seed=1).fit(est),
+        "pnlss": PNLSS(nx=2, degree=2, max_nfev=20, starts=1).fit(est),
     }
 
 
@@ -55,7 +57,7 @@ def test_stepper_refuses_rnn():
         make_stepper(RNNStateSpace())
 
 
-@pytest.mark.parametrize("name", ["arx", "narx-poly", "narx-mlp"])
+@pytest.mark.parametrize("name", ["arx", "narx-poly", "narx-mlp", "pnlss"])
 def test_exported_model_fmu_validates_and_equals_free_run(name, est, tmp_path, capsys):
     from benchmarks.cli import main
 

@@ -35,6 +35,7 @@ SETTINGS = {
     "ss-encoder": "nx=2,ny=3,nu=3,f_hidden=4,h_hidden=4,e_hidden=4,T=10,epochs=1,device=cpu",
     "wh-net": "channels=2,hidden=4,nb=2,na=2,epochs=2,warmup=2,device=cpu",
     "oe-echo": "nb=3,nf=2,nk=1,echo_lag=6,echo_width=1",
+    "pnlss": "nx=2,degree=2",
 }
 
 

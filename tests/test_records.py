@@ -32,6 +32,7 @@ class ToySeeded(ToyARX):
 
 def test_full_mode_scores_every_requested_seed_with_mean_and_sd():
     ds = load_dataset("cascaded-tanks")
+    del ds.tests["test-official"]  # one test (window 4): the rows below are unpacked as one
     (r,), _ = scoring.score_pair("toy", ds, quick=False, factory=lambda n: ToySeeded, params={"ny": 2, "nu": 2},
                                  seeds=[0, 1, 2])
     assert r["seeds"] == [0, 1, 2] and r["seed"] == 1  # the median seed's model gives the row's metrics
@@ -47,6 +48,7 @@ def test_full_mode_scores_every_requested_seed_with_mean_and_sd():
 
 def test_deterministic_identifier_is_fitted_once_and_says_so():
     ds = load_dataset("cascaded-tanks")
+    del ds.tests["test-official"]  # one test (window 4): the rows below are unpacked as one
     fits = []
 
     class Counting(ToyARX):
@@ -63,6 +65,7 @@ def test_deterministic_identifier_is_fitted_once_and_says_so():
 
 def test_floors_ignore_a_deterministic_seeds_mark():
     ds = load_dataset("cascaded-tanks")
+    del ds.tests["test-official"]  # one test (window 4): the rows below are unpacked as one
     rows, _ = scoring.score_pair("toy", ds, quick=False, factory=lambda n: ToyARX, params={"ny": 2, "nu": 2},
                                  seeds=[0, 1, 2])
     floors = scoring.make_floors([{"format": "piezotwin-score/1", "mode": "full", "rows": rows}])

@@ -20,6 +20,9 @@ REFERENCES: dict[str, dict[str, dict[str, dict[str, Any]]]] = {
             "best_published": {"value": 0.241 * MV, "unit": "V", "model": "SUBNET"},
             "sysidentpy": {"value": 42.2 * MV, "unit": "V", "model": "polynomial NARX (small model)"},
         },
+        "test-official": {
+            "best_published": {"value": 0.241 * MV, "unit": "V", "model": "SUBNET (official dataloader's test set)"},
+        },
     },
     "silverbox": {
         "multisine": {

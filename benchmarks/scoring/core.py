@@ -3,7 +3,7 @@
 For every identifier (registry id, :mod:`sysid.registry`) and dataset (:mod:`benchmarks.datasets`) the
 identifier is fitted on the estimation data with the settings of :mod:`benchmarks.scoring.settings` and predicts
 every test set one step ahead and in free run (``predict(record, horizon=1)`` / ``horizon=None``). Metrics
-(:mod:`sysid.metrics`) skip the first ``max(dataset.init_samples, model.max_lag_)`` samples of each test — the
+(:mod:`sysid.metrics`) skip the first ``max(dataset.init_for(test), model.max_lag_)`` samples of each test — the
 official initialisation window, or the model's own initial conditions if it needs more. Beside each row: the
 published reference numbers of that test (:mod:`benchmarks.datasets.references`) and SysIdentPy's FROLS fitted
 on the same split (:mod:`benchmarks.scoring.crosscheck`).
@@ -28,6 +28,7 @@ from benchmarks.scoring.settings import (
     QUICK_ONLY_DATASETS,
     QUICK_SEEDS,
     QUICK_SKIP_IDENTIFIERS,
+    QUICK_SKIP_TESTS,
     seeds_for,
     settings_for,
 )
@@ -157,8 +158,15 @@ def _quick_cut(rec: Record, n: int | None) -> Record:
 
 
 def prepare_dataset(ds, quick: bool):
-    """Apply the quick-mode sample budget (QUICK_MAX_SAMPLES) to a loaded Dataset, in place; returns it."""
-    if not quick or ds.name not in QUICK_MAX_SAMPLES:
+    """Apply the quick-mode sample budget (QUICK_MAX_SAMPLES) and test selection (QUICK_SKIP_TESTS) to a loaded
+    Dataset, in place; returns it."""
+    if not quick:
+        return ds
+    skip = QUICK_SKIP_TESTS.get(ds.name, {}).get("tests", [])
+    if skip:
+        ds.tests = {k: v for k, v in ds.tests.items() if k not in skip}
+        ds.meta["quick_skipped_tests"] = list(skip)
+    if ds.name not in QUICK_MAX_SAMPLES:
         return ds
     lim = QUICK_MAX_SAMPLES[ds.name]
     if isinstance(ds.est, Record):
@@ -241,7 +249,7 @@ def _fit_seed(identifier, ds, quick, factory, params, seeds, k: int) -> dict[str
     fit_s = time.perf_counter() - t0
     out = {}
     for test, rec in ds.tests.items():
-        ev = evaluate(model, rec, ds.init_samples)
+        ev = evaluate(model, rec, ds.init_for(test))
         ev.update(seed=seed, fit_seconds=fit_s, n_parameters=getattr(model, "n_parameters_", None))
         out[test] = ev
     return out

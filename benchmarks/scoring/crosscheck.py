@@ -47,9 +47,10 @@ def sysidentpy_frols(ds, quick: bool = False, use_cache: bool = True) -> list[di
     for rec in [est, *ds.tests.values()]:
         h.update(np.ascontiguousarray(rec.u).tobytes())
         h.update(np.ascontiguousarray(rec.y).tobytes())
-    h.update(
-        json.dumps({"cfg": cfg, "version": sysidentpy.__version__, "init": ds.init_samples}, sort_keys=True).encode()
-    )
+    cache_key = {"cfg": cfg, "version": sysidentpy.__version__, "init": ds.init_samples}
+    if ds.test_init:  # per-test windows (kept out of the key otherwise, so earlier cached fits stay valid)
+        cache_key["test_init"] = ds.test_init
+    h.update(json.dumps(cache_key, sort_keys=True).encode())
     from benchmarks.datasets.twin import cache_dir
 
     cache = cache_dir() / "sysidentpy" / f"{ds.name}-{h.hexdigest()[:16]}.json"
@@ -66,7 +67,7 @@ def sysidentpy_frols(ds, quick: bool = False, use_cache: bool = True) -> list[di
     rows = []
     for t, rec in ds.tests.items():
         x, y = rec.u.reshape(-1, 1), rec.y.reshape(-1, 1)
-        skip = max(ds.init_samples, max_lag)
+        skip = max(ds.init_for(t), max_lag)
         row = {"dataset": ds.name, "test": t, "status": "ok", "settings": cfg, "fit_seconds": fit_s,
                "n_parameters": int(len(model.final_model)), "skip": skip, "sysidentpy_version": sysidentpy.__version__}
         with warnings.catch_warnings():

@@ -92,7 +92,7 @@ def write_report(run: ScoreRun, report_dir: str | Path) -> dict[str, Path]:
             keys = [k for k in run.predictions if k[1] == dname and k[2] == test]
             if not keys:
                 continue
-            n0 = ds.init_samples
+            n0 = ds.init_for(test)
             t = np.arange(n0, len(rec)) / rec.fs
             preds = {k[0]: np.asarray(run.predictions[k])[n0:] for k in sorted(keys)}
             p = plot_measured_vs_predicted(t, rec.y[n0:], preds, out / f"freerun_{dname}_{test}.png",

@@ -78,6 +78,8 @@ QUICK_MAX_SAMPLES: dict[str, dict[str, int]] = _QUICK.get("max_samples", {})
 QUICK_SKIP_IDENTIFIERS: dict[str, str] = _QUICK.get("skip_identifiers", {})
 #: identifiers that the default quick run scores on some datasets only: {identifier: {"datasets": [...], "why": ...}}
 QUICK_ONLY_DATASETS: dict[str, dict[str, Any]] = _QUICK.get("only_datasets", {})
+#: tests left out of the quick check per dataset, with the reason: {dataset: {"tests": [...], "why": ...}}
+QUICK_SKIP_TESTS: dict[str, dict[str, Any]] = _QUICK.get("skip_tests", {})
 #: training seeds of the seeded identifiers in quick mode, each test scored by the run of median free-run RMSE
 QUICK_SEEDS: tuple[int, ...] = tuple(_QUICK["seeds"])
 
