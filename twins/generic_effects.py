@@ -122,11 +122,11 @@ OUTPUT_ORDER: tuple[str, ...] = ("sensor_lowpass", "output_echo", "input_crossta
 def specialise(effect: str, twin: str, params: Mapping[str, str], **changes: Any) -> EffectSpec:
     """The generic catalog entry ``effect`` for ``twin``: its parameter keys mapped to the twin's fields
     (``params``, same keys), and any field of :class:`EffectSpec` (description, signature, default_on ...)
-    in the twin's own words."""
+    in the twin's own words; ``generic`` names ``effect`` (the same cause under a twin's own id)."""
     spec = GENERIC_EFFECTS[effect]
     if set(params) != set(spec.params):
         raise ValueError(f"{effect}: parameter keys {sorted(params)} differ from the catalog's {sorted(spec.params)}")
-    return dataclasses.replace(spec, twin=twin, params=dict(params), **changes)
+    return dataclasses.replace(spec, twin=twin, params=dict(params), generic=effect, **changes)
 
 
 def data_ranges(u: np.ndarray, y: np.ndarray, fs: float) -> dict[str, tuple[float, float]]:

@@ -140,7 +140,7 @@ def external_twin_class(name: str, core: Core, params_cls: type, model_effects: 
     all_params = dataclasses.make_dataclass(f"{params_cls.__name__}WithEffects",
                                             [(n, t, _copy_field(f)) for n, t, f in fields])
     all_params.__doc__ = f"Parameters of {params_cls.__name__} and of the generic effects."
-    effects = {**{k: dataclasses.replace(v, twin=name, params={pk: gnames[f] for pk, f in v.params.items()})
+    effects = {**{k: dataclasses.replace(v, twin=name, params={pk: gnames[f] for pk, f in v.params.items()}, generic=k)
                   for k, v in GENERIC_EFFECTS.items()},
                **{k: dataclasses.replace(v, twin=name) for k, v in model_effects.items()}}
     if calibration_params is None:
