@@ -9,7 +9,6 @@ small core: the FMU steps ~20 µs per sample); the ten-seed statistics per effec
 from __future__ import annotations
 
 import math
-import shutil
 import subprocess
 import sys
 import zipfile
@@ -20,7 +19,7 @@ import pytest
 
 pytest.importorskip("fmpy")
 
-from fmu_diagnose_cases import CASES, CORE, FMU, fmu_case, generic_value, same_cause  # noqa: E402
+from fmu_diagnose_cases import CASES, FMU, fmu_case, generic_value, same_cause  # noqa: E402
 
 from sysid.errors import ConfigError, DataError  # noqa: E402
 from sysid.record import Record  # noqa: E402

@@ -28,9 +28,10 @@ import numpy as np
 from scipy import signal
 
 from twins.base import EffectSpec
+from twins.paramfields import pfield
 
 __all__ = ["GENERIC_EFFECTS", "GENERIC_FIELDS", "INPUT_SIDE", "GenericField", "specialise", "data_ranges",
-           "apply_input", "apply_output", "delay_input", "soft_limit", "sensor_lowpass", "drift"]
+           "generic_params_class", "apply_input", "apply_output", "delay_input", "soft_limit", "sensor_lowpass", "drift"]
 
 _T = "generic"
 
@@ -200,3 +201,14 @@ def apply_output(y: np.ndarray, u: np.ndarray, fs: float, effects: frozenset[str
         q = float(p.quant_step)
         y = q * np.floor(y / q + 0.5)
     return y
+
+
+def generic_params_class(units: Mapping[str, str] | None = None) -> type:
+    """A parameter dataclass of the generic fields alone (units with the record's ``u``/``y`` units filled in, or
+    the placeholders ``{u}``, ``{y}``): what ``piezotwin list effects`` shows for the catalog itself."""
+    def unit(text: str) -> str:
+        return text if units is None else text.replace("{u}", units.get("u", "1")).replace("{y}", units.get("y", "1"))
+
+    fields = [(k, float, pfield(f.default, unit(f.unit), f.lo, f.hi, f.doc, source="twins.generic_effects"))
+              for k, f in GENERIC_FIELDS.items()]
+    return dataclasses.make_dataclass("GenericEffectParams", fields)

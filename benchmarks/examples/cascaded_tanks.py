@@ -74,3 +74,30 @@ def simulate(u, fs, p: Params, effects=frozenset()):
                 x1 = min(x1, p.x1_max)
         y[k] = x2
     return y
+
+
+def diagnose_cascaded_tanks(max_rounds: int = 3, progress=None) -> dict:
+    """Diagnose this model on the measured Cascaded Tanks records (estimation ``est``, validation ``test``);
+    returns the diagnosis (:func:`twins.discrepancy.diagnose`) with ``rmse_val`` added: the validation RMSE [V]
+    of the calibrated plain model, of the extended model, of each round-1 trial, and the published references
+    (:mod:`benchmarks.datasets.references`)."""
+    from pathlib import Path
+
+    from benchmarks.datasets import load_dataset
+    from benchmarks.datasets.references import references_for
+    from twins.discrepancy import diagnose
+    from twins.external import load_model
+
+    ds = load_dataset("cascaded-tanks")
+    est, val = ds.est, ds.tests["test"]
+    twin_cls = load_model(str(Path(__file__)))
+    out = diagnose(twin_cls(), est, val, max_rounds=max_rounds, progress=progress)
+    scale = float(np.std(val.y))  # nrmse = rmse / std(y) (sysid.metrics)
+    first = next((r for r in out["rounds"] if r.get("round") == 1 and "candidates" in r), {"candidates": []})
+    out["rmse_val"] = {
+        "plain": out["baseline"]["nrmse_val"] * scale,
+        "extended": out["extended"]["nrmse_val"] * scale,
+        "round1_trials": {c["effect"]: c["nrmse_val"] * scale for c in first["candidates"]},
+        "published": {k: v["value"] for k, v in references_for("cascaded-tanks")["test"].items()},
+    }
+    return out
