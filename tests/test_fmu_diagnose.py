@@ -207,3 +207,23 @@ def test_failed_simulation_is_a_failed_trial():
     assert any(r.get("effect") == "stiction" and "simulation failed" in r.get("error", "")
                for r in out["rounds"]), out["rounds"]
     assert out["causes"] and out["causes"][0]["effect"] == "input_delay"
+
+
+def test_cli_fmu_diagnose_json(tmp_path):
+    """``diagnose --fmu``: the FMU configured as the native twin that made the record predicts it exactly."""
+    import json
+
+    from sysid.io import write_record
+    from twins.cantilever import CantileverTwin
+
+    tw = CantileverTwin.from_options(without=["measurement_noise", "sensor_quantization"])
+    u = 40 * np.sin(2 * np.pi * 60 * np.arange(1200) / 1e4)
+    data = write_record(Record(u=u, y=tw.simulate(u, 1e4), fs=1e4), tmp_path / "c.npz")
+    cmd = [sys.executable, "-m", "benchmarks.cli", "diagnose", "--fmu", str(FMU), "--data", str(data),
+           "--param", "gain_um_per_v", "--set", "effect_measurement_noise=false,effect_sensor_quantization=false",
+           "--max-rounds", "0", "--json"]
+    r = subprocess.run(cmd, capture_output=True, text=True, cwd=ROOT)
+    assert r.returncode == 0, r.stderr
+    out = json.loads(r.stdout)
+    assert out["verdict"] == "none" and out["baseline"]["nrmse_val"] < 1e-12
+    assert out["calibration"]["fitted"]["gain_um_per_v"] == pytest.approx(0.3, rel=1e-6)
