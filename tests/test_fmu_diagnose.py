@@ -175,6 +175,19 @@ def test_fmu_failed_run_raises_and_recovers():
     assert np.all(np.isfinite(y)) and y[-1] > 0
 
 
+def test_fmpy_route_equals_the_slave_route():
+    """The route a model-exchange FMU takes (``fmpy.simulate_fmu`` with the input as a signal table) gives the
+    samples of the co-simulation slave route (here both on the co-simulation FMU: no model-exchange FMU ships)."""
+    core = FMUCore(FMU)
+    params_cls, _ = core.params_class(["gain_um_per_v"])
+    p = params_cls(effect_measurement_noise=False, effect_sensor_quantization=False)
+    u = 30 * np.sin(2 * np.pi * 90 * np.arange(400) / 1e4)
+    y_slave = core(u, 1e4, p, frozenset())
+    core.cs = False
+    y_fmpy = core(u, 1e4, p, frozenset())
+    assert np.max(np.abs(y_fmpy - y_slave)) < 1e-9 * np.max(np.abs(y_slave))
+
+
 def test_failed_simulation_is_a_failed_trial():
     """A model whose simulation fails for one candidate (its own effect ``stiction``: the solver diverges whenever
     it is on) leaves a row with the error in ``rounds``; the other candidate is tried and the diagnosis ends."""
