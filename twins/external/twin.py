@@ -76,14 +76,18 @@ class ExternalTwin(Twin):
 
     def follow_records(self, est: Record, val: Record) -> tuple["ExternalTwin", list[str]]:
         """The twin with the generic effects' ranges set from the records (:func:`twins.generic_effects.data_ranges`);
-        values outside a new range are moved onto it."""
+        values outside a new range are moved onto it (a note for each of an effect that is on)."""
         u = np.concatenate([np.ravel(est.u), np.ravel(val.u)])
         y = np.concatenate([np.ravel(est.y), np.ravel(val.y)])
         ranges = {self.GENERIC_NAMES.get(k, k): r for k, r in data_ranges(u, y, est.fs).items()}
         params = with_ranges(self.params, ranges, "generic ranges from the records")
         clipped = {k: float(np.clip(getattr(params, k), lo, hi)) for k, (lo, hi) in ranges.items()}
+        active = {f for e in self.effects if e in GENERIC_EFFECTS for f in self.EFFECTS[e].params.values()}
+        notes = [f"{k} moved {float(getattr(params, k)):g} -> {v:g} (into its range from the records "
+                 f"[{ranges[k][0]:g}, {ranges[k][1]:g}])" for k, v in clipped.items()
+                 if k in active and v != float(getattr(params, k))]
         params = dataclasses.replace(params, **clipped)
-        return type(self)(params, self.effects, self.seed), []
+        return type(self)(params, self.effects, self.seed), notes
 
 
 class _Renamed:
