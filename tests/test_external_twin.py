@@ -200,6 +200,9 @@ def test_cli_model_bad_input_one_line(tmp_path):
            "--data", str(data)]
     r = subprocess.run(cmd, capture_output=True, text=True, cwd=ROOT)
     assert r.returncode == 2 and "exactly one of" in r.stderr
+    cmd = [sys.executable, "-m", "benchmarks.cli", "diagnose", "cantilever", "--data", str(data), "--param", "nope"]
+    r = subprocess.run(cmd, capture_output=True, text=True, cwd=ROOT)
+    assert r.returncode == 2 and "cannot calibrate 'nope'" in r.stderr and len(r.stderr.strip().splitlines()) == 1
 
 
 # ------------------------------------------------------------------------------------------ cascaded tanks
