@@ -28,8 +28,8 @@ def fmu_case(effect: str | None, seed: int, n: int = 2000, route: str = "fmu"):
     """(twin as configured, est, val, true parameters, checked fields) for one case (None = noise only).
 
     ``route="fmu"``: the twin of ``fmus/cantilever.fmu``; ``route="kernel"``: the native cantilever kernel
-    wrapped as a user's model with the same configuration (the same samples as the FMU, bit for bit, at 1/60
-    of its cost), so that the default suite and the ten-seed statistics can afford the same diagnosis."""
+    wrapped as a user's model with the same configuration (the same samples as the FMU, bit for bit, at a tenth
+    of its CPU per diagnosis), so that the default suite and the ten-seed statistics can afford the same diagnosis."""
     _, est, val, params, checked = hidden_case("cantilever", effect, seed)
     if est.fs > 2000.0:  # the 10 kHz multisine/broadband cases; the 1 kHz step records (drift) stay whole
         est, val = est[:n], val[-n:]
