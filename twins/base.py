@@ -47,6 +47,7 @@ class EffectSpec:
     params: Mapping[str, str] = field(default_factory=dict)
     default_on: bool = False
     group: str = ""  # effects the data cannot tell apart share a group name
+    generic: str = ""  # the model-agnostic effect this one specialises (twins.generic_effects), if any
 
     def to_dict(self, params_cls: type | None = None) -> dict[str, Any]:
         d: dict[str, Any] = {"id": self.id, "twin": self.twin, "description": self.description,

@@ -15,7 +15,7 @@ from typing import Any
 
 from sysid.errors import ConfigError
 
-__all__ = ["pfield", "ParamInfo", "param_info"]
+__all__ = ["pfield", "ParamInfo", "param_info", "with_ranges"]
 
 
 def pfield(default: Any, unit: str, lo: float | None = None, hi: float | None = None, doc: str = "",
@@ -60,3 +60,26 @@ def param_info(params_cls: type) -> dict[str, ParamInfo]:
         out[f.name] = ParamInfo(f.name, default, md.get("unit", ""), tuple(md.get("range", (None, None))),
                                 md.get("doc", ""), md.get("source", ""), md.get("choices"))
     return out
+
+
+def with_ranges(params: Any, ranges: dict[str, tuple[float, float]], note: str = "ranges changed") -> Any:
+    """A copy of the parameter dataclass instance ``params`` whose class has the documented ranges of some
+    fields replaced (``ranges``: field → (lo, hi)); a subclass of the original, so every twin that checks
+    ``isinstance(params, Params)`` takes it, and ``validate_params`` checks against the new ranges."""
+    if not ranges:
+        return params
+    cls = type(params)
+    fields = []
+    for f in dataclasses.fields(cls):
+        if f.name in ranges:
+            md = dict(f.metadata)
+            md["range"] = tuple(ranges[f.name])
+            kw: dict[str, Any] = {"metadata": md}
+            if f.default is not dataclasses.MISSING:
+                kw["default"] = f.default
+            elif f.default_factory is not dataclasses.MISSING:
+                kw["default_factory"] = f.default_factory
+            fields.append((f.name, f.type, field(**kw)))
+    new_cls = dataclasses.make_dataclass(cls.__name__, fields, bases=(cls,), frozen=cls.__dataclass_params__.frozen)
+    new_cls.__doc__ = f"{cls.__doc__} ({note}: {', '.join(ranges)})"
+    return new_cls(**{f.name: getattr(params, f.name) for f in dataclasses.fields(cls)})

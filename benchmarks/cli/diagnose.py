@@ -1,8 +1,10 @@
-"""``piezotwin diagnose TWIN --data FILE [--val FILE] [--params FILE] [--effects LIST] [--json] [--report DIR]``.
+"""``piezotwin diagnose TWIN --data FILE [--val FILE] [--params FILE] [--effects LIST] [--json] [--report DIR]``,
+``piezotwin diagnose --fmu MODEL.fmu --data FILE [--param NAME ...]`` and ``piezotwin diagnose --model model.py ...``.
 
 Calibrates the twin's configuration to the data, analyses the residual, names the cause among the twin's
 catalog effects, extends the twin with it and reports the validation gain (library:
-:func:`twins.discrepancy.run_diagnosis`).
+:func:`twins.discrepancy.run_diagnosis`). A user's FMU or Python model is wrapped in the generic effects
+(:mod:`twins.external`).
 """
 
 from __future__ import annotations
@@ -25,7 +27,27 @@ from sysid.errors import ConfigError
 
 def register(sub) -> None:
     p = sub.add_parser("diagnose", help="what a twin gets wrong about measured data, why, and the gain once modelled")
-    p.add_argument("twin")
+    p.add_argument("twin", nargs="?", help="a shipped twin (or give --fmu / --model)")
+    p.add_argument(
+        "--fmu", metavar="MODEL.fmu", help="diagnose this FMU (co-simulation or model exchange) instead of a twin"
+    )
+    p.add_argument(
+        "--model",
+        metavar="FILE.py[:NAME]",
+        help="diagnose a Python model (Params dataclass + simulate or step; docs/diagnosis.md)",
+    )
+    p.add_argument(
+        "--param",
+        action="append",
+        default=[],
+        metavar="NAME",
+        help="calibrate this parameter (may repeat; default: the twin's calibration parameters, for an "
+        "FMU every Real parameter with declared min/max)",
+    )
+    p.add_argument(
+        "--fmu-input", metavar="NAME", help="the FMU's input variable fed with the record's u (default: its only input)"
+    )
+    p.add_argument("--fmu-output", metavar="NAME", help="the FMU's output compared with y (default: its only output)")
     p.add_argument("--data", required=True, metavar="FILE", help="measured (estimation) record")
     p.add_argument("--val", metavar="FILE", help="validation record (default: last 40 %% of --data)")
     p.add_argument(
@@ -39,8 +61,11 @@ def register(sub) -> None:
     p.add_argument("--skip", type=NONNEG_INT, default=0, help="leading samples not scored (initial transient)")
     add_data_args(p)
     add_twin_args(p)
-    p.add_argument("--progress", action="store_true",
-                   help="print the steps as they run on stderr (default when stderr is a terminal)")
+    p.add_argument(
+        "--progress",
+        action="store_true",
+        help="print the steps as they run on stderr (default when stderr is a terminal)",
+    )
     p.add_argument("--json", action="store_true")
     p.add_argument("--report", metavar="DIR", help="write figures and index.html here")
     p.set_defaults(func=run)
@@ -51,16 +76,18 @@ def run(args: argparse.Namespace) -> int:
 
     if args.max_rounds < 0:
         raise ConfigError(f"--max-rounds must be >= 0, got {args.max_rounds}")
-    twin = twin_from_args(args.twin, args)
+    twin, label = _twin(args)
     data = read_data(args, args.data)
     val = read_data(args, args.val) if args.val else None
     same_fs([data] + ([val] if val is not None else []))
     cands = [c.strip() for c in args.candidates.split(",") if c.strip()] if args.candidates else None
     show = bool(getattr(args, "progress", False)) or sys.stderr.isatty()
+    names = [n.strip() for item in args.param for n in str(item).split(",") if n.strip()] or None
     opts = DiagnoseOptions(
         candidates=cands,
         calibrate_baseline=not args.no_calibrate,
         skip=args.skip,
+        calibration_params=names,
         progress=(lambda msg: print(f"[diagnose] {msg}", file=sys.stderr, flush=True)) if show else None,
     )
     diagnosis = run_diagnosis(twin, data, val, max_rounds=args.max_rounds, options=opts)
@@ -73,7 +100,7 @@ def run(args: argparse.Namespace) -> int:
         emit_json(result)
         return 0
     b, e = result["baseline"], result["extended"]
-    print(f"diagnose {args.twin}: verdict {result['verdict']}")
+    print(f"diagnose {label}: verdict {result['verdict']}")
     if result.get("split", {}).get("note"):
         print(f"  validation: {result['split']['note']}")
     for note in result.get("ranges", []):
@@ -87,8 +114,9 @@ def run(args: argparse.Namespace) -> int:
         f"{'pass' if e['tests']['passed'] else 'fail'}"
     )
     for c in result["causes"]:
-        params = ", ".join(f"{k}={v:.4g}" if isinstance(v, (int, float)) else f"{k}={v}"
-                           for k, v in c.get("params", {}).items())
+        params = ", ".join(
+            f"{k}={v:.4g}" if isinstance(v, (int, float)) else f"{k}={v}" for k, v in c.get("params", {}).items()
+        )
         print(f"  cause {c['effect']} (confidence {c['confidence']:.2f}) {params}")
         print(f"    {c['evidence']}")
     if result["verdict"] == "unexplained":
@@ -100,3 +128,37 @@ def run(args: argparse.Namespace) -> int:
     if args.report:
         print(f"  report -> {result['report']}")
     return 0
+
+
+def _twin(args: argparse.Namespace):
+    """The twin to diagnose (a shipped one, an FMU or a Python model) and how to name it in the output."""
+    given = [n for n, v in (("TWIN", args.twin), ("--fmu", args.fmu), ("--model", args.model)) if v]
+    if len(given) != 1:
+        raise ConfigError(
+            "diagnose: give exactly one of TWIN, --fmu MODEL.fmu or --model FILE.py"
+            + (f" (got {', '.join(given)})" if given else "")
+        )
+    if (args.fmu_input or args.fmu_output) and not args.fmu:
+        raise ConfigError("diagnose: --fmu-input/--fmu-output go with --fmu")
+    if args.twin:
+        return twin_from_args(args.twin, args), args.twin
+    if args.fmu:
+        from twins.external import fmu_twin_class
+
+        names = [n.strip() for item in args.param for n in str(item).split(",") if n.strip()] or None
+        cls = fmu_twin_class(args.fmu, names, args.fmu_input, args.fmu_output)
+        label = args.fmu
+    else:
+        from twins.external import load_model
+
+        cls = load_model(args.model)
+        label = args.model
+    twin = cls.from_options(
+        params_file=args.params,
+        set_=args.set_,
+        effect=args.effect,
+        without=args.without,
+        effects=args.effects,
+        seed=getattr(args, "seed", 0),
+    )
+    return twin, label

@@ -33,7 +33,11 @@ def collect(kind: str) -> list[dict]:
             for pid, d in get_twin(n).PROTOCOLS.items()
         ]
     if kind == "effects":
-        return [e.to_dict(get_twin(n).Params) for n in available_twins() for e in get_twin(n).EFFECTS.values()]
+        from twins.generic_effects import GENERIC_EFFECTS, generic_params_class
+
+        generic = generic_params_class()  # the model-agnostic catalog that wraps a user's model or FMU
+        return ([e.to_dict(get_twin(n).Params) for n in available_twins() for e in get_twin(n).EFFECTS.values()]
+                + [e.to_dict(generic) for e in GENERIC_EFFECTS.values()])
     if kind == "identifiers":
         from sysid.registry import IDENTIFIERS, available_identifiers
 

@@ -6,11 +6,18 @@ signature that reveals it when a twin without the effect is compared with data t
 chosen to be physically distinct: input-independent additive (thermal drift, noise, quantisation), linear
 dynamic (second mode, sensor low-pass, amplifier bandwidth, input delay, creep) and nonlinear (saturation,
 rate-dependent and asymmetric hysteresis).
+
+The effects that sit between the physics and the measurement (input delay, saturation of the drive, sensor
+low-pass, thermal drift) are the model-agnostic entries of :mod:`twins.generic_effects` specialised to this
+twin's fields and wording (the compiled kernel applies the same laws inside its sub-steps).
 """
 
 from __future__ import annotations
 
+import dataclasses
+
 from twins.base import EffectSpec
+from twins.generic_effects import specialise
 
 __all__ = ["EFFECTS", "DEFAULT_ON"]
 
@@ -28,12 +35,11 @@ EFFECTS: dict[str, EffectSpec] = {
         "second bending mode of D(s) at f₂ = mode_ratio·f₁ carrying mode2_share of the static deflection",
         "residual spectrum peak near 6.27·f₁ (≈4.4 kHz), ringing after fast edges; nothing at low frequency",
         {"ratio": "mode_ratio", "share": "mode2_share", "zeta": "zeta2"}, default_on=True),
-    "sensor_lowpass": EffectSpec(
-        "sensor_lowpass", _T,
-        "2nd-order Butterworth low-pass of the optical sensor",
-        "residual grows with frequency near the sensor corner: phase lag ≈ √2·f/f_c rad and roll-off above; "
-        "nothing below ≈ 100 Hz",
-        {"bandwidth": "sensor_bandwidth_hz"}, default_on=True),
+    "sensor_lowpass": specialise(
+        "sensor_lowpass", _T, {"bandwidth": "sensor_bandwidth_hz"},
+        description="2nd-order Butterworth low-pass of the optical sensor",
+        signature="residual grows with frequency near the sensor corner: phase lag ≈ √2·f/f_c rad and roll-off "
+        "above; nothing below ≈ 100 Hz", default_on=True, group=""),
     "sensor_quantization": EffectSpec(
         "sensor_quantization", _T,
         "sensor/ADC quantiser with step quant_um",
@@ -44,23 +50,21 @@ EFFECTS: dict[str, EffectSpec] = {
         "white Gaussian sensor noise σ = noise_um, seeded by the twin's seed",
         "white residual (flat spectrum, r_ee = δ) uncorrelated with u, Gaussian",
         {"sigma": "noise_um"}, default_on=True),
-    "input_delay": EffectSpec(
-        "input_delay", _T,
-        "pure delay of the input in seconds (fractional samples by linear interpolation)",
-        "residual ∝ τ·dy/dt: phase lag growing linearly with frequency (2π f τ), cross-correlation r_ue peaks "
-        "at lag τ·fs; gain unchanged",
-        {"delay": "input_delay_s"}, group="lag"),
-    "thermal_drift": EffectSpec(
-        "thermal_drift", _T,
-        "additive thermal drift D·(1 − e^(−t/τ)) of the reading, independent of the input",
-        "slow monotone trend in the residual present even at u = 0; no correlation with u",
-        {"amplitude": "thermal_drift_um", "tau": "thermal_tau_s"}),
-    "saturation": EffectSpec(
-        "saturation", _T,
-        "soft amplifier/actuator limit v = u/(1 + |u/V_s|^p)^(1/p) before the hard clip",
-        "output compressed at large |u| only (flattened loop tips, odd harmonics growing with amplitude); "
-        "residual ∝ −u|u|^p near the peaks, none at small u",
-        {"knee": "sat_voltage_v", "sharpness": "sat_sharpness"}),
+    "input_delay": specialise(
+        "input_delay", _T, {"delay": "input_delay_s"},
+        description="pure delay of the input in seconds (fractional samples by linear interpolation)",
+        signature="residual ∝ τ·dy/dt: phase lag growing linearly with frequency (2π f τ), cross-correlation "
+        "r_ue peaks at lag τ·fs; gain unchanged"),
+    "thermal_drift": dataclasses.replace(specialise(
+        "offset_drift", _T, {"amplitude": "thermal_drift_um", "tau": "thermal_tau_s"},
+        description="additive thermal drift D·(1 − e^(−t/τ)) of the reading, independent of the input",
+        signature="slow monotone trend in the residual present even at u = 0; no correlation with u"),
+        id="thermal_drift"),
+    "saturation": dataclasses.replace(specialise(
+        "drive_compression", _T, {"knee": "sat_voltage_v", "sharpness": "sat_sharpness"},
+        description="soft amplifier/actuator limit v = u/(1 + |u/V_s|^p)^(1/p) before the hard clip",
+        signature="output compressed at large |u| only (flattened loop tips, odd harmonics growing with "
+        "amplitude); residual ∝ −u|u|^p near the peaks, none at small u"), id="saturation"),
     "rate_dependent_hysteresis": EffectSpec(
         "rate_dependent_hysteresis", _T,
         "hysteretic share grows with the input rate: α (Bouc–Wen) or the play weights (PI, p_0 lowered to keep "

@@ -50,7 +50,7 @@ import numpy as np
 
 from sysid.errors import ConfigError, DataError
 from sysid.record import Record
-from twins.base import Twin
+from twins.base import Twin, param_info
 from twins.calibration import calibrate as ls_calibrate
 
 from . import defaults as dflt
@@ -190,7 +190,12 @@ def _prepare(twin: Twin, data: Record, val: Record | None, opts: DiagnoseOptions
         raise ConfigError(f"unknown effect {unknown[0]!r} for twin {twin.name}; valid: {', '.join(twin.EFFECTS)}")
     t_start = time.perf_counter()
     core = list(opts.calibration_params if opts.calibration_params is not None else twin.CALIBRATION_PARAMS)
-    core = numeric_fields(twin, core)
+    fit = numeric_fields(twin, core)
+    if opts.calibration_params is not None and len(fit) < len(set(core)):
+        bad = next(c for c in core if c not in fit)
+        raise ConfigError(f"cannot calibrate {bad!r} of twin {twin.name}: not a numeric parameter with a range; "
+                          f"valid: {', '.join(numeric_fields(twin, param_info(type(twin.params))))}")
+    core = fit
     opts.say(f"diagnose {twin.name}: {len(data)} + {len(val)} samples" + "".join(f"; {n}" for n in range_notes))
     given = deterministic(twin)
     saturation = {"estimation": ft.saturation_rails(data.output, simulate(given, data)),

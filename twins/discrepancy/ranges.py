@@ -12,6 +12,8 @@ widened.
 - **time constants**: with creep on, the Kelvin–Voigt chain τ_i = τ₁·10^(i−1) gets enough elements
   (≤ 8, the documented maximum) for its longest time constant to reach the record's duration (a chain
   that stops at 100 s cannot follow a creep record of minutes).
+- **a twin's own rule**: a twin with a ``follow_records(est, val) -> (twin, notes)`` method (the generic
+  effects' ranges of :class:`twins.external.ExternalTwin`) applies it.
 - **integration step**: :func:`twins.cantilever.substep.choose_substep` (bandwidth- and mode-chosen;
   only when ``max_substep_s`` is the default, a value the user set is kept); :func:`substep_for` re-chooses
   it (only finer) for each configuration the diagnosis adopts, since the calibrated hysteresis or an added
@@ -25,7 +27,6 @@ otherwise), so that the diagnosis can refit before it states a verdict. Dimensio
 
 from __future__ import annotations
 
-import dataclasses
 import math
 from collections.abc import Iterable
 from typing import Any
@@ -35,6 +36,7 @@ import numpy as np
 from sysid.errors import DataError
 from sysid.record import Record
 from twins.base import Twin, param_info
+from twins.paramfields import with_ranges
 
 __all__ = ["AMPLITUDE_OPTIONS", "follow_record", "substep_followed", "substep_for", "at_bounds", "widened",
            "BOUND_TOL"]
@@ -79,6 +81,10 @@ def follow_record(twin: Twin, est: Record, val: Record) -> tuple[Twin, list[str]
                 notes.append(f"creep_elements {n} -> {n_new}: longest creep time constant "
                              f"{tau1 * 10 ** (n_new - 1):g} s for a {duration:.4g} s record")
     tw = twin.with_params(**changes) if changes else twin
+    follow = getattr(tw, "follow_records", None)  # a twin whose own ranges follow the data (twins.external)
+    if callable(follow):
+        tw, more = follow(est, val)
+        notes += more
     if substep_followed(twin):
         cur = float(tw.params.max_substep_s)
         h = _chosen_substep(tw, est, val)
@@ -166,16 +172,7 @@ def widened(twin: Twin, hits: list[dict[str, Any]]) -> tuple[Twin, list[dict[str
         rows.append({**h, "widened_to": [lo2, hi2]})
     if not new_ranges:
         return twin, []
-    cls = type(twin.params)
-    fields = []
-    for f in dataclasses.fields(cls):
-        if f.name in new_ranges:
-            md = dict(f.metadata)
-            md["range"] = new_ranges[f.name]
-            fields.append((f.name, f.type, dataclasses.field(default=f.default, metadata=md)))
-    wide_cls = dataclasses.make_dataclass(cls.__name__, fields, bases=(cls,))
-    wide_cls.__doc__ = f"{cls.__doc__} (ranges widened: {', '.join(new_ranges)})"
-    params = wide_cls(**{f.name: getattr(twin.params, f.name) for f in dataclasses.fields(cls)})
+    params = with_ranges(twin.params, new_ranges, "ranges widened")
     return type(twin)(params, twin.effects, twin.seed), rows
 
 
