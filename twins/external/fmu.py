@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import sys
 import threading
 from collections.abc import Iterable, Mapping
 from pathlib import Path
@@ -117,6 +118,7 @@ class FMUCore:
         from fmpy import extract
         from fmpy.fmi2 import FMU2Slave
 
+        saved = list(sys.path)
         try:
             if self._unzip is None:
                 self._unzip = extract(str(self.path))
@@ -125,6 +127,10 @@ class FMUCore:
             slave.instantiate()
         except Exception as exc:  # noqa: BLE001 — a missing binary for this platform, a crash in the FMU's init
             raise ConfigError(f"{self.path}: the FMU fails to instantiate ({type(exc).__name__}: {exc})") from None
+        finally:
+            # a Python FMU (pythonfmu) puts its resources folder first on sys.path; processes started from this one
+            # later (Dask workers, multiprocessing) would import the FMU's bundled copies of packages from it
+            sys.path[:] = saved
         self._slave, self._used = slave, False
 
     def _drop_instance(self) -> None:
