@@ -1,12 +1,12 @@
 """Model-agnostic effects: what sits between a model and the measurement, for any twin.
 
-Each effect wraps a simulator's input or output and needs nothing of its physics: a pure input delay, a
-drive compression (soft limiter), a sensor low-pass, an echo of the output, electrical crosstalk of the
-input, offset and gain drift, and a quantiser. :data:`GENERIC_EFFECTS` is their catalog (id, description,
-residual signature, parameters with units); :data:`GENERIC_FIELDS` the parameter fields, each with a
-documented default range and a rule for its range from the records (:func:`data_ranges`); :func:`apply_input`
-and :func:`apply_output` the sample-level implementations that :class:`twins.external.ExternalTwin` wraps
-around a user's Python model or FMU.
+Each effect wraps a simulator's input or output and needs nothing of its physics: a pure input delay, a drive
+compression (soft limiter), a sensor low-pass, an echo of the output, electrical crosstalk of the input,
+offset and gain drift, a constant sensor offset, and a quantiser. :data:`GENERIC_EFFECTS` is their catalog
+(id, description, residual signature, parameters with units); :data:`GENERIC_FIELDS` the parameter fields,
+each with a documented default range and a rule for its range from the records (:func:`data_ranges`);
+:func:`apply_input` and :func:`apply_output` the sample-level implementations that
+:class:`twins.external.ExternalTwin` wraps around a user's Python model or FMU.
 
 The shipped twins build on the same catalog entries: the cantilever's ``input_delay``, ``sensor_lowpass``,
 ``thermal_drift`` and ``saturation`` are :func:`specialise`-d from ``input_delay``, ``sensor_lowpass``,
@@ -115,6 +115,14 @@ GENERIC_FIELDS: dict[str, GenericField] = {
     "drift_tau_s": GenericField(
         1.0, "s", 1e-12, 1e12, "time constant τ of the offset drift", lambda um, ys, fs, T: (10.0 / fs, 10.0 * T)
     ),
+    "sensor_offset": GenericField(
+        0.0,
+        "{y}",
+        -1e12,
+        1e12,
+        "constant offset c of the reading y + c (the sensor's zero is not the model's zero)",
+        lambda um, ys, fs, T: (-_span(ys), _span(ys)),
+    ),
     "gain_drift": GenericField(
         0.0,
         "1",
@@ -183,6 +191,15 @@ GENERIC_EFFECTS: dict[str, EffectSpec] = {
         "slow monotone trend in the residual, present even at u = 0; no correlation with u",
         {"amplitude": "drift_offset", "tau": "drift_tau_s"},
     ),
+    "sensor_offset": EffectSpec(
+        "sensor_offset",
+        _T,
+        "constant offset of the reading: y + c (the sensor's zero is not the model's zero: a level sensor above "
+        "the outlet, a bridge not nulled)",
+        "residual with a constant part from the first sample on; where the model is nonlinear in its output "
+        "(a square-root outflow, a saturation) the model's own parameters cannot absorb it",
+        {"offset": "sensor_offset"},
+    ),
     "gain_drift": EffectSpec(
         "gain_drift",
         _T,
@@ -208,6 +225,7 @@ OUTPUT_ORDER: tuple[str, ...] = (
     "input_crosstalk",
     "gain_drift",
     "offset_drift",
+    "sensor_offset",
     "output_quantization",
 )
 
@@ -293,6 +311,8 @@ def apply_output(y: np.ndarray, u: np.ndarray, fs: float, effects: frozenset[str
         y = y * (1.0 + drift(len(y), fs, p.gain_drift, p.gain_drift_tau_s))
     if "offset_drift" in effects:
         y = y + drift(len(y), fs, p.drift_offset, p.drift_tau_s)
+    if "sensor_offset" in effects:
+        y = y + float(p.sensor_offset)
     if "output_quantization" in effects:
         q = float(p.quant_step)
         y = q * np.floor(y / q + 0.5)

@@ -39,6 +39,17 @@ class DiagnoseOptions:
         Re-test the deterministic effects that are on (their own parameters refitted).
     follow_ranges
         Adjust the twin's amplitude limit, time constants and integration step to the records.
+    starts
+        With ``starts > 1`` every candidate gets the full refit (its parameters with the core), from its first-stage
+        fit and from ``starts − 1`` points spread over its parameters' ranges, the best estimation fit kept
+        (:func:`.rounds.refine_trials`). For models whose effects pay only once the core moves with them (a
+        sensor offset under a square-root outflow law: no gain with the core held); about ``starts`` × the
+        candidates full fits per round, so meant for models that simulate in milliseconds.
+    pairs
+        When a round's leader is not significant alone and the residual is still far above the noise, try it
+        jointly with each other candidate (:mod:`.pairs`): two effects that mask each other are named together
+        when their joint gain is significant with both effects' parameters counted (Bonferroni over every
+        single and joint trial).
     progress
         Callable taking one message per step, or None.
     """
@@ -60,10 +71,12 @@ class DiagnoseOptions:
     keep_stages: bool = False
     retest_defaults: bool = True
     follow_ranges: bool = True
+    starts: int = 1
+    pairs: bool = False
     progress: Callable[[str], Any] | None = None
 
     def __post_init__(self) -> None:
-        for name in ("trial_nfev", "scan_nfev", "scan_points", "skip", "max_lag"):
+        for name in ("trial_nfev", "scan_nfev", "scan_points", "skip", "max_lag", "starts"):
             setattr(self, name, int(getattr(self, name)))
 
     def say(self, msg: str) -> None:

@@ -31,7 +31,7 @@ import numpy as np
 
 from sysid.errors import ConfigError, DataError
 from sysid.progress import progress as progress_bar
-from twins.base import Twin
+from twins.base import Twin, param_info
 
 from . import defaults as dflt
 from . import features as ft
@@ -39,11 +39,12 @@ from . import ranges as rg
 from . import unexplained as unx
 from .fields import core_for, effect_fields
 from .options import DiagnoseOptions
+from .pairs import joint_step
 from .prediction import NOISE_EFFECTS, significance, sse, unpredictable
 from .ranking import Ranking, cause_from, rank_round
 from .trials import Stage, Trial, make_stage, run_trial
 
-__all__ = ["Extension", "adopt", "extend", "revisit", "round_trials"]
+__all__ = ["Extension", "adopt", "extend", "revisit", "round_trials", "spread_starts", "beyond_noise"]
 
 #: the failures that mean "this candidate cannot run here" (it is left out of the round)
 _TRIAL_ERRORS = (ConfigError, DataError, ValueError, np.linalg.LinAlgError)
@@ -105,7 +106,7 @@ def _branch(loop: _Loop, ext: Extension, base: Stage, n_max: int) -> None:
     (saturation + delay, seed 9). The branch is kept where its validation residual is significantly smaller
     (F-test at ``alpha``); its rounds are listed with ``branch``."""
     inp, first, opts = loop.inp, loop.first, loop.opts
-    if first is None or not ext.causes or len(ext.causes) >= n_max or not _beyond_noise(inp, ext.stage, opts.skip):
+    if first is None or not ext.causes or len(ext.causes) >= n_max or not beyond_noise(inp, ext.stage, opts.skip):
         return
     alt_i = next((i for i, t in enumerate(first.trials) if i and t.significant and t.effect not in first.group), None)
     if alt_i is None:
@@ -132,7 +133,7 @@ def _branch(loop: _Loop, ext: Extension, base: Stage, n_max: int) -> None:
     ext.causes, ext.stage = alt.causes, alt.stage
 
 
-def _beyond_noise(inp: Any, stage: Stage, skip: int) -> bool:
+def beyond_noise(inp: Any, stage: Stage, skip: int) -> bool:
     """The validation residual of ``stage`` is far above the noise measured from the data (the verdict's rule,
     :func:`.unexplained.outside`, on the noise level measured once from the records)."""
     return unx.outside(inp.val.y[skip:] - stage.yhat_val[skip:], inp.noise)
@@ -196,6 +197,9 @@ def _greedy(loop: _Loop, ext: Extension, n_max: int) -> None:
             loop.first = ranking
         top = ranking.top
         if not top.significant:
+            if joint_step(loop, ext, ranking, rnd, n_max, adopt=adopt, beyond_noise=beyond_noise,
+                          round_trials=round_trials):
+                continue
             break
         ext.causes.append(cause_from(ranking, stage, inp.twin, cal.prior, rnd))
         if top.retest:
@@ -350,13 +354,38 @@ def _refine(trials: list[Trial], stage: Stage, inp: Any, core_r: list[str], a_es
         j = min(range(len(trials)), key=lambda k: trials[k].sse_est)
         if j not in picked and trials[j].sse_est < sse(inp.est.y, stage.yhat_est, opts.skip):
             picked.append(j)
+    if opts.starts > 1:  # every candidate, from several starts (DiagnoseOptions.starts)
+        picked = list(range(len(trials)))
     for i in picked:
         tr = trials[i]
-        try:
-            trB = run_trial(tr.base, tr.effect, inp.est, inp.val, core_r, a_est, opts, refit_core=True,
-                            start=tr.effect_params)
-        except _TRIAL_ERRORS:
-            continue
-        trB.seconds += tr.seconds
-        if trB.sse_est <= tr.sse_est:
-            trials[i] = trB
+        for start in [tr.effect_params] + spread_starts(tr, opts.starts):
+            try:
+                trB = run_trial(tr.base, tr.effect, inp.est, inp.val, core_r, a_est, opts, refit_core=True,
+                                start=start)
+            except _TRIAL_ERRORS:
+                continue
+            trB.seconds += trials[i].seconds
+            if trB.sse_est <= trials[i].sse_est:
+                trials[i] = trB
+
+
+def spread_starts(tr: Trial, starts: int) -> list[dict[str, float]]:
+    """``starts − 1`` starting points of a trial's full refit spread over its effect's parameter ranges: for
+    j = 1 … starts − 1 every numeric parameter at the fraction j/starts of its range (geometrically where the
+    range is positive and spans more than two decades), the other parameters as first fitted."""
+    if starts <= 1:
+        return []
+    info = param_info(type(tr.twin.params))
+    out = []
+    for j in range(1, starts):
+        point = dict(tr.effect_params)
+        for f, v in tr.effect_params.items():
+            if f not in info or isinstance(v, (bool, int, str)) or info[f].choices:
+                continue
+            lo, hi = info[f].bounds()
+            if not (math.isfinite(lo) and math.isfinite(hi)) or hi <= lo:
+                continue
+            q = j / starts
+            point[f] = lo * (hi / lo) ** q if lo > 0 and hi / lo > 100 else lo + q * (hi - lo)
+        out.append(point)
+    return out
