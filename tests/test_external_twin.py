@@ -230,12 +230,22 @@ def test_tanks_model_steady_state_and_overflow():
 
 
 @pytest.mark.slow
-def test_cascaded_tanks_overflow_ranked_first():
-    """On the measured records the overflow is the trial that lowers the validation error most (the mechanism
-    the published grey-box adds); the numbers are in docs/diagnosis.md."""
+@pytest.mark.parametrize("route", ["model", "fmu"])
+def test_cascaded_tanks_overflow_named(route, tmp_path):
+    """On the measured records the diagnosis names the overflow (the mechanism the published grey-box model adds),
+    jointly with a sensor offset that masks it, through the Python model and through its pythonfmu FMU alike; the
+    extended model's validation RMSE falls by a quarter or more (0.675 → 0.445 V measured; docs/diagnosis.md)."""
     from benchmarks.examples.cascaded_tanks import diagnose_cascaded_tanks
 
-    out = diagnose_cascaded_tanks(max_rounds=1)
-    trials = out["rmse_val"]["round1_trials"]
-    assert min(trials, key=trials.get) == "overflow", trials
-    assert trials["overflow"] < out["rmse_val"]["plain"]
+    fmu = None
+    if route == "fmu":
+        pytest.importorskip("pythonfmu")
+        from benchmarks.examples.cascaded_tanks_fmu import build_tanks_fmu
+
+        fmu = str(build_tanks_fmu(tmp_path / "tanks.fmu"))
+    out = diagnose_cascaded_tanks(fmu=fmu)
+    named = {c["effect"] for c in out["causes"]}
+    assert "overflow" in named, out["causes"]
+    rm = out["rmse_val"]
+    assert rm["extended"] < 0.75 * rm["plain"], rm
+    assert out["verdict"] == "unexplained"  # still far above the sensor noise: the report says so

@@ -48,6 +48,14 @@ def register(sub) -> None:
         "--fmu-input", metavar="NAME", help="the FMU's input variable fed with the record's u (default: its only input)"
     )
     p.add_argument("--fmu-output", metavar="NAME", help="the FMU's output compared with y (default: its only output)")
+    p.add_argument(
+        "--fmu-effect",
+        action="append",
+        default=[],
+        metavar="ID=P1,P2",
+        help="an effect the FMU models itself, switched by its Boolean parameter effect_ID (or ID), with the ranged "
+        "Real parameters it fits (may repeat); tried beside the generic effects",
+    )
     p.add_argument("--data", required=True, metavar="FILE", help="measured (estimation) record")
     p.add_argument("--val", metavar="FILE", help="validation record (default: last 40 %% of --data)")
     p.add_argument(
@@ -59,6 +67,25 @@ def register(sub) -> None:
     p.add_argument("--candidates", metavar="LIST", help="comma-separated catalog effects to try (default: all missing)")
     p.add_argument("--no-calibrate", action="store_true", help="do not re-fit the starting configuration")
     p.add_argument("--skip", type=NONNEG_INT, default=0, help="leading samples not scored (initial transient)")
+    p.add_argument(
+        "--starts",
+        type=number(1, 20, integer=True),
+        default=1,
+        help="refit every candidate with the core from N starts spread over its parameters' ranges (default 1: "
+        "only the best first-stage fits are refitted); for models that simulate in milliseconds",
+    )
+    p.add_argument(
+        "--pairs",
+        action="store_true",
+        help="when a round's leader is not significant alone, try it jointly with each other candidate (two effects "
+        "that mask each other)",
+    )
+    p.add_argument(
+        "--trial-nfev",
+        type=number(1, 10000, integer=True),
+        default=25,
+        help="least-squares evaluations of each full trial fit (default 25)",
+    )
     add_data_args(p)
     add_twin_args(p)
     p.add_argument(
@@ -88,6 +115,9 @@ def run(args: argparse.Namespace) -> int:
         calibrate_baseline=not args.no_calibrate,
         skip=args.skip,
         calibration_params=names,
+        starts=args.starts,
+        pairs=args.pairs,
+        trial_nfev=args.trial_nfev,
         progress=(lambda msg: print(f"[diagnose] {msg}", file=sys.stderr, flush=True)) if show else None,
     )
     diagnosis = run_diagnosis(twin, data, val, max_rounds=args.max_rounds, options=opts)
@@ -138,15 +168,15 @@ def _twin(args: argparse.Namespace):
             "diagnose: give exactly one of TWIN, --fmu MODEL.fmu or --model FILE.py"
             + (f" (got {', '.join(given)})" if given else "")
         )
-    if (args.fmu_input or args.fmu_output) and not args.fmu:
-        raise ConfigError("diagnose: --fmu-input/--fmu-output go with --fmu")
+    if (args.fmu_input or args.fmu_output or args.fmu_effect) and not args.fmu:
+        raise ConfigError("diagnose: --fmu-input/--fmu-output/--fmu-effect go with --fmu")
     if args.twin:
         return twin_from_args(args.twin, args), args.twin
     if args.fmu:
         from twins.external import fmu_twin_class
 
         names = [n.strip() for item in args.param for n in str(item).split(",") if n.strip()] or None
-        cls = fmu_twin_class(args.fmu, names, args.fmu_input, args.fmu_output)
+        cls = fmu_twin_class(args.fmu, names, args.fmu_input, args.fmu_output, _fmu_effects(args.fmu_effect))
         label = args.fmu
     else:
         from twins.external import load_model
@@ -162,3 +192,15 @@ def _twin(args: argparse.Namespace):
         seed=getattr(args, "seed", 0),
     )
     return twin, label
+
+
+def _fmu_effects(items: list[str]) -> dict[str, list[str]] | None:
+    """``--fmu-effect ID=P1,P2`` items as {id: [parameters]}; a malformed one is refused with one line."""
+    out: dict[str, list[str]] = {}
+    for item in items:
+        eid, sep, rest = str(item).partition("=")
+        names = [n.strip() for n in rest.split(",") if n.strip()]
+        if not sep or not eid.strip() or not names:
+            raise ConfigError(f"--fmu-effect {item!r}: expected ID=PARAM[,PARAM...]")
+        out[eid.strip()] = names
+    return out or None

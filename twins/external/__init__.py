@@ -13,8 +13,8 @@ def load_model(spec: str):
     return _load(spec)
 
 
-def fmu_twin_class(path, names=None, input_name=None, output_name=None):
+def fmu_twin_class(path, names=None, input_name=None, output_name=None, effects=None):
     """The twin class of an FMU (:func:`.fmu.fmu_twin_class`; needs FMPy)."""
     from .fmu import fmu_twin_class as _fmu
 
-    return _fmu(path, names, input_name, output_name)
+    return _fmu(path, names, input_name, output_name, effects)

@@ -19,6 +19,11 @@
   per run against 71 ms through ``fmpy.simulate_fmu(..., fmu_instance=...)`` on the same instance, outputs equal
   to 1e-13; docs/diagnosis.md). A model-exchange FMU (or FMI 1/3) is simulated by ``fmpy.simulate_fmu`` with
   its own solver.
+- **effects the FMU declares**: ``effects={"overflow": ["x1_max", "overflow_share"]}`` (CLI ``--fmu-effect
+  overflow=x1_max,overflow_share``) names a mechanism the FMU models itself behind a Boolean parameter, its switch
+  ``effect_<id>`` (the convention of ``piezotwin export-fmu``) or ``<id>``, with the ranged Real parameters it
+  fits. The diagnosis tries it beside the generic effects (switched on, its parameters fitted); its parameters
+  leave the default calibration set. The switch is set from the twin's effects on every run.
 - **failures**: an FMU that cannot be instantiated is refused at once (one line); a simulation that fails
   during a diagnosis raises :class:`sysid.errors.DataError`, which the diagnosis counts as a failed trial (the
   instance is re-created for the next run).
@@ -37,6 +42,7 @@ from typing import Any
 import numpy as np
 
 from sysid.errors import ConfigError, DataError
+from twins.base import EffectSpec
 from twins.paramfields import pfield
 
 from .twin import ExternalTwin, external_twin_class
@@ -86,6 +92,7 @@ class FMUCore:
         self.fs_name = ("fs" if fs_var is not None and fs_var.causality == "parameter" and fs_var.type == "Real"
                         and (fs_var.unit or "Hz") == "Hz" else None)
         self.params = [v for v in self.md.modelVariables if v.causality == "parameter" and v.name != self.fs_name]
+        self.switches: dict[str, str] = {}  # effect id -> its Boolean switch parameter (declare_effects)
         self.cs = self.md.coSimulation is not None and self.md.fmiVersion == "2.0"
         self._lock = threading.Lock()
         self._slave: Any = None
@@ -144,6 +151,7 @@ class FMUCore:
     # ------------------------------------------------------------------ one run
     def __call__(self, u: np.ndarray, fs: float, p: Any, effects: frozenset) -> np.ndarray:
         values = {v.name: getattr(p, v.name) for v in self.params if hasattr(p, v.name)}
+        values.update({sw: eid in effects for eid, sw in self.switches.items()})
         if self.fs_name:
             values[self.fs_name] = float(fs)
         with self._lock:
@@ -214,6 +222,31 @@ class FMUCore:
             raise DataError(f"{self.path.name}: simulation stopped after {len(y) - 1} of {n} samples")
         return y[1:n + 1]
 
+    # ------------------------------------------------------------------ effects the FMU models itself
+    def declare_effects(self, effects: Mapping[str, Iterable[str]] | None) -> dict[str, EffectSpec]:
+        """Catalog entries of the effects the FMU models behind a Boolean switch (module docstring); refused with
+        one line: no switch, a parameter the FMU lacks or that declares no range."""
+        out: dict[str, EffectSpec] = {}
+        for eid, pnames in dict(effects or {}).items():
+            sw = next((n for n in (f"effect_{eid}", eid) if n in self.vars and self.vars[n].causality == "parameter"
+                       and self.vars[n].type == "Boolean"), None)
+            if sw is None:
+                raise ConfigError(f"{self.path}: effect {eid!r} needs a Boolean parameter effect_{eid} (or {eid}) "
+                                  "that switches it on")
+            pnames = list(dict.fromkeys(pnames))
+            if not pnames:
+                raise ConfigError(f"{self.path}: effect {eid!r} names no parameter to fit")
+            for n in pnames:
+                v = self.vars.get(n)
+                if v is None or v.causality != "parameter" or v.type != "Real":
+                    raise ConfigError(f"{self.path}: effect {eid!r}: no Real parameter {n!r}")
+                if _num(v.min) is None or _num(v.max) is None or not float(v.max) > float(v.min):
+                    raise ConfigError(f"{self.path}: effect {eid!r}: parameter {n!r} declares no range (min and max)")
+            self.switches[eid] = sw
+            desc = self.vars[sw].description or f"{eid}, modelled by the FMU"
+            out[eid] = EffectSpec(eid, "fmu", desc, "", {n: n for n in pnames})
+        return out
+
     # ------------------------------------------------------------------ the parameter dataclass
     def params_class(self, names: Iterable[str] | None) -> tuple[type, list[str]]:
         """(dataclass of the FMU's parameters, the calibration parameters); refusals as in the module docstring."""
@@ -253,12 +286,18 @@ def _ident(text: str) -> str:
 
 
 def fmu_twin_class(path: str | Path, names: Iterable[str] | None = None, input_name: str | None = None,
-                   output_name: str | None = None) -> type[ExternalTwin]:
+                   output_name: str | None = None,
+                   effects: Mapping[str, Iterable[str]] | None = None) -> type[ExternalTwin]:
     """The twin class of the FMU at ``path``: ``names`` the calibration parameters (default: every Real parameter
-    with a declared range), ``input_name``/``output_name`` its signals (default: its only Real input/output)."""
+    with a declared range that no declared effect owns), ``input_name``/``output_name`` its signals (default: its
+    only Real input/output), ``effects`` the mechanisms it models behind a switch (module docstring)."""
     core = FMUCore(path, input_name, output_name)
+    model_effects = core.declare_effects(effects)
     params_cls, calib = core.params_class(names)
+    if names is None:
+        owned = {f for spec in model_effects.values() for f in spec.params.values()}
+        calib = [c for c in calib if c not in owned]
     units = {"u": core.u_var.unit or "", "y": core.y_var.unit or ""}
     name = f"fmu:{Path(path).stem}"  # prefixed: never mistaken for a shipped twin of the same name
-    return external_twin_class(name, core, params_cls, {}, calib, units,
+    return external_twin_class(name, core, params_cls, model_effects, calib, units,
                                doc=f"FMU {Path(path).name} ({core.md.modelName}), {core.md.generationTool or ''}")
