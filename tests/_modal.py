@@ -45,3 +45,17 @@ def modal_records(n: int = 8192, fs: float = 1000.0, noise: float = 0.01, band=(
         y = y0 + noise * np.std(y0) * rng.standard_normal(n)
         out.append(Record(u[n:], y, fs=fs, units={"u": "N", "y": "m/s2"}))
     return out
+
+
+def write_modal_pair(folder, n: int) -> tuple[str, str]:
+    """The estimation and validation records of :func:`modal_records` written to ``folder`` (est.npz, val.npz):
+    the paths, for the tests that run ``piezotwin identify`` on them."""
+    from pathlib import Path
+
+    from sysid.io import write_record
+
+    est, val = modal_records(n=n)
+    paths = (str(Path(folder) / "est.npz"), str(Path(folder) / "val.npz"))
+    write_record(est, paths[0])
+    write_record(val, paths[1])
+    return paths

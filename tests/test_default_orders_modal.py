@@ -13,10 +13,9 @@ from sysid import metrics
 from sysid.errors import DivergenceWarning
 from sysid.evaluate import identification_summary
 from sysid.fir import FIR
-from sysid.io import write_record
 from sysid.order import OrderSearchWarning
 from sysid.registry import get_identifier
-from tests._modal import modal_records, time_constant_samples
+from tests._modal import modal_records, time_constant_samples, write_modal_pair
 
 
 def _r2_same_samples(models, val):
@@ -83,11 +82,8 @@ def test_a_choice_on_the_grid_corner_or_short_of_the_fir_is_flagged():
 
 
 def test_identify_cli_json_has_the_order_curve(tmp_path, capsys):
-    est, val = modal_records(n=4096)
-    write_record(est, tmp_path / "est.npz")
-    write_record(val, tmp_path / "val.npz")
-    assert main(["identify", "n4sid", "--est", str(tmp_path / "est.npz"), "--val", str(tmp_path / "val.npz"),
-                 "--json"]) == 0
+    est_path, val_path = write_modal_pair(tmp_path, n=4096)
+    assert main(["identify", "n4sid", "--est", est_path, "--val", val_path, "--json"]) == 0
     out = json.loads(capsys.readouterr().out)
     assert out["chosen_orders"]["nx"] == sum(r["order"] for r in out["order_selection"] if r["chosen"])
     assert out["order_search"]["singular_value_choice"] >= 1

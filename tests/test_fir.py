@@ -12,7 +12,7 @@ from sysid.base import load_model
 from sysid.fir import FIR, tap_grid
 from sysid.io import write_record
 from sysid.record import Record
-from tests._modal import modal_records
+from tests._modal import modal_records, write_modal_pair
 
 
 def _lstsq_fir(u, y, nb, nk):
@@ -79,17 +79,14 @@ def test_saved_model_predicts_identically(tmp_path, suffix):
 
 
 def test_identify_fir_json_has_the_taps_and_bad_tap_count_is_one_line(tmp_path, capsys):
-    est, val = modal_records(n=2048)
-    write_record(est, tmp_path / "est.npz")
-    write_record(val, tmp_path / "val.npz")
-    assert main(["identify", "fir", "--est", str(tmp_path / "est.npz"), "--val", str(tmp_path / "val.npz"),
-                 "--json"]) == 0
+    est_path, val_path = write_modal_pair(tmp_path, n=2048)
+    assert main(["identify", "fir", "--est", est_path, "--val", val_path, "--json"]) == 0
     out = json.loads(capsys.readouterr().out)
     assert out["identifier"] == "fir" and len(out["taps"]) == out["chosen_orders"]["nb"] == out["n_parameters"]
     assert out["validation"]["free_run"]["r2"] == out["validation"]["one_step"]["r2"] > 0.8
     for sets, words in (("nb=5000", "too few for a FIR with nb=5000"), ("nb=0", "nb must be an integer >= 1"),
                         ("nk=-1", "nk must be an integer >= 0")):
-        assert main(["identify", "fir", "--est", str(tmp_path / "est.npz"), "--set", sets]) == 2
+        assert main(["identify", "fir", "--est", est_path, "--set", sets]) == 2
         err = capsys.readouterr().err
         assert words in err and len(err.strip().splitlines()) == 1 and "Traceback" not in err
 

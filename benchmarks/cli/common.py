@@ -81,6 +81,12 @@ NONNEG_INT = number(0, 10**12, integer=True)
 POSITIVE = number(0, 1e12, lo_open=True)  # a positive finite quantity (durations, amplitudes ...)
 
 
+def add_set_arg(p: argparse.ArgumentParser, help: str) -> None:
+    """The repeatable ``--set KEY=VALUE[,...]`` option (into ``args.set_``) of the commands that take identifier
+    options."""
+    p.add_argument("--set", dest="set_", action="append", default=[], metavar="KEY=VALUE[,...]", help=help)
+
+
 def add_data_args(p: argparse.ArgumentParser) -> None:
     """Options of every command that reads a data file."""
     g = p.add_argument_group("data files")

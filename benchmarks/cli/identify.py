@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import argparse
 
-from benchmarks.cli.common import add_data_args, emit_json, read_data, same_fs
+from benchmarks.cli.common import add_data_args, add_set_arg, emit_json, read_data, same_fs
 from sysid.config import parse_assignments
 from sysid.identify import identify
 
@@ -34,13 +34,9 @@ def register(sub) -> None:
         help="estimation record; repeat for several separate experiments",
     )
     p.add_argument("--val", metavar="FILE", help="validation record")
-    p.add_argument(
-        "--set",
-        dest="set_",
-        action="append",
-        default=[],
-        metavar="KEY=VALUE[,...]",
-        help="identifier options, e.g. ny=2,nu=2,degree=2,criterion=bic; may repeat. auto=true (nonlinear "
+    add_set_arg(
+        p,
+        "identifier options, e.g. ny=2,nu=2,degree=2,criterion=bic; may repeat. auto=true (nonlinear "
         "identifiers): also fit the default linear model (arx) and keep whichever simulates the hold-out "
         "(--val, else the last 30%% of the estimation data) better",
     )

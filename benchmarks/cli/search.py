@@ -21,7 +21,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from benchmarks.cli.common import COUNT, SEED, add_data_args, emit_json, number, read_data, same_fs
+from benchmarks.cli.common import COUNT, SEED, add_data_args, add_set_arg, emit_json, number, read_data, same_fs
 from benchmarks.execution import add_execution_args, make_executor
 from sysid.config import parse_assignments
 
@@ -43,14 +43,7 @@ def register(sub) -> None:
         "--repeats", type=COUNT, default=1, metavar="R", help="runs per configuration (seeds seed..seed+R-1)"
     )
     p.add_argument("--seed", type=SEED, default=0, help="first seed (default 0)")
-    p.add_argument(
-        "--set",
-        dest="set_",
-        action="append",
-        default=[],
-        metavar="KEY=VALUE[,...]",
-        help="options fixed for every run (e.g. epochs=20)",
-    )
+    add_set_arg(p, "options fixed for every run (e.g. epochs=20)")
     p.add_argument("--sampler", choices=("grid", "random", "tpe"), default="grid")
     p.add_argument("--trials", type=COUNT, metavar="N", help="configurations to evaluate (default: the whole grid)")
     p.add_argument("--storage", metavar="URL|FILE", help="Optuna storage: SQLite file (default STUDY.db) or URL")
