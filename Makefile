@@ -7,7 +7,7 @@ STAMP  := $(VENV)/.installed
 # on a 2-core machine (measured 9 ms vs <1 ms per 8x8 expm when both cores are busy).
 export OPENBLAS_NUM_THREADS ?= 1
 
-.PHONY: run run-quick test test-all lint bench fmus docs install clean floors lock
+.PHONY: run run-quick test test-all lint bench fmus docs install clean floors floors-full lock
 
 # Exact versions: requirements.lock holds every package of the environment the floors and stored rows were
 # measured with (docs/regression-check.md); `make lock` refreshes it from pyproject.toml.
@@ -95,3 +95,19 @@ floors: $(STAMP)
 	done
 	$(VENV)/bin/piezotwin score --quick --json --seeds 5-19 $(FLOORS_ARGS) > .floors/extra_seeds.json
 	$(VENV)/bin/piezotwin score --quick --update-baselines --from-runs .floors/run_*.json .floors/extra_seeds.json
+
+# The full-mode floors (`score --check` without --quick) measured the same way: torch's kernel sets x 1 and 2 BLAS
+# threads, then each OpenBLAS kernel set. Hours on two cores for every dataset: narrow it with FLOORS_ARGS, e.g.
+# FLOORS_ARGS="--datasets cascaded-tanks,piezo-tue --identifiers narx-poly-sim,pnlss" (docs/regression-check.md).
+floors-full: $(STAMP)
+	mkdir -p .floors-full
+	for isa in default avx2 native; do for th in 1 2; do \
+	  if [ $$isa = native ]; then e="env -u ATEN_CPU_CAPABILITY"; else e="env ATEN_CPU_CAPABILITY=$$isa"; fi; \
+	  $$e OPENBLAS_NUM_THREADS=$$th $(VENV)/bin/piezotwin score --json $(FLOORS_ARGS) \
+	    > .floors-full/run_$${isa}_$${th}.json || exit 1; \
+	done; done
+	for ct in $(CORETYPES); do \
+	  env OPENBLAS_CORETYPE=$$ct OPENBLAS_NUM_THREADS=1 $(VENV)/bin/piezotwin score --json $(FLOORS_ARGS) \
+	    > .floors-full/run_blas_$$ct.json || exit 1; \
+	done
+	$(VENV)/bin/piezotwin score --update-baselines --from-runs .floors-full/run_*.json
