@@ -395,3 +395,17 @@ def test_update_baselines_from_saved_runs(tmp_path, capsys):
 def test_quick_check_passes_on_this_build():
     """What CI runs: `piezotwin score --quick --check` (about 1 CPU-minute)."""
     assert main(["score", "--quick", "--check", "--no-sysidentpy", "--json"]) == 0
+
+
+def test_full_run_scores_oe_echo_only_on_the_acoustic_channel():
+    """The default full selection leaves oe-echo out where it is ill-posed (no echo to find), with the reason in
+    ``skipped``; an explicit ``--identifiers`` still runs it there. Every identifier is the toy ARX here, so only
+    the selection is tested."""
+    only = scoring.FULL_ONLY_DATASETS["oe-echo"]
+    assert set(only["datasets"]) == {"acoustic-thesis", "acoustic-thesis-clean"} and only["why"]
+    run = scoring.score(datasets=["piezo-tue"], sysidentpy=False, factory=lambda n: ToyARX)
+    assert "oe-echo" not in {r["identifier"] for r in run.rows}
+    assert {"identifier": "oe-echo", "dataset": "piezo-tue", "reason": only["why"]} in run.skipped
+    assert "arx" in {r["identifier"] for r in run.rows}
+    run = scoring.score(identifiers=["oe-echo"], datasets=["piezo-tue"], sysidentpy=False, factory=lambda n: ToyARX)
+    assert {r["identifier"] for r in run.rows} == {"oe-echo"}

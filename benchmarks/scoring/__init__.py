@@ -45,6 +45,7 @@ from benchmarks.scoring.floors import (
 )
 from benchmarks.scoring.report import markdown_table, write_report
 from benchmarks.scoring.settings import (
+    FULL_ONLY_DATASETS,
     NORMALISE,
     QUICK_DATASETS,
     QUICK_MAX_SAMPLES,
@@ -81,6 +82,7 @@ __all__ = [
     "QUICK_DATASETS",
     "QUICK_MAX_SAMPLES",
     "QUICK_SEEDS",
+    "FULL_ONLY_DATASETS",
     "QUICK_ONLY_DATASETS",
     "QUICK_SETTINGS",
     "QUICK_SKIP_IDENTIFIERS",

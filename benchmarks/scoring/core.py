@@ -21,6 +21,7 @@ from typing import Any, TypeGuard
 import numpy as np
 
 from benchmarks.scoring.settings import (
+    FULL_ONLY_DATASETS,
     METRICS,
     NORMALISE,
     QUICK_DATASETS,
@@ -409,9 +410,10 @@ def _score(identifiers, datasets, quick, sysidentpy, progress, factory, log, see
     ex = executor or Executor()
     handles = {d: ex.share(ds) for d, ds in loaded.items() if not isinstance(ds, Exception)}
     pairs = [(i, d) for d in datasets if d in handles for i in identifiers]
-    if quick and chosen_here:  # the default quick run scores some identifiers on some datasets only
-        left = [(i, d) for i, d in pairs if i in QUICK_ONLY_DATASETS and d not in QUICK_ONLY_DATASETS[i]["datasets"]]
-        run.skipped.extend({"identifier": i, "dataset": d, "reason": QUICK_ONLY_DATASETS[i]["why"]} for i, d in left)
+    if chosen_here:  # the default runs score some identifiers on some datasets only
+        only = QUICK_ONLY_DATASETS if quick else FULL_ONLY_DATASETS
+        left = [(i, d) for i, d in pairs if i in only and d not in only[i]["datasets"]]
+        run.skipped.extend({"identifier": i, "dataset": d, "reason": only[i]["why"]} for i, d in left)
         pairs = [p for p in pairs if p not in left]
 
     # One task per training seed of a pair, so that the five seeds of a neural pair spread over the workers

@@ -80,6 +80,9 @@ QUICK_SKIP_IDENTIFIERS: dict[str, str] = _QUICK.get("skip_identifiers", {})
 QUICK_ONLY_DATASETS: dict[str, dict[str, Any]] = _QUICK.get("only_datasets", {})
 #: tests left out of the quick check per dataset, with the reason: {dataset: {"tests": [...], "why": ...}}
 QUICK_SKIP_TESTS: dict[str, dict[str, Any]] = _QUICK.get("skip_tests", {})
+_FULL = _read(SETTINGS_DIR / "full.toml")
+#: identifiers that the default full run scores on some datasets only: {identifier: {"datasets": [...], "why": ...}}
+FULL_ONLY_DATASETS: dict[str, dict[str, Any]] = _FULL.get("only_datasets", {})
 #: training seeds of the seeded identifiers in quick mode, each test scored by the run of median free-run RMSE
 QUICK_SEEDS: tuple[int, ...] = tuple(_QUICK["seeds"])
 
