@@ -77,34 +77,36 @@ def _frs_r2(model, rec) -> float:
     return float(v) if np.isfinite(v) else float("nan")
 
 
-def ds1_model(model: str, nu: int, ny: int, ne: int | None, rho: float | None, seed: int, t: Tier):
-    """The identifier of one Table 5.2 line (unfitted) and its settings."""
+def ds1_model(model: str, nu: int, ny: int, ne: int | None, rho: float | None, seed: int, t: Tier, nk: int = 1):
+    """The identifier of one Table 5.2 line (unfitted) and its settings (``nk``: input delay, 1 in the table)."""
     from sysid.registry import get_identifier
 
     if model == "armax":
-        kw: dict[str, Any] = {"ny": ny, "nu": nu, "ne": ne, "nk": 1}
+        kw: dict[str, Any] = {"ny": ny, "nu": nu, "ne": ne, "nk": nk}
         return get_identifier("armax")(**kw), "armax", kw
     if model == "narmax":
         if rho is None:
             raise ValueError("a NARMAX line of Table 5.2 needs its rho_p")
-        kw = {"ny": ny, "nu": nu, "ne": ne, "nk": 1, "degree": 2, "criterion": "err", "rho_p": rho,
+        kw = {"ny": ny, "nu": nu, "ne": ne, "nk": nk, "degree": 2, "criterion": "err", "rho_p": rho,
               "rho_n": rho / 10}
         return get_identifier("narmax-poly")(**kw), "narmax-poly", kw
     if model == "narx":
-        kw = {"ny": ny, "nu": nu, "nk": 1, "hidden": list(NARX_HIDDEN), "activation": "sigmoid", "linear": True,
+        kw = {"ny": ny, "nu": nu, "nk": nk, "hidden": list(NARX_HIDDEN), "activation": "sigmoid", "linear": True,
               "lr": NARX_LR, "batch_size": 128, "epochs": t.narx_epochs, "seed": seed}
         return get_identifier("narx-mlp")(**kw), "narx-mlp", kw
     raise ValueError(f"unknown Table 5.2 model {model!r}")
 
 
-def ds1_task(model: str, nu: int, ny: int, ne: int | None, rho: float | None, seed: int, t: Tier) -> dict[str, Any]:
-    """One Table 5.2 line fitted on data set 1: FRS R² (and one-step R²) on the estimation samples."""
+def ds1_task(model: str, nu: int, ny: int, ne: int | None, rho: float | None, seed: int, t: Tier,
+             nk: str = "1") -> dict[str, Any]:
+    """One Table 5.2 line fitted on data set 1: FRS R² (and one-step R²) on the estimation samples. ``nk="tof"``
+    delays the input by the direct path's time of flight (a measured explanation, not the table's setting)."""
     from sysid.errors import DataError
     from sysid.metrics import r2
 
     rec = dataset1(t.short_records)
     c0, w0 = time.process_time(), time.perf_counter()
-    est, ident, kw = ds1_model(model, nu, ny, ne, rho, seed, t)
+    est, ident, kw = ds1_model(model, nu, ny, ne, rho, seed, t, _delay(nk, rec.fs))
     note = None
     frs = osa = float("nan")
     with warnings.catch_warnings():
@@ -160,16 +162,21 @@ def vna_peaks_task(t: Tier) -> dict[str, Any]:
             "cpu_seconds": time.process_time() - c0, "wall_seconds": time.perf_counter() - w0}
 
 
+def _delay(nk: str, fs: float) -> int:
+    """``"1"`` → 1; ``"tof"`` → 4 samples before the direct path's arrival (the twin's time of flight) at ``fs``."""
+    from twins.acoustic import AcousticTwin
+
+    return 1 if nk == "1" else max(1, int(round(AcousticTwin(seed=0).time_of_flight() * fs)) - 4)
+
+
 def ds1_candidate_task(nk: str, t: Tier) -> dict[str, Any]:
     """ARX(n_y = 4, n_u = 8) on data set 1 with n_k = 1 (the dissertation's regressors start at lag 1) or n_k from
     the twin's time of flight (``"tof"``: 4 samples before the direct-path arrival at 10 MHz), FRS R²."""
     from sysid.registry import get_identifier
-    from twins.acoustic import AcousticTwin
 
     rec = dataset1(t.short_records)
     c0, w0 = time.process_time(), time.perf_counter()
-    k = 1 if nk == "1" else max(1, int(round(AcousticTwin(seed=0).time_of_flight() * rec.fs)) - 4)
-    kw = {"ny": 4, "nu": 8, "nk": k}
+    kw = {"ny": 4, "nu": 8, "nk": _delay(nk, rec.fs)}
     model = get_identifier("arx")(**kw).fit(rec)
     return {"identifier": "arx", "params": kw, "r2_frs": _frs_r2(model, rec), "seed": 0,
             "silent_samples": int(np.argmax(np.abs(rec.output) > 0.05 * np.max(np.abs(rec.output)))),

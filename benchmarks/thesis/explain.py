@@ -101,6 +101,12 @@ def _mean(vals: list[Any]) -> float | None:
     return float(np.mean(ok)) if ok else None
 
 
+def k_name(r: dict[str, Any]) -> str:
+    """``(n_u, n_y[, n_e])`` of a data-set-1 fit, as Table 5.2 writes its lines."""
+    p = r["params"]
+    return "(" + ", ".join(str(p[k]) for k in ("nu", "ny", "ne") if k in p) + ")"
+
+
 def explanation(row: dict[str, Any], results: dict[str, dict[str, Any]], t: Tier) -> str | None:
     """Measured statements for a row outside the published spread (``None`` when within or better)."""
     if row["verdict"] in ("within", "better"):
@@ -130,6 +136,15 @@ def explanation(row: dict[str, Any], results: dict[str, dict[str, Any]], t: Tier
                 f"flight at 10 MHz), which regressors starting at lag 1 cannot span: ARX(n_y = 4, n_u = 8) gives FRS "
                 f"R² {_fmt(c1['r2_frs'])} with n_k = 1 and {_fmt(ct['r2_frs'])} with n_k = {ct['params']['nk']} "
                 "(measured in this run)")
+        delayed = []
+        for cls in ("narx", "armax", "narmax"):
+            rr = [r for k, r in results.items() if k.startswith(f"ds1-cand/{cls}-") and "-nktof" in k]
+            if rr:
+                line = k_name(rr[0])
+                delayed.append(f"{cls.upper()} {line}: {_fmt(_mean([r['r2_frs'] for r in rr]))}")
+        if delayed:
+            text += (f"; the best line of each class with the same delay n_k = {ct['params']['nk']}: "
+                     + ", ".join(delayed))
         note = row["settings"].get("note")
         return text + (f"; this fit: {note}" if note else "") + "."
     if fam in ("table-5.4", "table-5.5", "table-5.6", "fig-5.13"):
@@ -152,7 +167,11 @@ def explanation(row: dict[str, Any], results: dict[str, dict[str, Any]], t: Tier
             parts.append(f"trained {t.acoustic_epochs} of Table 5.3's 75 epochs")
         return ("Measured in this run: " + "; ".join(parts) + ".") if parts else None
     if fam == "fig-3.4":
+        r = results["cant/peak"]
+        moved = ", ".join(f"{v:.0f} Hz with f1_hz = {k}" for k, v in r["peak_hz_with_f1_hz"].items())
         return (f"The twin's largest output peak above the excitation band is at {row['project']['mean']:.0f} Hz, "
-                f"{row['settings']['level_db']:.1f} dB from the in-band median level; the default was left as it is "
-                "(the lead decides whether to move it).")
+                f"{row['settings']['level_db']:.1f} dB from the in-band median level (§3.1: 'close to -20 dB, "
+                "compared to the base amplitude of 40 dB for the band of interest'): the first bending mode "
+                f"(f1_hz = {r['f1_hz']:g} by default). The same spectrum peaks at {moved}; the default was left "
+                "as it is (the lead decides whether to move it).")
     return None

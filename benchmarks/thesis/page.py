@@ -30,7 +30,7 @@ _TITLES = OrderedDict([
 #: Table 5.3's grid, one width for every layer: lag values (n_u and n_y each), layers, widths, activations
 GRID_5_3 = {"lags": 15, "layers": 8, "widths": 21, "activations": 3, "runs": 2}
 _EPOCH_FIELD = {"cant/": "cantilever_epochs", "cant-cand/narx-mlp": "cantilever_epochs", "ds2": "acoustic_epochs",
-                "ds1/narx": "narx_epochs"}
+                "ds1/narx": "narx_epochs", "ds1-cand/narx": "narx_epochs"}
 
 
 def _num(x: Any, unit: str = "", digits: int = 4) -> str:
@@ -93,7 +93,7 @@ def full_tier_cost(rows: dict[str, dict[str, Any]]) -> dict[str, Any]:
                 continue
             key = f["key"]
             field = next((v for k, v in _EPOCH_FIELD.items() if key.startswith(k)), None)
-            if key.startswith("ds1/") and not key.startswith("ds1/narx"):
+            if key.startswith("cant/peak"):
                 field = None
             scale = getattr(full, field) / tier[field] if field and tier.get(field) else 1.0
             per.setdefault(key.rsplit("/", 1)[0] if key.rsplit("/", 1)[-1].isdigit() else key, []).append(

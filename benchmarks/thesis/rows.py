@@ -165,9 +165,13 @@ def _ds1(fam, name, results, t: Tier):
         if rr:
             cands.append((stats([r["r2_frs"] for _, r in rr])["mean"], rr[0][1]["identifier"],
                           {k: v for k, v in rr[0][1]["params"].items() if k != "seed"}, len(rr)))
+    groups: dict[str, list[dict[str, Any]]] = {}
     for key, r in results.items():
         if key.startswith("ds1-cand/"):
-            cands.append((r["r2_frs"], r["identifier"], r["params"], 1))
+            groups.setdefault(key.rsplit("/", 1)[0] if key.rsplit("/", 1)[1].isdigit() else key, []).append(r)
+    for rr2 in groups.values():
+        cands.append((stats([r["r2_frs"] for r in rr2])["mean"], rr2[0]["identifier"],
+                      {k: v for k, v in rr2[0]["params"].items() if k != "seed"}, len(rr2)))
     return values, runs, settings, _best(cands)
 
 
