@@ -140,3 +140,18 @@ def test_published_numbers_and_their_slips():
     # Table 4.2's parameter counts are the 4 x 25 network's: 20 inputs, ReLU layers, one output
     for (layers, width), (_, n_par) in targets.TABLE_4_2.items():
         assert n_par == 20 * width + width + (layers - 1) * (width * width + width) + width + 1
+
+
+def test_tasks_follow_the_tier_and_share_fits():
+    """--repeats sets every repeated experiment; Table 4.3 and Fig. 5.13 reuse the fits of Tables 4.2 / 5.6."""
+    from benchmarks.thesis.plan import TIERS, with_repeats
+    from benchmarks.thesis.runner import tasks_for
+
+    t = with_repeats(TIERS["quick"], 3)
+    keys = set(tasks_for(["table-5.6/frs-val", "fig-5.13/val"], t))
+    assert {f"ds2/75x2-sigmoid/{s}" for s in range(3)} <= keys
+    assert not any(k.startswith("ds2/75x2-sigmoid/3") for k in keys)
+    full = tasks_for(ROW_IDS, TIERS["full"])
+    assert sum(k.startswith("ds2/75x2-sigmoid/") for k in full) == 75  # Fig. 5.13's runs include Table 5.6's five
+    assert sum(k.startswith("cant/4x25/") for k in full) == 5  # Table 4.3 reads Table 4.2's 4 x 25 runs
+    assert sum(k.startswith("ds1/armax-") for k in full) == 5  # deterministic fits run once

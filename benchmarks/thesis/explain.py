@@ -93,7 +93,9 @@ def differences(fam: str, t: Tier) -> list[str]:
 
 
 def _fmt(x: Any) -> str:
-    return "—" if x is None or (isinstance(x, float) and not math.isfinite(x)) else f"{x:.3f}"
+    if x is None or (isinstance(x, float) and not math.isfinite(x)):
+        return "—"
+    return f"{x:.3f}" if abs(x) < 10 else f"{x:.3g}"
 
 
 def _mean(vals: list[Any]) -> float | None:
@@ -125,6 +127,13 @@ def explanation(row: dict[str, Any], results: dict[str, dict[str, Any]], t: Tier
         bad = sum(r["r2_mean"] is None or not math.isfinite(r["r2_mean"]) for r in runs)
         if bad:
             text += f"; {bad} of {len(runs)} free runs diverged on some sine"
+        without = [(k.split("/")[1], r) for k, r in results.items() if k.startswith("cant-without/")]
+        if fam == "table-4.3" and without:
+            eff = without[0][0]
+            f = name[:-2]
+            v = _mean([r["r2_per_freq"].get(f) for _, r in without])
+            text += (f"; on the twin without its {eff} effect the same network and seeds give {_fmt(v)} at {f} Hz "
+                     f"(mean over the sines {_fmt(_mean([r['r2_mean'] for _, r in without]))})")
         if t.cantilever_epochs < 100:
             text += f"; trained {t.cantilever_epochs} of Table 4.1's 100 epochs"
         return text + "."
@@ -140,8 +149,9 @@ def explanation(row: dict[str, Any], results: dict[str, dict[str, Any]], t: Tier
         for cls in ("narx", "armax", "narmax"):
             rr = [r for k, r in results.items() if k.startswith(f"ds1-cand/{cls}-") and "-nktof" in k]
             if rr:
-                line = k_name(rr[0])
-                delayed.append(f"{cls.upper()} {line}: {_fmt(_mean([r['r2_frs'] for r in rr]))}")
+                v = _mean([r["r2_frs"] for r in rr])
+                why = "fit refused" if any(r.get("note") for r in rr) else "free run diverged"
+                delayed.append(f"{cls.upper()} {k_name(rr[0])}: {_fmt(v) if v is not None else why}")
         if delayed:
             text += (f"; the best line of each class with the same delay n_k = {ct['params']['nk']}: "
                      + ", ".join(delayed))

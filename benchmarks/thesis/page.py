@@ -29,7 +29,8 @@ _TITLES = OrderedDict([
 ])
 #: Table 5.3's grid, one width for every layer: lag values (n_u and n_y each), layers, widths, activations
 GRID_5_3 = {"lags": 15, "layers": 8, "widths": 21, "activations": 3, "runs": 2}
-_EPOCH_FIELD = {"cant/": "cantilever_epochs", "cant-cand/narx-mlp": "cantilever_epochs", "ds2": "acoustic_epochs",
+_EPOCH_FIELD = {"cant/": "cantilever_epochs", "cant-cand/narx-mlp": "cantilever_epochs",
+                "cant-without/": "cantilever_epochs", "ds2": "acoustic_epochs",
                 "ds1/narx": "narx_epochs", "ds1-cand/narx": "narx_epochs"}
 
 
@@ -38,7 +39,7 @@ def _num(x: Any, unit: str = "", digits: int = 4) -> str:
         return "—"
     if unit == "Hz":
         return f"{x / 1e3:.1f} kHz" if x >= 1e4 else f"{x:.0f} Hz"
-    return f"{x:.{digits}f}"
+    return f"{x:.{digits}f}" if abs(x) < 10 else f"{x:.3g}"  # a diverged free run's R² (−5.98e+04)
 
 
 def _dissertation(d: dict[str, Any]) -> str:

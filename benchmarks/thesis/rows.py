@@ -112,7 +112,7 @@ def build_row(rid: str, results: dict[str, dict[str, Any]], t: Tier, measured: d
 
 
 #: the fits of the project's other models beside a family's rows (the "best" column, the explanations)
-_OTHER = {"table-4.2": "cant-cand/", "table-4.3": "cant-cand/", "table-5.2": "ds1-cand/", "table-5.4": "ds2-cand/",
+_OTHER = {"table-4.2": "cant-cand/", "table-4.3": "cant-", "table-5.2": "ds1-cand/", "table-5.4": "ds2-cand/",
           "table-5.5": "ds2-cand/", "table-5.6": "ds2-cand/", "fig-5.13": "ds2-cand/"}
 
 
@@ -177,8 +177,8 @@ def _ds1(fam, name, results, t: Tier):
 
 def _ds2(fam, name, results, t: Tier):
     BEST_DS2, _ARCH = targets.BEST_DS2, targets.ARCH
-    if fam in ("table-5.4", "table-5.5"):
-        arch, key, n = name, _DS2_KEYS[fam], None
+    if fam in ("table-5.4", "table-5.5"):  # the 75-75 network also has Fig. 5.13's runs: the tier's repeats here
+        arch, key, n = name, _DS2_KEYS[fam], t.acoustic_repeats
     else:
         arch, key = BEST_DS2, _DS2_KEYS[name]
         n = t.table_5_6_runs if fam == "table-5.6" else t.fig_5_13_runs

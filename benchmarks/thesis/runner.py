@@ -83,6 +83,10 @@ def tasks_for(row_ids: Sequence[str], t: Tier) -> dict[str, Task]:
         for ident in cantilever.CANDIDATES:
             for s in range(1 if ident == "narx-poly" else t.cantilever_repeats):
                 tasks[f"cant-cand/{ident}/{s}"] = (cantilever.candidate_task, (ident, s, t))
+    if "table-4.3" in fams:
+        for s in range(t.cantilever_repeats):
+            tasks[f"cant-without/{cantilever.WITHOUT_FOR_4_3}/{s}"] = (
+                cantilever.mlp_task, (4, 25, s, t, cantilever.WITHOUT_FOR_4_3))
     if "table-5.2" in fams:
         for nk in ("1", "tof"):
             tasks[f"ds1-cand/arx-nk{nk}"] = (acoustic.ds1_candidate_task, (nk, t))
