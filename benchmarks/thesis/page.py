@@ -225,8 +225,11 @@ def _measurements(rows: dict[str, dict[str, Any]]) -> list[str]:
         key = f"{m.get('date', '?')}|{(m.get('tier') or {}).get('name', '?')}"
         groups.setdefault(key, []).append(rid)
         info[key] = m
-    out = ["## How the rows were measured", "", "| date (UTC) | tier | rows | machine | load (1 min) before → after | "
-           "process | versions |", "|---|---|---|---|---|---|---|"]
+    out = ["## How the rows were measured", "",
+           "Each line is one `piezotwin thesis` run (wall seconds of the whole run with all its fits, where the row "
+           "recorded it; CPU seconds per fit are in the tables above).", "",
+           "| date (UTC) | tier | rows | machine | load (1 min) before → after | process | wall s | versions |",
+           "|---|---|---|---|---|---|---|---|"]
     for key, ids in groups.items():
         m = info[key]
         mach = m.get("machine") or {}
@@ -235,7 +238,7 @@ def _measurements(rows: dict[str, dict[str, Any]]) -> list[str]:
         versions = ", ".join(f"{k} {v}" for k, v in (m.get("versions") or {}).items() if v and k != "sysidentpy")
         out.append(f"| {m.get('date', '?')} | {(m.get('tier') or {}).get('name', '?')} | {len(ids)} "
                    f"({', '.join(fams)}) | {mach.get('cpu', '?')}, {mach.get('cores', '?')} cores | {load} | "
-                   f"{m.get('process', '?')} | {versions} |")
+                   f"{m.get('process', '?')} | {_num(m.get('wall_seconds'), digits=0)} | {versions} |")
     return out + [""]
 
 

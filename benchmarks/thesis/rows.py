@@ -104,7 +104,8 @@ def build_row(rid: str, results: dict[str, dict[str, Any]], t: Tier, measured: d
         "fits": [_fit(k, r) for k, r in fits],
         "other_fits": [_fit(k, r) for k, r in sorted(results.items()) if k.startswith(_OTHER.get(fam, "\0"))],
         "measured": {k: measured[k] for k in ("date", "machine", "versions", "load_average_before",
-                                              "load_average_after", "process", "tier") if k in measured},
+                                              "load_average_after", "process", "tier", "wall_seconds")
+                     if k in measured},
     }
     row["cpu_seconds"] = float(sum(f["cpu_seconds"] or 0.0 for f in row["fits"]))
     row["explanation"] = explain.explanation(row, results, t)
