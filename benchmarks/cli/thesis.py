@@ -21,7 +21,7 @@ def register(sub) -> None:
     p.add_argument("--tier", choices=("quick", "middle", "full"), default=None,
                    help="budget: middle (default; 100/75 epochs, 2-3 runs, 20 runs for Fig. 5.13) or full (the "
                         "dissertation's: 5 runs, 75 for Fig. 5.13)")
-    p.add_argument("--rows", metavar="ID,...", help="rows or tables to measure, e.g. table-4.2,fig-3.4/peak "
+    p.add_argument("--rows", "--only", metavar="ID,...", help="rows or tables to measure, e.g. table-4.2,fig-3.4/peak "
                                                     "(default: every row)")
     p.add_argument("--repeats", type=COUNT, metavar="N", help="runs of every repeated experiment (overrides the tier)")
     p.add_argument("--store", action="store_true", help="merge the measured rows into the stored rows and render "
