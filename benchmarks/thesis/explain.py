@@ -49,7 +49,9 @@ def differences(fam: str, t: Tier) -> list[str]:
                "dissertation chose the rate from covariance functions, ref. [83]), fifth-order Butterworth band-pass "
                "900–1350 kHz applied forward and backward (zero phase; the dissertation: 'fifth-order band-pass'), "
                "first 2000 samples; only the first 0.5 ms of the 100 ms sweep is simulated (the kept samples are its "
-               "first 0.2 ms)",
+               "first 0.2 ms, over which the 4.5 kHz/ms sweep moves from 900.0 to 900.9 kHz: one tone, as §3.2 says "
+               "'this new dataset does not contain the entire frequency range'; where the dissertation's 2000 "
+               "samples began in its record is not stated)",
                "ARMAX: the project's prediction-error ARMAX, n_a = n_y, n_b = n_u, n_c = n_e, n_k = 1",
                "NARX: narx-mlp with one hidden layer of 10 sigmoid units beside a linear term (the least-squares ARX "
                "of the same regressor, kept fixed while the units train), one-step RMSprop (lr 1e-3, batch 128, "
