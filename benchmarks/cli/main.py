@@ -38,6 +38,7 @@ COMMAND_MODULES = (
     "search",
     "score",
     "records",
+    "thesis",
     "diagnose",
     "sweep",
     "export_fmu",

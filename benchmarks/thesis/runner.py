@@ -1,0 +1,141 @@
+"""Which fits each row needs, running them (here or on Dask workers) and turning the results into rows.
+
+A row id names one published figure (:data:`benchmarks.thesis.targets.TARGETS`). :func:`tasks_for` lists the
+fits behind the chosen rows — shared fits once (Table 4.3 reads the 4 × 25 runs of Table 4.2; Tables 5.5/5.6 and
+Figure 5.13 read the runs of Table 5.4's networks) — and :func:`measure` runs them with an
+:class:`benchmarks.execution.Executor` and builds the rows (:mod:`benchmarks.thesis.rows`).
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from collections.abc import Callable, Sequence
+from typing import Any
+
+from benchmarks.thesis import acoustic, cantilever, targets
+from benchmarks.thesis.plan import Tier
+from benchmarks.thesis.rows import build_row
+from sysid.errors import ConfigError
+
+__all__ = ["ROW_IDS", "select_rows", "tasks_for", "measure"]
+
+ROW_IDS: list[str] = list(targets.TARGETS)
+_ARCH = targets.ARCH
+BEST_DS2 = targets.BEST_DS2
+#: the best line of each model class in Table 5.2 (its last NARX, ARMAX and NARMAX rows)
+DS1_DELAYED = [[x for x in targets.TABLE_5_2 if x[0] == m][-1] for m in ("narx", "armax", "narmax")]
+
+
+def select_rows(spec: str | None) -> list[str]:
+    """Row ids from ``--rows``: ids or prefixes (``table-4.2`` = its nine rows); unknown ones are refused."""
+    if not spec:
+        return list(ROW_IDS)
+    chosen: list[str] = []
+    for item in (s.strip() for s in spec.split(",")):
+        if not item:
+            continue
+        hits = [r for r in ROW_IDS if r == item or r.startswith(item.rstrip("/") + "/")]
+        if not hits:
+            raise ConfigError(f"--rows: {item!r} is not a row id or table; valid tables: "
+                              f"{', '.join(sorted({r.split('/')[0] for r in ROW_IDS}))} (ids: table-4.2/4x25, ...)")
+        chosen += [h for h in hits if h not in chosen]
+    return [r for r in ROW_IDS if r in chosen]
+
+
+Task = tuple[Callable[..., dict[str, Any]], tuple]
+
+
+def _family(rid: str) -> str:
+    return rid.split("/")[0]
+
+
+def tasks_for(row_ids: Sequence[str], t: Tier) -> dict[str, Task]:
+    """key -> (function, arguments) of every fit the rows need (each key once)."""
+    tasks: dict[str, Task] = {}
+    fams = {_family(r) for r in row_ids}
+    for rid in row_ids:
+        fam, name = rid.split("/", 1)
+        if fam in ("table-4.2", "table-4.3"):
+            layers, width = (4, 25) if fam == "table-4.3" else tuple(int(x) for x in name.split("x"))
+            for s in range(t.cantilever_repeats):
+                tasks[f"cant/{layers}x{width}/{s}"] = (cantilever.mlp_task, (layers, width, s, t))
+        elif fam == "table-5.2":
+            line = next(x for x in targets.TABLE_5_2 if targets.table_5_2_id(*x[:5]) == rid)
+            reps = t.narx_repeats if line[0] == "narx" else 1  # ARMAX and NARMAX fits are deterministic
+            for s in range(reps):
+                tasks[f"ds1/{name}/{s}"] = (acoustic.ds1_task, (*line[:5], s, t))
+        elif fam in ("table-5.4", "table-5.5"):
+            ny, hidden, act = _ARCH[name]
+            for s in range(t.acoustic_repeats):
+                tasks[f"ds2/{name}/{s}"] = (acoustic.ds2_task, (ny, hidden, act, s, t))
+        elif fam in ("table-5.6", "fig-5.13"):
+            ny, hidden, act = _ARCH[BEST_DS2]
+            runs = t.table_5_6_runs if fam == "table-5.6" else t.fig_5_13_runs
+            for s in range(runs):
+                tasks[f"ds2/{BEST_DS2}/{s}"] = (acoustic.ds2_task, (ny, hidden, act, s, t))
+        elif fam == "fig-3.4":
+            tasks["cant/peak"] = (cantilever.output_peak_task, (t,))
+        elif fam == "fig-3.9":
+            tasks["vna/peaks"] = (acoustic.vna_peaks_task, (t,))
+    # the project's other models on the same protocols (the "best model" column and the measured explanations)
+    if fams & {"table-4.2", "table-4.3"}:
+        for ident in cantilever.CANDIDATES:
+            for s in range(1 if ident == "narx-poly" else t.cantilever_repeats):
+                tasks[f"cant-cand/{ident}/{s}"] = (cantilever.candidate_task, (ident, s, t))
+    if "table-4.3" in fams:
+        for s in range(t.cantilever_repeats):
+            tasks[f"cant-without/{cantilever.WITHOUT_FOR_4_3}/{s}"] = (
+                cantilever.mlp_task, (4, 25, s, t, cantilever.WITHOUT_FOR_4_3))
+    if "table-5.2" in fams:
+        for nk in ("1", "tof"):
+            tasks[f"ds1-cand/arx-nk{nk}"] = (acoustic.ds1_candidate_task, (nk, t))
+        for line in DS1_DELAYED:  # each class's best line of the table with the input delayed past the dead time
+            name = targets.table_5_2_id(*line[:5]).split("/", 1)[1]
+            for s in range(t.narx_repeats if line[0] == "narx" else 1):
+                tasks[f"ds1-cand/{name}-nktof/{s}"] = (acoustic.ds1_task, (*line[:5], s, t, "tof"))
+    if fams & {"table-5.4", "table-5.5", "table-5.6", "fig-5.13"}:
+        ny, hidden, act = _ARCH[BEST_DS2]
+        for s in range(t.acoustic_repeats):
+            tasks[f"ds2-cand/nk{acoustic.DS2_CANDIDATE_NK}/{s}"] = (
+                acoustic.ds2_task, (ny, hidden, act, s, t, acoustic.DS2_CANDIDATE_NK))
+    return tasks
+
+
+def _cost(key: str) -> float:
+    """Rough relative cost, to start the long fits first on a cluster."""
+    if key.startswith("cant/") and "x" in key:
+        layers, width = key.split("/")[1].split("x")
+        return float(layers) * float(width) ** 2
+    return 1e4 if key.startswith("ds2") else 1.0
+
+
+def measure(row_ids: Sequence[str], t: Tier, executor=None, progress: bool = False,
+            on_task: Callable[[str, dict[str, Any]], None] | None = None) -> dict[str, dict[str, Any]]:
+    """Run the fits of ``row_ids`` at tier ``t`` and return the rows (id -> row), each with how it was measured."""
+    from benchmarks.execution import Executor
+    from benchmarks.records import provenance
+
+    ex = executor or Executor()
+    tasks = tasks_for(row_ids, t)
+    keys = list(tasks)
+    load0 = list(os.getloadavg())
+    w0, c0 = time.perf_counter(), time.process_time()
+
+    def report(i: int, res: dict[str, Any]) -> None:
+        if on_task is not None:
+            on_task(keys[i], res)
+
+    results = ex.map(_run, [(tasks[k][0], tasks[k][1]) for k in keys], desc="thesis fits", progress=progress,
+                     on_result=report, priorities=[_cost(k) for k in keys])
+    by_key = dict(zip(keys, results))
+    measured = provenance()
+    measured.update(load_average_before=load0, load_average_after=list(os.getloadavg()),
+                    wall_seconds=time.perf_counter() - w0, cpu_seconds_here=time.process_time() - c0,
+                    process="in-process" if getattr(ex, "client", None) is None else f"dask ({ex.n_workers} workers)",
+                    tier=t.as_dict())
+    return {rid: build_row(rid, by_key, t, measured) for rid in row_ids}
+
+
+def _run(fn: Callable[..., dict[str, Any]], args: tuple) -> dict[str, Any]:
+    return fn(*args)
