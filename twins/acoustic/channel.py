@@ -24,8 +24,10 @@ The fluid gap is written as its Fabry–Pérot series, which for plane waves is 
   a = R_wall · κ · D(L_w) · e^{−jkL_w}, delay (L_w − L)/c after the direct arrival; κ (``wall_coupling``) is
   the fitted fraction of the beam reaching the wall path (edge waves / frame scattering: the far-field sinc
   directivity of a 70 × 25 mm piston would put it below −60 dB; notes B.8 recommends fitting a_k).
-- Crosstalk (effect): the Tx terminal voltage couples through a stray capacitance C_x into the Rx node
-  (Z_L ∥ Z_el,rx): H_x = V_tx · Z_node/(Z_node + 1/(jωC_x)).
+- Crosstalk (effect): electrical coupling paths from the drive into the Rx node (Z_L ∥ Z_el,rx): the Tx
+  terminal voltage through a stray capacitance C_x, V_tx · Z_node/(Z_node + 1/(jωC_x)), plus an in-phase tap
+  g_r and a derivative tap τ_d·jω of V_oc (resistive / common-ground and capacitive-into-resistive or
+  inductive paths; :func:`crosstalk_path`).
 - Amplifier bandwidth (first-order HP/LP) and ``output_gain`` multiply the whole.
 """
 
@@ -38,6 +40,7 @@ import numpy as np
 from numba import njit, prange
 
 from sysid.errors import ConfigError
+from twins.acoustic import chaincache as cc
 from twins.acoustic.amplifier import amplifier_bandwidth
 from twins.acoustic.fluids import FluidState, fluid_state
 from twins.acoustic.layers import Layer, chain, input_impedance, layer_matrix, propagate_forward
@@ -52,7 +55,7 @@ from twins.acoustic.transducer import (
 )
 
 __all__ = ["ChannelGeometry", "geometry", "channel_parts", "frequency_response", "spreading_factor",
-           "misalignment_factor", "wall_path_length"]
+           "misalignment_factor", "wall_path_length", "crosstalk_path"]
 
 
 @dataclass(frozen=True)
@@ -182,7 +185,33 @@ def frequency_response(f_hz: np.ndarray, p, effects=frozenset(), parts: dict | N
     if not np.any(pos):
         return out
     fp = f[pos]
-    parts = parts or channel_parts(fp, p, effects)
+    g = geometry(p, effects)
+    if parts is None:
+        # the two-ports and the reverberation series depend on the core only: cached (:mod:`.chaincache`)
+        key = (cc.grid_key(fp), cc.chain_key(p, effects), bool(direct_only))
+        parts = cc.CHAIN.get_or(key, lambda: _chain(fp, p, effects, direct_only))
+    else:
+        parts = {**parts, "series_tr": _chain(fp, p, effects, direct_only, parts)["series_tr"]}
+    L, c = g.distance_m, g.fluid.speed
+    k = parts["k"]
+    h = parts["series_tr"]
+    if g.wall_echo and not direct_only:
+        lw = wall_path_length(L, p.wall_distance_m)
+        h = h + parts["t_tx"] * parts["r_v"] * (p.wall_reflection * p.wall_coupling
+                                                * spreading_factor(fp, lw, c, p) * np.exp(-1j * k * lw))
+    if g.crosstalk and not direct_only:
+        h = h + crosstalk_path(fp, p, parts)
+    if include_amplifier:
+        h = h * amplifier_bandwidth(fp, p.amp_f_low_hz, p.amp_f_high_hz)
+    out[pos] = h * p.output_gain
+    return out
+
+
+def _chain(fp: np.ndarray, p, effects, direct_only: bool, parts: dict | None = None) -> dict[str, Any]:
+    """The parts of H at ``fp`` (> 0) that depend on the core only: :func:`channel_parts` and
+    ``series_tr`` = T_tx·R_v·Σ_n (R_tx R_rx)^n e^{−jk(2n+1)L} D((2n+1)L) M_n (the direct path and the
+    reverberations, before the wall echo, crosstalk, amplifier bandwidth and output gain)."""
+    parts = dict(parts) if parts is not None else channel_parts(fp, p, effects)
     g: ChannelGeometry = parts["geometry"]
     L, c = g.distance_m, g.fluid.speed
     k = parts["k"]
@@ -194,19 +223,27 @@ def frequency_response(f_hz: np.ndarray, p, effects=frozenset(), parts: dict | N
         series = np.exp(-1j * k * L) / (1.0 - loop)
     else:
         series = _series(2 * np.pi * fp, k, loop, L, c, orders, p, g.misaligned)
-    if g.wall_echo and not direct_only:
-        lw = wall_path_length(L, p.wall_distance_m)
-        series = series + (p.wall_reflection * p.wall_coupling * spreading_factor(fp, lw, c, p)
-                           * np.exp(-1j * k * lw))
-    h = parts["t_tx"] * parts["r_v"] * series
-    if g.crosstalk and not direct_only:
-        z_node = 1.0 / (1.0 / parts["z_load"] + 1.0 / parts["z_el"])
-        zc = 1.0 / (2j * np.pi * fp * p.crosstalk_capacitance_f) if p.crosstalk_capacitance_f > 0 else np.inf
-        h = h + parts["v_tx"] * z_node / (z_node + zc)
-    if include_amplifier:
-        h = h * amplifier_bandwidth(fp, p.amp_f_low_hz, p.amp_f_high_hz)
-    out[pos] = h * p.output_gain
-    return out
+    parts["series_tr"] = parts["t_tx"] * parts["r_v"] * series
+    parts["z_node"] = 1.0 / (1.0 / parts["z_load"] + 1.0 / parts["z_el"])
+    parts.pop("geometry")
+    return parts
+
+
+def crosstalk_path(fp: np.ndarray, p, parts: dict[str, Any]) -> np.ndarray:
+    """H_x(f) of the electrical coupling paths from the drive into the Rx node (effect ``crosstalk``), per volt
+    of V_oc: the stray capacitance C_x from the Tx terminal, V_tx·Z_node/(Z_node + 1/(jωC_x)), plus two
+    short taps of the drive itself, g_r + τ_d·jω: an in-phase path g_r (a resistive divider or a common
+    ground impedance, ``crosstalk_resistive``) and a derivative path τ_d (a capacitance into a resistive node,
+    τ_d = R·C > 0, or a mutual inductance, either sign: ``crosstalk_derivative_s``)."""
+    jw = 2j * np.pi * fp
+    z_node = parts["z_node"]
+    zc = 1.0 / (jw * p.crosstalk_capacitance_f) if p.crosstalk_capacitance_f > 0 else np.inf
+    h = parts["v_tx"] * z_node / (z_node + zc)
+    g_r = float(getattr(p, "crosstalk_resistive", 0.0))
+    tau = float(getattr(p, "crosstalk_derivative_s", 0.0))
+    if g_r or tau:
+        h = h + (g_r + tau * jw)
+    return h
 
 
 def _spreading_constants(p) -> tuple[int, float, float]:
