@@ -26,6 +26,7 @@ _STEPS = [
     ({"amp_sat_v": 80.0, "amp_smoothness": 1.3, "amp_asymmetry": 0.2}, None),
     ({"wall_distance_m": 0.025, "wall_coupling": 0.2}, {"wall_echo"}),
     ({"wall_distance_m": 0.031, "wall_coupling": 0.2}, {"wall_echo"}),
+    ({"wall_distance_m": 0.031, "wall_echo_path": "copy", "wall_echo_cutoff_hz": 1.5e6}, {"wall_echo"}),
     ({"crosstalk_capacitance_f": 5e-12}, {"crosstalk"}),
     ({"crosstalk_resistive": 0.03, "crosstalk_derivative_s": 4e-9}, {"crosstalk"}),
     ({"pzt_thickness_m": 2.17e-3}, None),
@@ -75,3 +76,17 @@ def test_crosstalk_taps_closed_form():
     off = AcousticTwin.from_options(effects="none", seed=0, set_=["crosstalk_resistive=0.2"])
     np.testing.assert_array_equal(off.frequency_response(f), off.with_params(crosstalk_resistive=0.0)
                                   .frequency_response(f))
+
+
+def test_wall_echo_copy_is_a_delayed_copy_of_the_received_signal():
+    """Variant ``copy``: H = H₀·(1 + a·e^{−jωΔτ}/(1 + jf/f_e)) with Δτ = (√(L² + 4w²) − L)/c, a = R·κ."""
+    tw = AcousticTwin.from_options(effects="none", seed=0)
+    f = np.linspace(0.3e6, 2.4e6, 211)
+    w, a, fe = 0.028, 0.9 * 0.2, 2.0e6
+    echo = tw.with_params(wall_distance_m=w, wall_reflection=0.9, wall_coupling=0.2, wall_echo_path="copy",
+                          wall_echo_cutoff_hz=fe).with_effects({"wall_echo"})
+    L, c = tw.params.distance_m, tw.spectrum_metrics(points=16)["sound_speed_m_s"]
+    dtau = (np.hypot(L, 2 * w) - L) / c
+    h0 = tw.frequency_response(f)
+    want = h0 * (1 + a * np.exp(-2j * np.pi * f * dtau) / (1 + 1j * f / fe))
+    np.testing.assert_allclose(echo.frequency_response(f), want, rtol=1e-9, atol=1e-12 * np.abs(h0).max())

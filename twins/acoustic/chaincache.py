@@ -39,7 +39,8 @@ NOT_IN_LINEAR: frozenset[str] = frozenset({
 #: fields that enter H only through the terms added to (or multiplying) the reverberation series
 NOT_IN_CHAIN: frozenset[str] = NOT_IN_LINEAR | {
     "amp_f_low_hz", "amp_f_high_hz", "model_max_hz", "output_gain", "wall_distance_m", "wall_reflection",
-    "wall_coupling", "crosstalk_capacitance_f", "crosstalk_resistive", "crosstalk_derivative_s"}
+    "wall_coupling", "wall_echo_path", "wall_echo_cutoff_hz", "crosstalk_capacitance_f", "crosstalk_resistive",
+    "crosstalk_derivative_s"}
 #: effects outside the linear chain (amplifier, acquisition)
 EFFECTS_OUTSIDE_LINEAR: frozenset[str] = frozenset({
     "amplifier_compression", "amplifier_even_distortion", "measurement_noise", "adc_quantization"})

@@ -23,7 +23,9 @@ The fluid gap is written as its Fabry–Pérot series, which for plane waves is 
 - Wall echo (effect): image path of length L_w = √(L² + (2w)²) off a side wall at lateral distance w:
   a = R_wall · κ · D(L_w) · e^{−jkL_w}, delay (L_w − L)/c after the direct arrival; κ (``wall_coupling``) is
   the fitted fraction of the beam reaching the wall path (edge waves / frame scattering: the far-field sinc
-  directivity of a 70 × 25 mm piston would put it below −60 dB; notes B.8 recommends fitting a_k).
+  directivity of a 70 × 25 mm piston would put it below −60 dB; notes B.8 recommends fitting a_k). Or, as a
+  variant, a delayed copy of the whole received signal; either through a fitted first-order low-pass
+  (:func:`wall_echo_path`).
 - Crosstalk (effect): electrical coupling paths from the drive into the Rx node (Z_L ∥ Z_el,rx): the Tx
   terminal voltage through a stray capacitance C_x, V_tx · Z_node/(Z_node + 1/(jωC_x)), plus an in-phase tap
   g_r and a derivative tap τ_d·jω of V_oc (resistive / common-ground and capacitive-into-resistive or
@@ -55,7 +57,8 @@ from twins.acoustic.transducer import (
 )
 
 __all__ = ["ChannelGeometry", "geometry", "channel_parts", "frequency_response", "spreading_factor",
-           "misalignment_factor", "wall_path_length", "crosstalk_path"]
+           "misalignment_factor", "wall_path_length", "crosstalk_path",
+           "wall_echo_path"]
 
 
 @dataclass(frozen=True)
@@ -193,12 +196,9 @@ def frequency_response(f_hz: np.ndarray, p, effects=frozenset(), parts: dict | N
     else:
         parts = {**parts, "series_tr": _chain(fp, p, effects, direct_only, parts)["series_tr"]}
     L, c = g.distance_m, g.fluid.speed
-    k = parts["k"]
     h = parts["series_tr"]
     if g.wall_echo and not direct_only:
-        lw = wall_path_length(L, p.wall_distance_m)
-        h = h + parts["t_tx"] * parts["r_v"] * (p.wall_reflection * p.wall_coupling
-                                                * spreading_factor(fp, lw, c, p) * np.exp(-1j * k * lw))
+        h = h + wall_echo_path(fp, p, parts, L, c)
     if g.crosstalk and not direct_only:
         h = h + crosstalk_path(fp, p, parts)
     if include_amplifier:
@@ -227,6 +227,26 @@ def _chain(fp: np.ndarray, p, effects, direct_only: bool, parts: dict | None = N
     parts["z_node"] = 1.0 / (1.0 / parts["z_load"] + 1.0 / parts["z_el"])
     parts.pop("geometry")
     return parts
+
+
+def wall_echo_path(fp: np.ndarray, p, parts: dict[str, Any], L: float, c: float) -> np.ndarray:
+    """The wall echo's term of H (effect ``wall_echo``), a delayed, filtered copy whose filter is fitted:
+
+    * ``wall_echo_path = "image"``: the single-bounce image path of length L_w = √(L² + (2w)²),
+      R_wall·κ·T_tx·R_v·D(L_w)·e^{−jkL_w} (its own spreading and absorption);
+    * ``"copy"``: a copy of the whole received signal (direct arrival and its reverberations between the
+      plates) delayed by (L_w − L)/c and scaled by R_wall·κ — an echo that reverberates like the direct wave;
+
+    either one times a first-order low-pass 1/(1 + jf/f_e) (``wall_echo_cutoff_hz`` = f_e; 0 = none): the
+    frequency-dependent loss of a rough or absorbing wall."""
+    a = p.wall_reflection * p.wall_coupling
+    lw = wall_path_length(L, p.wall_distance_m)
+    if getattr(p, "wall_echo_path", "image") == "copy":
+        e = a * parts["series_tr"] * np.exp(-2j * np.pi * fp * ((lw - L) / c))
+    else:
+        e = parts["t_tx"] * parts["r_v"] * (a * spreading_factor(fp, lw, c, p) * np.exp(-1j * parts["k"] * lw))
+    fc = float(getattr(p, "wall_echo_cutoff_hz", 0.0))
+    return e / (1.0 + 1j * fp / fc) if fc > 0 else e
 
 
 def crosstalk_path(fp: np.ndarray, p, parts: dict[str, Any]) -> np.ndarray:

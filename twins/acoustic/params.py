@@ -83,6 +83,11 @@ class AcousticParams:
                                     source="notes B.8")
     wall_coupling: float = pfield(0.05, "", 0.0, 1.0, "fraction of the beam reaching the wall path (edge waves)",
                                   source="notes B.8: a_k to be fitted")
+    wall_echo_path: str = pfield("image", "", doc="wall echo variant: the single-bounce image path, or a delayed "
+                                 "copy of the whole received signal (reverberations included)",
+                                 choices=("image", "copy"), source="effect wall_echo")
+    wall_echo_cutoff_hz: float = pfield(0.0, "Hz", 0.0, 2e7, "first-order low-pass on the echo path (0 = none): "
+                                        "the loss of a rough or absorbing wall", source="effect wall_echo")
     crosstalk_capacitance_f: float = pfield(2e-12, "F", 0.0, 1e-9, "stray capacitance Tx terminal → Rx node")
     crosstalk_resistive: float = pfield(0.0, "", -0.5, 0.5, "in-phase coupling V_rx/V_oc of a resistive or "
                                         "common-ground path from the drive (effect crosstalk)")

@@ -55,11 +55,14 @@ EFFECTS: dict[str, EffectSpec] = {
         "residual at 2f (and near DC, removed by the AC-coupled chain); r_u²'e correlation test fails",
         {"k2": "amp_even_ratio"}),
     "wall_echo": EffectSpec(
-        "wall_echo", _T, "tank side-wall image path, delayed by (√(L²+4w²) − L)/c after the direct arrival",
+        "wall_echo", _T, "tank side-wall echo, delayed by (√(L²+4w²) − L)/c after the direct arrival: the image "
+        "path or a delayed copy of the received signal, through a fitted first-order low-pass",
         "residual is a delayed, scaled copy of the direct arrival: cross-correlation of e with the "
         "simulated output peaks at the geometric extra delay", {"distance": "wall_distance_m",
                                                                  "reflection": "wall_reflection",
-                                                                 "coupling": "wall_coupling"}),
+                                                                 "coupling": "wall_coupling",
+                                                                 "path": "wall_echo_path",
+                                                                 "cutoff": "wall_echo_cutoff_hz"}),
     "crosstalk": EffectSpec(
         "crosstalk", _T, "electrical coupling paths from the drive into the Rx node: a stray capacitance from "
         "the Tx terminal, an in-phase (resistive / common-ground) tap and a derivative (capacitive into a "
@@ -188,7 +191,8 @@ class AcousticTwin(Twin):
         orders = max(int(p.reverb_orders), 0)
         path = (2 * orders + 1) * g.distance_m
         if g.wall_echo:
-            path = max(path, wall_path_length(g.distance_m, p.wall_distance_m))
+            extra = wall_path_length(g.distance_m, p.wall_distance_m)
+            path = max(path, path + extra - g.distance_m if p.wall_echo_path == "copy" else extra)
         slow = 2 * (p.steel_thickness_m / 5000.0 + p.epoxy_thickness_m / 2000.0)
         if p.reverb_orders < 0:  # closed form: all orders; stop where |R_tx R_rx|^n < 1e-4
             path = 80 * 2 * g.distance_m
