@@ -1,11 +1,12 @@
-"""Acoustic hidden-effect cases injected by code outside the twin, on its bare simulation (issue-style cases).
+"""Acoustic hidden-effect cases injected by code outside the twin, on its bare simulation.
 
 The data are the compression-, noise- and ADC-free twin's simulation ("bare": no catalog effect on) with an
 effect written here in a few lines — a tanh limiter, a cubic soft clip or a hard clip of the generator
-signal, an in-phase copy of the drive (a resistive crosstalk path), a delayed scaled copy of the output (an
-echo: 0.1–0.3 of it, 8–25 µs later, linear interpolation between samples) — and white noise of 1 % of the output
-RMS. Records as in :mod:`discrepancy_cases`: the 2 ms, 5 MHz multisine for estimation and the 1 ms chirp at the
-multisine's 0.4 V peak for validation. The twin diagnosed is the bare configuration.
+signal, an in-phase copy of the drive (a resistive crosstalk path, 10 % of the estimation output's RMS), a
+delayed scaled copy of the output (an echo: 0.1–0.3 of it, 8–25 µs later, linear interpolation between
+samples) — and white noise of 1 % of the output RMS. Records as in :mod:`discrepancy_cases`: the 2 ms, 5 MHz
+multisine for estimation and the 1 ms chirp at the multisine's 0.4 V peak for validation. The twin diagnosed
+is the bare configuration.
 """
 
 from __future__ import annotations
@@ -60,10 +61,12 @@ def outside_case(kind: str, seed: int, level: float | None = None, start_effects
         truth["echo_amplitude"] = float(level if level is not None else rng.uniform(0.1, 0.3))
         truth["echo_delay_s"] = float(rng.uniform(8e-6, 25e-6))
     out = []
+    coupling = 0.0
     for u in (ue, uv):
         y = bare_e.simulate(lim(u) if lim is not None else u, FS)
-        if share:
-            y = y + share * np.sqrt(np.mean(y ** 2)) * u / np.sqrt(np.mean(u ** 2))
+        if share:  # one coupling coefficient for both records: share × the estimation output's RMS
+            coupling = coupling or share * np.sqrt(np.mean(y ** 2)) / np.sqrt(np.mean(u ** 2))
+            y = y + coupling * u
         if kind == "echo":
             n = np.arange(y.size)
             y = y + float(truth["echo_amplitude"]) * np.interp(n - float(truth["echo_delay_s"]) * FS, n, y, left=0.0)

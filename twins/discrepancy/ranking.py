@@ -129,6 +129,7 @@ def _rows(trials: list[Trial], group: list[str], sig_ev: dict[str, dict[str, Any
                      "retest": bool(tr.retest),
                      "confidence": conf, "signature_score": s["score"], "signature": s["text"],
                      "nrmse_val": tr.nrmse_val, "r2_val": tr.r2_val, "gain": tr.gain, "p_value": tr.p_value,
+                     "n_params": tr.n_added, "n_params_total": tr.n_total,
                      "params": tr.effect_params, "stderr": tr.stderr, "seconds": tr.seconds})
     return rows
 
