@@ -4,8 +4,9 @@ Closed form: nested least-squares models on pure noise. Under the null hypothesi
 explain nothing) ``F = (N − k_total)/k · (SSE₀ − SSE₁)/SSE₁`` follows F(k, N − k_total), so the p-values of
 :func:`twins.discrepancy.prediction.significance` are uniform — whatever k, so a richer family (larger k, a
 larger gain by flexibility alone) is not found significant more often than a poorer one. Counting only the
-extra parameters in the denominator (N − k instead of N − k_total) makes the test anti-conservative when the
-model fits many parameters, which the last test shows.
+extra parameters in the denominator (N − k instead of N − k_total) makes the in-sample test anti-conservative
+when the model fits many parameters, which the last test shows. (The diagnosis scores validation residuals, to
+which no parameter was fitted, and so passes k alone: see :mod:`twins.discrepancy.ranking`.)
 """
 
 from __future__ import annotations

@@ -90,12 +90,11 @@ def retest_trials(bases: Sequence[Twin], effects: Sequence[str], est: Record, va
 def attributable(tr: Trial, est: Record, val: Record, configured: Twin, n_eff: float, level: float, min_rel_gain: float,
                  skip: int) -> bool:
     """Step 2 of the module docstring: P_e back at their configured values must be significantly worse."""
-    return holds(tr.twin, tr.effect, tr.sse_val, tr.n_added, est, val, configured, n_eff, level, min_rel_gain, skip,
-                 tr.n_total)
+    return holds(tr.twin, tr.effect, tr.sse_val, tr.n_added, est, val, configured, n_eff, level, min_rel_gain, skip)
 
 
 def holds(twin: Twin, effect: str, sse_val: float, n_added: int, est: Record, val: Record, configured: Twin,
-          n_eff: float, level: float, min_rel_gain: float, skip: int, n_total: int | None = None) -> bool:
+          n_eff: float, level: float, min_rel_gain: float, skip: int) -> bool:
     """``twin`` (validation SSE ``sse_val``) with ``effect``'s parameters back at their configured values is
     significantly worse (F-test below ``level`` and a relative gain of at least ``min_rel_gain``)."""
     fields = _fields(configured, effect) + choice_fields(configured, configured.EFFECTS[effect].params.values())
@@ -104,7 +103,7 @@ def holds(twin: Twin, effect: str, sse_val: float, n_added: int, est: Record, va
     if not (math.isfinite(sse0) and sse0 > 0):
         return True
     g0 = 1.0 - math.sqrt(sse_val / sse0)
-    return bool(significance(sse0, sse_val, n_eff, n_added, n_total) < level and g0 >= min_rel_gain)
+    return bool(significance(sse0, sse_val, n_eff, n_added) < level and g0 >= min_rel_gain)
 
 
 def cause_fields(tr: Trial, nrmse_before: float, configured: Twin) -> dict[str, Any]:
