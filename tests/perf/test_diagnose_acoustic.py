@@ -1,10 +1,13 @@
 """Speed of one acoustic diagnosis: a 2 ms record at 5 MHz (10 000 samples, estimation multisine and
 validation chirp), compression injected as a tanh limiter of the drive on the bare twin's simulation with 1 %
 noise, diagnosed from the default configuration (its Rapp compression re-tested) with the CLI's 3 rounds, in
-under 3 minutes on 2 cores. The machine's load average is recorded beside the time (``extra_info``), since
-the machine is shared. Run by ``make bench``."""
+under 3 minutes on 2 cores. The machine is shared: the load average before and after and the process's CPU
+time are recorded beside the wall time (``extra_info``), and the CPU time is what is asserted (the work of one
+diagnosis fits 3 minutes of one core; the wall time follows it on an idle machine and grows with the load).
+Run by ``make bench``."""
 
 import os
+import time
 
 import pytest
 from discrepancy_outside import outside_case
@@ -20,9 +23,10 @@ def test_diagnose_acoustic_2ms_at_5mhz(benchmark):
     benchmark.extra_info["target_s"] = 180.0
     benchmark.extra_info["items"] = len(est) + len(val)
     benchmark.extra_info["load_before"] = os.getloadavg()[0]
+    c0 = time.process_time()
     out = benchmark.pedantic(diagnose, args=(start, est, val), kwargs={"max_rounds": 3}, rounds=1, iterations=1)
+    cpu = time.process_time() - c0
+    benchmark.extra_info["cpu_s"] = cpu
     benchmark.extra_info["load_after"] = os.getloadavg()[0]
     assert out["causes"] and out["causes"][0]["effect"] == "amplifier_compression", out["causes"]
-    stats = getattr(benchmark, "stats", None)
-    if stats is not None:
-        assert stats.stats.median < 180.0
+    assert cpu < 180.0
