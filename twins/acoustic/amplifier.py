@@ -9,6 +9,13 @@
     also saturates at A_sat. For one tone of amplitude a (< v0): fundamental a − a³/(4 v0²), third harmonic
     a³/(12 v0²) (the general rule 3rd = a3·a³/4 with a3 = −1/(3v0²)).
   Both are odd functions of v: they produce odd harmonics only.
+- The compression is a *family*, not one curve: the Rapp curve's smoothness p spans the shapes an
+  amplifier's limiter takes, from tanh-like (p ≈ 1.2–1.4) through a cubic soft clip up to its turning point
+  (p ≈ 1.5–1.8, sat ≈ 0.77 v0) to a hard clip (p → 64: ``|v| > A`` gives exactly ±A where |v/A|^{2p}
+  overflows); each is matched within 1 % of its RMS (tests/test_amplifier_family.py). An optional asymmetry
+  a (``asymmetry``, default 0 = odd) sets the saturation to A(1 + a) for v > 0 and A(1 − a) for v < 0 (a
+  push-pull stage whose halves saturate at different levels): the curve stays monotone and continuous, and
+  adds even harmonics.
 - Optional even-order term (push-pull imbalance): v_c + k2·v_c²/A_sat; a tone of amplitude a gives
   k2·a²/(2 A_sat) at 2f (and the same at DC, removed by the AC-coupled chain).
 - Bandwidth (≈ 10 kHz – 12 MHz): first-order high-pass and low-pass, applied in the frequency domain as a
@@ -30,18 +37,21 @@ def voltage_gain(gain_db: float) -> float:
 
 
 def amplifier_voltage(x: np.ndarray, gain_db: float = 50.0, compression: str | None = None, sat_v: float = 105.0,
-                      smoothness: float = 2.5, even_ratio: float = 0.0) -> np.ndarray:
+                      smoothness: float = 2.5, even_ratio: float = 0.0, asymmetry: float = 0.0) -> np.ndarray:
     """Open-circuit output voltage V_oc [V] of the amplifier for the input ``x`` [V] (memoryless).
 
     ``compression``: None (linear), ``"rapp"`` or ``"cubic"``; ``sat_v``: output saturation A_sat [V peak into
-    50 Ω]; ``smoothness``: Rapp p; ``even_ratio``: k2 of the even-order term (0 = none).
+    50 Ω]; ``smoothness``: Rapp p; ``even_ratio``: k2 of the even-order term (0 = none); ``asymmetry``: a,
+    saturation A(1 ± a) for positive / negative v (0 = odd).
     """
     if compression == "rapp":
         return _rapp_kernel(np.ascontiguousarray(x, dtype=np.float64), voltage_gain(gain_db), float(sat_v),
-                            float(smoothness), float(even_ratio))
+                            float(smoothness), float(even_ratio), float(asymmetry))
     v = voltage_gain(gain_db) * np.asarray(x, dtype=float)
     if compression == "cubic":
-        v0 = 1.5 * sat_v
+        v0: float | np.ndarray = 1.5 * sat_v
+        if asymmetry:
+            v0 = np.where(v > 0, 1.5 * sat_v * (1.0 + asymmetry), 1.5 * sat_v * (1.0 - asymmetry))
         vc = np.clip(v, -v0, v0)
         v = vc - vc**3 / (3.0 * v0 * v0)
     elif compression not in (None, "none", "linear"):
@@ -52,13 +62,13 @@ def amplifier_voltage(x: np.ndarray, gain_db: float = 50.0, compression: str | N
 
 
 def sample_amplifier(gain_db: float = 50.0, compression: str | None = None, sat_v: float = 105.0,
-                     smoothness: float = 2.5, even_ratio: float = 0.0):
+                     smoothness: float = 2.5, even_ratio: float = 0.0, asymmetry: float = 0.0):
     """``float -> float``: :func:`amplifier_voltage` for one sample at a time with the same arithmetic (the
     per-sample path of an FMU step: no array, no thread launch), or None for a compression without one."""
-    gain, sat, k2 = voltage_gain(gain_db), float(sat_v), float(even_ratio)
+    gain, sat, k2, asym = voltage_gain(gain_db), float(sat_v), float(even_ratio), float(asymmetry)
     if compression == "rapp":
         p = float(smoothness)
-        return lambda x: _rapp_scalar(float(x), gain, sat, p, k2)
+        return lambda x: _rapp_scalar(float(x), gain, sat, p, k2, asym)
     if compression not in (None, "none", "linear"):
         return None
 
@@ -85,51 +95,57 @@ PARALLEL_MIN = 16384
 
 
 @njit(cache=True, inline="always")
-def _rapp_one(x, gain, sat, p2, inv, ip, integer, k2):  # pragma: no cover - compiled; as amplifier_voltage
+def _rapp_one(x, gain, sat, p2, inv, ip, integer, k2, asym):  # pragma: no cover - compiled; as amplifier_voltage
     v = gain * x
-    a = np.abs(v / sat)
+    a_sat = sat
+    if asym != 0.0:
+        a_sat = sat * (1.0 + asym) if v > 0 else sat * (1.0 - asym)
+    a = np.abs(v / a_sat)
     if integer:  # |v/A|^(2p) by multiplication when 2p is whole (p = 2.5 by default): one pow per sample
         q = a
         for _ in range(ip - 1):
             q *= a
     else:
         q = a**p2
-    v = v / (1.0 + q) ** inv
+    if q == np.inf:  # a hard clip's limit (large p): v/(1 + q)^(1/2p) → ±A
+        v = a_sat if v > 0 else -a_sat
+    else:
+        v = v / (1.0 + q) ** inv
     if k2 != 0.0:
         v = v + k2 * v * v / sat
     return 2.0 * v
 
 
 @njit(cache=True, parallel=True)
-def _rapp_parallel(x, gain, sat, p, k2):  # pragma: no cover - compiled
+def _rapp_parallel(x, gain, sat, p, k2, asym):  # pragma: no cover - compiled
     out = np.empty_like(x)
     p2 = 2.0 * p
     ip = int(p2)
     integer = ip == p2 and ip >= 1
     for i in prange(x.shape[0]):
-        out[i] = _rapp_one(x[i], gain, sat, p2, 1.0 / p2, ip, integer, k2)
+        out[i] = _rapp_one(x[i], gain, sat, p2, 1.0 / p2, ip, integer, k2, asym)
     return out
 
 
 @njit(cache=True)
-def _rapp_serial(x, gain, sat, p, k2):  # pragma: no cover - compiled
+def _rapp_serial(x, gain, sat, p, k2, asym):  # pragma: no cover - compiled
     out = np.empty_like(x)
     p2 = 2.0 * p
     ip = int(p2)
     integer = ip == p2 and ip >= 1
     for i in range(x.shape[0]):
-        out[i] = _rapp_one(x[i], gain, sat, p2, 1.0 / p2, ip, integer, k2)
+        out[i] = _rapp_one(x[i], gain, sat, p2, 1.0 / p2, ip, integer, k2, asym)
     return out
 
 
 @njit(cache=True)
-def _rapp_scalar(x, gain, sat, p, k2):  # pragma: no cover - compiled
+def _rapp_scalar(x, gain, sat, p, k2, asym):  # pragma: no cover - compiled
     p2 = 2.0 * p
     ip = int(p2)
-    return _rapp_one(x, gain, sat, p2, 1.0 / p2, ip, ip == p2 and ip >= 1, k2)
+    return _rapp_one(x, gain, sat, p2, 1.0 / p2, ip, ip == p2 and ip >= 1, k2, asym)
 
 
-def _rapp_kernel(x, gain, sat, p, k2):
+def _rapp_kernel(x, gain, sat, p, k2, asym=0.0):
     """Rapp compression of ``x``: the parallel kernel for long arrays, the serial one (no thread launch) for
     short ones such as the one-sample calls of an FMU step. Both evaluate the same expression per sample."""
-    return (_rapp_parallel if x.shape[0] >= PARALLEL_MIN else _rapp_serial)(x, gain, sat, p, k2)
+    return (_rapp_parallel if x.shape[0] >= PARALLEL_MIN else _rapp_serial)(x, gain, sat, p, k2, asym)

@@ -23,9 +23,13 @@ The fluid gap is written as its Fabry–Pérot series, which for plane waves is 
 - Wall echo (effect): image path of length L_w = √(L² + (2w)²) off a side wall at lateral distance w:
   a = R_wall · κ · D(L_w) · e^{−jkL_w}, delay (L_w − L)/c after the direct arrival; κ (``wall_coupling``) is
   the fitted fraction of the beam reaching the wall path (edge waves / frame scattering: the far-field sinc
-  directivity of a 70 × 25 mm piston would put it below −60 dB; notes B.8 recommends fitting a_k).
-- Crosstalk (effect): the Tx terminal voltage couples through a stray capacitance C_x into the Rx node
-  (Z_L ∥ Z_el,rx): H_x = V_tx · Z_node/(Z_node + 1/(jωC_x)).
+  directivity of a 70 × 25 mm piston would put it below −60 dB; notes B.8 recommends fitting a_k). Or, as a
+  variant, a delayed copy of the whole received signal; either through a fitted first-order low-pass
+  (:func:`wall_echo_path`).
+- Crosstalk (effect): electrical coupling paths from the drive into the Rx node (Z_L ∥ Z_el,rx): the Tx
+  terminal voltage through a stray capacitance C_x, V_tx · Z_node/(Z_node + 1/(jωC_x)), plus an in-phase tap
+  g_r and a derivative tap τ_d·jω of V_oc (resistive / common-ground and capacitive-into-resistive or
+  inductive paths; :func:`crosstalk_path`).
 - Amplifier bandwidth (first-order HP/LP) and ``output_gain`` multiply the whole.
 """
 
@@ -38,6 +42,7 @@ import numpy as np
 from numba import njit, prange
 
 from sysid.errors import ConfigError
+from twins.acoustic import chaincache as cc
 from twins.acoustic.amplifier import amplifier_bandwidth
 from twins.acoustic.fluids import FluidState, fluid_state
 from twins.acoustic.layers import Layer, chain, input_impedance, layer_matrix, propagate_forward
@@ -52,7 +57,8 @@ from twins.acoustic.transducer import (
 )
 
 __all__ = ["ChannelGeometry", "geometry", "channel_parts", "frequency_response", "spreading_factor",
-           "misalignment_factor", "wall_path_length"]
+           "misalignment_factor", "wall_path_length", "crosstalk_path",
+           "wall_echo_path"]
 
 
 @dataclass(frozen=True)
@@ -182,7 +188,30 @@ def frequency_response(f_hz: np.ndarray, p, effects=frozenset(), parts: dict | N
     if not np.any(pos):
         return out
     fp = f[pos]
-    parts = parts or channel_parts(fp, p, effects)
+    g = geometry(p, effects)
+    if parts is None:
+        # the two-ports and the reverberation series depend on the core only: cached (:mod:`.chaincache`)
+        key = (cc.grid_key(fp), cc.chain_key(p, effects), bool(direct_only))
+        parts = cc.CHAIN.get_or(key, lambda: _chain(fp, p, effects, direct_only))
+    else:
+        parts = {**parts, "series_tr": _chain(fp, p, effects, direct_only, parts)["series_tr"]}
+    L, c = g.distance_m, g.fluid.speed
+    h = parts["series_tr"]
+    if g.wall_echo and not direct_only:
+        h = h + wall_echo_path(fp, p, parts, L, c)
+    if g.crosstalk and not direct_only:
+        h = h + crosstalk_path(fp, p, parts)
+    if include_amplifier:
+        h = h * amplifier_bandwidth(fp, p.amp_f_low_hz, p.amp_f_high_hz)
+    out[pos] = h * p.output_gain
+    return out
+
+
+def _chain(fp: np.ndarray, p, effects, direct_only: bool, parts: dict | None = None) -> dict[str, Any]:
+    """The parts of H at ``fp`` (> 0) that depend on the core only: :func:`channel_parts` and
+    ``series_tr`` = T_tx·R_v·Σ_n (R_tx R_rx)^n e^{−jk(2n+1)L} D((2n+1)L) M_n (the direct path and the
+    reverberations, before the wall echo, crosstalk, amplifier bandwidth and output gain)."""
+    parts = dict(parts) if parts is not None else channel_parts(fp, p, effects)
     g: ChannelGeometry = parts["geometry"]
     L, c = g.distance_m, g.fluid.speed
     k = parts["k"]
@@ -194,19 +223,47 @@ def frequency_response(f_hz: np.ndarray, p, effects=frozenset(), parts: dict | N
         series = np.exp(-1j * k * L) / (1.0 - loop)
     else:
         series = _series(2 * np.pi * fp, k, loop, L, c, orders, p, g.misaligned)
-    if g.wall_echo and not direct_only:
-        lw = wall_path_length(L, p.wall_distance_m)
-        series = series + (p.wall_reflection * p.wall_coupling * spreading_factor(fp, lw, c, p)
-                           * np.exp(-1j * k * lw))
-    h = parts["t_tx"] * parts["r_v"] * series
-    if g.crosstalk and not direct_only:
-        z_node = 1.0 / (1.0 / parts["z_load"] + 1.0 / parts["z_el"])
-        zc = 1.0 / (2j * np.pi * fp * p.crosstalk_capacitance_f) if p.crosstalk_capacitance_f > 0 else np.inf
-        h = h + parts["v_tx"] * z_node / (z_node + zc)
-    if include_amplifier:
-        h = h * amplifier_bandwidth(fp, p.amp_f_low_hz, p.amp_f_high_hz)
-    out[pos] = h * p.output_gain
-    return out
+    parts["series_tr"] = parts["t_tx"] * parts["r_v"] * series
+    parts["z_node"] = 1.0 / (1.0 / parts["z_load"] + 1.0 / parts["z_el"])
+    parts.pop("geometry")
+    return parts
+
+
+def wall_echo_path(fp: np.ndarray, p, parts: dict[str, Any], L: float, c: float) -> np.ndarray:
+    """The wall echo's term of H (effect ``wall_echo``), a delayed, filtered copy whose filter is fitted:
+
+    * ``wall_echo_path = "image"``: the single-bounce image path of length L_w = √(L² + (2w)²),
+      R_wall·κ·T_tx·R_v·D(L_w)·e^{−jkL_w} (its own spreading and absorption);
+    * ``"copy"``: a copy of the whole received signal (direct arrival and its reverberations between the
+      plates) delayed by (L_w − L)/c and scaled by R_wall·κ — an echo that reverberates like the direct wave;
+
+    either one times a first-order low-pass 1/(1 + jf/f_e) (``wall_echo_cutoff_hz`` = f_e; 0 = none): the
+    frequency-dependent loss of a rough or absorbing wall."""
+    a = p.wall_reflection * p.wall_coupling
+    lw = wall_path_length(L, p.wall_distance_m)
+    if getattr(p, "wall_echo_path", "image") == "copy":
+        e = a * parts["series_tr"] * np.exp(-2j * np.pi * fp * ((lw - L) / c))
+    else:
+        e = parts["t_tx"] * parts["r_v"] * (a * spreading_factor(fp, lw, c, p) * np.exp(-1j * parts["k"] * lw))
+    fc = float(getattr(p, "wall_echo_cutoff_hz", 0.0))
+    return e / (1.0 + 1j * fp / fc) if fc > 0 else e
+
+
+def crosstalk_path(fp: np.ndarray, p, parts: dict[str, Any]) -> np.ndarray:
+    """H_x(f) of the electrical coupling paths from the drive into the Rx node (effect ``crosstalk``), per volt
+    of V_oc: the stray capacitance C_x from the Tx terminal, V_tx·Z_node/(Z_node + 1/(jωC_x)), plus two
+    short taps of the drive itself, g_r + τ_d·jω: an in-phase path g_r (a resistive divider or a common
+    ground impedance, ``crosstalk_resistive``) and a derivative path τ_d (a capacitance into a resistive node,
+    τ_d = R·C > 0, or a mutual inductance, either sign: ``crosstalk_derivative_s``)."""
+    jw = 2j * np.pi * fp
+    z_node = parts["z_node"]
+    zc = 1.0 / (jw * p.crosstalk_capacitance_f) if p.crosstalk_capacitance_f > 0 else np.inf
+    h = parts["v_tx"] * z_node / (z_node + zc)
+    g_r = float(getattr(p, "crosstalk_resistive", 0.0))
+    tau = float(getattr(p, "crosstalk_derivative_s", 0.0))
+    if g_r or tau:
+        h = h + (g_r + tau * jw)
+    return h
 
 
 def _spreading_constants(p) -> tuple[int, float, float]:

@@ -62,7 +62,10 @@ class AcousticParams:
                                   choices=("rapp", "cubic"), source="notes B.9")
     amp_sat_v: float = pfield(105.0, "V", 1.0, 1e3, "saturated output amplitude into 50 Ω (100 W ≈ 100 V peak)",
                               source="notes B.9")
-    amp_smoothness: float = pfield(2.5, "", 0.5, 20.0, "Rapp smoothness p", source="notes B.9: p ≈ 2–3")
+    amp_smoothness: float = pfield(2.5, "", 0.5, 64.0, "Rapp smoothness p (≈ 1.3 tanh-like, ≈ 1.7 a cubic soft "
+                                   "clip, 64 a hard clip)", source="notes B.9: p ≈ 2–3")
+    amp_asymmetry: float = pfield(0.0, "", -0.5, 0.5, "compression asymmetry a: saturation A_sat·(1 ± a) for "
+                                  "positive / negative output (0 = odd)", source="effect amplifier_compression")
     amp_even_ratio: float = pfield(0.02, "", -1.0, 1.0, "even-order term k2 (HD2 = k2·a/(2 A_sat))",
                                    source="effect amplifier_even_distortion")
     # ---------------------------------------------------------------- propagation details
@@ -80,7 +83,17 @@ class AcousticParams:
                                     source="notes B.8")
     wall_coupling: float = pfield(0.05, "", 0.0, 1.0, "fraction of the beam reaching the wall path (edge waves)",
                                   source="notes B.8: a_k to be fitted")
+    wall_echo_path: str = pfield("image", "", doc="wall echo variant: the single-bounce image path, or a delayed "
+                                 "copy of the whole received signal (reverberations included)",
+                                 choices=("image", "copy"), source="effect wall_echo")
+    wall_echo_cutoff_hz: float = pfield(0.0, "Hz", 0.0, 2e7, "first-order low-pass on the echo path (0 = none): "
+                                        "the loss of a rough or absorbing wall", source="effect wall_echo")
     crosstalk_capacitance_f: float = pfield(2e-12, "F", 0.0, 1e-9, "stray capacitance Tx terminal → Rx node")
+    crosstalk_resistive: float = pfield(0.0, "", -0.5, 0.5, "in-phase coupling V_rx/V_oc of a resistive or "
+                                        "common-ground path from the drive (effect crosstalk)")
+    crosstalk_derivative_s: float = pfield(0.0, "s", -1e-7, 1e-7, "derivative coupling τ_d: V_rx = τ_d·dV_oc/dt "
+                                           "(capacitance into a resistive node, τ_d = R·C; or a mutual "
+                                           "inductance, either sign; effect crosstalk)")
     temperature_offset_k: float = pfield(0.5, "K", -20.0, 20.0, "true − assumed fluid temperature")
     distance_offset_m: float = pfield(0.5e-3, "m", -0.05, 0.05, "true − assumed distance")
     mismatch_fluid: str = pfield("seawater", "", doc="fluid actually in the tank (effect fluid_mismatch)",

@@ -23,6 +23,7 @@ from scipy import signal as sps
 from sysid.config import coerce
 from sysid.errors import ConfigError
 from sysid.record import Record
+from twins.acoustic import chaincache as cc
 from twins.acoustic.amplifier import amplifier_voltage, sample_amplifier
 from twins.acoustic.channel import frequency_response, geometry, wall_path_length
 from twins.acoustic.params import AcousticParams
@@ -43,24 +44,32 @@ EFFECTS: dict[str, EffectSpec] = {
         "uniform residual within ±LSB/2 (LSB = 2·range/2^bits); flat-topped output where |y| reaches the range",
         {"bits": "adc_bits", "range": "adc_range_v"}, default_on=True),
     "amplifier_compression": EffectSpec(
-        "amplifier_compression", _T, "odd-order AM/AM compression of the RF power amplifier (Rapp or cubic)",
+        "amplifier_compression", _T, "AM/AM compression of the RF power amplifier: a monotone limiter family "
+        "(Rapp curve whose smoothness spans tanh-like to a hard clip, or a cubic soft clip; optionally asymmetric)",
         "residual at 3f, 5f (odd harmonics) growing faster than the drive; gain loss at large amplitude; "
-        "r_u²'e² correlation test fails", {"model": "amp_compression", "sat": "amp_sat_v", "p": "amp_smoothness"},
+        "r_u²'e² correlation test fails", {"model": "amp_compression", "sat": "amp_sat_v", "p": "amp_smoothness",
+                                           "asymmetry": "amp_asymmetry"},
         default_on=True),
     "amplifier_even_distortion": EffectSpec(
         "amplifier_even_distortion", _T, "even-order term k2·v²/A_sat of the amplifier (push-pull imbalance)",
         "residual at 2f (and near DC, removed by the AC-coupled chain); r_u²'e correlation test fails",
         {"k2": "amp_even_ratio"}),
     "wall_echo": EffectSpec(
-        "wall_echo", _T, "tank side-wall image path, delayed by (√(L²+4w²) − L)/c after the direct arrival",
+        "wall_echo", _T, "tank side-wall echo, delayed by (√(L²+4w²) − L)/c after the direct arrival: the image "
+        "path or a delayed copy of the received signal, through a fitted first-order low-pass",
         "residual is a delayed, scaled copy of the direct arrival: cross-correlation of e with the "
         "simulated output peaks at the geometric extra delay", {"distance": "wall_distance_m",
                                                                  "reflection": "wall_reflection",
-                                                                 "coupling": "wall_coupling"}),
+                                                                 "coupling": "wall_coupling",
+                                                                 "path": "wall_echo_path",
+                                                                 "cutoff": "wall_echo_cutoff_hz"}),
     "crosstalk": EffectSpec(
-        "crosstalk", _T, "capacitive electrical crosstalk from the Tx terminal into the Rx node",
-        "residual with no acoustic delay: correlated with u at lag 0 (before the time of flight), rising 20 dB/dec",
-        {"capacitance": "crosstalk_capacitance_f"}),
+        "crosstalk", _T, "electrical coupling paths from the drive into the Rx node: a stray capacitance from "
+        "the Tx terminal, an in-phase (resistive / common-ground) tap and a derivative (capacitive into a "
+        "resistive node, or inductive) tap of the drive",
+        "residual with no acoustic delay: correlated with u at lag 0 (before the time of flight)",
+        {"capacitance": "crosstalk_capacitance_f", "resistive": "crosstalk_resistive",
+         "derivative": "crosstalk_derivative_s"}),
     "temperature_offset": EffectSpec(
         "temperature_offset", _T, "fluid temperature differs from the assumed one (sound speed c(T))",
         "time-of-flight shift (≈ −123 ns/K at 100 mm of water): residual ∝ dy/dt, cross-correlation peak off 0; "
@@ -98,7 +107,6 @@ class AcousticTwin(Twin):
 
     def __init__(self, params: Any = None, effects=None, seed: int | None = 0):
         super().__init__(params, effects, seed)
-        self._h_cache: dict[tuple, np.ndarray] = {}
         self.impulse_tail_energy_: float | None = None
 
     # ------------------------------------------------------------------ the three stages (interfaces.md)
@@ -117,7 +125,8 @@ class AcousticTwin(Twin):
         return amplifier_voltage(x, p.amp_gain_db,
                                  p.amp_compression if self.has("amplifier_compression") else None,
                                  p.amp_sat_v, p.amp_smoothness,
-                                 p.amp_even_ratio if self.has("amplifier_even_distortion") else 0.0)
+                                 p.amp_even_ratio if self.has("amplifier_even_distortion") else 0.0,
+                                 p.amp_asymmetry)
 
     def sample_amplifier(self):
         """:meth:`amplifier` as a ``float -> float`` function for one sample at a time (same arithmetic), or
@@ -125,7 +134,8 @@ class AcousticTwin(Twin):
         p = self.params
         return sample_amplifier(p.amp_gain_db, p.amp_compression if self.has("amplifier_compression") else None,
                                 p.amp_sat_v, p.amp_smoothness,
-                                p.amp_even_ratio if self.has("amplifier_even_distortion") else 0.0)
+                                p.amp_even_ratio if self.has("amplifier_even_distortion") else 0.0,
+                                p.amp_asymmetry)
 
     def sample_measure(self, fs: float):
         """:meth:`measure` as ``(y: float, rng) -> float`` for one sample at a time: the same float32 noise
@@ -181,7 +191,8 @@ class AcousticTwin(Twin):
         orders = max(int(p.reverb_orders), 0)
         path = (2 * orders + 1) * g.distance_m
         if g.wall_echo:
-            path = max(path, wall_path_length(g.distance_m, p.wall_distance_m))
+            extra = wall_path_length(g.distance_m, p.wall_distance_m)
+            path = max(path, path + extra - g.distance_m if p.wall_echo_path == "copy" else extra)
         slow = 2 * (p.steel_thickness_m / 5000.0 + p.epoxy_thickness_m / 2000.0)
         if p.reverb_orders < 0:  # closed form: all orders; stop where |R_tx R_rx|^n < 1e-4
             path = 80 * 2 * g.distance_m
@@ -195,25 +206,46 @@ class AcousticTwin(Twin):
         holds more than ``_TAIL_TOL`` of its energy (slow ringing), the grid is doubled (at most 3 times).
         ``impulse_tail_energy_`` keeps the fraction reached.
         """
-        fs = float(fs)
-        n_grid = scipy.fft.next_fast_len(max(int(np.ceil(self.response_duration() * fs)), 256), real=True)
-        key = (fs, n_grid)
-        h = self._h_cache.get(key)
-        if h is None:
-            for _ in range(4):
-                f = np.fft.rfftfreq(n_grid, 1.0 / fs)
-                H = np.zeros(f.size, dtype=complex)
-                keep = f <= self.params.model_max_hz
-                H[keep] = self.frequency_response(f[keep])
-                h = scipy.fft.irfft(H, n_grid)
-                e = h * h
-                total = float(e.sum())
-                self.impulse_tail_energy_ = float(e[-n_grid // 8:].sum()) / total if total > 0 else 0.0
-                if self.impulse_tail_energy_ <= _TAIL_TOL:
-                    break
-                n_grid = scipy.fft.next_fast_len(2 * n_grid, real=True)
-            self._h_cache = {key: h}
+        entry = self._linear_entry(float(fs))
+        self.impulse_tail_energy_ = entry["tail"]
+        h = entry["h"]
         return h if n is None else h[:n]
+
+    def _linear_entry(self, fs: float) -> dict[str, Any]:
+        """h at ``fs`` with its tail energy and spectra, shared by every twin whose linear chain is the same
+        (:mod:`twins.acoustic.chaincache`: a diagnosis's amplifier trials reuse it)."""
+        n_grid = scipy.fft.next_fast_len(max(int(np.ceil(self.response_duration() * fs)), 256), real=True)
+        key = (fs, n_grid, cc.linear_key(self.params, self.effects))
+        return cc.LINEAR.get_or(key, lambda: self._compute_h(fs, n_grid))
+
+    def _compute_h(self, fs: float, n_grid: int) -> dict[str, Any]:
+        for _ in range(4):
+            f = np.fft.rfftfreq(n_grid, 1.0 / fs)
+            H = np.zeros(f.size, dtype=complex)
+            keep = f <= self.params.model_max_hz
+            H[keep] = self.frequency_response(f[keep])
+            h = scipy.fft.irfft(H, n_grid)
+            e = h * h
+            total = float(e.sum())
+            tail = float(e[-n_grid // 8:].sum()) / total if total > 0 else 0.0
+            if tail <= _TAIL_TOL:
+                break
+            n_grid = scipy.fft.next_fast_len(2 * n_grid, real=True)
+        return {"h": h, "tail": tail, "spectra": {}}
+
+    def _h_spectrum(self, fs: float, m: int, nfft: int, dtype) -> np.ndarray:
+        """rfft of the first ``m`` samples of h zero-padded to ``nfft`` (kept with h in the cache)."""
+        entry = self._linear_entry(fs)
+        key = (m, nfft, np.dtype(dtype).str)
+        spec = entry["spectra"].get(key) if cc.enabled() else None
+        if spec is None:
+            spec = scipy.fft.rfft(entry["h"][:m].astype(dtype), nfft)
+            spec.flags.writeable = False
+            if cc.enabled():
+                if len(entry["spectra"]) > 4:
+                    entry["spectra"].clear()
+                entry["spectra"][key] = spec
+        return spec
 
     def linear(self, v, fs: float) -> np.ndarray:
         """Noise-free output of the linear chain for the open-circuit amplifier voltage ``v`` (linear convolution).
@@ -232,9 +264,9 @@ class AcousticTwin(Twin):
         nfft = scipy.fft.next_fast_len(max(2 * m, _OLS_MIN_BLOCK), real=True)
         if single <= nfft:  # short record: one block
             spec = scipy.fft.rfft(v.astype(dtype, copy=False), single)
-            spec *= scipy.fft.rfft(h.astype(dtype), single)
+            spec *= self._h_spectrum(float(fs), m, single, dtype)
             return scipy.fft.irfft(spec, single)[:n].astype(float)
-        hspec = scipy.fft.rfft(h.astype(dtype), nfft)
+        hspec = self._h_spectrum(float(fs), m, nfft, dtype)
         step = nfft - m + 1  # new output samples per block
         out = np.empty(n)
         buf = np.zeros(nfft, dtype=dtype)

@@ -72,11 +72,11 @@ def retest_trials(bases: Sequence[Twin], effects: Sequence[str], est: Record, va
             continue
         best = None
         for b in bases:
-            # a list-valued parameter (a model variant) stays as configured: the re-test sizes the effect, it does
-            # not swap its structure (and enumerating the variants would cost up to 8 fits per round)
-            cats = {c: getattr(b.params, c) for c in choice_fields(b, b.EFFECTS[e].params.values())}
+            # a list-valued parameter (a model variant: Rapp or cubic compression) is part of the effect's family:
+            # each variant is fitted and the best kept (run_trial's variant loop; a variant's fit counts one more
+            # parameter), so a cubic compression is not forced into the configured Rapp curve
             try:
-                t = run_trial(b, e, est, val, core, analysis, opts, refit_core=True, choice=cats or None)
+                t = run_trial(b, e, est, val, core, analysis, opts, refit_core=True)
             except (ConfigError, DataError, ValueError, np.linalg.LinAlgError):
                 continue
             if best is None or t.sse_est < best.sse_est:
@@ -97,7 +97,7 @@ def holds(twin: Twin, effect: str, sse_val: float, n_added: int, est: Record, va
           n_eff: float, level: float, min_rel_gain: float, skip: int) -> bool:
     """``twin`` (validation SSE ``sse_val``) with ``effect``'s parameters back at their configured values is
     significantly worse (F-test below ``level`` and a relative gain of at least ``min_rel_gain``)."""
-    fields = _fields(configured, effect)
+    fields = _fields(configured, effect) + choice_fields(configured, configured.EFFECTS[effect].params.values())
     yv0 = simulate_val(twin.with_params(**{f: getattr(configured.params, f) for f in fields}), est, val)
     sse0 = sse(val.output, yv0, skip)
     if not (math.isfinite(sse0) and sse0 > 0):
@@ -115,6 +115,9 @@ def cause_fields(tr: Trial, nrmse_before: float, configured: Twin) -> dict[str, 
         ratio[f] = float(tr.effect_params.get(f, v0)) / v0 if v0 != 0 else float("inf")
     changed = [f for f in fields if abs(math.log(max(ratio[f], 1e-300))) > math.log(1.05)] or fields
     size = ", ".join(f"{f} {ratio[f]:.3g}× the configured {float(getattr(configured.params, f)):.4g}" for f in changed)
+    for c in choice_fields(configured, configured.EFFECTS[tr.effect].params.values()):
+        if c in tr.effect_params and tr.effect_params[c] != getattr(configured.params, c):
+            size += f", {c} {tr.effect_params[c]} instead of the configured {getattr(configured.params, c)}"
     text = (f"{tr.effect} (on by default) mis-sized: {size}, gain {100 * tr.gain:.0f} % NRMSE (validation NRMSE "
             f"{nrmse_before:.4g} → {tr.nrmse_val:.4g}, F-test p = {tr.p_value:.2g})")
     return {"kind": "mis-sized default", "evidence": text, "ratio_to_configured": ratio, "family": "default",

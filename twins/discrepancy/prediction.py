@@ -79,12 +79,15 @@ def sse(y: np.ndarray, yh: np.ndarray, skip: int) -> float:
     return v if math.isfinite(v) else float("inf")
 
 
-def significance(sse0: float, sse1: float, n_eff: float, p_extra: int) -> float:
-    """p-value of the F-test that the residual variance fell from sse0 to sse1 by adding ``p_extra`` parameters,
-    with ``n_eff`` effective independent samples: ``F = (N_eff − p)/p · (s₀² − s₁²)/s₁²``."""
+def significance(sse0: float, sse1: float, n_eff: float, p_extra: int, p_total: int | None = None) -> float:
+    """p-value of the F-test of nested models that the residual variance fell from sse0 to sse1 by adding
+    ``p_extra`` = k parameters to a model that then fits ``p_total`` = k_total in all (default k), with
+    ``n_eff`` effective independent samples: ``F = (N_eff − k_total)/k · (s₀² − s₁²)/s₁²`` on (k, N_eff − k_total)
+    degrees of freedom. A richer family (larger k) needs a larger fall to be significant: under the null
+    hypothesis (the extra parameters fit noise only) F follows the F distribution and p is uniform."""
     p = max(int(p_extra), 1)
     if not (math.isfinite(sse0) and math.isfinite(sse1)) or sse1 >= sse0 or sse1 <= 0:
         return 1.0 if sse1 > 0 or sse1 >= sse0 else 0.0
-    d2 = max(n_eff - p, 1.0)
+    d2 = max(n_eff - max(int(p_total) if p_total is not None else p, p), 1.0)
     F = d2 / p * (sse0 - sse1) / sse1
     return float(stats.f.sf(F, p, d2))

@@ -1,7 +1,11 @@
 """Ranking the trials of one round: significance, order, what the data cannot tell apart, confidence, cause.
 
-**Significance** of a gain: an F-test on the validation residual variance (:func:`.prediction.significance`)
-with ``p`` the number of added parameters and ``N_eff`` the effective number of independent residual samples
+**Significance** of a gain: an F-test of nested models on the validation residual variance
+(:func:`.prediction.significance`) on (k, N_eff − k) degrees of freedom, ``k`` the parameters the effect adds
+(its fitted parameters, plus one where its variant was chosen by the data: a richer family needs a larger
+gain) and ``N_eff`` the effective number of independent residual samples. The in-sample form (k, N_eff −
+k_total), k_total every parameter the trial fitted, is not used: no parameter was fitted to the validation
+residual, and with a strongly correlated residual it would refuse real gains (``n_params_total`` is reported)
 (:func:`.features.effective_samples`), Bonferroni-corrected over the candidates tried (``p_value < alpha /
 n_candidates``), *and* a relative validation NRMSE reduction of at least ``min_rel_gain`` (a floor against
 gains of no practical size on very long records). A re-tested effect that is on must also owe its gain to its
@@ -72,6 +76,8 @@ def _judge(trials: list[Trial], stage: Stage, est: Record, val: Record, prior: T
     skip = opts.skip
     for tr in trials:
         n_eff = min(n_eff0, ft.effective_samples(val.output[skip:] - tr.yhat_val[skip:]))
+        # the validation residual has no parameter fitted to it: its denominator keeps N_eff − k (k_total, the
+        # in-sample count, would make a 98.6 % gain of a creep re-test insignificant at N_eff = 8: d2 = 1)
         tr.p_value = significance(stage.sse_val, tr.sse_val, n_eff, tr.n_added)
         tr.gain = max(0.0, 1.0 - tr.nrmse_val / stage.nrmse_val) if stage.nrmse_val > 0 else 0.0
     level = opts.alpha / len(trials)
@@ -126,6 +132,7 @@ def _rows(trials: list[Trial], group: list[str], sig_ev: dict[str, dict[str, Any
                      "retest": bool(tr.retest),
                      "confidence": conf, "signature_score": s["score"], "signature": s["text"],
                      "nrmse_val": tr.nrmse_val, "r2_val": tr.r2_val, "gain": tr.gain, "p_value": tr.p_value,
+                     "n_params": tr.n_added, "n_params_total": tr.n_total,
                      "params": tr.effect_params, "stderr": tr.stderr, "seconds": tr.seconds})
     return rows
 

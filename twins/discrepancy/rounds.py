@@ -37,7 +37,7 @@ from . import defaults as dflt
 from . import features as ft
 from . import ranges as rg
 from . import unexplained as unx
-from .fields import core_for, effect_fields
+from .fields import choice_fields, core_for, effect_fields
 from .options import DiagnoseOptions
 from .pairs import joint_step
 from .prediction import NOISE_EFFECTS, significance, sse, unpredictable
@@ -264,7 +264,8 @@ def _taken_out(twin: Twin, effect: str, retest: bool, prior: Twin) -> Twin:
     if it is a re-tested default."""
     if not retest:
         return twin.with_effects(set(twin.effects) - {effect})
-    fields = effect_fields(twin, twin.EFFECTS[effect].params.values())
+    spec_fields = twin.EFFECTS[effect].params.values()
+    fields = effect_fields(twin, spec_fields) + choice_fields(twin, spec_fields)  # its variant back too
     return twin.with_params(**{f: getattr(prior.params, f) for f in fields})
 
 

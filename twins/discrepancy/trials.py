@@ -47,7 +47,8 @@ class Trial:
     gain: float = 0.0
     significant: bool = False
     seconds: float = 0.0
-    n_added: int = 0
+    n_added: int = 0  # k: the effect's parameters the trial chose from the data (a variant choice counts one)
+    n_total: int = 0  # k_total: every parameter the trial fitted (k and the core parameters refitted with them)
     base: Twin | None = None
     retest: bool = False  # an effect that was already on, its own parameters refitted (:mod:`.defaults`)
 
@@ -70,12 +71,16 @@ def run_trial(base: Twin, effect: str, est: Record, val: Record, core: list[str]
     if start is None and choice is None and cat_fields and eff_fields:
         info = param_info(type(tw.params))
         best: Trial | None = None
-        for combo in itertools.islice(itertools.product(*(info[c].choices for c in cat_fields)), 8):
+        combos = list(itertools.islice(itertools.product(*(info[c].choices for c in cat_fields)), 8))
+        for combo in combos:
             tr = run_trial(base, effect, est, val, core, a_val, opts, refit_core, choice=dict(zip(cat_fields, combo)))
             if best is None or tr.sse_est < best.sse_est:
                 best = tr
         assert best is not None
         best.seconds = time.perf_counter() - t0
+        if len(combos) > 1:  # the variant was chosen by the data too: one more degree of freedom
+            best.n_added += 1
+            best.n_total += 1
         return best
     if choice is not None:
         tw = tw.with_params(**choice)
@@ -86,19 +91,26 @@ def run_trial(base: Twin, effect: str, est: Record, val: Record, core: list[str]
               if (eff_fields or cat_fields) else {})
     else:
         x0 = dict(start)
-    return _fit(base, tw, effect, est, val, core, x0, eff_fields, cat_fields, opts, refit_core, t0)
+    return _fit(base, tw, effect, est, val, core, x0, eff_fields, cat_fields, opts, refit_core, t0, choice)
 
 
 def _fit(base: Twin, tw: Twin, effect: str, est: Record, val: Record, core: list[str], x0: dict[str, Any],
-         eff_fields: list[str], cat_fields: list[str], opts: DiagnoseOptions, refit_core: bool, t0: float) -> Trial:
+         eff_fields: list[str], cat_fields: list[str], opts: DiagnoseOptions, refit_core: bool, t0: float,
+         choice: dict[str, Any] | None = None) -> Trial:
     """Least squares from the start ``x0`` (categorical and integer parameters stay at their scanned values)."""
     fixed = {k: v for k, v in x0.items() if k in cat_fields or k in int_fields(tw, eff_fields)}
+    # k: the numeric parameters fitted or scanned, and a list-valued one scanned here (a fluid) — not one fixed by
+    # the caller (a variant the choice loop fits one at a time counts there, a re-test keeps its variant)
+    k = len(eff_fields) + (len(cat_fields) if choice is None else 0)
     if fixed:
         tw = tw.with_params(**{k: (int(round(v)) if k not in cat_fields else v) for k, v in fixed.items()})
     x0 = {k: v for k, v in x0.items() if k not in fixed}
     names = [f for f in eff_fields if f not in fixed]
+    n_core = 0
     if refit_core:
-        names += [c for c in core_for(tw, core) if c not in eff_fields]
+        core_names = [c for c in core_for(tw, core) if c not in eff_fields]
+        names += core_names
+        n_core = len(core_names)
     if names:
         res = ls_calibrate(tw, est, names, x0={**{c: float(getattr(base.params, c)) for c in core}, **x0},
                            simulate=simulate, max_nfev=opts.trial_nfev if refit_core else opts.scan_nfev,
@@ -116,7 +128,7 @@ def _fit(base: Twin, tw: Twin, effect: str, est: Record, val: Record, core: list
                  sse_est=sse(est.output, ye, opts.skip), sse_val=sse(val.output, yv, opts.skip), yhat_val=yv,
                  nrmse_val=nrmse(val.y, yv, opts.skip) if ok else float("inf"),
                  r2_val=r2(val.y, yv, opts.skip) if ok else float("-inf"),
-                 seconds=time.perf_counter() - t0, n_added=max(len(eff_fields), 1), base=base)
+                 seconds=time.perf_counter() - t0, n_added=max(k, 1), n_total=max(k, 1) + n_core, base=base)
 
 
 @dataclasses.dataclass
