@@ -56,9 +56,11 @@ EFFECTS: dict[str, EffectSpec] = {
         signature="residual ∝ τ·dy/dt: phase lag growing linearly with frequency (2π f τ), cross-correlation "
         "r_ue peaks at lag τ·fs; gain unchanged"),
     "thermal_drift": dataclasses.replace(specialise(
-        "offset_drift", _T, {"amplitude": "thermal_drift_um", "tau": "thermal_tau_s"},
-        description="additive thermal drift D·(1 − e^(−t/τ)) of the reading, independent of the input",
-        signature="slow monotone trend in the residual present even at u = 0; no correlation with u"),
+        "offset_drift", _T, {"amplitude": "thermal_drift_um", "tau": "thermal_tau_s", "rate": "drift_rate_um_per_s",
+                             "sine": "drift_sin_um", "cosine": "drift_cos_um", "period": "drift_period_s"},
+        description="additive slow thermal drift of the reading, independent of the input: D·(1 − e^(−t/τ)) + r·t "
+        "+ a·sin(2πt/P) + b·(1 − cos(2πt/P)) (settling, ramp, slow cycle; zero at t = 0)",
+        signature="slow trend in the residual present even at u = 0; no correlation with u"),
         id="thermal_drift"),
     "saturation": dataclasses.replace(specialise(
         "drive_compression", _T, {"knee": "sat_voltage_v", "sharpness": "sat_sharpness"},

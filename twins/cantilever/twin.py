@@ -204,6 +204,8 @@ class CantileverTwin(Twin):
         )
         fcfg[K.F_RATEREF], fcfg[K.F_ASYM] = p.rate_ref_v_per_s, p.asym_factor
         fcfg[K.F_OFFSET], fcfg[K.F_DRIFT], fcfg[K.F_DRIFTTAU] = p.offset_um, p.thermal_drift_um, p.thermal_tau_s
+        fcfg[K.F_DRATE], fcfg[K.F_DSIN], fcfg[K.F_DCOS] = p.drift_rate_um_per_s, p.drift_sin_um, p.drift_cos_um
+        fcfg[K.F_DOMEGA] = 2 * math.pi / p.drift_period_s
         fcfg[K.F_Q] = p.quant_um
         fcfg[K.F_RATEA] = math.exp(-h / p.rate_tau_s)
         cr = np.array([_first_order_foh(tau, T) for tau in taus]).reshape(-1, 3)
