@@ -41,6 +41,9 @@ class DiagnoseOptions:
         Adjust the twin's amplitude limit, time constants and integration step to the records.
     progress
         Callable taking one message per step, or None.
+    hybrid
+        With an ``unexplained`` verdict, fit the hybrid twin (the final configuration plus a black-box remainder,
+        :mod:`.hybrid`) and report its validation gain under ``hybrid``.
     """
 
     candidates: Sequence[str] | None = None
@@ -61,6 +64,7 @@ class DiagnoseOptions:
     retest_defaults: bool = True
     follow_ranges: bool = True
     progress: Callable[[str], Any] | None = None
+    hybrid: bool = True
 
     def __post_init__(self) -> None:
         for name in ("trial_nfev", "scan_nfev", "scan_points", "skip", "max_lag"):
