@@ -31,7 +31,7 @@ def _noisy(rec: Record, y: np.ndarray, sigma: float, seed: int, tag: str) -> Rec
 
 
 def drift_case(seed: int):
-    """(start twin without thermal_drift, est, val, truth, noise NRMSE of val): ramp 0.3–0.6 µm/s plus a sine of
+    """(start = default twin (no drift), est, val, truth, noise NRMSE of val): ramp 0.3–0.6 µm/s plus a sine of
     1.5–3 µm and period 4–12 s at a random phase, on 80 V / 60 V steps."""
     from twins.cantilever import CantileverTwin
 
@@ -50,7 +50,7 @@ def drift_case(seed: int):
     recs = [_noisy(r, r.y + drift(len(r), r.fs), NOISE_SHARE * float(np.std(r.y)), 10 * seed + k, "drift")
             for k, r in enumerate((est, val))]
     noise_nrmse = NOISE_SHARE * float(np.std(val.y)) / float(np.std(recs[1].y))
-    return CantileverTwin.from_options(seed=0, without=["thermal_drift"]), recs[0], recs[1], truth, noise_nrmse
+    return CantileverTwin.from_options(seed=0), recs[0], recs[1], truth, noise_nrmse
 
 
 def lag_sum(u: np.ndarray, fs: float, gains: list[float], taus: list[float]) -> np.ndarray:

@@ -1,8 +1,9 @@
-"""Effect families that stretch to the physics' shapes: the slow drift (settling + ramp + slow cycle) and the creep
-of several time constants, each injected by test code (:mod:`drift_creep_cases`), not by the twin's own law.
+"""Effect families that stretch to the physics' shapes: the drift family (``thermal_drift``, the settling
+exponential, and ``slow_drift``, a ramp and a slow cycle; group "drift") and the creep of several time constants,
+each injected by test code (:mod:`drift_creep_cases`), not by the twin's own law.
 
-Default suite: the drift family's law against its closed form, in the cantilever kernel (at u = 0 the reading is
-offset + drift) and in the generic effect, and the old one-exponential parameters unchanged. ``slow``: the
+Default suite: the drift family's laws against their closed form, in the cantilever kernel (at u = 0 the reading
+is offset + drift) and in the generic effects, and the one-exponential drift unchanged. ``slow``: the
 diagnoses (3 seeds each; the measured figures are in docs/discrepancy-notes.md).
 """
 
@@ -27,7 +28,7 @@ def _closed_form(t, D, tau, r, a, b, P):
 def test_cantilever_drift_family_is_its_closed_form():
     p = dict(thermal_drift_um=1.3, thermal_tau_s=0.4, drift_rate_um_per_s=0.25, drift_sin_um=-0.7,
              drift_cos_um=0.45, drift_period_s=1.7, offset_um=0.2)
-    tw = CantileverTwin.from_options(effects="thermal_drift", seed=0).with_params(**p)
+    tw = CantileverTwin.from_options(effects="thermal_drift,slow_drift", seed=0).with_params(**p)
     fs, n = 200.0, 1000
     y = tw.simulate(np.zeros(n), fs)
     t = np.arange(n) / fs
@@ -36,12 +37,15 @@ def test_cantilever_drift_family_is_its_closed_form():
     # the stepper runs the same kernel: same samples
     st = tw.make_stepper(fs)
     assert np.array_equal([st.step(0.0) for _ in range(n)], y)
+    # each member alone: its own terms only
+    y1 = tw.with_effects({"slow_drift"}).simulate(np.zeros(n), fs)
+    assert np.max(np.abs(y1 - (0.2 + _closed_form(t, 0.0, 0.4, 0.25, -0.7, 0.45, 1.7)))) < 1e-12
 
 
-def test_old_drift_parameters_keep_their_meaning():
-    """The new terms default to zero: a configuration of the one-exponential drift simulates as before."""
-    tw = CantileverTwin.from_options(effects="thermal_drift", seed=0).with_params(thermal_drift_um=2.0,
-                                                                                  thermal_tau_s=0.5)
+def test_thermal_drift_alone_is_the_one_exponential():
+    """slow_drift's parameters act only with slow_drift on: thermal_drift alone simulates as before."""
+    tw = CantileverTwin.from_options(effects="thermal_drift", seed=0).with_params(
+        thermal_drift_um=2.0, thermal_tau_s=0.5, drift_rate_um_per_s=1.0, drift_sin_um=3.0)
     y = tw.simulate(np.zeros(300), 100.0)
     t = np.arange(300) / 100.0
     assert np.max(np.abs(y - (float(tw.params.offset_um) + 2.0 * (1 - np.exp(-t / 0.5))))) < 1e-12
@@ -53,20 +57,25 @@ def test_generic_drift_family_is_its_closed_form():
     got = ge.drift(n, fs, 1.0, 2.0, 0.1, 0.3, -0.2, 4.0)
     assert np.allclose(got, _closed_form(t, 1.0, 2.0, 0.1, 0.3, -0.2, 4.0), rtol=0, atol=1e-13)
     assert np.array_equal(ge.drift(n, fs, 1.0, 2.0), 1.0 * -np.expm1(-t / 2.0))
-    spec = ge.GENERIC_EFFECTS["offset_drift"]
-    assert set(spec.params.values()) >= {"drift_offset", "drift_tau_s", "drift_rate", "drift_sin", "drift_cos",
-                                         "drift_period_s"}
+    P = ge.generic_params_class()
+    p = P(drift_offset=1.0, drift_tau_s=2.0, drift_rate=0.1, drift_sin=0.3, drift_cos=-0.2, drift_period_s=4.0)
+    y0 = np.zeros(n)
+    assert np.allclose(ge.apply_output(y0, y0, fs, {"slow_drift"}, p), _closed_form(t, 0.0, 2.0, 0.1, 0.3, -0.2, 4.0),
+                       rtol=0, atol=1e-13)
+    assert np.allclose(ge.apply_output(y0, y0, fs, {"offset_drift", "slow_drift"}, p), got, rtol=0, atol=1e-13)
+    assert ge.GENERIC_EFFECTS["offset_drift"].group == ge.GENERIC_EFFECTS["slow_drift"].group == "drift"
 
 
 @pytest.mark.slow  # ≈ 15 s CPU per diagnosis (10 000 + 10 000 samples at 1 kHz)
 def test_ramp_plus_slow_sine_drift_is_named_and_explained_to_the_noise():
-    """A ramp plus a slow sine added by test code: ``thermal_drift`` named, validation NRMSE ≤ 1.5× the noise
-    level after extension (the one-exponential family named nothing on these seeds: NRMSE 8–21× the noise)."""
+    """A ramp plus a slow sine added by test code: a drift named (``slow_drift``, of the drift family), validation
+    NRMSE ≤ 1.5× the noise level after extension (the one exponential alone named nothing on these seeds: NRMSE
+    8–21× the noise)."""
     for seed in range(3):
         start, est, val, truth, noise_nrmse = C.drift_case(seed)
         out = diagnose(start, est, val, max_rounds=1)
         top = out["causes"][0] if out["causes"] else {}
-        assert top.get("effect") == "thermal_drift", (seed, out["causes"])
+        assert top.get("effect") == "slow_drift", (seed, out["causes"])
         assert out["extended"]["nrmse_val"] <= 1.5 * noise_nrmse, (seed, out["extended"]["nrmse_val"], noise_nrmse)
 
 

@@ -9,12 +9,12 @@ and :func:`apply_output` the sample-level implementations that :class:`twins.ext
 around a user's Python model or FMU.
 
 The shipped twins build on the same catalog entries: the cantilever's ``input_delay``, ``sensor_lowpass``,
-``thermal_drift`` and ``saturation`` are :func:`specialise`-d from ``input_delay``, ``sensor_lowpass``,
-``offset_drift`` and ``drive_compression`` (same law, the twin's own field names and signature wording; its
-compiled kernel applies them inside its sub-steps). The sample-level laws are those of the cantilever kernel:
-delay by linear interpolation between samples (zero before the start), the soft limiter
-v = u/(1 + |u/V_s|^p)^(1/p), the drift D·(1 − e^(−t/τ)) + r·t + a·sin(2πt/P) + b·(1 − cos(2πt/P)) with
-t = k/fs; the sensor is the 2nd-order
+``thermal_drift``, ``slow_drift`` and ``saturation`` are :func:`specialise`-d from ``input_delay``,
+``sensor_lowpass``, ``offset_drift``, ``slow_drift`` and ``drive_compression`` (same law, the twin's own field
+names and signature wording; its compiled kernel applies them inside its sub-steps). The sample-level laws are
+those of the cantilever kernel: delay by linear interpolation between samples (zero before the start), the soft
+limiter v = u/(1 + |u/V_s|^p)^(1/p), the drift D·(1 − e^(−t/τ)) (settling) and r·t + a·sin(2πt/P) + b·(1 − cos(2πt/P))
+(the slow drift: a ramp and a slow cycle) with t = k/fs; the sensor is the 2nd-order
 Butterworth low-pass ω_c²/(s² + √2·ω_c·s + ω_c²) discretised with a first-order hold of the sampled output
 (Franklin & Powell §6.3) and started in steady state at the first output sample.
 """
@@ -207,11 +207,19 @@ GENERIC_EFFECTS: dict[str, EffectSpec] = {
     "offset_drift": EffectSpec(
         "offset_drift",
         _T,
-        "additive slow drift of the reading, independent of the input: D·(1 − e^(−t/τ)) + r·t + a·sin(2πt/P) "
-        "+ b·(1 − cos(2πt/P)) (settling, a ramp, a slow cycle, zero at t = 0)",
-        "slow trend in the residual, present even at u = 0; no correlation with u",
-        {"amplitude": "drift_offset", "tau": "drift_tau_s", "rate": "drift_rate", "sine": "drift_sin",
-         "cosine": "drift_cos", "period": "drift_period_s"},
+        "additive drift D·(1 − e^(−t/τ)) of the reading, independent of the input",
+        "slow monotone trend in the residual, present even at u = 0; no correlation with u",
+        {"amplitude": "drift_offset", "tau": "drift_tau_s"},
+        group="drift",
+    ),
+    "slow_drift": EffectSpec(
+        "slow_drift",
+        _T,
+        "additive slow drift of the reading that has not settled: a ramp and a slow cycle of any phase, "
+        "r·t + a·sin(2πt/P) + b·(1 − cos(2πt/P)) (zero at t = 0), independent of the input",
+        "slow trend in the residual (a ramp, a slow swing or turn), present even at u = 0; no correlation with u",
+        {"rate": "drift_rate", "sine": "drift_sin", "cosine": "drift_cos", "period": "drift_period_s"},
+        group="drift",
     ),
     "gain_drift": EffectSpec(
         "gain_drift",
@@ -238,6 +246,7 @@ OUTPUT_ORDER: tuple[str, ...] = (
     "input_crosstalk",
     "gain_drift",
     "offset_drift",
+    "slow_drift",
     "output_quantization",
 )
 
@@ -328,8 +337,9 @@ def apply_output(y: np.ndarray, u: np.ndarray, fs: float, effects: frozenset[str
     if "gain_drift" in effects:
         y = y * (1.0 + drift(len(y), fs, p.gain_drift, p.gain_drift_tau_s))
     if "offset_drift" in effects:
-        y = y + drift(len(y), fs, p.drift_offset, p.drift_tau_s, p.drift_rate, p.drift_sin, p.drift_cos,
-                      p.drift_period_s)
+        y = y + drift(len(y), fs, p.drift_offset, p.drift_tau_s)
+    if "slow_drift" in effects:
+        y = y + drift(len(y), fs, 0.0, 1.0, p.drift_rate, p.drift_sin, p.drift_cos, p.drift_period_s)
     if "output_quantization" in effects:
         q = float(p.quant_step)
         y = q * np.floor(y / q + 0.5)

@@ -17,8 +17,8 @@ Per sample interval [t_{k−1}, t_k] (T = 1/fs), split into M sub-steps of h = T
    interpolated at the sub-step nodes;
 5. force f = Γ + creep into the 6-state linear system (two modes of D(s) and the 2nd-order sensor low-pass),
    discretised exactly with a FOH on f per sub-step (matrix exponential, :func:`foh_discretise`);
-6. output y_k = C z + offset + thermal drift + σ·n_k, quantised to q; the drift is the slow family
-   D·(1 − e^(−t/τ)) + r·t + a·sin(ωt) + b·(1 − cos ωt) at t = k·T (zero at t = 0: no offset of its own).
+6. output y_k = C z + offset + drift + σ·n_k, quantised to q; the drift is D·(1 − e^(−t/τ)) (thermal_drift)
+   + r·t + a·sin(ωt) + b·(1 − cos ωt) (slow_drift) at t = k·T (zero at t = 0: no offset of its own).
 """
 
 from __future__ import annotations
