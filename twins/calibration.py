@@ -187,7 +187,7 @@ def _calibrate_projected(twin: Twin, data: Record, names: list[str], lin: list[s
         count[0] += 1
         base = tw.with_params(**zero)
         yh0 = np.asarray(sim(base, data), dtype=float).reshape(-1)[skip:]
-        B = np.column_stack([np.asarray(base.output_basis(n, len(data), data.fs), float)[skip:] for n in lin])
+        B = _basis(base, lin, data, skip)
         r0 = y - yh0
         if not (np.all(np.isfinite(r0)) and np.all(np.isfinite(B))):
             return base, np.full(y.shape, 1e3), B
@@ -230,6 +230,12 @@ def _calibrate_projected(twin: Twin, data: Record, names: list[str], lin: list[s
                              seconds=time.perf_counter() - t0, message=message)
 
 
+def _basis(twin: Twin, lin: list[str], data: Record, skip: int) -> np.ndarray:
+    """Columns d ŷ/d p for the linear parameters ``lin`` after ``skip`` samples (the twin's ``output_basis``)."""
+    basis: Callable[[str, int, float], Any] = getattr(twin, "output_basis", None) or (lambda n, k, fs: np.zeros(k))
+    return np.column_stack([np.asarray(basis(n, len(data), data.fs), dtype=np.float64)[skip:] for n in lin])
+
+
 def _shape_grid_start(twin: Twin, data: Record, nl: list[str], lin: list[str], zero: dict[str, float],
                       x0: dict[str, float] | None, sim: Callable, y: np.ndarray, skip: int,
                       points: int = 60) -> dict[str, float] | None:
@@ -250,7 +256,7 @@ def _shape_grid_start(twin: Twin, data: Record, nl: list[str], lin: list[str], z
         best, best_cost = start[name], np.inf
         for v in [start[name], *grid]:
             tw = base.with_params(**{name: float(v)})
-            B = np.column_stack([np.asarray(tw.output_basis(n, len(data), data.fs), float)[skip:] for n in lin])
+            B = _basis(tw, lin, data, skip)
             c = np.linalg.lstsq(B, r0, rcond=None)[0]
             cost = float(np.sum((r0 - B @ c) ** 2))
             if cost < best_cost:
