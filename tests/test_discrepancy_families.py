@@ -89,3 +89,18 @@ def test_two_time_constant_creep_is_named_and_explained_to_the_noise():
         top = out["causes"][0] if out["causes"] else {}
         assert top.get("effect") == "creep", (seed, out["causes"])
         assert out["extended"]["nrmse_val"] <= 1.5 * noise_nrmse, (seed, out["extended"]["nrmse_val"], noise_nrmse)
+
+
+def test_calibration_solves_the_linear_drift_terms_and_finds_the_period():
+    """The slow drift's coefficients are solved by least squares inside the fit and its period starts from a grid:
+    from a start far off (coefficients 0, period 100 s) the noise-free truth is recovered."""
+    from sysid.record import Record
+    from twins.calibration import calibrate
+
+    truth = {"drift_rate_um_per_s": 0.4, "drift_sin_um": -1.5, "drift_cos_um": 0.8, "drift_period_s": 3.3}
+    tw = CantileverTwin.from_options(effects="slow_drift", seed=0)
+    u = np.repeat(np.random.default_rng(0).uniform(-50, 50, 40), 100)
+    rec = Record(u=u, y=tw.with_params(**truth).simulate(u, 1000.0), fs=1000.0)
+    res = calibrate(tw, rec, list(truth))
+    for k, v in truth.items():
+        assert res.fitted[k] == pytest.approx(v, rel=1e-4), (k, res.fitted)

@@ -251,7 +251,8 @@ def _shape_grid_start(twin: Twin, data: Record, nl: list[str], lin: list[str], z
         return x0
     out = dict(x0 or {})
     for name in shape:
-        a, b = (float(v) for v in _bounds(twin, [name]))
+        lo_s, hi_s = _bounds(twin, [name])
+        a, b = float(lo_s[0]), float(hi_s[0])
         grid = np.geomspace(a, b, points) if a > 0 and np.isfinite(b) else np.linspace(a, b, points)
         best, best_cost = start[name], np.inf
         for v in [start[name], *grid]:
