@@ -49,7 +49,7 @@ def discretise(A: np.ndarray, B: np.ndarray, h: float) -> tuple[np.ndarray, np.n
 
 def input_key(u: np.ndarray) -> bytes:
     """A digest of the input samples (BLAKE2b, 16 bytes): two records with the same digest are the same input."""
-    return hashlib.blake2b(np.ascontiguousarray(u).view(np.uint8), digest_size=16).digest() + str(u.shape).encode()
+    return hashlib.blake2b(np.ascontiguousarray(u).tobytes(), digest_size=16).digest() + str(u.shape).encode()
 
 
 class BaseOutputs:
