@@ -147,3 +147,22 @@ def test_outside_catalog_sweep_reports_the_hybrid(kind):
         assert not got["named"], (seed, got)
         rows.append(got["share"])
     print(f"{kind}: hybrid share of the discrepancy taken, seeds 0-9: {np.round(rows, 3).tolist()}")
+
+
+@pytest.mark.slow  # 50–130 s wall (load 3–7): three rounds on the measured record
+def test_real_piezo_record_names_creep_and_reports_the_hybrid_beside_it(tmp_path):
+    """The measured TU/e actuator (lab configuration, as benchmarks.real_discrepancy runs it): creep named, verdict
+    ``unexplained``, and the hybrid twin's validation R² beside the twin's in the JSON and the report."""
+    from benchmarks.datasets import files
+    from twins.cantilever.lab import lab_split, lab_twin
+    from twins.discrepancy import run_diagnosis
+    from twins.discrepancy.report import write_report
+
+    est, val = lab_split(files.piezo_tue_record())
+    diagnosis = run_diagnosis(lab_twin(), est, val, max_rounds=3)
+    out = diagnosis.to_dict()
+    assert "creep" in {c["effect"] for c in out["causes"]} and out["verdict"] == "unexplained"
+    h = out["hybrid"]
+    assert h["fitted"] and h["before"]["r2_val"] == out["extended"]["r2_val"] and np.isfinite(h["after"]["r2_val"])
+    index = write_report(diagnosis.to_dict(keep_stages=True), tmp_path / "rep")
+    assert "Hybrid twin" in index.read_text()
