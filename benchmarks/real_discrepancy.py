@@ -188,6 +188,10 @@ def main(argv: list[str] | None = None) -> int:
                 print("  cause", c["effect"], round(c["confidence"], 3), c["params"])
                 print("   ", c["evidence"])
             print("  unexplained:", res["unexplained"])
+        if res.get("hybrid"):
+            from twins.discrepancy.hybrid import hybrid_text
+
+            print(" ", hybrid_text(res["hybrid"]))
     return 0
 
 

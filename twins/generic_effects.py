@@ -9,11 +9,12 @@ each with a documented default range and a rule for its range from the records (
 :class:`twins.external.ExternalTwin` wraps around a user's Python model or FMU.
 
 The shipped twins build on the same catalog entries: the cantilever's ``input_delay``, ``sensor_lowpass``,
-``thermal_drift`` and ``saturation`` are :func:`specialise`-d from ``input_delay``, ``sensor_lowpass``,
-``offset_drift`` and ``drive_compression`` (same law, the twin's own field names and signature wording; its
-compiled kernel applies them inside its sub-steps). The sample-level laws are those of the cantilever kernel:
-delay by linear interpolation between samples (zero before the start), the soft limiter
-v = u/(1 + |u/V_s|^p)^(1/p), the drift D·(1 − e^(−t/τ)) with t = k/fs; the sensor is the 2nd-order
+``thermal_drift``, ``slow_drift`` and ``saturation`` are :func:`specialise`-d from ``input_delay``,
+``sensor_lowpass``, ``offset_drift``, ``slow_drift`` and ``drive_compression`` (same law, the twin's own field
+names and signature wording; its compiled kernel applies them inside its sub-steps). The sample-level laws are
+those of the cantilever kernel: delay by linear interpolation between samples (zero before the start), the soft
+limiter v = u/(1 + |u/V_s|^p)^(1/p), the drift D·(1 − e^(−t/τ)) (settling) and r·t + a·sin(2πt/P) + b·(1 − cos(2πt/P))
+(the slow drift: a ramp and a slow cycle) with t = k/fs; the sensor is the 2nd-order
 Butterworth low-pass ω_c²/(s² + √2·ω_c·s + ω_c²) discretised with a first-order hold of the sampled output
 (Franklin & Powell §6.3) and started in steady state at the first output sample.
 """
@@ -123,6 +124,33 @@ GENERIC_FIELDS: dict[str, GenericField] = {
         "constant offset c of the reading y + c (the sensor's zero is not the model's zero)",
         lambda um, ys, fs, T: (-_span(ys), _span(ys)),
     ),
+    "drift_rate": GenericField(
+        0.0,
+        "{y}/s",
+        -1e12,
+        1e12,
+        "ramp r of the offset drift (r·t)",
+        lambda um, ys, fs, T: (-2.0 * _span(ys) / T, 2.0 * _span(ys) / T),
+    ),
+    "drift_sin": GenericField(
+        0.0,
+        "{y}",
+        -1e12,
+        1e12,
+        "amplitude a of the drift's slow sine a·sin(2πt/P)",
+        lambda um, ys, fs, T: (-2.0 * _span(ys), 2.0 * _span(ys)),
+    ),
+    "drift_cos": GenericField(
+        0.0,
+        "{y}",
+        -1e12,
+        1e12,
+        "amplitude b of the drift's slow b·(1 − cos(2πt/P))",
+        lambda um, ys, fs, T: (-2.0 * _span(ys), 2.0 * _span(ys)),
+    ),
+    "drift_period_s": GenericField(
+        100.0, "s", 1e-12, 1e12, "period P of the drift's slow oscillation", lambda um, ys, fs, T: (0.5 * T, 20.0 * T)
+    ),
     "gain_drift": GenericField(
         0.0,
         "1",
@@ -190,6 +218,16 @@ GENERIC_EFFECTS: dict[str, EffectSpec] = {
         "additive drift D·(1 − e^(−t/τ)) of the reading, independent of the input",
         "slow monotone trend in the residual, present even at u = 0; no correlation with u",
         {"amplitude": "drift_offset", "tau": "drift_tau_s"},
+        group="drift",
+    ),
+    "slow_drift": EffectSpec(
+        "slow_drift",
+        _T,
+        "additive slow drift of the reading that has not settled: a ramp and a slow cycle of any phase, "
+        "r·t + a·sin(2πt/P) + b·(1 − cos(2πt/P)) (zero at t = 0), independent of the input",
+        "slow trend in the residual (a ramp, a slow swing or turn), present even at u = 0; no correlation with u",
+        {"rate": "drift_rate", "sine": "drift_sin", "cosine": "drift_cos", "period": "drift_period_s"},
+        group="drift",
     ),
     "sensor_offset": EffectSpec(
         "sensor_offset",
@@ -225,6 +263,7 @@ OUTPUT_ORDER: tuple[str, ...] = (
     "input_crosstalk",
     "gain_drift",
     "offset_drift",
+    "slow_drift",
     "sensor_offset",
     "output_quantization",
 )
@@ -281,10 +320,16 @@ def sensor_lowpass(y: np.ndarray, bandwidth_hz: float, fs: float) -> np.ndarray:
     return signal.lfilter(b, a, y, zi=zi)[0]
 
 
-def drift(n: int, fs: float, amplitude: float, tau_s: float) -> np.ndarray:
-    """D·(1 − e^(−t/τ)) at t = k/fs, k = 0 … n−1."""
+def drift(n: int, fs: float, amplitude: float, tau_s: float, rate: float = 0.0, sine: float = 0.0,
+          cosine: float = 0.0, period_s: float = 1.0) -> np.ndarray:
+    """The slow drift D·(1 − e^(−t/τ)) + r·t + a·sin(2πt/P) + b·(1 − cos(2πt/P)) at t = k/fs, k = 0 … n−1:
+    a settling exponential, a ramp that has not settled and a slow cycle (any phase), all zero at t = 0."""
     t = np.arange(n) / fs
-    return float(amplitude) * -np.expm1(-t / float(tau_s))
+    out = float(amplitude) * -np.expm1(-t / float(tau_s))
+    if rate or sine or cosine:
+        w = 2.0 * math.pi / float(period_s)
+        out = out + float(rate) * t + float(sine) * np.sin(w * t) + float(cosine) * (1.0 - np.cos(w * t))
+    return out
 
 
 def apply_input(u: np.ndarray, fs: float, effects: frozenset[str] | set[str], p: Any) -> np.ndarray:
@@ -311,6 +356,8 @@ def apply_output(y: np.ndarray, u: np.ndarray, fs: float, effects: frozenset[str
         y = y * (1.0 + drift(len(y), fs, p.gain_drift, p.gain_drift_tau_s))
     if "offset_drift" in effects:
         y = y + drift(len(y), fs, p.drift_offset, p.drift_tau_s)
+    if "slow_drift" in effects:
+        y = y + drift(len(y), fs, 0.0, 1.0, p.drift_rate, p.drift_sin, p.drift_cos, p.drift_period_s)
     if "sensor_offset" in effects:
         y = y + float(p.sensor_offset)
     if "output_quantization" in effects:

@@ -23,6 +23,7 @@ from benchmarks.cli.common import (
     twin_from_args,
 )
 from sysid.errors import ConfigError
+from sysid.safeio import check_output_path
 
 
 def register(sub) -> None:
@@ -95,15 +96,27 @@ def register(sub) -> None:
     )
     p.add_argument("--json", action="store_true")
     p.add_argument("--report", metavar="DIR", help="write figures and index.html here")
+    p.add_argument(
+        "--save-hybrid",
+        metavar="FILE.json",
+        help="with an 'unexplained' verdict, save the hybrid twin (the extended twin plus its black-box remainder "
+        "model) here; a shipped twin only",
+    )
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
     from twins.discrepancy import DiagnoseOptions, run_diagnosis
+    from twins.discrepancy.hybrid import hybrid_text
 
     if args.max_rounds < 0:
         raise ConfigError(f"--max-rounds must be >= 0, got {args.max_rounds}")
     twin, label = _twin(args)
+    save_hybrid = getattr(args, "save_hybrid", None)
+    if save_hybrid:
+        if not args.twin:
+            raise ConfigError("--save-hybrid: only the hybrid of a shipped twin can be saved (not of --fmu/--model)")
+        check_output_path(save_hybrid, [args.data] + ([args.val] if args.val else []))
     data = read_data(args, args.data)
     val = read_data(args, args.val) if args.val else None
     same_fs([data] + ([val] if val is not None else []))
@@ -122,6 +135,11 @@ def run(args: argparse.Namespace) -> int:
     )
     diagnosis = run_diagnosis(twin, data, val, max_rounds=args.max_rounds, options=opts)
     result = diagnosis.to_dict()
+    if save_hybrid:
+        if diagnosis.hybrid_twin is not None:
+            result["hybrid"]["saved"] = str(diagnosis.hybrid_twin.save(save_hybrid))
+        else:
+            result.setdefault("hybrid", {})["saved"] = None
     if args.report:
         from twins.discrepancy.report import write_report
 
@@ -151,6 +169,12 @@ def run(args: argparse.Namespace) -> int:
         print(f"    {c['evidence']}")
     if result["verdict"] == "unexplained":
         print(f"  {result['residual_vs_noise']['text']}")
+    if result.get("hybrid", {}).get("fitted") is not None:
+        print(f"  {hybrid_text(result['hybrid'])}")
+    if save_hybrid:
+        saved = result["hybrid"].get("saved")
+        print(f"  hybrid twin -> {saved}" if saved else f"  no hybrid twin saved: the verdict is {result['verdict']} "
+              "(the hybrid is fitted when the residual stays far above the noise)")
     elif not result["causes"]:
         print(f"  residual: {result['unexplained']['description']}")
     for row in result.get("at_bound", []):

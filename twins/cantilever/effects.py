@@ -60,6 +60,13 @@ EFFECTS: dict[str, EffectSpec] = {
         description="additive thermal drift D·(1 − e^(−t/τ)) of the reading, independent of the input",
         signature="slow monotone trend in the residual present even at u = 0; no correlation with u"),
         id="thermal_drift"),
+    "slow_drift": specialise(
+        "slow_drift", _T, {"rate": "drift_rate_um_per_s", "sine": "drift_sin_um", "cosine": "drift_cos_um",
+                           "period": "drift_period_s"},
+        description="additive thermal drift that has not settled: a ramp and a slow cycle of any phase, "
+        "r·t + a·sin(2πt/P) + b·(1 − cos(2πt/P)) (zero at t = 0), independent of the input",
+        signature="slow trend in the residual (ramp, slow swing or turn) present even at u = 0; no correlation "
+        "with u"),
     "saturation": dataclasses.replace(specialise(
         "drive_compression", _T, {"knee": "sat_voltage_v", "sharpness": "sat_sharpness"},
         description="soft amplifier/actuator limit v = u/(1 + |u/V_s|^p)^(1/p) before the hard clip",
@@ -88,5 +95,8 @@ EFFECTS: dict[str, EffectSpec] = {
 }
 # input_delay and amplifier_bandwidth share the ambiguity group "lag": both are a phase lag ∝ f well below
 # f_amp; a sweep to frequencies near f_amp (gain roll-off only for the low-pass) separates them.
+# thermal_drift and slow_drift are the drift family (group "drift"): the settling exponential alone (2 parameters,
+# precise when the drift settles) and the ramp + slow cycle (4 parameters, a drift that has not settled); both
+# can be on at once (their sum).
 
 DEFAULT_ON = tuple(k for k, e in EFFECTS.items() if e.default_on)

@@ -17,7 +17,8 @@ Per sample interval [t_{k−1}, t_k] (T = 1/fs), split into M sub-steps of h = T
    interpolated at the sub-step nodes;
 5. force f = Γ + creep into the 6-state linear system (two modes of D(s) and the 2nd-order sensor low-pass),
    discretised exactly with a FOH on f per sub-step (matrix exponential, :func:`foh_discretise`);
-6. output y_k = C z + offset + thermal drift + σ·n_k, quantised to q.
+6. output y_k = C z + offset + drift + σ·n_k, quantised to q; the drift is D·(1 − e^(−t/τ)) (thermal_drift)
+   + r·t + a·sin(ωt) + b·(1 − cos ωt) (slow_drift) at t = k·T (zero at t = 0: no offset of its own).
 """
 
 from __future__ import annotations
@@ -31,7 +32,8 @@ __all__ = ["expm_small", "foh_discretise", "run_block", "pi_play", "pi_inverse_w
            "I_M", "I_DELAY", "I_HYST", "I_NPI", "I_NCR", "I_SAT", "I_AMPLP", "I_RATE", "I_ASYM", "I_DRIFT",
            "I_QUANT", "N_ICFG",
            "F_T", "F_H", "F_MU", "F_VS", "F_SATP", "F_LIM", "F_LPA", "F_LPB0", "F_LPB1", "F_D", "F_ALPHA",
-           "F_BETA", "F_GAMMA", "F_RATEREF", "F_ASYM", "F_OFFSET", "F_DRIFT", "F_DRIFTTAU", "F_Q", "F_RATEA", "N_FCFG",
+           "F_BETA", "F_GAMMA", "F_RATEREF", "F_ASYM", "F_OFFSET", "F_DRIFT", "F_DRIFTTAU", "F_Q", "F_RATEA",
+           "F_DRATE", "F_DSIN", "F_DCOS", "F_DOMEGA", "N_FCFG",
            "S_CPREV", "S_VPREV", "S_H", "S_FPREV", "S_K", "S_BUFI", "S_CRPREV", "S_RHO", "N_SCAL", "NZ"]
 
 # integer configuration indices
@@ -39,8 +41,8 @@ I_M, I_DELAY, I_HYST, I_NPI, I_NCR, I_SAT, I_AMPLP, I_RATE, I_ASYM, I_DRIFT, I_Q
 N_ICFG = 11
 # float configuration indices
 (F_T, F_H, F_MU, F_VS, F_SATP, F_LIM, F_LPA, F_LPB0, F_LPB1, F_D, F_ALPHA, F_BETA, F_GAMMA, F_RATEREF, F_ASYM,
- F_OFFSET, F_DRIFT, F_DRIFTTAU, F_Q, F_RATEA) = range(20)
-N_FCFG = 20
+ F_OFFSET, F_DRIFT, F_DRIFTTAU, F_Q, F_RATEA, F_DRATE, F_DSIN, F_DCOS, F_DOMEGA) = range(24)
+N_FCFG = 24
 # scalar state indices
 S_CPREV, S_VPREV, S_H, S_FPREV, S_K, S_BUFI, S_CRPREV, S_RHO = range(8)
 N_SCAL = 8
@@ -182,6 +184,10 @@ def run_block(u, noise, out, icfg, fcfg, sc, z, xc, play, buf, vsub, Phi, G0, G1
     offset = fcfg[F_OFFSET]
     drift = fcfg[F_DRIFT]
     drift_tau = fcfg[F_DRIFTTAU]
+    d_rate = fcfg[F_DRATE]
+    d_sin = fcfg[F_DSIN]
+    d_cos = fcfg[F_DCOS]
+    d_omega = fcfg[F_DOMEGA]
     q = fcfg[F_Q]
     rate_a = fcfg[F_RATEA]
     pi_psum = 0.0
@@ -295,7 +301,8 @@ def run_block(u, noise, out, icfg, fcfg, sc, z, xc, play, buf, vsub, Phi, G0, G1
             y += Cout[i] * z[i]
         if drift_on:
             tk = sc[S_K] * T
-            y += drift * (-math.expm1(-tk / drift_tau))
+            y += (drift * (-math.expm1(-tk / drift_tau)) + d_rate * tk + d_sin * math.sin(d_omega * tk)
+                  + d_cos * (1.0 - math.cos(d_omega * tk)))
         if quant_on:
             y = q * math.floor(y / q + 0.5)
         out[k] = y

@@ -108,6 +108,18 @@ class CantileverParams:
                                      source="thermal expansion of the clamp/sensor mount (assumed order µm)")
     thermal_tau_s: float = pfield(20.0, "s", 0.01, 1e5, "time constant of the thermal drift D·(1 − e^(−t/τ))",
                                   source="assumed")
+    drift_rate_um_per_s: float = pfield(0.0, "um/s", -10.0, 10.0, "ramp r·t of the thermal drift (slow family)",
+                                        source="a drift that has not settled within the record (assumed order "
+                                        "0.01 µm/s, the TU/e record's 0.015 µm/s)")
+    drift_sin_um: float = pfield(0.0, "um", -50.0, 50.0, "amplitude a of the drift's slow sine a·sin(2πt/P)",
+                                 source="room-temperature cycles of the mount (assumed)")
+    drift_cos_um: float = pfield(0.0, "um", -50.0, 50.0, "amplitude b of the drift's slow b·(1 − cos(2πt/P))",
+                                 source="with the sine: any phase of the slow oscillation, zero at t = 0")
+    drift_period_s: float = pfield(100.0, "s", 20.0, 1e5, "period P of the drift's slow oscillation",
+                                   source="assumed (air-conditioning cycles 5–30 min); at least 20 s, slower than "
+                                   "the drives and the creep of seconds: with 0.1 s the TU/e record's 1 Hz loop-shape "
+                                   "error was taken for a 0.34 s 'drift', with 2–10 s creep + thermal drift on 5 s "
+                                   "steps for a 4.3 s one")
     rate_ref_v_per_s: float = pfield(
         2.0e5,
         "V/s",

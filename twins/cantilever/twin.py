@@ -12,12 +12,18 @@ import numpy as np
 from sysid.errors import ConfigError, DataError
 from sysid.record import Record, check_array
 from twins.base import Twin
+from twins.cantilever import cache
 from twins.cantilever import kernels as K
 from twins.cantilever.effects import EFFECTS
 from twins.cantilever.params import CantileverParams
 from twins.cantilever.protocols import BUILDERS, PROTOCOLS
 
 __all__ = ["CantileverTwin", "CantileverStepper"]
+
+#: the additive drift after the sensor: its effects and parameters (the cached base output excludes them)
+_DRIFT_EFFECTS = frozenset({"thermal_drift", "slow_drift"})
+_DRIFT_FIELDS = frozenset({"thermal_drift_um", "thermal_tau_s", "drift_rate_um_per_s", "drift_sin_um", "drift_cos_um",
+                           "drift_period_s"})
 
 
 class CantileverTwin(Twin):
@@ -32,7 +38,7 @@ class CantileverTwin(Twin):
 
     Default configuration (effects on): creep, second_mode, sensor_lowpass, sensor_quantization,
     measurement_noise — the dissertation's bench as described in §3.1. Off by default (for the discrepancy
-    analysis to find): input_delay, thermal_drift, saturation, rate_dependent_hysteresis,
+    analysis to find): input_delay, thermal_drift, slow_drift, saturation, rate_dependent_hysteresis,
     asymmetric_hysteresis, amplifier_bandwidth. ``--effects none`` is the noise-free core: hysteresis,
     single-mode D(s), clip, offset.
 
@@ -60,9 +66,26 @@ class CantileverTwin(Twin):
                            if f.type in ("float", float)
                            and f.name not in ("input_delay_s", "max_substep_s", "initial_state_um"))
 
+    #: parameters that enter the output additively and linearly (the slow drift's coefficients): a calibration
+    #: solves them by linear least squares for each value of the others (:mod:`twins.calibration`)
+    OUTPUT_LINEAR_PARAMS = ("drift_rate_um_per_s", "drift_sin_um", "drift_cos_um")
+    #: the parameter that shapes only their basis (scanned on a grid before the search, :mod:`twins.calibration`)
+    OUTPUT_BASIS_SHAPE_PARAMS = ("drift_period_s",)
+
     def __init__(self, params: Any = None, effects: Iterable[str] | None = None, seed: int | None = 0):
         super().__init__(params, effects, seed)
         self._cache: dict[float, dict[str, Any]] = {}
+
+    def output_basis(self, name: str, n: int, fs: float) -> np.ndarray | None:
+        """d y[k]/d ``name`` at the samples k = 0 … n−1 (rate ``fs``) for a parameter of
+        :data:`OUTPUT_LINEAR_PARAMS`, or None when its effect is off (then it does not act)."""
+        if name not in self.OUTPUT_LINEAR_PARAMS or not self.has("slow_drift"):
+            return None
+        t = np.arange(n) * (1.0 / float(fs))
+        w = 2 * math.pi / self.params.drift_period_s
+        if name == "drift_rate_um_per_s":
+            return t
+        return np.sin(w * t) if name == "drift_sin_um" else 1.0 - np.cos(w * t)
 
     # ------------------------------------------------------------------ derived quantities
     def pi_weights(self) -> tuple[np.ndarray, float, np.ndarray]:
@@ -170,7 +193,7 @@ class CantileverTwin(Twin):
         M = self.substeps(fs)
         h = T / M
         A, B, C = self.linear_system()
-        Phi, G0, G1 = K.foh_discretise(A, B, h)
+        Phi, G0, G1 = cache.discretise(A, B, h)
         icfg = np.zeros(K.N_ICFG, dtype=np.int64)
         fcfg = np.zeros(K.N_FCFG)
         icfg[K.I_M] = M
@@ -190,7 +213,7 @@ class CantileverTwin(Twin):
         icfg[K.I_AMPLP] = self.has("amplifier_bandwidth")
         icfg[K.I_RATE] = self.has("rate_dependent_hysteresis")
         icfg[K.I_ASYM] = self.has("asymmetric_hysteresis")
-        icfg[K.I_DRIFT] = self.has("thermal_drift")
+        icfg[K.I_DRIFT] = self.has("thermal_drift") or self.has("slow_drift")
         icfg[K.I_QUANT] = self.has("sensor_quantization")
         fcfg[K.F_T], fcfg[K.F_H] = T, h
         fcfg[K.F_VS], fcfg[K.F_SATP], fcfg[K.F_LIM] = p.sat_voltage_v, p.sat_sharpness, p.amp_limit_v
@@ -203,7 +226,11 @@ class CantileverTwin(Twin):
             p.bw_gamma,
         )
         fcfg[K.F_RATEREF], fcfg[K.F_ASYM] = p.rate_ref_v_per_s, p.asym_factor
-        fcfg[K.F_OFFSET], fcfg[K.F_DRIFT], fcfg[K.F_DRIFTTAU] = p.offset_um, p.thermal_drift_um, p.thermal_tau_s
+        fcfg[K.F_OFFSET], fcfg[K.F_DRIFTTAU] = p.offset_um, p.thermal_tau_s
+        fcfg[K.F_DRIFT] = p.thermal_drift_um if self.has("thermal_drift") else 0.0
+        if self.has("slow_drift"):
+            fcfg[K.F_DRATE], fcfg[K.F_DSIN], fcfg[K.F_DCOS] = p.drift_rate_um_per_s, p.drift_sin_um, p.drift_cos_um
+        fcfg[K.F_DOMEGA] = 2 * math.pi / p.drift_period_s
         fcfg[K.F_Q] = p.quant_um
         fcfg[K.F_RATEA] = math.exp(-h / p.rate_tau_s)
         cr = np.array([_first_order_foh(tau, T) for tau in taus]).reshape(-1, 3)
@@ -252,8 +279,27 @@ class CantileverTwin(Twin):
         else:
             noise = np.zeros(u.size)
         out = np.empty(u.size)
+        if cfg["icfg"][K.I_DRIFT]:
+            cache.add_drift(self._base_output(u, fs, noise, cfg, st), cfg["fcfg"], bool(cfg["icfg"][K.I_QUANT]), out)
+            return out
         _run(u, noise, out, cfg, st)
         return out
+
+    def _base_output(self, u: np.ndarray, fs: float, noise: np.ndarray, cfg: dict[str, Any],
+                     st: dict[str, np.ndarray]) -> np.ndarray:
+        """The kernel's reading without the drift and the quantiser (:mod:`.cache`): computed once for an input and
+        a configuration that differ only in drift parameters (the drift is added after the sensor)."""
+        p = self.params
+        conf = tuple((f.name, getattr(p, f.name)) for f in dataclasses.fields(p) if f.name not in _DRIFT_FIELDS)
+        key = (cache.input_key(u), fs, conf, tuple(sorted(self.effects - _DRIFT_EFFECTS)), self.seed)
+        base = cache.BASE_OUTPUTS.get(key)
+        if base is None:
+            icfg = cfg["icfg"].copy()
+            icfg[K.I_DRIFT] = icfg[K.I_QUANT] = 0
+            base = np.empty(u.size)
+            _run(u, noise, base, {**cfg, "icfg": icfg}, st)
+            cache.BASE_OUTPUTS.put(key, base)
+        return base
 
     def make_stepper(self, fs: float) -> CantileverStepper:
         """Sample-by-sample simulator for FMU export: ``reset()``, ``step(u) -> y`` (same kernel as simulate)."""

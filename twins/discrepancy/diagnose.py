@@ -34,7 +34,9 @@
    Quantisation is judged by the lattice of the measured values alone.
 6. **Verdict** (:func:`_conclude`): test what is left for structure no catalog entry explains
    (:func:`.unexplained.generic_residual_model`); the verdict is ``unexplained`` when the final residual stays
-   far above the noise measured from the data, else ``discrepancy`` with causes or ``none``.
+   far above the noise measured from the data, else ``discrepancy`` with causes or ``none``. With
+   ``unexplained``, the hybrid twin (the final configuration plus a black-box remainder, :mod:`.hybrid`) is fitted
+   and its validation gain reported under ``hybrid``; the verdict and the causes stay as they are.
 
 :func:`run_diagnosis` returns the typed :class:`.result.Diagnosis`; :func:`diagnose` its dict view.
 """
@@ -60,6 +62,7 @@ from . import ranges as rg
 from . import realdata
 from . import unexplained as unx
 from .fields import core_for, numeric_fields, quant_params
+from .hybrid import hybrid_block
 from .options import DiagnoseOptions
 from .prediction import (
     NOISE_EFFECTS,
@@ -287,10 +290,15 @@ def _conclude(inp: _Inputs, cal: _Calibrated, base: Stage, ext: Extension, opts:
                                                        opts.skip, inp.noise)
     opts.say(f"verdict {verdict}")
     defaults = dflt.contributions(stage.twin, cal.retest, inp.est, inp.val, opts.skip)
+    hybrid, hybrid_twin = None, None
+    if verdict == "unexplained" and opts.hybrid:
+        opts.say("fitting the hybrid twin (black-box remainder)")
+        hybrid, hybrid_twin = hybrid_block(inp, stage, opts.skip)
     return Diagnosis(verdict=verdict, causes=causes, baseline=base, extended=stage, twin=inp.twin,
                      calibration=cal.info, saturation=inp.saturation, rounds=ext.rounds, unexplained=unexplained,
                      residual_vs_noise=beyond, split=inp.split, ranges=inp.ranges, defaults=defaults,
-                     at_bound=at_bound, est=inp.est, val=inp.val, seconds=time.perf_counter() - inp.t_start)
+                     at_bound=at_bound, est=inp.est, val=inp.val, seconds=time.perf_counter() - inp.t_start,
+                     hybrid=hybrid, hybrid_twin=hybrid_twin)
 
 
 def _quantization_causes(inp: _Inputs, opts: DiagnoseOptions) -> list[dict[str, Any]]:

@@ -52,6 +52,9 @@ class DiagnoseOptions:
         single and joint trial).
     progress
         Callable taking one message per step, or None.
+    hybrid
+        With an ``unexplained`` verdict, fit the hybrid twin (the final configuration plus a black-box remainder,
+        :mod:`.hybrid`) and report its validation gain under ``hybrid``.
     """
 
     candidates: Sequence[str] | None = None
@@ -74,6 +77,7 @@ class DiagnoseOptions:
     starts: int = 1
     pairs: bool = False
     progress: Callable[[str], Any] | None = None
+    hybrid: bool = True
 
     def __post_init__(self) -> None:
         for name in ("trial_nfev", "scan_nfev", "scan_points", "skip", "max_lag", "starts"):

@@ -121,6 +121,8 @@ def _write_index(result: dict[str, Any], figures: list[str], records: list[Any],
     from sysid.provenance import collect
     from sysid.report import esc, image, table, write_page
 
+    from .hybrid import hybrid_text
+
     causes = table(
         ["effect", "confidence", "evidence", "params"],
         [
@@ -140,6 +142,7 @@ def _write_index(result: dict[str, Any], figures: list[str], records: list[Any],
         "<h2>Correlation tests (eq. 2-32), validation</h2>"
         f"<p>before: {esc(_tests_txt(b))}<br>after: {esc(_tests_txt(x))}</p>",
         f"<h2>Not explained</h2><p>{esc(result['unexplained']['description'])}</p>",
+        (f"<h2>Hybrid twin</h2><p>{esc(hybrid_text(result['hybrid']))}</p>" if result.get("hybrid") else ""),
         "".join(f"<h2>{esc(f[:-4])}</h2>{image(f, style='max-width:100%')}" for f in figures),
     ]
     return write_page(d / "index.html", f"diagnosis: {twin}", body, css=_CSS, provenance=collect(records=records))

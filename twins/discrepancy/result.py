@@ -40,6 +40,8 @@ class Diagnosis:
     est: Record
     val: Record
     seconds: float
+    hybrid: dict[str, Any] | None = None  # the hybrid twin's block (:mod:`.hybrid`), with an ``unexplained`` verdict
+    hybrid_twin: Any = None  # the fitted :class:`twins.hybrid.HybridTwin` itself (not in the dict view)
 
     def to_dict(self, keep_stages: bool = False) -> dict[str, Any]:
         """The result as a dict: ``verdict``, ``causes``, ``baseline``, ``extended``, ``gain`` and the details
@@ -74,6 +76,8 @@ class Diagnosis:
             },
             "seconds": self.seconds,
         }
+        if self.hybrid is not None:
+            out["hybrid"] = self.hybrid
         if keep_stages:
             out["_stages"] = {"baseline": base, "extended": ext, "est": self.est, "val": self.val}
         return out
