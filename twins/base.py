@@ -23,6 +23,7 @@ from sysid.config import coerce, make_rng, parse_assignments
 from sysid.errors import ConfigError, DataError
 from sysid.io import output_file
 from sysid.jsonio import json_default as _json_default
+from sysid.jsonio import read_json_file
 from sysid.record import Record
 from twins.paramfields import ParamInfo, param_info, pfield
 
@@ -265,16 +266,7 @@ def _json_value(value: Any, default: Any, key: str, where: str) -> Any:
 def load_params_file(path: str | Path, twin: str | None = None) -> dict[str, Any]:
     """Read a parameter file written by :meth:`Twin.save_params`; check it belongs to ``twin``."""
     p = Path(path)
-    if not p.exists():
-        raise DataError(f"{p}: parameter file not found")
-    if p.is_dir():
-        raise DataError(f"{p}: is a directory, expected a parameter file")
-    try:
-        data = json.loads(p.read_text())
-    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise DataError(f"{p}: not a JSON parameter file ({exc})") from None
-    if not isinstance(data, dict) or data.get("format") != PARAMS_FORMAT:
-        raise DataError(f"{p}: not a piezotwin parameter file (expected format {PARAMS_FORMAT!r})")
+    data = read_json_file(p, PARAMS_FORMAT, "parameter file")
     if twin is not None and data.get("twin") != twin:
         raise DataError(f"{p}: parameter file is for twin {data.get('twin')!r}, not {twin!r}")
     return data

@@ -32,6 +32,7 @@ from typing import Any
 import numpy as np
 
 from sysid.errors import ConfigError, DataError, DivergenceWarning
+from sysid.jsonio import read_json_file
 from sysid.metrics import nrmse, r2
 from sysid.modelfile import read_model
 from sysid.record import Record
@@ -179,15 +180,7 @@ class HybridTwin:
         """Read a file written by :meth:`save` (the physics twin must be a shipped one, :mod:`twins.registry`)."""
         from twins.registry import get_twin
 
-        p = Path(path)
-        if not p.is_file():
-            raise DataError(f"{p}: hybrid twin file not found")
-        try:
-            doc = json.loads(p.read_text())
-        except (UnicodeDecodeError, json.JSONDecodeError) as exc:
-            raise DataError(f"{p}: not a hybrid twin file ({exc})") from None
-        if not isinstance(doc, dict) or doc.get("format") != HYBRID_FORMAT:
-            raise DataError(f"{p}: not a piezotwin hybrid twin file (expected format {HYBRID_FORMAT!r})")
+        doc = read_json_file(path, HYBRID_FORMAT, "hybrid twin file")
         phys = doc["physics"]
         tcls = get_twin(phys["twin"])
         physics = tcls(tcls.Params(**phys["params"]), phys["effects"], phys["seed"])

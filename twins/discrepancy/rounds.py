@@ -359,15 +359,17 @@ def _refine(trials: list[Trial], stage: Stage, inp: Any, core_r: list[str], a_es
         picked = list(range(len(trials)))
     for i in picked:
         tr = trials[i]
+        spent = tr.seconds  # stage A and every full refit, kept or not
         for start in [tr.effect_params] + spread_starts(tr, opts.starts):
             try:
                 trB = run_trial(tr.base, tr.effect, inp.est, inp.val, core_r, a_est, opts, refit_core=True,
                                 start=start)
             except _TRIAL_ERRORS:
                 continue
-            trB.seconds += trials[i].seconds
+            spent += trB.seconds
             if trB.sse_est <= trials[i].sse_est:
                 trials[i] = trB
+        trials[i].seconds = spent
 
 
 def spread_starts(tr: Trial, starts: int) -> list[dict[str, float]]:
