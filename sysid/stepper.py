@@ -21,17 +21,19 @@ import numpy as np
 
 from sysid.errors import ConfigError
 
-__all__ = ["make_stepper", "STEPPABLE"]
+__all__ = ["make_stepper", "STEPPABLE", "MULTI_INPUT"]
 
 STEPPABLE = ("arx", "armax", "narx-poly", "narmax-poly", "narx-mlp", "narx-mlp-sim", "pnlss")
+#: identifiers whose stepper takes several inputs (one output)
+MULTI_INPUT = ("arx", "armax", "narx-poly", "narmax-poly")
 
 
 class _WindowStepper:
-    """Shared ring of the last ``L + 1`` inputs and outputs (single channel in and out)."""
+    """Shared ring of the last ``L + 1`` inputs and outputs (``n_in`` input channels, one output)."""
 
-    def __init__(self, L: int):
+    def __init__(self, L: int, n_in: int = 1):
         self.L = int(L)
-        self.u = np.zeros((self.L + 1, 1))
+        self.u = np.zeros((self.L + 1, int(n_in)))
         self.y = np.zeros((self.L + 1, 1))
         self.k = 0
 
@@ -40,9 +42,10 @@ class _WindowStepper:
         self.y[:] = 0.0
         self.k = 0
 
-    def _push_u(self, value: float) -> None:
+    def _push_u(self, value) -> None:
+        """``value``: a number, or one number per input channel."""
         self.u[:-1] = self.u[1:]
-        self.u[-1, 0] = value
+        self.u[-1] = value
 
     def _push_y(self, value: float) -> None:
         self.y[:-1] = self.y[1:]
@@ -50,15 +53,18 @@ class _WindowStepper:
 
 
 class PolynomialStepper(_WindowStepper):
+    """The polynomial family; several inputs (a multi-input single-output model, e.g. the remainder of a hybrid
+    twin on [u, ŷ_twin]) are passed to :meth:`step` as one number per input, in the model's input order."""
+
     def __init__(self, model):
-        super().__init__(model.max_lag_)
+        super().__init__(model.max_lag_, int(getattr(model, "n_inputs_", 1)))
         self.compiled = model.compiled()
         self.bound = float(model.y_bound_)
 
-    def step(self, u: float) -> float:
+    def step(self, u) -> float:
         from sysid.simulate import free_run
 
-        self._push_u(float(u))
+        self._push_u(float(u) if self.u.shape[1] == 1 else np.asarray(u, dtype=float).reshape(-1))
         self._push_y(0.0)  # rows are now times k-L .. k; the last output is what this step computes
         if self.k >= self.L:  # before: the zero initial conditions, as predict(u) without y
             yw, _ = free_run(self.compiled, self.u, self.y, self.bound)
@@ -127,12 +133,13 @@ class StateSpaceStepper:
 
 
 def make_stepper(model):
-    """A fresh stepper (state at rest) for a fitted single-input single-output ``model``."""
+    """A fresh stepper (state at rest) for a fitted single-output ``model`` (several inputs: :data:`MULTI_INPUT`)."""
     if model.name not in STEPPABLE:
         raise ConfigError(f"{model.name}: no per-sample stepper (an FMU needs one); supported: {', '.join(STEPPABLE)}")
-    if int(getattr(model, "n_inputs_", 1)) != 1 or int(getattr(model, "n_outputs_", 1)) != 1:
-        raise ConfigError(f"{model.name}: the stepper handles one input and one output, the model has "
-                          f"{model.n_inputs_} / {model.n_outputs_}")
+    n_in, n_out = int(getattr(model, "n_inputs_", 1)), int(getattr(model, "n_outputs_", 1))
+    if n_out != 1 or (n_in != 1 and model.name not in MULTI_INPUT):
+        raise ConfigError(f"{model.name}: the stepper handles one output, and several inputs only for "
+                          f"{', '.join(MULTI_INPUT)}; the model has {n_in} / {n_out}")
     if model.name.startswith("narx-mlp"):
         return NeuralNARXStepper(model)
     if model.name == "pnlss":

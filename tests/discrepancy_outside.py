@@ -4,7 +4,8 @@ The data are the compression-, noise- and ADC-free twin's simulation ("bare": no
 effect written here in a few lines — a tanh limiter, a cubic soft clip or a hard clip of the generator
 signal, an in-phase copy of the drive (a resistive crosstalk path, 10 % of the estimation output's RMS), a
 delayed scaled copy of the output (an echo: 0.1–0.3 of it, 8–25 µs later, linear interpolation between
-samples) — and white noise of 1 % of the output RMS. Records as in :mod:`discrepancy_cases`: the 2 ms, 5 MHz
+samples; ``echo_lp``: the same copy through a first-order Butterworth low-pass at 0.5–2 MHz, a lossy wall) — and
+white noise of 1 % of the output RMS. Records as in :mod:`discrepancy_cases`: the 2 ms, 5 MHz
 multisine for estimation and the 1 ms chirp at the multisine's 0.4 V peak for validation. The twin diagnosed
 is the bare configuration.
 """
@@ -13,11 +14,12 @@ from __future__ import annotations
 
 import numpy as np
 from scipy.optimize import brentq
+from scipy.signal import butter, lfilter
 
 from sysid.record import Record
 
 FS = 5e6
-KINDS = ("tanh", "cubic", "clip", "inphase", "echo", "none")
+KINDS = ("tanh", "cubic", "clip", "inphase", "echo", "echo_lp", "none")
 
 
 def _limiter(kind: str, peak: float, compression: float):
@@ -57,9 +59,11 @@ def outside_case(kind: str, seed: int, level: float | None = None, start_effects
     share = float(level if level is not None else 0.10) if kind == "inphase" else 0.0
     if share:
         truth["crosstalk_share"] = share
-    if kind == "echo":
+    if kind in ("echo", "echo_lp"):
         truth["echo_amplitude"] = float(level if level is not None else rng.uniform(0.1, 0.3))
         truth["echo_delay_s"] = float(rng.uniform(8e-6, 25e-6))
+    if kind == "echo_lp":
+        truth["echo_cutoff_hz"] = float(rng.uniform(0.5e6, 2e6))
     out = []
     coupling = 0.0
     for u in (ue, uv):
@@ -67,9 +71,12 @@ def outside_case(kind: str, seed: int, level: float | None = None, start_effects
         if share:  # one coupling coefficient for both records: share × the estimation output's RMS
             coupling = coupling or share * np.sqrt(np.mean(y ** 2)) / np.sqrt(np.mean(u ** 2))
             y = y + coupling * u
-        if kind == "echo":
+        if kind in ("echo", "echo_lp"):
             n = np.arange(y.size)
-            y = y + float(truth["echo_amplitude"]) * np.interp(n - float(truth["echo_delay_s"]) * FS, n, y, left=0.0)
+            copy = np.interp(n - float(truth["echo_delay_s"]) * FS, n, y, left=0.0)
+            if kind == "echo_lp":
+                copy = lfilter(*butter(1, float(truth["echo_cutoff_hz"]), fs=FS), copy)
+            y = y + float(truth["echo_amplitude"]) * copy
         y = y + 0.01 * np.sqrt(np.mean(y ** 2)) * rng.standard_normal(y.size)
         out.append(Record(u=u, y=y, fs=FS, meta={"injected": dict(truth)}))
     start = AcousticTwin.from_options(effects=start_effects, seed=0)
@@ -78,4 +85,5 @@ def outside_case(kind: str, seed: int, level: float | None = None, start_effects
 
 def expected_effect(kind: str) -> str | None:
     return {"tanh": "amplifier_compression", "cubic": "amplifier_compression", "clip": "amplifier_compression",
-            "inphase": "crosstalk", "echo": "wall_echo"}.get(kind)
+            "inphase": "crosstalk", "echo": "wall_echo",
+            "echo_lp": "wall_echo"}.get(kind)

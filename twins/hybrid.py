@@ -40,7 +40,7 @@ from sysid.registry import get_identifier
 from sysid.safeio import atomic_write_text
 from twins.base import Twin
 
-__all__ = ["HybridTwin", "DEFAULT_CANDIDATES", "HYBRID_FORMAT"]
+__all__ = ["HybridTwin", "HybridStepper", "DEFAULT_CANDIDATES", "HYBRID_FORMAT"]
 
 HYBRID_FORMAT = "piezotwin-hybrid-1"
 
@@ -55,6 +55,23 @@ DEFAULT_CANDIDATES: tuple[tuple[str, dict[str, Any]], ...] = (
 def _scale(x: np.ndarray) -> float:
     s = float(np.std(x))
     return s if math.isfinite(s) and s > 0 else 1.0
+
+
+class HybridStepper:
+    """One sample of a hybrid twin: ``y = y_twin + s_r·M(u/s_u, y_twin/s_y)`` with the physics core and the
+    remainder model's stepper each advanced by one sample (both from rest after :meth:`reset`)."""
+
+    def __init__(self, physics_core: Any, remainder: Any, scales: dict[str, float]):
+        self.physics_core, self.remainder = physics_core, remainder
+        self.su, self.sy, self.sr = float(scales["u"]), float(scales["y_twin"]), float(scales["r"])
+
+    def reset(self) -> None:
+        self.physics_core.reset()
+        self.remainder.reset()
+
+    def step(self, u: float) -> float:
+        yt = float(self.physics_core.step(u))
+        return yt + float(self.remainder.step((float(u) / self.su, yt / self.sy))) * self.sr
 
 
 class HybridTwin:
@@ -102,6 +119,30 @@ class HybridTwin:
         """ŷ_twin + r̂ for the drive ``u`` at ``fs`` [Hz] (the twin starts at rest, the remainder from zero)."""
         y_twin = np.asarray(self.physics.simulate(u, fs), float)
         return y_twin + self.remainder(u, y_twin, fs)
+
+    @property
+    def fs_(self) -> float | None:
+        """Sampling rate [Hz] of the remainder model (its estimation record's): the rate of its discrete-time
+        free run, so the rate a per-sample stepper or an FMU of the hybrid must run at."""
+        self._check_fitted()
+        fs = getattr(self.model_, "fs_", None)
+        return float(fs) if fs else None
+
+    def make_stepper(self, fs: float, core: dict[str, Any] | None = None) -> HybridStepper:
+        """Sample-by-sample simulator (``reset()``, ``step(u) -> y``) for FMU export: the physics twin's own
+        per-sample core (:mod:`twins.fmu.cores`: its stepper, or the response core of a block-simulated twin)
+        and the remainder model's stepper (:func:`sysid.stepper.make_stepper`, its free-run kernel) on
+        [u/s_u, ŷ_twin/s_y]. With a stepper core it reproduces :meth:`simulate` sample for sample. ``fs`` [Hz]
+        must be the remainder's rate (:attr:`fs_`)."""
+        from sysid.stepper import make_stepper
+        from twins.fmu.cores import build_core, choose_core
+
+        own = self.fs_
+        if own is not None and abs(float(fs) - own) > 1e-9 * own:
+            raise ConfigError(f"hybrid twin: its remainder model is discrete-time at {own:g} Hz; it cannot step "
+                              f"at {float(fs):g} Hz")
+        core = dict(core) if core is not None else choose_core(self.physics, fs)
+        return HybridStepper(build_core(self.physics, fs, core), make_stepper(self.model_), dict(self.scales_))
 
     # ------------------------------------------------------------------ fitting
     def fit(self, est: Record, skip: int = 0) -> HybridTwin:

@@ -1,9 +1,10 @@
 """``piezotwin export-fmu TWIN [--set ...] [--effect ...] [--effects ...] [--params FILE] [--seed N] [-o FILE]``
-and ``piezotwin export-fmu --model MODEL [-o FILE]``.
+``piezotwin export-fmu --model MODEL [-o FILE]`` and ``piezotwin export-fmu --hybrid FILE [-o FILE]``.
 
 Builds an FMI 2.0 co-simulation FMU of the twin as configured (the same configuration options as
 ``simulate``); see :mod:`twins.fmu` and the README section "fmu". With ``--model`` it exports an identified
-model instead (:mod:`twins.fmu.model_export`; docs/models-in-use.md).
+model instead (:mod:`twins.fmu.model_export`; docs/models-in-use.md); with ``--hybrid`` a hybrid twin saved by
+``diagnose --save-hybrid`` (physics twin + fitted remainder, :mod:`twins.fmu.hybrid_export`).
 """
 
 from __future__ import annotations
@@ -18,6 +19,8 @@ def register(sub) -> None:
     p = sub.add_parser("export-fmu", help="export a twin or an identified model as an FMI 2.0 co-simulation FMU")
     p.add_argument("twin", nargs="?", help="twin to export (or give --model)")
     p.add_argument("--model", metavar="MODEL", help="export this identified model file (identify -o) instead of a twin")
+    p.add_argument("--hybrid", metavar="FILE", help="export this hybrid twin file (diagnose --save-hybrid: the twin "
+                                                    "plus its fitted remainder) instead of a twin")
     add_twin_args(p)
     p.add_argument("--fs", type=FS, default=None,
                    help="sampling rate [Hz] = 1/communication step (default: the twin's rate, "
@@ -49,10 +52,12 @@ def run(args: argparse.Namespace) -> int:
     from twins.fmu import export_fmu
     from twins.fmu.spec import fmu_variables
 
-    if (args.model is None) == (args.twin is None):
-        raise ConfigError("export-fmu: give a twin name or --model MODEL (one of the two)")
+    if sum(x is not None for x in (args.twin, args.model, args.hybrid)) != 1:
+        raise ConfigError("export-fmu: give a twin name or --model MODEL or --hybrid FILE (one of the three)")
     if args.model is not None:
         return _run_model(args)
+    if args.hybrid is not None:
+        return _run_hybrid(args)
     twin = twin_from_args(args.twin, args)
     if args.fs is not None and not args.fs > 0:
         raise ConfigError(f"--fs must be positive, got {args.fs}")
@@ -106,6 +111,32 @@ def _run_model(args: argparse.Namespace) -> int:
     else:
         print(f"exported {model.name} model {args.model} (fs {fs:g} Hz, step 1/fs) -> {path} "
               f"({summary['bytes'] / 1e3:.0f} kB, {'valid' if not problems else 'INVALID'})")
+    for p in problems:
+        print(f"validation: {p}")
+    return 1 if problems else 0
+
+
+def _run_hybrid(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
+    from sysid.errors import ConfigError
+    from twins.fmu.hybrid_export import export_hybrid_fmu
+    from twins.hybrid import HybridTwin
+
+    if args.fs is not None and not args.fs > 0:
+        raise ConfigError(f"--fs must be positive, got {args.fs}")
+    hybrid = HybridTwin.load(args.hybrid)
+    out = args.output or f"fmus/{Path(args.hybrid).stem}.fmu"
+    path, seconds, problems = _export(export_hybrid_fmu, hybrid, out, args)
+    fs = args.fs or hybrid.fs_
+    summary = {"hybrid": str(args.hybrid), "twin": hybrid.physics.name, "effects": sorted(hybrid.physics.effects),
+               "identifier": hybrid.identifier_, "fmu": str(path), "bytes": Path(path).stat().st_size, "fs": fs,
+               "validation_problems": problems, "build_seconds": round(seconds, 3)}
+    if args.json:
+        emit_json(summary)
+    else:
+        print(f"exported hybrid twin {args.hybrid} ({hybrid.physics.name} + {hybrid.identifier_} remainder; fs {fs:g} "
+              f"Hz, step 1/fs) -> {path} ({summary['bytes'] / 1e3:.0f} kB, {'valid' if not problems else 'INVALID'})")
     for p in problems:
         print(f"validation: {p}")
     return 1 if problems else 0

@@ -112,14 +112,11 @@ def _fit(base: Twin, tw: Twin, effect: str, est: Record, val: Record, core: list
         names += core_names
         n_core = len(core_names)
     if names:
-        res = ls_calibrate(tw, est, names, x0={**{c: float(getattr(base.params, c)) for c in core}, **x0},
-                           simulate=simulate, max_nfev=opts.trial_nfev if refit_core else opts.scan_nfev,
-                           skip=opts.skip)
-        fit_tw, fitted, stderr = res.twin, res.fitted, res.stderr
+        fit_tw, fitted, stderr, ye = _least_squares(base, tw, est, core, x0, names, opts, refit_core)
     else:
         fit_tw, fitted, stderr = tw, {}, {}
+        ye = simulate(fit_tw, est)
     yv = simulate_val(fit_tw, est, val)
-    ye = simulate(fit_tw, est)
     ok = bool(np.all(np.isfinite(yv)))
     eff_all = eff_fields + [c for c in cat_fields if c not in eff_fields]
     return Trial(effect=effect, twin=fit_tw, fitted=fitted,
@@ -129,6 +126,46 @@ def _fit(base: Twin, tw: Twin, effect: str, est: Record, val: Record, core: list
                  nrmse_val=nrmse(val.y, yv, opts.skip) if ok else float("inf"),
                  r2_val=r2(val.y, yv, opts.skip) if ok else float("-inf"),
                  seconds=time.perf_counter() - t0, n_added=max(k, 1), n_total=max(k, 1) + n_core, base=base)
+
+
+def _least_squares(base: Twin, tw: Twin, est: Record, core: list[str], x0: dict[str, Any], names: list[str],
+                   opts: DiagnoseOptions, refit_core: bool) -> tuple[Twin, dict[str, float], dict[str, float],
+                                                                    np.ndarray]:
+    """Least squares of ``names`` from ``x0``; never a worse estimation fit than the start.
+
+    ``scipy.optimize.least_squares`` moves a start that lies on a bound strictly inside the bounds. For a
+    parameter whose bound is a switch — a first-order low-pass whose cutoff 0 means "no filter"
+    (``wall_echo_cutoff_hz``), where 10⁻³ Hz removes the whole path — that first move lands in a flat region
+    where every neighbour has the path gone, and the fit stops there, worse than its start: the pre-scan had
+    found the echo's delay and size with no filter (estimation SSE at the noise), and the fit returned an echo
+    filtered away (gain 0; seed 3 of the outside-injected echo). So the start's SSE is compared with the fit's,
+    and where the start is better the fit is run again with the parameters that start on a bound held there
+    (the pre-scan chose that bound value over its grid); the better of the fits and the start is kept."""
+    start_vals = {**{c: float(getattr(base.params, c)) for c in core}, **x0}
+    nfev = opts.trial_nfev if refit_core else opts.scan_nfev
+
+    def run(t: Twin, fields: list[str]) -> tuple[Twin, dict[str, float], dict[str, float], np.ndarray]:
+        res = ls_calibrate(t, est, fields, x0=start_vals, simulate=simulate, max_nfev=nfev, skip=opts.skip)
+        return res.twin, res.fitted, res.stderr, simulate(res.twin, est)
+
+    out = run(tw, names)
+    info = param_info(type(tw.params))
+    on_bound = {f: float(start_vals[f]) for f in names
+                if f in x0 and f in info and float(start_vals[f]) in tuple(info[f].range)}
+    if not on_bound:
+        return out
+    t_start = tw.with_params(**{f: v for f, v in start_vals.items() if f in names})
+    y_start = simulate(t_start, est)
+    cost_fit, cost_start = sse(est.output, out[3], opts.skip), sse(est.output, y_start, opts.skip)
+    if cost_fit <= cost_start:
+        return out
+    rest = [f for f in names if f not in on_bound]
+    best = (t_start, {f: float(start_vals[f]) for f in names}, {f: float("nan") for f in names}, y_start)
+    if rest:
+        held = run(tw.with_params(**on_bound), rest)
+        if sse(est.output, held[3], opts.skip) < cost_start:
+            best = (held[0], {**on_bound, **held[1]}, {**{f: float("nan") for f in on_bound}, **held[2]}, held[3])
+    return best
 
 
 @dataclasses.dataclass

@@ -48,6 +48,8 @@ def export_model_fmu(model, path: str | Path, fs: float | None = None, model_nam
     if path.suffix != ".fmu":
         raise ConfigError(f"{path}: the output file must end in .fmu")
     make_stepper(model)  # refuses models without a per-sample free run (rnn, MIMO)
+    if int(getattr(model, "n_inputs_", 1)) != 1:
+        raise ConfigError(f"{model.name}: the model FMU has one input u; this model has {model.n_inputs_} inputs")
     fs = float(fs) if fs is not None else getattr(model, "fs_", None)
     if not fs or not fs > 0:
         raise ConfigError(f"{model.name}: the model file does not record its sampling rate; give --fs")
