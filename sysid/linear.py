@@ -191,6 +191,31 @@ def _choose_orders(model, keys: tuple[str, ...]) -> bool:
     return choose
 
 
+#: restarts of the ARMAX prediction-error fit from C with its roots reflected inside the unit circle
+PEM_REFLECTIONS = 3
+
+
+def _invertible(c: np.ndarray) -> bool:
+    """True when the monic polynomial ``c`` (coefficients of q⁰, q⁻¹, …) has every root inside the unit circle."""
+    return bool(np.all(np.abs(np.roots(c)) < 1.0)) if len(c) > 1 else True
+
+
+def reflect_inside(c: np.ndarray) -> np.ndarray:
+    """The monic polynomial with the roots of ``c`` outside the unit circle replaced by 1/conj(root).
+
+    |C'(e^{jω})| = |C(e^{jω})| / Π|r_i| over the reflected roots r_i, so C' gives the same noise spectrum shape
+    (Ljung 1999, §10.1 and Söderström & Stoica 1989, §6.4: the spectral factor chosen minimum phase); roots on the
+    circle move to radius 0.99."""
+    r = np.roots(np.asarray(c, dtype=float))
+    mag = np.abs(r)
+    r = np.where(mag > 1.0, r / np.maximum(mag, 1e-300) ** 2, r)
+    r = np.where(np.isclose(np.abs(r), 1.0), 0.99 * r, r)
+    out = np.zeros(len(c))
+    p = np.real(np.poly(r)) if len(r) else np.ones(1)
+    out[: len(p)] = p
+    return out
+
+
 class ARMAX(_LinearBase):
     """ARMAX (eq. 2-4/2-5) by the prediction-error method (``method="pem"``) or extended least squares (``"els"``).
 
@@ -328,13 +353,35 @@ class ARMAX(_LinearBase):
             return np.vstack(cols)
 
         x0 = np.concatenate([np.asarray(theta0)[proc_idx], np.asarray(theta0)[idx["e"]]])
-        if optimise and not np.all(np.abs(np.roots(split(x0)[1])) < 1.0):
+        if optimise and not _invertible(split(x0)[1]):
             # ELS gave an unstable noise model: start PEM from C = 1 instead.
             x0[len(proc_idx):] = 0.0
         if optimise:
-            sol = _scipy_lsq(residual, x0, jac=jac, method="lm", xtol=1e-12, ftol=1e-12, gtol=1e-12,
-                             max_nfev=200 * len(x0))
-            x, r, J, message = sol.x, sol.fun, sol.jac, str(sol.message)
+            x, notes = x0, []
+            for attempt in range(PEM_REFLECTIONS + 1):
+                sol = _scipy_lsq(residual, x, jac=jac, method="lm", xtol=1e-12, ftol=1e-12, gtol=1e-12,
+                                 max_nfev=200 * len(x0))
+                x = sol.x
+                c = split(x)[1]
+                if _invertible(c) or attempt == PEM_REFLECTIONS:
+                    break
+                # C left the unit circle (Ljung §10.1: the predictor needs 1/C stable). The same noise spectrum
+                # has C with those roots reflected inside (up to a gain), so restart from it.
+                x = x.copy()
+                x[len(proc_idx):] = reflect_inside(c)[e_lags]
+                notes.append("C reflected inside the unit circle, PEM restarted")
+            message = "; ".join([str(sol.message), *notes])
+            if not _invertible(split(x)[1]):
+                # PEM keeps returning to a non-invertible C: of its estimate with C reflected and the ELS estimate
+                # (when invertible), keep the one with the smaller prediction error.
+                xr = x.copy()
+                xr[len(proc_idx):] = reflect_inside(split(x)[1])[e_lags]
+                cands = [(float(residual(xr) @ residual(xr)), xr, "PEM with C reflected")]
+                if _invertible(split(x0)[1]):
+                    cands.append((float(residual(x0) @ residual(x0)), x0.copy(), "the ELS estimate"))
+                cost, x, which = min(cands, key=lambda cnd: cnd[0])
+                message += f"; C stayed outside the unit circle after {PEM_REFLECTIONS} restarts: kept {which}"
+            r, J = residual(x), jac(x)
         else:
             x = np.concatenate([np.asarray(theta0)[proc_idx], np.asarray(theta0)[idx["e"]]])
             r, J, message = residual(x), jac(x), "extended least squares"
@@ -350,7 +397,7 @@ class ARMAX(_LinearBase):
         order = proc_idx + idx["e"]
         theta[order] = x
         stderr[order] = se
-        if not np.all(np.abs(np.roots(split(x)[1])) < 1.0):
+        if not _invertible(split(x)[1]):
             raise DataError(f"armax ({self.method}): the fit gave a noise polynomial C with roots outside the "
                             "unit circle (non-invertible); try method=els or other orders")
         return theta, stderr, message

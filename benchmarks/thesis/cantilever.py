@@ -27,7 +27,9 @@ __all__ = ["mlp_task", "candidate_task", "output_peak_task", "data", "CANDIDATES
 #: band searched for Figure 3.4's out-of-band peak [Hz]: above the 500 Hz multisine, below the sensor's 5 kHz
 PEAK_BAND_HZ = (550.0, 2000.0)
 #: first bending-mode frequencies [Hz] tried for Figure 3.4's explanation (the twin's default is not changed)
-F1_TRIALS_HZ = (740.0, 750.0)
+F1_TRIALS_HZ = (710.0, 740.0, 750.0)
+#: Bouc–Wen hysteresis shares α tried to measure what limits Table 4.3's slow sines (the twin's default: 0.30)
+ALPHA_TRIALS_FOR_4_3 = (0.01, 0.15)
 #: the twin's slow effect left out to measure what limits Table 4.3's low-frequency sines
 WITHOUT_FOR_4_3 = "creep"
 #: identifiers tried beside the table's networks for "the project's best model on the same protocol"
@@ -37,15 +39,22 @@ CANDIDATES: dict[str, dict[str, Any]] = {
 }
 
 
-@functools.lru_cache(maxsize=3)
-def data(duration_s: float | None, short: bool, without: str | None = None):
-    """(estimation record, sine segments) of the twin (default effects, seed 0; ``without`` one of them);
-    ``short``: quick-tier sines."""
+@functools.lru_cache(maxsize=4)
+def data(duration_s: float | None, short: bool, without: str | None = None, bw_alpha: float | None = None):
+    """(estimation record, sine segments) of the twin (default effects, seed 0; ``without`` one of them;
+    ``bw_alpha`` another Bouc–Wen hysteresis share); ``short``: quick-tier sines."""
     from benchmarks.neural_twins import cantilever_data
+    from twins.cantilever import CantileverTwin
     from twins.cantilever.effects import DEFAULT_ON
+    from twins.cantilever.params import CantileverParams
 
     effects = None if without is None else [e for e in DEFAULT_ON if e != without]
-    est, segs = cantilever_data(duration_s=duration_s, effects=effects)
+    if bw_alpha is None:
+        est, segs = cantilever_data(duration_s=duration_s, effects=effects)
+    else:
+        twin = CantileverTwin(params=replace(CantileverParams(), bw_alpha=float(bw_alpha)), effects=effects, seed=0)
+        est = twin.generate("thesis-multisine", **({} if duration_s is None else {"duration_s": float(duration_s)}))
+        segs = twin.generate("thesis-sines").segments()
     if short:  # one period of each sine above 1 Hz (at least 100 samples), the 0.1/1 Hz sines cut to 1 s
         segs = [s[: max(100, min(len(s), int(s.fs / max(float(s.meta["segment"]["freq_hz"]), 1.0))))] for s in segs]
     return est, segs
@@ -57,12 +66,14 @@ def _timed(fn, *args, **kw) -> tuple[Any, float, float]:
     return out, time.process_time() - c0, time.perf_counter() - w0
 
 
-def mlp_task(layers: int, width: int, seed: int, t: Tier, without: str | None = None) -> dict[str, Any]:
+def mlp_task(layers: int, width: int, seed: int, t: Tier, without: str | None = None,
+             bw_alpha: float | None = None) -> dict[str, Any]:
     """One training of the ``layers`` × ``width`` ReLU network: R² per sine, their mean, estimation FRS R².
-    ``without``: a default effect of the twin left out (a measured explanation, not the table's protocol)."""
+    ``without``: a default effect of the twin left out; ``bw_alpha``: another hysteresis share (measured
+    explanations, not the table's protocol)."""
     from benchmarks.neural_twins import cantilever_sines
 
-    recs = data(t.cantilever_duration_s, t.short_records, without)
+    recs = data(t.cantilever_duration_s, t.short_records, without, bw_alpha)
     params = {"hidden": [width] * layers, "epochs": t.cantilever_epochs}
     res, cpu, wall = _timed(cantilever_sines, "narx-mlp", params, seed, recs)
     return {"r2_per_freq": {f"{f:g}": v for f, v in res["r2_per_freq"].items()}, "r2_mean": res["r2_mean"],

@@ -70,7 +70,7 @@ def _best(b: dict[str, Any] | None, unit: str) -> str:
         return "—"
     s = b["settings"]
     brief = ", ".join(f"{k}={v}" for k, v in s.items() if k in ("hidden", "activation", "ny", "nu", "ne", "nk",
-                                                                 "degree", "rho_p", "linear"))
+                                                                 "degree", "rho_p", "linear", "lr", "units"))
     return f"{_num(b['value'], unit)} ({b['identifier']}{': ' + brief if brief else ''})"
 
 

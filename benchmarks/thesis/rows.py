@@ -113,8 +113,8 @@ def build_row(rid: str, results: dict[str, dict[str, Any]], t: Tier, measured: d
 
 
 #: the fits of the project's other models beside a family's rows (the "best" column, the explanations)
-_OTHER = {"table-4.2": "cant-cand/", "table-4.3": "cant-", "table-5.2": "ds1-cand/", "table-5.4": "ds2-cand/",
-          "table-5.5": "ds2-cand/", "table-5.6": "ds2-cand/", "fig-5.13": "ds2-cand/"}
+_OTHER = {"table-4.2": "cant-cand/", "table-4.3": "cant-", "table-5.2": "ds1-cand/", "table-5.4": "ds2-",
+          "table-5.5": "ds2-", "table-5.6": "ds2-", "fig-5.13": "ds2-"}
 
 
 def _fit(key: str, r: dict[str, Any]) -> dict[str, Any]:

@@ -87,6 +87,8 @@ def tasks_for(row_ids: Sequence[str], t: Tier) -> dict[str, Task]:
         for s in range(t.cantilever_repeats):
             tasks[f"cant-without/{cantilever.WITHOUT_FOR_4_3}/{s}"] = (
                 cantilever.mlp_task, (4, 25, s, t, cantilever.WITHOUT_FOR_4_3))
+            for alpha in cantilever.ALPHA_TRIALS_FOR_4_3:
+                tasks[f"cant-alpha/{alpha:g}/{s}"] = (cantilever.mlp_task, (4, 25, s, t, None, alpha))
     if "table-5.2" in fams:
         for nk in ("1", "tof"):
             tasks[f"ds1-cand/arx-nk{nk}"] = (acoustic.ds1_candidate_task, (nk, t))
@@ -94,11 +96,29 @@ def tasks_for(row_ids: Sequence[str], t: Tier) -> dict[str, Task]:
             name = targets.table_5_2_id(*line[:5]).split("/", 1)[1]
             for s in range(t.narx_repeats if line[0] == "narx" else 1):
                 tasks[f"ds1-cand/{name}-nktof/{s}"] = (acoustic.ds1_task, (*line[:5], s, t, "tof"))
+        # the wavelet network of Table 5.1 on every NARX line's lags (and the best line's with the delay)
+        for line in targets.TABLE_5_2:
+            if line[0] == "narx":
+                tasks[f"ds1-cand/wavenet-{line[1]}-{line[2]}/0"] = (acoustic.ds1_wavenet_task, (line[1], line[2], t))
+        tasks[f"ds1-cand/wavenet-{DS1_DELAYED[0][1]}-{DS1_DELAYED[0][2]}-nktof/0"] = (
+            acoustic.ds1_wavenet_task, (DS1_DELAYED[0][1], DS1_DELAYED[0][2], t, "tof"))
+        # what each class's failure depends on: the NARX at a smaller RMSprop step, the NARMAX at a smaller rho_p
+        narx, narmax = DS1_DELAYED[0], DS1_DELAYED[2]
+        name = targets.table_5_2_id(*narx[:5]).split("/", 1)[1]
+        for nk in ("1", "tof"):
+            for s in range(t.narx_repeats):
+                tasks[f"ds1-cand/{name}-lr{acoustic.NARX_LR_SMALL:g}{'-nktof' if nk == 'tof' else ''}/{s}"] = (
+                    acoustic.ds1_task, (*narx[:5], s, t, nk, acoustic.NARX_LR_SMALL))
+        m, nu, ny, ne, _ = narmax[:5]
+        name = targets.table_5_2_id(m, nu, ny, ne, acoustic.NARMAX_RHO_SMALL).split("/", 1)[1]
+        tasks[f"ds1-cand/{name}-nktof/0"] = (acoustic.ds1_task, (m, nu, ny, ne, acoustic.NARMAX_RHO_SMALL, 0, t, "tof"))
     if fams & {"table-5.4", "table-5.5", "table-5.6", "fig-5.13"}:
         ny, hidden, act = _ARCH[BEST_DS2]
         for s in range(t.acoustic_repeats):
             tasks[f"ds2-cand/nk{acoustic.DS2_CANDIDATE_NK}/{s}"] = (
                 acoustic.ds2_task, (ny, hidden, act, s, t, acoustic.DS2_CANDIDATE_NK))
+            tasks[f"ds2-dist/{acoustic.DS2_DISTANCE_TRIAL_M:g}/{s}"] = (
+                acoustic.ds2_task, (ny, hidden, act, s, t, 1, acoustic.DS2_DISTANCE_TRIAL_M))
     return tasks
 
 
