@@ -101,7 +101,7 @@ def test_linear_fits_on_cascaded_tanks_do_not_depend_on_the_kernel_set():
 
 def test_pnlss_full_settings_on_cascaded_tanks_do_not_depend_on_the_kernel_set():
     """pnlss with its full settings on cascaded tanks (a fit of about 2 s): with degree 3 and searches cut at 100
-    evaluations it gave 0.421 V with the AVX2 kernels and 0.478 V with the generic ones (issue 29); the stored
+    evaluations it gave 0.421 V with the AVX2 kernels and 0.478 V with the generic ones; the stored
     settings (degree 2, searches run to convergence, ties in cost kept in search order) agree to 1e-4."""
     _compare([(["pnlss"], ["cascaded-tanks"])], quick=False)
 
