@@ -18,7 +18,13 @@ the constant 1 when ``constant`` (an output offset; :mod:`sysid.pnlss_sim`). The
    simulation error Σ_t ‖y(t) − ŷ(t; θ)‖² (:func:`scipy.optimize.least_squares`, trust-region reflective or
    Levenberg–Marquardt) with the exact Jacobian of the forward sensitivity recursion (eq. 18-20, compiled).
    Several records are separate experiments, each with its own x(0). ``starts`` searches follow different
-   paths from the same start (the simulation error has local minima) and the lowest cost is kept.
+   paths from the same start (the simulation error has local minima) and the lowest cost is kept, among the
+   searches that converged (met ``ftol``/``xtol``) when any did: a search cut by ``max_nfev`` in a flat valley
+   ends at a point that depends on the last bits of its start (cascaded tanks, nx 2, degree 3, 100 evaluations:
+   test 0.421 V with OpenBLAS's AVX2 kernels, 0.478 V with the generic ones; run to convergence, the two agree
+   to 1e-6), so it is kept only when no search converged, and ``optimisation_["converged"]`` says which. Costs
+   within ``COST_RTOL`` are a tie, kept in search order (cascaded tanks, nx 2, degree 2: both searches converge
+   to the same cost to 1e-11 at different parameters, and the last bit chose between them).
 
 Stability monitoring: a trial parameter vector whose simulation leaves ±``DIVERGENCE_FACTOR`` × max|y| (scaled
 units), or gives a non-finite value, gets the residual ``DIVERGED_RESIDUAL`` on every sample from the divergence
@@ -56,8 +62,10 @@ DIVERGENCE_FACTOR = 1e3  # a simulation leaving this multiple of max|y| (or of t
 DIVERGED_RESIDUAL = 1e3  # residual (in output RMS) of every sample from a divergence on
 X0_ITERATIONS = 20  # most evaluations of the initial-state fit in predict
 X0_RIDGE = 1e-2  # weight of the initial-state prior (states and outputs are in RMS units)
+COST_RTOL = 1e-6  # searches whose final costs differ by less (relative) are tied: the first in SEARCHES order is kept
 # The searches run by ``starts`` (scipy least_squares method, x_scale), in this order, all from the linear start:
-# other paths (trust region shapes) to a minimum; the lowest cost (hold-out RMSE when held out) is kept.
+# other paths (trust region shapes) to a minimum; the lowest cost (hold-out RMSE when held out) of the converged
+# searches is kept (of all, when none converged).
 SEARCHES = (("trf", "jac"), ("lm", "jac"), ("lm", 1.0))
 
 
@@ -93,10 +101,10 @@ class PNLSS(Identifier):
     starts : int
         Searches from the linear start along different paths (:data:`SEARCHES`: trust-region reflective and
         Levenberg–Marquardt, both scaled by the Jacobian's columns, then Levenberg–Marquardt unscaled), 1 … 3; the
-        lowest cost is kept. One search can stop in a local minimum of the simulation error (18 noise-free systems
-        of nx = 2, degree 2-3, 16 drawn at random and the 2 of the tests: without the output constant the
-        trust-region search stopped at an RMS of about 1e-3 of the output on 1, LM on 3, the two together on
-        none; with it, the two together on 1, the degree-2 test system).
+        lowest cost of those that converged is kept (of all, when none did). One search can stop in a local minimum
+        of the simulation error (18 noise-free systems of nx = 2, degree 2-3, 16 drawn at random and the 2 of the
+        tests: without the output constant the trust-region search stopped at an RMS of about 1e-3 of the output on
+        1, LM on 3, the two together on none; with it, the two together on 1, the degree-2 test system).
     constant : bool
         Add the constant 1 to η: an output offset (measured data keep their means; Silverbox, 20 000 estimation
         samples, nx = 2, degree 3: multisine test 0.23 mV with it, 2.7 mV without). A constant in ζ too was
@@ -301,8 +309,10 @@ class PNLSS(Identifier):
                     ftol=float(self.ftol),
                 )
                 z, status, nfev = sol.x, str(sol.message), int(sol.nfev)
+                converged = sol.status > 0  # a tolerance met (0: cut by max_nfev)
             except _Stop:
                 z, status, nfev = best["theta"], f"stopped: no better hold-out RMSE in {self.patience} evaluations", -1
+                converged = True  # the hold-out rule's own end
             if val_n and best["theta"] is not None:
                 z = best["theta"]
             if z is None:  # stopped before any finite hold-out error
@@ -313,6 +323,7 @@ class PNLSS(Identifier):
                 "x_scale": x_scale,
                 "nfev": nfev,
                 "status": status,
+                "converged": bool(converged),
                 "rms": float(np.sqrt(np.mean(r1**2))),
                 "holdout_rms": v1,
                 "z": z,
@@ -326,10 +337,15 @@ class PNLSS(Identifier):
             for method, x_scale in (SEARCHES[: int(self.starts)] if int(self.max_nfev) > 0 else [])
         ]
         runs = [r for r in runs if r is not None and np.isfinite(r["rms"]) and r["rms"] <= rms0]  # never worse
-        if runs:
-            pick = min(runs, key=lambda r: r["holdout_rms"] if val_n else r["rms"])
+        if runs:  # a search cut by max_nfev competes only when none converged (its end point is path-dependent)
+            pool = [r for r in runs if r["converged"]] or runs
+            key = "holdout_rms" if val_n else "rms"
+            low = min(r[key] for r in pool)
+            # costs equal to COST_RTOL are a tie (two paths into one valley), kept in SEARCHES order: the last bits
+            # of a cost never choose between two models (their hold-out behaviour can differ)
+            pick = next(r for r in pool if r[key] <= low * (1 + COST_RTOL))
         else:
-            pick = {"z": z0, "rms": rms0, "status": "kept the linear start", "holdout_rms": v0}
+            pick = {"z": z0, "rms": rms0, "status": "kept the linear start", "holdout_rms": v0, "converged": True}
         z = pick["z"]
         theta, x0s = split(z)
         self.A_, self.B_, self.E_, self.C_, self.D_, self.F_ = (M.copy() for M in self._unpack(theta))
@@ -339,6 +355,7 @@ class PNLSS(Identifier):
             "rms": pick["rms"],
             "holdout_rms": pick["holdout_rms"],
             "status": pick["status"],
+            "converged": pick["converged"],
             "units": "output RMS",
             "searches": [{k: v for k, v in r.items() if k != "z"} for r in runs],
         }
