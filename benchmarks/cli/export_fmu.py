@@ -106,14 +106,8 @@ def _run_model(args: argparse.Namespace) -> int:
     fs = args.fs or model.fs_
     summary = {"model": str(args.model), "identifier": model.name, "fmu": str(path), "bytes": Path(path).stat().st_size,
                "fs": fs, "validation_problems": problems, "build_seconds": round(seconds, 3)}
-    if args.json:
-        emit_json(summary)
-    else:
-        print(f"exported {model.name} model {args.model} (fs {fs:g} Hz, step 1/fs) -> {path} "
-              f"({summary['bytes'] / 1e3:.0f} kB, {'valid' if not problems else 'INVALID'})")
-    for p in problems:
-        print(f"validation: {p}")
-    return 1 if problems else 0
+    return _finish(args, summary, f"exported {model.name} model {args.model} (fs {fs:g} Hz, step 1/fs) -> {path} "
+                                  f"({summary['bytes'] / 1e3:.0f} kB, {'valid' if not problems else 'INVALID'})")
 
 
 def _run_hybrid(args: argparse.Namespace) -> int:
@@ -132,11 +126,19 @@ def _run_hybrid(args: argparse.Namespace) -> int:
     summary = {"hybrid": str(args.hybrid), "twin": hybrid.physics.name, "effects": sorted(hybrid.physics.effects),
                "identifier": hybrid.identifier_, "fmu": str(path), "bytes": Path(path).stat().st_size, "fs": fs,
                "validation_problems": problems, "build_seconds": round(seconds, 3)}
+    return _finish(args, summary, f"exported hybrid twin {args.hybrid} ({hybrid.physics.name} + {hybrid.identifier_} "
+                                  f"remainder; fs {fs:g} Hz, step 1/fs) -> {path} ({summary['bytes'] / 1e3:.0f} kB, "
+                                  f"{'valid' if not problems else 'INVALID'})")
+
+
+def _finish(args: argparse.Namespace, summary: dict, line: str) -> int:
+    """Print the export's JSON summary (``--json``) or its one line, then each validation problem; exit status 1
+    when the FMU did not validate."""
+    problems = summary["validation_problems"]
     if args.json:
         emit_json(summary)
     else:
-        print(f"exported hybrid twin {args.hybrid} ({hybrid.physics.name} + {hybrid.identifier_} remainder; fs {fs:g} "
-              f"Hz, step 1/fs) -> {path} ({summary['bytes'] / 1e3:.0f} kB, {'valid' if not problems else 'INVALID'})")
+        print(line)
     for p in problems:
         print(f"validation: {p}")
     return 1 if problems else 0
