@@ -39,11 +39,12 @@ CANTILEVER_STRUCTURE = {"ny": 10, "nu": 10, "hidden": [25, 25, 25, 25], "activat
 
 
 def cantilever_data(duration_s: float | None = None, freqs_hz: Sequence[float] | None = None, seed: int = 0,
-                    effects: Sequence[str] | None = None) -> tuple[Record, list[Record]]:
-    """(estimation record, list of sine segments) from the cantilever twin with its default effects."""
+                    effects: Sequence[str] | None = None, params: Any = None) -> tuple[Record, list[Record]]:
+    """(estimation record, list of sine segments) from the cantilever twin with its default effects (or
+    ``effects``) and its default parameters (or ``params``, a :class:`twins.cantilever.params.CantileverParams`)."""
     from twins.cantilever import CantileverTwin
 
-    twin = CantileverTwin(seed=seed) if effects is None else CantileverTwin(effects=list(effects), seed=seed)
+    twin = CantileverTwin(params=params, effects=None if effects is None else list(effects), seed=seed)
     est_opts: dict[str, Any] = {} if duration_s is None else {"duration_s": float(duration_s)}
     val_opts: dict[str, Any] = {} if freqs_hz is None else {"freqs_hz": list(freqs_hz)}
     est = twin.generate("thesis-multisine", **est_opts)

@@ -376,10 +376,9 @@ class ARMAX(_LinearBase):
                 # (when invertible), keep the one with the smaller prediction error.
                 xr = x.copy()
                 xr[len(proc_idx):] = reflect_inside(split(x)[1])[e_lags]
-                cands = [(float(residual(xr) @ residual(xr)), xr, "PEM with C reflected")]
-                if _invertible(split(x0)[1]):
-                    cands.append((float(residual(x0) @ residual(x0)), x0.copy(), "the ELS estimate"))
-                cost, x, which = min(cands, key=lambda cnd: cnd[0])
+                cands = [(xr, "PEM with C reflected")] + ([(x0.copy(), "the ELS estimate")]
+                                                          if _invertible(split(x0)[1]) else [])
+                x, which = min(cands, key=lambda cnd: float(np.sum(residual(cnd[0]) ** 2)))
                 message += f"; C stayed outside the unit circle after {PEM_REFLECTIONS} restarts: kept {which}"
             r, J = residual(x), jac(x)
         else:

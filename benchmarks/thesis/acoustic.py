@@ -195,6 +195,7 @@ def ds2_task(ny: int, hidden: tuple[int, ...], activation: str, seed: int, t: Ti
     from sysid.registry import get_identifier
 
     est, val = dataset2(t.short_records, distance_m)
+    tw = _twin(distance_m)
     c0, w0 = time.process_time(), time.perf_counter()
     kw = {"ny": ny, "nu": 512, "nk": nk, "hidden": list(hidden), "activation": activation, "lr": 1e-4,
           "batch_size": 128, "epochs": t.acoustic_epochs, "seed": seed}
@@ -203,8 +204,7 @@ def ds2_task(ny: int, hidden: tuple[int, ...], activation: str, seed: int, t: Ti
     out = {"params": kw, "seed": seed, "r2_osa_est": float(r2(est.output, model.predict(est, 1), lag)),
            "r2_frs_est": _frs_r2(model, est), "r2_osa_val": float(r2(val.output, model.predict(val, 1), lag)),
            "r2_frs_val": _frs_r2(model, val), "n_parameters": int(model.n_parameters_),
-           "distance_m": float(_twin(distance_m).params.distance_m),
-           "tof_samples": float(_twin(distance_m).time_of_flight() * est.fs)}
+           "distance_m": float(tw.params.distance_m), "tof_samples": float(tw.time_of_flight() * est.fs)}
     out.update(cpu_seconds=time.process_time() - c0, wall_seconds=time.perf_counter() - w0)
     return out
 

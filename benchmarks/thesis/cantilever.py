@@ -44,17 +44,12 @@ def data(duration_s: float | None, short: bool, without: str | None = None, bw_a
     """(estimation record, sine segments) of the twin (default effects, seed 0; ``without`` one of them;
     ``bw_alpha`` another Bouc–Wen hysteresis share); ``short``: quick-tier sines."""
     from benchmarks.neural_twins import cantilever_data
-    from twins.cantilever import CantileverTwin
     from twins.cantilever.effects import DEFAULT_ON
     from twins.cantilever.params import CantileverParams
 
     effects = None if without is None else [e for e in DEFAULT_ON if e != without]
-    if bw_alpha is None:
-        est, segs = cantilever_data(duration_s=duration_s, effects=effects)
-    else:
-        twin = CantileverTwin(params=replace(CantileverParams(), bw_alpha=float(bw_alpha)), effects=effects, seed=0)
-        est = twin.generate("thesis-multisine", **({} if duration_s is None else {"duration_s": float(duration_s)}))
-        segs = twin.generate("thesis-sines").segments()
+    params = None if bw_alpha is None else replace(CantileverParams(), bw_alpha=float(bw_alpha))
+    est, segs = cantilever_data(duration_s=duration_s, effects=effects, params=params)
     if short:  # one period of each sine above 1 Hz (at least 100 samples), the 0.1/1 Hz sines cut to 1 s
         segs = [s[: max(100, min(len(s), int(s.fs / max(float(s.meta["segment"]["freq_hz"]), 1.0))))] for s in segs]
     return est, segs
