@@ -79,6 +79,30 @@ def _copy_package(src: Path, dest: Path) -> None:
     shutil.copytree(src, dest, ignore=ignore)
 
 
+def stage_packages(stage: Path, packages: Iterable[str]) -> list[Path]:
+    """Copy the importable ``packages`` (their source, no byte code) to ``stage/pkgs/<name>`` for an FMU's
+    ``resources/``; the folders copied, in order."""
+    pkg_dir = stage / "pkgs"
+    pkg_dir.mkdir(exist_ok=True)
+    out = []
+    for name in packages:
+        mod = importlib.import_module(name)
+        _copy_package(Path(str(mod.__file__)).parent, pkg_dir / name)
+        out.append(pkg_dir / name)
+    return out
+
+
+def export_core(twin: Twin, fs: float, core: dict[str, Any] | None = None) -> dict[str, Any]:
+    """The per-sample core an FMU of ``twin`` at ``fs`` [Hz] runs (:func:`twins.fmu.cores.choose_core` unless
+    ``core`` is given), a response core described at export (:func:`twins.fmu.response.prepare_response_core`)."""
+    core = dict(core) if core is not None else choose_core(twin, fs)
+    if core["kind"] == "response":
+        from twins.fmu.response import prepare_response_core
+
+        core = prepare_response_core(twin, fs, core)
+    return core
+
+
 def _project_version() -> str:
     try:
         from importlib.metadata import version
@@ -104,23 +128,14 @@ def export_fmu(twin: Twin, path: str | Path, fs: float | None = None, model_name
     with tempfile.TemporaryDirectory(prefix="piezotwin_fmu_") as tmp:
         stage = Path(tmp)
         files: list[Path] = []
-        core = dict(core) if core is not None else choose_core(twin, fs)
-        if core["kind"] == "response":
-            from twins.fmu.response import prepare_response_core
-
-            core = prepare_response_core(twin, fs, core)
+        core = export_core(twin, fs, core)
         cfg = fmu_config(twin, fs, core, model_name)
         cfg["project_version"] = _project_version()
         (stage / CONFIG_NAME).write_text(json.dumps(cfg, indent=1, default=_json_default))
         files.append(stage / CONFIG_NAME)
-        pkg_dir = stage / "pkgs"
-        pkg_dir.mkdir()
-        shipped = set()
-        for name in packages:
-            mod = importlib.import_module(name)
-            _copy_package(Path(mod.__file__).parent, pkg_dir / name)
-            files.append(pkg_dir / name)
-            shipped.add(name)
+        packages = list(packages)
+        files += stage_packages(stage, packages)
+        shipped, pkg_dir = set(packages), stage / "pkgs"
         top = type(twin).__module__.split(".")[0]
         if top not in shipped:  # a twin defined outside the project (e.g. a user's module): ship it too
             mod = sys.modules[top]

@@ -13,7 +13,6 @@ twin's ``simulate`` sample for sample (the same kernels run one sample at a time
 
 from __future__ import annotations
 
-import importlib
 import json
 import tempfile
 from collections.abc import Iterable
@@ -21,8 +20,14 @@ from pathlib import Path
 
 from sysid.errors import ConfigError
 from sysid.jsonio import json_default
-from twins.fmu.cores import choose_core
-from twins.fmu.export import SHIPPED_PACKAGES, _copy_package, _identifier, _project_version, build_from_source
+from twins.fmu.export import (
+    SHIPPED_PACKAGES,
+    _identifier,
+    _project_version,
+    build_from_source,
+    export_core,
+    stage_packages,
+)
 from twins.fmu.hybrid_slave import HYBRID_CONFIG_NAME, HYBRID_FMU_FORMAT
 from twins.hybrid import HybridTwin
 
@@ -62,11 +67,7 @@ def export_hybrid_fmu(hybrid: HybridTwin, path: str | Path, fs: float | None = N
     fs = float(fs)
     hybrid.make_stepper(fs)  # refuses a rate other than the remainder's and a remainder without a stepper
     physics = hybrid.physics
-    core = choose_core(physics, fs)
-    if core["kind"] == "response":
-        from twins.fmu.response import prepare_response_core
-
-        core = prepare_response_core(physics, fs, core)
+    core = export_core(physics, fs)
     model_name = _identifier(model_name or f"piezotwin_hybrid_{physics.name}")
     path.parent.mkdir(parents=True, exist_ok=True)
     with tempfile.TemporaryDirectory(prefix="piezotwin_fmu_") as tmp:
@@ -77,12 +78,7 @@ def export_hybrid_fmu(hybrid: HybridTwin, path: str | Path, fs: float | None = N
                "project_version": _project_version()}
         (stage / HYBRID_CONFIG_NAME).write_text(json.dumps(cfg, indent=1, default=json_default))
         files = [stage / HYBRID_CONFIG_NAME, stage / HYBRID_FILE]
-        pkg_dir = stage / "pkgs"
-        pkg_dir.mkdir()
-        for name in packages:
-            mod = importlib.import_module(name)
-            _copy_package(Path(str(mod.__file__)).parent, pkg_dir / name)
-            files.append(pkg_dir / name)
+        files += stage_packages(stage, packages)
         build_from_source(stage, model_name, hybrid_slave_source(model_name, physics.name, hybrid.identifier_),
                           files, path)
     return path

@@ -18,7 +18,7 @@ from pathlib import Path
 from sysid.errors import ConfigError
 from sysid.modelfile import write_model
 from sysid.stepper import make_stepper
-from twins.fmu.export import SHIPPED_PACKAGES, _copy_package, _identifier, _project_version, build_from_source
+from twins.fmu.export import SHIPPED_PACKAGES, _identifier, _project_version, build_from_source, stage_packages
 from twins.fmu.model_slave import MODEL_CONFIG_NAME, MODEL_FORMAT
 
 __all__ = ["export_model_fmu", "model_slave_source"]
@@ -42,7 +42,6 @@ def export_model_fmu(model, path: str | Path, fs: float | None = None, model_nam
                      packages: Iterable[str] = SHIPPED_PACKAGES) -> Path:
     """Build the FMU of the fitted ``model`` at ``path`` (``.fmu``). ``fs`` [Hz] defaults to the model's
     estimation rate (``model.fs_``); it must be given for model files that do not record it."""
-    import importlib
 
     path = Path(path)
     if path.suffix != ".fmu":
@@ -63,11 +62,6 @@ def export_model_fmu(model, path: str | Path, fs: float | None = None, model_nam
                "units": est.get("units", {}), "project_version": _project_version()}
         (stage / MODEL_CONFIG_NAME).write_text(json.dumps(cfg, indent=1))
         files = [stage / MODEL_CONFIG_NAME, stage / "model.npz"]
-        pkg_dir = stage / "pkgs"
-        pkg_dir.mkdir()
-        for name in packages:
-            mod = importlib.import_module(name)
-            _copy_package(Path(mod.__file__).parent, pkg_dir / name)
-            files.append(pkg_dir / name)
+        files += stage_packages(stage, packages)
         build_from_source(stage, model_name, model_slave_source(model_name, model.name), files, path)
     return path
