@@ -29,6 +29,7 @@ IDENTIFIERS: dict[str, str] = {
     "narx-poly-sim": "sysid.polysim:NARXPolySim",
     "oe-echo": "sysid.echo_oe:EchoOE",
     "pnlss": "sysid.pnlss:PNLSS",
+    "wh-bla": "sysid.wiener_hammerstein:WienerHammerstein",
 }
 
 # Identifiers whose models are linear in the input: the baselines a nonlinear model must beat (the scoring rule of

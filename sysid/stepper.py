@@ -8,8 +8,9 @@ keeps the last ``max_lag_ + 1`` samples and runs the model's *own* compiled free
 computed by the same arithmetic in the same order as the whole-record free run: the two agree bit for bit.
 
 Supported: every identifier whose free run is a function of a finite past (``arx``, ``armax``, ``narx-poly``,
-``narmax-poly``, ``narx-mlp``, ``narx-mlp-sim``), and ``pnlss``, whose state is carried from one sample to the
-next through its own compiled kernel (:func:`sysid.pnlss_sim.simulate` with ``final_state``). The recurrent
+``narmax-poly``, ``narx-mlp``, ``narx-mlp-sim``), ``pnlss``, whose state is carried from one sample to the
+next through its own compiled kernel (:func:`sysid.pnlss_sim.simulate` with ``final_state``), and ``wh-bla``, whose
+two filters carry their ``scipy.signal.lfilter`` states from one sample to the next. The recurrent
 ``rnn`` (a hidden state started by an encoder) is not.
 """
 
@@ -23,7 +24,7 @@ from sysid.errors import ConfigError
 
 __all__ = ["make_stepper", "STEPPABLE", "MULTI_INPUT"]
 
-STEPPABLE = ("arx", "armax", "narx-poly", "narmax-poly", "narx-mlp", "narx-mlp-sim", "pnlss")
+STEPPABLE = ("arx", "armax", "narx-poly", "narmax-poly", "narx-mlp", "narx-mlp-sim", "pnlss", "wh-bla")
 #: identifiers whose stepper takes several inputs (one output)
 MULTI_INPUT = ("arx", "armax", "narx-poly", "narmax-poly")
 
@@ -132,6 +133,41 @@ class StateSpaceStepper:
         return 0.0 if self.k <= m.max_lag_ else float(y[0, 0] * m.y_scale_[0])
 
 
+class BlockStepper:
+    """Wiener–Hammerstein (``wh-bla``): G1 and G2 advanced one sample per step with their ``lfilter`` states (the
+    delays as short input queues), the spline between; outputs before ``max_lag_`` are the zero initial
+    conditions, as in the free run."""
+
+    def __init__(self, model):
+        self.model = model
+        self.reset()
+
+    def reset(self) -> None:
+        m = self.model
+        self.z = [np.zeros(max(len(g.a), len(g.b)) - 1) for g in (m.g1_, m.g2_)]
+        self.queues = [np.zeros(g.nk) for g in (m.g1_, m.g2_)]  # v(k-1), ..., v(k-nk)
+        self.k = 0
+
+    def _filter(self, i: int, g, v: float) -> float:
+        from scipy.signal import lfilter
+
+        q = self.queues[i]
+        if q.size:
+            v, q[1:], q[0] = float(q[-1]), q[:-1].copy(), v
+        if self.z[i].size == 0:
+            return float(g.b[0] * v)
+        out, self.z[i] = lfilter(g.b, g.a, [v], zi=self.z[i])
+        return float(out[0])
+
+    def step(self, u: float) -> float:
+        m = self.model
+        x = self._filter(0, m.g1_, float(u))
+        w = float(m.spline_(np.array([x]), m.c_)[0])
+        y = self._filter(1, m.g2_, w)
+        self.k += 1
+        return 0.0 if self.k <= m.max_lag_ else y
+
+
 def make_stepper(model):
     """A fresh stepper (state at rest) for a fitted single-output ``model`` (several inputs: :data:`MULTI_INPUT`)."""
     if model.name not in STEPPABLE:
@@ -144,4 +180,6 @@ def make_stepper(model):
         return NeuralNARXStepper(model)
     if model.name == "pnlss":
         return StateSpaceStepper(model)
+    if model.name == "wh-bla":
+        return BlockStepper(model)
     return PolynomialStepper(model)

@@ -1,5 +1,6 @@
-"""Identified models as FMUs: per-sample stepper == free run bit for bit; exported ARX, narx-poly, a NARX network
-and a PNLSS model validate with fmpy and their FMPy simulation equals the model's own free run (1e-9 relative)."""
+"""Identified models as FMUs: per-sample stepper == free run bit for bit; exported ARX, narx-poly, a NARX network,
+a PNLSS and a Wiener–Hammerstein model validate with fmpy and their FMPy simulation equals the model's own free run
+(1e-9 relative)."""
 
 import json
 import zipfile
@@ -13,6 +14,7 @@ from sysid.neural.narx_mlp import NARXMLP
 from sysid.pnlss import PNLSS
 from sysid.polynomial import NARMAXPoly, NARXPoly
 from sysid.stepper import make_stepper
+from sysid.wiener_hammerstein import WienerHammerstein
 from tests._polysys import narx_record
 
 fmpy = pytest.importorskip("fmpy")
@@ -37,6 +39,7 @@ def _models(est):
         "narmax-poly": NARMAXPoly(ne=1).fit(est),
         "narx-mlp": NARXMLP(ny=3, nu=3, hidden=[8, 8], epochs=3, device="cpu", linear=True, seed=1).fit(est),
         "pnlss": PNLSS(nx=2, degree=2, max_nfev=20, starts=1).fit(est),
+        "wh-bla": WienerHammerstein(nb=3, nf=2, knots=4, extra_zeros=1, warmup=2, max_nfev=20).fit(est),
     }
 
 
@@ -57,7 +60,7 @@ def test_stepper_refuses_rnn():
         make_stepper(RNNStateSpace())
 
 
-@pytest.mark.parametrize("name", ["arx", "narx-poly", "narx-mlp", "pnlss"])
+@pytest.mark.parametrize("name", ["arx", "narx-poly", "narx-mlp", "pnlss", "wh-bla"])
 def test_exported_model_fmu_validates_and_equals_free_run(name, est, tmp_path, capsys):
     from benchmarks.cli import main
 

@@ -36,6 +36,7 @@ SETTINGS = {
     "wh-net": "channels=2,hidden=4,nb=2,na=2,epochs=2,warmup=2,device=cpu",
     "oe-echo": "nb=3,nf=2,nk=1,echo_lag=6,echo_width=1",
     "pnlss": "nx=2,degree=2",
+    "wh-bla": "nb=3,nf=2,knots=4,extra_zeros=1,warmup=2,max_nfev=20",
 }
 
 
