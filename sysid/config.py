@@ -14,7 +14,8 @@ from typing import Any
 
 from sysid.errors import ConfigError
 
-__all__ = ["parse_assignments", "coerce", "apply_assignments", "positive", "make_rng", "ALIASES", "resolve_aliases"]
+__all__ = ["parse_assignments", "coerce", "apply_assignments", "positive", "int_option", "make_rng", "ALIASES",
+           "resolve_aliases"]
 
 # One vocabulary for identifier options, the same in the Python API, ``--set`` and model files: lags ``ny``, ``nu``,
 # delay ``nk`` in every identifier that has them, the linear bypass ``linear``. Older spellings stay accepted for
@@ -225,3 +226,13 @@ def positive(name: str, value: Any, integer: bool = False) -> float:
     if integer and v != int(v):
         raise ConfigError(f"{name} must be an integer, got {value!r}")
     return v
+
+
+def int_option(owner: str, name: str, value: Any, low: int) -> int:
+    """An identifier's integer option ``name`` (not a bool) of at least ``low``, else a one-line ConfigError naming
+    ``owner`` (the identifier)."""
+    import numpy as np
+
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < low:
+        raise ConfigError(f"{owner}: {name}={value!r} must be an integer >= {low}")
+    return int(value)

@@ -53,6 +53,7 @@ from scipy.optimize import least_squares
 
 from sysid import pnlss_sim as ps
 from sysid.base import Identifier, as_record_list, check_prediction, check_records, stop_at_divergence
+from sysid.config import int_option
 from sysid.errors import ConfigError, DataError
 from sysid.record import Record
 
@@ -74,9 +75,7 @@ class _Stop(Exception):
 
 
 def _int_option(name: str, value: Any, low: int) -> int:
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < low:
-        raise ConfigError(f"pnlss: {name}={value!r} must be an integer >= {low}")
-    return int(value)
+    return int_option("pnlss", name, value, low)
 
 
 class PNLSS(Identifier):

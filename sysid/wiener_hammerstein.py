@@ -48,6 +48,7 @@ from scipy.optimize import least_squares
 
 from sysid import wh_blocks as wb
 from sysid.base import Identifier, as_record_list, check_prediction, check_records, stop_at_divergence
+from sysid.config import int_option
 from sysid.errors import ConfigError, DataError
 from sysid.record import Record
 
@@ -60,9 +61,7 @@ RESTAGES = 2  # most extra searches, each after placing the knots again, while x
 
 
 def _int_option(name: str, value: Any, low: int) -> int:
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < low:
-        raise ConfigError(f"wh-bla: {name}={value!r} must be an integer >= {low}")
-    return int(value)
+    return int_option("wh-bla", name, value, low)
 
 
 class WienerHammerstein(Identifier):
