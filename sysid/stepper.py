@@ -139,7 +139,10 @@ class BlockStepper:
     conditions, as in the free run."""
 
     def __init__(self, model):
+        from scipy.signal import lfilter
+
         self.model = model
+        self._lfilter = lfilter  # imported once here, not on every sample
         self.reset()
 
     def reset(self) -> None:
@@ -149,14 +152,12 @@ class BlockStepper:
         self.k = 0
 
     def _filter(self, i: int, g, v: float) -> float:
-        from scipy.signal import lfilter
-
         q = self.queues[i]
         if q.size:
             v, q[1:], q[0] = float(q[-1]), q[:-1].copy(), v
         if self.z[i].size == 0:
             return float(g.b[0] * v)
-        out, self.z[i] = lfilter(g.b, g.a, [v], zi=self.z[i])
+        out, self.z[i] = self._lfilter(g.b, g.a, [v], zi=self.z[i])
         return float(out[0])
 
     def step(self, u: float) -> float:

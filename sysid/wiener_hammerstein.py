@@ -144,8 +144,6 @@ class WienerHammerstein(Identifier):
             stages.append(info)
         self.g1_, self.c_, self.g2_, self.spline_ = g1, c, g2, f
         self.optimisation_ = {**stages[-1], "converged": all(s["converged"] for s in stages), "stages": stages}
-        self.n_parameters_ = int(len(self.g1_.b) + len(self.g1_.a) - 1 + len(self.c_) + len(self.g2_.b)
-                                 + len(self.g2_.a) - 3)
         self._set_common()
         return self
 
@@ -154,7 +152,8 @@ class WienerHammerstein(Identifier):
         n = len(u) if o["split_samples"] == 0 else min(len(u), o["split_samples"])
         u, y, w0 = u[:n], y[:n], min(o["warmup"], n // 2)
         try:
-            candidates = list(wb.splits(wb.Filter(b, a).zeros(), wb.Filter(b, a).poles()))
+            bla = wb.Filter(b, a)
+            candidates = list(wb.splits(bla.zeros(), bla.poles()))
         except ValueError as exc:
             raise ConfigError(f"wh-bla: {exc}") from None
         best: tuple | None = None
@@ -201,17 +200,15 @@ class WienerHammerstein(Identifier):
     def _refine(self, g1: wb.Filter, f: wb.Spline, c: np.ndarray, g2: wb.Filter, us, ys, o):
         """One Levenberg–Marquardt search of step 3 (module docstring): (G1, c, G2, summary)."""
         j2 = int(np.argmax(np.abs(g2.b)))
-        free1 = np.arange(len(g1.b))
+        free1 = np.arange(len(g1.b))  # every coefficient of B1 (module docstring: why G1's gain stays free)
         free2 = np.array([i for i in range(len(g2.b)) if i != j2], dtype=int)
-        n1a, n2a, nc = len(g1.a) - 1, len(g2.a) - 1, len(c)
+        n1b, n1a, n2a, nc = len(g1.b), len(g1.a) - 1, len(g2.a) - 1, len(c)
         w0 = o["warmup"]
         scale = self.y_bound_ / DIVERGENCE_FACTOR
 
         def unpack(th: np.ndarray):
-            i = 0
-            b1 = g1.b.copy()
-            b1[free1] = th[i:i + len(free1)]
-            i += len(free1)
+            b1 = th[:n1b]
+            i = n1b
             a1 = np.r_[1.0, th[i:i + n1a]]
             i += n1a
             cc = th[i:i + nc]
@@ -240,27 +237,30 @@ class WienerHammerstein(Identifier):
                 J = np.vstack([wb.jacobian(h1, f, cc, h2, u, free1, free2)[1][w0:] for u in us])
             return np.nan_to_num(J, nan=0.0, posinf=0.0, neginf=0.0)
 
-        th0 = np.concatenate([g1.b[free1], g1.a[1:], c, g2.b[free2], g2.a[1:]])
+        th0 = np.concatenate([g1.b, g1.a[1:], c, g2.b[free2], g2.a[1:]])
         r0 = fun(th0)
         cost0 = float(np.mean(r0 ** 2))
         info: dict[str, Any] = {"start_rms": float(np.sqrt(cost0)), "nfev": 0, "status": "start", "converged": False}
-        th = th0
+        th, cost_kept = th0, cost0
         if o["max_nfev"] > 0:
             res = least_squares(fun, th0, jac=jac, method="lm", x_scale="jac", max_nfev=o["max_nfev"],
                                 xtol=float(self.xtol), ftol=float(self.ftol))
             cost = float(np.mean(res.fun ** 2))
             info.update(nfev=int(res.nfev), status=str(res.message), converged=bool(res.status in (2, 3, 4)))
             if np.isfinite(cost) and cost <= cost0:
-                th = res.x
+                th, cost_kept = res.x, cost
             else:
                 info["status"] = "refinement ended worse than its start; the best split is kept"
         h1, cc, h2 = unpack(th)
-        info["rms"] = float(np.sqrt(np.mean(fun(th) ** 2)))
+        info["rms"] = float(np.sqrt(cost_kept))
         return h1, cc, h2, info
 
     def _set_common(self) -> None:
         self.max_lag_ = int(self.warmup)
         self.diverged_at_ = None
+        # B1, A1 less its leading 1, f, B2 less its pinned coefficient, A2 less its leading 1
+        self.n_parameters_ = int(len(self.g1_.b) + len(self.g1_.a) - 1 + len(self.c_) + len(self.g2_.b) - 1
+                                 + len(self.g2_.a) - 1)
 
     # ------------------------------------------------------------------ prediction
     def _check_fitted(self) -> None:
@@ -322,6 +322,4 @@ class WienerHammerstein(Identifier):
         self.optimisation_ = dict(state["optimisation"])
         self.y_bound_ = float(state["y_bound"])
         self.n_inputs_, self.n_outputs_ = 1, 1
-        self.n_parameters_ = int(len(self.g1_.b) + len(self.g1_.a) - 1 + len(self.c_) + len(self.g2_.b)
-                                 + len(self.g2_.a) - 3)
         self._set_common()

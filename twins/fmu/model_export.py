@@ -42,7 +42,6 @@ def export_model_fmu(model, path: str | Path, fs: float | None = None, model_nam
                      packages: Iterable[str] = SHIPPED_PACKAGES) -> Path:
     """Build the FMU of the fitted ``model`` at ``path`` (``.fmu``). ``fs`` [Hz] defaults to the model's
     estimation rate (``model.fs_``); it must be given for model files that do not record it."""
-
     path = Path(path)
     if path.suffix != ".fmu":
         raise ConfigError(f"{path}: the output file must end in .fmu")
