@@ -246,7 +246,7 @@ class WienerHammerstein(Identifier):
             res = least_squares(fun, th0, jac=jac, method="lm", x_scale="jac", max_nfev=o["max_nfev"],
                                 xtol=float(self.xtol), ftol=float(self.ftol))
             cost = float(np.mean(res.fun ** 2))
-            info.update(nfev=int(res.nfev), status=str(res.message), converged=bool(res.status in (2, 3, 4)))
+            info.update(nfev=int(res.nfev), status=str(res.message), converged=bool(res.status > 0))
             if np.isfinite(cost) and cost <= cost0:
                 th, cost_kept = res.x, cost
             else:
