@@ -30,15 +30,16 @@ def _noisy(rec: Record, y: np.ndarray, sigma: float, seed: int, tag: str) -> Rec
     return Record(u=rec.u, y=y, fs=rec.fs, units=rec.units, meta=dict(rec.meta), source=f"{rec.source}+{tag}")
 
 
-def drift_case(seed: int):
+def drift_case(seed: int, val_hold_s: float = HOLD_S):
     """(start = default twin (no drift), est, val, truth, noise NRMSE of val): ramp 0.3–0.6 µm/s plus a sine of
-    1.5–3 µm and period 20–40 s (slower than the 10 s record) at a random phase, on 80 V / 60 V steps."""
+    1.5–3 µm and period 20–40 s (slower than the 10 s record) at a random phase, on 80 V / 60 V steps (the
+    validation's steps held ``val_hold_s``: a longer validation record than the estimation's)."""
     from twins.cantilever import CantileverTwin
 
     rng = np.random.default_rng(500 + seed)
     clean = _clean_twin(seed)
     est = clean.generate("steps", fs=1000.0, hold_s=HOLD_S, level_v=80.0)
-    val = clean.generate("steps", fs=1000.0, hold_s=HOLD_S, level_v=60.0)
+    val = clean.generate("steps", fs=1000.0, hold_s=val_hold_s, level_v=60.0)
     truth = {"ramp": float(rng.uniform(0.3, 0.6)), "amp": float(rng.uniform(1.5, 3.0)),
              "period": float(rng.uniform(20.0, 40.0)), "phase": float(rng.uniform(0.0, 2 * np.pi))}
 

@@ -49,10 +49,14 @@ class EffectSpec:
     default_on: bool = False
     group: str = ""  # effects the data cannot tell apart share a group name
     generic: str = ""  # the model-agnostic effect this one specialises (twins.generic_effects), if any
+    # its law changes with the time since the record's start (a drift of the reading or of the gain): between
+    # separate records the diagnosis judges it only over the time both records cover (twins.discrepancy.ranking)
+    time_varying: bool = False
 
     def to_dict(self, params_cls: type | None = None) -> dict[str, Any]:
         d: dict[str, Any] = {"id": self.id, "twin": self.twin, "description": self.description,
-                             "signature": self.signature, "default_on": self.default_on, "group": self.group}
+                             "signature": self.signature, "default_on": self.default_on, "group": self.group,
+                             "time_varying": self.time_varying}
         info = param_info(params_cls) if params_cls is not None else {}
         d["params"] = {
             k: ({"field": f, "unit": info[f].unit, "range": list(info[f].range), "default": info[f].default,

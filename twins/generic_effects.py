@@ -219,6 +219,7 @@ GENERIC_EFFECTS: dict[str, EffectSpec] = {
         "slow monotone trend in the residual, present even at u = 0; no correlation with u",
         {"amplitude": "drift_offset", "tau": "drift_tau_s"},
         group="drift",
+        time_varying=True,
     ),
     "slow_drift": EffectSpec(
         "slow_drift",
@@ -228,6 +229,7 @@ GENERIC_EFFECTS: dict[str, EffectSpec] = {
         "slow trend in the residual (a ramp, a slow swing or turn), present even at u = 0; no correlation with u",
         {"rate": "drift_rate", "sine": "drift_sin", "cosine": "drift_cos", "period": "drift_period_s"},
         group="drift",
+        time_varying=True,
     ),
     "sensor_offset": EffectSpec(
         "sensor_offset",
@@ -244,6 +246,7 @@ GENERIC_EFFECTS: dict[str, EffectSpec] = {
         "slow change of the gain: y·(1 + g·(1 − e^(−t/τ)))",
         "residual ∝ y with a weight growing slowly over the record",
         {"gain": "gain_drift", "tau": "gain_drift_tau_s"},
+        time_varying=True,
     ),
     "output_quantization": EffectSpec(
         "output_quantization",

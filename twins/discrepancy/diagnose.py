@@ -65,6 +65,7 @@ from .fields import core_for, numeric_fields, quant_params
 from .hybrid import hybrid_block
 from .options import DiagnoseOptions
 from .prediction import (
+    MIN_SCORED_SAMPLES,
     NOISE_EFFECTS,
     deterministic,
     significance,
@@ -118,7 +119,6 @@ def run_diagnosis(twin: Twin, data: Record, val: Record | None = None, max_round
         return _conclude(inp, cal, base, ext, opts)
 
 
-MIN_SCORED_SAMPLES = 32  # fewest samples after skip: residual gradients, spectra and correlation lags need a record
 _PARALLEL_FROM = 1 << 20  # samples (estimation + validation) from which numba's own thread count is kept
 
 

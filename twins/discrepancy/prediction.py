@@ -21,13 +21,16 @@ from . import evidence as ev
 from .features import clip_to_rails
 
 __all__ = ["NOISE_EFFECTS", "unpredictable", "deterministic", "simulate", "simulate_val", "with_rails", "sse",
-           "significance"]
+           "significance", "continues", "MIN_SCORED_SAMPLES"]
 
 #: effects that model unpredictable noise: never a candidate cause, always off in the fitted prediction
 NOISE_EFFECTS: tuple[str, ...] = ("measurement_noise",)
 
 #: meta key under which the diagnosis attaches the saturation rails to its working copies of the records
 RAILS_KEY = "diagnose_saturation_rails"
+
+#: fewest samples after skip that a diagnosis scores: residual gradients, spectra and correlation lags need a record
+MIN_SCORED_SAMPLES = 32
 
 
 def unpredictable(twin: Twin) -> set[str]:

@@ -40,10 +40,10 @@ from . import evidence as ev
 from . import features as ft
 from .fields import fmt_params
 from .options import DiagnoseOptions
-from .prediction import significance
+from .prediction import MIN_SCORED_SAMPLES, continues, significance, sse
 from .trials import Stage, Trial
 
-__all__ = ["Ranking", "rank_round", "cause_from"]
+__all__ = ["Ranking", "rank_round", "cause_from", "judged_span"]
 
 
 @dataclasses.dataclass
@@ -70,11 +70,35 @@ def rank_round(trials: list[Trial], stage: Stage, est: Record, val: Record, twin
     return Ranking(trials, group, _rows(trials, group, sig_ev))
 
 
+def judged_span(effect: str, twin: Twin, est: Record, val: Record) -> int:
+    """How many leading validation samples judge ``effect``: all of them, except for an effect whose law changes
+    with the time since the record's start (``EffectSpec.time_varying``: a drift) on a validation record that is a
+    separate experiment (it does not continue ``est``). Such an effect is fitted as a function of time over the
+    estimation record's duration and simulated on the validation record from its own start: beyond that duration
+    its curve is an extrapolation, which between separate records also follows any difference in level between
+    them (a drive-dependent offset, a sensor zeroed anew). It is judged over the time both records cover."""
+    if not twin.EFFECTS[effect].time_varying or continues(est, val):
+        return val.n
+    return min(val.n, int(round(len(est) / est.fs * val.fs)))
+
+
 def _judge(trials: list[Trial], stage: Stage, est: Record, val: Record, prior: Twin, n_eff0: float,
            opts: DiagnoseOptions) -> None:
-    """p-value, gain and significance of each trial against ``stage`` (module docstring)."""
+    """p-value, gain and significance of each trial against ``stage`` (module docstring); a drift between separate
+    records on the validation samples of :func:`judged_span` only."""
     skip = opts.skip
     for tr in trials:
+        m = judged_span(tr.effect, stage.twin, est, val)
+        tr.judged_samples = max(m - skip, 0)
+        if m < val.n:
+            if tr.judged_samples < MIN_SCORED_SAMPLES:
+                tr.p_value, tr.gain = 1.0, 0.0
+                continue
+            sse0, sse1 = sse(val.output[:m], stage.yhat_val[:m], skip), sse(val.output[:m], tr.yhat_val[:m], skip)
+            n_eff = ft.effective_samples(val.output[skip:m] - tr.yhat_val[skip:m])
+            tr.p_value = significance(sse0, sse1, n_eff, tr.n_added)
+            tr.gain = max(0.0, 1.0 - math.sqrt(sse1 / sse0)) if sse0 > 0 else 0.0
+            continue
         n_eff = min(n_eff0, ft.effective_samples(val.output[skip:] - tr.yhat_val[skip:]))
         # the validation residual has no parameter fitted to it: its denominator keeps N_eff − k (k_total, the
         # in-sample count, would make a 98.6 % gain of a creep re-test insignificant at N_eff = 8: d2 = 1)
@@ -133,7 +157,8 @@ def _rows(trials: list[Trial], group: list[str], sig_ev: dict[str, dict[str, Any
                      "confidence": conf, "signature_score": s["score"], "signature": s["text"],
                      "nrmse_val": tr.nrmse_val, "r2_val": tr.r2_val, "gain": tr.gain, "p_value": tr.p_value,
                      "n_params": tr.n_added, "n_params_total": tr.n_total,
-                     "params": tr.effect_params, "stderr": tr.stderr, "seconds": tr.seconds})
+                     "params": tr.effect_params, "stderr": tr.stderr, "seconds": tr.seconds,
+                     "judged_samples": tr.judged_samples})
     return rows
 
 

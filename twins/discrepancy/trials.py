@@ -51,6 +51,7 @@ class Trial:
     n_total: int = 0  # k_total: every parameter the trial fitted (k and the core parameters refitted with them)
     base: Twin | None = None
     retest: bool = False  # an effect that was already on, its own parameters refitted (:mod:`.defaults`)
+    judged_samples: int = 0  # validation samples (after skip) its gain and p-value were judged on (:mod:`.ranking`)
 
 
 def run_trial(base: Twin, effect: str, est: Record, val: Record, core: list[str], a_val: dict[str, Any],
