@@ -66,11 +66,13 @@ class CantileverTwin(Twin):
                            if f.type in ("float", float)
                            and f.name not in ("input_delay_s", "max_substep_s", "initial_state_um"))
 
-    #: parameters that enter the output additively and linearly (the slow drift's coefficients): a calibration
-    #: solves them by linear least squares for each value of the others (:mod:`twins.calibration`)
-    OUTPUT_LINEAR_PARAMS = ("drift_rate_um_per_s", "drift_sin_um", "drift_cos_um")
-    #: the parameter that shapes only their basis (scanned on a grid before the search, :mod:`twins.calibration`)
-    OUTPUT_BASIS_SHAPE_PARAMS = ("drift_period_s",)
+    #: parameters that enter the output additively and linearly (the drifts' sizes: the slow drift's coefficients
+    #: and the settling drift's final value): a calibration solves them by linear least squares for each value of
+    #: the others (:mod:`twins.calibration`)
+    OUTPUT_LINEAR_PARAMS = ("drift_rate_um_per_s", "drift_sin_um", "drift_cos_um", "thermal_drift_um")
+    #: the parameters that shape only their basis (the cycle's period, the settling time constant), each scanned on
+    #: a log grid before the search (:mod:`twins.calibration`)
+    OUTPUT_BASIS_SHAPE_PARAMS = ("drift_period_s", "thermal_tau_s")
 
     def __init__(self, params: Any = None, effects: Iterable[str] | None = None, seed: int | None = 0):
         super().__init__(params, effects, seed)
@@ -79,6 +81,11 @@ class CantileverTwin(Twin):
     def output_basis(self, name: str, n: int, fs: float) -> np.ndarray | None:
         """d y[k]/d ``name`` at the samples k = 0 … n−1 (rate ``fs``) for a parameter of
         :data:`OUTPUT_LINEAR_PARAMS`, or None when its effect is off (then it does not act)."""
+        if name == "thermal_drift_um":
+            if not self.has("thermal_drift"):
+                return None
+            # the kernel's D·(1 − e^(−t/τ)), as it computes it (−expm1)
+            return -np.expm1(-(np.arange(n) * (1.0 / float(fs))) / self.params.thermal_tau_s)
         if name not in self.OUTPUT_LINEAR_PARAMS or not self.has("slow_drift"):
             return None
         t = np.arange(n) * (1.0 / float(fs))

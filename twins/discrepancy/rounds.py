@@ -340,8 +340,9 @@ def _starting_points(stage: Stage, prior: Twin, core: list[str]) -> list[Twin]:
 def _refine(trials: list[Trial], stage: Stage, inp: Any, core_r: list[str], a_est: dict[str, Any],
             opts: DiagnoseOptions) -> None:
     """Stage B: the leader, and whoever comes close to it (within a factor 1.5 in validation SSE), refitted
-    together with the core parameters (``opts.refine`` at most), and the estimation leader if it is not among
-    them; kept where the estimation SSE improves.
+    together with the core parameters (``opts.refine`` at most), the estimation leader if it is not among them and
+    the other members of the leader's ambiguity group (``EffectSpec.group``); kept where the estimation SSE
+    improves.
 
     The estimation leader is refined because stage A holds the core at a calibration that bent to mimic the
     missing effect: creep added to a core whose gain absorbed creep's slow rise overshoots, fits the estimation
@@ -355,6 +356,12 @@ def _refine(trials: list[Trial], stage: Stage, inp: Any, core_r: list[str], a_es
         j = min(range(len(trials)), key=lambda k: trials[k].sse_est)
         if j not in picked and trials[j].sse_est < sse(inp.est.y, stage.yhat_est, opts.skip):
             picked.append(j)
+    # the leader's ambiguity group is refined with it: the ranking chooses between members the data can hardly tell
+    # apart, so each is judged as it fits with the core (a calibration whose offset and initial state absorbed a
+    # settling drift leaves thermal_drift no gain with the core held, while slow_drift, refitted, takes it)
+    group = inp.twin.EFFECTS[trials[0].effect].group if trials else ""
+    picked += [i for i, tr in enumerate(trials)
+               if group and i not in picked and inp.twin.EFFECTS[tr.effect].group == group]
     if opts.starts > 1:  # every candidate, from several starts (DiagnoseOptions.starts)
         picked = list(range(len(trials)))
     for i in picked:
