@@ -356,9 +356,8 @@ def _refine(trials: list[Trial], stage: Stage, inp: Any, core_r: list[str], a_es
         j = min(range(len(trials)), key=lambda k: trials[k].sse_est)
         if j not in picked and trials[j].sse_est < sse(inp.est.y, stage.yhat_est, opts.skip):
             picked.append(j)
-    # the leader's ambiguity group is refined with it: the ranking chooses between members the data can hardly tell
-    # apart, so each is judged as it fits with the core (a calibration whose offset and initial state absorbed a
-    # settling drift leaves thermal_drift no gain with the core held, while slow_drift, refitted, takes it)
+    # the leader's group is refined with it, so its members are judged alike (a core that absorbed a settling drift
+    # leaves thermal_drift no gain with the core held, while slow_drift, refitted, takes it)
     group = inp.twin.EFFECTS[trials[0].effect].group if trials else ""
     picked += [i for i, tr in enumerate(trials)
                if group and i not in picked and inp.twin.EFFECTS[tr.effect].group == group]
