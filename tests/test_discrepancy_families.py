@@ -15,9 +15,9 @@ import drift_creep_cases as C
 import numpy as np
 import pytest
 
+from sysid.record import Record
 from twins import generic_effects as ge
 from twins.cantilever import CantileverTwin
-from sysid.record import Record
 from twins.discrepancy import diagnose
 from twins.discrepancy.ranking import judged_span
 
