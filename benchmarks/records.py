@@ -1,7 +1,8 @@
 """The records table: per dataset, the identifier whose full settings give its best row, scored over training
 seeds, stored with how it was measured, and rendered into ``docs/benchmarks.md`` and ``benchmarks/records.json``.
 
-- ``benchmarks/settings/records.toml`` names, per dataset, the identifier of its row (with a ``why`` line);
+- ``benchmarks/settings/records.toml`` names, per dataset, the identifier of its row (with a ``why`` line) and,
+  optionally, ``beside``: other identifiers whose rows the table shows under it for comparison;
 - :func:`measure` scores one row exactly as ``piezotwin score --datasets D --identifiers I --seeds A-B --json``
   does (same library call, same settings) and wraps the raw result with the machine, date, load average,
   package versions and wall/CPU seconds; :func:`write_row` stores it as ``<dataset>.json`` (atomically);
@@ -41,11 +42,21 @@ DEFAULT_SEEDS: tuple[int, ...] = (0, 1, 2)
 
 @dataclass(frozen=True)
 class Entry:
-    """One row of the table: the dataset, the identifier whose full settings give it, and why that one."""
+    """One row of the table: the dataset, the identifier whose full settings give it, and why that one.
+
+    ``beside``: identifiers shown under the chosen row for comparison (each is an entry of its own, whose
+    ``beside_of`` names the chosen identifier; :func:`beside_entries`)."""
 
     dataset: str
     identifier: str
     why: str
+    beside: tuple[str, ...] = ()
+    beside_of: str = ""
+
+    @property
+    def key(self) -> str:
+        """Where the row is stored and found: ``dataset``, or ``dataset--identifier`` for a row shown beside."""
+        return f"{self.dataset}--{self.identifier}" if self.beside_of else self.dataset
 
 
 def load_entries(path: str | Path | None = None) -> list[Entry]:
@@ -58,15 +69,30 @@ def load_entries(path: str | Path | None = None) -> list[Entry]:
     for dname, table in _read(path).items():
         if dname not in dataset_names():
             raise ConfigError(f"{path}: [{dname}] is not a dataset; valid: {', '.join(dataset_names())}")
-        if not isinstance(table, dict) or set(table) != {"identifier", "why"}:
-            raise ConfigError(f"{path}: [{dname}] needs exactly `identifier` and a `why` line")
+        if not isinstance(table, dict) or not {"identifier", "why"} <= set(table) <= {"identifier", "why", "beside"}:
+            raise ConfigError(f"{path}: [{dname}] needs exactly `identifier` and a `why` line (and optionally "
+                              "`beside`, a list of identifiers)")
         ident, why = table["identifier"], table["why"]
         if ident not in IDENTIFIERS:
             raise ConfigError(f"{path}: [{dname}] identifier {ident!r} unknown; valid: {', '.join(IDENTIFIERS)}")
         if not (isinstance(why, str) and why.strip()):
             raise ConfigError(f"{path}: [{dname}] needs a `why` line saying which measurement chose {ident!r}")
-        entries.append(Entry(dname, ident, why.strip()))
+        beside = table.get("beside", [])
+        if not (isinstance(beside, list) and all(isinstance(b, str) for b in beside)):
+            raise ConfigError(f"{path}: [{dname}] `beside` must be a list of identifiers")
+        for b in beside:
+            if b not in IDENTIFIERS:
+                raise ConfigError(f"{path}: [{dname}] beside identifier {b!r} unknown; valid: {', '.join(IDENTIFIERS)}")
+        if ident in beside or len(set(beside)) != len(beside):
+            raise ConfigError(f"{path}: [{dname}] `beside` repeats an identifier or names the row's own {ident!r}")
+        entries.append(Entry(dname, ident, why.strip(), tuple(beside)))
     return entries
+
+
+def beside_entries(entries: Sequence[Entry]) -> list[Entry]:
+    """One entry per identifier shown beside a chosen row, in the settings' order."""
+    return [Entry(e.dataset, b, f"shown beside `{e.identifier}` for comparison", beside_of=e.identifier)
+            for e in entries for b in e.beside]
 
 
 def seeds_text(seeds: Sequence[int]) -> str:
@@ -75,6 +101,12 @@ def seeds_text(seeds: Sequence[int]) -> str:
     if not seeds or seeds != list(range(seeds[0], seeds[0] + len(seeds))):
         raise ConfigError(f"records need consecutive training seeds (A-B), got {seeds}")
     return f"{seeds[0]}-{seeds[-1]}"
+
+
+def measure_command(entry: Entry) -> str:
+    """The ``piezotwin records`` command that measures one row again."""
+    return f"piezotwin records --datasets {entry.dataset}" + (f" --identifiers {entry.identifier}"
+                                                              if entry.beside_of else "")
 
 
 def command(dataset: str, identifier: str, seeds: Sequence[int] = DEFAULT_SEEDS) -> str:
@@ -136,27 +168,30 @@ def _measure(entry: Entry, seeds: list[int], executor, progress: bool, process: 
             "score": scoring._clean(run.to_dict())}
 
 
-def row_path(directory: str | Path, dataset: str) -> Path:
-    return Path(directory) / f"{dataset}.json"
+def row_path(directory: str | Path, dataset: str, identifier: str | None = None) -> Path:
+    """``<dataset>.json`` for a chosen row, ``<dataset>--<identifier>.json`` for a row shown beside it."""
+    return Path(directory) / (f"{dataset}--{identifier}.json" if identifier else f"{dataset}.json")
 
 
-def write_row(row: dict[str, Any], directory: str | Path) -> Path:
-    """Store one measured row as ``<directory>/<dataset>.json``, atomically."""
+def write_row(row: dict[str, Any], directory: str | Path, beside: bool = False) -> Path:
+    """Store one measured row as ``<directory>/<dataset>.json`` (``beside``: ``<dataset>--<identifier>.json``),
+    atomically."""
     from sysid.jsonio import clean_json
     from sysid.safeio import atomic_write_text
 
-    path = row_path(directory, row["dataset"])
+    path = row_path(directory, row["dataset"], row["identifier"] if beside else None)
     path.parent.mkdir(parents=True, exist_ok=True)
     atomic_write_text(path, json.dumps(clean_json(row), indent=1, ensure_ascii=False) + "\n")
     return path
 
 
 def load_rows(entries: Sequence[Entry], directory: str | Path) -> tuple[dict[str, dict[str, Any]], list[Entry]]:
-    """The stored rows of ``entries`` (by dataset) and the entries that have none yet. A stored row of another
-    identifier than the entry names counts as missing (the settings changed since it was measured)."""
+    """The stored rows of ``entries`` and of the rows shown beside them (by :attr:`Entry.key`: the dataset, or
+    ``dataset--identifier``) and the entries that have none yet. A stored row of another identifier than the
+    entry names counts as missing (the settings changed since it was measured)."""
     rows, missing = {}, []
-    for e in entries:
-        path = row_path(directory, e.dataset)
+    for e in [*entries, *beside_entries(entries)]:
+        path = row_path(directory, e.dataset, e.identifier if e.beside_of else None)
         if not path.exists():
             missing.append(e)
             continue
@@ -166,7 +201,7 @@ def load_rows(entries: Sequence[Entry], directory: str | Path) -> tuple[dict[str
         if row["identifier"] != e.identifier:
             missing.append(e)
             continue
-        rows[e.dataset] = row
+        rows[e.key] = row
     return rows, missing
 
 
@@ -273,15 +308,18 @@ def page_context(entries: Sequence[Entry], rows: dict[str, dict[str, Any]],
     """What the page template shows: one line per dataset and test, one per stored row's measurement, and the
     rows not measured yet with the command that measures them."""
     lines, measurements = [], []
-    for e in entries:
-        if e.dataset not in rows:
+    beside = beside_entries(entries)
+    shown = [x for e in entries for x in (e, *[b for b in beside if b.dataset == e.dataset])]
+    for e in shown:
+        if e.key not in rows:
             continue
-        row = rows[e.dataset]
+        row = rows[e.key]
         entry = summarise_row(row)
         for r in score_rows(row):
             unit = r.get("units", "")
             rec = entry["record"][r["test"]]
             lines.append({"dataset": e.dataset, "test": r["test"], "identifier": row["identifier"],
+                          "beside": bool(e.beside_of),
                           "settings": _settings_text(r.get("params") or {}),
                           "rmse": fmt_spread(entry["rmse"][r["test"]], unit),
                           "seconds": "—" if entry["seconds"] is None else f"{entry['seconds']:.3g}",
@@ -291,7 +329,7 @@ def page_context(entries: Sequence[Entry], rows: dict[str, dict[str, Any]],
         versions = m.get("versions") or {}
         measurements.append(
             {
-                "dataset": e.dataset,
+                "dataset": f"{e.dataset} (`{e.identifier}`, beside)" if e.beside_of else e.dataset,
                 "date": m.get("date", "?"),
                 "cpu": (m.get("machine") or {}).get("cpu", "?"),
                 "cores": (m.get("machine") or {}).get("cores", "?"),
@@ -304,8 +342,8 @@ def page_context(entries: Sequence[Entry], rows: dict[str, dict[str, Any]],
             }
         )
     return {"lines": lines, "measurements": measurements, "why": [(e.dataset, e.identifier, e.why) for e in entries],
-            "missing": [{"dataset": e.dataset, "identifier": e.identifier,
-                         "command": f"piezotwin records --datasets {e.dataset}"} for e in missing],
+            "missing": [{"dataset": e.dataset, "identifier": e.identifier, "command": measure_command(e)}
+                        for e in missing],
             "default_seeds": seeds_text(DEFAULT_SEEDS)}
 
 

@@ -205,6 +205,10 @@ def test_write_is_atomic_a_failed_write_leaves_the_old_files(fake, monkeypatch, 
     ("bad-identifier", "identifier 'nosuch-ident' unknown"),
     ("bad-seeds", "--seeds"),
     ("render-only-datasets", "--render-only renders every stored row"),
+    ("bad-beside", "beside identifier 'nosuch-ident' unknown"),
+    ("beside-itself", "`beside` repeats an identifier or names the row's own 'arx'"),
+    ("beside-not-list", "`beside` must be a list of identifiers"),
+    ("unknown-identifiers", "--identifiers: 'narx-poly' has no row in the chosen datasets"),
 ])
 def test_bad_input_exits_2_with_one_line(fake, case, expected, capsys):
     argv, out, stored = fake
@@ -223,6 +227,14 @@ def test_bad_input_exits_2_with_one_line(fake, case, expected, capsys):
         argv = [*argv, "--seeds", "3-1"]
     elif case == "render-only-datasets":
         argv = [*argv, "--datasets", "silverbox"]
+    elif case == "bad-beside":
+        settings.write_text('[silverbox]\nidentifier = "arx"\nwhy = "x"\nbeside = ["nosuch-ident"]\n')
+    elif case == "beside-itself":
+        settings.write_text('[silverbox]\nidentifier = "arx"\nwhy = "x"\nbeside = ["arx"]\n')
+    elif case == "beside-not-list":
+        settings.write_text('[silverbox]\nidentifier = "arx"\nwhy = "x"\nbeside = "pnlss"\n')
+    elif case == "unknown-identifiers":
+        argv = [a for a in argv if a != "--render-only"] + ["--datasets", "silverbox", "--identifiers", "narx-poly"]
     try:
         code = main(argv)
     except SystemExit as exc:  # argparse refuses a bad option value itself
@@ -230,6 +242,32 @@ def test_bad_input_exits_2_with_one_line(fake, case, expected, capsys):
     err = capsys.readouterr().err.strip().splitlines()
     assert code == 2 and len(err) == 1 and expected in err[0], err
     assert not out["md"].exists() and not out["json"].exists()
+
+
+def test_a_row_beside_the_chosen_one_is_shown_under_it_and_kept_out_of_records_json(fake, capsys):
+    """``beside = [...]`` in the settings shows another identifier's stored row (``<dataset>--<identifier>.json``)
+    under the chosen row, marked, with its own measurement line; records.json keeps the chosen rows only; a beside
+    row not stored yet is named with the command that measures only it."""
+    argv, out, stored = fake
+    settings = Path(argv[argv.index("--settings") + 1])
+    settings.write_text(settings.read_text().replace('why = "deterministic toy"\n',
+                                                     'why = "deterministic toy"\nbeside = ["narx-poly", "arx"]\n'))
+    records.write_row(_stored("cascaded-tanks", "narx-poly", [
+        _score_row("narx-poly", "cascaded-tanks", "test", 0.467, "V", fit=0.5)], wall=7.0), stored, beside=True)
+    assert (stored / "cascaded-tanks--narx-poly.json").exists()
+    assert main(argv) == 0
+    err = capsys.readouterr().err
+    data = json.loads(out["json"].read_text())
+    assert list(data) == ["silverbox", "cascaded-tanks"] and all(set(v) == RECORD_KEYS for v in data.values())
+    assert data["cascaded-tanks"]["identifier"] == "narx-poly-sim"
+    md = out["md"].read_text()
+    lines = [ln for ln in md.splitlines() if ln.startswith("| cascaded-tanks / test")]
+    assert [_cells(ln, "|")[1] for ln in lines] == ["`narx-poly-sim`: ny=2, nu=24",
+                                                    "`narx-poly` (*beside*): ny=2, nu=24"]
+    assert _cells(lines[1], "|")[2:4] == ["0.467 V (deterministic)", "0.5"]
+    assert _cells(md, "| cascaded-tanks (`narx-poly`, beside)")[5:7] == ["7.0", "3.5"]
+    assert "no stored row for cascaded-tanks (arx)" in err
+    assert "`cascaded-tanks` with `arx`: `piezotwin records --datasets cascaded-tanks --identifiers arx`" in md
 
 
 # ---------------------------------------------------------------------------- real rows
@@ -319,6 +357,24 @@ def test_one_real_row_end_to_end_equals_score_json(tmp_path, capsys):
     assert entry["rmse"]["test"]["mean"] == row["score"]["rows"][0]["free_run"]["rmse"]
 
 
+def test_identifiers_measures_only_the_row_beside(tmp_path, capsys):
+    """``--identifiers`` measures the named row of the chosen dataset only: a real ARX row beside a chosen
+    narx-poly row is stored as ``cascaded-tanks--arx.json`` and equals a fresh run of its printed command; the
+    chosen row, not measured, is reported missing."""
+    settings = tmp_path / "records.toml"
+    settings.write_text('[cascaded-tanks]\nidentifier = "narx-poly"\nwhy = "chosen"\nbeside = ["arx"]\n')
+    stored, md, js = tmp_path / "stored", tmp_path / "b.md", tmp_path / "r.json"
+    assert main(["records", "--datasets", "cascaded-tanks", "--identifiers", "arx", "--settings", str(settings),
+                 "--stored", str(stored), "--markdown", str(md), "--records-json", str(js), "--in-process"]) == 0
+    err = capsys.readouterr().err
+    assert sorted(p.name for p in stored.iterdir()) == ["cascaded-tanks--arx.json"]
+    row = json.loads((stored / "cascaded-tanks--arx.json").read_text())
+    assert row["identifier"] == "arx" and row["why"] == "shown beside `narx-poly` for comparison"
+    _same_score(row["score"], _fresh_score(row["command"], capsys))
+    assert json.loads(js.read_text()) == {} and "no stored row for cascaded-tanks (narx-poly)" in err
+    assert "| cascaded-tanks / test | `arx` (*beside*)" in md.read_text()
+
+
 @pytest.mark.slow
 def test_a_row_is_measured_in_a_fresh_process():
     """Without --in-process each row runs in a new interpreter (≈ 10 s to import torch and the rest there)."""
@@ -354,6 +410,10 @@ def test_shipped_settings_name_known_datasets_and_identifiers():
         "piezo-tue",
     ]
     assert all(e.why for e in entries)
+    # issue 34: PNLSS's Silverbox and Wiener-Hammerstein rows beside the chosen ones (its Bouc-Wen row is chosen)
+    beside = {(e.dataset, e.identifier) for e in records.beside_entries(entries)}
+    assert {("silverbox", "pnlss"), ("wiener-hammerstein", "pnlss")} <= beside
+    assert next(e for e in entries if e.dataset == "bouc-wen").identifier == "pnlss"
 
 
 def test_readme_states_the_figures_of_records_json():

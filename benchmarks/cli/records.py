@@ -2,8 +2,10 @@
 
 For every dataset of ``benchmarks/settings/records.toml`` (or those of ``--datasets``) scores its identifier with
 the full settings over training seeds 0-2, exactly as the printed ``piezotwin score`` command does, stores the
-raw result with how it was measured in ``docs/records/<dataset>.json``, then renders ``docs/benchmarks.md`` and
+raw result with how it was measured in ``docs/records/<dataset>.json`` (a row shown ``beside`` it in
+``docs/records/<dataset>--<identifier>.json``), then renders ``docs/benchmarks.md`` and
 ``benchmarks/records.json`` from every stored row (the rows not measured now are kept as stored).
+``--identifiers`` measures only those identifiers' rows of the chosen datasets.
 ``--render-only`` fits nothing and only renders.
 """
 
@@ -22,6 +24,9 @@ def register(sub) -> None:
     )
     p.add_argument("--datasets", metavar="X,Y", help="measure only these rows of the records settings (default: every "
                                                      "row); the others are rendered as stored")
+    p.add_argument("--identifiers", metavar="X,Y", help="measure only the rows of these identifiers (the chosen "
+                                                        "one or those shown beside it; default: every row of "
+                                                        "the chosen datasets)")
     p.add_argument("--render-only", action="store_true", help="fit nothing: render the page and records.json from the "
                                                               "stored rows")
     p.add_argument("--seeds", metavar="A-B", type=seed_range, default=None,
@@ -58,8 +63,16 @@ def run(args: argparse.Namespace) -> int:
             if n not in known:
                 raise ConfigError(f"--datasets: {n!r} has no row in the records settings; valid: {', '.join(known)}")
         chosen = [known[n] for n in names]
-    if args.render_only and args.datasets is not None:
-        raise ConfigError("--render-only renders every stored row: give it without --datasets")
+    chosen = [x for e in chosen for x in (e, *records.beside_entries([e]))]
+    if args.identifiers is not None:
+        wanted = [s.strip() for s in args.identifiers.split(",") if s.strip()]
+        for w in wanted:
+            if w not in {e.identifier for e in chosen}:
+                raise ConfigError(f"--identifiers: {w!r} has no row in the chosen datasets; valid: "
+                                  f"{', '.join(dict.fromkeys(e.identifier for e in chosen))}")
+        chosen = [e for e in chosen if e.identifier in wanted]
+    if args.render_only and (args.datasets is not None or args.identifiers is not None):
+        raise ConfigError("--render-only renders every stored row: give it without --datasets or --identifiers")
     seeds = args.seeds if args.seeds is not None else list(records.DEFAULT_SEEDS)
     records.seeds_text(seeds)
     quiet = args.json or getattr(args, "quiet", False)
@@ -69,7 +82,7 @@ def run(args: argparse.Namespace) -> int:
                 if not quiet:
                     print(f"{e.dataset}: {records.command(e.dataset, e.identifier, seeds)}", flush=True)
                 row = records.measure(e, seeds, executor=ex, progress=not quiet, fresh=not args.in_process)
-                path = records.write_row(row, stored)
+                path = records.write_row(row, stored, beside=bool(e.beside_of))
                 if not quiet:
                     for r in records.score_rows(row):
                         print(f"  {format_row(r)}")
