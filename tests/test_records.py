@@ -410,7 +410,7 @@ def test_shipped_settings_name_known_datasets_and_identifiers():
         "piezo-tue",
     ]
     assert all(e.why for e in entries)
-    # issue 34: PNLSS's Silverbox and Wiener-Hammerstein rows beside the chosen ones (its Bouc-Wen row is chosen)
+    # PNLSS's Silverbox and Wiener-Hammerstein rows are shown beside the chosen ones (its Bouc-Wen row is chosen)
     beside = {(e.dataset, e.identifier) for e in records.beside_entries(entries)}
     assert {("silverbox", "pnlss"), ("wiener-hammerstein", "pnlss")} <= beside
     assert next(e for e in entries if e.dataset == "bouc-wen").identifier == "pnlss"
