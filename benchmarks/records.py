@@ -55,8 +55,14 @@ class Entry:
 
     @property
     def key(self) -> str:
-        """Where the row is stored and found: ``dataset``, or ``dataset--identifier`` for a row shown beside."""
-        return f"{self.dataset}--{self.identifier}" if self.beside_of else self.dataset
+        """Where the row is stored and found (:func:`row_key`)."""
+        return row_key(self.dataset, self.identifier if self.beside_of else None)
+
+
+def row_key(dataset: str, identifier: str | None = None) -> str:
+    """``dataset`` for a chosen row, ``dataset--identifier`` for a row shown beside it: the stored file's stem and
+    the key of :func:`load_rows`."""
+    return f"{dataset}--{identifier}" if identifier else dataset
 
 
 def load_entries(path: str | Path | None = None) -> list[Entry]:
@@ -93,6 +99,11 @@ def beside_entries(entries: Sequence[Entry]) -> list[Entry]:
     """One entry per identifier shown beside a chosen row, in the settings' order."""
     return [Entry(e.dataset, b, f"shown beside `{e.identifier}` for comparison", beside_of=e.identifier)
             for e in entries for b in e.beside]
+
+
+def with_beside(entries: Sequence[Entry]) -> list[Entry]:
+    """Every row of ``entries``: each chosen row followed by those shown beside it (the table's order)."""
+    return [x for e in entries for x in (e, *beside_entries([e]))]
 
 
 def seeds_text(seeds: Sequence[int]) -> str:
@@ -170,7 +181,7 @@ def _measure(entry: Entry, seeds: list[int], executor, progress: bool, process: 
 
 def row_path(directory: str | Path, dataset: str, identifier: str | None = None) -> Path:
     """``<dataset>.json`` for a chosen row, ``<dataset>--<identifier>.json`` for a row shown beside it."""
-    return Path(directory) / (f"{dataset}--{identifier}.json" if identifier else f"{dataset}.json")
+    return Path(directory) / f"{row_key(dataset, identifier)}.json"
 
 
 def write_row(row: dict[str, Any], directory: str | Path, beside: bool = False) -> Path:
@@ -190,8 +201,8 @@ def load_rows(entries: Sequence[Entry], directory: str | Path) -> tuple[dict[str
     ``dataset--identifier``) and the entries that have none yet. A stored row of another identifier than the
     entry names counts as missing (the settings changed since it was measured)."""
     rows, missing = {}, []
-    for e in [*entries, *beside_entries(entries)]:
-        path = row_path(directory, e.dataset, e.identifier if e.beside_of else None)
+    for e in with_beside(entries):
+        path = Path(directory) / f"{e.key}.json"
         if not path.exists():
             missing.append(e)
             continue
@@ -308,9 +319,7 @@ def page_context(entries: Sequence[Entry], rows: dict[str, dict[str, Any]],
     """What the page template shows: one line per dataset and test, one per stored row's measurement, and the
     rows not measured yet with the command that measures them."""
     lines, measurements = [], []
-    beside = beside_entries(entries)
-    shown = [x for e in entries for x in (e, *[b for b in beside if b.dataset == e.dataset])]
-    for e in shown:
+    for e in with_beside(entries):
         if e.key not in rows:
             continue
         row = rows[e.key]

@@ -63,13 +63,14 @@ def run(args: argparse.Namespace) -> int:
             if n not in known:
                 raise ConfigError(f"--datasets: {n!r} has no row in the records settings; valid: {', '.join(known)}")
         chosen = [known[n] for n in names]
-    chosen = [x for e in chosen for x in (e, *records.beside_entries([e]))]
+    chosen = records.with_beside(chosen)
     if args.identifiers is not None:
         wanted = [s.strip() for s in args.identifiers.split(",") if s.strip()]
+        valid = dict.fromkeys(e.identifier for e in chosen)
         for w in wanted:
-            if w not in {e.identifier for e in chosen}:
+            if w not in valid:
                 raise ConfigError(f"--identifiers: {w!r} has no row in the chosen datasets; valid: "
-                                  f"{', '.join(dict.fromkeys(e.identifier for e in chosen))}")
+                                  f"{', '.join(valid)}")
         chosen = [e for e in chosen if e.identifier in wanted]
     if args.render_only and (args.datasets is not None or args.identifiers is not None):
         raise ConfigError("--render-only renders every stored row: give it without --datasets or --identifiers")
