@@ -32,8 +32,8 @@ from typing import Any
 import numpy as np
 
 from sysid.config import coerce
+from sysid.data.record import Record
 from sysid.errors import ConfigError
-from sysid.record import Record
 
 FORMAT = "piezotwin-collection/1"
 _VALUE_SEP = re.compile(r"(?<![eE])-")  # values are separated by '-', except the exponent sign of 1e-3
@@ -105,7 +105,7 @@ def generate_point(twin, changes: dict[str, Any], seed: int, protocol: str, opti
 
 
 def _json(obj: Any, sort: bool = True) -> str:
-    from sysid.jsonio import clean_json
+    from sysid.data.jsonio import clean_json
 
     return json.dumps(clean_json(obj), sort_keys=sort, default=str)
 

@@ -30,8 +30,8 @@ import numpy as np
 
 from benchmarks.mainjob_context import Context, StageSkipped
 from benchmarks.mainjob_score import stage_identify_twins, stage_lab
-from sysid.plots import pyplot
-from sysid.report import esc, figure, table, write_page
+from sysid.report.html import esc, figure, table, write_page
+from sysid.report.plots import pyplot
 
 __all__ = ["STAGES", "Context", "StageSkipped", "floor_counts", "run_main_job"]
 
@@ -46,7 +46,7 @@ def _not_built(exc: Exception, what: str) -> StageSkipped:
 # ---------------------------------------------------------------------------------------------- stages
 def _stage_signals(ctx: Context) -> str:
     try:
-        from sysid import signals
+        from sysid.signals import excitation as signals
     except ImportError:
         raise StageSkipped("sysid.signals not built yet") from None
     # 5000 lines up to 500 Hz need a 0.1 Hz grid (10 s period); the 8 s record is 80 % of it (see the docstring)
@@ -102,7 +102,7 @@ def _stage_cantilever_figures(ctx: Context) -> str:
     cols = 4
     rows = int(np.ceil(n / cols))
     fig, axes = plt.subplots(rows, cols, figsize=(11, 2.6 * rows))
-    from sysid.plots import whole_periods
+    from sysid.report.plots import whole_periods
 
     for ax, seg in zip(np.ravel(axes), segs):
         f = seg.meta["segment"].get("freq_hz")
@@ -356,7 +356,7 @@ def _header(ctx: Context, seconds: float | None) -> str:
 
 
 def _write_report(ctx: Context, rows: list[dict[str, Any]], seconds: float | None = None) -> Path:
-    from sysid.provenance import collect
+    from sysid.report.provenance import collect
 
     ctx.report_dir.mkdir(parents=True, exist_ok=True)
     body = [

@@ -7,7 +7,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from sysid.plots import save_and_close
+from sysid.report.plots import save_and_close
 
 
 class StageSkipped(Exception):

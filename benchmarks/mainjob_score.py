@@ -20,7 +20,7 @@ from typing import Any
 import numpy as np
 
 from benchmarks.mainjob_context import Context, StageSkipped
-from sysid.report import esc, table
+from sysid.report.html import esc, table
 
 #: training seeds of the seeded identifiers in the main job: one draw, judged by floors that cover every single seed
 MAIN_SEEDS = (0,)
@@ -201,7 +201,7 @@ def stage_identify_twins(ctx: Context) -> str:
 def _residual_figure(ctx: Context) -> None:
     """Residual correlation tests (eq. 2-32, Figure 5.6 analogue) of the best one-step model on a twin test."""
     try:
-        from sysid.residuals import correlation_tests
+        from sysid.evaluation.residuals import correlation_tests
     except ImportError:
         return
     run = ctx.data.get("twins")
@@ -212,8 +212,8 @@ def _residual_figure(ctx: Context) -> None:
         return
     r = min(ok, key=lambda x: x["one_step"]["nrmse"])
     from benchmarks import scoring
-    from sysid.plots import draw_correlation_test, pyplot
     from sysid.registry import get_identifier
+    from sysid.report.plots import draw_correlation_test, pyplot
 
     ds = run.datasets[r["dataset"]]
     # residual tests on the estimation record (as the dissertation's Figure 5.6), first 20 000 samples

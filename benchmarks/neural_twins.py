@@ -26,9 +26,9 @@ from typing import Any
 
 import numpy as np
 
+from sysid.data.record import Record
 from sysid.errors import DivergenceWarning
-from sysid.metrics import r2
-from sysid.record import Record
+from sysid.evaluation.metrics import r2
 from sysid.registry import get_identifier
 
 __all__ = ["cantilever_data", "cantilever_sines", "acoustic_data", "acoustic_osa_vs_sim", "ACOUSTIC_STRUCTURE",
@@ -146,7 +146,7 @@ def acoustic_osa_vs_sim(seeds: Sequence[int] = (0, 1, 2, 3, 4), structure: dict[
 
 
 def main(argv: list[str] | None = None) -> int:
-    from sysid.jsonio import clean_json
+    from sysid.data.jsonio import clean_json
 
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     p.add_argument("experiment", choices=("cantilever", "acoustic"))

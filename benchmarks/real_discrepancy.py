@@ -27,9 +27,9 @@ from typing import Any
 
 import numpy as np
 
-from sysid.jsonio import clean_json
-from sysid.record import Record
-from sysid.safeio import atomic_write_text
+from sysid.data.jsonio import clean_json
+from sysid.data.record import Record
+from sysid.data.safeio import atomic_write_text
 
 
 def _save(out: Path, name: str, obj: dict[str, Any]) -> Path:
@@ -62,7 +62,7 @@ def piezo(out: Path) -> dict[str, Any]:
 def water_records(distance_mm: int = 20, seed: int = 0) -> tuple[Record, Record]:
     """Measured I/O records from the measured FIRs: multisine through FIR #1, chirp through FIR #6."""
     from benchmarks.datasets import files
-    from sysid import signals
+    from sysid.signals import excitation as signals
     from twins.acoustic.labdata import FS_FIR, load_charac
 
     h = load_charac(distance_mm, files.water_fir())
@@ -109,9 +109,9 @@ NARMAX_ORDERS = {"nu": 1, "ny": 2, "ne": 3, "degree": 2, "rho_p": 1e-4, "rho_n":
 
 
 def _narmax_case(rec: Record, orders: dict[str, Any], n_est: int) -> dict[str, Any]:
-    from sysid.metrics import r2
-    from sysid.polynomial import NARMAXPoly
-    from sysid.residuals import correlation_tests
+    from sysid.evaluation.metrics import r2
+    from sysid.evaluation.residuals import correlation_tests
+    from sysid.polynomial.narmax import NARMAXPoly
     from twins.discrepancy import features as ft
 
     est, val = rec[:n_est], rec[n_est:]

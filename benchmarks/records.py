@@ -187,8 +187,8 @@ def row_path(directory: str | Path, dataset: str, identifier: str | None = None)
 def write_row(row: dict[str, Any], directory: str | Path, beside: bool = False) -> Path:
     """Store one measured row as ``<directory>/<dataset>.json`` (``beside``: ``<dataset>--<identifier>.json``),
     atomically."""
-    from sysid.jsonio import clean_json
-    from sysid.safeio import atomic_write_text
+    from sysid.data.jsonio import clean_json
+    from sysid.data.safeio import atomic_write_text
 
     path = row_path(directory, row["dataset"], row["identifier"] if beside else None)
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -368,8 +368,8 @@ def render_markdown(entries: Sequence[Entry], rows: dict[str, dict[str, Any]], m
 def write_outputs(entries: Sequence[Entry], rows: dict[str, dict[str, Any]], missing: Sequence[Entry],
                   markdown: str | Path, records_json: str | Path) -> dict[str, Any]:
     """Render both outputs and write them atomically; returns the ``records.json`` mapping."""
-    from sysid.jsonio import clean_json
-    from sysid.safeio import atomic_write_text
+    from sysid.data.jsonio import clean_json
+    from sysid.data.safeio import atomic_write_text
 
     text = render_markdown(entries, rows, missing)
     data = clean_json(summary(entries, rows))

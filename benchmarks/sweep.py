@@ -12,9 +12,9 @@ from typing import Any
 
 from benchmarks.execution import Executor
 from sysid.config import coerce
+from sysid.data.jsonio import clean_json
+from sysid.data.safeio import atomic_write_text
 from sysid.errors import ConfigError
-from sysid.jsonio import clean_json
-from sysid.safeio import atomic_write_text
 from twins.base import param_info
 
 __all__ = ["parse_spec", "sweep_point", "sweep", "write_report", "public"]
@@ -66,7 +66,7 @@ def write_report(result: dict[str, Any], out: Path) -> list[str]:
     of ``result`` in ``out``; the paths written."""
     import numpy as np
 
-    from sysid.plots import pyplot, save_and_close
+    from sysid.report.plots import pyplot, save_and_close
 
     plt = pyplot()
 

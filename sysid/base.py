@@ -11,7 +11,7 @@
   is issued — never an exception;
 - ``n_parameters_`` counts the estimated parameters; ``describe()`` returns a JSON-able summary (terms...);
 - ``save(path)`` / :func:`load_model` round-trip a fitted model so it predicts identically (format:
-  :mod:`sysid.modelfile`).
+  :mod:`sysid.data.modelfile`).
 
 Arrays as well as records (done once here, for every identifier: :meth:`Identifier.__init_subclass__` wraps
 each subclass's ``fit`` and ``predict``):
@@ -36,8 +36,8 @@ from typing import Any, ClassVar
 
 import numpy as np
 
+from sysid.data.record import Record
 from sysid.errors import ConfigError, DataError, DivergenceWarning
-from sysid.record import Record
 
 __all__ = ["Identifier", "as_record_list", "check_records", "load_model", "as_fit_data", "as_predict_record",
            "check_prediction", "stop_at_divergence"]
@@ -150,7 +150,7 @@ def _zero_output(model: Identifier, rec: Record) -> Record:
 def _wrap_fit(fn):
     @functools.wraps(fn)
     def fit(self, data, y=None, *, fs=None, units=None, **kwargs):
-        from sysid.modelfile import estimation_info
+        from sysid.data.modelfile import estimation_info
 
         fit_data = as_fit_data(data, y, fs, units)
         out = fn(self, fit_data, **kwargs)
@@ -304,7 +304,7 @@ class Identifier(ABC):
         ``score(u, y)`` or ``score(record)``; ``horizon`` as in :meth:`predict` (default ``None``: free run,
         what MATLAB's ``compare`` shows by default). A diverged prediction scores nan.
         """
-        from sysid import metrics
+        from sysid.evaluation import metrics
 
         rec = as_predict_record(self, data, y, fs)
         rec.require_output()
@@ -315,8 +315,8 @@ class Identifier(ABC):
 
     def save(self, path: str | Path) -> Path:
         """Write the fitted model to ``path`` (atomically): the npz container, or JSON for ``.json``
-        (:mod:`sysid.modelfile`; neural identifiers also write torch ``.pt``)."""
-        from sysid.modelfile import write_model
+        (:mod:`sysid.data.modelfile`; neural identifiers also write torch ``.pt``)."""
+        from sysid.data.modelfile import write_model
 
         return write_model(self, path)
 
@@ -331,6 +331,6 @@ class Identifier(ABC):
 
 def load_model(path: str | Path) -> Identifier:
     """Load a model written by :meth:`Identifier.save` (any registered identifier, any format version)."""
-    from sysid.modelfile import read_model
+    from sysid.data.modelfile import read_model
 
     return read_model(path)

@@ -1,11 +1,11 @@
 """Identify one model as the ``identify`` command does, and hold a nonlinear default against the linear one.
 
 :func:`identify` builds an identifier from ``--set``-style assignments, fits it on the estimation record(s) and
-scores it on estimation and validation data (:func:`sysid.evaluate.identification_summary`).
+scores it on estimation and validation data (:func:`sysid.evaluation.evaluate.identification_summary`).
 
 A nonlinear model is only worth its parameters when it simulates better than a linear one. When a nonlinear
 identifier runs with its defaults (no options given) or with ``auto=true``, the default linear model
-(``LINEAR_DEFAULT``, ``arx`` with its orders chosen on a hold-out, :mod:`sysid.order`) is fitted on the same data
+(``LINEAR_DEFAULT``, ``arx`` with its orders chosen on a hold-out, :mod:`sysid.linear.order`) is fitted on the same data
 and both are scored by their free-run R² on the same hold-out samples (after the larger ``max_lag_`` of the two):
 
 - the validation record when one is given;
@@ -27,11 +27,11 @@ from typing import Any
 
 import numpy as np
 
-from sysid import metrics
 from sysid.config import coerce, parse_assignments
+from sysid.data.record import Record
 from sysid.errors import ConfigError, DataError, DivergenceWarning
-from sysid.evaluate import identification_summary
-from sysid.record import Record
+from sysid.evaluation import metrics
+from sysid.evaluation.evaluate import identification_summary
 from sysid.registry import LINEAR_IDENTIFIERS, get_identifier
 
 __all__ = ["LINEAR_DEFAULT", "LINEAR_IDENTIFIERS", "free_run_r2", "identify", "linear_comparison"]

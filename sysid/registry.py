@@ -12,24 +12,24 @@ __all__ = ["IDENTIFIERS", "LINEAR_IDENTIFIERS", "get_identifier", "available_ide
 
 # id -> "module:Class". Each module owns its identifier; add a line here to register a new one.
 IDENTIFIERS: dict[str, str] = {
-    "fir": "sysid.fir:FIR",
-    "arx": "sysid.linear:ARX",
-    "armax": "sysid.linear:ARMAX",
-    "bla": "sysid.bla_model:BLAModel",
-    "oe": "sysid.pem:OE",
-    "bj": "sysid.pem:BJ",
-    "n4sid": "sysid.subspace:N4SID",
-    "narx-poly": "sysid.polynomial:NARXPoly",
-    "narmax-poly": "sysid.polynomial:NARMAXPoly",
+    "fir": "sysid.linear.fir:FIR",
+    "arx": "sysid.linear.arx:ARX",
+    "armax": "sysid.linear.arx:ARMAX",
+    "bla": "sysid.linear.bla_model:BLAModel",
+    "oe": "sysid.linear.pem:OE",
+    "bj": "sysid.linear.pem:BJ",
+    "n4sid": "sysid.linear.subspace:N4SID",
+    "narx-poly": "sysid.polynomial.narmax:NARXPoly",
+    "narmax-poly": "sysid.polynomial.narmax:NARMAXPoly",
     "narx-mlp": "sysid.neural.narx_mlp:NARXMLP",
     "narx-mlp-sim": "sysid.neural.narx_mlp:NARXMLPSim",
     "rnn": "sysid.neural.rnn:RNNStateSpace",
     "ss-encoder": "sysid.neural.ss_encoder:SSEncoder",
     "wh-net": "sysid.neural.wh_net:WHNet",
-    "narx-poly-sim": "sysid.polysim:NARXPolySim",
-    "oe-echo": "sysid.echo_oe:EchoOE",
-    "pnlss": "sysid.pnlss:PNLSS",
-    "wh-bla": "sysid.wiener_hammerstein:WienerHammerstein",
+    "narx-poly-sim": "sysid.polynomial.polysim:NARXPolySim",
+    "oe-echo": "sysid.linear.echo_oe:EchoOE",
+    "pnlss": "sysid.nonlinear.pnlss:PNLSS",
+    "wh-bla": "sysid.nonlinear.wiener_hammerstein:WienerHammerstein",
 }
 
 # Identifiers whose models are linear in the input: the baselines a nonlinear model must beat (the scoring rule of

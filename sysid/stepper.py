@@ -3,13 +3,14 @@
 The stepper reproduces ``model.predict(u)`` (free run from zero initial conditions, eq. 2-29) one sample at a
 time: for ``k < max_lag_`` it returns the zero initial condition, afterwards the model's simulated output. It
 keeps the last ``max_lag_ + 1`` samples and runs the model's *own* compiled free-run kernel on that window
-(:func:`sysid.simulate.free_run` for the polynomial family — ARX, ARMAX, NARX, NARMAX — and
+(:func:`sysid.polynomial.simulate.free_run` for the polynomial family — ARX, ARMAX, NARX, NARMAX — and
 :func:`sysid.neural.core.free_run_mlp` for the NARX networks, in their normalised units), so every sample is
 computed by the same arithmetic in the same order as the whole-record free run: the two agree bit for bit.
 
 Supported: every identifier whose free run is a function of a finite past (``arx``, ``armax``, ``narx-poly``,
 ``narmax-poly``, ``narx-mlp``, ``narx-mlp-sim``), ``pnlss``, whose state is carried from one sample to the
-next through its own compiled kernel (:func:`sysid.pnlss_sim.simulate` with ``final_state``), and ``wh-bla``, whose
+next through its own compiled kernel (:func:`sysid.nonlinear.pnlss_sim.simulate` with ``final_state``), and
+``wh-bla``, whose
 two filters carry their ``scipy.signal.lfilter`` states from one sample to the next. The recurrent
 ``rnn`` (a hidden state started by an encoder) is not.
 """
@@ -63,7 +64,7 @@ class PolynomialStepper(_WindowStepper):
         self.bound = float(model.y_bound_)
 
     def step(self, u) -> float:
-        from sysid.simulate import free_run
+        from sysid.polynomial.simulate import free_run
 
         self._push_u(float(u) if self.u.shape[1] == 1 else np.asarray(u, dtype=float).reshape(-1))
         self._push_y(0.0)  # rows are now times k-L .. k; the last output is what this step computes
@@ -122,7 +123,7 @@ class StateSpaceStepper:
         self.k = 0
 
     def step(self, u: float) -> float:
-        from sysid import pnlss_sim as ps
+        from sysid.nonlinear import pnlss_sim as ps
 
         m = self.model
         A, B, E, C, D, F = m._unpack(m._pack())

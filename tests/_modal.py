@@ -7,8 +7,8 @@ from __future__ import annotations
 import numpy as np
 from scipy import signal
 
-from sysid.record import Record
-from sysid.signals import multisine
+from sysid.data.record import Record
+from sysid.signals.excitation import multisine
 
 FREQS_HZ = (23.0, 51.0, 88.0, 140.0, 210.0)
 ZETAS = (0.005, 0.008, 0.01, 0.015, 0.02)
@@ -52,7 +52,7 @@ def write_modal_pair(folder, n: int) -> tuple[str, str]:
     the paths, for the tests that run ``piezotwin identify`` on them."""
     from pathlib import Path
 
-    from sysid.io import write_record
+    from sysid.data.io import write_record
 
     est, val = modal_records(n=n)
     paths = (str(Path(folder) / "est.npz"), str(Path(folder) / "val.npz"))

@@ -2,7 +2,7 @@
 
 import numpy as np
 
-from sysid.record import Record
+from sysid.data.record import Record
 
 # y(k) = 0.2 y(k-1) + 0.1 y(k-1) u(k-1) + 0.9 u(k-2) - 0.3 u(k-1)^2   (names as sysid prints them)
 TRUE_TERMS = {"y(k-1)": 0.2, "y(k-1)*u(k-1)": 0.1, "u(k-2)": 0.9, "u(k-1)^2": -0.3}

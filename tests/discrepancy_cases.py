@@ -12,7 +12,7 @@ import math
 
 import numpy as np
 
-from sysid.record import Record
+from sysid.data.record import Record
 
 # effect -> (random parameters: field -> (lo, hi) drawn uniformly; data kind; fields checked within 10 %)
 CANTILEVER = {

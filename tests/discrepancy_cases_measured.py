@@ -15,7 +15,7 @@ import numpy as np
 from discrepancy_cases import records
 from scipy import signal as sps
 
-from sysid.record import Record
+from sysid.data.record import Record
 
 # default effect → (parameter, factor, data kind)
 MISSIZED = {

@@ -16,7 +16,7 @@ import numpy as np
 from scipy.optimize import brentq
 from scipy.signal import butter, lfilter
 
-from sysid.record import Record
+from sysid.data.record import Record
 
 FS = 5e6
 KINDS = ("tanh", "cubic", "clip", "inphase", "echo", "echo_lp", "none")

@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 from scipy import signal
 
-from sysid.record import Record
+from sysid.data.record import Record
 
 HOLD_S = 2.0  # steps at 1 kHz: 5 levels × 2 s = 10 000 samples per record
 NOISE_SHARE = 0.01  # σ of the added noise, share of the clean output's standard deviation

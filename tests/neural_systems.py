@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from sysid.record import Record
+from sysid.data.record import Record
 
 
 def multisine_input(n: int, fs: float, f_max: float, seed: int, amplitude: float = 1.0) -> np.ndarray:

@@ -181,7 +181,7 @@ def test_chirp_100ms_protocol_and_recipe():
 
 
 def test_chirp_prefix_is_the_start_of_the_sysid_chirp():
-    from sysid.signals import chirp
+    from sysid.signals.excitation import chirp
     from twins.acoustic.protocols import chirp_prefix
 
     full = chirp(2e6, 0.1, 900e3, 950e3, amplitude=0.04)  # 2e5 samples: cheap
@@ -281,7 +281,7 @@ def test_sweep_cli_report_and_errors(tmp_path, capsys):
 
 def test_calibrate_cli_on_a_vna_file(tmp_path, capsys):
     from benchmarks.cli import main
-    from sysid.io import write_record
+    from sysid.data.io import write_record
 
     truth = AcousticTwin.from_options(set_=["steel_thickness_m=0.0061"])
     write_record(truth.generate("vna-sweep", f_start=0.85e6, f_stop=1.4e6, points=400), tmp_path / "vna.npz")

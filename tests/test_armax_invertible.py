@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from sysid.linear import _invertible, reflect_inside
+from sysid.linear.arx import _invertible, reflect_inside
 
 
 @pytest.mark.parametrize("c", [[1.0, 2.5], [1.0, -0.3, -1.8], [1.0, 0.5, 1.44, -0.2], [1.0, 0.4]])

@@ -11,7 +11,7 @@ import pytest
 
 from benchmarks.cli import main
 from benchmarks.datasets import files
-from sysid.io import read_record, write_record
+from sysid.data.io import read_record, write_record
 from twins.cantilever import CantileverTwin
 from twins.cantilever.lab import calibrate_lab, lab_split, load_lab_record, plot_lab_loops, static_line_r2
 

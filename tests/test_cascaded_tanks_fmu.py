@@ -11,9 +11,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from sysid.data.io import write_record
+from sysid.data.record import Record
 from sysid.errors import ConfigError
-from sysid.io import write_record
-from sysid.record import Record
 
 pytest.importorskip("fmpy")
 pytest.importorskip("pythonfmu")

@@ -16,8 +16,8 @@ import pytest
 from scipy.io import savemat
 
 from benchmarks.cli import main
+from sysid.data.io import read_record
 from sysid.errors import DataError
-from sysid.io import read_record
 
 FS = 1000.0
 N = 400
@@ -26,8 +26,8 @@ N = 400
 @pytest.fixture(scope="module")
 def d(tmp_path_factory) -> Path:
     """A folder of good and bad data files (small)."""
-    from sysid.io import write_record
-    from sysid.record import Record
+    from sysid.data.io import write_record
+    from sysid.data.record import Record
     from twins.registry import get_twin
 
     p = tmp_path_factory.mktemp("bad_input")

@@ -9,10 +9,10 @@ import numpy as np
 import pytest
 
 from benchmarks.cli import main
-from sysid import preprocess as P
-from sysid import signals as S
-from sysid.io import read_record, write_record
-from sysid.record import Record
+from sysid.data.io import read_record, write_record
+from sysid.data.record import Record
+from sysid.signals import excitation as S
+from sysid.signals import preprocess as P
 
 
 def run_cli(args, capsys):

@@ -184,7 +184,7 @@ class _FakeTwin:
             raise ConfigError(p)
 
     def generate(self, protocol, **opts):
-        from sysid.record import Record
+        from sysid.data.record import Record
 
         type(self).calls += 1
         rng = np.random.default_rng(self.seed)

@@ -9,11 +9,11 @@ import numpy as np
 import pytest
 
 from benchmarks.cli import main
-from sysid import metrics
 from sysid.errors import DivergenceWarning
-from sysid.evaluate import identification_summary
-from sysid.fir import FIR
-from sysid.order import OrderSearchWarning
+from sysid.evaluation import metrics
+from sysid.evaluation.evaluate import identification_summary
+from sysid.linear.fir import FIR
+from sysid.linear.order import OrderSearchWarning
 from sysid.registry import get_identifier
 from tests._modal import modal_records, time_constant_samples, write_modal_pair
 
@@ -93,7 +93,7 @@ def test_identify_cli_json_has_the_order_curve(tmp_path, capsys):
 def test_lightly_damped_modes_are_not_called_integrators_but_an_integrator_still_is():
     """The modes' poles (|p| up to 0.9993, ζ ≥ 0.5 %) lie within 1e-3 of the unit circle: no pole warning for them;
     a real pole at 0.9996 (an integrator in a feedback loop) keeps its warning."""
-    from sysid.advice import practitioner_warnings
+    from sysid.evaluation.advice import practitioner_warnings
     from tests.test_linear_order import _closed_loop
 
     est, _ = modal_records()

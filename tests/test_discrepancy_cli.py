@@ -8,7 +8,7 @@ import sys
 
 import pytest
 
-from sysid.io import write_record
+from sysid.data.io import write_record
 
 cantilever = pytest.importorskip("twins.cantilever")
 

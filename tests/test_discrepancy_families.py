@@ -15,7 +15,7 @@ import drift_creep_cases as C
 import numpy as np
 import pytest
 
-from sysid.record import Record
+from sysid.data.record import Record
 from twins import generic_effects as ge
 from twins.cantilever import CantileverTwin
 from twins.discrepancy import diagnose
@@ -148,7 +148,7 @@ def test_two_time_constant_creep_is_named_and_explained_to_the_noise():
 def test_calibration_solves_the_linear_drift_terms_and_finds_the_period():
     """The slow drift's coefficients are solved by least squares inside the fit and its period starts from a grid:
     from a start far off (coefficients 0, period 100 s) the noise-free truth is recovered."""
-    from sysid.record import Record
+    from sysid.data.record import Record
     from twins.calibration import calibrate
 
     truth = {"drift_rate_um_per_s": 0.04, "drift_sin_um": -1.5, "drift_cos_um": 0.8, "drift_period_s": 33.0}

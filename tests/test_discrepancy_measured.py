@@ -15,8 +15,8 @@ import numpy as np
 import pytest
 from discrepancy_cases import hidden_case
 
+from sysid.data.record import Record
 from sysid.errors import DataError
-from sysid.record import Record
 from twins.cantilever import CantileverTwin
 from twins.cantilever.substep import choose_substep
 from twins.discrepancy import diagnose, ranges, splitting, unexplained

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 from scipy import signal as sps
 
-from sysid.record import Record
+from sysid.data.record import Record
 from twins.base import EffectSpec, Twin, pfield
 from twins.discrepancy import diagnose, significance
 from twins.discrepancy import features as ft

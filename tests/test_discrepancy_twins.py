@@ -22,7 +22,7 @@ import pytest
 from discrepancy_cases import CATALOG, check_case, hidden_case
 from scipy import signal as sps
 
-from sysid.record import Record
+from sysid.data.record import Record
 from twins.discrepancy import diagnose
 
 cantilever = pytest.importorskip("twins.cantilever")

@@ -1,4 +1,4 @@
-"""oe-echo (sysid/echo_oe.py): an output-error model whose denominator holds one round trip of an echo.
+"""oe-echo (sysid/linear/echo_oe.py): an output-error model whose denominator holds one round trip of an echo.
 
 Checked against closed forms: a system B/(F − q^−τ C) written out here is found again — its delay and round trip
 from the data (cepstrum), its frequency response to 1e-6 from noise-free data — and a system without an echo gives
@@ -12,9 +12,9 @@ import pytest
 from scipy.signal import lfilter
 
 from sysid.base import load_model
-from sysid.echo_oe import EchoOE, echo_lags
+from sysid.data.record import Record
 from sysid.errors import ConfigError, DataError
-from sysid.record import Record
+from sysid.linear.echo_oe import EchoOE, echo_lags
 
 NK, TAU = 30, 200
 B = np.array([0.5, 0.3, -0.2])

@@ -134,7 +134,7 @@ def test_sweep_survives_a_worker_killed_mid_task(tmp_path):
     """SIGKILL one worker process while the sweep's tasks run: the lost task is re-run and the result is
     complete and identical to the serial run."""
     from benchmarks.sweep import public, sweep
-    from sysid.jsonio import clean_json
+    from sysid.data.jsonio import clean_json
     from twins.registry import get_twin
 
     twin = get_twin("acoustic").from_options()
@@ -169,8 +169,8 @@ def test_search_repeats_on_the_cluster_equal_the_serial_sweep(cluster, tmp_path,
     """search --scheduler: the repeats of each configuration run as Dask tasks; the stored runs equal the
     serial sweep's (timings and pids aside). Through PIEZOTWIN_SCHEDULER, as a user on a cluster would."""
     from benchmarks.cli import main
-    from sysid.io import write_record
-    from sysid.record import Record
+    from sysid.data.io import write_record
+    from sysid.data.record import Record
 
     rng = np.random.default_rng(1)
     u = rng.standard_normal(600)

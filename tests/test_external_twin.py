@@ -14,8 +14,8 @@ import numpy as np
 import pytest
 from scipy import signal as sps
 
+from sysid.data.record import Record
 from sysid.errors import ConfigError, DataError
-from sysid.record import Record
 from twins import generic_effects as ge
 from twins.discrepancy import diagnose
 from twins.external import external_twin_class, load_model
@@ -190,7 +190,7 @@ def test_bad_models_refused(tmp_path):
 def test_cli_model_bad_input_one_line(tmp_path):
     est, _ = _records(6)
     data = tmp_path / "est.npz"
-    from sysid.io import write_record
+    from sysid.data.io import write_record
 
     write_record(est, data)
     cmd = [sys.executable, "-m", "benchmarks.cli", "diagnose", "--model", str(tmp_path / "nope.py"),

@@ -9,9 +9,9 @@ import pytest
 
 from benchmarks.cli import main
 from sysid.base import load_model
-from sysid.fir import FIR, tap_grid
-from sysid.io import write_record
-from sysid.record import Record
+from sysid.data.io import write_record
+from sysid.data.record import Record
+from sysid.linear.fir import FIR, tap_grid
 from tests._modal import modal_records, write_modal_pair
 
 

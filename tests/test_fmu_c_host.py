@@ -82,7 +82,7 @@ def _run(host, fmu, folder, fs, n=3000, out=None):
 
 @pytest.fixture(scope="module")
 def model_fmu(tmp_path_factory):
-    from sysid.polynomial import NARXPoly
+    from sysid.polynomial.narmax import NARXPoly
     from tests._polysys import narx_record
     from twins.fmu.model_export import export_model_fmu
 

@@ -21,8 +21,8 @@ pytest.importorskip("fmpy")
 
 from fmu_diagnose_cases import CASES, FMU, fmu_case, generic_value, same_cause  # noqa: E402
 
+from sysid.data.record import Record  # noqa: E402
 from sysid.errors import ConfigError, DataError  # noqa: E402
-from sysid.record import Record  # noqa: E402
 from twins.discrepancy import diagnose  # noqa: E402
 from twins.external import external_twin_class, fmu_twin_class  # noqa: E402
 from twins.external.fmu import FMUCore  # noqa: E402
@@ -158,7 +158,7 @@ def test_fmu_that_does_not_instantiate_refused(tmp_path):
 
 def test_cli_fmu_refusals_one_line(tmp_path):
     rec = Record(u=np.sin(np.arange(500) / 10.0), y=np.cos(np.arange(500) / 10.0), fs=1e4)
-    from sysid.io import write_record
+    from sysid.data.io import write_record
 
     data = write_record(rec, tmp_path / "d.npz")
     for extra, words in (
@@ -239,7 +239,7 @@ def test_cli_fmu_diagnose_json(tmp_path):
     """``diagnose --fmu``: the FMU configured as the native twin that made the record predicts it exactly."""
     import json
 
-    from sysid.io import write_record
+    from sysid.data.io import write_record
     from twins.cantilever import CantileverTwin
 
     tw = CantileverTwin.from_options(without=["measurement_noise", "sensor_quantization"])

@@ -6,12 +6,12 @@ import numpy as np
 import pytest
 import scipy.signal as ss
 
-from sysid.bla import best_linear_approximation
+from sysid.data.io import atomic_path
 from sysid.errors import DataError
-from sysid.frf import frf_periodic, frf_welch
-from sysid.io import atomic_path
-from sysid.signals import multisine
-from sysid.tfest import tfest
+from sysid.linear.bla import best_linear_approximation
+from sysid.linear.frf import frf_periodic, frf_welch
+from sysid.linear.tfest import tfest
+from sysid.signals.excitation import multisine
 
 FS = 1000.0
 B, A = ss.cheby1(4, 1.0, 0.3)  # known 4th-order IIR; G(e^jw) from scipy.signal.freqz
@@ -85,7 +85,7 @@ def test_periodic_std_matches_noise_closed_form():
 
 
 def test_period_drift_removal_keeps_the_periodic_part():
-    from sysid.frf import period_spectra
+    from sysid.linear.frf import period_spectra
 
     u = multisine(FS, resolution=2.0, band=(2, 300), periods=4, seed=6)
     ramp = 0.3 + 0.01 * np.arange(u.size) / FS
@@ -190,7 +190,7 @@ def test_atomic_path_leaves_no_partial_file(tmp_path):
 # ---------------------------------------------------------------------------------------------- bla identifier
 def test_bla_identifier_recovers_a_filter_and_round_trips(tmp_path):
     from sysid.base import load_model
-    from sysid.record import Record
+    from sysid.data.record import Record
     from sysid.registry import get_identifier
 
     rng = np.random.default_rng(7)

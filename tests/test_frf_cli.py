@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from benchmarks.cli import main
-from sysid.io import read_record
+from sysid.data.io import read_record
 from twins.cantilever import CantileverTwin
 
 LINEAR = ["--set", "hysteresis=prandtl-ishlinskii,pi_p0_fraction=1"]  # Γ = d·v: the hysteresis switched off
@@ -151,8 +151,8 @@ def test_wiener_hammerstein_bla_reaches_the_published_rmse():
     import scipy.signal as ss
 
     from benchmarks.datasets import load_dataset
-    from sysid.frf import frf_welch
-    from sysid.tfest import tfest
+    from sysid.linear.frf import frf_welch
+    from sysid.linear.tfest import tfest
 
     ds = load_dataset("wiener-hammerstein")
     est, test = ds.est, ds.tests["test"]
@@ -183,7 +183,7 @@ def test_bla_bad_input_exit_2(inputs, tmp_path, capsys):
     (y,) = _simulate(inputs[:1], tmp_path, "b", ["--effects", "none"])
     short = tmp_path / "short.npz"
     rec = read_record(y)
-    from sysid.io import write_record
+    from sysid.data.io import write_record
 
     write_record(rec[: len(rec) // 3 * 2], short)
     for args in (["bla", y, "--periods", 3, "--drop", 3], ["bla", y, short, "--periods", 3],

@@ -6,12 +6,12 @@ import warnings
 import numpy as np
 import pytest
 
-from sysid import frols as fr
 from sysid.base import load_model
+from sysid.data.record import Record
 from sysid.errors import DataError, DivergenceWarning, InputError
-from sysid.polynomial import NARMAXPoly, NARXPoly
-from sysid.record import Record
-from sysid.residuals import correlation_tests
+from sysid.evaluation.residuals import correlation_tests
+from sysid.polynomial import frols as fr
+from sysid.polynomial.narmax import NARMAXPoly, NARXPoly
 from tests._polysys import TRUE_TERMS, narmax_record, narx_record, table
 
 
@@ -100,7 +100,7 @@ def test_zero_start_candidate_column_does_not_change_selection():
 
 @pytest.mark.parametrize("cls", [NARXPoly, NARMAXPoly])
 def test_k_step_equals_one_step_and_free_run(cls):
-    from sysid import simulate as sim
+    from sysid.polynomial import simulate as sim
 
     rec = narmax_record(600, seed=7)
     m = cls(ny=2, nu=2, degree=2, criterion="bic").fit(rec)
@@ -404,7 +404,7 @@ def test_narmax_els_iterations_finite_and_one_step_finite_on_real_data(els_iter)
             y1 = m.predict(rec, 1)
         assert np.isfinite(y1).all()
         # k = 1 through the k-step machinery equals the one-step path; k = N is the free run (noise terms zero)
-        from sysid import simulate as sim
+        from sysid.polynomial import simulate as sim
 
         yk1, bad = sim.k_step(m.compiled(), rec.u.reshape(-1, 1), rec.y.reshape(-1, 1), 1)
         assert bad == -1
@@ -440,7 +440,7 @@ def test_narmax_unstable_noise_model_is_reported_not_kept():
     m = NARMAXPoly(ny=4, nu=4, ne=2, degree=3, max_terms=20, els_iter=20)
     with pytest.warns(UserWarning, match="residual recursion diverged"):
         m.fit(ds.est)
-    from sysid import simulate as sim
+    from sysid.polynomial import simulate as sim
 
     _, e = sim.one_step(m.compiled(), ds.est.u.reshape(-1, 1), ds.est.y.reshape(-1, 1))
     assert np.isfinite(e).all() and np.abs(e).max() < np.abs(ds.est.y).max()

@@ -19,8 +19,8 @@ import numpy as np
 import pytest
 
 from benchmarks.cli import main
+from sysid.data.io import read_record
 from sysid.errors import DataError
-from sysid.io import read_record
 
 ROOT = Path(__file__).resolve().parents[1]
 FS = 1000.0

@@ -18,8 +18,8 @@ import numpy as np
 import pytest
 from scipy import signal
 
-from sysid.io import write_record
-from sysid.record import Record
+from sysid.data.io import write_record
+from sysid.data.record import Record
 from twins.cantilever import CantileverTwin
 from twins.discrepancy import diagnose
 from twins.discrepancy.prediction import deterministic
@@ -116,7 +116,7 @@ def test_cli_saves_the_hybrid_twin(backlash_files, tmp_path):
     out = json.loads(r.stdout)
     assert out["verdict"] == "unexplained" and out["hybrid"]["saved"] == str(path)
     hy = HybridTwin.load(path)
-    from sysid.io import read_record
+    from sysid.data.io import read_record
 
     val = read_record(d / "val.npz")
     y = hy.simulate(val.u, val.fs)

@@ -13,10 +13,10 @@ import numpy as np
 import pytest
 from test_hybrid import _path_records
 
+from sysid.data.record import Record
 from sysid.errors import ConfigError
-from sysid.linear import ARX
-from sysid.polynomial import NARXPoly
-from sysid.record import Record
+from sysid.linear.arx import ARX
+from sysid.polynomial.narmax import NARXPoly
 from sysid.stepper import make_stepper
 from twins.hybrid import DEFAULT_CANDIDATES, HybridTwin
 

@@ -1,4 +1,4 @@
-"""``piezotwin identify``: JSON contract, model file round trip, errors, plots; and sysid.evaluate."""
+"""``piezotwin identify``: JSON contract, model file round trip, errors, plots; and sysid.evaluation.evaluate."""
 
 import json
 
@@ -8,9 +8,9 @@ import pytest
 from benchmarks.cli import main
 from benchmarks.cli.identify import identify
 from sysid.base import load_model
-from sysid.evaluate import evaluate
-from sysid.io import read_record, write_record
-from sysid.metrics import r2
+from sysid.data.io import read_record, write_record
+from sysid.evaluation.evaluate import evaluate
+from sysid.evaluation.metrics import r2
 from tests._polysys import narmax_record, narx_record
 
 KEYS = {"identifier", "params", "n_parameters", "fit_seconds", "terms", "estimation", "validation"}
@@ -107,9 +107,9 @@ def test_identify_helper_is_generic_over_registry():
 
 
 def test_report_plots_survive_a_diverging_free_run(tmp_path):
-    from sysid.plots import identification_report
-    from sysid.polynomial import NARXPoly
-    from sysid.record import Record
+    from sysid.data.record import Record
+    from sysid.polynomial.narmax import NARXPoly
+    from sysid.report.plots import identification_report
 
     rng = np.random.default_rng(0)
     n = 400

@@ -6,8 +6,8 @@ import json
 import pytest
 
 from benchmarks.cli import main
+from sysid.data.io import write_record
 from sysid.identify import free_run_r2, identify
-from sysid.io import write_record
 from sysid.registry import get_identifier
 from tests._modal import modal_records
 from tests._polysys import narx_record

@@ -5,9 +5,9 @@ import pytest
 from scipy.signal import lfilter
 
 from sysid.base import load_model
+from sysid.data.record import Record
 from sysid.errors import ConfigError, DataError
-from sysid.linear import ARMAX, ARX
-from sysid.record import Record
+from sysid.linear.arx import ARMAX, ARX
 
 A = [1.0, -1.5, 0.7]
 B = [1.0, 0.5]          # applied to u(t - nk)

@@ -5,8 +5,8 @@ import numpy as np
 import pytest
 
 from sysid.base import load_model
-from sysid.linear import ARMAX
-from sysid.record import Record
+from sysid.data.record import Record
+from sysid.linear.arx import ARMAX
 
 # y_o(t) = Σ_p A[o, p] y_p(t−1) + Σ_j B[o, j] u_j(t−1) + e_o(t) + C[o] e_o(t−1)
 A = np.array([[0.6, 0.2], [-0.1, 0.5]])

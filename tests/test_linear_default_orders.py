@@ -8,10 +8,10 @@ from scipy.signal import lfilter
 
 from benchmarks.cli import main
 from sysid.base import load_model
-from sysid.evaluate import evaluate
-from sysid.io import write_record
-from sysid.linear import ARMAX, ARX
-from sysid.record import Record
+from sysid.data.io import write_record
+from sysid.data.record import Record
+from sysid.evaluation.evaluate import evaluate
+from sysid.linear.arx import ARMAX, ARX
 
 
 def _sixth_order(n=8000, seed=4):

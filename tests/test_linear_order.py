@@ -7,11 +7,11 @@ import pytest
 from scipy.signal import lfilter
 
 from benchmarks.cli.identify import identify
-from sysid.advice import closed_loop_correlation, practitioner_warnings
-from sysid.io import write_record
-from sysid.linear import ARX
-from sysid.order import delay_estimate, order_table, plot_order_table
-from sysid.record import Record
+from sysid.data.io import write_record
+from sysid.data.record import Record
+from sysid.evaluation.advice import closed_loop_correlation, practitioner_warnings
+from sysid.linear.arx import ARX
+from sysid.linear.order import delay_estimate, order_table, plot_order_table
 
 F = [1.0, -1.5, 0.7]
 B = [1.0, 0.5]
@@ -56,7 +56,7 @@ def test_arx_auto_orders_improve_a_model_arx_2_2_cannot_fit():
     u = rng.standard_normal(8000)
     y = lfilter([0, 1.0, 0.3], a, u) + 0.05 * rng.standard_normal(8000)
     est, val = Record(u[:6000], y[:6000], fs=1.0), Record(u[6000:], y[6000:], fs=1.0)
-    from sysid.evaluate import evaluate
+    from sysid.evaluation.evaluate import evaluate
 
     r2_fixed = evaluate(ARX(orders="given").fit(est), val)["free_run"]["r2"]
     auto = ARX(orders="auto").fit(est)

@@ -21,7 +21,7 @@ def test_skipped_and_failed_stages_are_reported(tmp_path, monkeypatch):
         raise RuntimeError("boom")
 
     def fine(ctx):
-        from sysid.plots import pyplot
+        from sysid.report.plots import pyplot
 
         fig, ax = pyplot().subplots()
         ax.plot([0, 1])

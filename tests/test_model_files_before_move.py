@@ -10,8 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from sysid.base import load_model
-from sysid.io import read_record
+from sysid import load_model, read_record
 from sysid.registry import IDENTIFIERS
 
 HERE = Path(__file__).parent / "data" / "models_before_subpackages"

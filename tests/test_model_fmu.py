@@ -9,12 +9,12 @@ import numpy as np
 import pytest
 
 from sysid.errors import ConfigError
-from sysid.linear import ARMAX, ARX
+from sysid.linear.arx import ARMAX, ARX
 from sysid.neural.narx_mlp import NARXMLP
-from sysid.pnlss import PNLSS
-from sysid.polynomial import NARMAXPoly, NARXPoly
+from sysid.nonlinear.pnlss import PNLSS
+from sysid.nonlinear.wiener_hammerstein import WienerHammerstein
+from sysid.polynomial.narmax import NARMAXPoly, NARXPoly
 from sysid.stepper import make_stepper
-from sysid.wiener_hammerstein import WienerHammerstein
 from tests._polysys import narx_record
 
 fmpy = pytest.importorskip("fmpy")

@@ -8,11 +8,11 @@ import pytest
 
 from benchmarks.cli import main
 from sysid.base import Identifier, load_model
+from sysid.data.io import read_record, write_record
+from sysid.data.record import Record
 from sysid.errors import ConfigError, DataError, InputError
-from sysid.io import read_record, write_record
-from sysid.linear import ARX
-from sysid.polynomial import NARXPoly
-from sysid.record import Record
+from sysid.linear.arx import ARX
+from sysid.polynomial.narmax import NARXPoly
 from sysid.registry import IDENTIFIERS, get_identifier
 from tests._polysys import narx_record
 
@@ -192,7 +192,7 @@ def test_old_formats_still_read(data, tmp_path):
     m = NARXPoly().fit(est)
     v1 = {"format": "piezotwin-model/1", "identifier": m.name, "params": m.get_params(), "state": m._state()}
     p = tmp_path / "old.json"
-    from sysid.jsonio import json_default
+    from sysid.data.jsonio import json_default
 
     p.write_text(json.dumps(v1, default=json_default))
     assert np.array_equal(load_model(p).predict(val, None), m.predict(val, None))
@@ -250,7 +250,7 @@ def test_identifier_base_load_is_generic(data, tmp_path):
 
 
 def test_horizon_parsing():
-    from sysid.compare import parse_horizon
+    from sysid.report.compare import parse_horizon
 
     assert parse_horizon("inf") is None and parse_horizon("1") == 1 and parse_horizon("25") == 25
     for bad in ("0", "-3", "x", "1.5"):

@@ -8,12 +8,12 @@ import pytest
 torch = pytest.importorskip("torch")
 
 from sysid.base import load_model  # noqa: E402
+from sysid.data.record import Record  # noqa: E402
 from sysid.errors import ConfigError, DataError, DivergenceWarning  # noqa: E402
-from sysid.metrics import r2  # noqa: E402
+from sysid.evaluation.metrics import r2  # noqa: E402
 from sysid.neural.core import count_mlp_parameters, free_run_mlp, k_step_mlp, mlp_forward_np  # noqa: E402
 from sysid.neural.narx_mlp import NARXMLP, NARXMLPSim  # noqa: E402
 from sysid.neural.rnn import RNNStateSpace  # noqa: E402
-from sysid.record import Record  # noqa: E402
 from tests.neural_systems import bouc_wen_record, multisine_input  # noqa: E402
 
 FS = 1000.0
@@ -198,7 +198,7 @@ def test_identify_cli_same_json_as_polynomial_models(tmp_path, plant, capsys, na
     import json
 
     from benchmarks.cli import main
-    from sysid.io import write_record
+    from sysid.data.io import write_record
 
     est, val = plant
     write_record(est, tmp_path / "est.npz")

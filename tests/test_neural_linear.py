@@ -15,7 +15,7 @@ torch = pytest.importorskip("torch")
 
 from sysid.base import load_model  # noqa: E402
 from sysid.errors import ConfigError  # noqa: E402
-from sysid.linear import ARX  # noqa: E402
+from sysid.linear.arx import ARX  # noqa: E402
 from sysid.neural.core import (  # noqa: E402
     FlatMLP,
     count_mlp_parameters,

@@ -10,8 +10,8 @@ pytest.importorskip("optuna")
 pytest.importorskip("torch")
 
 from benchmarks.cli import main  # noqa: E402
+from sysid.data.io import write_record  # noqa: E402
 from sysid.errors import ConfigError  # noqa: E402
-from sysid.io import write_record  # noqa: E402
 from sysid.search import SweepSpec, collect, parse_grid, run_sweep, storage_url  # noqa: E402
 from tests.neural_systems import bouc_wen_record, multisine_input  # noqa: E402
 

@@ -12,9 +12,9 @@ import pytest
 
 from benchmarks.cli import main
 from sysid.config import ALIASES, resolve_aliases
+from sysid.data.io import write_record
+from sysid.data.record import Record
 from sysid.errors import ConfigError
-from sysid.io import write_record
-from sysid.record import Record
 from sysid.registry import IDENTIFIERS, get_identifier
 
 LAG_NAMES = {"ny", "nu", "n_y", "n_u"}
@@ -105,11 +105,11 @@ def test_an_alias_is_not_applied_where_the_old_name_is_a_real_option():
 
 def test_old_model_files_with_old_names_load(tmp_path, est_file):
     from sysid.base import load_model
-    from sysid.io import read_record
+    from sysid.data.io import read_record
 
     rec = read_record(est_file)
     model = get_identifier("narx-mlp")(ny=2, nu=2, epochs=1, hidden=[4]).fit(rec)
-    from sysid.jsonio import json_default
+    from sysid.data.jsonio import json_default
 
     # a model file as written before the rename: the first (JSON, unchecksummed) format with the old names
     params = model.get_params()

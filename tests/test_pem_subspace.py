@@ -6,11 +6,11 @@ import pytest
 from scipy.signal import lfilter
 
 from sysid.base import load_model
+from sysid.data.record import Record
 from sysid.errors import ConfigError
-from sysid.pem import BJ, OE, stabilise
-from sysid.record import Record
+from sysid.linear.pem import BJ, OE, stabilise
+from sysid.linear.subspace import N4SID, ss_simulate
 from sysid.registry import available_identifiers
-from sysid.subspace import N4SID, ss_simulate
 
 # 4th-order system: poles 0.9 e^{±0.3i} and 0.7 e^{±1.0i}; B(q) = 0.5 − 0.3 q⁻¹ + 0.2 q⁻² + 0.1 q⁻³, nk = 1
 POLES = np.array([0.9 * np.exp(0.3j), 0.9 * np.exp(-0.3j), 0.7 * np.exp(1.0j), 0.7 * np.exp(-1.0j)])

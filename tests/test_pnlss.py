@@ -8,12 +8,12 @@ import numpy as np
 import pytest
 
 from benchmarks.cli import main
-from sysid import pnlss_sim as ps
 from sysid.base import load_model
+from sysid.data.io import write_record
+from sysid.data.record import Record
 from sysid.errors import ConfigError
-from sysid.io import write_record
-from sysid.pnlss import PNLSS
-from sysid.record import Record
+from sysid.nonlinear import pnlss_sim as ps
+from sysid.nonlinear.pnlss import PNLSS
 
 A = np.array([[0.6, 0.3], [-0.3, 0.6]])
 B = np.array([[1.0], [0.5]])
@@ -23,7 +23,7 @@ D = np.array([[0.1]])
 
 def true_system(degree: int):
     """x(t+1) = A x + B u + E ζ(x, u), y = C x + D u + F η(x, u): a few monomials of z = [x1, x2, u], written
-    out here (E, F in the monomial order of sysid.pnlss_sim.monomials, checked by name)."""
+    out here (E, F in the monomial order of sysid.nonlinear.pnlss_sim.monomials, checked by name)."""
     fac = ps.monomials(3, degree)
     names = ps.monomial_names(fac, 2, 1)
     E = np.zeros((2, len(fac)))

@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from sysid.base import load_model
-from sysid.polysim import NARXPolySim, simulate_sensitivity
-from sysid.record import Record
+from sysid.data.record import Record
+from sysid.polynomial.polysim import NARXPolySim, simulate_sensitivity
 
 TRUE = {"y(k-1)": 1.2, "y(k-2)": -0.5, "u(k-1)": 0.5, "u(k-1)^2": 0.2, "y(k-1)*u(k-1)": -0.1}
 

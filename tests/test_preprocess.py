@@ -1,13 +1,13 @@
-"""Preprocessing (sysid.preprocess) against closed forms and designed specifications."""
+"""Preprocessing (sysid.signals.preprocess) against closed forms and designed specifications."""
 
 import numpy as np
 import pytest
 from scipy.signal import lfilter
 
-from sysid import preprocess as P
-from sysid.cleaning import _hampel_1d
+from sysid.data.record import Record
 from sysid.errors import ConfigError, DataError
-from sysid.record import Record
+from sysid.signals import preprocess as P
+from sysid.signals.cleaning import _hampel_1d
 
 
 def tone_amp_phase(y: np.ndarray, f: float, fs: float, t0: float = 0.0) -> tuple[float, float]:

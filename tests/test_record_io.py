@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 from scipy.io import savemat
 
+from sysid.data.io import read_record, write_record
+from sysid.data.record import Normaliser, Record
 from sysid.errors import DataError
-from sysid.io import read_record, write_record
-from sysid.record import Normaliser, Record
 
 
 def _rec(n=257, seed=1, mimo=False):

@@ -179,7 +179,7 @@ def test_a_stored_row_of_another_identifier_counts_as_missing(fake, capsys, tmp_
 def test_write_is_atomic_a_failed_write_leaves_the_old_files(fake, monkeypatch, capsys):
     import os
 
-    import sysid.safeio
+    import sysid.data.safeio
 
     argv, out, _ = fake
     out["md"].write_text("old page\n")
@@ -188,11 +188,11 @@ def test_write_is_atomic_a_failed_write_leaves_the_old_files(fake, monkeypatch, 
     def failing_replace(src, dst):
         raise OSError(28, "No space left on device")
 
-    monkeypatch.setattr(sysid.safeio.os, "replace", failing_replace)
+    monkeypatch.setattr(sysid.data.safeio.os, "replace", failing_replace)
     assert main(argv) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "cannot write" in err[0]
-    monkeypatch.setattr(sysid.safeio.os, "replace", os.replace)
+    monkeypatch.setattr(sysid.data.safeio.os, "replace", os.replace)
     assert out["md"].read_text() == "old page\n" and out["json"].read_text() == "{}\n"
     assert not [p for p in out["md"].parent.iterdir() if ".tmp-" in p.name]
 

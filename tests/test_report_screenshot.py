@@ -66,7 +66,7 @@ def _mask(img: np.ndarray, hex_color: str, tol: float = 0.06) -> np.ndarray:
 
 def band_fraction(img: np.ndarray) -> float:
     """Share of the figure's pixels painted in the band colour."""
-    from sysid.plots import BAND_COLOR
+    from sysid.report.plots import BAND_COLOR
 
     return float(_mask(img, BAND_COLOR).mean())
 
@@ -75,7 +75,7 @@ def trace_reaches_end(img: np.ndarray) -> tuple[float, float]:
     """(share of the figure's width that the first prediction's colour spans in the whole-record panel,
     ratio of that trace's vertical extent in its last 3 % of columns to its extent before): the test record
     has a burst of 3× amplitude in its last 5 %, which a plot of its start cannot show."""
-    from sysid.plots import PREDICTED_COLORS
+    from sysid.report.plots import PREDICTED_COLORS
 
     top = img[: int(img.shape[0] * 0.5)]  # the whole-record panel is the upper one
     m = _mask(top, PREDICTED_COLORS[0], tol=0.12)
@@ -96,13 +96,13 @@ def trace_reaches_end(img: np.ndarray) -> tuple[float, float]:
 def page(tmp_path_factory):
     if not CHROMIUM.exists():
         pytest.skip("headless browser test needs /usr/bin/chromium (Debian package 'chromium'); not installed")
-    from sysid.plots import pyplot
+    from sysid.report.plots import pyplot
 
     plt = pyplot()
 
     from benchmarks.mainjob import Context, _write_report
-    from sysid.plots import draw_correlation_test, plot_measured_vs_predicted
-    from sysid.residuals import correlation_tests
+    from sysid.evaluation.residuals import correlation_tests
+    from sysid.report.plots import draw_correlation_test, plot_measured_vs_predicted
 
     tmp = tmp_path_factory.mktemp("shot")
     rep = tmp / "report"

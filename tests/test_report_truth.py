@@ -9,8 +9,8 @@ import re
 
 import numpy as np
 
-from sysid.plots import _envelope, draw_correlation_test, whole_periods
-from sysid.provenance import collect, html_block
+from sysid.report.plots import _envelope, draw_correlation_test, whole_periods
+from sysid.report.provenance import collect, html_block
 
 
 def test_loops_cover_whole_periods():
@@ -25,7 +25,7 @@ def test_loops_cover_whole_periods():
 
 
 def test_correlation_axes_scale_to_the_data_and_show_the_band():
-    from sysid.plots import pyplot
+    from sysid.report.plots import pyplot
 
     plt = pyplot()
 
@@ -72,7 +72,7 @@ def test_provenance_hashes_files_and_names_the_source(tmp_path):
 
 
 def test_one_page_template_escapes_data_and_ends_with_the_provenance(tmp_path):
-    from sysid.report import figure, table, write_page
+    from sysid.report.html import figure, table, write_page
 
     prov = collect(files=[])
     path = write_page(

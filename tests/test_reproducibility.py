@@ -16,7 +16,7 @@ import pytest
 TRAIN = r"""
 import json, numpy as np
 from sysid.neural.narx_mlp import NARXMLP
-from sysid.record import Record
+from sysid.data.record import Record
 rng = np.random.default_rng(0)
 u = rng.standard_normal(3000)
 y = np.zeros_like(u)

@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 
 from sysid.errors import DataError
-from sysid.residuals import correlation_tests, normality, residual_spectrum, xcorr
-from sysid.residuals import tests_summary as summary  # (a name starting with "test" would be collected)
+from sysid.evaluation.residuals import correlation_tests, normality, residual_spectrum, xcorr
+from sysid.evaluation.residuals import tests_summary as summary  # (a name starting with "test" would be collected)
 
 
 def test_xcorr_matches_eq_2_33_directly():

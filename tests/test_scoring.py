@@ -95,7 +95,7 @@ def test_normalised_wrapper_is_exact_for_an_affine_invariant_model():
 
 def test_normaliser_fitted_on_several_records_is_the_one_of_the_joined_record():
     """The wrapper fits one scale on all estimation records together: the same as on their concatenation."""
-    from sysid.record import Normaliser, Record
+    from sysid.data.record import Normaliser, Record
 
     rng = np.random.default_rng(0)
     recs = [Record(u=rng.normal(k, 1 + k, 50), y=rng.normal(-k, 2, 50), fs=10.0) for k in range(3)]

@@ -20,7 +20,7 @@ import pytest
 pytest.importorskip("optuna")
 pytest.importorskip("psycopg2")
 
-from sysid.io import write_record  # noqa: E402
+from sysid.data.io import write_record  # noqa: E402
 from tests._postgres import postgres_url  # noqa: E402,F401  (fixture)
 from tests.neural_systems import bouc_wen_record, multisine_input  # noqa: E402
 
@@ -176,7 +176,7 @@ def test_search_that_cannot_complete_says_how_many_are_missing_and_exits_1(tmp_p
 
     import sysid.search.sweep as S  # run_config looks run_one up here
     from benchmarks.cli import main
-    from sysid.record import Record
+    from sysid.data.record import Record
 
     rng = np.random.default_rng(0)
     u = rng.standard_normal(400)

@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 from scipy.signal import hilbert
 
-from sysid import signals as S
 from sysid.errors import ConfigError
+from sysid.signals import excitation as S
 
 
 def line_db(u: np.ndarray, n0: int) -> np.ndarray:

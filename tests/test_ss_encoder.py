@@ -10,8 +10,8 @@ import pytest
 torch = pytest.importorskip("torch")
 
 from sysid.base import load_model  # noqa: E402
+from sysid.data.record import Record  # noqa: E402
 from sysid.neural.ss_encoder import SSEncoder  # noqa: E402
-from sysid.record import Record  # noqa: E402
 
 A = np.array([[1.6, -0.8], [1.0, 0.0]])   # poles 0.8 ± 0.4j (|p| = 0.894)
 B = np.array([1.0, 0.0])

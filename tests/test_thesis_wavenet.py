@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 from benchmarks.thesis.wavenet import WaveletNARX
-from sysid.metrics import r2
-from sysid.record import Record
+from sysid.data.record import Record
+from sysid.evaluation.metrics import r2
 
 
 def _system(nonlinear: bool, n: int = 1500) -> Record:

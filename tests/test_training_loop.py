@@ -15,10 +15,10 @@ import pytest
 
 torch = pytest.importorskip("torch")
 
+from sysid.data.record import Record  # noqa: E402
 from sysid.neural.rnn import RNNStateSpace, _Net  # noqa: E402
 from sysid.neural.subnet import SubnetModel  # noqa: E402
 from sysid.neural.training import train_simulation  # noqa: E402
-from sysid.record import Record  # noqa: E402
 
 LAG, T, BATCH, EPOCHS = 4, 6, 16, 2
 

@@ -62,7 +62,7 @@ def test_bad_options_refused_with_valid_list(kw, needle):
 
 
 def test_params_file_round_trip_and_calibration(tmp_path):
-    from sysid.record import Record
+    from sysid.data.record import Record
 
     fs = 1000.0
     u = np.sign(np.sin(2 * np.pi * 5 * np.arange(2000) / fs))

@@ -7,12 +7,12 @@ import numpy as np
 import pytest
 from scipy.signal import lfilter
 
-from sysid import wh_blocks as wb
 from sysid.base import load_model
+from sysid.data.record import Record
 from sysid.errors import ConfigError, DataError
-from sysid.record import Record
+from sysid.nonlinear import wh_blocks as wb
+from sysid.nonlinear.wiener_hammerstein import WienerHammerstein
 from sysid.stepper import make_stepper
-from sysid.wiener_hammerstein import WienerHammerstein
 
 
 def true_system(u: np.ndarray) -> np.ndarray:

@@ -11,12 +11,12 @@ from scipy.signal import lfilter
 torch = pytest.importorskip("torch")
 
 from sysid.base import load_model  # noqa: E402
+from sysid.data.record import Record  # noqa: E402
 from sysid.errors import ConfigError  # noqa: E402
 from sysid.neural.blocknet import BlockNet  # noqa: E402
 from sysid.neural.iir import LinearDynamic, MIMOFilter, filter_np, iir_filter  # noqa: E402
 from sysid.neural.training import train_records  # noqa: E402
 from sysid.neural.wh_net import WHNet  # noqa: E402
-from sysid.record import Record  # noqa: E402
 
 B_TRUE = np.array([0.3, 0.2])
 A_TRUE = np.array([-1.5, 0.7])  # poles 0.75 ± 0.37j

@@ -40,4 +40,4 @@ def test_wheel_holds_no_tests_and_only_the_benchmark_library_and_cli(tmp_path):
     library = {p.relative_to(ROOT).as_posix() for p in (ROOT / "benchmarks").rglob("*.py")}
     shipped_bench = {n for n in modules if n.startswith("benchmarks/")}
     assert shipped_bench == library  # the library and benchmarks/cli, nothing more
-    assert "benchmarks/cli/main.py" in shipped_bench and "sysid/record.py" in modules
+    assert "benchmarks/cli/main.py" in shipped_bench and "sysid/data/record.py" in modules

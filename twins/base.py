@@ -20,11 +20,12 @@ from typing import Any, ClassVar, Self
 import numpy as np
 
 from sysid.config import coerce, make_rng, parse_assignments
+from sysid.data.io import output_file
+from sysid.data.jsonio import json_default as _json_default
+from sysid.data.jsonio import read_json_file
+from sysid.data.record import Record
 from sysid.errors import ConfigError, DataError
-from sysid.io import output_file
-from sysid.jsonio import json_default as _json_default
-from sysid.jsonio import read_json_file
-from sysid.record import Record
+from twins.calibration import CalibrationResult, calibrate
 from twins.paramfields import ParamInfo, param_info, pfield
 
 __all__ = ["pfield", "ParamInfo", "param_info", "EffectSpec", "Twin", "PARAMS_FORMAT"]
@@ -151,14 +152,12 @@ class Twin(ABC):
         if protocol not in self.PROTOCOLS:
             raise ConfigError(f"unknown protocol {protocol!r} for twin {self.name}; valid: {', '.join(self.PROTOCOLS)}")
 
-    def calibrate(self, data: Record, val: Record | None = None, names: Iterable[str] | None = None, **options: Any):
+    def calibrate(self, data: Record, val: Record | None = None, names: Iterable[str] | None = None,
+                  **options: Any) -> CalibrationResult[Self]:
         """Fit ``names`` (default ``CALIBRATION_PARAMS``) to ``data`` by free-run output error.
 
-        Returns a :class:`twins.calibration.CalibrationResult`; twins override this to add a good start
-        (e.g. a linear pre-fit) or a staged fit.
+        Twins override this to add a good start (e.g. a linear pre-fit) or a staged fit.
         """
-        from twins.calibration import calibrate
-
         fit = list(names) if names is not None else list(self.CALIBRATION_PARAMS)
         if not fit:
             raise ConfigError(f"twin {self.name} names no parameters to calibrate")
@@ -168,7 +167,7 @@ class Twin(ABC):
     def save_params(self, path: str | Path, extra: Mapping[str, Any] | None = None) -> Path:
         """Write the configuration (and e.g. calibration statistics in ``extra``) as a JSON parameter file."""
         payload = {"format": PARAMS_FORMAT, **self.config(), **(dict(extra) if extra else {})}
-        with output_file(path) as tmp:  # atomic: a temporary file renamed over path (sysid.safeio)
+        with output_file(path) as tmp:  # atomic: a temporary file renamed over path (sysid.data.safeio)
             tmp.write_text(json.dumps(payload, indent=2, default=_json_default))
         return Path(path)
 

@@ -19,24 +19,38 @@ from __future__ import annotations
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any
+from typing import Any, ClassVar, Generic, Protocol, Self, TypeVar
 
 import numpy as np
-from scipy.optimize import least_squares
 
+from sysid.data.record import Record
 from sysid.errors import ConfigError, DataError
-from sysid.metrics import nrmse, r2
-from sysid.record import Record
+from sysid.evaluation.metrics import nrmse, r2
 from twins.paramfields import param_info
 
-if TYPE_CHECKING:  # annotations only: twins.base calls calibrate() from Twin.calibrate
-    from twins.base import Twin
+
+class Calibratable(Protocol):
+    """What a calibration needs of a twin (:class:`twins.base.Twin` is one): its name, effects and parameter
+    dataclass, a copy with some parameters changed, and a simulation of an input at a rate ``fs`` [Hz]."""
+
+    name: ClassVar[str]
+    params: Any
+
+    @property
+    def effects(self) -> frozenset[str]: ...
+
+    def with_params(self, **changes: Any) -> Self: ...
+
+    def simulate(self, u: np.ndarray, fs: float) -> np.ndarray: ...
+
+
+Twin = TypeVar("Twin", bound=Calibratable)
 
 __all__ = ["CalibrationResult", "calibrate", "check_calibration_data"]
 
 
 @dataclass
-class CalibrationResult:
+class CalibrationResult(Generic[Twin]):
     """Outcome of :func:`calibrate`: the fitted twin, parameter values with standard errors and scores."""
 
     twin: Twin
@@ -98,7 +112,7 @@ def calibrate(
     simulate: Callable[[Twin, Record], np.ndarray] | None = None,
     max_nfev: int = 200,
     **lsq_options: Any,
-) -> CalibrationResult:
+) -> CalibrationResult[Twin]:
     """Fit ``names`` of ``twin.params`` to ``data`` by free-run output error; score on ``data`` and ``val``.
 
     ``simulate(twin, record)`` defaults to ``twin.simulate(record.u, record.fs)``; pass a noise-free variant
@@ -132,6 +146,8 @@ def calibrate(
 
     t0 = time.perf_counter()
     zlo, zhi = (lo - start) / scale, (hi - start) / scale
+    from scipy.optimize import least_squares  # here: twins.base imports this module, and the CLI starts without scipy
+
     res = least_squares(residual, np.zeros(len(names)), bounds=(zlo, zhi), x_scale=1.0, max_nfev=max_nfev,
                         **lsq_options)
     x = start + res.x * scale
@@ -206,6 +222,8 @@ def _calibrate_projected(twin: Twin, data: Record, names: list[str], lin: list[s
 
         def build(z: np.ndarray) -> Twin:
             return twin.with_params(**{n: float(v) for n, v in zip(nl, start + z * scale)})
+
+        from scipy.optimize import least_squares
 
         res = least_squares(lambda z: project(build(z))[1], np.zeros(len(nl)), bounds=((lo - start) / scale,
                             (hi - start) / scale), x_scale=1.0, max_nfev=max_nfev, **lsq_options)

@@ -15,7 +15,7 @@ record is kept for the score that is reported). The physics stays as diagnosed: 
 cause.
 
 ``save(path)`` writes one JSON file (the twin's configuration and the remainder model in the project's model-file
-format, :mod:`sysid.modelfile`); :meth:`HybridTwin.load` reads it back and simulates identically.
+format, :mod:`sysid.data.modelfile`); :meth:`HybridTwin.load` reads it back and simulates identically.
 """
 
 from __future__ import annotations
@@ -31,13 +31,13 @@ from typing import Any
 
 import numpy as np
 
+from sysid.data.jsonio import read_json_file
+from sysid.data.modelfile import read_model
+from sysid.data.record import Record
+from sysid.data.safeio import atomic_write_text
 from sysid.errors import ConfigError, DataError, DivergenceWarning
-from sysid.jsonio import read_json_file
-from sysid.metrics import nrmse, r2
-from sysid.modelfile import read_model
-from sysid.record import Record
+from sysid.evaluation.metrics import nrmse, r2
 from sysid.registry import get_identifier
-from sysid.safeio import atomic_write_text
 from twins.base import Twin
 
 __all__ = ["HybridTwin", "HybridStepper", "DEFAULT_CANDIDATES", "HYBRID_FORMAT"]

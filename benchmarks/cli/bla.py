@@ -1,7 +1,7 @@
 """``piezotwin bla FILE [FILE ...] --periods P [--json]``: Best Linear Approximation and nonlinearity detection.
 
 One file per realisation of a random-phase multisine, each holding exactly P periods (``--drop K`` leading
-transient periods are left out). Robust method of Pintelon & Schoukens (:mod:`sysid.bla`): G_BLA, its noise
+transient periods are left out). Robust method of Pintelon & Schoukens (:mod:`sysid.linear.bla`): G_BLA, its noise
 variance (period spread) and its nonlinear-distortion variance (realisation spread, two or more files), and
 the odd / even distortion levels in dB over the noise floor at the detection lines, with a verdict
 ``linear`` | ``odd`` | ``even`` | ``odd+even``.
@@ -43,7 +43,7 @@ def register(sub) -> None:
 
 def estimate(records, periods: int, drop: int = 0, alpha: float = 1e-3, detrend: int = 1):
     """The BLA of the records (one per realisation) the way the command computes it."""
-    from sysid.bla import best_linear_approximation
+    from sysid.linear.bla import best_linear_approximation
 
     if periods < 1:
         raise ConfigError(f"--periods must be >= 1, got {periods}")
@@ -100,7 +100,7 @@ def run(args: argparse.Namespace) -> int:
         write_csv({k: payload[k] for k in ("f_hz", "re", "im", "var_noise", "var_distortion", "var_total")},
                   args.output)
     if args.plot:
-        from sysid.plots import plot_bla
+        from sysid.report.plots import plot_bla
 
         rec = records[0]
         unit = f"{rec.units.get('y', '')}/{rec.units.get('u', '')}" if rec.units.get("y") else ""

@@ -137,7 +137,7 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     text = generate()
     if args.output:
-        from sysid.io import output_file
+        from sysid.data.io import output_file
 
         with output_file(args.output) as tmp:
             Path(tmp).write_text(text, encoding="utf-8")

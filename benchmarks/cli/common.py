@@ -9,9 +9,9 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from sysid.io import read_record, write_record
-from sysid.jsonio import clean_json
-from sysid.record import FS_MAX, FS_MIN, Record
+from sysid.data.io import read_record, write_record
+from sysid.data.jsonio import clean_json
+from sysid.data.record import FS_MAX, FS_MIN, Record
 
 # ---------------------------------------------------------------------------- option types
 # argparse calls these on the option's text; ArgumentTypeError becomes "argument --x: message", exit 2, one line.
@@ -128,9 +128,9 @@ def preflight(args: argparse.Namespace) -> None:
     """Check every output the command will write before any work, so a wrong path fails at once: outputs that
     are an input file (by inode, symlinks included), folders that are files, a record output with an unknown
     suffix, a --storage that is a data file. Registers the inputs so that every writer refuses to overwrite them."""
+    from sysid.data.io import SUPPORTED_SUFFIXES
+    from sysid.data.safeio import check_output_dir, check_output_path, protect_inputs, same_file
     from sysid.errors import DataError
-    from sysid.io import SUPPORTED_SUFFIXES
-    from sysid.safeio import check_output_dir, check_output_path, protect_inputs, same_file
 
     inputs: list[str] = []
     for name in INPUT_ARGS:

@@ -16,7 +16,7 @@ from typing import Any
 
 from benchmarks.cli.common import add_data_args, emit_json, read_data, same_fs
 from sysid.base import load_model
-from sysid.compare import compare, compare_report, fir_reference, horizon_label, parse_horizon
+from sysid.report.compare import compare, compare_report, fir_reference, horizon_label, parse_horizon
 
 
 def register(sub) -> None:

@@ -22,8 +22,8 @@ from benchmarks.cli.common import (
     same_fs,
     twin_from_args,
 )
+from sysid.data.safeio import check_output_path
 from sysid.errors import ConfigError
-from sysid.safeio import check_output_path
 
 
 def register(sub) -> None:

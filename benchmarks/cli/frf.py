@@ -19,8 +19,8 @@ from typing import Any
 import numpy as np
 
 from benchmarks.cli.common import add_data_args, emit_json, read_data
+from sysid.data.record import Record
 from sysid.errors import ConfigError
-from sysid.record import Record
 
 
 def register(sub) -> None:
@@ -57,7 +57,7 @@ def excited_from_meta(rec: Record, n0: int) -> np.ndarray | None:
 def estimate(rec: Record, periods: int | None = None, drop: int = 0, window: str = "hann",
              nperseg: int | None = None, noverlap: int | None = None, detrend: int = 1):
     """The FRF of a record the way the command computes it (H1, or periodic with ``periods``)."""
-    from sysid.frf import frf_periodic, frf_welch
+    from sysid.linear.frf import frf_periodic, frf_welch
 
     rec.require_output()
     if rec.u.ndim != 1 or rec.output.ndim != 1:
@@ -89,7 +89,7 @@ def to_json(frf) -> dict[str, Any]:
 
 def write_csv(columns: dict[str, Any], path: str) -> None:
     """Columns of equal length as a CSV with a header row, written atomically."""
-    from sysid.io import atomic_path
+    from sysid.data.io import atomic_path
 
     names = list(columns)
     data = np.column_stack([np.asarray(columns[n], dtype=float) for n in names])
@@ -110,7 +110,7 @@ def run(args: argparse.Namespace) -> int:
         cols[key] = payload[key]
         write_csv(cols, args.output)
     if args.plot:
-        from sysid.plots import plot_frf
+        from sysid.report.plots import plot_frf
 
         unit = f"{rec.units.get('y', '')}/{rec.units.get('u', '')}" if rec.units.get("y") else ""
         plot_frf(frf, args.plot, title=f"FRF of {args.file} ({frf.info['method']})", unit=unit)

@@ -2,7 +2,8 @@
 
 Generic over the identifier registry (:mod:`sysid.registry`): any registered identifier (linear, polynomial,
 neural) is built with ``Identifier.from_assignments`` from the ``--set`` options, fitted on the estimation
-record(s) (several ``--est`` files are separate experiments) and scored by :func:`sysid.evaluate.evaluate`; the
+record(s) (several ``--est`` files are separate experiments) and scored by
+:func:`sysid.evaluation.evaluate.evaluate`; the
 work is the library's :func:`sysid.identify.identify` (which also holds a nonlinear default against the linear
 one and, with ``--set auto=true``, keeps the better).
 The JSON keys are the contract of interfaces.md: ``identifier, params, n_parameters, fit_seconds, terms,
@@ -62,11 +63,11 @@ def run(args: argparse.Namespace) -> int:
         path = model.save(args.output)
         summary["model_file"] = str(path)
     if args.plots:
-        from sysid.plots import identification_report
+        from sysid.report.plots import identification_report
 
         summary["plots"] = identification_report(model, val if val is not None else est[0], args.plots)
         if hasattr(model, "simulation_band"):  # linear models with uncertainty
-            from sysid.linplots import linear_report
+            from sysid.report.linplots import linear_report
 
             summary["plots"].update(linear_report(model, val if val is not None else est[0], args.plots))
     if args.json:

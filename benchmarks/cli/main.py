@@ -192,7 +192,7 @@ def _run(args: argparse.Namespace) -> int:
     import signal
     import threading
 
-    from sysid.safeio import protect_inputs
+    from sysid.data.safeio import protect_inputs
 
     previous = None
     if threading.current_thread() is threading.main_thread():

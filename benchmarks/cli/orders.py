@@ -1,6 +1,6 @@
 """``piezotwin orders IDENTIFIER --est FILE [--val FILE] [--grid 1-2-4-8] [--set k=v] [--json] [--plot PNG]``.
 
-Delay estimate per input (:func:`sysid.order.delay_estimate`) and an order table of a linear identifier (``arx``,
+Delay estimate per input (:func:`sysid.linear.order.delay_estimate`) and an order table of a linear identifier (``arx``,
 ``armax``, ``oe``, ``bj``, ``n4sid``): per order n (every order option set to n) the parameter count, AIC and BIC
 on the estimation data and the free-run R² / NRMSE on the validation data; ``--plot`` draws it.
 JSON keys: ``identifier``, ``delay`` (samples per input), ``rows`` ([{order, n_parameters, aic, bic, val_r2,
@@ -15,7 +15,7 @@ import math
 from benchmarks.cli.common import add_data_args, emit_json, read_data
 from sysid.config import parse_assignments
 from sysid.errors import ConfigError
-from sysid.order import delay_estimate, order_table, plot_order_table
+from sysid.linear.order import delay_estimate, order_table, plot_order_table
 
 
 def register(sub) -> None:

@@ -17,10 +17,10 @@ import numpy as np
 
 from benchmarks.cli.common import add_data_args, emit_json, read_data
 from sysid.base import load_model
-from sysid.compare import horizon_label, parse_horizon, predict_scores
+from sysid.data.io import write_record
+from sysid.data.modelfile import atomic_path
 from sysid.errors import DataError
-from sysid.io import write_record
-from sysid.modelfile import atomic_path
+from sysid.report.compare import horizon_label, parse_horizon, predict_scores
 
 
 def register(sub) -> None:

@@ -17,9 +17,9 @@ import math
 from typing import Any
 
 from benchmarks.cli.common import add_data_args, emit_json, read_data
+from sysid.data.io import write_record
+from sysid.data.record import FS_MAX, FS_MIN
 from sysid.errors import ConfigError
-from sysid.io import write_record
-from sysid.record import FS_MAX, FS_MIN
 
 
 class _Step(argparse.Action):
@@ -126,7 +126,7 @@ def to_steps(raw: list[tuple[str, str | list, str]], signals: str = "both") -> l
 
 
 def run(args: argparse.Namespace) -> int:
-    from sysid.preprocess import apply_steps  # imported here: numba is slow to import for every CLI start
+    from sysid.signals.preprocess import apply_steps  # imported here: numba is slow to import for every CLI start
 
     steps = to_steps(args.steps, args.signals)
     if not steps and not args.fill_missing:
@@ -134,7 +134,7 @@ def run(args: argparse.Namespace) -> int:
     rec = read_data(args, args.file, require_y=False)
     for st in steps:  # memory guard: the largest record a resampling step would build
         if st["step"] == "resample" and st["fs_new"] <= FS_MAX:
-            from sysid.safeio import check_memory
+            from sysid.data.safeio import check_memory
 
             check_memory(len(rec) * max(1.0, st["fs_new"] / rec.fs) * max(rec.n_inputs + rec.n_outputs, 1),
                          f"preprocess --resample {st['fs_new']:g}", copies=4)

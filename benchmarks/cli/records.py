@@ -48,8 +48,8 @@ def run(args: argparse.Namespace) -> int:
     from benchmarks import records
     from benchmarks.cli.common import emit_json
     from benchmarks.scoring import format_row
+    from sysid.data.safeio import check_output_dir, check_output_path
     from sysid.errors import ConfigError
-    from sysid.safeio import check_output_dir, check_output_path
 
     entries = records.load_entries(args.settings)
     stored = check_output_dir(args.stored or records.STORED_DIR)

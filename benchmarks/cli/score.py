@@ -135,7 +135,7 @@ def run(args: argparse.Namespace) -> int:
 def _write_json(path, obj) -> None:
     import json
 
-    from sysid.safeio import atomic_write_text
+    from sysid.data.safeio import atomic_write_text
 
     atomic_write_text(path, json.dumps(obj, indent=2) + "\n")
 

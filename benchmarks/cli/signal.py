@@ -16,10 +16,10 @@ from typing import Any
 import numpy as np
 
 from benchmarks.cli.common import COUNT, FS, POSITIVE, SEED, emit_json, number
-from sysid import signals
+from sysid.data.io import write_record
+from sysid.data.record import Record
 from sysid.errors import ConfigError
-from sysid.io import write_record
-from sysid.record import Record
+from sysid.signals import excitation as signals
 
 KINDS = ("multisine", "chirp", "sine", "stepped-sine", "prbs", "aprbs", "thesis-cantilever", "thesis-acoustic",
          "thesis-chirp")
@@ -185,7 +185,7 @@ def _expected_samples(args: argparse.Namespace) -> float:
 
 
 def run(args: argparse.Namespace) -> int:
-    from sysid.safeio import check_memory
+    from sysid.data.safeio import check_memory
 
     check_memory(_expected_samples(args), f"signal {args.kind}", copies=6)
     if args.amplitude is not None and (not math.isfinite(args.amplitude) or args.amplitude <= 0):

@@ -11,8 +11,8 @@ import argparse
 
 from benchmarks.cli.common import add_data_args, add_twin_args, read_data, twin_from_args
 from benchmarks.execution import add_execution_args, executor_from_args
+from sysid.data.io import write_record
 from sysid.errors import ConfigError
-from sysid.io import write_record
 
 
 def register(sub) -> None:
@@ -58,7 +58,7 @@ def run_generate(args: argparse.Namespace) -> int:
     if "fs" in opts:  # the documented rate range (a huge fs would otherwise overflow or exhaust memory)
         import math
 
-        from sysid.record import FS_MAX, FS_MIN
+        from sysid.data.record import FS_MAX, FS_MIN
 
         try:
             v = float(opts["fs"])

@@ -41,8 +41,8 @@ def run(args: argparse.Namespace) -> int:
     from benchmarks.thesis.plan import tier, with_repeats
     from benchmarks.thesis.rows import load_rows, write_rows
     from benchmarks.thesis.runner import measure, select_rows
+    from sysid.data.safeio import check_output_path
     from sysid.errors import ConfigError
-    from sysid.safeio import check_output_path
 
     if args.quick and args.tier not in (None, "quick"):
         raise ConfigError(f"--quick is --tier quick: give one of them, not --tier {args.tier}")

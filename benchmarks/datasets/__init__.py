@@ -20,8 +20,8 @@ from typing import Any
 
 from benchmarks.datasets import lab, twin
 from benchmarks.datasets.references import references_for
+from sysid.data.record import Record
 from sysid.errors import ConfigError
-from sysid.record import Record
 
 __all__ = ["Dataset", "list_datasets", "load_dataset", "dataset_names", "LAB_DESCRIPTIONS"]
 

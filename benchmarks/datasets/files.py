@@ -21,8 +21,8 @@ from typing import Any
 import numpy as np
 
 from benchmarks.datasets import lab
+from sysid.data.record import Record
 from sysid.errors import ConfigError, DataError
-from sysid.record import Record
 
 __all__ = ["LabData", "LAB_DATA", "SCORED_LAB", "get", "read", "piezo_tue_record", "water_fir",
            "read_water_fir", "WATER_DISTANCES_MM"]

@@ -23,9 +23,9 @@ from typing import Any
 
 import numpy as np
 
+from sysid.data.io import read_record
+from sysid.data.record import Record
 from sysid.errors import DataError
-from sysid.io import read_record
-from sysid.record import Record
 
 DATA_DIR = Path(__file__).resolve().parents[1] / "data"
 

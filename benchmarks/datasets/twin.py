@@ -17,9 +17,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from sysid.data.io import read_record, write_record
+from sysid.data.record import Record
 from sysid.errors import ConfigError
-from sysid.io import read_record, write_record
-from sysid.record import Record
 
 NOISE_EFFECT = "measurement_noise"  # interfaces.md: each twin's sensor/ADC noise effect
 CACHE_FORMAT = "piezotwin-dataset-cache/1"

@@ -6,7 +6,7 @@ For each lab dataset this reads the original published files with the same reade
 
 - one Record ``.npz`` per raw record (arrays ``u``, ``y`` as float64 exactly as parsed from the original — no
   cast, no resampling, nothing dropped —, scalar ``fs``, ``meta`` JSON with units and provenance), compressed
-  with ``numpy.savez_compressed``; readable with ``sysid.io.read_record`` or plain ``numpy.load``;
+  with ``numpy.savez_compressed``; readable with ``sysid.data.io.read_record`` or plain ``numpy.load``;
 - ``SOURCE.txt`` and every licence/readme file of the source folder, copied unchanged;
 - ``PROVENANCE.txt``: how the npz files were made, with the sha256 of every original file and of every array.
 """

@@ -107,7 +107,7 @@ def diagnose_cascaded_tanks(max_rounds: int = 3, progress=None, fmu: str | None 
     else:
         twin_cls = load_model(str(Path(__file__)))
     out = diagnose(twin_cls(), est, val, max_rounds=max_rounds, progress=progress, **{**TANKS_OPTIONS, **options})
-    scale = float(np.std(val.output))  # nrmse = rmse / std(y) (sysid.metrics)
+    scale = float(np.std(val.output))  # nrmse = rmse / std(y) (sysid.evaluation.metrics)
     first: dict[str, Any] = next(
         (r for r in out["rounds"] if r.get("round") == 1 and "candidates" in r), {"candidates": []}
     )

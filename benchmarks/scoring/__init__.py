@@ -64,12 +64,12 @@ from benchmarks.scoring.settings import (
     settings_for,
     sysidentpy_settings,
 )
+from sysid.data.jsonio import clean_json
+from sysid.data.record import NormalisedModel, Record
 from sysid.errors import ConfigError, InputError
-from sysid.jsonio import clean_json
-from sysid.record import NormalisedModel, Record
 
 _clean = clean_json  # the run as plain JSON (NaN/inf as null), as the CLI prints it
-#: the former name of :class:`sysid.record.NormalisedModel` (an identifier fitted on normalised data)
+#: the former name of :class:`sysid.data.record.NormalisedModel` (an identifier fitted on normalised data)
 Normalised = NormalisedModel
 
 __all__ = [

@@ -3,7 +3,8 @@
 For every identifier (registry id, :mod:`sysid.registry`) and dataset (:mod:`benchmarks.datasets`) the
 identifier is fitted on the estimation data with the settings of :mod:`benchmarks.scoring.settings` and predicts
 every test set one step ahead and in free run (``predict(record, horizon=1)`` / ``horizon=None``). Metrics
-(:mod:`sysid.metrics`) skip the first ``max(dataset.init_for(test), model.max_lag_)`` samples of each test — the
+(:mod:`sysid.evaluation.metrics`)
+skip the first ``max(dataset.init_for(test), model.max_lag_)`` samples of each test — the
 official initialisation window, or the model's own initial conditions if it needs more. Beside each row: the
 published reference numbers of that test (:mod:`benchmarks.datasets.references`) and SysIdentPy's FROLS fitted
 on the same split (:mod:`benchmarks.scoring.crosscheck`).
@@ -33,12 +34,12 @@ from benchmarks.scoring.settings import (
     seeds_for,
     settings_for,
 )
+from sysid.data.record import NormalisedModel, Record
 from sysid.errors import ConfigError, InputError
-from sysid.record import NormalisedModel, Record
 
 
 class _Scored:
-    """Proxy of a fitted model for :func:`sysid.evaluate.evaluate`: reports ``max_lag_`` = the scoring skip
+    """Proxy of a fitted model for :func:`sysid.evaluation.evaluate.evaluate`: reports ``max_lag_`` = the scoring skip
     (max of the dataset's initialisation window and the model's own lags) and keeps the predictions."""
 
     def __init__(self, model, skip: int):
@@ -57,8 +58,8 @@ class _Scored:
 
 def evaluate(model, record: Record, init_samples: int = 0) -> dict[str, Any]:
     """One-step and free-run metrics of a fitted ``model`` on ``record``, scored from sample
-    ``max(init_samples, model.max_lag_)`` on — the poly team's :func:`sysid.evaluate.evaluate` on a proxy."""
-    from sysid.evaluate import evaluate as sysid_evaluate
+    ``max(init_samples, model.max_lag_)`` on — the poly team's :func:`sysid.evaluation.evaluate.evaluate` on a proxy."""
+    from sysid.evaluation.evaluate import evaluate as sysid_evaluate
 
     skip = max(int(init_samples), int(getattr(model, "max_lag_", 0) or 0))
     proxy = _Scored(model, skip)

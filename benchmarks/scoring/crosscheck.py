@@ -15,8 +15,8 @@ from typing import Any
 import numpy as np
 
 from benchmarks.scoring.settings import METRICS, SYSIDENTPY_QUICK_MAX_EST, sysidentpy_settings
-from sysid.jsonio import clean_json
-from sysid.metrics import score as metric_score
+from sysid.data.jsonio import clean_json
+from sysid.evaluation.metrics import score as metric_score
 
 
 def sysidentpy_frols(ds, quick: bool = False, use_cache: bool = True) -> list[dict[str, Any]]:
@@ -86,7 +86,7 @@ def sysidentpy_frols(ds, quick: bool = False, use_cache: bool = True) -> list[di
         rows.append(row)
     if use_cache:
         cache.parent.mkdir(parents=True, exist_ok=True)
-        from sysid.safeio import atomic_write_text
+        from sysid.data.safeio import atomic_write_text
 
         atomic_write_text(cache, json.dumps(clean_json(rows)))
     return rows

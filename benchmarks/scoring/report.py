@@ -9,7 +9,7 @@ from typing import Any
 import numpy as np
 
 from benchmarks.scoring.core import ScoreRun, _finite, _fmt
-from sysid.jsonio import clean_json
+from sysid.data.jsonio import clean_json
 
 
 def markdown_table(run: ScoreRun | dict[str, Any]) -> str:
@@ -49,9 +49,9 @@ def markdown_table(run: ScoreRun | dict[str, Any]) -> str:
 
 def write_report(run: ScoreRun, report_dir: str | Path) -> dict[str, Path]:
     """score.json, score.md and figures (free-run NRMSE bars; measured vs free-run for each dataset test), each
-    written atomically (:mod:`sysid.safeio`)."""
-    from sysid.plots import pyplot, save_and_close
-    from sysid.safeio import atomic_write_text
+    written atomically (:mod:`sysid.data.safeio`)."""
+    from sysid.data.safeio import atomic_write_text
+    from sysid.report.plots import pyplot, save_and_close
 
     plt = pyplot()
     out = Path(report_dir)
@@ -84,7 +84,7 @@ def write_report(run: ScoreRun, report_dir: str | Path) -> dict[str, Path]:
         save_and_close(fig, paths["nrmse"], dpi=90)
     # measured vs free-run predictions: one figure per dataset (first test), the whole scored record and a zoom
     if run.predictions and run.datasets:
-        from sysid.plots import plot_measured_vs_predicted
+        from sysid.report.plots import plot_measured_vs_predicted
 
         for dname, ds in run.datasets.items():
             test = next(iter(ds.tests))

@@ -26,7 +26,7 @@ from sysid.errors import ConfigError
 SETTINGS_DIR = Path(__file__).resolve().parent.parent / "settings"
 #: scoring option in the settings (not an identifier option): fit on normalised data, metrics in the data's units
 NORMALISE = "normalise"
-# The accuracy measures of every scored row, one-step and free run (sysid.metrics).
+# The accuracy measures of every scored row, one-step and free run (sysid.evaluation.metrics).
 METRICS = ("rmse", "nrmse", "r2")
 
 

@@ -30,7 +30,7 @@ def write_page(rows: dict[str, dict[str, Any]], page: str | Path, histogram_dir:
     import os
 
     from benchmarks.thesis.page import render, write_histogram
-    from sysid.safeio import atomic_write_text
+    from sysid.data.safeio import atomic_write_text
 
     page = Path(page)
     hdir = Path(histogram_dir) if histogram_dir else page.parent / page.stem

@@ -51,7 +51,7 @@ def dataset1(short: bool = False):
 
     Only the first 0.5 ms of the sweep is simulated (0.3 ms in the quick tier): the kept 0.2 ms and a margin for
     the zero-phase band-pass's end effects; the sweep itself is the 100 ms one (rate 4.5 kHz/ms)."""
-    from sysid.preprocess import apply_steps
+    from sysid.signals.preprocess import apply_steps
     from twins.acoustic import AcousticTwin
 
     rec = AcousticTwin(seed=0).generate("thesis-chirp-100ms", duration=0.0003 if short else 0.0005)
@@ -73,7 +73,7 @@ def dataset2(short: bool = False, distance_m: float | None = None):
 
 def _frs_r2(model, rec) -> float:
     from sysid.errors import DivergenceWarning
-    from sysid.metrics import r2
+    from sysid.evaluation.metrics import r2
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", DivergenceWarning)
@@ -111,7 +111,7 @@ def ds1_task(model: str, nu: int, ny: int, ne: int | None, rho: float | None, se
     input terms FROLS chose and the share of the output the output-lag terms leave unexplained (1 − ΣERR), for
     an ARMAX the prediction-error fit's status."""
     from sysid.errors import DataError
-    from sysid.metrics import r2
+    from sysid.evaluation.metrics import r2
 
     rec = dataset1(t.short_records)
     c0, w0 = time.process_time(), time.perf_counter()
@@ -137,7 +137,7 @@ def ds1_task(model: str, nu: int, ny: int, ne: int | None, rho: float | None, se
 
 def _ds1_diagnostics(model: str, est, rec, kw: dict[str, Any]) -> dict[str, Any]:
     """What a data-set-1 fit's free run depends on (see :func:`ds1_task`)."""
-    from sysid.metrics import r2
+    from sysid.evaluation.metrics import r2
     from sysid.registry import get_identifier
 
     if model == "narx":
@@ -145,7 +145,7 @@ def _ds1_diagnostics(model: str, est, rec, kw: dict[str, Any]) -> dict[str, Any]
         return {"linear_r2_osa": float(r2(rec.output, lin.predict(rec, 1), int(lin.max_lag_))),
                 "linear_r2_frs": _frs_r2(lin, rec)}
     if model == "narmax":
-        import sysid.frols as fr
+        import sysid.polynomial.frols as fr
 
         s = est.structure_
         names = [fr.term_name(tm, s.regressors, s.n_outputs, s.n_inputs) for tm in est.terms_[0]]
@@ -175,7 +175,7 @@ def ds1_wavenet_task(nu: int, ny: int, t: Tier, nk: str = "1") -> dict[str, Any]
     """A wavelet network (:class:`benchmarks.thesis.wavenet.WaveletNARX`, :data:`NARX_HIDDEN` units) on a Table 5.2
     NARX line's lags: FRS and one-step R² on data set 1 (deterministic: one fit)."""
     from benchmarks.thesis.wavenet import WaveletNARX
-    from sysid.metrics import r2
+    from sysid.evaluation.metrics import r2
 
     rec = dataset1(t.short_records)
     c0, w0 = time.process_time(), time.perf_counter()
@@ -191,7 +191,7 @@ def ds2_task(ny: int, hidden: tuple[int, ...], activation: str, seed: int, t: Ti
     """One training of a Table 5.3 network (n_u = 512, n_y = ``ny``) on data set 2: R² OSA/FRS on estimation and
     validation (the four columns of Table 5.6). ``distance_m``: data set 2 of the twin with that plate gap (a
     measured explanation); the result gives the direct path's time of flight in samples at 6.75 MHz."""
-    from sysid.metrics import r2
+    from sysid.evaluation.metrics import r2
     from sysid.registry import get_identifier
 
     est, val = dataset2(t.short_records, distance_m)

@@ -248,7 +248,7 @@ def write_histogram(rows: dict[str, dict[str, Any]], path: str | Path) -> Path |
     est, val = rows.get("fig-5.13/est"), rows.get("fig-5.13/val")
     if not (est and val):
         return None
-    from sysid.plots import pyplot, save_and_close
+    from sysid.report.plots import pyplot, save_and_close
 
     plt = pyplot()
     fig, axes = plt.subplots(1, 2, figsize=(10, 3.6))

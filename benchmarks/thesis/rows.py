@@ -243,8 +243,8 @@ def load_rows(path: str | Path) -> dict[str, dict[str, Any]]:
 
 def write_rows(rows: dict[str, dict[str, Any]], path: str | Path) -> Path:
     """Store ``rows`` (merged over the rows already stored there, in the page's order), atomically."""
-    from sysid.jsonio import clean_json
-    from sysid.safeio import atomic_write_text
+    from sysid.data.jsonio import clean_json
+    from sysid.data.safeio import atomic_write_text
 
     path = Path(path)
     merged = {**load_rows(path), **rows}

@@ -30,6 +30,7 @@ import numpy as np
 import torch
 
 from sysid.base import Identifier, as_record_list
+from sysid.data.record import Normaliser, Record
 from sysid.errors import ConfigError, DataError, DivergenceWarning
 from sysid.neural.core import (
     ACT_CODE,
@@ -58,7 +59,6 @@ from sysid.neural.records import (
     normalised_pairs,
 )
 from sysid.progress import progress
-from sysid.record import Normaliser, Record
 
 __all__ = ["NARXMLP", "NARXMLPSim"]
 
@@ -151,7 +151,7 @@ class _NeuralNARXBase(TorchFileSave, Identifier):
 
     def _tail_r2(self, net: FlatMLP) -> float:
         """Free-run R² (normalised units; R² is scale-free) on the held-out tail, after the initial conditions."""
-        from sysid.metrics import r2
+        from sysid.evaluation.metrics import r2
 
         (un, yn), = normalised_pairs([self._tail], self.normaliser_)
         yh, div = free_run_mlp(net.weights_np(), list(net.sizes), ACT_CODE[self.activation], yn, un, self.ny, self.nu,

@@ -6,9 +6,9 @@ and read back with ``torch.load(weights_only=True)`` (plain containers, numbers,
 only: no pickled code is executed on load). Weights are stored as float64 tensors, so a loaded model
 predicts bit-identically. Registered in ``sysid.registry.BINARY_LOADERS`` for the suffix ``.pt``.
 
-The portable format is the npz container of :mod:`sysid.modelfile` (no torch needed to read it); ``.pt`` stays
+The portable format is the npz container of :mod:`sysid.data.modelfile` (no torch needed to read it); ``.pt`` stays
 for compatibility. The payload also carries ``estimation`` (fs, units, hash of the estimation data) and is
-checked by the same code as every other model file (:func:`sysid.modelfile.build_model`).
+checked by the same code as every other model file (:func:`sysid.data.modelfile.build_model`).
 """
 
 from __future__ import annotations
@@ -63,7 +63,7 @@ def _from_torch(obj: Any) -> Any:
 
 def save_torch(model, path: str | Path) -> Path:
     path = Path(path)
-    from sysid.safeio import atomic_path
+    from sysid.data.safeio import atomic_path
 
     payload = {
         "format": FORMAT,
@@ -79,7 +79,7 @@ def save_torch(model, path: str | Path) -> Path:
 
 def load(path: str | Path):
     """Read a ``.pt`` model file written by :func:`save_torch` and return the fitted identifier."""
-    from sysid.modelfile import build_model
+    from sysid.data.modelfile import build_model
 
     path = Path(path)
     try:

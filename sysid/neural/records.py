@@ -11,8 +11,8 @@ from collections.abc import Sequence
 import numpy as np
 
 from sysid.base import Identifier, check_records
+from sysid.data.record import Normaliser, Record
 from sysid.errors import ConfigError, DataError
-from sysid.record import Normaliser, Record
 
 __all__ = ["MAX_LAG", "DIVERGENCE_BOUND", "normalised_pairs", "fit_normaliser", "check_channels", "check_predict_input",
            "hidden_widths"]

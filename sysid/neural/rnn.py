@@ -36,6 +36,7 @@ import numpy as np
 import torch
 
 from sysid.base import as_record_list
+from sysid.data.record import Record
 from sysid.errors import ConfigError, DataError, DivergenceWarning
 from sysid.neural.core import least_squares_linear
 from sysid.neural.device import configure_threads, train_dtype
@@ -43,7 +44,6 @@ from sysid.neural.persist import saved_array
 from sysid.neural.records import MAX_LAG, check_channels, check_predict_input, normalised_pairs
 from sysid.neural.sequence import SequenceIdentifier
 from sysid.neural.training import train_simulation
-from sysid.record import Record
 
 __all__ = ["RNNStateSpace"]
 

@@ -18,12 +18,12 @@ import numpy as np
 import torch
 
 from sysid.base import Identifier
+from sysid.data.record import Normaliser, Record
 from sysid.errors import ConfigError
 from sysid.neural.device import configure_threads, select_device
 from sysid.neural.persist import TorchFileSave
 from sysid.neural.records import _as2d, fit_normaliser, normalised_pairs
 from sysid.neural.training import SimTrainResult
-from sysid.record import Normaliser, Record
 
 __all__ = ["SequenceIdentifier"]
 

@@ -24,6 +24,7 @@ from typing import Any
 import numpy as np
 
 from sysid.base import as_record_list
+from sysid.data.record import Record
 from sysid.errors import ConfigError, DataError, DivergenceWarning
 from sysid.neural.persist import saved_array
 from sysid.neural.records import (
@@ -37,7 +38,6 @@ from sysid.neural.records import (
 from sysid.neural.sequence import SequenceIdentifier
 from sysid.neural.subnet import SubnetModel, encode_np, export_weights, simulate_np
 from sysid.neural.training import train_simulation
-from sysid.record import Record
 
 __all__ = ["SSEncoder"]
 

@@ -35,6 +35,7 @@ import torch
 
 from sysid._blas import blas_threads
 from sysid.base import as_record_list
+from sysid.data.record import Record
 from sysid.errors import ConfigError, DataError
 from sysid.neural.blocknet import BlockNet
 from sysid.neural.device import configure_threads
@@ -42,7 +43,6 @@ from sysid.neural.persist import saved_array
 from sysid.neural.records import check_channels, check_predict_input, hidden_widths, normalised_pairs
 from sysid.neural.sequence import SequenceIdentifier
 from sysid.neural.training import train_records
-from sysid.record import Record
 
 __all__ = ["WHNet"]
 

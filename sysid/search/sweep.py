@@ -21,8 +21,8 @@ from typing import Any
 import numpy as np
 
 from sysid.config import ALIASES, coerce, resolve_aliases
+from sysid.data.record import Record
 from sysid.errors import ConfigError, DivergenceWarning
-from sysid.record import Record
 
 __all__ = ["SweepSpec", "parse_grid", "config_key", "storage_url", "heartbeat_settings", "open_study", "run_one",
            "run_config"]
@@ -256,7 +256,7 @@ def run_one(spec: SweepSpec, config: dict[str, str], repeat: int, est: Record | 
             val: Record | Sequence[Record]) -> dict[str, Any]:
     """Fit one run (repeat ``repeat``, seed ``spec.seed + repeat``) of one configuration: a pure function of
     its arguments, so a Dask worker gives the same numbers as this process."""
-    from sysid.evaluate import evaluate
+    from sysid.evaluation.evaluate import evaluate
     from sysid.registry import get_identifier
 
     seed = spec.seed + repeat

@@ -78,14 +78,14 @@ def summarise(runs: list[dict[str, Any]]) -> dict[str, Any]:
 
 def export_jsonl(runs: list[dict[str, Any]], path: str | Path) -> Path:
     """One JSON object per run (config, seed, n_parameters, fit_seconds, estimation/validation scores)."""
-    from sysid.safeio import atomic_write_text
+    from sysid.data.safeio import atomic_write_text
 
     return atomic_write_text(path, "".join(json.dumps(_clean(run)) + "\n" for run in runs))
 
 
 def plot_r2_distribution(runs: list[dict[str, Any]], config_key_: str, path: str | Path) -> Path:
     """Fig. 5.13 analogue: histograms of free-run R² in estimation and validation with fitted normal curves."""
-    from sysid.plots import pyplot, save_and_close
+    from sysid.report.plots import pyplot, save_and_close
 
     plt = pyplot()
     rs = [r for r in runs if r["config_key"] == config_key_]

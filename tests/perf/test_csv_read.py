@@ -1,5 +1,5 @@
 """Speed of the strict CSV reader: a 1e6-row ``t,u,y`` file is read by
-:func:`sysid.io.read_record` (structure checks + time column + parsing) within 2x of a bare
+:func:`sysid.data.io.read_record` (structure checks + time column + parsing) within 2x of a bare
 ``pandas.read_csv`` of the same file. Both are wall-clock times (``time.perf_counter``), taken alternately in
 the same run, best of 5 each, so that the load of a shared machine hits both alike (CPU time is not used:
 pandas' reader reports far less CPU than wall time here, which would flatter the ratio's denominator).
@@ -12,7 +12,7 @@ import time
 import numpy as np
 import pytest
 
-from sysid.io import read_record
+from sysid.data.io import read_record
 
 N = 1_000_000
 

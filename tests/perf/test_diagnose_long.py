@@ -11,7 +11,7 @@ import time
 import numpy as np
 import pytest
 
-from sysid.record import Record
+from sysid.data.record import Record
 from twins.cantilever import CantileverTwin
 from twins.discrepancy import diagnose
 

@@ -30,7 +30,7 @@ TARGETS = {"acoustic": 100e-6, "cantilever": 50e-6}
 
 @pytest.fixture(scope="module")
 def fmus(tmp_path_factory):
-    from sysid.polynomial import NARXPoly
+    from sysid.polynomial.narmax import NARXPoly
     from tests._polysys import narx_record
     from twins.acoustic import AcousticTwin
     from twins.cantilever import CantileverTwin

@@ -20,8 +20,8 @@ import numpy as np
 import pytest
 from scipy.signal import lfilter
 
-from sysid.polynomial import NARXPoly
-from sysid.record import Record
+from sysid.data.record import Record
+from sysid.polynomial.narmax import NARXPoly
 
 REPO = Path(__file__).resolve().parents[2]
 
@@ -62,7 +62,7 @@ def _peak_rss_subprocess(n: int, lags: int) -> dict:
         import json, resource, time, sys, tracemalloc
         sys.path.insert(0, {str(REPO)!r})
         from tests.perf.test_frols import make_data, ours
-        from sysid.record import Record
+        from sysid.data.record import Record
         u, y = make_data({n})
         rec = Record(u, y, fs=1.0)
         base = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss

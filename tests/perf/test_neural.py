@@ -14,11 +14,11 @@ import pytest
 
 torch = pytest.importorskip("torch")
 
+from sysid.data.record import Record  # noqa: E402
 from sysid.neural.core import free_run_mlp  # noqa: E402
 from sysid.neural.device import select_device  # noqa: E402
 from sysid.neural.narx_mlp import NARXMLP, NARXMLPSim  # noqa: E402
 from sysid.neural.rnn import RNNStateSpace  # noqa: E402
-from sysid.record import Record  # noqa: E402
 
 N = 80_000  # thesis-multisine: 8 s at 10 kHz
 

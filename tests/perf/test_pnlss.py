@@ -1,5 +1,5 @@
 """Speed of the PNLSS simulation with its sensitivity Jacobian (the cost of one search step of ``pnlss``): the
-compiled forward recursion of :mod:`sysid.pnlss_sim` against the same recursion written with numpy per sample.
+compiled forward recursion of :mod:`sysid.nonlinear.pnlss_sim` against the same recursion written with numpy per sample.
 
 Run with ``make bench`` (or ``pytest tests/perf/test_pnlss.py --benchmark-enable``). Both compute the same
 Jacobian (checked here to 1e-10); the reference loop is the plain NumPy form of eq. 18-20 of Paduart et al. 2010.
@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from sysid import pnlss_sim as ps
+from sysid.nonlinear import pnlss_sim as ps
 
 N = 5000
 NX, DEGREE = 2, 3

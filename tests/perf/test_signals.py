@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 import scipy.signal
 
-from sysid import preprocess as P
-from sysid import signals as S
+from sysid.signals import excitation as S
+from sysid.signals import preprocess as P
 
 N = 10_000_000  # 0.1 s at 100 MHz, the length of the dissertation's acoustic recordings
 FS = 100e6

@@ -19,8 +19,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from sysid.record import Record
-from sysid.subspace import N4SID, ss_simulate
+from sysid.data.record import Record
+from sysid.linear.subspace import N4SID, ss_simulate
 
 REPO = Path(__file__).resolve().parents[2]
 BLOCK_ROWS = 10

@@ -32,9 +32,9 @@ import numpy as np
 from scipy import signal as sps
 from scipy.optimize import least_squares
 
+from sysid.data.record import Record
 from sysid.errors import ConfigError, DataError
-from sysid.metrics import nrmse, r2
-from sysid.record import Record
+from sysid.evaluation.metrics import nrmse, r2
 from twins.acoustic.amplifier import voltage_gain
 from twins.base import param_info
 from twins.calibration import CalibrationResult, check_calibration_data

@@ -177,7 +177,7 @@ def compare(p: AcousticParams, distances=(20, 40, 80), data: FirData | None = No
 
 def report_figure(p: AcousticParams, path: str | Path, distances=(20, 40, 80), data: FirData | None = None) -> Path:
     """PNG: measured vs twin magnitude spectra and impulse-response envelopes at each distance."""
-    from sysid.plots import pyplot, save_and_close
+    from sysid.report.plots import pyplot, save_and_close
 
     plt = pyplot()
 

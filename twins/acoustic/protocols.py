@@ -1,6 +1,6 @@
 """Excitations and the preprocessing recipe of the dissertation's piezoacoustic experiments (§3.2).
 
-Signals come from :mod:`sysid.signals`, the recipe from :mod:`sysid.preprocess` (team signals' agreed API).
+Signals come from :mod:`sysid.signals`, the recipe from :mod:`sysid.signals.preprocess` (team signals' agreed API).
 
 - ``thesis-chirp-100ms``: linear chirp 900 → 1350 kHz over 100 ms, 80 mVpp before the amplifier, recorded at
   100 MHz (10⁷ samples) — the first dataset. One sweep; the record starts with the sweep.
@@ -27,8 +27,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
+from sysid.data.record import Record
 from sysid.errors import ConfigError
-from sysid.record import Record
 
 __all__ = ["PROTOCOLS", "BAND_HZ", "excitation", "recipe_steps", "apply_recipe", "RECIPE_KEEP"]
 
@@ -53,7 +53,7 @@ PROTOCOLS = {
 def excitation(protocol: str, fs: float = FS_ACQ, duration: float = 0.1, seed: int | None = 0,
                awg_rate_hz: float = 10e6) -> tuple[np.ndarray, bool, dict]:
     """Input ``u`` [V, before the amplifier] of a time-domain protocol: (u, periodic, info)."""
-    from sysid import signals
+    from sysid.signals import excitation as signals
 
     n = int(round(duration * fs))
     if n < 2:
@@ -73,7 +73,7 @@ def excitation(protocol: str, fs: float = FS_ACQ, duration: float = 0.1, seed: i
         reps = -(-n // period)
         return np.tile(one[:period], reps)[:n], True, {"sweep_s": 1e-3, "vpp": 0.150, "period_samples": period}
     if protocol == "thesis-multisine":
-        from sysid.preprocess import resample
+        from sysid.signals.preprocess import resample
 
         file_, info = signals.multisine(fs=awg_rate_hz, band=(BAND_HZ[0], BAND_HZ[1] - 10.0), components=45000,
                                         resolution=10.0, amplitude=0.4, phase="random", seed=seed, return_info=True)
@@ -112,7 +112,8 @@ def _chirp_kernel(n, a, b, amplitude):  # pragma: no cover - compiled
 
 
 def recipe_steps() -> list[dict]:
-    """The dissertation's preprocessing (§3.2) as :func:`sysid.preprocess.apply_steps` steps (before truncation)."""
+    """The dissertation's preprocessing (§3.2) as :func:`sysid.signals.preprocess.apply_steps` steps (before
+    truncation)."""
     return [{"step": "moving_average", "span": MA_SPAN},
             {"step": "resample", "fs_new": FS_RECIPE},
             {"step": "bandpass", "fmin": BAND_HZ[0], "fmax": BAND_HZ[1], "order": 5}]
@@ -120,7 +121,7 @@ def recipe_steps() -> list[dict]:
 
 def apply_recipe(rec: Record, keep: int, start: int = 0) -> Record:
     """Moving average 100 → resample 6.75 MHz → band-pass 900–1350 kHz → truncate to ``keep`` from ``start``."""
-    from sysid.preprocess import apply_steps
+    from sysid.signals.preprocess import apply_steps
 
     out = apply_steps(rec, recipe_steps())
     if start < 0 or keep < 1 or start + keep > len(out):

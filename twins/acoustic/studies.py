@@ -30,7 +30,7 @@ def _identified_accuracy(twin, protocol: str | None, identifier: str = "arx") ->
     except Exception as exc:  # a build without the identifier's dependencies: the column is null, with the reason
         return {"identified_model_r2": None,
                 "identified_model_note": f"{exc} — left null until the identifiers are merged"}
-    from sysid.metrics import r2 as _r2
+    from sysid.evaluation.metrics import r2 as _r2
     from twins.acoustic.protocols import FS_RECIPE
 
     est_p = protocol or "thesis-multisine"

@@ -21,8 +21,8 @@ import scipy.fft
 from scipy import signal as sps
 
 from sysid.config import coerce
+from sysid.data.record import Record
 from sysid.errors import ConfigError
-from sysid.record import Record
 from twins.acoustic import chaincache as cc
 from twins.acoustic.amplifier import amplifier_voltage, sample_amplifier
 from twins.acoustic.channel import frequency_response, geometry, wall_path_length
@@ -450,7 +450,7 @@ def _parabolic_peak(f: np.ndarray, y: np.ndarray, i: int) -> tuple[float, float]
 def recipe_filter_response(f_hz) -> np.ndarray:
     """Magnitude the §3.2 recipe imposes on a spectrum: 100-point moving average at 100 MHz × the zero-phase
     fifth-order Butterworth band-pass (|H|²). The resampling to 6.75 MHz is flat in band (Kaiser design)."""
-    from sysid.preprocess import bandpass_design
+    from sysid.signals.preprocess import bandpass_design
     from twins.acoustic.protocols import FS_RECIPE, MA_SPAN
 
     f = np.asarray(f_hz, dtype=float)

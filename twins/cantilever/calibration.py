@@ -28,8 +28,8 @@ from typing import Any
 
 import numpy as np
 
+from sysid.data.record import Record
 from sysid.errors import ConfigError
-from sysid.record import Record
 from twins.calibration import CalibrationResult, calibrate, check_calibration_data
 
 __all__ = ["calibrate_cantilever", "continues"]
@@ -140,7 +140,7 @@ def calibrate_cantilever(twin, data: Record, val: Record | None = None, names: I
 
 
 def _score(tw, rec: Record, sim) -> dict[str, float]:
-    from sysid.metrics import nrmse, r2
+    from sysid.evaluation.metrics import nrmse, r2
 
     rec.require_output()
     yh = sim(tw, rec)

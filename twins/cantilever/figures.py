@@ -1,4 +1,4 @@
-"""Figures of the cantilever case study (PNG files, drawn with :func:`sysid.plots.pyplot`).
+"""Figures of the cantilever case study (PNG files, drawn with :func:`sysid.report.plots.pyplot`).
 
 - :func:`plot_sine_loops` — the analogue of dissertation Figure 4.3: normalised u–y loops, measured
   (blue) against the twin's free-run simulation (red), one panel per validation sine.
@@ -13,16 +13,16 @@ from pathlib import Path
 
 import numpy as np
 
-from sysid.metrics import r2
-from sysid.plots import pyplot, save_and_close, whole_periods
-from sysid.record import Record
+from sysid.data.record import Record
+from sysid.evaluation.metrics import r2
+from sysid.report.plots import pyplot, save_and_close, whole_periods
 
 __all__ = ["plot_sine_loops", "plot_multisine_spectra", "last_period", "loop_metrics"]
 
 
 def last_period(seg_len: int, fs: float, freq_hz: float) -> slice:
     """Slice of the last whole period of a sine segment of ``seg_len`` samples (steady-state loop); the
-    reports cut their loops with the same :func:`sysid.plots.whole_periods`."""
+    reports cut their loops with the same :func:`sysid.report.plots.whole_periods`."""
     return whole_periods(seg_len, fs, freq_hz)
 
 

@@ -15,10 +15,10 @@ from pathlib import Path
 
 import numpy as np
 
+from sysid.data.io import read_record
+from sysid.data.record import Record
 from sysid.errors import DataError
-from sysid.io import read_record
-from sysid.metrics import r2
-from sysid.record import Record
+from sysid.evaluation.metrics import r2
 
 __all__ = ["load_lab_record", "lab_split", "static_line_r2", "lab_twin", "calibrate_lab", "plot_lab_loops"]
 
@@ -68,7 +68,7 @@ def calibrate_lab(hysteresis: str = "bouc-wen", est: Record | None = None, val: 
 
 def plot_lab_loops(twin, path: str | Path, rec: Record, split_s: float = SPLIT_S) -> Path:
     """One PNG: measured and simulated u–y loops (left), and the time series with the residual (right)."""
-    from sysid.plots import pyplot, save_and_close
+    from sysid.report.plots import pyplot, save_and_close
 
     plt = pyplot()
     rec = load_lab_record(rec)

@@ -77,7 +77,7 @@ def thesis_multisine(options: dict[str, Any]) -> tuple[np.ndarray, float, dict[s
     n = int(round(fs * duration))
     generator = "twins.cantilever.protocols.multisine_local"
     try:  # the project's signal library (team signals) when present, else the local irfft version
-        from sysid.signals import multisine
+        from sysid.signals.excitation import multisine
     except ImportError:
         multisine = None
     if multisine is not None:

@@ -9,8 +9,8 @@ from typing import Any
 
 import numpy as np
 
+from sysid.data.record import Record, check_array
 from sysid.errors import ConfigError, DataError
-from sysid.record import Record, check_array
 from twins.base import Twin
 from twins.cantilever import cache
 from twins.cantilever import kernels as K

@@ -32,9 +32,9 @@ from typing import Any
 
 import numpy as np
 
+from sysid.data.record import Record
 from sysid.errors import ConfigError, DataError
-from sysid.metrics import nrmse
-from sysid.record import Record
+from sysid.evaluation.metrics import nrmse
 from twins.base import Twin
 
 from .fields import choice_fields, effect_fields

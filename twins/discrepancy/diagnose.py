@@ -50,8 +50,8 @@ from typing import Any
 
 import numpy as np
 
+from sysid.data.record import Record
 from sysid.errors import ConfigError, DataError
-from sysid.record import Record
 from twins.base import Twin, param_info
 from twins.calibration import calibrate as ls_calibrate
 

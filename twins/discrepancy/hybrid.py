@@ -18,7 +18,7 @@ from typing import Any, cast
 import numpy as np
 
 from sysid.errors import ConfigError, DataError
-from sysid.metrics import nrmse, r2
+from sysid.evaluation.metrics import nrmse, r2
 from twins.base import Twin
 from twins.hybrid import HybridTwin
 

@@ -14,7 +14,7 @@ from typing import Any
 import numpy as np
 from scipy import stats
 
-from sysid.record import Record
+from sysid.data.record import Record
 from twins.base import Twin
 
 from . import evidence as ev

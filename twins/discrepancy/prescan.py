@@ -17,8 +17,8 @@ from typing import Any
 import numpy as np
 from scipy.optimize import minimize_scalar
 
+from sysid.data.record import Record
 from sysid.errors import ConfigError, DataError
-from sysid.record import Record
 from twins.base import Twin, param_info
 
 from . import features as ft

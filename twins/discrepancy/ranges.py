@@ -33,8 +33,8 @@ from typing import Any
 
 import numpy as np
 
+from sysid.data.record import Record
 from sysid.errors import DataError
-from sysid.record import Record
 from twins.base import Twin, param_info
 from twins.paramfields import with_ranges
 

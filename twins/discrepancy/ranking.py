@@ -32,7 +32,7 @@ from typing import Any
 
 import numpy as np
 
-from sysid.record import Record
+from sysid.data.record import Record
 from twins.base import Twin
 
 from . import defaults as dflt

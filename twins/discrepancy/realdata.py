@@ -10,8 +10,8 @@ from typing import Any
 
 import numpy as np
 
+from sysid.data.record import Record
 from sysid.errors import ConfigError, DataError
-from sysid.record import Record
 from twins.base import Twin
 from twins.calibration import calibrate as ls_calibrate
 

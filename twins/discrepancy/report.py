@@ -13,7 +13,7 @@ from typing import Any
 
 import numpy as np
 
-from sysid.plots import pyplot, save_and_close
+from sysid.report.plots import pyplot, save_and_close
 
 __all__ = ["write_report"]
 
@@ -81,7 +81,7 @@ def _spectra_png(result, val, e0, e1, path: Path) -> Path:
 
 
 def _tests_png(before: list[dict[str, Any]], after: list[dict[str, Any]], path: Path) -> Path:
-    from sysid.plots import draw_correlation_test
+    from sysid.report.plots import draw_correlation_test
 
     fig, ax = pyplot().subplots(2, len(before), figsize=(3.2 * len(before), 5.4))
     for row, tests, lab in ((0, before, "before"), (1, after, "after")):
@@ -118,8 +118,8 @@ def _tests_txt(part: dict[str, Any]) -> str:
 
 
 def _write_index(result: dict[str, Any], figures: list[str], records: list[Any], d: Path) -> Path:
-    from sysid.provenance import collect
-    from sysid.report import esc, image, table, write_page
+    from sysid.report.html import esc, image, table, write_page
+    from sysid.report.provenance import collect
 
     from .hybrid import hybrid_text
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import dataclasses
 from typing import Any
 
-from sysid.record import Record
+from sysid.data.record import Record
 from twins.base import Twin
 
 from .prediction import unpredictable

@@ -21,8 +21,8 @@ from typing import Any
 
 import numpy as np
 
+from sysid.data.record import Record
 from sysid.errors import DataError
-from sysid.record import Record
 
 __all__ = ["MIN_EXCITATION", "FRACTIONS", "excitation", "choose_split", "check_validation"]
 

@@ -15,8 +15,8 @@ from typing import Any
 
 import numpy as np
 
-from sysid.metrics import nrmse, r2
-from sysid.record import Record
+from sysid.data.record import Record
+from sysid.evaluation.metrics import nrmse, r2
 from twins.base import Twin, param_info
 from twins.calibration import calibrate as ls_calibrate
 

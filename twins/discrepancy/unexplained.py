@@ -34,7 +34,7 @@ from typing import Any
 import numpy as np
 from scipy import signal as sps
 
-from sysid.record import Record
+from sysid.data.record import Record
 
 from .features import effective_samples
 from .prediction import significance

@@ -24,8 +24,8 @@ from typing import Any, ClassVar
 
 import numpy as np
 
+from sysid.data.record import Record, check_array
 from sysid.errors import ConfigError, DataError
-from sysid.record import Record, check_array
 from twins.base import EffectSpec, Twin
 from twins.generic_effects import GENERIC_EFFECTS, GENERIC_FIELDS, apply_input, apply_output, data_ranges
 from twins.paramfields import param_info, pfield, with_ranges

@@ -26,8 +26,8 @@ from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
 
+from sysid.data.jsonio import json_default as _json_default
 from sysid.errors import ConfigError
-from sysid.jsonio import json_default as _json_default
 from twins.base import Twin
 from twins.fmu.cores import choose_core
 from twins.fmu.spec import CONFIG_NAME, fmu_config
@@ -171,7 +171,7 @@ def build_from_source(stage: Path, model_name: str, source: str, files: list, pa
 def _deflate(src: Path, dest: Path) -> None:
     """Copy the FMU (pythonfmu stores its members uncompressed) with deflate compression (FMI allows it), with
     the libpython loader in front of the linux64 wrapper (:mod:`twins.fmu.shim`)."""
-    from sysid.safeio import atomic_path
+    from sysid.data.safeio import atomic_path
     from twins.fmu.shim import with_loader
 
     with zipfile.ZipFile(src) as zin:

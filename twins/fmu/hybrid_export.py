@@ -18,8 +18,8 @@ import tempfile
 from collections.abc import Iterable
 from pathlib import Path
 
+from sysid.data.jsonio import json_default
 from sysid.errors import ConfigError
-from sysid.jsonio import json_default
 from twins.fmu.export import (
     SHIPPED_PACKAGES,
     _identifier,

@@ -2,7 +2,7 @@
 FMU with input ``u``, output ``y`` and the fixed communication step ``1/fs`` of its estimation data.
 
 Built like the twins' FMUs (:mod:`twins.fmu.export`, pythonfmu): ``resources/`` hold the model file
-(``model.npz``, :mod:`sysid.modelfile`), ``piezotwin_model_fmu.json`` and the ``sysid``/``twins`` packages;
+(``model.npz``, :mod:`sysid.data.modelfile`), ``piezotwin_model_fmu.json`` and the ``sysid``/``twins`` packages;
 the slave is :class:`twins.fmu.model_slave.ModelSlave`. The host needs CPython 3 with numpy, numba (and torch for
 the neural models). The FMU's output equals the model's own free run from zero initial conditions
 (``model.predict(u)``) sample for sample: the slave runs the same kernel (:mod:`sysid.stepper`).
@@ -15,8 +15,8 @@ import tempfile
 from collections.abc import Iterable
 from pathlib import Path
 
+from sysid.data.modelfile import write_model
 from sysid.errors import ConfigError
-from sysid.modelfile import write_model
 from sysid.stepper import make_stepper
 from twins.fmu.export import SHIPPED_PACKAGES, _identifier, _project_version, build_from_source, stage_packages
 from twins.fmu.model_slave import MODEL_CONFIG_NAME, MODEL_FORMAT

@@ -1,7 +1,7 @@
 """Run-time side of an identified-model FMU (``piezotwin export-fmu --model``): the FMI 2.0 co-simulation slave.
 
 The FMU's ``resources/`` hold ``piezotwin_model_fmu.json`` (written by :mod:`twins.fmu.model_export`), the
-model file ``model.npz`` (:mod:`sysid.modelfile`) and the ``sysid``/``twins`` packages. At instantiation the
+model file ``model.npz`` (:mod:`sysid.data.modelfile`) and the ``sysid``/``twins`` packages. At instantiation the
 slave loads the model and builds its per-sample stepper (:func:`sysid.stepper.make_stepper`).
 
 Timing as for the twins (:mod:`twins.fmu.slave`): a communication step ``[t_k, t_k + 1/fs)`` feeds ``u(t_k)``

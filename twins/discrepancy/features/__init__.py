@@ -30,7 +30,7 @@ What is measured, and which physical effect it points to:
 - :func:`saturation_rails` — flat tops where the measurement saturates (an ADC or sensor at the end of its
   range) while the prediction goes beyond: the samples there are censored, not errors of the model;
 - :func:`hysteresis_by_segment` — loop width and phase lag, measured versus simulated, per sine segment;
-- :func:`correlation_tests` — the five tests of eq. 2-32, with the failing lags (``sysid.residuals``, the
+- :func:`correlation_tests` — the five tests of eq. 2-32, with the failing lags (``sysid.evaluation.residuals``, the
   one implementation; :func:`tests_summary` is its compact form for JSON).
 
 The time-domain features live in :mod:`.timing`, the spectral ones in :mod:`.spectra`, the value lattice,
@@ -44,7 +44,7 @@ from typing import Any
 import numpy as np
 from scipy import signal as sps
 
-from sysid.residuals import correlation_tests, tests_summary
+from sysid.evaluation.residuals import correlation_tests, tests_summary
 
 from .levels import _segments, clip_to_rails, hysteresis_by_segment, quantization_step, saturation_rails
 from .spectra import (
