@@ -320,7 +320,8 @@ def test_checker_reports_a_cycle(tmp_path):
 def test_a_package_listing_its_own_modules_is_no_cycle(tmp_path):
     _write(tmp_path, {
         "sysid/__init__.py": "",
-        "sysid/linear/__init__.py": "from typing import TYPE_CHECKING\nif TYPE_CHECKING:\n    from sysid.linear.arx import ARX\n",
+        "sysid/linear/__init__.py": ("from typing import TYPE_CHECKING\nif TYPE_CHECKING:\n"
+                                     "    from sysid.linear.arx import ARX\n"),
         "sysid/linear/arx.py": "from sysid.linear import order\n",
         "sysid/linear/order.py": "from sysid.linear import arx  # a real cycle\n",
     })

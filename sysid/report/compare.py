@@ -22,9 +22,9 @@ from typing import Any
 
 import numpy as np
 
-from sysid.evaluation import metrics
-from sysid.errors import ConfigError, DataError, DivergenceWarning
 from sysid.data.record import Record
+from sysid.errors import ConfigError, DataError, DivergenceWarning
+from sysid.evaluation import metrics
 
 __all__ = ["parse_horizon", "horizon_label", "check_rate", "predict_scores", "compare", "compare_report",
            "fir_reference"]
@@ -117,8 +117,8 @@ def compare_report(models: Sequence[Any], names: Sequence[str], record: Record, 
                    rows: Sequence[dict[str, Any]], out_dir: str | Path, max_lag: int = 20) -> dict[str, Any]:
     """Write ``compare.png`` (measured vs predicted, whole record and zoom) and ``residual_tests_<n>.png``
     (correlation tests of each model's one-step residuals); return the paths and the test results."""
-    from sysid.report.plots import plot_compare, plot_correlation_tests
     from sysid.evaluation.residuals import correlation_tests
+    from sysid.report.plots import plot_compare, plot_correlation_tests
 
     out = Path(out_dir)
     skip = rows[0]["skip"] if rows else 0

@@ -14,8 +14,8 @@ from typing import Any
 
 import numpy as np
 
-from sysid.report.plots import _save, pyplot
 from sysid.data.record import Record
+from sysid.report.plots import _save, pyplot
 
 __all__ = ["plot_simulation_band", "plot_bode_with_std", "linear_report"]
 

@@ -14,9 +14,10 @@ integer from a to b; ``lags`` sets ``ny`` and ``nu`` together (``n_enc`` for ``r
 Samplers: ``grid`` (every combination), ``random`` and ``tpe`` (Optuna's Tree-structured Parzen Estimator) draw
 ``trials`` distinct configurations. One Optuna trial is one configuration with all its repeats. Storage: an
 SQLite file by default, or ``postgresql://...`` for workers on several machines; re-running the same command
-resumes (trials of a killed worker are found by Optuna's heartbeat and run again). The definition and single runs
-live in :mod:`~sysid.search.sweep`, results (and their JSON-lines export) in :mod:`~sysid.search.sweep_results`, the study's workers in
-:mod:`~sysid.search.study` (repeats as Dask tasks through ``run_config(..., executor)``).
+resumes (trials of a killed worker are found by Optuna's heartbeat and run again). The definition and single
+runs live in :mod:`~sysid.search.sweep`, results (and their JSON-lines export) in
+:mod:`~sysid.search.sweep_results`, the study's workers in :mod:`~sysid.search.study` (repeats as Dask tasks
+through ``run_config(..., executor)``).
 May import: :mod:`sysid.errors`, :mod:`sysid.config`, :mod:`sysid.progress`, :mod:`sysid.data`,
 :mod:`sysid.evaluation`, :mod:`sysid.report`, :mod:`sysid.neural` (threads), :mod:`sysid.registry` (by name).
 """
