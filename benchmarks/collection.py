@@ -123,8 +123,15 @@ class CollectionWriter:
         self.grid = grid
         self.rows: dict[int, dict[str, Any]] = {}
         self.h5 = h5py.File(self._tmp, "w")
-        self.h5.attrs.update({"format": FORMAT, "twin": twin, "protocol": protocol, "grid": _json(grid, sort=False),
-                              "seeds": _json(seeds)})
+        self.h5.attrs.update(
+            {
+                "format": FORMAT,
+                "twin": twin,
+                "protocol": protocol,
+                "grid": _json(grid, sort=False),
+                "seeds": _json(seeds),
+            }
+        )
         self.h5.create_group("records")
 
     def add(self, index: int, point: dict[str, Any], seed: int, rec: Record) -> None:
@@ -136,15 +143,29 @@ class CollectionWriter:
                 continue
             g.create_dataset(key, data=np.asarray(data), compression="gzip", compression_opts=4, shuffle=True)
         meta = rec.meta
-        g.attrs.update({
-            "fs": float(rec.fs), "units_u": rec.units.get("u", ""), "units_y": rec.units.get("y", ""),
-            "twin": str(meta.get("twin", "")), "protocol": str(meta.get("protocol", "")), "seed": int(seed),
-            "init_samples": int(meta.get("init_samples", 0)), "parameters": _json(meta.get("params", {})),
-            "grid_point": _json(point, sort=False), "effects": _json(meta.get("effects", [])),
-            "protocol_options": _json(meta.get("protocol_options", {})), "meta": _json(meta),
-        })
-        self.rows[index] = {"record": f"records/{name}", **{k: point[k] for k in self.grid}, "seed": seed,
-                            "n_samples": len(rec), "fs_hz": float(rec.fs)}
+        g.attrs.update(
+            {
+                "fs": float(rec.fs),
+                "units_u": rec.units.get("u", ""),
+                "units_y": rec.units.get("y", ""),
+                "twin": str(meta.get("twin", "")),
+                "protocol": str(meta.get("protocol", "")),
+                "seed": int(seed),
+                "init_samples": int(meta.get("init_samples", 0)),
+                "parameters": _json(meta.get("params", {})),
+                "grid_point": _json(point, sort=False),
+                "effects": _json(meta.get("effects", [])),
+                "protocol_options": _json(meta.get("protocol_options", {})),
+                "meta": _json(meta),
+            }
+        )
+        self.rows[index] = {
+            "record": f"records/{name}",
+            **{k: point[k] for k in self.grid},
+            "seed": seed,
+            "n_samples": len(rec),
+            "fs_hz": float(rec.fs),
+        }
 
     def close(self) -> tuple[Path, Path]:
         """Finish both files and move them into place; returns (HDF5 path, index path)."""
@@ -166,8 +187,16 @@ class CollectionWriter:
             self._tmp.unlink(missing_ok=True)
 
 
-def generate_collection(twin, protocol: str, grid: dict[str, list[Any]], seeds: list[int], out: str | Path,
-                        options: dict[str, Any] | None = None, executor=None, progress: bool = True) -> dict[str, Any]:
+def generate_collection(
+    twin,
+    protocol: str,
+    grid: dict[str, list[Any]],
+    seeds: list[int],
+    out: str | Path,
+    options: dict[str, Any] | None = None,
+    executor=None,
+    progress: bool = True,
+) -> dict[str, Any]:
     """Run the grid × seeds (one task each) and write the collection; returns a summary."""
     from benchmarks.execution import Executor
 
@@ -179,14 +208,27 @@ def generate_collection(twin, protocol: str, grid: dict[str, list[Any]], seeds: 
     writer = CollectionWriter(out, twin.name, protocol, grid, seeds)
     tw = ex.share(twin)
     try:
-        ex.map(generate_point, [(tw, p, s, protocol, dict(options or {})) for p, s in points], desc="generate",
-               progress=progress, on_result=lambda i, rec: writer.add(i, points[i][0], points[i][1], rec), keep=False)
+        ex.map(
+            generate_point,
+            [(tw, p, s, protocol, dict(options or {})) for p, s in points],
+            desc="generate",
+            progress=progress,
+            on_result=lambda i, rec: writer.add(i, points[i][0], points[i][1], rec),
+            keep=False,
+        )
     except BaseException:
         writer.abort()
         raise
     h5_path, index_path = writer.close()
-    return {"file": str(h5_path), "index": str(index_path), "records": len(points), "twin": twin.name,
-            "protocol": protocol, "grid": grid, "seeds": seeds}
+    return {
+        "file": str(h5_path),
+        "index": str(index_path),
+        "records": len(points),
+        "twin": twin.name,
+        "protocol": protocol,
+        "grid": grid,
+        "seeds": seeds,
+    }
 
 
 def read_collection(path: str | Path) -> list[Record]:
@@ -199,7 +241,13 @@ def read_collection(path: str | Path) -> list[Record]:
             raise ConfigError(f"{path}: not a piezotwin collection (format {f.attrs.get('format')!r})")
         for name in sorted(f["records"]):
             g = f["records"][name]
-            out.append(Record(u=g["u"][()], y=g["y"][()] if "y" in g else None, fs=float(g.attrs["fs"]),
-                              units={"u": str(g.attrs["units_u"]), "y": str(g.attrs["units_y"])},
-                              meta=json.loads(g.attrs["meta"])))
+            out.append(
+                Record(
+                    u=g["u"][()],
+                    y=g["y"][()] if "y" in g else None,
+                    fs=float(g.attrs["fs"]),
+                    units={"u": str(g.attrs["units_u"]), "y": str(g.attrs["units_y"])},
+                    meta=json.loads(g.attrs["meta"]),
+                )
+            )
     return out

@@ -39,10 +39,17 @@ def add_execution_args(p: argparse.ArgumentParser, workers: bool = True) -> None
     """``--workers N`` and ``--scheduler ADDRESS`` (the same on every command that fans out)."""
     g = p.add_argument_group("execution (Dask)")
     if workers:
-        g.add_argument("--workers", type=int, metavar="N",
-                       help="run the tasks on a local Dask cluster of N worker processes (default: in this process)")
-    g.add_argument("--scheduler", metavar="ADDRESS",
-                   help=f"run the tasks on a running Dask scheduler, e.g. tcp://host:8786 (default ${SCHEDULER_ENV})")
+        g.add_argument(
+            "--workers",
+            type=int,
+            metavar="N",
+            help="run the tasks on a local Dask cluster of N worker processes (default: in this process)",
+        )
+    g.add_argument(
+        "--scheduler",
+        metavar="ADDRESS",
+        help=f"run the tasks on a running Dask scheduler, e.g. tcp://host:8786 (default ${SCHEDULER_ENV})",
+    )
 
 
 class Executor:
@@ -78,9 +85,16 @@ class Executor:
             return obj
         return self.client.scatter(_Blob(obj), broadcast=False, hash=False)
 
-    def map(self, fn: Callable[..., Any], tasks: Sequence[tuple], desc: str = "tasks", progress: bool = True,
-            on_result: Callable[[int, Any], None] | None = None, keep: bool = True,
-            priorities: Sequence[float] | None = None) -> list[Any]:
+    def map(
+        self,
+        fn: Callable[..., Any],
+        tasks: Sequence[tuple],
+        desc: str = "tasks",
+        progress: bool = True,
+        on_result: Callable[[int, Any], None] | None = None,
+        keep: bool = True,
+        priorities: Sequence[float] | None = None,
+    ) -> list[Any]:
         """``[fn(*task) for task in tasks]``, wherever it runs.
 
         ``on_result(index, result)`` is called in the order the tasks finish (to log a line per task); the

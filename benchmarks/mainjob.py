@@ -52,8 +52,10 @@ def _stage_signals(ctx: Context) -> str:
     # 5000 lines up to 500 Hz need a 0.1 Hz grid (10 s period); the 8 s record is 80 % of it (see the docstring)
     u, info = signals.thesis_cantilever_multisine(seed=0, return_info=True)
     ctx.data["cantilever_multisine_u"] = u
-    return (f"dissertation multisine: {u.size} samples at 10 kHz, {info['n_components']} lines up to"
-            f" {info['frequencies_hz'][-1]:g} Hz, crest factor {info['crest_factor']:.2f}")
+    return (
+        f"dissertation multisine: {u.size} samples at 10 kHz, {info['n_components']} lines up to"
+        f" {info['frequencies_hz'][-1]:g} Hz, crest factor {info['crest_factor']:.2f}"
+    )
 
 
 def _twin_dataset_names() -> list[str]:
@@ -74,8 +76,10 @@ def _stage_twin_datasets(ctx: Context) -> str:
         t0 = time.perf_counter()
         ds = load_dataset(name, progress=ctx.verbose)
         ctx.data.setdefault("twin_datasets", {})[name] = ds
-        done.append(f"{name} ({len(ds.est)} -> {', '.join(f'{k} {len(v)}' for k, v in ds.tests.items())} samples, "
-                    f"{time.perf_counter() - t0:.1f} s)")
+        done.append(
+            f"{name} ({len(ds.est)} -> {', '.join(f'{k} {len(v)}' for k, v in ds.tests.items())} samples, "
+            f"{time.perf_counter() - t0:.1f} s)"
+        )
     if not done:
         raise StageSkipped(f"no twin built yet ({', '.join(skipped)} unavailable)")
     msg = "; ".join(done)
@@ -125,8 +129,9 @@ def _stage_cantilever_figures(ctx: Context) -> str:
     ax[1].set_xlabel("frequency [Hz]")
     fig.suptitle("cantilever twin: thesis-multisine spectra (Figure 3.4 analogue)")
     fig.tight_layout()
-    ctx.save_figure(fig, "cantilever_multisine_spectra",
-                    "Cantilever twin: input and output spectra of the thesis multisine")
+    ctx.save_figure(
+        fig, "cantilever_multisine_spectra", "Cantilever twin: input and output spectra of the thesis multisine"
+    )
     widths = []
     for seg in segs[:2]:
         last = whole_periods(len(seg), seg.fs, seg.meta["segment"].get("freq_hz"))

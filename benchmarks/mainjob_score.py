@@ -35,8 +35,10 @@ def plan(quick: bool) -> dict[str, list[str]]:
     from benchmarks.datasets import twin as twin_ds
     from benchmarks.scoring import QUICK_DATASETS
 
-    out = {"twins": [d for d in QUICK_DATASETS if d in twin_ds.TWIN_DATASETS],
-           "lab": [d for d in QUICK_DATASETS if d in lab.LAB_SPECS]}
+    out = {
+        "twins": [d for d in QUICK_DATASETS if d in twin_ds.TWIN_DATASETS],
+        "lab": [d for d in QUICK_DATASETS if d in lab.LAB_SPECS],
+    }
     if quick:
         out = {k: [d for d in v if d in QUICK_PLAN[k]] for k, v in out.items()}
     return out
@@ -49,8 +51,11 @@ def _left_datasets(ctx: Context, scored: list[str], candidates: list[str]) -> No
     for d in candidates:
         if d in scored:
             continue
-        why = ("no floor at the quick budgets (the regression check does not score it), so nothing to compare with"
-               if d not in QUICK_DATASETS else "left out by --quick")
+        why = (
+            "no floor at the quick budgets (the regression check does not score it), so nothing to compare with"
+            if d not in QUICK_DATASETS
+            else "left out by --quick"
+        )
         ctx.leave(f"identifiers on {d}", why, f"piezotwin score --quick --datasets {d}")
 
 

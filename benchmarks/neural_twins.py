@@ -31,15 +31,26 @@ from sysid.errors import DivergenceWarning
 from sysid.evaluation.metrics import r2
 from sysid.registry import get_identifier
 
-__all__ = ["cantilever_data", "cantilever_sines", "acoustic_data", "acoustic_osa_vs_sim", "ACOUSTIC_STRUCTURE",
-           "ACOUSTIC_NK"]
+__all__ = [
+    "cantilever_data",
+    "cantilever_sines",
+    "acoustic_data",
+    "acoustic_osa_vs_sim",
+    "ACOUSTIC_STRUCTURE",
+    "ACOUSTIC_NK",
+]
 
 # The network of Table 4.1 / 4.3
 CANTILEVER_STRUCTURE = {"ny": 10, "nu": 10, "hidden": [25, 25, 25, 25], "activation": "relu"}
 
 
-def cantilever_data(duration_s: float | None = None, freqs_hz: Sequence[float] | None = None, seed: int = 0,
-                    effects: Sequence[str] | None = None, params: Any = None) -> tuple[Record, list[Record]]:
+def cantilever_data(
+    duration_s: float | None = None,
+    freqs_hz: Sequence[float] | None = None,
+    seed: int = 0,
+    effects: Sequence[str] | None = None,
+    params: Any = None,
+) -> tuple[Record, list[Record]]:
     """(estimation record, list of sine segments) from the cantilever twin with its default effects (or
     ``effects``) and its default parameters (or ``params``, a :class:`twins.cantilever.params.CantileverParams`)."""
     from twins.cantilever import CantileverTwin
@@ -52,8 +63,12 @@ def cantilever_data(duration_s: float | None = None, freqs_hz: Sequence[float] |
     return est, val.segments()
 
 
-def cantilever_sines(identifier: str = "narx-mlp", params: dict[str, Any] | None = None, seed: int = 0,
-                     data: tuple[Record, list[Record]] | None = None) -> dict[str, Any]:
+def cantilever_sines(
+    identifier: str = "narx-mlp",
+    params: dict[str, Any] | None = None,
+    seed: int = 0,
+    data: tuple[Record, list[Record]] | None = None,
+) -> dict[str, Any]:
     """Fit on the multisine, free-run each sine; R² per frequency (skipping the copied initial samples)."""
     est, segs = data if data is not None else cantilever_data()
     base = CANTILEVER_STRUCTURE if identifier.startswith("narx-mlp") else {}
@@ -73,10 +88,17 @@ def cantilever_sines(identifier: str = "narx-mlp", params: dict[str, Any] | None
             per[float(s.meta["segment"]["freq_hz"])] = r2(s.y, yh, model.max_lag_)
         est_frs = r2(est.y, model.predict(est, None), model.max_lag_)
     vals = np.array(list(per.values()))
-    return {"identifier": identifier, "params": {k: v for k, v in kw.items()}, "seed": seed, "fit_seconds": fit_s,
-            "n_parameters": model.n_parameters_, "r2_est_frs": est_frs, "r2_per_freq": per,
-            "r2_mean": float(np.mean(vals)) if np.isfinite(vals).all() else float("nan"),
-            "r2_min": float(np.min(vals)) if np.isfinite(vals).all() else float("nan")}
+    return {
+        "identifier": identifier,
+        "params": {k: v for k, v in kw.items()},
+        "seed": seed,
+        "fit_seconds": fit_s,
+        "n_parameters": model.n_parameters_,
+        "r2_est_frs": est_frs,
+        "r2_per_freq": per,
+        "r2_mean": float(np.mean(vals)) if np.isfinite(vals).all() else float("nan"),
+        "r2_min": float(np.min(vals)) if np.isfinite(vals).all() else float("nan"),
+    }
 
 
 # The dissertation's best acoustic network (Tables 5.4-5.6: lags 512, 2 x 75 sigmoid); both trainings use
@@ -87,8 +109,15 @@ def cantilever_sines(identifier: str = "narx-mlp", params: dict[str, Any] | None
 # continuation of the multisine (validation="multisine"), i.e. without looking at the chirp.
 ACOUSTIC_STRUCTURE = {"ny": 512, "nu": 512, "hidden": [75, 75], "activation": "sigmoid"}
 ACOUSTIC_OSA = {"epochs": 75}  # Table 5.3: 75 epochs, lr 1e-4, batch 128
-ACOUSTIC_SIM = {"pretrain_epochs": 75, "pretrain_lr": 1e-4, "pretrain_batch_size": 128, "epochs": 20, "lr": 3e-4,
-                "window": 100, "batch_size": 8}
+ACOUSTIC_SIM = {
+    "pretrain_epochs": 75,
+    "pretrain_lr": 1e-4,
+    "pretrain_batch_size": 128,
+    "epochs": 20,
+    "lr": 3e-4,
+    "window": 100,
+    "batch_size": 8,
+}
 # Input delay near the twin's time of flight (≈ 510 samples at 6.75 MHz): the input lags then cover the
 # response instead of the dead time. Used for both trainings alike (structure={"nk": ACOUSTIC_NK}).
 ACOUSTIC_NK = 450
@@ -109,14 +138,22 @@ def acoustic_data(seed: int = 0, validation: str = "chirp") -> tuple[Record, Rec
     return est, val
 
 
-def acoustic_osa_vs_sim(seeds: Sequence[int] = (0, 1, 2, 3, 4), structure: dict[str, Any] | None = None,
-                        osa: dict[str, Any] | None = None, sim: dict[str, Any] | None = None,
-                        data: tuple[Record, Record] | None = None) -> dict[str, Any]:
+def acoustic_osa_vs_sim(
+    seeds: Sequence[int] = (0, 1, 2, 3, 4),
+    structure: dict[str, Any] | None = None,
+    osa: dict[str, Any] | None = None,
+    sim: dict[str, Any] | None = None,
+    data: tuple[Record, Record] | None = None,
+) -> dict[str, Any]:
     """Validation free-run R² of one-step-trained vs simulation-error-trained networks, per seed."""
     est, val = data if data is not None else acoustic_data()
     structure = {**ACOUSTIC_STRUCTURE, **(structure or {})}
-    out: dict[str, Any] = {"structure": structure, "osa_training": {**ACOUSTIC_OSA, **(osa or {})},
-                           "sim_training": {**ACOUSTIC_SIM, **(sim or {})}, "runs": []}
+    out: dict[str, Any] = {
+        "structure": structure,
+        "osa_training": {**ACOUSTIC_OSA, **(osa or {})},
+        "sim_training": {**ACOUSTIC_SIM, **(sim or {})},
+        "runs": [],
+    }
     for seed in seeds:
         row: dict[str, Any] = {"seed": seed}
         for tag, name, opts in (("osa", "narx-mlp", out["osa_training"]), ("sim", "narx-mlp-sim", out["sim_training"])):

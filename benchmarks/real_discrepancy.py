@@ -73,8 +73,10 @@ def water_records(distance_mm: int = 20, seed: int = 0) -> tuple[Record, Record]
     y_est = np.convolve(u_est, h[0])[:n]
     y_val = np.convolve(u_val, h[5])[:n]
     meta = {"source": f"USbodyComm charac_water_{int(distance_mm)}", "fir": "measured impulse response convolved"}
-    return (Record(u=u_est, y=y_est, fs=fs, meta={**meta, "fir_index": 0}, source="water_est"),
-            Record(u=u_val, y=y_val, fs=fs, meta={**meta, "fir_index": 5}, source="water_val"))
+    return (
+        Record(u=u_est, y=y_est, fs=fs, meta={**meta, "fir_index": 0}, source="water_est"),
+        Record(u=u_val, y=y_val, fs=fs, meta={**meta, "fir_index": 5}, source="water_val"),
+    )
 
 
 def water(out: Path, distance_mm: int = 20) -> dict[str, Any]:
@@ -115,8 +117,15 @@ def _narmax_case(rec: Record, orders: dict[str, Any], n_est: int) -> dict[str, A
     from twins.discrepancy import features as ft
 
     est, val = rec[:n_est], rec[n_est:]
-    model = NARMAXPoly(ny=orders["ny"], nu=orders["nu"], ne=orders["ne"], degree=orders["degree"],
-                       criterion="err", rho_p=orders["rho_p"], rho_n=orders["rho_n"])
+    model = NARMAXPoly(
+        ny=orders["ny"],
+        nu=orders["nu"],
+        ne=orders["ne"],
+        degree=orders["degree"],
+        criterion="err",
+        rho_p=orders["rho_p"],
+        rho_n=orders["rho_n"],
+    )
     model.fit(est)
     out = {"orders": orders, "n_parameters": int(model.n_parameters_)}
     for part, r in (("estimation", est), ("validation", val)):
@@ -129,10 +138,15 @@ def _narmax_case(rec: Record, orders: dict[str, Any], n_est: int) -> dict[str, A
         ctf = correlation_tests(ef, r.u[skip:], max_lag=20)
         a = ft.analyse(r.u[skip:], r.output[skip:], yf[skip:], r.fs, {})
         out[part] = {
-            "r2_free_run": r2(r.y, yf, skip), "r2_one_step": r2(r.y, y1, skip),
-            "tests_one_step": ft.tests_summary(ct1), "tests_free_run": ft.tests_summary(ctf),
-            "residual_echo": a["echo"], "residual_resonances": a["resonances"], "residual_bands": a["bands"],
-            "residual_nonlinear": a["nonlinear"], "residual_trend": a["trend"],
+            "r2_free_run": r2(r.y, yf, skip),
+            "r2_one_step": r2(r.y, y1, skip),
+            "tests_one_step": ft.tests_summary(ct1),
+            "tests_free_run": ft.tests_summary(ctf),
+            "residual_echo": a["echo"],
+            "residual_resonances": a["resonances"],
+            "residual_bands": a["bands"],
+            "residual_nonlinear": a["nonlinear"],
+            "residual_trend": a["trend"],
         }
     return out
 
@@ -148,8 +162,9 @@ def narmax(out: Path) -> dict[str, Any]:
         "no inter-plate reverberation (reverb_orders=0)": base.with_params(reverb_orders=0),
         "no amplifier compression": base.with_effects(base.effects - {"amplifier_compression"}),
         "no noise, no ADC": base.with_effects(base.effects - {"measurement_noise", "adc_quantization"}),
-        "bare linear core (no reverberation, compression, noise, ADC)":
-            base.with_params(reverb_orders=0).with_effects(set()),
+        "bare linear core (no reverberation, compression, noise, ADC)": base.with_params(reverb_orders=0).with_effects(
+            set()
+        ),
     }
     recs = {}
     for name, tw in variants.items():

@@ -76,8 +76,10 @@ def load_entries(path: str | Path | None = None) -> list[Entry]:
         if dname not in dataset_names():
             raise ConfigError(f"{path}: [{dname}] is not a dataset; valid: {', '.join(dataset_names())}")
         if not isinstance(table, dict) or not {"identifier", "why"} <= set(table) <= {"identifier", "why", "beside"}:
-            raise ConfigError(f"{path}: [{dname}] needs exactly `identifier` and a `why` line (and optionally "
-                              "`beside`, a list of identifiers)")
+            raise ConfigError(
+                f"{path}: [{dname}] needs exactly `identifier` and a `why` line (and optionally "
+                "`beside`, a list of identifiers)"
+            )
         ident, why = table["identifier"], table["why"]
         if ident not in IDENTIFIERS:
             raise ConfigError(f"{path}: [{dname}] identifier {ident!r} unknown; valid: {', '.join(IDENTIFIERS)}")
@@ -97,8 +99,11 @@ def load_entries(path: str | Path | None = None) -> list[Entry]:
 
 def beside_entries(entries: Sequence[Entry]) -> list[Entry]:
     """One entry per identifier shown beside a chosen row, in the settings' order."""
-    return [Entry(e.dataset, b, f"shown beside `{e.identifier}` for comparison", beside_of=e.identifier)
-            for e in entries for b in e.beside]
+    return [
+        Entry(e.dataset, b, f"shown beside `{e.identifier}` for comparison", beside_of=e.identifier)
+        for e in entries
+        for b in e.beside
+    ]
 
 
 def with_beside(entries: Sequence[Entry]) -> list[Entry]:
@@ -116,8 +121,9 @@ def seeds_text(seeds: Sequence[int]) -> str:
 
 def measure_command(entry: Entry) -> str:
     """The ``piezotwin records`` command that measures one row again."""
-    return f"piezotwin records --datasets {entry.dataset}" + (f" --identifiers {entry.identifier}"
-                                                              if entry.beside_of else "")
+    return f"piezotwin records --datasets {entry.dataset}" + (
+        f" --identifiers {entry.identifier}" if entry.beside_of else ""
+    )
 
 
 def command(dataset: str, identifier: str, seeds: Sequence[int] = DEFAULT_SEEDS) -> str:
@@ -138,12 +144,16 @@ def provenance() -> dict[str, Any]:
             versions[dist] = version(dist)
         except PackageNotFoundError:
             versions[dist] = None
-    return {"date": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()), "machine": {**env, "cores": os.cpu_count()},
-            "versions": versions}
+    return {
+        "date": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
+        "machine": {**env, "cores": os.cpu_count()},
+        "versions": versions,
+    }
 
 
-def measure(entry: Entry, seeds: Sequence[int] = DEFAULT_SEEDS, executor=None, progress: bool = False,
-            fresh: bool = True) -> dict[str, Any]:
+def measure(
+    entry: Entry, seeds: Sequence[int] = DEFAULT_SEEDS, executor=None, progress: bool = False, fresh: bool = True
+) -> dict[str, Any]:
     """Score one row as its :func:`command` does and return it with how it was measured (not yet stored).
 
     Without a Dask ``executor`` the row is measured in a new Python process (``fresh``), as the printed command
@@ -168,15 +178,28 @@ def _measure(entry: Entry, seeds: list[int], executor, progress: bool, process: 
 
     load_before = list(os.getloadavg())
     wall0, cpu0 = time.perf_counter(), time.process_time()
-    run = scoring.score([entry.identifier], [entry.dataset], quick=False, progress=progress, seeds=seeds,
-                        executor=executor)
+    run = scoring.score(
+        [entry.identifier], [entry.dataset], quick=False, progress=progress, seeds=seeds, executor=executor
+    )
     wall, cpu = time.perf_counter() - wall0, time.process_time() - cpu0
     measured = provenance()
-    measured.update(load_average_before=load_before, load_average_after=list(os.getloadavg()),
-                    wall_seconds=wall, cpu_seconds=cpu, process=process)
-    return {"format": ROW_FORMAT, "dataset": entry.dataset, "identifier": entry.identifier, "seeds": seeds,
-            "command": command(entry.dataset, entry.identifier, seeds), "why": entry.why, "measured": measured,
-            "score": scoring._clean(run.to_dict())}
+    measured.update(
+        load_average_before=load_before,
+        load_average_after=list(os.getloadavg()),
+        wall_seconds=wall,
+        cpu_seconds=cpu,
+        process=process,
+    )
+    return {
+        "format": ROW_FORMAT,
+        "dataset": entry.dataset,
+        "identifier": entry.identifier,
+        "seeds": seeds,
+        "command": command(entry.dataset, entry.identifier, seeds),
+        "why": entry.why,
+        "measured": measured,
+        "score": scoring._clean(run.to_dict()),
+    }
 
 
 def row_path(directory: str | Path, dataset: str, identifier: str | None = None) -> Path:
@@ -221,18 +244,28 @@ def _read_row(path: Path) -> dict[str, Any]:
         row = json.loads(path.read_text(encoding="utf-8"))
     except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
         raise ConfigError(f"{path}: cannot read a stored records row ({exc})") from None
-    if not (isinstance(row, dict) and row.get("format") == ROW_FORMAT and isinstance(row.get("score"), dict)
-            and isinstance(row["score"].get("rows"), list) and isinstance(row.get("measured"), dict)
-            and all(isinstance(row.get(k), str) for k in ("dataset", "identifier", "command"))):
-        raise ConfigError(f"{path}: not a stored records row (format {ROW_FORMAT!r} with dataset, identifier, "
-                          "command, measured and score)")
+    if not (
+        isinstance(row, dict)
+        and row.get("format") == ROW_FORMAT
+        and isinstance(row.get("score"), dict)
+        and isinstance(row["score"].get("rows"), list)
+        and isinstance(row.get("measured"), dict)
+        and all(isinstance(row.get(k), str) for k in ("dataset", "identifier", "command"))
+    ):
+        raise ConfigError(
+            f"{path}: not a stored records row (format {ROW_FORMAT!r} with dataset, identifier, "
+            "command, measured and score)"
+        )
     return row
 
 
 def score_rows(row: dict[str, Any]) -> list[dict[str, Any]]:
     """The scored test rows of one stored row (its identifier on its dataset), in test order."""
-    return [r for r in row["score"]["rows"] if r.get("identifier") == row["identifier"]
-            and r.get("dataset") == row["dataset"]]
+    return [
+        r
+        for r in row["score"]["rows"]
+        if r.get("identifier") == row["identifier"] and r.get("dataset") == row["dataset"]
+    ]
 
 
 def _test_rmse(r: dict[str, Any]) -> dict[str, Any]:
@@ -252,8 +285,9 @@ def _record(r: dict[str, Any]) -> dict[str, Any] | None:
     of the measurement, so a corrected or added one shows without refitting), else as the row stored it."""
     from benchmarks.datasets.references import references_for
 
-    best = (references_for(r.get("dataset", "")).get(r.get("test", ""), {}).get("best_published")
-            or (r.get("references") or {}).get("best_published"))
+    best = references_for(r.get("dataset", "")).get(r.get("test", ""), {}).get("best_published") or (
+        r.get("references") or {}
+    ).get("best_published")
     return {k: best[k] for k in ("value", "unit", "model")} if best else None
 
 
@@ -265,11 +299,15 @@ def summarise_row(row: dict[str, Any]) -> dict[str, Any]:
     fits = [r.get("fit_seconds_mean", r.get("fit_seconds")) for r in tests]
     fits = [f for f in fits if isinstance(f, (int, float))]
     meas = row["measured"]
-    return {"identifier": row["identifier"], "rmse": {r["test"]: _test_rmse(r) for r in tests},
-            "units": {r["test"]: r.get("units", "") for r in tests},
-            "seconds": fits[0] if fits else None, "command": row["command"],
-            "record": {r["test"]: _record(r) for r in tests},
-            "measured": {"date": meas.get("date"), "machine": meas.get("machine")}}
+    return {
+        "identifier": row["identifier"],
+        "rmse": {r["test"]: _test_rmse(r) for r in tests},
+        "units": {r["test"]: r.get("units", "") for r in tests},
+        "seconds": fits[0] if fits else None,
+        "command": row["command"],
+        "record": {r["test"]: _record(r) for r in tests},
+        "measured": {"date": meas.get("date"), "machine": meas.get("machine")},
+    }
 
 
 def summary(entries: Sequence[Entry], rows: dict[str, dict[str, Any]]) -> dict[str, Any]:
@@ -308,14 +346,14 @@ def fmt_spread(rmse: dict[str, Any], unit: str) -> str:
 
 def _settings_text(params: dict[str, Any]) -> str:
     """The options as ``--set`` writes them (a list with dashes: ``hidden=25-25``)."""
+
     def value(v: Any) -> str:
         return "-".join(str(x) for x in v) if isinstance(v, (list, tuple)) else str(v)
 
     return ", ".join(f"{k}={value(v)}" for k, v in params.items()) or "defaults"
 
 
-def page_context(entries: Sequence[Entry], rows: dict[str, dict[str, Any]],
-                 missing: Sequence[Entry]) -> dict[str, Any]:
+def page_context(entries: Sequence[Entry], rows: dict[str, dict[str, Any]], missing: Sequence[Entry]) -> dict[str, Any]:
     """What the page template shows: one line per dataset and test, one per stored row's measurement, and the
     rows not measured yet with the command that measures them."""
     lines, measurements = [], []
@@ -327,13 +365,19 @@ def page_context(entries: Sequence[Entry], rows: dict[str, dict[str, Any]],
         for r in score_rows(row):
             unit = r.get("units", "")
             rec = entry["record"][r["test"]]
-            lines.append({"dataset": e.dataset, "test": r["test"], "identifier": row["identifier"],
-                          "beside": bool(e.beside_of),
-                          "settings": _settings_text(r.get("params") or {}),
-                          "rmse": fmt_spread(entry["rmse"][r["test"]], unit),
-                          "seconds": "—" if entry["seconds"] is None else f"{entry['seconds']:.3g}",
-                          "record": f"{fmt_value(rec['value'], unit)} ({rec['model']})" if rec else "—",
-                          "command": row["command"]})
+            lines.append(
+                {
+                    "dataset": e.dataset,
+                    "test": r["test"],
+                    "identifier": row["identifier"],
+                    "beside": bool(e.beside_of),
+                    "settings": _settings_text(r.get("params") or {}),
+                    "rmse": fmt_spread(entry["rmse"][r["test"]], unit),
+                    "seconds": "—" if entry["seconds"] is None else f"{entry['seconds']:.3g}",
+                    "record": f"{fmt_value(rec['value'], unit)} ({rec['model']})" if rec else "—",
+                    "command": row["command"],
+                }
+            )
         m = row["measured"]
         versions = m.get("versions") or {}
         measurements.append(
@@ -350,23 +394,35 @@ def page_context(entries: Sequence[Entry], rows: dict[str, dict[str, Any]],
                 "versions": ", ".join(f"{k} {v}" for k, v in versions.items() if v),
             }
         )
-    return {"lines": lines, "measurements": measurements, "why": [(e.dataset, e.identifier, e.why) for e in entries],
-            "missing": [{"dataset": e.dataset, "identifier": e.identifier, "command": measure_command(e)}
-                        for e in missing],
-            "default_seeds": seeds_text(DEFAULT_SEEDS)}
+    return {
+        "lines": lines,
+        "measurements": measurements,
+        "why": [(e.dataset, e.identifier, e.why) for e in entries],
+        "missing": [{"dataset": e.dataset, "identifier": e.identifier, "command": measure_command(e)} for e in missing],
+        "default_seeds": seeds_text(DEFAULT_SEEDS),
+    }
 
 
 def render_markdown(entries: Sequence[Entry], rows: dict[str, dict[str, Any]], missing: Sequence[Entry]) -> str:
     """The whole ``docs/benchmarks.md``: the page template with the records tables filled from stored rows."""
     import jinja2
 
-    env = jinja2.Environment(loader=jinja2.FileSystemLoader(TEMPLATES_DIR), undefined=jinja2.StrictUndefined,
-                             keep_trailing_newline=True, autoescape=False)
+    env = jinja2.Environment(
+        loader=jinja2.FileSystemLoader(TEMPLATES_DIR),
+        undefined=jinja2.StrictUndefined,
+        keep_trailing_newline=True,
+        autoescape=False,
+    )
     return env.get_template(TEMPLATE).render(**page_context(entries, rows, missing))
 
 
-def write_outputs(entries: Sequence[Entry], rows: dict[str, dict[str, Any]], missing: Sequence[Entry],
-                  markdown: str | Path, records_json: str | Path) -> dict[str, Any]:
+def write_outputs(
+    entries: Sequence[Entry],
+    rows: dict[str, dict[str, Any]],
+    missing: Sequence[Entry],
+    markdown: str | Path,
+    records_json: str | Path,
+) -> dict[str, Any]:
     """Render both outputs and write them atomically; returns the ``records.json`` mapping."""
     from sysid.data.jsonio import clean_json
     from sysid.data.safeio import atomic_write_text

@@ -42,8 +42,15 @@ def sweep_point(twin, name: str, value: Any, protocol: str | None, identify: boo
     return row, (tw.sweep_spectrum() if hasattr(tw, "sweep_spectrum") else None)
 
 
-def sweep(twin, name: str, values: list[Any], protocol: str | None = None, identify: bool = True, executor=None,
-          progress: bool = False) -> dict[str, Any]:
+def sweep(
+    twin,
+    name: str,
+    values: list[Any],
+    protocol: str | None = None,
+    identify: bool = True,
+    executor=None,
+    progress: bool = False,
+) -> dict[str, Any]:
     """Run the study; returns {twin, param, unit, rows: [{value, **metrics}], ...}. One task per value on
     ``executor`` (:class:`benchmarks.execution.Executor`; default in-process), rows in the order of ``values``."""
     if not hasattr(twin, "sweep_metrics"):
@@ -52,13 +59,20 @@ def sweep(twin, name: str, values: list[Any], protocol: str | None = None, ident
         twin.check_protocol(protocol)
     ex = executor or Executor()
     tw = ex.share(twin)
-    results = ex.map(sweep_point, [(tw, name, v, protocol, identify) for v in values], desc=f"sweep {name}",
-                     progress=progress)
+    results = ex.map(
+        sweep_point, [(tw, name, v, protocol, identify) for v in values], desc=f"sweep {name}", progress=progress
+    )
     rows = [row for row, _ in results]
     spectra = [(v, *spec) for v, (_, spec) in zip(values, results) if spec is not None]
     unit = param_info(type(twin.params))[name].unit
-    return {"twin": twin.name, "param": name, "unit": unit, "effects": sorted(twin.effects), "rows": rows,
-            "_spectra": spectra}
+    return {
+        "twin": twin.name,
+        "param": name,
+        "unit": unit,
+        "effects": sorted(twin.effects),
+        "rows": rows,
+        "_spectra": spectra,
+    }
 
 
 def write_report(result: dict[str, Any], out: Path) -> list[str]:
@@ -90,8 +104,11 @@ def write_report(result: dict[str, Any], out: Path) -> list[str]:
         path = out / f"sweep_{name}_spectra.png"
         save_and_close(fig, path, dpi=110)
         files.append(str(path))
-    keys = [k for k, v in result["rows"][0].items()
-            if k != "value" and isinstance(v, (int, float)) and not isinstance(v, bool)]
+    keys = [
+        k
+        for k, v in result["rows"][0].items()
+        if k != "value" and isinstance(v, (int, float)) and not isinstance(v, bool)
+    ]
     keys += [k for k in ("identified_model_r2",) if k not in keys and any(r.get(k) is not None for r in result["rows"])]
     if keys:
         values = [r["value"] for r in result["rows"]]

@@ -36,8 +36,22 @@ MOVED: dict[str, str] = {
     **{f"sysid.{m}": f"sysid.evaluation.{m}" for m in ("metrics", "residuals", "evaluate", "advice")},
     **{f"sysid.{m}": f"sysid.report.{m}" for m in ("plots", "linplots", "provenance", "compare")},
     **{f"sysid.{m}": f"sysid.polynomial.{m}" for m in ("frols", "simulate", "polysim")},
-    **{f"sysid.{m}": f"sysid.linear.{m}" for m in ("fir", "frf", "bla", "bla_model", "tfest", "pem", "pem_init",
-                                                    "subspace", "order", "uncertainty", "echo_oe")},
+    **{
+        f"sysid.{m}": f"sysid.linear.{m}"
+        for m in (
+            "fir",
+            "frf",
+            "bla",
+            "bla_model",
+            "tfest",
+            "pem",
+            "pem_init",
+            "subspace",
+            "order",
+            "uncertainty",
+            "echo_oe",
+        )
+    },
     **{f"sysid.{m}": f"sysid.nonlinear.{m}" for m in ("pnlss", "pnlss_sim", "wiener_hammerstein", "wh_blocks")},
 }
 
@@ -72,8 +86,11 @@ def attach(package: str, init_file: str) -> tuple[Callable[[str], Any], Callable
         parent = importlib.import_module(module)
         value = parent.__dict__.get(attr)
         if value is None:
-            value = (importlib.import_module(f"{module}.{attr}")
-                     if importlib.util.find_spec(f"{module}.{attr}") is not None else getattr(parent, attr))
+            value = (
+                importlib.import_module(f"{module}.{attr}")
+                if importlib.util.find_spec(f"{module}.{attr}") is not None
+                else getattr(parent, attr)
+            )
         setattr(sys.modules[package], name, value)
         return value
 
@@ -89,13 +106,17 @@ class _MovedModules(importlib.abc.MetaPathFinder, importlib.abc.Loader):
     def __init__(self) -> None:
         self._specs: dict[str, importlib.machinery.ModuleSpec | None] = {}
 
-    def find_spec(self, fullname: str, path: Sequence[str] | None, target: ModuleType | None = None
-                  ) -> importlib.machinery.ModuleSpec | None:
+    def find_spec(
+        self, fullname: str, path: Sequence[str] | None, target: ModuleType | None = None
+    ) -> importlib.machinery.ModuleSpec | None:
         return importlib.util.spec_from_loader(fullname, self) if fullname in MOVED else None
 
     def create_module(self, spec: importlib.machinery.ModuleSpec) -> ModuleType:
-        warnings.warn(f"{spec.name} moved to {MOVED[spec.name]}; import it from there (or from sysid)",
-                      DeprecationWarning, stacklevel=2)
+        warnings.warn(
+            f"{spec.name} moved to {MOVED[spec.name]}; import it from there (or from sysid)",
+            DeprecationWarning,
+            stacklevel=2,
+        )
         module = importlib.import_module(MOVED[spec.name])
         self._specs[spec.name] = module.__spec__
         return module

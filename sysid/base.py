@@ -39,8 +39,16 @@ import numpy as np
 from sysid.data.record import Record
 from sysid.errors import ConfigError, DataError, DivergenceWarning
 
-__all__ = ["Identifier", "as_record_list", "check_records", "load_model", "as_fit_data", "as_predict_record",
-           "check_prediction", "stop_at_divergence"]
+__all__ = [
+    "Identifier",
+    "as_record_list",
+    "check_records",
+    "load_model",
+    "as_fit_data",
+    "as_predict_record",
+    "check_prediction",
+    "stop_at_divergence",
+]
 
 _UNSET: Any = object()  # "argument not given" (None is a meaningful horizon: free run)
 
@@ -63,38 +71,49 @@ def check_records(records: Sequence[Record], max_lag: int, min_rows: int, what: 
     rows = 0
     for rec in records:
         if rec.n_inputs != n_in or rec.n_outputs != n_out:
-            raise DataError(f"{rec.source}: {rec.n_inputs} inputs / {rec.n_outputs} outputs, but the first record has "
-                            f"{n_in} / {n_out}")
+            raise DataError(
+                f"{rec.source}: {rec.n_inputs} inputs / {rec.n_outputs} outputs, but the first record has "
+                f"{n_in} / {n_out}"
+            )
         for name, arr in (("u", rec.u), ("y", rec.output)):
             if not np.isfinite(arr).all():
                 i = int(np.flatnonzero(~np.isfinite(arr.reshape(arr.shape[0], -1)).any(axis=1))[0])
                 raise DataError(f"{rec.source}: {name} has non-finite (NaN/inf) samples, first at index {i}")
         if len(rec) <= max_lag:
-            raise DataError(f"{rec.source}: {len(rec)} samples are too few for the lags of {what} "
-                            f"(max lag {max_lag}; need more than {max_lag} samples per record)")
+            raise DataError(
+                f"{rec.source}: {len(rec)} samples are too few for the lags of {what} "
+                f"(max lag {max_lag}; need more than {max_lag} samples per record)"
+            )
         rows += len(rec) - max_lag
     if rows < min_rows:
-        raise DataError(f"{what}: {rows} usable samples (after the max lag {max_lag}) are too few for "
-                        f"{min_rows - 1} candidate parameters; give more data or smaller lags/degree")
+        raise DataError(
+            f"{what}: {rows} usable samples (after the max lag {max_lag}) are too few for "
+            f"{min_rows - 1} candidate parameters; give more data or smaller lags/degree"
+        )
     u_all = np.concatenate([r.u.reshape(len(r), -1) for r in records])
     for ch in range(u_all.shape[1]):
         if np.ptp(u_all[:, ch]) == 0.0:
             name = "u" if u_all.shape[1] == 1 else f"u{ch + 1}"
-            raise DataError(f"{records[0].source}: input {name} is constant ({u_all[0, ch]:g}); "
-                            "a constant input does not excite the system, nothing to identify")
+            raise DataError(
+                f"{records[0].source}: input {name} is constant ({u_all[0, ch]:g}); "
+                "a constant input does not excite the system, nothing to identify"
+            )
     y_all = np.concatenate([r.output.reshape(len(r), -1) for r in records])
     for ch in range(y_all.shape[1]):
         if np.ptp(y_all[:, ch]) == 0.0:
             name = "y" if y_all.shape[1] == 1 else f"y{ch + 1}"
             raise DataError(f"{records[0].source}: output {name} is constant ({y_all[0, ch]:g}); nothing to identify")
 
+
 def check_prediction(model: Identifier, record: Record, horizon: Any) -> None:
     """What ``predict`` refuses for every simulation model: a record without output, other channel counts than the
     model was fitted on, a horizon that is not a positive integer or ``None`` (free run)."""
     record.require_output()
     if record.n_inputs != model.n_inputs_ or record.n_outputs != model.n_outputs_:
-        raise DataError(f"{record.source}: {record.n_inputs} inputs / {record.n_outputs} outputs, model was fitted "
-                        f"on {model.n_inputs_} / {model.n_outputs_}")
+        raise DataError(
+            f"{record.source}: {record.n_inputs} inputs / {record.n_outputs} outputs, model was fitted "
+            f"on {model.n_inputs_} / {model.n_outputs_}"
+        )
     if horizon is not None and (isinstance(horizon, bool) or int(horizon) != horizon or horizon < 1):
         raise ConfigError(f"horizon must be a positive integer or None (free run), got {horizon!r}")
 
@@ -108,14 +127,18 @@ def stop_at_divergence(model: Identifier, yhat: np.ndarray, what: str = "predict
     model.diverged_at_ = None
     if bad.size:
         model.diverged_at_ = int(bad[0])
-        yhat[bad[0]:] = np.nan
-        warnings.warn(f"{model.name}: {what} left ±{model.y_bound_:.3g} at sample {bad[0]}; the rest is nan",
-                      DivergenceWarning, stacklevel=3)
+        yhat[bad[0] :] = np.nan
+        warnings.warn(
+            f"{model.name}: {what} left ±{model.y_bound_:.3g} at sample {bad[0]}; the rest is nan",
+            DivergenceWarning,
+            stacklevel=3,
+        )
     return yhat
 
 
-def as_fit_data(data: Any, y: Any = None, fs: float | None = None, units: dict[str, str] | None = None
-                ) -> Record | list[Record]:
+def as_fit_data(
+    data: Any, y: Any = None, fs: float | None = None, units: dict[str, str] | None = None
+) -> Record | list[Record]:
     """What ``fit`` accepts: a Record, a list of Records, or arrays ``u, y`` (with ``fs`` [Hz], default 1)."""
     if isinstance(data, Record) or (
         isinstance(data, (list, tuple)) and data and all(isinstance(r, Record) for r in data)
@@ -181,14 +204,15 @@ def _wrap_predict(fn):
             h = (1 if rec.y is not None else None) if horizon is _UNSET else horizon
         if rec.y is None:
             if h is not None:
-                raise ConfigError(f"{self.name}: {h}-step prediction needs the measured output y; a free run "
-                                  "(horizon=None, --horizon inf) needs only the input u")
+                raise ConfigError(
+                    f"{self.name}: {h}-step prediction needs the measured output y; a free run "
+                    "(horizon=None, --horizon inf) needs only the input u"
+                )
             return fn(self, _zero_output(self, rec), None)
         return fn(self, rec, h)
 
     predict._piezotwin_wrapped = True  # type: ignore[attr-defined]
     return predict
-
 
 
 class Identifier(ABC):
@@ -262,9 +286,7 @@ class Identifier(ABC):
 
         sig = inspect.signature(cls.__init__)
         defaults = {
-            p.name: p.default
-            for p in sig.parameters.values()
-            if p.name != "self" and p.kind is p.POSITIONAL_OR_KEYWORD
+            p.name: p.default for p in sig.parameters.values() if p.name != "self" and p.kind is p.POSITIONAL_OR_KEYWORD
         }
         from sysid.config import resolve_aliases
 
@@ -274,12 +296,10 @@ class Identifier(ABC):
 
     # ------------------------------------------------------------------ learning / prediction
     @abstractmethod
-    def fit(self, data: Record | Sequence[Record]) -> Identifier:
-        ...
+    def fit(self, data: Record | Sequence[Record]) -> Identifier: ...
 
     @abstractmethod
-    def predict(self, record: Record, horizon: int | None = 1) -> np.ndarray:
-        ...
+    def predict(self, record: Record, horizon: int | None = 1) -> np.ndarray: ...
 
     def describe(self) -> dict[str, Any]:
         """JSON-able summary of the fitted model (subclasses add terms, structure...)."""
@@ -295,8 +315,7 @@ class Identifier(ABC):
         """Learned state as JSON-able dict (arrays as lists) — enough to predict identically."""
 
     @abstractmethod
-    def _load_state(self, state: dict[str, Any]) -> None:
-        ...
+    def _load_state(self, state: dict[str, Any]) -> None: ...
 
     def score(self, data: Any, y: Any = None, horizon: int | None = None, fs: float | None = None) -> float:
         """R² (eq. 2-31) of ``predict`` against the measured output, after the first ``max_lag_`` samples.

@@ -14,8 +14,16 @@ from typing import Any
 
 from sysid.errors import ConfigError
 
-__all__ = ["parse_assignments", "coerce", "apply_assignments", "positive", "int_option", "make_rng", "ALIASES",
-           "resolve_aliases"]
+__all__ = [
+    "parse_assignments",
+    "coerce",
+    "apply_assignments",
+    "positive",
+    "int_option",
+    "make_rng",
+    "ALIASES",
+    "resolve_aliases",
+]
 
 # One vocabulary for identifier options, the same in the Python API, ``--set`` and model files: lags ``ny``, ``nu``,
 # delay ``nk`` in every identifier that has them, the linear bypass ``linear``. Older spellings stay accepted for
@@ -47,8 +55,11 @@ def resolve_aliases(params: Mapping[str, Any], valid: Iterable[str], owner: str 
         out[key] = value
     if renamed:
         names = ", ".join(f"{old} -> {new}" for old, new in renamed)
-        warnings.warn(f"{owner}: deprecated option name(s) {names}; the old names will be removed in a later release",
-                      DeprecationWarning, stacklevel=3)
+        warnings.warn(
+            f"{owner}: deprecated option name(s) {names}; the old names will be removed in a later release",
+            DeprecationWarning,
+            stacklevel=3,
+        )
     return out
 
 
@@ -120,8 +131,10 @@ def coerce(text: Any, like: Any, key: str = "value", annotation: Any = None) -> 
                 elem_like = like[0]
             parts = (text.split(";") if ";" in text else text.split("-")) if text else []
             if "" in parts:  # '-4' would silently become [4], '25--25' [25, 25]
-                raise ConfigError(f"{key}: list {text!r} has an empty item; list items are separated by '-' "
-                                  "(e.g. 25-25), negative numbers by ';' (e.g. -1;-2)")
+                raise ConfigError(
+                    f"{key}: list {text!r} has an empty item; list items are separated by '-' "
+                    "(e.g. 25-25), negative numbers by ';' (e.g. -1;-2)"
+                )
             vals = [coerce(p, elem_like if elem_like is not None else 0.0, key) if _numeric(p) else p for p in parts]
             if elem_like is not None and isinstance(elem_like, int) and not isinstance(elem_like, bool):
                 vals = [int(v) for v in vals]

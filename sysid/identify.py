@@ -64,8 +64,9 @@ def free_run_r2(models: Sequence[Any], data: Record | Sequence[Record]) -> list[
     return out
 
 
-def linear_comparison(name: str, model: Any, est: list[Record], val: list[Record] | None,
-                      build) -> tuple[dict[str, Any], Any]:
+def linear_comparison(
+    name: str, model: Any, est: list[Record], val: list[Record] | None, build
+) -> tuple[dict[str, Any], Any]:
     """The comparison of the module docstring: ``(linear_reference, linear model fitted on all of est or None)``
     — None when the comparison ran on the internal hold-out and the nonlinear model won (no refit needed).
 
@@ -84,13 +85,23 @@ def linear_comparison(name: str, model: Any, est: list[Record], val: list[Record
         where = f"last {HOLDOUT:.0%} of the estimation data"
         lin = linear_cls().fit(_fit_data(est)) if r_nl < r_lin else None
     better = name if r_nl >= r_lin else LINEAR_DEFAULT
-    ref = {"identifier": LINEAR_DEFAULT, "chosen_orders": getattr(lin, "chosen_orders_", None),
-           "holdout": where, "r2": r_lin, "model_r2": r_nl, "better": better}
+    ref = {
+        "identifier": LINEAR_DEFAULT,
+        "chosen_orders": getattr(lin, "chosen_orders_", None),
+        "holdout": where,
+        "r2": r_lin,
+        "model_r2": r_nl,
+        "better": better,
+    }
     return ref, lin
 
 
-def identify(name: str, est: Record | Sequence[Record], val: Record | Sequence[Record] | None = None,
-             assignments: dict[str, str] | Sequence[str] | None = None) -> tuple[Any, dict[str, Any]]:
+def identify(
+    name: str,
+    est: Record | Sequence[Record],
+    val: Record | Sequence[Record] | None = None,
+    assignments: dict[str, str] | Sequence[str] | None = None,
+) -> tuple[Any, dict[str, Any]]:
     """Build identifier ``name`` from ``--set``-style assignments, fit on ``est``, score on est/val; for a nonlinear
     identifier run with defaults or ``auto=true``, the comparison with the linear default (module docstring).
 
@@ -104,8 +115,9 @@ def identify(name: str, est: Record | Sequence[Record], val: Record | Sequence[R
     auto = bool(coerce(assignments.pop("auto", False), False, "auto"))
     if auto and name in LINEAR_IDENTIFIERS:
         hint = " (its own orders are chosen with orders=auto)" if name in ("arx", "armax") else ""
-        raise ConfigError(f"{name}: auto=true holds a nonlinear identifier against the default linear model; {name} is "
-                          f"linear{hint}")
+        raise ConfigError(
+            f"{name}: auto=true holds a nonlinear identifier against the default linear model; {name} is linear{hint}"
+        )
     model = cls.from_assignments(assignments)
     t0 = time.perf_counter()
     model.fit(est)
@@ -123,8 +135,10 @@ def identify(name: str, est: Record | Sequence[Record], val: Record | Sequence[R
     summary["linear_reference"] = ref
     if ref["better"] == name:
         return model, summary
-    msg = (f"{name} simulates the {ref['holdout']} worse than the default linear model {LINEAR_DEFAULT}: free-run "
-           f"R² {ref['model_r2']:.4f} against {ref['r2']:.4f}")
+    msg = (
+        f"{name} simulates the {ref['holdout']} worse than the default linear model {LINEAR_DEFAULT}: free-run "
+        f"R² {ref['model_r2']:.4f} against {ref['r2']:.4f}"
+    )
     if not auto:
         summary["warnings"].append(msg + "; identify with --set auto=true keeps the better one")
         return model, summary

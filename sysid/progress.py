@@ -31,8 +31,14 @@ def enabled() -> bool:
         return False
 
 
-def progress(iterable: Iterable | None = None, *, total: int | None = None, desc: str | None = None,
-             show: bool = True, **kwargs: Any):
+def progress(
+    iterable: Iterable | None = None,
+    *,
+    total: int | None = None,
+    desc: str | None = None,
+    show: bool = True,
+    **kwargs: Any,
+):
     """A tqdm bar over ``iterable`` (or a manual one with ``total``), disabled unless :func:`enabled` and ``show``.
 
     The bar writes to stderr and disappears when done (``leave=False``) unless told otherwise.

@@ -102,8 +102,9 @@ class NeuralNARXStepper(_WindowStepper):
         if self.k < self.L:
             self.k += 1
             return 0.0
-        yw, _ = free_run_mlp(m.weights_, m.sizes_, self.code, self.y, self.u, m.ny, m.nu, DIVERGENCE_BOUND,
-                             m.nk, m.linear)
+        yw, _ = free_run_mlp(
+            m.weights_, m.sizes_, self.code, self.y, self.u, m.ny, m.nu, DIVERGENCE_BOUND, m.nk, m.linear
+        )
         vn = float(yw[-1, 0])
         self.y[-1, 0] = vn
         self.k += 1
@@ -128,8 +129,21 @@ class StateSpaceStepper:
         m = self.model
         A, B, E, C, D, F = m._unpack(m._pack())
         with np.errstate(all="ignore"):
-            y, _, _, self.x = ps.simulate(A, B, C, D, E, F, m.facE_, m.facF_, np.array([[u]]) / m.u_scale_, self.x,
-                                          m.bound_, False, final_state=True)
+            y, _, _, self.x = ps.simulate(
+                A,
+                B,
+                C,
+                D,
+                E,
+                F,
+                m.facE_,
+                m.facF_,
+                np.array([[u]]) / m.u_scale_,
+                self.x,
+                m.bound_,
+                False,
+                final_state=True,
+            )
         self.k += 1
         return 0.0 if self.k <= m.max_lag_ else float(y[0, 0] * m.y_scale_[0])
 
@@ -176,8 +190,10 @@ def make_stepper(model):
         raise ConfigError(f"{model.name}: no per-sample stepper (an FMU needs one); supported: {', '.join(STEPPABLE)}")
     n_in, n_out = int(getattr(model, "n_inputs_", 1)), int(getattr(model, "n_outputs_", 1))
     if n_out != 1 or (n_in != 1 and model.name not in MULTI_INPUT):
-        raise ConfigError(f"{model.name}: the stepper handles one output, and several inputs only for "
-                          f"{', '.join(MULTI_INPUT)}; the model has {n_in} / {n_out}")
+        raise ConfigError(
+            f"{model.name}: the stepper handles one output, and several inputs only for "
+            f"{', '.join(MULTI_INPUT)}; the model has {n_in} / {n_out}"
+        )
     if model.name.startswith("narx-mlp"):
         return NeuralNARXStepper(model)
     if model.name == "pnlss":

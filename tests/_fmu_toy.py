@@ -28,8 +28,9 @@ class ToyTwin(Twin):
     EFFECTS = {
         "offset": EffectSpec("offset", "toy", "constant offset", "residual mean != 0", {"value": "offset_um"}),
         "lag": EffectSpec("lag", "toy", "first-order lag", "phase lag", {"tau": "tau_s"}, default_on=True),
-        "measurement_noise": EffectSpec("measurement_noise", "toy", "sensor noise", "white residual",
-                                        {"rms": "noise_um"}, default_on=True),
+        "measurement_noise": EffectSpec(
+            "measurement_noise", "toy", "sensor noise", "white residual", {"rms": "noise_um"}, default_on=True
+        ),
     }
 
     def make_stepper(self, fs):
@@ -92,12 +93,15 @@ class EchoTwin(Twin):
     Params = EchoParams
     units = {"u": "V", "y": "V"}
     EFFECTS = {
-        "echo": EffectSpec("echo", "echo", "triple-transit echo", "repeat at 3 ToF", {"gain": "echo_gain"},
-                           default_on=True),
-        "measurement_noise": EffectSpec("measurement_noise", "echo", "receiver noise", "white",
-                                        {"rms": "noise_v"}, default_on=True),
-        "crosstalk": EffectSpec("crosstalk", "echo", "electrical path without delay", "lag-0 correlation",
-                                {"c": "crosstalk"}),
+        "echo": EffectSpec(
+            "echo", "echo", "triple-transit echo", "repeat at 3 ToF", {"gain": "echo_gain"}, default_on=True
+        ),
+        "measurement_noise": EffectSpec(
+            "measurement_noise", "echo", "receiver noise", "white", {"rms": "noise_v"}, default_on=True
+        ),
+        "crosstalk": EffectSpec(
+            "crosstalk", "echo", "electrical path without delay", "lag-0 correlation", {"c": "crosstalk"}
+        ),
     }
     default_fs = 100e6
 

@@ -31,8 +31,9 @@ def time_constant_samples(fs: float, freqs=FREQS_HZ, zetas=ZETAS) -> float:
     return max(fs / (z * 2 * np.pi * f) for f, z in zip(freqs, zetas))
 
 
-def modal_records(n: int = 8192, fs: float = 1000.0, noise: float = 0.01, band=(3.0, 300.0), seed: int = 0,
-                  levels=(0.2, 1.0), **kw) -> list[Record]:
+def modal_records(
+    n: int = 8192, fs: float = 1000.0, noise: float = 0.01, band=(3.0, 300.0), seed: int = 0, levels=(0.2, 1.0), **kw
+) -> list[Record]:
     """Estimation (low level) and validation (higher level) records of ``n`` samples: random-phase multisines in
     ``band`` (one period simulated before the kept one, so the transient is gone), output noise of ``noise`` × the
     output's standard deviation."""

@@ -26,8 +26,7 @@ def narmax_record(n=3000, seed=3, c1=0.8, sigma=0.05):
     e = sigma * rng.standard_normal(n)
     y = np.zeros(n)
     for k in range(2, n):
-        y[k] = (0.5 * y[k - 1] + u[k - 1] - 0.3 * u[k - 1] ** 2 + 0.1 * y[k - 1] * u[k - 1]
-                + c1 * e[k - 1] + e[k])
+        y[k] = 0.5 * y[k - 1] + u[k - 1] - 0.3 * u[k - 1] ** 2 + 0.1 * y[k - 1] * u[k - 1] + c1 * e[k - 1] + e[k]
     return Record(u, y, fs=1.0, source=f"narmax-seed{seed}")
 
 

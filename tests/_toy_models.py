@@ -34,7 +34,7 @@ class ToyARX(Identifier):
     def predict(self, record, horizon=1):
         y, u, n = record.y.astype(float), record.u, self.max_lag_
         out = y.copy()
-        a, b, c = self.theta_[: self.ny], self.theta_[self.ny: self.ny + self.nu], self.theta_[-1]
+        a, b, c = self.theta_[: self.ny], self.theta_[self.ny : self.ny + self.nu], self.theta_[-1]
         if horizon == 1:
             X, _ = self._regressors(y, u)
             out[n:] = X @ self.theta_

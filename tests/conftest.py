@@ -21,6 +21,7 @@ def _restore_sys_path():
     yield
     sys.path[:] = saved
 
+
 REPO = Path(__file__).resolve().parents[1]
 SHARED = REPO.parent / "shared"
 

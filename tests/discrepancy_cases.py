@@ -21,8 +21,11 @@ CANTILEVER = {
     "sensor_lowpass": ({"sensor_bandwidth_hz": (1500.0, 3500.0)}, "broadband", ["sensor_bandwidth_hz"]),
     "sensor_quantization": ({"quant_um": (0.02, 0.05)}, "multisine", ["quant_um"]),
     "input_delay": ({"input_delay_s": (1e-4, 6e-4)}, "multisine", ["input_delay_s"]),
-    "thermal_drift": ({"thermal_drift_um": (1.0, 3.0), "thermal_tau_s": (1.0, 3.0)}, "steps",
-                      ["thermal_drift_um", "thermal_tau_s"]),
+    "thermal_drift": (
+        {"thermal_drift_um": (1.0, 3.0), "thermal_tau_s": (1.0, 3.0)},
+        "steps",
+        ["thermal_drift_um", "thermal_tau_s"],
+    ),
     "saturation": ({"sat_voltage_v": (70.0, 120.0)}, "multisine", ["sat_voltage_v"]),
     "rate_dependent_hysteresis": ({"rate_ref_v_per_s": (2e4, 8e4)}, "multisine", ["rate_ref_v_per_s"]),
     "asymmetric_hysteresis": ({"asym_factor": (0.4, 1.2)}, "multisine", ["asym_factor"]),
@@ -72,8 +75,7 @@ def records(name: str, truth, kind: str, seed: int) -> tuple[Record, Record]:
             est = truth.generate("steps", fs=1000.0, hold_s=1.0, level_v=80.0)
             val = tv.generate("steps", fs=1000.0, hold_s=1.0, level_v=60.0)
         elif kind == "broadband":
-            est = truth.generate("thesis-multisine", duration_s=1.0, f_max_hz=4500.0, components=4500,
-                                 signal_seed=seed)
+            est = truth.generate("thesis-multisine", duration_s=1.0, f_max_hz=4500.0, components=4500, signal_seed=seed)
             val = tv.generate("thesis-sines", freqs_hz="200-1000-2500-4000", min_duration_s=0.1)
         else:
             est = truth.generate("thesis-multisine", duration_s=1.0, signal_seed=seed)
@@ -84,8 +86,14 @@ def records(name: str, truth, kind: str, seed: int) -> tuple[Record, Record]:
         # chirp at the multisine's 0.4 V peak so that amplitude-dependent effects are visible in validation
         ch = tv.generate("thesis-chirp-1ms", fs=5e6, duration=2e-3, warmup_s=0.0)
         u = ch.u * (0.4 / np.max(np.abs(ch.u)))
-        val = Record(u=u, y=tv.simulate(u, ch.fs), fs=ch.fs, units=ch.units, meta={**ch.meta, "scaled_to_v": 0.4},
-                     source=ch.source)
+        val = Record(
+            u=u,
+            y=tv.simulate(u, ch.fs),
+            fs=ch.fs,
+            units=ch.units,
+            meta={**ch.meta, "scaled_to_v": 0.4},
+            source=ch.source,
+        )
     return est, val
 
 
@@ -115,8 +123,14 @@ def check_case(out: dict, effect: str | None, params: dict, checked: list[str]) 
     found = bool(top) and (top["effect"] == effect or effect in top.get("group", []))
     errs = {}
     # a group names the leader's parameters; the hidden member's own fitted values are in its trial row
-    row = top.get("params", {}) if top.get("effect") == effect else next(
-        (c["params"] for r in out.get("rounds", [])[:1] for c in r.get("candidates", []) if c["effect"] == effect), {})
+    row = (
+        top.get("params", {})
+        if top.get("effect") == effect
+        else next(
+            (c["params"] for r in out.get("rounds", [])[:1] for c in r.get("candidates", []) if c["effect"] == effect),
+            {},
+        )
+    )
     for k in checked:
         got = row.get(k)
         want = params[k]
@@ -126,8 +140,16 @@ def check_case(out: dict, effect: str | None, params: dict, checked: list[str]) 
             errs[k] = abs(float(got) - float(want)) / abs(float(want)) if got is not None else float("nan")
     params_ok = all(math.isfinite(v) and v <= 0.10 for v in errs.values()) if found else False
     # quantisation adds error no prediction can follow: its evidence is the lattice, not a validation gain
-    gain_ok = ((out["gain"]["nrmse_ratio"] < 1.0 and bool(top.get("p_value", 1.0) < 0.01))
-               or top.get("family") == "quantization")
-    return {"ok": found and params_ok and gain_ok, "found": found, "params_ok": params_ok, "gain_ok": gain_ok,
-            "rel_err": errs, "top": top.get("effect"), "group": top.get("group"),
-            "nrmse_ratio": out["gain"]["nrmse_ratio"]}
+    gain_ok = (out["gain"]["nrmse_ratio"] < 1.0 and bool(top.get("p_value", 1.0) < 0.01)) or top.get(
+        "family"
+    ) == "quantization"
+    return {
+        "ok": found and params_ok and gain_ok,
+        "found": found,
+        "params_ok": params_ok,
+        "gain_ok": gain_ok,
+        "rel_err": errs,
+        "top": top.get("effect"),
+        "group": top.get("group"),
+        "nrmse_ratio": out["gain"]["nrmse_ratio"],
+    }

@@ -25,15 +25,19 @@ MISSIZED = {
 
 # pairs of hidden effects of the cantilever (start: the default twin without both) → data kind and drawn parameters
 PAIRS = {
-    ("creep", "thermal_drift"): ("steps", {"creep_per_decade": (0.015, 0.03), "thermal_drift_um": (1.5, 3.0),
-                                           "thermal_tau_s": (1.0, 3.0)}),
+    ("creep", "thermal_drift"): (
+        "steps",
+        {"creep_per_decade": (0.015, 0.03), "thermal_drift_um": (1.5, 3.0), "thermal_tau_s": (1.0, 3.0)},
+    ),
     ("saturation", "input_delay"): ("multisine", {"sat_voltage_v": (70.0, 110.0), "input_delay_s": (2e-4, 6e-4)}),
 }
 
 # pairs of the acoustic twin (ranges as for the single effects in discrepancy_cases.ACOUSTIC)
 ACOUSTIC_PAIRS = {
-    ("amplifier_compression", "wall_echo"): ("multisine", {"amp_sat_v": (60.0, 110.0), "wall_distance_m": (0.02, 0.05),
-                                                           "wall_coupling": (0.1, 0.3)}),
+    ("amplifier_compression", "wall_echo"): (
+        "multisine",
+        {"amp_sat_v": (60.0, 110.0), "wall_distance_m": (0.02, 0.05), "wall_coupling": (0.1, 0.3)},
+    ),
 }
 
 OUTSIDE = ("dead_zone", "backlash", "resonance")
@@ -159,5 +163,11 @@ def creep_stack_record(seed: int = 0, fs: float = 100.0, hold_s: float = 20.0, r
     u = np.concatenate([np.zeros(n0)] + [np.full(n1, v) for v in (1400.0, 1000.0, 1400.0, 1000.0)])
     truth = cls.from_options(seed=seed).with_params(amp_limit_v=1500.0, creep_per_decade=rate)
     y = truth.simulate(u, fs)
-    return Record(u=u, y=y, fs=fs, units={"u": "V", "y": "um"}, meta={"what": "simulated PZT-stack creep test"},
-                  source="creep_stack")
+    return Record(
+        u=u,
+        y=y,
+        fs=fs,
+        units={"u": "V", "y": "um"},
+        meta={"what": "simulated PZT-stack creep test"},
+        source="creep_stack",
+    )

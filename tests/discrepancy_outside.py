@@ -29,7 +29,7 @@ def _limiter(kind: str, peak: float, compression: float):
         a = brentq(lambda a: a * np.tanh(peak / a) - target, 1e-3 * peak, 1e3 * peak)
         return lambda u: a * np.tanh(u / a)
     if kind == "cubic":  # v − v³/(3 v0²), flat beyond its turning point v0 (compression ≤ 1/3 at v0)
-        v0 = brentq(lambda v0: peak - peak ** 3 / (3 * v0 * v0) - target, peak, 1e3 * peak)
+        v0 = brentq(lambda v0: peak - peak**3 / (3 * v0 * v0) - target, peak, 1e3 * peak)
         return lambda u: np.clip(u, -v0, v0) - np.clip(u, -v0, v0) ** 3 / (3 * v0 * v0)
     if kind == "clip":
         return lambda u: np.clip(u, -target, target)
@@ -69,7 +69,7 @@ def outside_case(kind: str, seed: int, level: float | None = None, start_effects
     for u in (ue, uv):
         y = bare_e.simulate(lim(u) if lim is not None else u, FS)
         if share:  # one coupling coefficient for both records: share × the estimation output's RMS
-            coupling = coupling or share * np.sqrt(np.mean(y ** 2)) / np.sqrt(np.mean(u ** 2))
+            coupling = coupling or share * np.sqrt(np.mean(y**2)) / np.sqrt(np.mean(u**2))
             y = y + coupling * u
         if kind in ("echo", "echo_lp"):
             n = np.arange(y.size)
@@ -77,13 +77,18 @@ def outside_case(kind: str, seed: int, level: float | None = None, start_effects
             if kind == "echo_lp":
                 copy = lfilter(*butter(1, float(truth["echo_cutoff_hz"]), fs=FS), copy)
             y = y + float(truth["echo_amplitude"]) * copy
-        y = y + 0.01 * np.sqrt(np.mean(y ** 2)) * rng.standard_normal(y.size)
+        y = y + 0.01 * np.sqrt(np.mean(y**2)) * rng.standard_normal(y.size)
         out.append(Record(u=u, y=y, fs=FS, meta={"injected": dict(truth)}))
     start = AcousticTwin.from_options(effects=start_effects, seed=0)
     return start, out[0], out[1], truth
 
 
 def expected_effect(kind: str) -> str | None:
-    return {"tanh": "amplifier_compression", "cubic": "amplifier_compression", "clip": "amplifier_compression",
-            "inphase": "crosstalk", "echo": "wall_echo",
-            "echo_lp": "wall_echo"}.get(kind)
+    return {
+        "tanh": "amplifier_compression",
+        "cubic": "amplifier_compression",
+        "clip": "amplifier_compression",
+        "inphase": "crosstalk",
+        "echo": "wall_echo",
+        "echo_lp": "wall_echo",
+    }.get(kind)

@@ -40,16 +40,22 @@ def drift_case(seed: int, val_hold_s: float = HOLD_S):
     clean = _clean_twin(seed)
     est = clean.generate("steps", fs=1000.0, hold_s=HOLD_S, level_v=80.0)
     val = clean.generate("steps", fs=1000.0, hold_s=val_hold_s, level_v=60.0)
-    truth = {"ramp": float(rng.uniform(0.3, 0.6)), "amp": float(rng.uniform(1.5, 3.0)),
-             "period": float(rng.uniform(20.0, 40.0)), "phase": float(rng.uniform(0.0, 2 * np.pi))}
+    truth = {
+        "ramp": float(rng.uniform(0.3, 0.6)),
+        "amp": float(rng.uniform(1.5, 3.0)),
+        "period": float(rng.uniform(20.0, 40.0)),
+        "phase": float(rng.uniform(0.0, 2 * np.pi)),
+    }
 
     def drift(n: int, fs: float) -> np.ndarray:
         t = np.arange(n) / fs
         w, ph = 2 * np.pi / truth["period"], truth["phase"]
         return truth["ramp"] * t + truth["amp"] * (np.sin(w * t + ph) - np.sin(ph))
 
-    recs = [_noisy(r, r.y + drift(len(r), r.fs), NOISE_SHARE * float(np.std(r.y)), 10 * seed + k, "drift")
-            for k, r in enumerate((est, val))]
+    recs = [
+        _noisy(r, r.y + drift(len(r), r.fs), NOISE_SHARE * float(np.std(r.y)), 10 * seed + k, "drift")
+        for k, r in enumerate((est, val))
+    ]
     noise_nrmse = NOISE_SHARE * float(np.std(val.y)) / float(np.std(recs[1].y))
     return CantileverTwin.from_options(seed=0), recs[0], recs[1], truth, noise_nrmse
 
@@ -72,8 +78,12 @@ def creep_case(seed: int):
     rng = np.random.default_rng(900 + seed)
     bare = _clean_twin(seed)
     bare = bare.with_effects(set(bare.effects) - {"creep"})
-    truth = {"g1": float(rng.uniform(0.04, 0.06)), "tau1": float(rng.uniform(0.05, 0.1)),
-             "g2": float(rng.uniform(0.03, 0.05)), "tau2": float(rng.uniform(3.0, 6.0))}
+    truth = {
+        "g1": float(rng.uniform(0.04, 0.06)),
+        "tau1": float(rng.uniform(0.05, 0.1)),
+        "g2": float(rng.uniform(0.03, 0.05)),
+        "tau2": float(rng.uniform(3.0, 6.0)),
+    }
     d = float(bare.params.gain_um_per_v)
     recs, sigma = [], 0.0
     for k, level in enumerate((80.0, 60.0)):

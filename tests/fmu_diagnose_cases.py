@@ -18,8 +18,11 @@ from discrepancy_cases import hidden_case
 ROOT = Path(__file__).resolve().parents[1]
 FMU = ROOT / "fmus" / "cantilever.fmu"
 #: the cases of the issue: the native twin's cause and the fields checked within 10 %
-CASES = {"input_delay": ["input_delay_s"], "sensor_lowpass": ["sensor_bandwidth_hz"],
-         "thermal_drift": ["thermal_drift_um", "thermal_tau_s"]}
+CASES = {
+    "input_delay": ["input_delay_s"],
+    "sensor_lowpass": ["sensor_bandwidth_hz"],
+    "thermal_drift": ["thermal_drift_um", "thermal_tau_s"],
+}
 #: core parameters calibrated with every trial (a subset of the native CALIBRATION_PARAMS: each costs FMU runs)
 CORE = ("gain_um_per_v", "f1_hz", "zeta1", "offset_um")
 
@@ -55,8 +58,9 @@ def kernel_class(sensor_off: bool):
     def core(u, fs, p, effects):
         return CantileverTwin(p, on, None).simulate(u, fs)
 
-    return external_twin_class("cantilever-kernel", core, CantileverTwin.Params, calibration_params=CORE,
-                               units=CantileverTwin.units)
+    return external_twin_class(
+        "cantilever-kernel", core, CantileverTwin.Params, calibration_params=CORE, units=CantileverTwin.units
+    )
 
 
 def same_cause(native_effect: str, cause: dict, twin) -> bool:

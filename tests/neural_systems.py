@@ -59,9 +59,19 @@ def _bw_kernel(u, fs, w0, zeta, d, A, beta, gamma, substeps):
     return y
 
 
-def bouc_wen_record(u: np.ndarray, fs: float = 1000.0, f0: float = 40.0, zeta: float = 0.1, d: float = 1.0,
-                    A: float = 1.0, beta: float = 0.6, gamma: float = 0.3, noise: float = 0.0, seed: int = 0,
-                    substeps: int = 8) -> Record:
+def bouc_wen_record(
+    u: np.ndarray,
+    fs: float = 1000.0,
+    f0: float = 40.0,
+    zeta: float = 0.1,
+    d: float = 1.0,
+    A: float = 1.0,
+    beta: float = 0.6,
+    gamma: float = 0.3,
+    noise: float = 0.0,
+    seed: int = 0,
+    substeps: int = 8,
+) -> Record:
     y = _bw_kernel(
         np.ascontiguousarray(u, dtype=float), float(fs), 2 * np.pi * f0, zeta, d, A, beta, gamma, int(substeps)
     )

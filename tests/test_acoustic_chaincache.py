@@ -68,14 +68,16 @@ def test_crosstalk_taps_closed_form():
     tw = AcousticTwin.from_options(effects="crosstalk", seed=0, set_=["crosstalk_capacitance_f=0", "output_gain=1.3"])
     f = np.linspace(0.2e6, 2.4e6, 301)
     g, tau = 0.04, 6e-9
-    dh = tw.with_params(crosstalk_resistive=g, crosstalk_derivative_s=tau).frequency_response(f) - \
-        tw.frequency_response(f)
+    dh = tw.with_params(crosstalk_resistive=g, crosstalk_derivative_s=tau).frequency_response(
+        f
+    ) - tw.frequency_response(f)
     want = (g + tau * 2j * np.pi * f) * amplifier_bandwidth(f, tw.params.amp_f_low_hz, tw.params.amp_f_high_hz) * 1.3
     np.testing.assert_allclose(dh, want, rtol=1e-9, atol=1e-12)
     # without the effect the taps do nothing
     off = AcousticTwin.from_options(effects="none", seed=0, set_=["crosstalk_resistive=0.2"])
-    np.testing.assert_array_equal(off.frequency_response(f), off.with_params(crosstalk_resistive=0.0)
-                                  .frequency_response(f))
+    np.testing.assert_array_equal(
+        off.frequency_response(f), off.with_params(crosstalk_resistive=0.0).frequency_response(f)
+    )
 
 
 def test_wall_echo_copy_is_a_delayed_copy_of_the_received_signal():
@@ -83,8 +85,9 @@ def test_wall_echo_copy_is_a_delayed_copy_of_the_received_signal():
     tw = AcousticTwin.from_options(effects="none", seed=0)
     f = np.linspace(0.3e6, 2.4e6, 211)
     w, a, fe = 0.028, 0.9 * 0.2, 2.0e6
-    echo = tw.with_params(wall_distance_m=w, wall_reflection=0.9, wall_coupling=0.2, wall_echo_path="copy",
-                          wall_echo_cutoff_hz=fe).with_effects({"wall_echo"})
+    echo = tw.with_params(
+        wall_distance_m=w, wall_reflection=0.9, wall_coupling=0.2, wall_echo_path="copy", wall_echo_cutoff_hz=fe
+    ).with_effects({"wall_echo"})
     L, c = tw.params.distance_m, tw.spectrum_metrics(points=16)["sound_speed_m_s"]
     dtau = (np.hypot(L, 2 * w) - L) / c
     h0 = tw.frequency_response(f)

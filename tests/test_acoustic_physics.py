@@ -141,8 +141,10 @@ def test_fabry_perot_series_equals_full_transfer_matrix_chain():
     g = p.plate_width_m * p.plate_height_m
     ep, st = SOLIDS["epoxy"], SOLIDS[p.steel]
     fl = fluid_state(p.fluid, p.temperature_c)
-    layers = [Layer(ep.density, ep.speed, p.epoxy_thickness_m, ep.alpha0_np_m, ep.alpha_power),
-              Layer(st.density, st.speed, p.steel_thickness_m, st.alpha0_np_m, st.alpha_power)]
+    layers = [
+        Layer(ep.density, ep.speed, p.epoxy_thickness_m, ep.alpha0_np_m, ep.alpha_power),
+        Layer(st.density, st.speed, p.steel_thickness_m, st.alpha0_np_m, st.alpha_power),
+    ]
 
     class _Fluid(Layer):
         def wavenumber(self, ff):
@@ -165,8 +167,9 @@ def test_fabry_perot_series_equals_full_transfer_matrix_chain():
     ok = loop**401 < 1e-9
     assert ok.sum() > 100
     p_sum = dataclasses.replace(p, reverb_orders=400)
-    np.testing.assert_allclose(frequency_response(f, p_sum, include_amplifier=False)[ok], h[ok], rtol=1e-6,
-                               atol=1e-7 * np.abs(h).max())
+    np.testing.assert_allclose(
+        frequency_response(f, p_sum, include_amplifier=False)[ok], h[ok], rtol=1e-6, atol=1e-7 * np.abs(h).max()
+    )
 
 
 def test_spreading_follows_the_aperture():
@@ -213,14 +216,14 @@ def test_compression_makes_odd_harmonics_only(model):
     assert h[1] / h[0] < 1e-12 and h[3] / h[0] < 1e-12  # no 2nd, 4th
     lin = _harmonics(amplifier_voltage(x, 50.0, None), fs, f0)
     assert h[0] < lin[0]  # gain compression
-    assert lin[0] == pytest.approx(2 * 10 ** 2.5 * 0.6 / 2, rel=1e-9)  # V_oc = 2 G_v x (one-sided amplitude/2)
+    assert lin[0] == pytest.approx(2 * 10**2.5 * 0.6 / 2, rel=1e-9)  # V_oc = 2 G_v x (one-sided amplitude/2)
 
 
 def test_even_term_makes_even_harmonics():
     fs, f0, n = 100e6, 1e6, 10000
     x = 0.2 * np.sin(2 * np.pi * f0 * np.arange(n) / fs)
     h = _harmonics(amplifier_voltage(x, 50.0, None, 105.0, 2.5, 0.05), fs, f0)
-    a = 10 ** 2.5 * 0.2
+    a = 10**2.5 * 0.2
     assert h[1] / h[0] == pytest.approx(0.05 * a / (2 * 105.0), rel=1e-6)  # HD2 = k2 a / (2 A_sat)
     assert h[2] / h[0] < 1e-12
 

@@ -102,7 +102,7 @@ def test_fft_convolution_equals_direct_convolution_and_no_wrap():
     h = tw.impulse_response(fs)
     np.testing.assert_allclose(tw.linear(v, fs), np.convolve(v, h)[:3000], atol=1e-10 * np.abs(h).max())
     # h decays before the end of its grid (no circular wrap of a summed arrival)
-    tail = h[-h.size // 10:]
+    tail = h[-h.size // 10 :]
     assert np.sqrt(np.mean(tail**2)) < 1e-3 * np.max(np.abs(h))
 
 
@@ -158,8 +158,18 @@ def test_time_of_flight_effects_share_an_ambiguity_group():
 
 
 def test_effect_catalog_complete():
-    need = {"wall_echo", "amplifier_compression", "amplifier_even_distortion", "crosstalk", "temperature_offset",
-            "distance_offset", "fluid_mismatch", "misalignment", "adc_quantization", "measurement_noise"}
+    need = {
+        "wall_echo",
+        "amplifier_compression",
+        "amplifier_even_distortion",
+        "crosstalk",
+        "temperature_offset",
+        "distance_offset",
+        "fluid_mismatch",
+        "misalignment",
+        "adc_quantization",
+        "measurement_noise",
+    }
     assert need <= set(AcousticTwin.EFFECTS)
     fields = set(AcousticTwin.Params.__dataclass_fields__)
     for e in AcousticTwin.EFFECTS.values():
@@ -192,7 +202,7 @@ def test_multisine_protocol_is_a_repeated_5000_point_piece():
     rec = AcousticTwin().generate("thesis-multisine", duration=1.2e-3, warmup_s=0.0)
     u = rec.u
     period = 50000  # 5000 points at 10 MS/s = 0.5 ms = 50 000 samples at 100 MHz
-    np.testing.assert_allclose(u[:period], u[period:2 * period], atol=1e-12)
+    np.testing.assert_allclose(u[:period], u[period : 2 * period], atol=1e-12)
     assert np.max(np.abs(u)) <= 0.4 + 1e-9
     spec = np.abs(np.fft.rfft(u[:period])) ** 2
     f = np.fft.rfftfreq(period, 1 / FS)
@@ -285,8 +295,22 @@ def test_calibrate_cli_on_a_vna_file(tmp_path, capsys):
 
     truth = AcousticTwin.from_options(set_=["steel_thickness_m=0.0061"])
     write_record(truth.generate("vna-sweep", f_start=0.85e6, f_stop=1.4e6, points=400), tmp_path / "vna.npz")
-    assert main(["calibrate", "acoustic", "--data", str(tmp_path / "vna.npz"), "--fit",
-                 "steel_thickness_m,output_gain", "--json", "-o", str(tmp_path / "p.json")]) == 0
+    assert (
+        main(
+            [
+                "calibrate",
+                "acoustic",
+                "--data",
+                str(tmp_path / "vna.npz"),
+                "--fit",
+                "steel_thickness_m,output_gain",
+                "--json",
+                "-o",
+                str(tmp_path / "p.json"),
+            ]
+        )
+        == 0
+    )
     out = json.loads(capsys.readouterr().out)
     assert out["parameters"]["steel_thickness_m"]["value"] == pytest.approx(0.0061, rel=1e-4)
     again = AcousticTwin.from_options(params_file=tmp_path / "p.json")
@@ -305,7 +329,8 @@ def test_fmu_interface_stages():
 def test_calibrate_time_of_flight_parameter_by_output_error():
     """A temperature offset only moves the phase: fitted on the time record (output error), not on |H|."""
     truth = AcousticTwin(effects=["measurement_noise", "temperature_offset"]).with_params(
-        temperature_offset_k=1.7, reverb_orders=1)
+        temperature_offset_k=1.7, reverb_orders=1
+    )
     rec = truth.generate("thesis-chirp-1ms", duration=0.5e-3, warmup_s=1e-3, fs=20e6)
     start = AcousticTwin(effects=["temperature_offset"]).with_params(reverb_orders=1, temperature_offset_k=0.0)
     res = start.calibrate(rec, names=["temperature_offset_k"])

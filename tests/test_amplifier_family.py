@@ -25,19 +25,20 @@ def _fit(x, y):
     lo_p, hi_p = _P["amp_smoothness"].bounds()
     best = None
     for p0 in (0.7, 1.3, 3.0, 10.0, 40.0):
-        r = least_squares(lambda th: _family(x, th[0], th[1]) - y, [np.max(np.abs(y)), p0],
-                          bounds=([1e-3, lo_p], [1e3, hi_p]))
+        r = least_squares(
+            lambda th: _family(x, th[0], th[1]) - y, [np.max(np.abs(y)), p0], bounds=([1e-3, lo_p], [1e3, hi_p])
+        )
         if best is None or r.cost < best.cost:
             best = r
-    return best.x, float(np.sqrt(np.mean(best.fun ** 2)) / np.sqrt(np.mean(y ** 2)))
+    return best.x, float(np.sqrt(np.mean(best.fun**2)) / np.sqrt(np.mean(y**2)))
 
 
 CURVES = {
     # name: (curve of the drive v in [−1, 1], the compression at the peak it gives)
     "tanh (18 % at the peak)": lambda v: 0.62 * np.tanh(v / 0.62),
     "tanh (strong)": lambda v: 0.25 * np.tanh(v / 0.25),
-    "cubic up to its turning point": lambda v: v - v ** 3 / 3.0,
-    "cubic (20 % at the peak)": lambda v: v - v ** 3 / (3 * 1.3 ** 2),
+    "cubic up to its turning point": lambda v: v - v**3 / 3.0,
+    "cubic (20 % at the peak)": lambda v: v - v**3 / (3 * 1.3**2),
     "hard clip at 0.7": lambda v: np.clip(v, -0.7, 0.7),
     "hard clip at 0.4": lambda v: np.clip(v, -0.4, 0.4),
 }
@@ -74,5 +75,6 @@ def test_cubic_variant_asymmetry_matches_its_formula():
     a, sat = 0.2, 105.0
     v0 = np.where(v > 0, 1.5 * sat * (1 + a), 1.5 * sat * (1 - a))
     vc = np.clip(v, -v0, v0)
-    np.testing.assert_allclose(0.5 * amplifier_voltage(v, 0.0, "cubic", sat, 2.5, 0.0, a), vc - vc ** 3 / (3 * v0 ** 2),
-                               rtol=1e-12)
+    np.testing.assert_allclose(
+        0.5 * amplifier_voltage(v, 0.0, "cubic", sat, 2.5, 0.0, a), vc - vc**3 / (3 * v0**2), rtol=1e-12
+    )

@@ -137,7 +137,8 @@ def test_score_runs_record_the_blas_kernel_set():
 
     env = environment()
     assert env["blas_kernels"].startswith("openblas:") and env["OPENBLAS_CORETYPE"] == os.environ.get(
-        "OPENBLAS_CORETYPE", "")
+        "OPENBLAS_CORETYPE", ""
+    )
 
 
 def test_check_warns_in_one_line_when_versions_differ_from_the_floors():

@@ -31,10 +31,18 @@ def steady_loop(tw, f, periods=3, fs=FS, amp=100.0):
 
 
 # ---------------------------------------------------------------------------- quasi-static loops
-@pytest.mark.parametrize("alpha,beta,gamma,h_pct,y_max", [
-    (0.15, 0.006, 0.002, 4.6, 26.9), (0.20, 0.010, 0.003, 8.0, 26.6), (0.25, 0.008, 0.002, 9.8, 25.3),
-    (0.30, 0.015, 0.004, 12.6, 25.7), (0.40, 0.015, 0.005, 17.4, 24.8), (0.45, 0.012, 0.003, 22.3, 23.0),
-    (0.50, 0.012, 0.002, 26.7, 21.9)])
+@pytest.mark.parametrize(
+    "alpha,beta,gamma,h_pct,y_max",
+    [
+        (0.15, 0.006, 0.002, 4.6, 26.9),
+        (0.20, 0.010, 0.003, 8.0, 26.6),
+        (0.25, 0.008, 0.002, 9.8, 25.3),
+        (0.30, 0.015, 0.004, 12.6, 25.7),
+        (0.40, 0.015, 0.005, 17.4, 24.8),
+        (0.45, 0.012, 0.003, 22.3, 23.0),
+        (0.50, 0.012, 0.002, 26.7, 21.9),
+    ],
+)
 def test_bouc_wen_loop_matches_notes_table(alpha, beta, gamma, h_pct, y_max):
     """Notes A.3 table [C]: d = 0.3 µm/V, ±100 V 1 Hz sine from rest: H% of the steady loop and the largest
     output (reached on the first, virgin quarter period). All rows agree to 0.1 % H and 0.1 µm except the
@@ -165,8 +173,9 @@ def test_linear_part_static_gain_one_and_matches_closed_form_response():
     f = np.array([10.0, 500.0, 3000.0])
     s = 2j * np.pi * f
     w1, w2, ws = 2 * np.pi * p.f1_hz, 2 * np.pi * p.f1_hz * p.mode_ratio, 2 * np.pi * p.sensor_bandwidth_hz
-    D = (1 - p.mode2_share) * w1**2 / (s**2 + 2 * p.zeta1 * w1 * s + w1**2) + \
-        p.mode2_share * w2**2 / (s**2 + 2 * p.zeta2 * w2 * s + w2**2)
+    D = (1 - p.mode2_share) * w1**2 / (s**2 + 2 * p.zeta1 * w1 * s + w1**2) + p.mode2_share * w2**2 / (
+        s**2 + 2 * p.zeta2 * w2 * s + w2**2
+    )
     S = ws**2 / (s**2 + math.sqrt(2) * ws * s + ws**2)
     np.testing.assert_allclose(tw.frequency_response(f), D * S, rtol=1e-10)
 
@@ -252,11 +261,14 @@ def test_substep_convergence_second_order():
     assert np.max(np.abs(tw.simulate(u, FS) - ref)) < 1e-4 * np.ptp(ref)  # default 20 µs: < 0.01 % of span
 
 
-@pytest.mark.parametrize("bad,fs,msg", [
-    (np.array([0.0, np.nan]), FS, "non-finite"),
-    (np.zeros((3, 2)), FS, "1-D"),
-    (np.zeros(3), 0.0, "positive"),
-])
+@pytest.mark.parametrize(
+    "bad,fs,msg",
+    [
+        (np.array([0.0, np.nan]), FS, "non-finite"),
+        (np.zeros((3, 2)), FS, "1-D"),
+        (np.zeros(3), 0.0, "positive"),
+    ],
+)
 def test_bad_input_refused(bad, fs, msg):
     with pytest.raises(DataError, match=msg):
         CantileverTwin().simulate(bad, fs)
@@ -265,5 +277,6 @@ def test_bad_input_refused(bad, fs, msg):
 def test_amplifier_clips_at_limit():
     u = np.r_[np.linspace(0, 300, 3000)]
     y_clip = core().simulate(u, FS)
-    assert y_clip[-1] == pytest.approx(core().simulate(np.r_[np.linspace(0, 100, 1000), np.full(2000, 100.0)], FS)[-1],
-                                       rel=1e-9)
+    assert y_clip[-1] == pytest.approx(
+        core().simulate(np.r_[np.linspace(0, 100, 1000), np.full(2000, 100.0)], FS)[-1], rel=1e-9
+    )

@@ -27,15 +27,30 @@ def pair(effect, u, fs=FS, base=(), **params):
 
 
 def test_catalog_complete_with_params_signatures_and_default():
-    required = {"creep", "rate_dependent_hysteresis", "asymmetric_hysteresis", "second_mode", "sensor_lowpass",
-                "sensor_quantization", "input_delay", "thermal_drift", "saturation", "measurement_noise"}
+    required = {
+        "creep",
+        "rate_dependent_hysteresis",
+        "asymmetric_hysteresis",
+        "second_mode",
+        "sensor_lowpass",
+        "sensor_quantization",
+        "input_delay",
+        "thermal_drift",
+        "saturation",
+        "measurement_noise",
+    }
     assert required <= set(CantileverTwin.EFFECTS)
     fields = set(CantileverTwin.Params.__dataclass_fields__)
     for e in CantileverTwin.EFFECTS.values():
         assert e.signature and "\n" not in e.signature
         assert e.params and set(e.params.values()) <= fields, e.id
-    assert CantileverTwin.default_effects() == {"creep", "second_mode", "sensor_lowpass", "sensor_quantization",
-                                                "measurement_noise"}
+    assert CantileverTwin.default_effects() == {
+        "creep",
+        "second_mode",
+        "sensor_lowpass",
+        "sensor_quantization",
+        "measurement_noise",
+    }
     rows = [r for r in collect("effects") if r["twin"] == "cantilever"]
     assert {r["id"] for r in rows if r["default_on"]} == CantileverTwin.default_effects()
     assert "Default configuration" in CantileverTwin.__doc__
@@ -150,6 +165,7 @@ def test_asymmetric_hysteresis_only_for_negative_voltage(model):
     assert np.max(np.abs(d[sym < -20])) > 0.02 * np.ptp(off)
     # the negative half of the loop widens more than the positive half
     sl = last_period(sym.size, 2000.0, 2.0)
+
     def gap(u_, y_, at):
         up = np.gradient(u_) > 0
         iu, idn = np.argsort(u_[up]), np.argsort(u_[~up])

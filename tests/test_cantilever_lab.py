@@ -62,8 +62,23 @@ def test_calibration_short_segment_cli_round_trip(tmp_path, capsys):
     write_record(est, tmp_path / "est.npz")
     write_record(val, tmp_path / "val.npz")
     params = tmp_path / "p.json"
-    code = main(["calibrate", "cantilever", "--data", str(tmp_path / "est.npz"), "--val", str(tmp_path / "val.npz"),
-                 "--set", "amp_limit_v=150", "--effects", "creep", "--json", "-o", str(params)])
+    code = main(
+        [
+            "calibrate",
+            "cantilever",
+            "--data",
+            str(tmp_path / "est.npz"),
+            "--val",
+            str(tmp_path / "val.npz"),
+            "--set",
+            "amp_limit_v=150",
+            "--effects",
+            "creep",
+            "--json",
+            "-o",
+            str(params),
+        ]
+    )
     assert code == 0
     out = json.loads(capsys.readouterr().out)
     assert set(out["parameters"]) == set(CantileverTwin.CALIBRATION_PARAMS)
@@ -72,15 +87,43 @@ def test_calibration_short_segment_cli_round_trip(tmp_path, capsys):
     assert out["scores"]["estimation"]["r2"] >= 0.995
     assert out["scores"]["validation"]["r2"] >= 0.995
     assert out["scores"]["validation"]["continuation"] is True
-    assert out["scores"]["validation"]["nrmse"] == pytest.approx(np.sqrt(1 - out["scores"]["validation"]["r2"]),
-                                                                 rel=1e-6)
+    assert out["scores"]["validation"]["nrmse"] == pytest.approx(
+        np.sqrt(1 - out["scores"]["validation"]["r2"]), rel=1e-6
+    )
     # the parameter file loads into generate and simulate
     tw = CantileverTwin.from_options(params_file=params)
     assert tw.params.gain_um_per_v == pytest.approx(out["parameters"]["gain_um_per_v"]["value"])
-    assert main(["generate", "cantilever", "steps", "--params", str(params), "--option", "hold_s=1",
-                 "-o", str(tmp_path / "g.npz")]) == 0
-    assert main(["simulate", "cantilever", "--input", str(tmp_path / "val.npz"), "--params", str(params),
-                 "-o", str(tmp_path / "s.npz")]) == 0
+    assert (
+        main(
+            [
+                "generate",
+                "cantilever",
+                "steps",
+                "--params",
+                str(params),
+                "--option",
+                "hold_s=1",
+                "-o",
+                str(tmp_path / "g.npz"),
+            ]
+        )
+        == 0
+    )
+    assert (
+        main(
+            [
+                "simulate",
+                "cantilever",
+                "--input",
+                str(tmp_path / "val.npz"),
+                "--params",
+                str(params),
+                "-o",
+                str(tmp_path / "s.npz"),
+            ]
+        )
+        == 0
+    )
     assert len(read_record(tmp_path / "s.npz")) == len(val)
 
 
@@ -115,7 +158,7 @@ def test_thesis_sines_protocol_segments():
     for s in segs:
         n = s["stop"] - s["start"]
         assert n == round(s["periods"] * rec.fs / s["freq_hz"])
-        seg = rec.u[s["start"]: s["stop"]]
+        seg = rec.u[s["start"] : s["stop"]]
         k = np.argmax(np.abs(np.fft.rfft(seg)))
         assert k / n * rec.fs == pytest.approx(s["freq_hz"], rel=1e-6)
     assert segs[0]["stop"] == 100_000  # 0.1 Hz: one whole period (10 s)
@@ -125,8 +168,11 @@ def test_steps_protocol_and_cli_generate(tmp_path):
     rec = CantileverTwin().generate("steps", hold_s=2)
     assert rec.fs == 1000.0 and len(rec) == 10_000
     assert set(np.unique(rec.u)) == {-80.0, 0.0, 80.0}
-    proc = subprocess.run([sys.executable, "-m", "benchmarks.cli", "generate", "cantilever", "nosuch", "-o",
-                           str(tmp_path / "x.npz")], capture_output=True, text=True)
+    proc = subprocess.run(
+        [sys.executable, "-m", "benchmarks.cli", "generate", "cantilever", "nosuch", "-o", str(tmp_path / "x.npz")],
+        capture_output=True,
+        text=True,
+    )
     assert proc.returncode == 2 and "thesis-multisine" in proc.stderr and "Traceback" not in proc.stderr
     with pytest.raises(Exception, match="unknown option"):
         CantileverTwin().generate("steps", bogus=1)
@@ -145,8 +191,16 @@ def test_local_multisine_fallback_lines_exact():
 def test_calibration_recovers_known_parameters_from_noisy_twin_data():
     """1 s of the thesis multisine from a twin with changed parameters (noise + quantiser on): the fit from the
     default start recovers every parameter to 1 % (f₁ lies outside the 500 Hz band and is still found)."""
-    truth = CantileverTwin(seed=5).with_params(gain_um_per_v=0.35, bw_alpha=0.25, bw_beta=0.012, bw_gamma=0.005,
-                                               f1_hz=650.0, zeta1=0.03, creep_per_decade=0.02, offset_um=0.5)
+    truth = CantileverTwin(seed=5).with_params(
+        gain_um_per_v=0.35,
+        bw_alpha=0.25,
+        bw_beta=0.012,
+        bw_gamma=0.005,
+        f1_hz=650.0,
+        zeta1=0.03,
+        creep_per_decade=0.02,
+        offset_um=0.5,
+    )
     rec = truth.generate("thesis-multisine", duration_s=1.0)
     res = CantileverTwin().calibrate(rec)
     assert res.scores["estimation"]["r2"] > 0.9999

@@ -41,8 +41,10 @@ def test_fmu_gives_the_python_models_samples(tanks_fmu):
     cls = fmu_twin_class(tanks_fmu, effects={"overflow": ["x1_max", "overflow_share"]})
     # the effect's parameters leave the default calibration set
     assert cls.CALIBRATION_PARAMS == ("k1", "k2", "k3", "k4", "x1_0", "x2_0")
-    assert "overflow" in cls.EFFECTS and cls.EFFECTS["overflow"].params == {"x1_max": "x1_max",
-                                                                           "overflow_share": "overflow_share"}
+    assert "overflow" in cls.EFFECTS and cls.EFFECTS["overflow"].params == {
+        "x1_max": "x1_max",
+        "overflow_share": "overflow_share",
+    }
     u = _pump()
     plain = cls().simulate(u, 0.25)
     np.testing.assert_allclose(plain, ct.simulate(u, 0.25, ct.Params()), rtol=0, atol=1e-12)
@@ -64,11 +66,40 @@ def test_fmu_effect_refusals(tanks_fmu, tmp_path):
     data = tmp_path / "est.npz"
     write_record(Record(u=_pump(), y=np.linspace(4, 6, 600), fs=0.25), data)
     for bad in ("overflow", "overflow=", "=x1_max"):
-        r = subprocess.run([sys.executable, "-m", "benchmarks.cli", "diagnose", "--fmu", str(tanks_fmu), "--data",
-                            str(data), "--fmu-effect", bad], capture_output=True, text=True, cwd=ROOT)
+        r = subprocess.run(
+            [
+                sys.executable,
+                "-m",
+                "benchmarks.cli",
+                "diagnose",
+                "--fmu",
+                str(tanks_fmu),
+                "--data",
+                str(data),
+                "--fmu-effect",
+                bad,
+            ],
+            capture_output=True,
+            text=True,
+            cwd=ROOT,
+        )
         assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1 and "--fmu-effect" in r.stderr, r.stderr
-    r = subprocess.run([sys.executable, "-m", "benchmarks.cli", "diagnose", "cantilever", "--data", str(data),
-                        "--fmu-effect", "overflow=x1_max"], capture_output=True, text=True, cwd=ROOT)
+    r = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "benchmarks.cli",
+            "diagnose",
+            "cantilever",
+            "--data",
+            str(data),
+            "--fmu-effect",
+            "overflow=x1_max",
+        ],
+        capture_output=True,
+        text=True,
+        cwd=ROOT,
+    )
     assert r.returncode == 2 and "go with --fmu" in r.stderr
 
 

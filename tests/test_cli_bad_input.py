@@ -56,8 +56,9 @@ def d(tmp_path_factory) -> Path:
     (p / "garbage.mat").write_bytes(b"not a MAT file at all " * 10)
     t, u, y = t.tolist(), u.tolist(), y.tolist()  # Python floats: repr is the shortest round-tripping text
     (p / "good.csv").write_text("t,u,y\n" + "".join(f"{a!r},{b!r},{c!r}\n" for a, b, c in zip(t, u, y)))
-    (p / "nan.csv").write_text("t,u,y\n" + "".join(f"{a!r},{'' if i == 5 else repr(b)},{c!r}\n"
-                                                   for i, (a, b, c) in enumerate(zip(t, u, y))))
+    (p / "nan.csv").write_text(
+        "t,u,y\n" + "".join(f"{a!r},{'' if i == 5 else repr(b)},{c!r}\n" for i, (a, b, c) in enumerate(zip(t, u, y)))
+    )
     (p / "header.csv").write_text("t,u,y\n")
     (p / "nonnum.csv").write_text("t,u,y\n0,1,2\n0.001,abc,3\n0.002,1,2\n")
     (p / "dup.csv").write_text("t,u,u\n0,1,2\n0.001,1,3\n0.002,1,2\n")
@@ -109,10 +110,14 @@ CASES = [
     (["preprocess", "{d}/nofs.npz", "--remove-offset"] + OUT, "nofs.npz: no sampling rate in the file"),
     (["preprocess", "{d}/fs0.npz", "--remove-offset"] + OUT, "fs0.npz: sampling rate fs must be positive"),
     (PRE + ["--fs", "-1", "--remove-offset"] + OUT, "sampling rate fs must be positive and finite, got -1"),
-    (["preprocess", "{d}/good.csv", "--fs", "500", "--remove-offset"] + OUT,
-     "contradicts the file's own sampling rate"),
-    (["preprocess", "{d}/good.npz", "--fs", "999", "--remove-offset"] + OUT,
-     "contradicts the file's own sampling rate"),
+    (
+        ["preprocess", "{d}/good.csv", "--fs", "500", "--remove-offset"] + OUT,
+        "contradicts the file's own sampling rate",
+    ),
+    (
+        ["preprocess", "{d}/good.npz", "--fs", "999", "--remove-offset"] + OUT,
+        "contradicts the file's own sampling rate",
+    ),
     (["preprocess", "{d}/good.csv", "--u-col", "volts", "--remove-offset"] + OUT, "missing column 'volts' for u"),
     (["preprocess", "{d}/good.mat", "--y-var", "out", "--remove-offset"] + OUT, "missing variable 'out' for y"),
     (["preprocess", "{d}/trunc.npz", "--remove-offset"] + OUT, "trunc.npz: not a readable .npz file"),
@@ -210,15 +215,27 @@ def test_bad_input_one_line_exit_2(argv, expected, d, capsys):
     assert expected in lines[0], lines[0]
 
 
-@pytest.mark.parametrize("argv,expected", [
-    (["preprocess", "{d}/trunc.npz", "--remove-offset", "-o", "{d}/out/t.npz"], "trunc.npz: not a readable .npz file"),
-    (["identify", "narx-poly", "--est", "{d}/good.npz", "--set", "degree=50"], "candidate terms"),
-    (["calibrate", "acoustic", "--data", "{d}/cant_mimo.npz"], "data must be SISO"),
-])
+@pytest.mark.parametrize(
+    "argv,expected",
+    [
+        (
+            ["preprocess", "{d}/trunc.npz", "--remove-offset", "-o", "{d}/out/t.npz"],
+            "trunc.npz: not a readable .npz file",
+        ),
+        (["identify", "narx-poly", "--est", "{d}/good.npz", "--set", "degree=50"], "candidate terms"),
+        (["calibrate", "acoustic", "--data", "{d}/cant_mimo.npz"], "data must be SISO"),
+    ],
+)
 def test_subprocess_stderr_is_one_line(argv, expected, d):
     root = Path(__file__).resolve().parents[1]
-    proc = subprocess.run([sys.executable, "-m", "benchmarks.cli", *_argv(argv, d)], capture_output=True, text=True,
-                          cwd=root, env={**os.environ, "PYTHONPATH": str(root)}, timeout=120)
+    proc = subprocess.run(
+        [sys.executable, "-m", "benchmarks.cli", *_argv(argv, d)],
+        capture_output=True,
+        text=True,
+        cwd=root,
+        env={**os.environ, "PYTHONPATH": str(root)},
+        timeout=120,
+    )
     assert proc.returncode == 2, proc.stderr
     lines = proc.stderr.strip().splitlines()
     assert len(lines) == 1 and expected in lines[0], proc.stderr  # no traceback, no warning lines
@@ -248,12 +265,15 @@ def test_real_valued_complex_array_is_accepted(tmp_path):
     assert read_record(tmp_path / "c.npz").u.dtype == np.float64
 
 
-@pytest.mark.parametrize("payload,expected", [
-    ([1, 2], "not a piezotwin model file"),
-    ({"format": "piezotwin-model/1", "identifier": "arx"}, "lacks params, state"),
-    ({"format": "piezotwin-model/1", "identifier": "arx", "params": {"bogus": 1}, "state": {}}, "bogus"),
-    ({"format": "piezotwin-model/1", "identifier": "nosuch", "params": {}, "state": {}}, "unknown identifier"),
-])
+@pytest.mark.parametrize(
+    "payload,expected",
+    [
+        ([1, 2], "not a piezotwin model file"),
+        ({"format": "piezotwin-model/1", "identifier": "arx"}, "lacks params, state"),
+        ({"format": "piezotwin-model/1", "identifier": "arx", "params": {"bogus": 1}, "state": {}}, "bogus"),
+        ({"format": "piezotwin-model/1", "identifier": "nosuch", "params": {}, "state": {}}, "unknown identifier"),
+    ],
+)
 def test_model_file_that_is_not_a_model(payload, expected, tmp_path):
     from sysid.base import load_model
     from sysid.errors import InputError

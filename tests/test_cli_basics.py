@@ -18,10 +18,13 @@ def test_help_lists_commands(capsys):
         assert cmd in out
 
 
-@pytest.mark.parametrize("args", [
-    ["simulate", "nosuchtwin", "--input", "x.npz", "-o", "y.npz"],
-    ["list", "nonsense"],
-])
+@pytest.mark.parametrize(
+    "args",
+    [
+        ["simulate", "nosuchtwin", "--input", "x.npz", "-o", "y.npz"],
+        ["list", "nonsense"],
+    ],
+)
 def test_errors_exit_2_one_line(args, capsys):
     try:
         code = main(args)
@@ -35,8 +38,21 @@ def test_errors_exit_2_one_line(args, capsys):
 def test_bad_file_one_line_subprocess(tmp_path):
     bad = tmp_path / "bad.npz"
     np.savez(bad, u=np.array([1.0, np.nan]), fs=1.0)
-    proc = subprocess.run([sys.executable, "-m", "benchmarks.cli", "simulate", "cantilever", "--input", str(bad),
-                           "-o", str(tmp_path / "o.npz")], capture_output=True, text=True)
+    proc = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "benchmarks.cli",
+            "simulate",
+            "cantilever",
+            "--input",
+            str(bad),
+            "-o",
+            str(tmp_path / "o.npz"),
+        ],
+        capture_output=True,
+        text=True,
+    )
     assert proc.returncode == 2
     lines = proc.stderr.strip().splitlines()
     assert len(lines) == 1 and "Traceback" not in proc.stderr

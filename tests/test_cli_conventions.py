@@ -44,12 +44,15 @@ def chatty(monkeypatch):
     warnings.resetwarnings()  # the default filter would show a warning only once per location
 
 
-@pytest.mark.parametrize("argv, err", [
-    (["list", "twins"], ["working on it", "warning: UserWarning: dependency says something"]),
-    (["-q", "list", "twins"], []),
-    (["list", "twins", "--quiet"], []),
-    (["list", "twins", "-v"], ["debug detail", "working on it", "warning: UserWarning: dependency says something"]),
-])
+@pytest.mark.parametrize(
+    "argv, err",
+    [
+        (["list", "twins"], ["working on it", "warning: UserWarning: dependency says something"]),
+        (["-q", "list", "twins"], []),
+        (["list", "twins", "--quiet"], []),
+        (["list", "twins", "-v"], ["debug detail", "working on it", "warning: UserWarning: dependency says something"]),
+    ],
+)
 def test_quiet_prints_only_results_and_verbose_adds_debug(chatty, capsys, argv, err):
     root_handlers = list(logging.getLogger().handlers)
     with warnings.catch_warnings():
@@ -97,8 +100,11 @@ def _prints_outside_main(path: Path) -> list[int]:
         in_main |= isinstance(node, ast.If) and "__main__" in ast.unparse(node.test)
         if in_main:
             allowed |= {n.lineno for n in ast.walk(node) if hasattr(n, "lineno")}
-    return [n.lineno for n in ast.walk(tree) if isinstance(n, ast.Call) and isinstance(n.func, ast.Name)
-            and n.func.id == "print" and n.lineno not in allowed]
+    return [
+        n.lineno
+        for n in ast.walk(tree)
+        if isinstance(n, ast.Call) and isinstance(n.func, ast.Name) and n.func.id == "print" and n.lineno not in allowed
+    ]
 
 
 def test_library_logs_never_prints():

@@ -26,14 +26,37 @@ def run_cli(args, capsys):
 
 def test_signal_multisine_writes_input_only_record(tmp_path, capsys):
     f = tmp_path / "ms.npz"
-    code, out, err = run_cli(["signal", "multisine", "--fs", 1000, "--duration", 2, "--band", "10:100",
-                              "--components", 20, "--amplitude", 3, "--phase", "schroeder", "--grid", "odd",
-                              "--periods", 2, "-o", f], capsys)
+    code, out, err = run_cli(
+        [
+            "signal",
+            "multisine",
+            "--fs",
+            1000,
+            "--duration",
+            2,
+            "--band",
+            "10:100",
+            "--components",
+            20,
+            "--amplitude",
+            3,
+            "--phase",
+            "schroeder",
+            "--grid",
+            "odd",
+            "--periods",
+            2,
+            "-o",
+            f,
+        ],
+        capsys,
+    )
     assert code == 0, err
     rec = read_record(f)
     assert rec.y is None and rec.fs == 1000 and len(rec) == 2000
-    ref = S.multisine(1000, duration=2, band=(10, 100), components=20, amplitude=3, phase="schroeder", grid="odd",
-                      periods=2)
+    ref = S.multisine(
+        1000, duration=2, band=(10, 100), components=20, amplitude=3, phase="schroeder", grid="odd", periods=2
+    )
     np.testing.assert_array_equal(rec.u, ref)
     sig = rec.meta["signal"]
     assert sig["kind"] == "multisine" and sig["info"]["n_components"] == 20
@@ -44,10 +67,14 @@ def test_signal_multisine_writes_input_only_record(tmp_path, capsys):
 
 def test_signal_rms_and_other_kinds(tmp_path, capsys):
     f = tmp_path / "s.npz"
-    assert run_cli(["signal", "sine", "--fs", 1000, "--duration", 1, "--freq", 50, "--amplitude", 2, "--rms", "-o", f],
-                   capsys)[0] == 0
+    assert (
+        run_cli(
+            ["signal", "sine", "--fs", 1000, "--duration", 1, "--freq", 50, "--amplitude", 2, "--rms", "-o", f], capsys
+        )[0]
+        == 0
+    )
     u = read_record(f).u
-    assert np.sqrt(np.mean(u ** 2)) == pytest.approx(2.0) and np.max(np.abs(u)) == pytest.approx(2 * np.sqrt(2))
+    assert np.sqrt(np.mean(u**2)) == pytest.approx(2.0) and np.max(np.abs(u)) == pytest.approx(2 * np.sqrt(2))
     assert (
         run_cli(["signal", "chirp", "--fs", 1e5, "--duration", 0.01, "--band", "1000:20000", "-o", f], capsys)[0] == 0
     )
@@ -63,19 +90,22 @@ def test_signal_rms_and_other_kinds(tmp_path, capsys):
     np.testing.assert_array_equal(read_record(f).u, S.thesis_cantilever_multisine(seed=0))
 
 
-@pytest.mark.parametrize("args", [
-    ["signal", "multisine", "--fs", 1000, "--duration", 1, "--band", "300:200"],          # fmin >= fmax
-    ["signal", "multisine", "--fs", 1000, "--duration", 1, "--band", "10:600"],           # above Nyquist
-    ["signal", "multisine", "--fs", 1000, "--duration", 1, "--band", "10:20", "--components", 50],  # does not fit
-    ["signal", "multisine", "--fs", 1000, "--duration", 1, "--band", "ten:20"],           # not a number
-    ["signal", "multisine", "--fs", -5, "--duration", 1],                                 # fs <= 0
-    ["signal", "multisine", "--fs", 1000],                                                # no duration
-    ["signal", "multisine", "--fs", 1000, "--duration", 1, "--phase", "zigzag"],          # argparse choice
-    ["signal", "chirp", "--fs", 1000, "--duration", 1],                                   # no band
-    ["signal", "sine", "--fs", 1000, "--duration", 1, "--freq", 800],                     # above Nyquist
-    ["signal", "thesis-chirp", "--duration", 0.5],
-    ["signal", "multisine", "--fs", 1000, "--duration", 1, "--amplitude", 0],
-])
+@pytest.mark.parametrize(
+    "args",
+    [
+        ["signal", "multisine", "--fs", 1000, "--duration", 1, "--band", "300:200"],  # fmin >= fmax
+        ["signal", "multisine", "--fs", 1000, "--duration", 1, "--band", "10:600"],  # above Nyquist
+        ["signal", "multisine", "--fs", 1000, "--duration", 1, "--band", "10:20", "--components", 50],  # does not fit
+        ["signal", "multisine", "--fs", 1000, "--duration", 1, "--band", "ten:20"],  # not a number
+        ["signal", "multisine", "--fs", -5, "--duration", 1],  # fs <= 0
+        ["signal", "multisine", "--fs", 1000],  # no duration
+        ["signal", "multisine", "--fs", 1000, "--duration", 1, "--phase", "zigzag"],  # argparse choice
+        ["signal", "chirp", "--fs", 1000, "--duration", 1],  # no band
+        ["signal", "sine", "--fs", 1000, "--duration", 1, "--freq", 800],  # above Nyquist
+        ["signal", "thesis-chirp", "--duration", 0.5],
+        ["signal", "multisine", "--fs", 1000, "--duration", 1, "--amplitude", 0],
+    ],
+)
 def test_signal_errors_exit_2_one_line(args, tmp_path, capsys):
     code, out, err = run_cli(args + ["-o", tmp_path / "x.npz"], capsys)
     assert code == 2
@@ -112,8 +142,22 @@ def test_preprocess_steps_in_command_line_order(noisy_record, tmp_path, capsys):
 def test_preprocess_outliers_detrend_bandpass_suggest_json(noisy_record, tmp_path, capsys):
     path, u, y = noisy_record
     o = tmp_path / "o.npz"
-    code, out, err = run_cli(["preprocess", path, "--outliers", "20:8", "--detrend", "--bandpass", "2:100",
-                              "--suggest-rate", "--json", "-o", o], capsys)
+    code, out, err = run_cli(
+        [
+            "preprocess",
+            path,
+            "--outliers",
+            "20:8",
+            "--detrend",
+            "--bandpass",
+            "2:100",
+            "--suggest-rate",
+            "--json",
+            "-o",
+            o,
+        ],
+        capsys,
+    )
     assert code == 0, err
     rep = json.loads(out)
     assert [s["step"] for s in rep["steps"]] == ["hampel", "detrend", "bandpass", "suggest_rate"]
@@ -134,10 +178,20 @@ def test_preprocess_fill_missing_is_recorded_first(tmp_path, capsys):
     assert log[0]["changes"]["filled_indices"] == {"y": [5]}
 
 
-@pytest.mark.parametrize("steps", [
-    ["--decimate", "0"], ["--decimate", "1.5"], ["--bandpass", "100:50"], ["--bandpass", "10:4000"],
-    ["--moving-average", "-3"], ["--resample", "abc"], ["--outliers", "a:b"], ["--segment", "10:10"], [],
-])
+@pytest.mark.parametrize(
+    "steps",
+    [
+        ["--decimate", "0"],
+        ["--decimate", "1.5"],
+        ["--bandpass", "100:50"],
+        ["--bandpass", "10:4000"],
+        ["--moving-average", "-3"],
+        ["--resample", "abc"],
+        ["--outliers", "a:b"],
+        ["--segment", "10:10"],
+        [],
+    ],
+)
 def test_preprocess_errors_exit_2_one_line(steps, noisy_record, tmp_path, capsys):
     path, _, _ = noisy_record
     code, out, err = run_cli(["preprocess", path, *steps, "-o", tmp_path / "x.npz"], capsys)
@@ -146,6 +200,18 @@ def test_preprocess_errors_exit_2_one_line(steps, noisy_record, tmp_path, capsys
 
 
 def test_preprocess_subprocess_one_line(tmp_path):
-    proc = subprocess.run([sys.executable, "-m", "benchmarks.cli", "preprocess", str(tmp_path / "missing.npz"),
-                           "--detrend", "-o", str(tmp_path / "o.npz")], capture_output=True, text=True)
+    proc = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "benchmarks.cli",
+            "preprocess",
+            str(tmp_path / "missing.npz"),
+            "--detrend",
+            "-o",
+            str(tmp_path / "o.npz"),
+        ],
+        capture_output=True,
+        text=True,
+    )
     assert proc.returncode == 2 and len(proc.stderr.strip().splitlines()) == 1 and "not found" in proc.stderr

@@ -12,8 +12,20 @@ import pytest
 REPO = Path(__file__).resolve().parents[1]
 
 # Packages whose import costs 0.2-1.5 s each on the 2-core machine (python -X importtime).
-HEAVY = ("scipy.signal", "scipy.stats", "scipy.optimize", "torch", "dask", "distributed", "matplotlib", "numba",
-         "optuna", "fmpy", "h5py", "jinja2")
+HEAVY = (
+    "scipy.signal",
+    "scipy.stats",
+    "scipy.optimize",
+    "torch",
+    "dask",
+    "distributed",
+    "matplotlib",
+    "numba",
+    "optuna",
+    "fmpy",
+    "h5py",
+    "jinja2",
+)
 
 _PROBE = """
 import json, sys
@@ -30,8 +42,14 @@ with open(sys.argv[1], "w") as f:
 def _loaded(tmp_path: Path, args: list[str]) -> tuple[int, set[str]]:
     """Run ``piezotwin ARGS`` in a fresh interpreter; its exit code and the modules it had imported."""
     report = tmp_path / "modules.json"
-    proc = subprocess.run([sys.executable, "-c", _PROBE, str(report), *args], cwd=REPO, capture_output=True, text=True,
-                          timeout=120, check=False)
+    proc = subprocess.run(
+        [sys.executable, "-c", _PROBE, str(report), *args],
+        cwd=REPO,
+        capture_output=True,
+        text=True,
+        timeout=120,
+        check=False,
+    )
     assert report.exists(), proc.stderr
     data = json.loads(report.read_text())
     return data["rc"], set(data["modules"])

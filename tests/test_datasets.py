@@ -29,8 +29,13 @@ def _shared_data() -> Path | None:
 # Published descriptions (SOURCE.txt of each dataset and the benchmark papers):
 # name -> (fs [Hz], estimation samples, {test: samples}, init window, units)
 PUBLISHED = {
-    "silverbox": (610.35, 105712 - 40650, {"multisine": 127400 - 105712, "arrow": 40575 - 100,
-                                           "arrow-no-extrapolation": 32000}, 50, ("V", "V")),
+    "silverbox": (
+        610.35,
+        105712 - 40650,
+        {"multisine": 127400 - 105712, "arrow": 40575 - 100, "arrow-no-extrapolation": 32000},
+        50,
+        ("V", "V"),
+    ),
     "wiener-hammerstein": (51200.0, 100000, {"test": 88000, "test-official": 184000 - 105200}, 50, ("V", "V")),
     "cascaded-tanks": (0.25, 1024, {"test": 1024, "test-official": 1024}, 4, ("V", "V")),
     "bouc-wen": (750.0, 40960, {"multisine": 8192, "sinesweep": 153000}, 0, ("N", "m")),
@@ -198,10 +203,28 @@ def test_twin_dataset_generated_cached_and_noise_switch(tmp_path, monkeypatch):
 
     monkeypatch.setenv("PIEZOTWIN_CACHE", str(tmp_path))
     monkeypatch.setattr(twins.registry, "get_twin", lambda name: _FakeTwin)
-    spec = twin_ds.TwinDatasetSpec(name="fake-ab", twin="fake", est=("a", {}), tests={"b": ("b", {})}, noise=True,
-                                   seed=3, fs=100.0, init_samples=0, description="fake")
-    clean = twin_ds.TwinDatasetSpec(name="fake-ab-clean", twin="fake", est=("a", {}), tests={"b": ("b", {})},
-                                    noise=False, seed=3, fs=100.0, init_samples=0, description="fake")
+    spec = twin_ds.TwinDatasetSpec(
+        name="fake-ab",
+        twin="fake",
+        est=("a", {}),
+        tests={"b": ("b", {})},
+        noise=True,
+        seed=3,
+        fs=100.0,
+        init_samples=0,
+        description="fake",
+    )
+    clean = twin_ds.TwinDatasetSpec(
+        name="fake-ab-clean",
+        twin="fake",
+        est=("a", {}),
+        tests={"b": ("b", {})},
+        noise=False,
+        seed=3,
+        fs=100.0,
+        init_samples=0,
+        description="fake",
+    )
     monkeypatch.setitem(twin_ds.TWIN_DATASETS, "fake-ab", spec)
     monkeypatch.setitem(twin_ds.TWIN_DATASETS, "fake-ab-clean", clean)
     _FakeTwin.calls = 0

@@ -31,7 +31,7 @@ def _check_defaults_reach_fir(est, val):
     models = {name: get_identifier(name)().fit(est) for name in ("arx", "oe", "n4sid")}
     r2 = dict(zip(["fir", *models], _r2_same_samples([fir, *models.values()], val)))
     # the FIR is a sound reference: it explains most of the validation output, and nothing beats the noise floor
-    assert 0.9 < r2["fir"] < 1.0 - 0.5 * 0.01 ** 2
+    assert 0.9 < r2["fir"] < 1.0 - 0.5 * 0.01**2
     for name, m in models.items():
         assert r2[name] >= r2["fir"] - 0.01, (name, m.chosen_orders_, r2)
         s = identification_summary(m, est, val)

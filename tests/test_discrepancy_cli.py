@@ -19,7 +19,8 @@ def delayed_files(tmp_path_factory):
     truth = cantilever.CantileverTwin.from_options(effect=["input_delay:delay=4e-4"], seed=1)
     est = truth.generate("thesis-multisine", duration_s=0.5, signal_seed=2)
     val = cantilever.CantileverTwin(truth.params, truth.effects, 2).generate(
-        "thesis-sines", freqs_hz="10-100", min_duration_s=0.1)
+        "thesis-sines", freqs_hz="10-100", min_duration_s=0.1
+    )
     write_record(est, d / "est.npz")
     write_record(val, d / "val.npz")
     return d
@@ -31,8 +32,20 @@ def _cli(*args):
 
 def test_cli_json_and_report(delayed_files):
     d = delayed_files
-    r = _cli("cantilever", "--data", str(d / "est.npz"), "--val", str(d / "val.npz"), "--candidates",
-             "input_delay,saturation", "--max-rounds", "1", "--json", "--report", str(d / "rep"))
+    r = _cli(
+        "cantilever",
+        "--data",
+        str(d / "est.npz"),
+        "--val",
+        str(d / "val.npz"),
+        "--candidates",
+        "input_delay,saturation",
+        "--max-rounds",
+        "1",
+        "--json",
+        "--report",
+        str(d / "rep"),
+    )
     assert r.returncode == 0, r.stderr
     out = json.loads(r.stdout)
     assert out["verdict"] == "discrepancy"

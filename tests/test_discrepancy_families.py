@@ -28,8 +28,15 @@ def _closed_form(t, D, tau, r, a, b, P):
 
 
 def test_cantilever_drift_family_is_its_closed_form():
-    p = dict(thermal_drift_um=1.3, thermal_tau_s=0.4, drift_rate_um_per_s=0.25, drift_sin_um=-0.7,
-             drift_cos_um=0.45, drift_period_s=21.7, offset_um=0.2)
+    p = dict(
+        thermal_drift_um=1.3,
+        thermal_tau_s=0.4,
+        drift_rate_um_per_s=0.25,
+        drift_sin_um=-0.7,
+        drift_cos_um=0.45,
+        drift_period_s=21.7,
+        offset_um=0.2,
+    )
     tw = CantileverTwin.from_options(effects="thermal_drift,slow_drift", seed=0).with_params(**p)
     fs, n = 200.0, 1000
     y = tw.simulate(np.zeros(n), fs)
@@ -47,7 +54,8 @@ def test_cantilever_drift_family_is_its_closed_form():
 def test_thermal_drift_alone_is_the_one_exponential():
     """slow_drift's parameters act only with slow_drift on: thermal_drift alone simulates as before."""
     tw = CantileverTwin.from_options(effects="thermal_drift", seed=0).with_params(
-        thermal_drift_um=2.0, thermal_tau_s=0.5, drift_rate_um_per_s=1.0, drift_sin_um=3.0)
+        thermal_drift_um=2.0, thermal_tau_s=0.5, drift_rate_um_per_s=1.0, drift_sin_um=3.0
+    )
     y = tw.simulate(np.zeros(300), 100.0)
     t = np.arange(300) / 100.0
     assert np.max(np.abs(y - (float(tw.params.offset_um) + 2.0 * (1 - np.exp(-t / 0.5))))) < 1e-12
@@ -62,8 +70,12 @@ def test_generic_drift_family_is_its_closed_form():
     P = ge.generic_params_class()
     p = P(drift_offset=1.0, drift_tau_s=2.0, drift_rate=0.1, drift_sin=0.3, drift_cos=-0.2, drift_period_s=4.0)
     y0 = np.zeros(n)
-    assert np.allclose(ge.apply_output(y0, y0, fs, {"slow_drift"}, p), _closed_form(t, 0.0, 2.0, 0.1, 0.3, -0.2, 4.0),
-                       rtol=0, atol=1e-13)
+    assert np.allclose(
+        ge.apply_output(y0, y0, fs, {"slow_drift"}, p),
+        _closed_form(t, 0.0, 2.0, 0.1, 0.3, -0.2, 4.0),
+        rtol=0,
+        atol=1e-13,
+    )
     assert np.allclose(ge.apply_output(y0, y0, fs, {"offset_drift", "slow_drift"}, p), got, rtol=0, atol=1e-13)
     assert ge.GENERIC_EFFECTS["offset_drift"].group == ge.GENERIC_EFFECTS["slow_drift"].group == "drift"
 
@@ -97,8 +109,7 @@ def test_a_drift_between_separate_records_is_judged_over_the_time_both_cover():
     assert judged_span("slow_drift", twin, est, half_rate) == 500
     e2, v2 = Record(u=val.u, y=val.y, fs=1000.0, source="c").split(index=600)  # v2 continues e2 (1000 samples)
     assert judged_span("slow_drift", twin, e2, v2) == len(v2) == 1000
-    assert {k for k, s in ge.GENERIC_EFFECTS.items() if s.time_varying} == {"offset_drift", "slow_drift",
-                                                                            "gain_drift"}
+    assert {k for k, s in ge.GENERIC_EFFECTS.items() if s.time_varying} == {"offset_drift", "slow_drift", "gain_drift"}
     assert {k for k, s in CantileverTwin.EFFECTS.items() if s.time_varying} == {"thermal_drift", "slow_drift"}
 
 
@@ -163,8 +174,9 @@ def test_calibration_solves_the_linear_drift_terms_and_finds_the_period():
 def test_cached_base_output_is_the_kernels_reading_bit_for_bit():
     """simulate() reuses the reading before the drift for a configuration that differs only in drift parameters
     (twins.cantilever.cache); with noise and quantiser on it equals the stepper (the kernel alone) bit for bit."""
-    tw = CantileverTwin.from_options(effect=["thermal_drift", "slow_drift:rate=0.3,sine=0.5,cosine=-0.2,period=20.7"],
-                                     seed=3)
+    tw = CantileverTwin.from_options(
+        effect=["thermal_drift", "slow_drift:rate=0.3,sine=0.5,cosine=-0.2,period=20.7"], seed=3
+    )
     u = np.random.default_rng(1).uniform(-80, 80, 3000)
     for t in (tw, tw.with_params(drift_rate_um_per_s=0.1, thermal_drift_um=-0.4)):  # the second one hits the cache
         st = t.make_stepper(1000.0)

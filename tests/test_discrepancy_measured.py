@@ -148,8 +148,9 @@ def test_creep_stack_record_loads_and_is_diagnosed_from_the_cli(tmp_path, capsys
 
     rec = C.creep_stack_record(0)
     path = tmp_path / "stack.csv"
-    np.savetxt(path, np.column_stack([np.arange(len(rec)) / rec.fs, rec.u, rec.y]), delimiter=",",
-               header="t,u,y", comments="")
+    np.savetxt(
+        path, np.column_stack([np.arange(len(rec)) / rec.fs, rec.u, rec.y]), delimiter=",", header="t,u,y", comments=""
+    )
     assert main(["diagnose", "cantilever", "--data", str(path), "--max-rounds", "1", "--json"]) == 0
     out = json.loads(capsys.readouterr().out)
     assert any("amp_limit_v" in n for n in out["ranges"])
@@ -176,9 +177,15 @@ def _recheck(stage_twin, truth):
     opts = DiagnoseOptions()
     prior = CantileverTwin().noise_free()
     loop = SimpleNamespace(inp=SimpleNamespace(est=est, val=val), cal=SimpleNamespace(prior=prior), opts=opts)
-    causes = [{"effect": "input_delay", "round": 1, "params": {}},
-              {"effect": "sensor_lowpass", "kind": "mis-sized default", "round": 2,
-               "params": {"sensor_bandwidth_hz": 15000.0}}]
+    causes = [
+        {"effect": "input_delay", "round": 1, "params": {}},
+        {
+            "effect": "sensor_lowpass",
+            "kind": "mis-sized default",
+            "round": 2,
+            "params": {"sensor_bandwidth_hz": 15000.0},
+        },
+    ]
     ext = rounds.Extension(make_stage(stage_twin, est, val, opts), causes, [])
     rounds._recheck_defaults(loop, ext)
     return ext

@@ -27,9 +27,16 @@ def _run(kind: str, seed: int) -> dict:
     want = expected_effect(kind)
     named = {c["effect"] for c in out["causes"]}
     ok = (top.get("effect") == want and named <= {want, "unexplained"}) if want else out["verdict"] == "none"
-    return {"seed": seed, "ok": bool(ok), "top": top.get("effect"), "causes": sorted(named),
-            "params": top.get("params"), "truth": truth, "nrmse_before": out["baseline"]["nrmse_val"],
-            "nrmse_after": out["extended"]["nrmse_val"]}
+    return {
+        "seed": seed,
+        "ok": bool(ok),
+        "top": top.get("effect"),
+        "causes": sorted(named),
+        "params": top.get("params"),
+        "truth": truth,
+        "nrmse_before": out["baseline"]["nrmse_val"],
+        "nrmse_after": out["extended"]["nrmse_val"],
+    }
 
 
 @pytest.mark.slow
@@ -81,8 +88,13 @@ def test_least_squares_from_a_switch_at_its_bound_keeps_the_echo():
     extra = c * float(truth["echo_delay_s"])  # √(L² + 4w²) − L = c·τ
     w = float(np.sqrt((L + extra) ** 2 - L * L) / 2)
     assert abs(wall_path_length(L, w) - L - extra) < 1e-9
-    x0 = {"wall_distance_m": w, "wall_reflection": 1.0, "wall_coupling": float(truth["echo_amplitude"]),
-          "wall_echo_cutoff_hz": 0.0, "wall_echo_path": "copy"}
+    x0 = {
+        "wall_distance_m": w,
+        "wall_reflection": 1.0,
+        "wall_coupling": float(truth["echo_amplitude"]),
+        "wall_echo_cutoff_hz": 0.0,
+        "wall_echo_path": "copy",
+    }
     tr = run_trial(base, "wall_echo", est, val, [], {}, DiagnoseOptions(), refit_core=False, start=x0)
     assert tr.nrmse_val < 0.015, (tr.nrmse_val, tr.effect_params)
     assert tr.effect_params["wall_echo_cutoff_hz"] == 0.0 or tr.effect_params["wall_echo_cutoff_hz"] > 1e5

@@ -36,14 +36,21 @@ class ToyTwin(Twin):
     name = "toy"
     Params = ToyParams
     EFFECTS = {
-        "echo": EffectSpec("echo", "toy", "output echo", "residual peak at the echo delay",
-                           {"delay": "echo_delay_s", "amp": "echo_amp"}),
+        "echo": EffectSpec(
+            "echo",
+            "toy",
+            "output echo",
+            "residual peak at the echo delay",
+            {"delay": "echo_delay_s", "amp": "echo_amp"},
+        ),
         "input_delay": EffectSpec("input_delay", "toy", "input delay", "shift", {"delay": "delay_s"}),
-        "compression": EffectSpec("compression", "toy", "soft clip of the input", "odd-order distortion",
-                                  {"u_sat": "u_sat"}),
+        "compression": EffectSpec(
+            "compression", "toy", "soft clip of the input", "odd-order distortion", {"u_sat": "u_sat"}
+        ),
         "drift": EffectSpec("drift", "toy", "linear drift", "trend", {"rate": "drift_per_s"}),
-        "measurement_noise": EffectSpec("measurement_noise", "toy", "noise", "white", {"sd": "noise_sd"},
-                                        default_on=True),
+        "measurement_noise": EffectSpec(
+            "measurement_noise", "toy", "noise", "white", {"sd": "noise_sd"}, default_on=True
+        ),
     }
     CALIBRATION_PARAMS = ("gain", "tau_s")
 
@@ -118,8 +125,9 @@ def test_toy_noise_only_none():
 
 
 def test_toy_two_effects_both_found():
-    truth = ToyTwin(ToyParams(echo_delay_s=9e-3, echo_amp=-0.25, u_sat=1.0),
-                    {"echo", "compression", "measurement_noise"}, seed=7)
+    truth = ToyTwin(
+        ToyParams(echo_delay_s=9e-3, echo_amp=-0.25, u_sat=1.0), {"echo", "compression", "measurement_noise"}, seed=7
+    )
     est, val = _records(truth, 7)
     out = diagnose(ToyTwin(ToyParams(), {"measurement_noise"}), est, val, max_rounds=3)
     found = {c["effect"] for c in out["causes"]}
@@ -158,8 +166,8 @@ def test_features_odd_even_lines():
     t = np.arange(P)
     u = np.sum(np.cos(2 * np.pi * np.outer(t, k) / P + rng.uniform(0, 2 * np.pi, k.size)), axis=1)
     u = np.tile(u / u.std(), 4)
-    odd = ft.odd_even_lines(u, u + 0.05 * u ** 3, 0.05 * u ** 3, 1000.0, period=P)
-    even = ft.odd_even_lines(u, u + 0.05 * u ** 2, 0.05 * u ** 2, 1000.0, period=P)
+    odd = ft.odd_even_lines(u, u + 0.05 * u**3, 0.05 * u**3, 1000.0, period=P)
+    even = ft.odd_even_lines(u, u + 0.05 * u**2, 0.05 * u**2, 1000.0, period=P)
     assert odd["odd_grid"] and odd["odd_minus_even_db"] > 40
     assert even["odd_minus_even_db"] < -40
 
@@ -213,8 +221,8 @@ def test_features_product_bands_and_early_input():
     u = sps.sosfilt(sos, rng.standard_normal(n))
     u /= np.std(u)
     noise = 0.01 * rng.standard_normal(n)
-    even = ft.product_bands(0.1 * (u ** 2 - 1) + noise, u, fs)
-    odd = ft.product_bands(0.1 * u ** 3 + noise, u, fs)
+    even = ft.product_bands(0.1 * (u**2 - 1) + noise, u, fs)
+    odd = ft.product_bands(0.1 * u**3 + noise, u, fs)
     white = ft.product_bands(noise, u, fs)
     assert even["valid"] and even["even_db"] > even["in_db"] + 10
     assert odd["in_db"] > odd["even_db"] + 10

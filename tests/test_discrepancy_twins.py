@@ -63,7 +63,7 @@ def test_cantilever_creep_injected_as_sum_of_lags():
 
     def data(u, seed):
         y = type(core)(core.params, core.effects, seed).simulate(u, fs)
-        return y + sum(g * d * _lag(u, tau_min * 10 ** i, fs) for i in range(4))
+        return y + sum(g * d * _lag(u, tau_min * 10**i, fs) for i in range(4))
 
     u_est = _staircase(rng, fs, 6.0, 80.0)
     u_val = _staircase(rng, fs, 4.0, 80.0)
@@ -234,8 +234,11 @@ def test_noise_only_rate(twin_name):
 @pytest.mark.slow
 def test_two_hidden_effects_both_found():
     start = CantileverTwin.from_options(seed=0)
-    truth = CantileverTwin(start.with_params(input_delay_s=3.3e-4, sat_voltage_v=90.0).params,
-                           set(start.effects) | {"input_delay", "saturation"}, 3)
+    truth = CantileverTwin(
+        start.with_params(input_delay_s=3.3e-4, sat_voltage_v=90.0).params,
+        set(start.effects) | {"input_delay", "saturation"},
+        3,
+    )
     from discrepancy_cases import records
 
     est, val = records("cantilever", truth, "multisine", 3)

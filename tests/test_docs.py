@@ -15,8 +15,7 @@ PAGES = [ROOT / "README.md", *sorted(DOCS.rglob("*.md"))]
 
 # Pages linked from the README or docs/index.md before they are written (work in progress on another branch);
 # allowed to be missing only while listed here. Empty in a release.
-PENDING = {
-           }
+PENDING = {}
 
 _LINK = re.compile(r"!?\[[^\]]*\]\(([^)\s]+)(?:\s+\"[^\"]*\")?\)")
 _FENCE = re.compile(r"^```[^\n]*\n.*?^```", re.S | re.M)
@@ -61,7 +60,7 @@ def _python_blocks(page: Path) -> list[tuple[int, str]]:
             while lines[j].strip() != "```":
                 j += 1
             if not skip:
-                out.append((i + 1, "\n".join(lines[i + 1:j])))
+                out.append((i + 1, "\n".join(lines[i + 1 : j])))
             i = j
         i += 1
     return out

@@ -25,9 +25,9 @@ C = np.array([0.05, 0.3, 0.05])  # lags TAU-1 .. TAU+1; max |C/F| ≈ 0.57 < 1: 
 def true_polys(echo: bool = True):
     b = np.r_[np.zeros(NK), B]
     a = np.zeros(TAU + 2)
-    a[:F.size] = F
+    a[: F.size] = F
     if echo:
-        a[TAU - 1:TAU + 2] -= C
+        a[TAU - 1 : TAU + 2] -= C
     return b, a
 
 

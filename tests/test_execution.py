@@ -48,8 +48,9 @@ def test_score_on_two_workers_equals_the_serial_run(cluster):
     from benchmarks import scoring
 
     assert cluster.kind == "dask" and cluster.n_workers == 2
-    args = dict(identifiers=["arx", "narx-poly"], datasets=["cascaded-tanks", "piezo-tue"], quick=True,
-                sysidentpy=False)
+    args = dict(
+        identifiers=["arx", "narx-poly"], datasets=["cascaded-tanks", "piezo-tue"], quick=True, sysidentpy=False
+    )
     serial = scoring._clean(scoring.score(**args).to_dict())
     parallel = scoring._clean(scoring.score(**args, executor=cluster).to_dict())
     assert len(serial["rows"]) == 4
@@ -82,9 +83,11 @@ def test_generate_grid_hdf5_reads_back_bit_identical_with_h5py_alone(cluster, tm
     seeds = parse_seeds("0-1")
     out = generate_collection(twin, "steps", grid, seeds, tmp_path / "c.h5", executor=cluster, progress=False)
     assert out["records"] == 4
-    expected = [(p, s, generate_point(twin, p, s, "steps", {})) for p in ({"gain_um_per_v": 0.2, "bw_alpha": 0.3},
-                                                                          {"gain_um_per_v": 0.3, "bw_alpha": 0.3})
-                for s in (0, 1)]
+    expected = [
+        (p, s, generate_point(twin, p, s, "steps", {}))
+        for p in ({"gain_um_per_v": 0.2, "bw_alpha": 0.3}, {"gain_um_per_v": 0.3, "bw_alpha": 0.3})
+        for s in (0, 1)
+    ]
     with h5py.File(tmp_path / "c.h5", "r") as f:
         assert f.attrs["format"] == "piezotwin-collection/1" and f.attrs["twin"] == "cantilever"
         names = sorted(f["records"])
@@ -118,8 +121,23 @@ def test_generate_grid_cli_writes_the_collection(tmp_path):
     from benchmarks.cli import main
 
     out = tmp_path / "grid.h5"
-    assert main(["generate", "cantilever", "steps", "--grid", "gain_um_per_v=0.2-0.25", "--seeds", "3",
-                 "-o", str(out), "--no-progress"]) == 0
+    assert (
+        main(
+            [
+                "generate",
+                "cantilever",
+                "steps",
+                "--grid",
+                "gain_um_per_v=0.2-0.25",
+                "--seeds",
+                "3",
+                "-o",
+                str(out),
+                "--no-progress",
+            ]
+        )
+        == 0
+    )
     import h5py
 
     with h5py.File(out, "r") as f:
@@ -176,8 +194,20 @@ def test_search_repeats_on_the_cluster_equal_the_serial_sweep(cluster, tmp_path,
     u = rng.standard_normal(600)
     y = np.convolve(u, [0.0, 0.6, -0.2, 0.1], mode="full")[:600] + 0.01 * rng.standard_normal(600)
     write_record(Record(u=u, y=y, fs=10.0), tmp_path / "e.npz")
-    argv = ["search", "arx", "--est", str(tmp_path / "e.npz"), "--val", str(tmp_path / "e.npz"), "--grid",
-            "ny=1,2;nu=1,3", "--repeats", "2", "--no-progress", "--json"]
+    argv = [
+        "search",
+        "arx",
+        "--est",
+        str(tmp_path / "e.npz"),
+        "--val",
+        str(tmp_path / "e.npz"),
+        "--grid",
+        "ny=1,2;nu=1,3",
+        "--repeats",
+        "2",
+        "--no-progress",
+        "--json",
+    ]
     monkeypatch.delenv("PIEZOTWIN_SCHEDULER", raising=False)
     assert main([*argv, "--storage", str(tmp_path / "serial.db")]) == 0
     serial = json.loads(capsys.readouterr().out)
@@ -186,8 +216,9 @@ def test_search_repeats_on_the_cluster_equal_the_serial_sweep(cluster, tmp_path,
     dask = json.loads(capsys.readouterr().out)
     assert dask["n_runs"] == serial["n_runs"] == 8
     drop = ("storage",)
-    assert strip_timing({k: v for k, v in dask.items() if k not in drop}) == \
-        strip_timing({k: v for k, v in serial.items() if k not in drop})
+    assert strip_timing({k: v for k, v in dask.items() if k not in drop}) == strip_timing(
+        {k: v for k, v in serial.items() if k not in drop}
+    )
     from sysid.search import collect, storage_url
 
     runs = collect(storage_url(str(tmp_path / "dask.db"), "piezotwin-search"), "piezotwin-search")

@@ -138,8 +138,11 @@ def test_docs_model_hidden_delay_found(tmp_path):
     assert out["verdict"] == "discrepancy", out["causes"]
     top = out["causes"][0]
     assert top["effect"] == "input_delay" or "input_delay" in top.get("group", [])
-    row = top["params"] if top["effect"] == "input_delay" else next(
-        c["params"] for c in out["rounds"][0]["candidates"] if c["effect"] == "input_delay")
+    row = (
+        top["params"]
+        if top["effect"] == "input_delay"
+        else next(c["params"] for c in out["rounds"][0]["candidates"] if c["effect"] == "input_delay")
+    )
     assert row["input_delay_s"] == pytest.approx(7.4e-3, rel=0.1)
     assert out["gain"]["nrmse_ratio"] < 0.5
 
@@ -158,7 +161,8 @@ def test_step_model_equals_simulate_model(tmp_path):
         "import math\nfrom dataclasses import dataclass\nfrom twins.base import pfield\n"
         "@dataclass\nclass Params:\n    tau_s: float = pfield(0.05, 's', 1e-3, 1.0, 'time constant')\n"
         "def initial_state(p, u0):\n    return 0.0\n"
-        "def step(x, u, dt, p):\n    a = math.exp(-dt / p.tau_s)\n    return a * x + (1 - a) * u, x\n")
+        "def step(x, u, dt, p):\n    a = math.exp(-dt / p.tau_s)\n    return a * x + (1 - a) * u, x\n"
+    )
     cls = load_model(str(path))
     u = _input(2, 500)
     y = cls().simulate(u, FS)
@@ -182,7 +186,8 @@ def test_bad_models_refused(tmp_path):
     fails.write_text(
         "from dataclasses import dataclass\nfrom twins.base import pfield\n"
         "@dataclass\nclass Params:\n    k: float = pfield(1.0, '1', 0.1, 2.0, 'gain')\n"
-        "def simulate(u, fs, p):\n    raise ZeroDivisionError('x')\n")
+        "def simulate(u, fs, p):\n    raise ZeroDivisionError('x')\n"
+    )
     with pytest.raises(DataError, match="simulation failed"):
         load_model(str(fails))().simulate(np.ones(10), 10.0)
 
@@ -193,8 +198,16 @@ def test_cli_model_bad_input_one_line(tmp_path):
     from sysid.data.io import write_record
 
     write_record(est, data)
-    cmd = [sys.executable, "-m", "benchmarks.cli", "diagnose", "--model", str(tmp_path / "nope.py"),
-           "--data", str(data)]
+    cmd = [
+        sys.executable,
+        "-m",
+        "benchmarks.cli",
+        "diagnose",
+        "--model",
+        str(tmp_path / "nope.py"),
+        "--data",
+        str(data),
+    ]
     r = subprocess.run(cmd, capture_output=True, text=True, cwd=ROOT)
     assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1 and "not found" in r.stderr
     cmd = [

@@ -19,7 +19,7 @@ def _lstsq_fir(u, y, nb, nk):
     """Closed form: ordinary least squares on the lagged input columns, t ≥ nk + nb − 1 (numpy lstsq)."""
     N, m = u.shape
     L = nk + nb - 1
-    Phi = np.column_stack([u[L - nk - k:N - nk - k, i] for i in range(m) for k in range(nb)])
+    Phi = np.column_stack([u[L - nk - k : N - nk - k, i] for i in range(m) for k in range(nb)])
     return np.linalg.lstsq(Phi, y[L:], rcond=None)[0].T.reshape(y.shape[1], m, nb)
 
 
@@ -27,8 +27,12 @@ def test_two_inputs_two_outputs_equal_the_closed_form_least_squares():
     rng = np.random.default_rng(0)
     N = 3000
     u = rng.standard_normal((N, 2))
-    y = np.column_stack([np.convolve(u[:, 0], [0.0, 1.0, 0.5, 0.2])[:N] + np.convolve(u[:, 1], [0, 0, -0.3, 0.1])[:N],
-                         u[:, 1] - 0.4 * np.r_[0.0, u[:-1, 0]]])
+    y = np.column_stack(
+        [
+            np.convolve(u[:, 0], [0.0, 1.0, 0.5, 0.2])[:N] + np.convolve(u[:, 1], [0, 0, -0.3, 0.1])[:N],
+            u[:, 1] - 0.4 * np.r_[0.0, u[:-1, 0]],
+        ]
+    )
     y = y + 0.01 * rng.standard_normal(y.shape)
     for nb, nk in ((7, 1), (12, 0), (3, 2)):
         m = FIR(nb=nb, nk=nk).fit(Record(u, y, fs=1.0))
@@ -46,8 +50,8 @@ def test_prediction_is_the_convolution_with_the_taps_at_every_horizon():
     expect = np.convolve(u, np.r_[0.0, 0.0, m.taps_[0, 0]])[:2000]
     for horizon in (1, 5, None):
         yh = m.predict(rec, horizon)
-        np.testing.assert_allclose(yh[m.max_lag_:], expect[m.max_lag_:], rtol=1e-10, atol=1e-12)
-        np.testing.assert_array_equal(yh[:m.max_lag_], y[:m.max_lag_])
+        np.testing.assert_allclose(yh[m.max_lag_ :], expect[m.max_lag_ :], rtol=1e-10, atol=1e-12)
+        np.testing.assert_array_equal(yh[: m.max_lag_], y[: m.max_lag_])
     np.testing.assert_allclose(m.impulse_response()[2:], h, atol=0.01)  # the true impulse response
 
 
@@ -84,8 +88,11 @@ def test_identify_fir_json_has_the_taps_and_bad_tap_count_is_one_line(tmp_path, 
     out = json.loads(capsys.readouterr().out)
     assert out["identifier"] == "fir" and len(out["taps"]) == out["chosen_orders"]["nb"] == out["n_parameters"]
     assert out["validation"]["free_run"]["r2"] == out["validation"]["one_step"]["r2"] > 0.8
-    for sets, words in (("nb=5000", "too few for a FIR with nb=5000"), ("nb=0", "nb must be an integer >= 1"),
-                        ("nk=-1", "nk must be an integer >= 0")):
+    for sets, words in (
+        ("nb=5000", "too few for a FIR with nb=5000"),
+        ("nb=0", "nb must be an integer >= 1"),
+        ("nk=-1", "nk must be an integer >= 0"),
+    ):
         assert main(["identify", "fir", "--est", est_path, "--set", sets]) == 2
         err = capsys.readouterr().err
         assert words in err and len(err.strip().splitlines()) == 1 and "Traceback" not in err
@@ -105,22 +112,58 @@ def test_compare_shows_the_fir_reference_beside_the_models(tmp_path, capsys):
     est, val = modal_records(n=2048)
     write_record(est, tmp_path / "est.npz")
     write_record(val, tmp_path / "val.npz")
-    assert main(["identify", "arx", "--est", str(tmp_path / "est.npz"), "--set", "ny=2,nu=2",
-                 "-o", str(tmp_path / "arx.json")]) == 0
+    assert (
+        main(
+            [
+                "identify",
+                "arx",
+                "--est",
+                str(tmp_path / "est.npz"),
+                "--set",
+                "ny=2,nu=2",
+                "-o",
+                str(tmp_path / "arx.json"),
+            ]
+        )
+        == 0
+    )
     capsys.readouterr()
-    assert main(["compare", str(tmp_path / "arx.json"), "--data", str(tmp_path / "val.npz"),
-                 "--fir-est", str(tmp_path / "est.npz"), "--json"]) == 0
+    assert (
+        main(
+            [
+                "compare",
+                str(tmp_path / "arx.json"),
+                "--data",
+                str(tmp_path / "val.npz"),
+                "--fir-est",
+                str(tmp_path / "est.npz"),
+                "--json",
+            ]
+        )
+        == 0
+    )
     out = json.loads(capsys.readouterr().out)
     arx_row, fir_row = out["models"]
     assert fir_row["identifier"] == "fir" and fir_row["reference"] is True and "reference" not in arx_row
     fir = FIR().fit(est)  # the same FIR as identify fir's defaults; every row scored after its taps
     assert arx_row["skip"] == fir_row["skip"] == fir.max_lag_
-    yh = fir.predict(val, None)[fir.max_lag_:]
-    y = val.y[fir.max_lag_:]
+    yh = fir.predict(val, None)[fir.max_lag_ :]
+    y = val.y[fir.max_lag_ :]
     assert fir_row["metrics"]["r2"] == pytest.approx(1 - np.sum((y - yh) ** 2) / np.sum((y - y.mean()) ** 2), rel=1e-9)
     assert fir_row["metrics"]["r2"] > arx_row["metrics"]["r2"]  # ARX(2, 2) cannot simulate five light modes
-    assert main(["compare", str(tmp_path / "arx.json"), "--data", str(tmp_path / "val.npz"),
-                 "--fir-est", str(tmp_path / "est.npz")]) == 0
+    assert (
+        main(
+            [
+                "compare",
+                str(tmp_path / "arx.json"),
+                "--data",
+                str(tmp_path / "val.npz"),
+                "--fir-est",
+                str(tmp_path / "est.npz"),
+            ]
+        )
+        == 0
+    )
     assert "fir (reference" in capsys.readouterr().out
 
 

@@ -91,13 +91,18 @@ def test_toy_round_trip_is_exact_with_noise(toy_fmu):
     assert np.array_equal(y9, ref9) and not np.array_equal(y9, y)
 
 
-@pytest.mark.parametrize("start,change", [
-    ({"tau_s": 0.05}, dict(params={"tau_s": 0.05})),
-    ({"order": 3, "weights": "0.2;-1.5"}, dict(params={"order": 3, "weights": [0.2, -1.5]})),
-    ({"fluid": "oil"}, dict(params={"fluid": "oil"})),
-    ({"effect_offset": True, "offset_um": -1.25, "effect_measurement_noise": False},
-     dict(params={"offset_um": -1.25}, effects={"lag", "offset"})),
-])
+@pytest.mark.parametrize(
+    "start,change",
+    [
+        ({"tau_s": 0.05}, dict(params={"tau_s": 0.05})),
+        ({"order": 3, "weights": "0.2;-1.5"}, dict(params={"order": 3, "weights": [0.2, -1.5]})),
+        ({"fluid": "oil"}, dict(params={"fluid": "oil"})),
+        (
+            {"effect_offset": True, "offset_um": -1.25, "effect_measurement_noise": False},
+            dict(params={"offset_um": -1.25}, effects={"lag", "offset"}),
+        ),
+    ],
+)
 def test_toy_start_values_act_as_in_native_twin(toy_fmu, start, change):
     twin, path = toy_fmu
     u = _toy_input(200)
@@ -122,17 +127,28 @@ def test_toy_bad_parameter_and_step_refused(toy_fmu):
         log.append(message.decode() if isinstance(message, bytes) else str(message))
 
     with pytest.raises(Exception, match="fmi2ExitInitializationMode failed"):
-        fmpy.simulate_fmu(str(path), stop_time=0.01, output_interval=1e-3, start_values={"fluid": "honey"},
-                          logger=logger, debug_logging=True)
+        fmpy.simulate_fmu(
+            str(path),
+            stop_time=0.01,
+            output_interval=1e-3,
+            start_values={"fluid": "honey"},
+            logger=logger,
+            debug_logging=True,
+        )
     with pytest.raises(Exception, match="fmi2DoStep failed"):
         fmpy.simulate_fmu(str(path), stop_time=0.01, output_interval=1.5e-3, logger=logger, debug_logging=True)
     # the importer's log names the problem (the twin's ConfigError, the step that is not 1/fs)
     text = "\n".join(log)
     assert "honey" in text and "not a whole number of sampling periods" in text
     # a whole number of periods: the input is held over the step (n samples of the same u)
-    res = fmpy.simulate_fmu(str(path), stop_time=0.02, output_interval=2e-3, output=["y"],
-                            start_values={"effect_measurement_noise": False},
-                            input=np.array([(0.0, 1.0), (1.0, 1.0)], dtype=[("time", float), ("u", float)]))
+    res = fmpy.simulate_fmu(
+        str(path),
+        stop_time=0.02,
+        output_interval=2e-3,
+        output=["y"],
+        start_values={"effect_measurement_noise": False},
+        input=np.array([(0.0, 1.0), (1.0, 1.0)], dtype=[("time", float), ("u", float)]),
+    )
     ref = twin.with_effects({"lag"}).simulate(np.ones(20), 1000.0)
     assert np.allclose(np.asarray(res["y"])[1:], ref[1::2], rtol=0, atol=1e-12)
 
@@ -152,8 +168,9 @@ def test_wrapper_state_release_finds_the_loaded_binary(toy_fmu):
         pytest.skip("the pythonfmu 0.7 exit problem and its fix are Linux-specific")
     assert release_wrapper_state(resources) is False  # binary not loaded yet: nothing to release
     md = read_model_description(folder)
-    fmu = FMU2Slave(guid=md.guid, unzipDirectory=folder, modelIdentifier=md.coSimulation.modelIdentifier,
-                    instanceName="a")
+    fmu = FMU2Slave(
+        guid=md.guid, unzipDirectory=folder, modelIdentifier=md.coSimulation.modelIdentifier, instanceName="a"
+    )
     fmu.instantiate()  # the slave released the PyState already; a second release is a no-op
     try:
         assert release_wrapper_state(resources) is True
@@ -175,10 +192,12 @@ def test_shipped_code_runs_without_the_project_on_the_path(toy_fmu, tmp_path):
         "sig = np.zeros(n + 1, dtype=[('time', float), ('u', float)]); sig['time'] = t; sig['u'][:n] = u\n"
         f"r = fmpy.simulate_fmu({str(path)!r}, stop_time=n / 1000.0, output_interval=1e-3, input=sig, output=['y'])\n"
         "np.save('y.npy', r['y'][1:])\n"
-        "print('used', sys.modules['twins'].__file__)\n")
+        "print('used', sys.modules['twins'].__file__)\n"
+    )
     env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "PYTHONHOME")}
-    proc = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, env=env, capture_output=True, text=True,
-                          timeout=120)
+    proc = subprocess.run(
+        [sys.executable, "-c", code], cwd=tmp_path, env=env, capture_output=True, text=True, timeout=120
+    )
     assert proc.returncode == 0, proc.stderr[-2000:]
     used = proc.stdout.split("used ")[1].strip()
     assert Path(used).parts[-3:] == ("resources", "twins", "__init__.py") and not used.startswith(str(REPO))
@@ -217,7 +236,7 @@ def test_response_core_round_trip(echo_fmu):
     y = fmu_simulate(path, u, fs)
     ref = twin.simulate(u, fs)  # with its seeded noise
     quiet = twin.with_effects({"echo"}).simulate(u, fs)
-    signal = np.sqrt(np.mean(quiet ** 2))
+    signal = np.sqrt(np.mean(quiet**2))
     assert relative_rms(y, ref) < 1e-6
     # the noise drawn per sample in the FMU is the native sequence: the error is far below the noise
     # (independent draws would leave sqrt(2) x noise_v)
@@ -250,7 +269,7 @@ def test_response_core_equals_direct_convolution(effects, head):
     assert bool(core.head) == head  # the crosstalk path arrives at once and is kept in the head
     rng = np.random.default_rng(1)
     u = rng.standard_normal(5000)  # white input: every tap of h matters
-    ref = np.convolve(twin.amplifier(u), h)[:len(u)]
+    ref = np.convolve(twin.amplifier(u), h)[: len(u)]
     y = core.run(u)
     # white input: expected error sqrt(dropped energy fraction); x3 for the finite record
     assert relative_rms(y, ref) < 3 * np.sqrt(core.head_dropped) + 1e-12
@@ -285,8 +304,11 @@ CANTILEVER_CASES = {
     "default": ({}, {}, None),
     "bw_f1": ({"bw_alpha": 0.45, "f1_hz": 900.0}, {"bw_alpha": 0.45, "f1_hz": 900.0}, None),
     "pi": ({"hysteresis": "prandtl-ishlinskii"}, {"hysteresis": "prandtl-ishlinskii"}, None),
-    "delay_no_noise": ({"effect_input_delay": True, "effect_measurement_noise": False}, {},
-                       "+input_delay-measurement_noise"),
+    "delay_no_noise": (
+        {"effect_input_delay": True, "effect_measurement_noise": False},
+        {},
+        "+input_delay-measurement_noise",
+    ),
     "seed3": ({"seed": 3}, {}, "seed"),
 }
 
@@ -311,9 +333,15 @@ def test_cantilever_process_exits_cleanly(cantilever_runs, tmp_path):
     _, path, *_ = cantilever_runs
     script = tmp_path / "exit_child.py"
     script.write_text(_EXIT_CHILD)
-    proc = subprocess.run([sys.executable, str(script), str(path)], cwd=tmp_path, stdout=subprocess.DEVNULL,
-                          stderr=subprocess.PIPE, env=dict(os.environ, PYTHONPATH=str(REPO)), text=True,
-                          timeout=300)
+    proc = subprocess.run(
+        [sys.executable, str(script), str(path)],
+        cwd=tmp_path,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+        env=dict(os.environ, PYTHONPATH=str(REPO)),
+        text=True,
+        timeout=300,
+    )
     assert proc.returncode == 0, proc.stderr[-2000:]
 
 
@@ -345,8 +373,9 @@ def test_cli_export_fmu(tmp_path, capsys):
     from benchmarks.cli import main
 
     out = tmp_path / "c.fmu"
-    code = main(["export-fmu", "cantilever", "--effects", "none", "--set", "f1_hz=800", "--seed", "4",
-                 "-o", str(out), "--json"])
+    code = main(
+        ["export-fmu", "cantilever", "--effects", "none", "--set", "f1_hz=800", "--seed", "4", "-o", str(out), "--json"]
+    )
     assert code == 0
     summary = json.loads(capsys.readouterr().out)
     assert summary["validation_problems"] == [] and summary["effects"] == [] and summary["seed"] == 4
@@ -354,8 +383,10 @@ def test_cli_export_fmu(tmp_path, capsys):
     assert float(_var(root, "f1_hz").find("Real").get("start")) == 800.0
     assert _var(root, "effect_measurement_noise").find("Boolean").get("start") == "false"
     assert cfg["config"]["params"]["f1_hz"] == 800.0
-    for bad in (["export-fmu", "cantilever", "-o", str(tmp_path / "x.zip")],
-                ["export-fmu", "cantilever", "--set", "f1_hz=1e9", "-o", str(out)]):
+    for bad in (
+        ["export-fmu", "cantilever", "-o", str(tmp_path / "x.zip")],
+        ["export-fmu", "cantilever", "--set", "f1_hz=1e9", "-o", str(out)],
+    ):
         assert main(bad) == 2
         err = capsys.readouterr().err.strip()
         assert err.count("\n") == 0 and "Traceback" not in err
@@ -411,10 +442,14 @@ def test_real_start_values_are_exact_doubles(tmp_path):
     root, _ = _md(path)
     assert float(_var(root, "gain").find("Real").get("start")) == twin.params.gain
     u = _toy_input(50)
-    res = fmpy.simulate_fmu(str(path), stop_time=0.05, output_interval=1e-3, output=["y"],
-                            apply_default_start_values=True,
-                            input=np.array(list(zip(np.arange(51) * 1e-3, np.append(u, u[-1]))),
-                                           dtype=[("time", float), ("u", float)]))
+    res = fmpy.simulate_fmu(
+        str(path),
+        stop_time=0.05,
+        output_interval=1e-3,
+        output=["y"],
+        apply_default_start_values=True,
+        input=np.array(list(zip(np.arange(51) * 1e-3, np.append(u, u[-1]))), dtype=[("time", float), ("u", float)]),
+    )
     assert np.array_equal(res["y"][1:], twin.simulate(u, 1000.0))
 
 
@@ -430,8 +465,9 @@ def _fmu_run_with_change(path, u, fs, k, change):
     md = read_model_description(str(path))
     refs = {v.name: v.valueReference for v in md.modelVariables}
     folder = extract(str(path))
-    slave = FMU2Slave(guid=md.guid, unzipDirectory=folder, modelIdentifier=md.coSimulation.modelIdentifier,
-                      instanceName="tune")
+    slave = FMU2Slave(
+        guid=md.guid, unzipDirectory=folder, modelIdentifier=md.coSimulation.modelIdentifier, instanceName="tune"
+    )
     try:
         slave.instantiate()
         slave.setupExperiment(startTime=0.0)
@@ -461,10 +497,13 @@ def _native_with_change(twin, u, fs, k, change):
     return y
 
 
-@pytest.mark.parametrize("change", [
-    {"gain_um_per_v": 0.4, "bw_beta": 0.03},  # hysteresis
-    {"f1_hz": 900.0, "creep_per_decade": 0.03, "noise_um": 0.02, "offset_um": 1.5},  # modes, creep, sensor
-])
+@pytest.mark.parametrize(
+    "change",
+    [
+        {"gain_um_per_v": 0.4, "bw_beta": 0.03},  # hysteresis
+        {"f1_hz": 900.0, "creep_per_decade": 0.03, "noise_um": 0.02, "offset_um": 1.5},  # modes, creep, sensor
+    ],
+)
 def test_cantilever_tunable_change_mid_run_matches_native(cantilever_runs, change):
     """A tunable parameter set between communication steps acts from the next step on, with the state
     (hysteresis, modes, creep, sensor, noise generator) carried over: exactly as the native stepper's retune."""
@@ -491,8 +530,19 @@ def test_cantilever_variability_declared(cantilever_runs):
     tunable = {sv.get("name") for sv in root.iter("ScalarVariable") if sv.get("variability") == "tunable"}
     assert tunable == set(CantileverTwin.TUNABLE_PARAMS)
     assert {"gain_um_per_v", "f1_hz", "bw_alpha", "noise_um", "creep_per_decade"} <= tunable
-    for name in ("input_delay_s", "max_substep_s", "initial_state_um", "creep_elements", "pi_operators",
-                 "hysteresis", "seed", "fs", "effect_creep", "effect_input_delay", "effect_measurement_noise"):
+    for name in (
+        "input_delay_s",
+        "max_substep_s",
+        "initial_state_um",
+        "creep_elements",
+        "pi_operators",
+        "hysteresis",
+        "seed",
+        "fs",
+        "effect_creep",
+        "effect_input_delay",
+        "effect_measurement_noise",
+    ):
         assert _var(root, name).get("variability") == "fixed", name
 
 

@@ -28,17 +28,35 @@ LIBDIR = sysconfig.get_config_var("LIBDIR") or ""
 LDLIB = sysconfig.get_config_var("LDLIBRARY") or ""
 
 pytestmark = pytest.mark.skipif(
-    sys.platform != "linux" or shutil.which("gcc") is None or not LDLIB.endswith(".so")
+    sys.platform != "linux"
+    or shutil.which("gcc") is None
+    or not LDLIB.endswith(".so")
     or not (Path(LIBDIR) / LDLIB).exists(),
-    reason="needs Linux, gcc and a shared libpython")
+    reason="needs Linux, gcc and a shared libpython",
+)
 
 
 @pytest.fixture(scope="module")
 def host(tmp_path_factory):
     exe = tmp_path_factory.mktemp("host") / "fmu_host"
     lib = LDLIB[3:].rsplit(".so", 1)[0]  # libpython3.11.so -> python3.11
-    subprocess.run(["gcc", "-O1", "-o", str(exe), str(HOST_C), "-Wl,--no-as-needed", "-ldl", "-lm", f"-L{LIBDIR}",
-                    f"-l{lib}", f"-Wl,-rpath,{LIBDIR}"], check=True, capture_output=True)
+    subprocess.run(
+        [
+            "gcc",
+            "-O1",
+            "-o",
+            str(exe),
+            str(HOST_C),
+            "-Wl,--no-as-needed",
+            "-ldl",
+            "-lm",
+            f"-L{LIBDIR}",
+            f"-l{lib}",
+            f"-Wl,-rpath,{LIBDIR}",
+        ],
+        check=True,
+        capture_output=True,
+    )
     return exe
 
 
@@ -123,8 +141,22 @@ def test_plain_c_host_needs_the_loader(plain_host, model_fmu, tmp_path):
     np.testing.assert_allclose(np.loadtxt(out), m.predict(u), rtol=1e-12, atol=1e-12)
     binary, guid, vu, vy = _unpack(fmu, tmp_path / "x")
     wrapped = binary.with_name(binary.stem + ".pythonfmu.so")
-    res = subprocess.run([str(plain_host), str(wrapped), (tmp_path / "x" / "resources").resolve().as_uri(), guid, vu,
-                          vy, "1000.0", "10"], env=_env(), capture_output=True, text=True, timeout=60)
+    res = subprocess.run(
+        [
+            str(plain_host),
+            str(wrapped),
+            (tmp_path / "x" / "resources").resolve().as_uri(),
+            guid,
+            vu,
+            vy,
+            "1000.0",
+            "10",
+        ],
+        env=_env(),
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
     assert res.returncode == 4 and "undefined symbol" in res.stderr, (res.returncode, res.stderr)
 
 

@@ -15,10 +15,17 @@ def _same_bits(a, b):
 
 def _inputs(twin):
     rng = np.random.default_rng(3)
-    lsb = 2.0 * twin.params.adc_range_v / 2 ** twin.params.adc_bits
+    lsb = 2.0 * twin.params.adc_range_v / 2**twin.params.adc_bits
     ties = (np.arange(-300, 300) + 0.5) * lsb  # halfway between two ADC levels: round half to even
-    return np.concatenate([[0.0, -0.0, 1e-300, -1e-300, 1e6, -1e6], ties, rng.standard_normal(3000),
-                           5 * rng.standard_normal(1000), 0.3 * lsb * rng.standard_normal(200)])
+    return np.concatenate(
+        [
+            [0.0, -0.0, 1e-300, -1e-300, 1e6, -1e6],
+            ties,
+            rng.standard_normal(3000),
+            5 * rng.standard_normal(1000),
+            0.3 * lsb * rng.standard_normal(200),
+        ]
+    )
 
 
 CONFIGS = [

@@ -39,7 +39,7 @@ def test_h1_matches_freqz_and_coherence_closed_form():
     band = (frf.f_hz > 0) & (frf.f_hz < 0.25 * FS)  # passband (DC is detrended away)
     assert np.max(np.abs(frf.G[band] - G[band])) < 0.03
     # coherence of y = G u + n with white u (S_uu = 1) and white n: |G|^2 / (|G|^2 + sigma_n^2)
-    coh = np.abs(G) ** 2 / (np.abs(G) ** 2 + sigma_n ** 2)
+    coh = np.abs(G) ** 2 / (np.abs(G) ** 2 + sigma_n**2)
     inner = (frf.f_hz > 5) & (frf.f_hz < 0.45 * FS)
     assert np.max(np.abs(frf.coherence[inner] - coh[inner])) < 0.05
     # Bendat & Piersol std: the observed error should be of the order of the predicted one
@@ -81,7 +81,7 @@ def test_periodic_std_matches_noise_closed_form():
     predicted = sigma / (np.sqrt(n0 * P) * U)
     assert np.mean(frf.std) == pytest.approx(predicted, rel=0.15)
     err = np.abs(frf.G - g_true(frf.f_hz))
-    assert np.sqrt(np.mean(err ** 2)) == pytest.approx(predicted, rel=0.25)
+    assert np.sqrt(np.mean(err**2)) == pytest.approx(predicted, rel=0.25)
 
 
 def test_period_drift_removal_keeps_the_periodic_part():
@@ -108,19 +108,31 @@ def _realisations(nl, M=4, P=3, grid="odd", fraction=0.2, sigma=1e-3, seed=0):
     rng = np.random.default_rng(seed)
     out = []
     for m in range(M):
-        u = multisine(FS, resolution=1.0, band=(1, 200), grid=grid, detection_fraction=fraction, periods=P,
-                      seed=100 + m, amplitude=1.0, rms=True)
+        u = multisine(
+            FS,
+            resolution=1.0,
+            band=(1, 200),
+            grid=grid,
+            detection_fraction=fraction,
+            periods=P,
+            seed=100 + m,
+            amplitude=1.0,
+            rms=True,
+        )
         x = steady(u, periods=P)
         out.append((u, nl(x) + sigma * rng.standard_normal(u.size)))
     return out
 
 
-@pytest.mark.parametrize("nl, verdict", [
-    (lambda x: x, "linear"),
-    (lambda x: x + 0.05 * x ** 3, "odd"),
-    (lambda x: x + 0.05 * x ** 2, "even"),
-    (lambda x: x + 0.05 * x ** 3 + 0.05 * x ** 2, "odd+even"),
-])
+@pytest.mark.parametrize(
+    "nl, verdict",
+    [
+        (lambda x: x, "linear"),
+        (lambda x: x + 0.05 * x**3, "odd"),
+        (lambda x: x + 0.05 * x**2, "even"),
+        (lambda x: x + 0.05 * x**3 + 0.05 * x**2, "odd+even"),
+    ],
+)
 def test_bla_verdicts_on_wiener_systems(nl, verdict):
     res = best_linear_approximation(_realisations(nl), FS, 3)
     assert res.nonlinearity["verdict"] == verdict
@@ -136,7 +148,7 @@ def test_bla_of_a_cubic_wiener_system_is_the_bussgang_gain():
     """For Gaussian x = G u, y = x + c x^3 has BLA G (1 + 3 c sigma_x^2) (Bussgang; Pintelon & Schoukens §3.5);
     a random-phase multisine is asymptotically Gaussian."""
     c = 0.2
-    reals = _realisations(lambda x: x + c * x ** 3, M=8, P=2, fraction=0.0, sigma=0.0, seed=1)
+    reals = _realisations(lambda x: x + c * x**3, M=8, P=2, fraction=0.0, sigma=0.0, seed=1)
     sx2 = np.mean([np.var(steady(u, periods=2)) for u, _ in reals])
     res = best_linear_approximation(reals, FS, 2)
     ratio = res.G / g_true(res.f_hz)
@@ -152,7 +164,7 @@ def test_bla_noise_variance_closed_form_and_full_grid_note():
     res = best_linear_approximation(reals, FS, 4)
     n0 = int(FS / 1.0)
     A = np.abs(np.fft.rfft(reals[0][0][:n0]) / n0)[res.lines].mean()
-    predicted = sigma ** 2 / (n0 * 4 * A ** 2) / 3  # per realisation / M
+    predicted = sigma**2 / (n0 * 4 * A**2) / 3  # per realisation / M
     assert np.mean(res.var_noise) == pytest.approx(predicted, rel=0.2)
     assert res.nonlinearity["classified"] is False
     assert res.nonlinearity["verdict"] == "linear"
@@ -226,7 +238,7 @@ def test_tfest_parameter_std_matches_monte_carlo():
     est, sds = [], []
     for _ in range(60):
         frf = frf_periodic(u, y0 + 0.05 * rng.standard_normal(u.size), FS, 4)
-        tf = tfest(frf.f_hz, frf.G, FS, nb=3, na=2, var=frf.std ** 2)
+        tf = tfest(frf.f_hz, frf.G, FS, nb=3, na=2, var=frf.std**2)
         est.append(np.concatenate([tf.a[1:], tf.b]))
         sds.append(np.concatenate([tf.info["std_a"], tf.info["std_b"]]))
     est, sds = np.array(est), np.array(sds)

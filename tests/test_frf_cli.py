@@ -31,9 +31,33 @@ def inputs(tmp_path_factory):
     paths = []
     for seed in (1, 2, 3):
         p = d / f"u{seed}.npz"
-        assert main(["signal", "multisine", "--fs", "10000", "--resolution", "2", "--band", "2:500", "--grid", "odd",
-                     "--detection-fraction", "0.1", "--periods", str(PERIODS), "--amplitude", "80", "--seed",
-                     str(seed), "-o", str(p)]) == 0
+        assert (
+            main(
+                [
+                    "signal",
+                    "multisine",
+                    "--fs",
+                    "10000",
+                    "--resolution",
+                    "2",
+                    "--band",
+                    "2:500",
+                    "--grid",
+                    "odd",
+                    "--detection-fraction",
+                    "0.1",
+                    "--periods",
+                    str(PERIODS),
+                    "--amplitude",
+                    "80",
+                    "--seed",
+                    str(seed),
+                    "-o",
+                    str(p),
+                ]
+            )
+            == 0
+        )
         paths.append(p)
     return paths
 
@@ -56,8 +80,11 @@ def test_sampled_frf_agrees_with_the_continuous_model():
     for effects in ([], ["second_mode", "sensor_lowpass", "creep"]):
         tw = CantileverTwin(effects=effects)
         p = tw.params
-        creep = 1.0 + sum(p.creep_per_decade / (2j * np.pi * f * tau + 1.0) for tau in tw.creep_taus()) \
-            if "creep" in effects else 1.0
+        creep = (
+            1.0 + sum(p.creep_per_decade / (2j * np.pi * f * tau + 1.0) for tau in tw.creep_taus())
+            if "creep" in effects
+            else 1.0
+        )
         Hc = p.gain_um_per_v * creep * tw.frequency_response(f) * np.sinc(f / fs) ** 2
         Hd = tw.sampled_frequency_response(f, fs)
         assert np.allclose(Hd, Hc, rtol=1e-3)
@@ -66,16 +93,33 @@ def test_sampled_frf_agrees_with_the_continuous_model():
 def test_frf_matches_the_exact_linear_frf_of_the_cantilever(inputs, tmp_path, capsys):
     """Done when: --effects none, hysteresis disabled → multisine FRF within 0.5 dB / 3° at the excited lines."""
     (y,) = _simulate(inputs[:1], tmp_path, "lin", ["--effects", "none", *LINEAR])
-    code, out, _ = _cli(["frf", y, "--periods", PERIODS, "--drop", 1, "--json", "-o", tmp_path / "frf.csv",
-                         "--plot", tmp_path / "frf.png"], capsys)
+    code, out, _ = _cli(
+        [
+            "frf",
+            y,
+            "--periods",
+            PERIODS,
+            "--drop",
+            1,
+            "--json",
+            "-o",
+            tmp_path / "frf.csv",
+            "--plot",
+            tmp_path / "frf.png",
+        ],
+        capsys,
+    )
     assert code == 0
     res = json.loads(out)
     assert set(res) >= {"f_hz", "re", "im", "std"}
     G = np.array(res["re"]) + 1j * np.array(res["im"])
     f = np.array(res["f_hz"])
     rec = read_record(y)
-    exact = CantileverTwin(effects=[]).with_params(hysteresis="prandtl-ishlinskii",
-                                                    pi_p0_fraction=1.0).sampled_frequency_response(f, rec.fs)
+    exact = (
+        CantileverTwin(effects=[])
+        .with_params(hysteresis="prandtl-ishlinskii", pi_p0_fraction=1.0)
+        .sampled_frequency_response(f, rec.fs)
+    )
     bins = np.array(rec.meta["signal"]["info"]["excited_bins"])
     assert np.allclose(f, bins * 2.0)  # exactly the excited lines
     assert np.max(np.abs(20 * np.log10(np.abs(G / exact)))) < 0.5
@@ -106,14 +150,20 @@ def test_frf_bad_periods_exit_2(inputs, tmp_path, capsys):
     assert code == 2 and "periods" in err and "Traceback" not in err
 
 
-@pytest.mark.parametrize("tag, twin_args, verdict", [
-    ("linear", ["--effects", "measurement_noise", *LINEAR], "linear"),
-    ("hysteresis", ["--effects", "measurement_noise"], "odd"),  # Bouc–Wen: odd-symmetric loop
-    ("asymmetric", ["--effects", "measurement_noise,asymmetric_hysteresis"], "odd+even"),
-    ("drift", ["--effects", "measurement_noise,thermal_drift", *LINEAR], "linear"),  # drift removed (--detrend 1)
-    ("saturation", ["--effects", "measurement_noise,saturation", *LINEAR, "--set", "sat_voltage_v=60"],
-     "odd"),  # odd-symmetric compression of the amplifier, hysteresis off
-])
+@pytest.mark.parametrize(
+    "tag, twin_args, verdict",
+    [
+        ("linear", ["--effects", "measurement_noise", *LINEAR], "linear"),
+        ("hysteresis", ["--effects", "measurement_noise"], "odd"),  # Bouc–Wen: odd-symmetric loop
+        ("asymmetric", ["--effects", "measurement_noise,asymmetric_hysteresis"], "odd+even"),
+        ("drift", ["--effects", "measurement_noise,thermal_drift", *LINEAR], "linear"),  # drift removed (--detrend 1)
+        (
+            "saturation",
+            ["--effects", "measurement_noise,saturation", *LINEAR, "--set", "sat_voltage_v=60"],
+            "odd",
+        ),  # odd-symmetric compression of the amplifier, hysteresis off
+    ],
+)
 def test_bla_detects_the_cantilever_nonlinearity(inputs, tmp_path, capsys, tag, twin_args, verdict):
     """Done when: 'linear' on a linear configuration, odd distortion with the hysteresis, even distortion as
     well with the asymmetric hysteresis (the catalog's even effect), levels in dB."""
@@ -134,8 +184,11 @@ def test_bla_detects_the_cantilever_nonlinearity(inputs, tmp_path, capsys, tag, 
         assert json.loads(out)["nonlinearity"]["verdict"] != "linear"
     elif verdict == "linear":  # and G_BLA is the exact linear FRF within the noise
         G = np.array(res["re"]) + 1j * np.array(res["im"])
-        exact = CantileverTwin(effects=[]).with_params(hysteresis="prandtl-ishlinskii", pi_p0_fraction=1.0
-                                                       ).sampled_frequency_response(np.array(res["f_hz"]), 1e4)
+        exact = (
+            CantileverTwin(effects=[])
+            .with_params(hysteresis="prandtl-ishlinskii", pi_p0_fraction=1.0)
+            .sampled_frequency_response(np.array(res["f_hz"]), 1e4)
+        )
         assert np.max(np.abs(20 * np.log10(np.abs(G / exact)))) < 0.05
         code, out, _ = _cli(["bla", *ys, "--periods", PERIODS, "--drop", 1, "--plot", tmp_path / "bla.png"], capsys)
         assert code == 0 and "verdict linear" in out and (tmp_path / "bla.png").stat().st_size > 1000
@@ -160,7 +213,7 @@ def test_wiener_hammerstein_bla_reaches_the_published_rmse():
     _, suu = ss.welch(est.u, fs=est.fs, nperseg=1024)
     tf = tfest(frf.f_hz, frf.G, est.fs, nb=6, na=6, weight=suu)
     y_hat = tf.simulate(test.u - est.u.mean()) + est.y.mean()
-    rmse = float(np.sqrt(np.mean((test.y - y_hat)[ds.init_samples:] ** 2)))
+    rmse = float(np.sqrt(np.mean((test.y - y_hat)[ds.init_samples :] ** 2)))
     published = ds.references["test"]["linear_baseline"]["value"]
     assert published == pytest.approx(44.4e-3)
     assert rmse < 1.10 * published  # measured 43.3 mV
@@ -175,7 +228,7 @@ def test_wiener_hammerstein_bla_identifier():
     ds = load_dataset("wiener-hammerstein")
     model = get_identifier("bla")().fit(ds.est)
     test = ds.tests["test"]
-    rmse = float(np.sqrt(np.mean((test.y - model.predict(test, horizon=None))[ds.init_samples:] ** 2)))
+    rmse = float(np.sqrt(np.mean((test.y - model.predict(test, horizon=None))[ds.init_samples :] ** 2)))
     assert rmse < 1.10 * ds.references["test"]["linear_baseline"]["value"]  # measured 43.3 mV
 
 
@@ -186,8 +239,12 @@ def test_bla_bad_input_exit_2(inputs, tmp_path, capsys):
     from sysid.data.io import write_record
 
     write_record(rec[: len(rec) // 3 * 2], short)
-    for args in (["bla", y, "--periods", 3, "--drop", 3], ["bla", y, short, "--periods", 3],
-                 ["bla", tmp_path / "missing.npz", "--periods", 3], ["bla", y, "--periods", 3, "--alpha", 2]):
+    for args in (
+        ["bla", y, "--periods", 3, "--drop", 3],
+        ["bla", y, short, "--periods", 3],
+        ["bla", tmp_path / "missing.npz", "--periods", 3],
+        ["bla", y, "--periods", 3, "--alpha", 2],
+    ):
         code, _, err = _cli(args, capsys)
         assert code == 2 and err.count("\n") == 1 and "Traceback" not in err
     assert not list(tmp_path.glob(".*tmp*"))  # no temporary file left behind

@@ -160,15 +160,16 @@ def test_free_run_divergence_is_reported_not_raised():
     with pytest.warns(DivergenceWarning):
         yf = m.predict(big, None)
     assert m.diverged_at_ is not None
-    assert np.isnan(yf[m.diverged_at_:]).all() and np.isfinite(yf[: m.diverged_at_]).all()
+    assert np.isnan(yf[m.diverged_at_ :]).all() and np.isfinite(yf[: m.diverged_at_]).all()
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         m.predict(Record(u, y, fs=1.0), None)
     assert m.diverged_at_ is None
 
 
-@pytest.mark.parametrize("cls,kw", [(NARXPoly, dict(ny=2, nu=2, degree=2)),
-                                    (NARMAXPoly, dict(ny=2, nu=2, ne=2, degree=2))])
+@pytest.mark.parametrize(
+    "cls,kw", [(NARXPoly, dict(ny=2, nu=2, degree=2)), (NARMAXPoly, dict(ny=2, nu=2, ne=2, degree=2))]
+)
 def test_save_load_round_trip(tmp_path, cls, kw):
     rec = narmax_record(1200)
     m = cls(**kw).fit(rec)
@@ -240,8 +241,15 @@ def test_sysidentpy_cross_check_terms_and_parameters(case):
         rec, lags, degree = _degree3_record(), 4, 3
         true = {"y(k-1)": 0.4, "y(k-3)": -0.2, "u(k-2)": 0.7, "u(k-1)*u(k-3)^2": 0.15, "1": 0.05}
     n_terms = len(true)
-    ref = FROLS(order_selection=False, n_terms=n_terms, ylag=lags, xlag=lags, estimator=LeastSquares(),
-                basis_function=Polynomial(degree=degree), model_type="NARMAX")
+    ref = FROLS(
+        order_selection=False,
+        n_terms=n_terms,
+        ylag=lags,
+        xlag=lags,
+        estimator=LeastSquares(),
+        basis_function=Polynomial(degree=degree),
+        model_type="NARMAX",
+    )
     ref.fit(X=rec.u.reshape(-1, 1), y=rec.y.reshape(-1, 1))
 
     def code_name(code):  # SysIdentPy's regressor codes: 1000 + j = y(k-j), 2000 + j = x1(k-j), 0 = none
@@ -333,11 +341,17 @@ def test_large_offset_keeps_precision_and_matches_sysidentpy():
     from sysidentpy.model_structure_selection import FROLS
     from sysidentpy.parameter_estimation import LeastSquares
 
-    ref = FROLS(order_selection=False, n_terms=5, ylag=2, xlag=2, estimator=LeastSquares(),
-                basis_function=Polynomial(degree=2))
+    ref = FROLS(
+        order_selection=False, n_terms=5, ylag=2, xlag=2, estimator=LeastSquares(), basis_function=Polynomial(degree=2)
+    )
     ref.fit(X=u[:, None], y=y[:, None])
-    codes = {(0, 0): "1", (2002, 1001): "y(k-1)*u(k-2)", (1001, 0): "y(k-1)", (2001, 2001): "u(k-1)^2",
-             (2002, 0): "u(k-2)"}
+    codes = {
+        (0, 0): "1",
+        (2002, 1001): "y(k-1)*u(k-2)",
+        (1001, 0): "y(k-1)",
+        (2001, 2001): "u(k-1)^2",
+        (2002, 0): "u(k-2)",
+    }
     assert [r["term"] for r in m.term_table()] == [codes[tuple(int(c) for c in row)] for row in ref.final_model]
     np.testing.assert_allclose(
         [r["err"] for r in m.term_table()], np.asarray(ref.err[:5]).ravel(), rtol=1e-5, atol=1e-15
@@ -430,7 +444,7 @@ def test_narmax_more_els_iterations_same_or_better_fit():
             assert mse[it] <= mse[1] * (1 + 1e-3) < mse[0], (it, mse)
     assert m.els_converged_ and mse[20] == mse[10]
     assert "e(k-1)" in {r["term"] for r in m.term_table()}
-    assert mse[20] < 1.05 * 0.1 ** 2
+    assert mse[20] < 1.05 * 0.1**2
 
 
 def test_narmax_unstable_noise_model_is_reported_not_kept():
@@ -512,4 +526,4 @@ def test_bouc_wen_in_si_units_is_identified():
     test = ds.tests["multisine"]
     e = test.y[50:] - m.predict(test, None)[50:]
     # ARX's quick floor on this test is 2.03e-4 m (free run); the nonlinear model must stay below it
-    assert np.sqrt(np.mean(e ** 2)) < 2.03e-4
+    assert np.sqrt(np.mean(e**2)) < 2.03e-4

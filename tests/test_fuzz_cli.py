@@ -46,7 +46,7 @@ def mutate_csv(text: str, rng: np.random.Generator) -> bytes:
     if kind == 1:
         pos = int(rng.integers(0, len(text)))
         return (
-            text[:pos] + "".join(rng.choice(list(",;\t x.#\"\n\r-e"), size=int(rng.integers(1, 4)))) + text[pos:]
+            text[:pos] + "".join(rng.choice(list(',;\t x.#"\n\r-e'), size=int(rng.integers(1, 4)))) + text[pos:]
         ).encode()
     if kind == 2:
         lines[k] += ",1"
@@ -196,12 +196,16 @@ def _check(argv: list[str], folder: Path, capsys, keep: set[str]) -> int:
 
 
 def _commands(path: Path, out: Path, slow: bool) -> list[list[str]]:
-    cmds = [["preprocess", str(path), "--remove-offset", "-o", str(out)],
-            ["simulate", "cantilever", "--input", str(path), "-o", str(out)],
-            ["identify", "arx", "--est", str(path), "--set", "ny=2,nu=2"]]
+    cmds = [
+        ["preprocess", str(path), "--remove-offset", "-o", str(out)],
+        ["simulate", "cantilever", "--input", str(path), "-o", str(out)],
+        ["identify", "arx", "--est", str(path), "--set", "ny=2,nu=2"],
+    ]
     if slow:
-        cmds += [["calibrate", "cantilever", "--data", str(path)],
-                 ["identify", "arx", "--est", str(path), "--val", str(path), "-o", str(out.with_suffix(".json"))]]
+        cmds += [
+            ["calibrate", "cantilever", "--data", str(path)],
+            ["identify", "arx", "--est", str(path), "--val", str(path), "-o", str(out.with_suffix(".json"))],
+        ]
     return cmds
 
 
@@ -219,8 +223,11 @@ def _fuzz(tmp_path: Path, capsys, cases: int, seed: int, slow: bool = False) -> 
         if which == 3:
             argv = option_cases(rng, good, out)[int(rng.integers(0, 15))]
         else:
-            suffix, data = [(".csv", lambda: mutate_csv(text, rng)), (".npz", lambda: npz_bytes(rng)),
-                            (".mat", lambda: mat_bytes(rng))][which]
+            suffix, data = [
+                (".csv", lambda: mutate_csv(text, rng)),
+                (".npz", lambda: npz_bytes(rng)),
+                (".mat", lambda: mat_bytes(rng)),
+            ][which]
             path = tmp_path / f"case{suffix}"
             path.write_bytes(data())
             cmds = _commands(path, out, slow)

@@ -50,8 +50,11 @@ def d(tmp_path, cantilever_io) -> Path:
 
 
 def _snapshot(folder: Path) -> dict[str, str]:
-    return {str(p.relative_to(folder)): (hashlib.sha256(p.read_bytes()).hexdigest() if p.is_file() else "dir")
-            for p in sorted(folder.rglob("*")) if not p.is_symlink()}
+    return {
+        str(p.relative_to(folder)): (hashlib.sha256(p.read_bytes()).hexdigest() if p.is_file() else "dir")
+        for p in sorted(folder.rglob("*"))
+        if not p.is_symlink()
+    }
 
 
 def refused(argv: list[str], folder: Path, capsys, expected: str | None = None) -> str:
@@ -91,10 +94,31 @@ def test_failed_run_keeps_the_existing_output(d, capsys):
 
 
 def test_refused_option_leaves_no_file(d, capsys):
-    refused(["identify", "arx", "--est", d / "in.npz", "-o", d / "m.json", "--plots", d / "afile" / "sub"], d, capsys,
-            "afile is a file")
-    refused(["search", "arx", "--est", d / "in.npz", "--val", d / "in.npz", "--grid", "ny=1,2", "--trials", "-5",
-             "--storage", d / "st.db"], d, capsys, "--trials")
+    refused(
+        ["identify", "arx", "--est", d / "in.npz", "-o", d / "m.json", "--plots", d / "afile" / "sub"],
+        d,
+        capsys,
+        "afile is a file",
+    )
+    refused(
+        [
+            "search",
+            "arx",
+            "--est",
+            d / "in.npz",
+            "--val",
+            d / "in.npz",
+            "--grid",
+            "ny=1,2",
+            "--trials",
+            "-5",
+            "--storage",
+            d / "st.db",
+        ],
+        d,
+        capsys,
+        "--trials",
+    )
 
 
 def _default_signals() -> None:
@@ -106,9 +130,15 @@ def _default_signals() -> None:
 
 
 def _spawn(args: list[str], cwd: Path) -> subprocess.Popen:
-    return subprocess.Popen([sys.executable, "-m", "benchmarks.cli", *map(str, args)], cwd=cwd,
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, preexec_fn=_default_signals,
-                            env={**os.environ, "PYTHONPATH": str(ROOT), "OPENBLAS_NUM_THREADS": "1"})
+    return subprocess.Popen(
+        [sys.executable, "-m", "benchmarks.cli", *map(str, args)],
+        cwd=cwd,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        preexec_fn=_default_signals,
+        env={**os.environ, "PYTHONPATH": str(ROOT), "OPENBLAS_NUM_THREADS": "1"},
+    )
 
 
 @pytest.mark.parametrize("sig,code", [(signal.SIGTERM, 143), (signal.SIGINT, 130)])
@@ -140,9 +170,15 @@ def test_file_size_limit_keeps_old_output(d):
     np.savez(big, u=np.zeros(200_000), y=np.zeros(200_000), fs=FS)
     old = d / "old.npz"
     old.write_bytes(b"previous")
-    cmd = (f"ulimit -f 100; exec {sys.executable} -m benchmarks.cli preprocess {big} --segment 1000 -o {old}")
-    proc = subprocess.run(["bash", "-c", cmd], capture_output=True, text=True, cwd=d, timeout=120,
-                          env={**os.environ, "PYTHONPATH": str(ROOT)})
+    cmd = f"ulimit -f 100; exec {sys.executable} -m benchmarks.cli preprocess {big} --segment 1000 -o {old}"
+    proc = subprocess.run(
+        ["bash", "-c", cmd],
+        capture_output=True,
+        text=True,
+        cwd=d,
+        timeout=120,
+        env={**os.environ, "PYTHONPATH": str(ROOT)},
+    )
     assert proc.returncode == 2 and "cannot write" in proc.stderr and len(proc.stderr.strip().splitlines()) == 1, (
         proc.stderr
     )
@@ -192,8 +228,11 @@ def test_fs_contradicting_time_column_refused_with_both_values(tmp_path, capsys)
     line = refused(["preprocess", p, "--fs", "2000", "--remove-offset", "-o", tmp_path / "o.npz"], tmp_path, capsys)
     assert "2000" in line and "1000" in line and "time_s" in line
     np.savetxt(tmp_path / "s.csv", np.column_stack([np.arange(50) / 100, np.ones(50), np.ones(50)]), header="t,u,y")
-    line = refused(["preprocess", tmp_path / "s.csv", "--fs", "1000", "--remove-offset", "-o", tmp_path / "o.npz"],
-                   tmp_path, capsys)
+    line = refused(
+        ["preprocess", tmp_path / "s.csv", "--fs", "1000", "--remove-offset", "-o", tmp_path / "o.npz"],
+        tmp_path,
+        capsys,
+    )
     assert "1000" in line and "100 Hz" in line
 
 
@@ -238,53 +277,83 @@ def test_mat73_external_link_refused(tmp_path):
 
 
 def test_est_and_val_at_different_rates_refused(d, capsys):
-    for argv in (["identify", "arx", "--est", d / "in.npz", "--val", d / "val100.npz"],
-                 ["identify", "arx", "--est", d / "in.npz", "--est", d / "val100.npz"],
-                 ["calibrate", "cantilever", "--data", d / "m.npz", "--val", d / "m100.npz"],
-                 ["search", "arx", "--est", d / "in.npz", "--val", d / "val100.npz", "--grid", "ny=1",
-                  "--storage", d / "s.db"]):
+    for argv in (
+        ["identify", "arx", "--est", d / "in.npz", "--val", d / "val100.npz"],
+        ["identify", "arx", "--est", d / "in.npz", "--est", d / "val100.npz"],
+        ["calibrate", "cantilever", "--data", d / "m.npz", "--val", d / "m100.npz"],
+        ["search", "arx", "--est", d / "in.npz", "--val", d / "val100.npz", "--grid", "ny=1", "--storage", d / "s.db"],
+    ):
         line = refused(argv, d, capsys, "share fs")
         assert "100 Hz" in line and "1000 Hz" in line
 
 
 # ------------------------------------------------------------------ options
-@pytest.mark.parametrize("extra,expected", [
-    (["identify", "arx", "--est", "{d}/in.npz", "--set", "ny=inf"], "ny"),
-    (["identify", "arx", "--est", "{d}/in.npz", "--set", "ny=1e300"], "ny"),
-    (["identify", "narx-mlp", "--est", "{d}/in.npz", "--set", "hidden=-4"], "hidden"),
-    (["diagnose", "cantilever", "--data", "{d}/m.npz", "--skip", "-5"], "--skip"),
-    (["score", "--margin", "nan", "--update-baselines", "--baselines", "{d}/b.json"], "--margin"),
-    (["simulate", "cantilever", "--input", "{d}/m.npz", "--fs", "1e308", "-o", "{d}/o.npz"],
-     "outside the accepted range"),
-    (["simulate", "cantilever", "--input", "{d}/m.npz", "--fs", "1e-300", "-o", "{d}/o.npz"],
-     "outside the accepted range"),
-    (["simulate", "cantilever", "--input", "{d}/m.npz", "--seed", "1e30", "-o", "{d}/o.npz"], "seed"),
-    (["search", "arx", "--est", "{d}/in.npz", "--val", "{d}/in.npz", "--grid", "ny=1", "--repeats",
-      "99999999999999999999"], "--repeats"),
-    (["signal", "multisine", "--fs", "1e4", "--duration", "1e5", "-o", "{d}/s.npz"], "GiB"),
-    (["preprocess", "{d}/in.npz", "--bandpass", "1:10:1000000000", "-o", "{d}/o.npz"], "--bandpass"),
-    (["export-fmu", "cantilever", "--fs", "1e308", "-o", "{d}/x.fmu"], "outside the accepted range"),
-])
+@pytest.mark.parametrize(
+    "extra,expected",
+    [
+        (["identify", "arx", "--est", "{d}/in.npz", "--set", "ny=inf"], "ny"),
+        (["identify", "arx", "--est", "{d}/in.npz", "--set", "ny=1e300"], "ny"),
+        (["identify", "narx-mlp", "--est", "{d}/in.npz", "--set", "hidden=-4"], "hidden"),
+        (["diagnose", "cantilever", "--data", "{d}/m.npz", "--skip", "-5"], "--skip"),
+        (["score", "--margin", "nan", "--update-baselines", "--baselines", "{d}/b.json"], "--margin"),
+        (
+            ["simulate", "cantilever", "--input", "{d}/m.npz", "--fs", "1e308", "-o", "{d}/o.npz"],
+            "outside the accepted range",
+        ),
+        (
+            ["simulate", "cantilever", "--input", "{d}/m.npz", "--fs", "1e-300", "-o", "{d}/o.npz"],
+            "outside the accepted range",
+        ),
+        (["simulate", "cantilever", "--input", "{d}/m.npz", "--seed", "1e30", "-o", "{d}/o.npz"], "seed"),
+        (
+            [
+                "search",
+                "arx",
+                "--est",
+                "{d}/in.npz",
+                "--val",
+                "{d}/in.npz",
+                "--grid",
+                "ny=1",
+                "--repeats",
+                "99999999999999999999",
+            ],
+            "--repeats",
+        ),
+        (["signal", "multisine", "--fs", "1e4", "--duration", "1e5", "-o", "{d}/s.npz"], "GiB"),
+        (["preprocess", "{d}/in.npz", "--bandpass", "1:10:1000000000", "-o", "{d}/o.npz"], "--bandpass"),
+        (["export-fmu", "cantilever", "--fs", "1e308", "-o", "{d}/x.fmu"], "outside the accepted range"),
+    ],
+)
 def test_bad_option_values(extra, expected, d, capsys):
     refused([a.replace("{d}", str(d)) for a in extra], d, capsys, expected)
 
 
-@pytest.mark.parametrize("payload,expected", [
-    ({"params": [1, 2]}, "'params' must be an object"),
-    ({"params": {}, "effects": 5}, "'effects' must be a list"),
-    ({"params": {"gain_um_per_v": [1, 2]}}, "must be a number"),
-    ({"params": {"gain_um_per_v": None}}, "must be a number"),
-])
+@pytest.mark.parametrize(
+    "payload,expected",
+    [
+        ({"params": [1, 2]}, "'params' must be an object"),
+        ({"params": {}, "effects": 5}, "'effects' must be a list"),
+        ({"params": {"gain_um_per_v": [1, 2]}}, "must be a number"),
+        ({"params": {"gain_um_per_v": None}}, "must be a number"),
+    ],
+)
 def test_params_file_structure(payload, expected, d, capsys):
     p = d / "p.json"
     p.write_text(json.dumps({"format": "piezotwin-params/1", "twin": "cantilever", **payload}))
     refused(["simulate", "cantilever", "--input", d / "m.npz", "--params", p, "-o", d / "o.npz"], d, capsys, expected)
 
 
-@pytest.mark.parametrize("meta,expected", [
-    ({"units": 5}, "'units'"), ({"t0": "abc"}, "'t0'"), ({"segments": 5}, "'segments'"),
-    ({"segments": [{"start": "a", "stop": 3}]}, "segments"), ({"preprocessing": {}}, "'preprocessing'"),
-])
+@pytest.mark.parametrize(
+    "meta,expected",
+    [
+        ({"units": 5}, "'units'"),
+        ({"t0": "abc"}, "'t0'"),
+        ({"segments": 5}, "'segments'"),
+        ({"segments": [{"start": "a", "stop": 3}]}, "segments"),
+        ({"preprocessing": {}}, "'preprocessing'"),
+    ],
+)
 def test_npz_metadata_types(meta, expected, tmp_path):
     np.savez(tmp_path / "m.npz", u=np.ones(10), y=np.ones(10), fs=FS, meta=np.array(json.dumps(meta)))
     with pytest.raises(DataError, match=expected):
@@ -304,20 +373,41 @@ def test_npz_metadata_types(meta, expected, tmp_path):
 )
 def test_search_storage_refused(storage, expected, d, capsys):
     (d / "data.csv").write_text("u,y\n1,2\n")
-    refused(["search", "arx", "--est", d / "in.npz", "--val", d / "in.npz", "--grid", "ny=1",
-             "--storage", storage.replace("{d}", str(d))], d, capsys, expected)
+    refused(
+        [
+            "search",
+            "arx",
+            "--est",
+            d / "in.npz",
+            "--val",
+            d / "in.npz",
+            "--grid",
+            "ny=1",
+            "--storage",
+            storage.replace("{d}", str(d)),
+        ],
+        d,
+        capsys,
+        expected,
+    )
 
 
 def test_two_processes_create_a_new_sqlite_store(tmp_path):
     """Three processes opening the same new SQLite store at once all succeed (table creation under a lock).
     Without the lock this fails most of the time ('table studies already exists', alembic_version UNIQUE)."""
-    script = ("import sys, optuna; from sysid.search import _open_storage; from sysid.search.storage_check "
-              "import init_sqlite; init_sqlite(sys.argv[1], _open_storage); optuna.create_study(study_name='s', "
-              "storage=_open_storage(sys.argv[1]), load_if_exists=True); print('ok')")
+    script = (
+        "import sys, optuna; from sysid.search import _open_storage; from sysid.search.storage_check "
+        "import init_sqlite; init_sqlite(sys.argv[1], _open_storage); optuna.create_study(study_name='s', "
+        "storage=_open_storage(sys.argv[1]), load_if_exists=True); print('ok')"
+    )
     url = f"sqlite:///{tmp_path / 'new.db'}"
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
-    procs = [subprocess.Popen([sys.executable, "-c", script, url], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                              text=True, env=env) for _ in range(3)]
+    procs = [
+        subprocess.Popen(
+            [sys.executable, "-c", script, url], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env
+        )
+        for _ in range(3)
+    ]
     for p in procs:
         out, err = p.communicate(timeout=120)
         assert p.returncode == 0 and out.strip() == "ok", err
@@ -328,8 +418,12 @@ def test_score_baselines_file_refused(content, expected, d, capsys):
     f = d / "b.json"
     if content is not None:
         f.write_text(content)
-    refused(["score", "--check", "--baselines", f, "--identifiers", "arx", "--datasets", "silverbox", "--quick"],
-            d, capsys, expected)
+    refused(
+        ["score", "--check", "--baselines", f, "--identifiers", "arx", "--datasets", "silverbox", "--quick"],
+        d,
+        capsys,
+        expected,
+    )
 
 
 def test_generate_rate_option(d, capsys):

@@ -46,6 +46,11 @@ def test_diagnosis_pipeline_is_small_pieces():
 def test_comments_do_not_cite_issues_or_outside_documents():
     files = _modules(*PACKAGES, "tests") + [REPO / "Makefile", REPO / ".ci" / "run", REPO / "pyproject.toml"]
     files += sorted((REPO / "benchmarks" / "settings").rglob("*.toml"))
-    hits = [f"{p.relative_to(REPO)}:{i}: {line.strip()}" for p in files if p != Path(__file__)
-            for i, line in enumerate(p.read_text(encoding="utf-8").splitlines(), 1) if CITATION.search(line)]
+    hits = [
+        f"{p.relative_to(REPO)}:{i}: {line.strip()}"
+        for p in files
+        if p != Path(__file__)
+        for i, line in enumerate(p.read_text(encoding="utf-8").splitlines(), 1)
+        if CITATION.search(line)
+    ]
     assert hits == []

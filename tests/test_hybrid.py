@@ -110,8 +110,18 @@ def _cli(*args):
 def test_cli_saves_the_hybrid_twin(backlash_files, tmp_path):
     d = backlash_files
     path = tmp_path / "h.json"
-    r = _cli("cantilever", "--data", str(d / "est.npz"), "--val", str(d / "val.npz"), "--max-rounds", "0",
-             "--save-hybrid", str(path), "--json")
+    r = _cli(
+        "cantilever",
+        "--data",
+        str(d / "est.npz"),
+        "--val",
+        str(d / "val.npz"),
+        "--max-rounds",
+        "0",
+        "--save-hybrid",
+        str(path),
+        "--json",
+    )
     assert r.returncode == 0, r.stderr
     out = json.loads(r.stdout)
     assert out["verdict"] == "unexplained" and out["hybrid"]["saved"] == str(path)
@@ -123,8 +133,17 @@ def test_cli_saves_the_hybrid_twin(backlash_files, tmp_path):
     r2 = 1 - np.sum((val.y - y) ** 2) / np.sum((val.y - val.y.mean()) ** 2)
     # the loaded twin is the one scored: its free run from rest on the (separate) validation record
     assert r2 == pytest.approx(out["hybrid"]["after"]["r2_val"], abs=1e-9)
-    r = _cli("cantilever", "--data", str(d / "est.npz"), "--val", str(d / "val.npz"), "--max-rounds", "0",
-             "--save-hybrid", str(path))
+    r = _cli(
+        "cantilever",
+        "--data",
+        str(d / "est.npz"),
+        "--val",
+        str(d / "val.npz"),
+        "--max-rounds",
+        "0",
+        "--save-hybrid",
+        str(path),
+    )
     assert r.returncode == 0 and "hybrid twin (twin + " in r.stdout and "hybrid twin -> " in r.stdout
 
 

@@ -95,14 +95,19 @@ def test_export_hybrid_bad_input(hybrids, tmp_path, capsys):
 
     saved = hybrids[0]["arx"].save(tmp_path / "h.json")
     (tmp_path / "x.json").write_text(json.dumps({"format": "something-else"}))
-    for args, msg in ((["--hybrid", str(tmp_path / "x.json")], "not a piezotwin hybrid twin file"),
-                      (["cantilever", "--hybrid", str(saved)], "one of the three"),
-                      (["--hybrid", str(saved), "--fs", "2000", "-o", str(tmp_path / "h.fmu")], "at 1000"),
-                      (["--hybrid", str(saved), "-o", str(tmp_path / "h.zip")], "must end in .fmu")):
+    for args, msg in (
+        (["--hybrid", str(tmp_path / "x.json")], "not a piezotwin hybrid twin file"),
+        (["cantilever", "--hybrid", str(saved)], "one of the three"),
+        (["--hybrid", str(saved), "--fs", "2000", "-o", str(tmp_path / "h.fmu")], "at 1000"),
+        (["--hybrid", str(saved), "-o", str(tmp_path / "h.zip")], "must end in .fmu"),
+    ):
         assert main(["export-fmu", *args]) == 2, args
         err = capsys.readouterr().err
         assert msg in err and "Traceback" not in err and len(err.strip().splitlines()) == 1, (args, err)
     # one run as a user's shell sees it: a separate process, exit status 2, one line
-    r = subprocess.run([sys.executable, "-m", "benchmarks.cli", "export-fmu", "--hybrid", str(tmp_path / "x.json")],
-                       capture_output=True, text=True)
+    r = subprocess.run(
+        [sys.executable, "-m", "benchmarks.cli", "export-fmu", "--hybrid", str(tmp_path / "x.json")],
+        capture_output=True,
+        text=True,
+    )
     assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1 and "Traceback" not in r.stderr, r.stderr

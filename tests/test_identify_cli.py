@@ -24,17 +24,21 @@ def files(tmp_path):
     return est, val
 
 
-@pytest.mark.parametrize("ident,sets", [
-    ("narx-poly", "ny=2,nu=2,degree=2,rho_p=1e-4,criterion=err"),
-    ("narmax-poly", "ny=2,nu=2,ne=3,degree=2,rho_p=1e-4,criterion=bic"),
-    ("arx", "ny=2,nu=2"),
-    ("armax", "ny=2,nu=2,ne=2"),
-])
+@pytest.mark.parametrize(
+    "ident,sets",
+    [
+        ("narx-poly", "ny=2,nu=2,degree=2,rho_p=1e-4,criterion=err"),
+        ("narmax-poly", "ny=2,nu=2,ne=3,degree=2,rho_p=1e-4,criterion=bic"),
+        ("arx", "ny=2,nu=2"),
+        ("armax", "ny=2,nu=2,ne=2"),
+    ],
+)
 def test_identify_json_and_model_round_trip(files, tmp_path, capsys, ident, sets):
     est, val = files
     model_path = tmp_path / f"{ident}.json"
-    code = main(["identify", ident, "--est", str(est), "--val", str(val), "--set", sets, "--json",
-                 "-o", str(model_path)])
+    code = main(
+        ["identify", ident, "--est", str(est), "--val", str(val), "--set", sets, "--json", "-o", str(model_path)]
+    )
     assert code == 0
     out = json.loads(capsys.readouterr().out)
     assert KEYS <= set(out)
@@ -68,8 +72,21 @@ def test_identify_several_experiments_and_plots(tmp_path, capsys):
     a, b = tmp_path / "a.npz", tmp_path / "b.npz"
     write_record(narmax_record(1000, seed=1), a)
     write_record(narmax_record(1000, seed=2), b)
-    code = main(["identify", "narmax-poly", "--est", str(a), "--est", str(b), "--set", "ne=1",
-                 "--plots", str(tmp_path / "plots"), "--json"])
+    code = main(
+        [
+            "identify",
+            "narmax-poly",
+            "--est",
+            str(a),
+            "--est",
+            str(b),
+            "--set",
+            "ne=1",
+            "--plots",
+            str(tmp_path / "plots"),
+            "--json",
+        ]
+    )
     assert code == 0
     out = json.loads(capsys.readouterr().out)
     assert out["validation"] is None and out["estimation"]["one_step"]["r2"] > 0.95
@@ -79,13 +96,16 @@ def test_identify_several_experiments_and_plots(tmp_path, capsys):
             assert fh.read(8) == b"\x89PNG\r\n\x1a\n"
 
 
-@pytest.mark.parametrize("args,msg", [
-    (["identify", "nosuch", "--est", "EST"], "unknown identifier"),
-    (["identify", "narx-poly", "--est", "EST", "--set", "bogus=1"], "bogus"),
-    (["identify", "narx-poly", "--est", "EST", "--set", "ny=two"], "ny"),
-    (["identify", "narx-poly", "--est", "EST", "--set", "ny=40,nu=40"], "too few"),
-    (["identify", "arx", "--est", "missing.npz"], "missing.npz"),
-])
+@pytest.mark.parametrize(
+    "args,msg",
+    [
+        (["identify", "nosuch", "--est", "EST"], "unknown identifier"),
+        (["identify", "narx-poly", "--est", "EST", "--set", "bogus=1"], "bogus"),
+        (["identify", "narx-poly", "--est", "EST", "--set", "ny=two"], "ny"),
+        (["identify", "narx-poly", "--est", "EST", "--set", "ny=40,nu=40"], "too few"),
+        (["identify", "arx", "--est", "missing.npz"], "missing.npz"),
+    ],
+)
 def test_identify_errors_exit_2_one_line(files, capsys, args, msg):
     est, _ = files
     args = [str(est) if a == "EST" else a for a in args]

@@ -46,6 +46,11 @@ _UPWARD_PATH = re.compile(r"""["']benchmarks["']\s*/|/\s*["']benchmarks["']|["']
 
 
 def test_lower_packages_build_no_path_into_the_benchmark_data():
-    offenders = [f"{p.relative_to(ROOT)}:{i}" for pkg in ("sysid", "twins") for p in sorted((ROOT / pkg).rglob("*.py"))
-                 for i, line in enumerate(p.read_text(encoding="utf-8").splitlines(), 1) if _UPWARD_PATH.search(line)]
+    offenders = [
+        f"{p.relative_to(ROOT)}:{i}"
+        for pkg in ("sysid", "twins")
+        for p in sorted((ROOT / pkg).rglob("*.py"))
+        for i, line in enumerate(p.read_text(encoding="utf-8").splitlines(), 1)
+        if _UPWARD_PATH.search(line)
+    ]
     assert offenders == []

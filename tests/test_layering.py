@@ -55,11 +55,13 @@ def _modules(root: Path, packages=PACKAGES) -> dict[str, Path]:
 
 def _is_type_checking(test: ast.expr) -> bool:
     return (isinstance(test, ast.Name) and test.id == "TYPE_CHECKING") or (
-        isinstance(test, ast.Attribute) and test.attr == "TYPE_CHECKING")
+        isinstance(test, ast.Attribute) and test.attr == "TYPE_CHECKING"
+    )
 
 
 def _imports(tree: ast.AST):
     """Yield (node, runtime) for every import statement, function bodies included."""
+
     def walk(node: ast.AST, runtime: bool):
         for child in ast.iter_child_nodes(node):
             if isinstance(child, (ast.Import, ast.ImportFrom)):
@@ -71,6 +73,7 @@ def _imports(tree: ast.AST):
                     yield from walk(ast.Module(body=[stmt], type_ignores=[]), runtime)
             else:
                 yield from walk(child, runtime)
+
     yield from walk(tree, True)
 
 
@@ -215,8 +218,11 @@ def _describe(cycles: list[list[str]], edges: list[Edge]) -> list[str]:
     lines = []
     for group in cycles:
         members = set(group)
-        lines.append(" <-> ".join(group) + ": " + "; ".join(dict.fromkeys(
-            str(e) for e in edges if e.source in members and e.target in members)))
+        lines.append(
+            " <-> ".join(group)
+            + ": "
+            + "; ".join(dict.fromkeys(str(e) for e in edges if e.source in members and e.target in members))
+        )
     return lines
 
 
@@ -273,11 +279,13 @@ def _toy_tree(root: Path) -> None:
             "sysid/report/__init__.py": "",
             "sysid/report/figs.py": "def draw():\n    return 1\n",
             "sysid/data/__init__.py": "",
-            "sysid/data/record.py": ("def load():\n    from twins.base import Twin  # upward, function-local\n"
-                                     "    return Twin\n"),
+            "sysid/data/record.py": (
+                "def load():\n    from twins.base import Twin  # upward, function-local\n    return Twin\n"
+            ),
             "twins/__init__.py": "",
-            "twins/base.py": ("from sysid.signals.gen import np\n\ndef fit():\n    from twins.calibration import go\n"
-                              "    return go\n"),
+            "twins/base.py": (
+                "from sysid.signals.gen import np\n\ndef fit():\n    from twins.calibration import go\n    return go\n"
+            ),
             "twins/calibration.py": "from twins.base import fit\n\ndef go():\n    return fit\n",
             "twins/typed.py": "from typing import TYPE_CHECKING\nif TYPE_CHECKING:\n    from twins.quiet import Q\n",
             "twins/quiet.py": "from twins import typed\n",
@@ -294,15 +302,19 @@ TOY_FLOORS = (("sysid.data",), ("sysid.signals",), ("sysid.report",))
 def test_checker_reports_a_wrong_import(tmp_path):
     _toy_tree(tmp_path)
     bad = layering_violations(import_edges(tmp_path))
-    assert bad == ["benchmarks/scoring.py:1: benchmarks.scoring imports benchmarks.cli",
-                   "sysid/data/record.py:2: sysid.data.record imports twins.base"]
+    assert bad == [
+        "benchmarks/scoring.py:1: benchmarks.scoring imports benchmarks.cli",
+        "sysid/data/record.py:2: sysid.data.record imports twins.base",
+    ]
 
 
 def test_checker_reports_a_family_importing_a_higher_one(tmp_path):
     _toy_tree(tmp_path)
     bad = family_violations(import_edges(tmp_path), TOY_FLOORS)
-    assert bad == ["sysid/signals/gen.py:2: sysid.signals.gen imports sysid.report.figs "
-                   "(floor 1 sysid.signals -> floor 2 sysid.report)"]
+    assert bad == [
+        "sysid/signals/gen.py:2: sysid.signals.gen imports sysid.report.figs "
+        "(floor 1 sysid.signals -> floor 2 sysid.report)"
+    ]
     # the same import is fine once report stands below signals
     assert family_violations(import_edges(tmp_path), (("sysid.data",), ("sysid.report",), ("sysid.signals",))) == []
 
@@ -312,17 +324,24 @@ def test_checker_reports_a_cycle(tmp_path):
     edges = import_edges(tmp_path)
     cycles = import_cycles(edges)
     # base <-> calibration (one side function-local), scoring <-> cli, and typed <-> quiet (one side type-only)
-    assert cycles == [["benchmarks.cli", "benchmarks.scoring"], ["twins.base", "twins.calibration"],
-                      ["twins.quiet", "twins.typed"]]
+    assert cycles == [
+        ["benchmarks.cli", "benchmarks.scoring"],
+        ["twins.base", "twins.calibration"],
+        ["twins.quiet", "twins.typed"],
+    ]
     assert "twins/base.py:4: twins.base imports twins.calibration" in _describe(cycles, edges)[1]
 
 
 def test_a_package_listing_its_own_modules_is_no_cycle(tmp_path):
-    _write(tmp_path, {
-        "sysid/__init__.py": "",
-        "sysid/linear/__init__.py": ("from typing import TYPE_CHECKING\nif TYPE_CHECKING:\n"
-                                     "    from sysid.linear.arx import ARX\n"),
-        "sysid/linear/arx.py": "from sysid.linear import order\n",
-        "sysid/linear/order.py": "from sysid.linear import arx  # a real cycle\n",
-    })
+    _write(
+        tmp_path,
+        {
+            "sysid/__init__.py": "",
+            "sysid/linear/__init__.py": (
+                "from typing import TYPE_CHECKING\nif TYPE_CHECKING:\n    from sysid.linear.arx import ARX\n"
+            ),
+            "sysid/linear/arx.py": "from sysid.linear import order\n",
+            "sysid/linear/order.py": "from sysid.linear import arx  # a real cycle\n",
+        },
+    )
     assert import_cycles(import_edges(tmp_path, ("sysid",))) == [["sysid.linear.arx", "sysid.linear.order"]]

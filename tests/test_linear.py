@@ -10,7 +10,7 @@ from sysid.errors import ConfigError, DataError
 from sysid.linear.arx import ARMAX, ARX
 
 A = [1.0, -1.5, 0.7]
-B = [1.0, 0.5]          # applied to u(t - nk)
+B = [1.0, 0.5]  # applied to u(t - nk)
 C = [1.0, 0.6, 0.2]
 
 

@@ -81,10 +81,29 @@ def test_identify_cli_fits_a_mimo_armax_from_csv_columns(tmp_path, capsys):
 
     rec = _simulate(4_000, seed=6)
     path = tmp_path / "mimo.csv"
-    np.savetxt(path, np.c_[np.arange(len(rec)) / 100.0, rec.u, rec.y], delimiter=",", header="t,f1,f2,a1,a2",
-               comments="")
-    assert main(["identify", "armax", "--est", str(path), "--u-col", "f1,f2", "--y-col", "a1,a2",
-                 "--set", "ny=1,nu=1,ne=1", "--json", "-o", str(tmp_path / "m.json")]) == 0
+    np.savetxt(
+        path, np.c_[np.arange(len(rec)) / 100.0, rec.u, rec.y], delimiter=",", header="t,f1,f2,a1,a2", comments=""
+    )
+    assert (
+        main(
+            [
+                "identify",
+                "armax",
+                "--est",
+                str(path),
+                "--u-col",
+                "f1,f2",
+                "--y-col",
+                "a1,a2",
+                "--set",
+                "ny=1,nu=1,ne=1",
+                "--json",
+                "-o",
+                str(tmp_path / "m.json"),
+            ]
+        )
+        == 0
+    )
     out = json.loads(capsys.readouterr().out)
     assert out["n_parameters"] == 10
     m = load_model(tmp_path / "m.json")

@@ -28,7 +28,7 @@ def _lstsq_arx(rec, ny, nu, nk=1):
     """Closed-form ARX: ordinary least squares on the lagged columns."""
     L = max(ny, nk + nu - 1)
     y, u = rec.y.reshape(-1), rec.u.reshape(-1)
-    cols = [y[L - i:len(y) - i] for i in range(1, ny + 1)] + [u[L - j:len(u) - j] for j in range(nk, nk + nu)]
+    cols = [y[L - i : len(y) - i] for i in range(1, ny + 1)] + [u[L - j : len(u) - j] for j in range(nk, nk + nu)]
     return np.linalg.lstsq(np.column_stack(cols), y[L:], rcond=None)[0]
 
 
@@ -44,8 +44,9 @@ def test_arx_without_orders_chooses_and_reports():
     assert m.fit(est).chosen_orders_ == d["chosen_orders"]
 
 
-@pytest.mark.parametrize("kw,orders", [({"ny": 3, "nu": 3}, (3, 3)), ({"ny": 5}, (5, 2)), ({"nu": 4}, (2, 4)),
-                                       ({"orders": "given"}, (2, 2))])
+@pytest.mark.parametrize(
+    "kw,orders", [({"ny": 3, "nu": 3}, (3, 3)), ({"ny": 5}, (5, 2)), ({"nu": 4}, (2, 4)), ({"orders": "given"}, (2, 2))]
+)
 def test_arx_explicit_orders_as_before(kw, orders):
     est, _ = _sixth_order()
     m = ARX(**kw).fit(est)
@@ -91,8 +92,9 @@ def test_identify_cli_reports_the_chosen_orders(tmp_path, capsys):
     est, val = _sixth_order()
     write_record(est, tmp_path / "est.npz")
     write_record(val, tmp_path / "val.npz")
-    assert main(["identify", "arx", "--est", str(tmp_path / "est.npz"), "--val", str(tmp_path / "val.npz"),
-                 "--json"]) == 0
+    assert (
+        main(["identify", "arx", "--est", str(tmp_path / "est.npz"), "--val", str(tmp_path / "val.npz"), "--json"]) == 0
+    )
     out = json.loads(capsys.readouterr().out)
     assert out["chosen_orders"]["ny"] == out["params"]["ny"] >= 6
     assert main(["identify", "arx", "--est", str(tmp_path / "est.npz")]) == 0

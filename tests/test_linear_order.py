@@ -106,8 +106,19 @@ def test_identify_json_parameters_warnings_and_range(tmp_path, capsys):
     val = Record(2.0 * est.u, 2.0 * est.y, fs=100.0)
     write_record(est, tmp_path / "est.npz")
     write_record(val, tmp_path / "val.npz")
-    rc = main(["identify", "oe", "--est", str(tmp_path / "est.npz"), "--val", str(tmp_path / "val.npz"),
-               "--set", "nb=2,nf=2,nk=1", "--json"])
+    rc = main(
+        [
+            "identify",
+            "oe",
+            "--est",
+            str(tmp_path / "est.npz"),
+            "--val",
+            str(tmp_path / "val.npz"),
+            "--set",
+            "nb=2,nf=2,nk=1",
+            "--json",
+        ]
+    )
     assert rc == 0
     out = json.loads(capsys.readouterr().out)
     names = [p["name"] for p in out["parameters"]]
@@ -130,8 +141,21 @@ def test_orders_command_table_json_and_bad_grid(tmp_path, capsys):
 
     write_record(_sys(seed=6, nk=2), tmp_path / "est.npz")
     write_record(_sys(seed=7, nk=2), tmp_path / "val.npz")
-    rc = main(["orders", "oe", "--est", str(tmp_path / "est.npz"), "--val", str(tmp_path / "val.npz"),
-               "--grid", "1-2-3", "--json", "--plot", str(tmp_path / "o.png")])
+    rc = main(
+        [
+            "orders",
+            "oe",
+            "--est",
+            str(tmp_path / "est.npz"),
+            "--val",
+            str(tmp_path / "val.npz"),
+            "--grid",
+            "1-2-3",
+            "--json",
+            "--plot",
+            str(tmp_path / "o.png"),
+        ]
+    )
     out = json.loads(capsys.readouterr().out)
     assert rc == 0 and out["delay"] == [2] and [r["order"] for r in out["rows"]] == [1, 2, 3]
     assert out["best"]["bic"] == 2 and (tmp_path / "o.png").exists()

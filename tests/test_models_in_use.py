@@ -82,8 +82,10 @@ def test_identify_predict_compare_cli(ident, data, tmp_path, capsys):
     assert m.estimation_["units"] == {"u": "V", "y": "um"} and m.estimation_["n_samples"] == 1200
     for horizon, h in (("1", 1), ("3", 3), ("inf", None)):
         out = tmp_path / f"pred{horizon}.npz"
-        assert main(["predict", str(model), "--data", str(d / "val.npz"), "--horizon", horizon, "--json",
-                     "-o", str(out)]) == 0
+        assert (
+            main(["predict", str(model), "--data", str(d / "val.npz"), "--horizon", horizon, "--json", "-o", str(out)])
+            == 0
+        )
         res = json.loads(capsys.readouterr().out)
         yh = m.predict(val, h)
         assert np.array_equal(read_record(out).y, yh)  # the record written is the model's prediction
@@ -101,14 +103,28 @@ def test_identify_predict_compare_cli(ident, data, tmp_path, capsys):
     other = tmp_path / "arx.json"
     assert main(["identify", "arx", "--est", str(d / "est.npz"), "--set", "ny=2,nu=2", "-o", str(other)]) == 0
     capsys.readouterr()
-    assert main(["compare", str(model), str(other), "--data", str(d / "val.npz"), "--json",
-                 "--report", str(tmp_path / "rep")]) == 0
+    assert (
+        main(
+            [
+                "compare",
+                str(model),
+                str(other),
+                "--data",
+                str(d / "val.npz"),
+                "--json",
+                "--report",
+                str(tmp_path / "rep"),
+            ]
+        )
+        == 0
+    )
     res = json.loads(capsys.readouterr().out)
     skip = max(m.max_lag_, 2)
     assert [r["skip"] for r in res["models"]] == [skip, skip]
     yf = m.predict(val, None)
     assert res["models"][0]["metrics"]["r2"] == pytest.approx(
-        1 - np.sum((val.y[skip:] - yf[skip:]) ** 2) / np.sum((val.y[skip:] - val.y[skip:].mean()) ** 2), rel=1e-9)
+        1 - np.sum((val.y[skip:] - yf[skip:]) ** 2) / np.sum((val.y[skip:] - val.y[skip:].mean()) ** 2), rel=1e-9
+    )
     assert (tmp_path / "rep" / "compare.png").stat().st_size > 10_000
 
 
@@ -135,7 +151,7 @@ def test_python_api_on_arrays(ident, data, tmp_path):
     m = a.fit(est.u, est.y, fs=est.fs)
     assert m is a
     assert m.estimation_["fs"] == 1.0
-    free = m.predict(val.u)                        # free run from the input alone
+    free = m.predict(val.u)  # free run from the input alone
     assert free.shape == val.u.shape and np.all(free[: m.max_lag_] == 0.0)
     assert np.array_equal(free, m.predict(Record(val.u, None, fs=1.0)))
     assert np.array_equal(m.predict(val.u, val.y), m.predict(val, 1))  # with y: one step by default
@@ -221,14 +237,28 @@ def _bad_files(tmp_path, est):
     edited_json.write_text(js.read_text().replace('"identifier": "arx"', '"identifier": "armax"'))
     legacy = tmp_path / "legacy.json"  # an old (unchecksummed) arx file edited to say narx-mlp
     m = ARX().fit(est)
-    legacy.write_text(json.dumps({"format": "piezotwin-model/1", "identifier": "narx-mlp",
-                                  "params": {}, "state": json.loads(json.dumps(m._state(), default=float))}))
+    legacy.write_text(
+        json.dumps(
+            {
+                "format": "piezotwin-model/1",
+                "identifier": "narx-mlp",
+                "params": {},
+                "state": json.loads(json.dumps(m._state(), default=float)),
+            }
+        )
+    )
     trunc_json = tmp_path / "truncated.json"
     trunc_json.write_text(js.read_text()[: len(js.read_text()) // 2])
     foreign = tmp_path / "settings.json"
     foreign.write_text(json.dumps({"name": "not a model", "values": [1, 2, 3]}))
-    return {trunc: "truncated", trunc_json: "truncated", edited: "checksum", edited_json: "checksum",
-            legacy: "not a valid narx-mlp model", foreign: "not a piezotwin model file"}
+    return {
+        trunc: "truncated",
+        trunc_json: "truncated",
+        edited: "checksum",
+        edited_json: "checksum",
+        legacy: "not a valid narx-mlp model",
+        foreign: "not a piezotwin model file",
+    }
 
 
 def test_bad_model_files_exit_2_with_one_line(data, tmp_path, capsys):
@@ -236,8 +266,10 @@ def test_bad_model_files_exit_2_with_one_line(data, tmp_path, capsys):
     for path, words in _bad_files(tmp_path, est).items():
         with pytest.raises(InputError, match=words):
             load_model(path)
-        for argv in (["predict", str(path), "--data", str(d / "val.npz")],
-                     ["compare", str(path), "--data", str(d / "val.npz")]):
+        for argv in (
+            ["predict", str(path), "--data", str(d / "val.npz")],
+            ["compare", str(path), "--data", str(d / "val.npz")],
+        ):
             assert main(argv) == 2, path
             err = capsys.readouterr().err.strip()
             assert len(err.splitlines()) == 1 and str(path) in err and words in err, err

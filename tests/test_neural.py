@@ -28,10 +28,20 @@ def plant():
 
 
 # ------------------------------------------------------------------ structure (published numbers)
-@pytest.mark.parametrize("layers,width,expected", [
-    (3, 25, 1851), (3, 50, 6201), (3, 100, 22401), (4, 25, 2501), (4, 50, 8751), (4, 100, 32501),
-    (5, 25, 3151), (5, 50, 11301), (5, 100, 42601),
-])
+@pytest.mark.parametrize(
+    "layers,width,expected",
+    [
+        (3, 25, 1851),
+        (3, 50, 6201),
+        (3, 100, 22401),
+        (4, 25, 2501),
+        (4, 50, 8751),
+        (4, 100, 32501),
+        (5, 25, 3151),
+        (5, 50, 11301),
+        (5, 100, 42601),
+    ],
+)
 def test_parameter_count_matches_table_4_2(layers, width, expected):
     # Table 4.2: ny = nu = 10 (20 regressors, eq. 2-14), one output
     assert count_mlp_parameters(20, [width] * layers, 1) == expected
@@ -98,11 +108,14 @@ def test_divergence_gives_nan_and_warning():
 
 
 # ------------------------------------------------------------------ training and persistence
-@pytest.mark.parametrize("cls,kw", [
-    (NARXMLP, dict(ny=4, nu=4, hidden=[16, 16], activation="tanh", lr=1e-3, epochs=40)),
-    (NARXMLPSim, dict(ny=4, nu=4, hidden=[16, 16], activation="tanh", epochs=3, pretrain_epochs=30, window=20)),
-    (RNNStateSpace, dict(n_state=16, n_enc=8, enc_hidden=[32], window=40, batch_size=16, epochs=40, lr=5e-3)),
-])
+@pytest.mark.parametrize(
+    "cls,kw",
+    [
+        (NARXMLP, dict(ny=4, nu=4, hidden=[16, 16], activation="tanh", lr=1e-3, epochs=40)),
+        (NARXMLPSim, dict(ny=4, nu=4, hidden=[16, 16], activation="tanh", epochs=3, pretrain_epochs=30, window=20)),
+        (RNNStateSpace, dict(n_state=16, n_enc=8, enc_hidden=[32], window=40, batch_size=16, epochs=40, lr=5e-3)),
+    ],
+)
 def test_learns_saves_loads_identically(plant, tmp_path, cls, kw):
     est, val = plant
     m = cls(seed=1, device="cpu", **kw).fit(est)
@@ -166,7 +179,7 @@ def test_rnn_k_step_matches_free_run_from_each_start(plant):
     ks = m.predict(short, k)
     for t in (m.max_lag_ + 10, 120, 199):
         start = t - k + 1
-        sub = short[start - m.max_lag_: t + 1]  # free run from the start encodes exactly at `start`
+        sub = short[start - m.max_lag_ : t + 1]  # free run from the start encodes exactly at `start`
         fr = m.predict(sub, None)
         assert ks[t] == pytest.approx(fr[-1], rel=1e-10, abs=1e-12)
 
@@ -189,11 +202,14 @@ def test_hand_written_backprop_equals_autograd(activation):
     assert net.check_grad_storage()
 
 
-@pytest.mark.parametrize("name,opts", [
-    ("narx-mlp", "ny=3,nu=3,hidden=8-8,epochs=2,device=cpu"),
-    ("narx-mlp-sim", "ny=3,nu=3,hidden=8,epochs=1,pretrain_epochs=1,window=10,device=cpu"),
-    ("rnn", "n_state=4,n_enc=4,enc_hidden=8,window=20,epochs=1,device=cpu"),
-])
+@pytest.mark.parametrize(
+    "name,opts",
+    [
+        ("narx-mlp", "ny=3,nu=3,hidden=8-8,epochs=2,device=cpu"),
+        ("narx-mlp-sim", "ny=3,nu=3,hidden=8,epochs=1,pretrain_epochs=1,window=10,device=cpu"),
+        ("rnn", "n_state=4,n_enc=4,enc_hidden=8,window=20,epochs=1,device=cpu"),
+    ],
+)
 def test_identify_cli_same_json_as_polynomial_models(tmp_path, plant, capsys, name, opts):
     import json
 
@@ -204,8 +220,21 @@ def test_identify_cli_same_json_as_polynomial_models(tmp_path, plant, capsys, na
     write_record(est, tmp_path / "est.npz")
     write_record(val, tmp_path / "val.npz")
     model_file = tmp_path / "m.pt"
-    code = main(["identify", name, "--est", str(tmp_path / "est.npz"), "--val", str(tmp_path / "val.npz"),
-                 "--set", opts, "--json", "-o", str(model_file)])
+    code = main(
+        [
+            "identify",
+            name,
+            "--est",
+            str(tmp_path / "est.npz"),
+            "--val",
+            str(tmp_path / "val.npz"),
+            "--set",
+            opts,
+            "--json",
+            "-o",
+            str(model_file),
+        ]
+    )
     assert code == 0
     out = json.loads(capsys.readouterr().out)
     for key in ("identifier", "params", "n_parameters", "fit_seconds", "terms", "estimation", "validation"):
@@ -262,7 +291,7 @@ def test_sim_warm_start_is_the_one_step_model_and_tail_selection(plant):
     np.testing.assert_array_equal(warm.weights_, osa.weights_)
     sim = NARXMLPSim(**kw, epochs=4, lr=3e-3, window=20, pretrain_epochs=3, pretrain_lr=1e-3, select_tail=0.25).fit(est)
     assert 0 <= sim.selected_epoch_ <= 4
-    tail = est[1500 - sim.max_lag_:]  # the held-out 500 samples with their initial conditions
+    tail = est[1500 - sim.max_lag_ :]  # the held-out 500 samples with their initial conditions
     assert r2(tail.y, sim.predict(tail, None), sim.max_lag_) == pytest.approx(sim.selection_r2_, abs=1e-9)
     with pytest.raises(ConfigError, match="select_tail"):
         NARXMLPSim(**kw, select_tail=0.7).fit(est)

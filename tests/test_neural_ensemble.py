@@ -33,6 +33,7 @@ def plant():
 def _mean_net(members, sizes, code, linear):
     def f(x):
         return np.mean([mlp_forward_np(w, sizes, code, x, linear) for w in members], axis=0)
+
     return f
 
 
@@ -42,7 +43,7 @@ def _regressor(y, u, t, ny, nu, nk):
 
 def _reference_predictions(model, members, val, horizon):
     """Normalised-unit reference by plain loops: the mean of the members' outputs, fed back for free run / k steps."""
-    (un, yn), = normalised_pairs([val], model.normaliser_)
+    ((un, yn),) = normalised_pairs([val], model.normaliser_)
     sizes = [model.sizes_[0], *model.hidden, model.sizes_[-1]]
     net = _mean_net([m.weights_ for m in members], sizes, ACT_CODE[model.activation], model.linear)
     lag, n = model.max_lag_, len(val)
@@ -137,15 +138,16 @@ def test_ensemble_one_is_the_single_network(plant):
     ens = NARXMLP(**{**common, "ensemble": 2}).fit(est)
     single = NARXMLP(**{**common, "seed": 4 * 2 + 1}).fit(est)
     n_in = ens.sizes_[0]
-    W1 = ens.weights_[:n_in * 12].reshape(12, n_in)
-    np.testing.assert_array_equal(W1[6:], single.weights_[:n_in * 6].reshape(6, n_in))
+    W1 = ens.weights_[: n_in * 12].reshape(12, n_in)
+    np.testing.assert_array_equal(W1[6:], single.weights_[: n_in * 6].reshape(6, n_in))
 
 
 @pytest.mark.parametrize("suffix", [".json", ".pt"])
 def test_ensemble_saved_and_loaded(plant, tmp_path, suffix):
     est, _, val = plant
-    m = NARXMLPSim(ny=3, nu=2, hidden=[6], device="cpu", epochs=1, pretrain_epochs=1, window=10, linear=True,
-                   ensemble=3, seed=1).fit(est)
+    m = NARXMLPSim(
+        ny=3, nu=2, hidden=[6], device="cpu", epochs=1, pretrain_epochs=1, window=10, linear=True, ensemble=3, seed=1
+    ).fit(est)
     m2 = load_model(m.save(tmp_path / f"ens{suffix}"))
     assert m2.ensemble == 3 and m2.sizes_ == m.sizes_ and m2.n_parameters_ == m.n_parameters_
     np.testing.assert_array_equal(m2.weights_, m.weights_)

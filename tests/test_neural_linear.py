@@ -46,20 +46,23 @@ def _reference_net(flat, sizes, code, x, linear):
         n_in, n_out = sizes[i], sizes[i + 1]
         W = np.array([[flat[o + j * n_in + m] for m in range(n_in)] for j in range(n_out)])
         o += n_in * n_out
-        a = W @ a + flat[o:o + n_out]
+        a = W @ a + flat[o : o + n_out]
         o += n_out
         if i < len(sizes) - 2:
             a = act(a)
     if linear:
-        a = a + flat[o:o + sizes[0] * sizes[-1]].reshape(sizes[-1], sizes[0]) @ x
+        a = a + flat[o : o + sizes[0] * sizes[-1]].reshape(sizes[-1], sizes[0]) @ x
     return a
 
 
 # ------------------------------------------------------------------ untrained = least-squares ARX
-@pytest.mark.parametrize("cls,kw", [
-    (NARXMLP, dict(epochs=0)),
-    (NARXMLPSim, dict(epochs=0, pretrain_epochs=0)),
-])
+@pytest.mark.parametrize(
+    "cls,kw",
+    [
+        (NARXMLP, dict(epochs=0)),
+        (NARXMLPSim, dict(epochs=0, pretrain_epochs=0)),
+    ],
+)
 def test_untrained_bypass_is_the_least_squares_arx(plant, cls, kw):
     est, val = plant
     arx = ARX(ny=3, nu=2, intercept=True).fit(est)
@@ -85,7 +88,7 @@ def test_bypass_stays_fixed_in_training_and_counts_parameters(plant):
     n_mlp = count_mlp_parameters(5, [8], 1)
     assert m.n_parameters_ == m.weights_.size == n_mlp + 5 == count_mlp_parameters(5, [8], 1, linear=True)
     np.testing.assert_array_equal(m.weights_[n_mlp:], m0.weights_[n_mlp:])  # L: the least-squares ARX, untouched
-    assert not np.array_equal(m.weights_[:n_mlp], m0.weights_[:n_mlp])        # the network did train
+    assert not np.array_equal(m.weights_[:n_mlp], m0.weights_[:n_mlp])  # the network did train
     s = NARXMLPSim(ny=3, nu=2, hidden=[8], linear=True, epochs=1, pretrain_epochs=1, window=10, device="cpu").fit(est)
     np.testing.assert_array_equal(s.weights_[n_mlp:], m0.weights_[n_mlp:])
     assert m.describe()["structure"]["linear"] is True
@@ -113,11 +116,15 @@ def test_free_run_and_k_step_kernels_with_bypass_equal_a_numpy_loop(code):
     assert not np.allclose(free_run_mlp(flat[:-5], sizes, code, yn, un, 2, 3, 1e6)[0][3:], fr[3:])
     # batched forward and k-step (k beyond the record = a free run from the start)
     X = rng.normal(size=(7, 5))
-    np.testing.assert_allclose(mlp_forward_np(flat, sizes, code, X, linear=True),
-                               np.array([_reference_net(flat, sizes, code, x, True) for x in X]),
-                               rtol=1e-12, atol=1e-12)
-    np.testing.assert_allclose(k_step_mlp(flat, sizes, code, yn, un, 2, 3, 100, 1e6, linear=True), ref,
-                               rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(
+        mlp_forward_np(flat, sizes, code, X, linear=True),
+        np.array([_reference_net(flat, sizes, code, x, True) for x in X]),
+        rtol=1e-12,
+        atol=1e-12,
+    )
+    np.testing.assert_allclose(
+        k_step_mlp(flat, sizes, code, yn, un, 2, 3, 100, 1e6, linear=True), ref, rtol=1e-12, atol=1e-12
+    )
     ks = k_step_mlp(flat, sizes, code, yn, un, 2, 3, 3, 1e6, linear=True)
     for t in (3, 10, 69):
         sim = yn.copy()
@@ -199,9 +206,9 @@ def test_rnn_linear_path_equals_a_numpy_recursion():
         for i in range(1, n_enc + 1):
             y[n_enc - i] = x0[s, i - 1]
             u[n_enc - i] = x0[s, n_enc + i - 1]
-        u[n_enc - 1:n_enc + 8] = useq[s, :, 0]
+        u[n_enc - 1 : n_enc + 8] = useq[s, :, 0]
         for t in range(n_enc, n_enc + 9):
-            y[t] = a @ y[t - 1:t - 4:-1] + b @ u[t - 1:t - 4:-1] + 0.05
+            y[t] = a @ y[t - 1 : t - 4 : -1] + b @ u[t - 1 : t - 4 : -1] + 0.05
         np.testing.assert_allclose(got[s, :, 0], y[n_enc:], rtol=1e-12, atol=1e-12)
 
 

@@ -63,8 +63,14 @@ def test_grid_sweep_repeats_and_resume(tmp_path, data):
     assert c["n_parameters"] == 6 * 6 + 6 + 6 + 1
     # a different sweep may not reuse the study
     with pytest.raises(ConfigError):
-        run_sweep(SweepSpec("narx-mlp", parse_grid("lags=5", "narx-mlp"), fixed=FIXED), est, val, storage=str(db),
-                  study="t", progress=False)
+        run_sweep(
+            SweepSpec("narx-mlp", parse_grid("lags=5", "narx-mlp"), fixed=FIXED),
+            est,
+            val,
+            storage=str(db),
+            study="t",
+            progress=False,
+        )
 
 
 def test_two_worker_processes_share_one_sqlite_storage(tmp_path, data):
@@ -80,10 +86,34 @@ def test_cli_search_json_and_export(tmp_path, data, capsys):
     est, val = data
     write_record(est, tmp_path / "est.npz")
     write_record(val, tmp_path / "val.npz")
-    code = main(["search", "narx-mlp", "--est", str(tmp_path / "est.npz"), "--val", str(tmp_path / "val.npz"),
-                 "--grid", "lags=2;activation=relu,tanh", "--repeats", "2", "--set", "epochs=1,hidden=4,device=cpu",
-                 "--storage", str(tmp_path / "c.db"), "--sampler", "random", "--trials", "2", "--no-progress",
-                 "--export", str(tmp_path / "runs.jsonl"), "--plot", str(tmp_path / "r2.png"), "--json"])
+    code = main(
+        [
+            "search",
+            "narx-mlp",
+            "--est",
+            str(tmp_path / "est.npz"),
+            "--val",
+            str(tmp_path / "val.npz"),
+            "--grid",
+            "lags=2;activation=relu,tanh",
+            "--repeats",
+            "2",
+            "--set",
+            "epochs=1,hidden=4,device=cpu",
+            "--storage",
+            str(tmp_path / "c.db"),
+            "--sampler",
+            "random",
+            "--trials",
+            "2",
+            "--no-progress",
+            "--export",
+            str(tmp_path / "runs.jsonl"),
+            "--plot",
+            str(tmp_path / "r2.png"),
+            "--json",
+        ]
+    )
     assert code == 0
     out = json.loads(capsys.readouterr().out)
     assert out["n_configs"] == 2 and out["n_runs"] == 4 and len(out["best_runs"]) == 2
@@ -93,8 +123,23 @@ def test_cli_search_json_and_export(tmp_path, data, capsys):
     for part in ("estimation", "validation"):
         assert set(row[part]) == {"one_step", "free_run"}
     assert (tmp_path / "r2.png").stat().st_size > 1000
-    assert main(["search", "narx-mlp", "--est", str(tmp_path / "est.npz"), "--val", str(tmp_path / "val.npz"),
-                 "--grid", "bogus=1", "--storage", str(tmp_path / "c2.db")]) == 2
+    assert (
+        main(
+            [
+                "search",
+                "narx-mlp",
+                "--est",
+                str(tmp_path / "est.npz"),
+                "--val",
+                str(tmp_path / "val.npz"),
+                "--grid",
+                "bogus=1",
+                "--storage",
+                str(tmp_path / "c2.db"),
+            ]
+        )
+        == 2
+    )
 
 
 def test_interrupted_sweep_resumes(tmp_path, data, monkeypatch):

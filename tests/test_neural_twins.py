@@ -38,8 +38,12 @@ def test_cantilever_full_budget_sim_training():
     """Simulation-error training of the same network: mean free-run R² over the twelve sines ≥ 0.986 (the
     lower end of Table 4.3)."""
     data = cantilever_data()
-    res = cantilever_sines("narx-mlp-sim", {"epochs": 10, "pretrain_epochs": 20, "window": 50, "batch_size": 16,
-                                            "lr": 3e-4}, seed=0, data=data)
+    res = cantilever_sines(
+        "narx-mlp-sim",
+        {"epochs": 10, "pretrain_epochs": 20, "window": 50, "batch_size": 16, "lr": 3e-4},
+        seed=0,
+        data=data,
+    )
     assert res["r2_mean"] >= TABLE_4_3_MIN, res["r2_per_freq"]
 
 

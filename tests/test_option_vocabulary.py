@@ -18,10 +18,13 @@ from sysid.errors import ConfigError
 from sysid.registry import IDENTIFIERS, get_identifier
 
 LAG_NAMES = {"ny", "nu", "n_y", "n_u"}
-FAST = {"narx-mlp": "epochs=1,hidden=4", "narx-mlp-sim": "epochs=1,pretrain_epochs=1,hidden=4,window=10",
-        "rnn": "epochs=1,n_state=2,enc_hidden=4,window=10",
-        "ss-encoder": "epochs=1,T=10,f_hidden=4,h_hidden=4,e_hidden=4",
-        "wh-net": "epochs=1,channels=2,hidden=4,nb=2,na=2"}
+FAST = {
+    "narx-mlp": "epochs=1,hidden=4",
+    "narx-mlp-sim": "epochs=1,pretrain_epochs=1,hidden=4,window=10",
+    "rnn": "epochs=1,n_state=2,enc_hidden=4,window=10",
+    "ss-encoder": "epochs=1,T=10,f_hidden=4,h_hidden=4,e_hidden=4",
+    "wh-net": "epochs=1,channels=2,hidden=4,nb=2,na=2",
+}
 
 
 def _available() -> list[str]:

@@ -36,11 +36,14 @@ def _poles_within(model, k=2.0):
     return bool(np.all(err <= k * sd)), err, sd
 
 
-@pytest.mark.parametrize("make,noise", [
-    (lambda: OE(nb=4, nf=4, nk=1), "white"),
-    (lambda: BJ(nb=4, nf=4, nc=1, nd=1, nk=1), "coloured"),
-    (lambda: N4SID(), "white"),
-])
+@pytest.mark.parametrize(
+    "make,noise",
+    [
+        (lambda: OE(nb=4, nf=4, nk=1), "white"),
+        (lambda: BJ(nb=4, nf=4, nc=1, nd=1, nk=1), "coloured"),
+        (lambda: N4SID(), "white"),
+    ],
+)
 def test_poles_recovered_within_two_reported_std_on_20_seeds(make, noise):
     """Calibrated uncertainty: ≥ 18 of 20 noise seeds have every pole within 2 of its reported (complex) std; the
     reported std must also be honest: the RMS error over the seeds is within a factor 2 of the mean reported std."""
@@ -85,8 +88,8 @@ def test_bj_k_step_matches_closed_form_for_ar1_noise():
     v = y - xs
     L = m.max_lag_
     for k in (1, 2):
-        expect = xs[L + 2:] + (-m.d_[1]) ** k * v[L + 2 - k:n - k]
-        np.testing.assert_allclose(m.predict(rec, k)[L + 2:], expect, atol=1e-8)
+        expect = xs[L + 2 :] + (-m.d_[1]) ** k * v[L + 2 - k : n - k]
+        np.testing.assert_allclose(m.predict(rec, k)[L + 2 :], expect, atol=1e-8)
 
 
 def test_miso_oe_recovers_both_channels():
@@ -134,12 +137,14 @@ def test_n4sid_memory_independent_of_chunk():
     rec = _data(1, n=3000)
     a = N4SID(nx=4, chunk=100).fit(rec)
     b = N4SID(nx=4, chunk=100_000).fit(rec)
-    np.testing.assert_allclose(np.sort_complex(np.linalg.eigvals(a.A_)), np.sort_complex(np.linalg.eigvals(b.A_)),
-                               atol=1e-9)
+    np.testing.assert_allclose(
+        np.sort_complex(np.linalg.eigvals(a.A_)), np.sort_complex(np.linalg.eigvals(b.A_)), atol=1e-9
+    )
 
 
-@pytest.mark.parametrize("make", [lambda: OE(nb=4, nf=4, nk=1), lambda: BJ(nb=4, nf=4, nc=1, nd=1, nk=1),
-                                  lambda: N4SID(nx=4)])
+@pytest.mark.parametrize(
+    "make", [lambda: OE(nb=4, nf=4, nk=1), lambda: BJ(nb=4, nf=4, nc=1, nd=1, nk=1), lambda: N4SID(nx=4)]
+)
 def test_round_trip_and_bands(make, tmp_path):
     rec = _data(2)
     m = make().fit(rec)

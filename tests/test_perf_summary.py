@@ -8,8 +8,12 @@ from tests.perf.summarise import main, pair_references, summarise
 
 
 def _b(module, name, mean, **extra):
-    return {"name": name, "fullname": f"tests/perf/{module}.py::{name}", "stats": {"mean": mean, "min": mean * 0.9},
-            "extra_info": extra}
+    return {
+        "name": name,
+        "fullname": f"tests/perf/{module}.py::{name}",
+        "stats": {"mean": mean, "min": mean * 0.9},
+        "extra_info": extra,
+    }
 
 
 DATA = {

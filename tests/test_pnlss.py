@@ -63,8 +63,9 @@ def test_recovers_a_polynomial_state_space_system_exactly(degree, constant):
     L = model.max_lag_
     assert np.all(free[:L] == 0.0) and np.max(np.abs(free[L:] - y2[L:])) < 1e-8 * np.std(y2)
     # poles of the linear part are similarity-invariant: those of A
-    np.testing.assert_allclose(np.sort_complex(np.linalg.eigvals(model.A_)), np.sort_complex(np.linalg.eigvals(A)),
-                               atol=1e-7)
+    np.testing.assert_allclose(
+        np.sort_complex(np.linalg.eigvals(model.A_)), np.sort_complex(np.linalg.eigvals(A)), atol=1e-7
+    )
 
 
 def test_a_search_cut_by_the_evaluation_budget_is_reported_as_not_converged():
@@ -84,9 +85,15 @@ def test_sensitivity_jacobian_matches_finite_differences():
     rng = np.random.default_rng(1)
     n, m, p = 3, 2, 2
     facE, facF = ps.monomials(n + m, 3), ps.monomials(n + m, 2)
-    mats = [0.3 * rng.standard_normal((n, n)), rng.standard_normal((n, m)), 0.01 * rng.standard_normal((n, len(facE))),
-            0.1 * rng.standard_normal(n), rng.standard_normal((p, n)), rng.standard_normal((p, m)),
-            0.01 * rng.standard_normal((p, len(facF)))]
+    mats = [
+        0.3 * rng.standard_normal((n, n)),
+        rng.standard_normal((n, m)),
+        0.01 * rng.standard_normal((n, len(facE))),
+        0.1 * rng.standard_normal(n),
+        rng.standard_normal((p, n)),
+        rng.standard_normal((p, m)),
+        0.01 * rng.standard_normal((p, len(facF))),
+    ]
     u = rng.uniform(-1, 1, (40, m))
     theta = np.concatenate([M.ravel() for M in mats])
     cuts = np.cumsum([M.size for M in mats])[:-1]

@@ -60,8 +60,10 @@ def test_sensitivity_equals_finite_differences(output_error_fit):
         tp, tm = theta.copy(), theta.copy()
         tp[i] += h
         tm[i] -= h
-        fd = (simulate_sensitivity(m.structure_, m.terms_, tp, u, y, jacobian=False)[0]
-              - simulate_sensitivity(m.structure_, m.terms_, tm, u, y, jacobian=False)[0]) / (2 * h)
+        fd = (
+            simulate_sensitivity(m.structure_, m.terms_, tp, u, y, jacobian=False)[0]
+            - simulate_sensitivity(m.structure_, m.terms_, tm, u, y, jacobian=False)[0]
+        ) / (2 * h)
         np.testing.assert_allclose(S[:, 0, i], fd[:, 0], rtol=1e-5, atol=1e-7 * np.max(np.abs(fd)))
     # the compiled free run of the identifier is the same simulation
     np.testing.assert_allclose(m.predict(Record(u=u, y=y, fs=1.0), None), yh[:, 0], rtol=1e-12, atol=1e-12)

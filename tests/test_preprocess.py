@@ -21,7 +21,7 @@ def tone_amp_phase(y: np.ndarray, f: float, fs: float, t0: float = 0.0) -> tuple
 # ---------------------------------------------------------------------------------------------- offset / trend
 def test_remove_offset_and_detrend():
     n = np.arange(1000.0)
-    x = 3.0 + 0.01 * n - 2e-5 * n ** 2
+    x = 3.0 + 0.01 * n - 2e-5 * n**2
     assert abs(P.remove_offset(x).mean()) < 1e-12
     assert np.max(np.abs(P.detrend(x, order=2))) < 1e-9  # an exact quadratic is removed completely
     # a linear drift under a zero-mean tone: the result has no linear component left
@@ -103,7 +103,7 @@ def test_moving_average_definition(span, mode):
     x = np.random.default_rng(1).standard_normal(400)
     y = P.moving_average(x, span, mode)
     before, after = (span // 2, (span - 1) // 2) if mode == "centred" else (span - 1, 0)
-    ref = np.array([x[max(0, i - before):min(400, i + after + 1)].mean() for i in range(400)])
+    ref = np.array([x[max(0, i - before) : min(400, i + after + 1)].mean() for i in range(400)])
     np.testing.assert_allclose(y, ref, atol=1e-12)
 
 
@@ -143,8 +143,14 @@ def _check_rate_change(fn, fs, fs_out, n, passband_hz, stop_hz):
 def test_decimate_passband_and_alias_rejection():
     fs, q = 1e6, 10
     nyq = fs / (2 * q)
-    _check_rate_change(lambda x: P.decimate(x, q, return_filter=True), fs, fs / q, 100_000,
-                       passband_hz=[1e3, 0.5 * nyq, 0.8 * nyq], stop_hz=[1.001 * nyq, 1.5 * nyq, 3.7 * nyq, 0.49 * fs])
+    _check_rate_change(
+        lambda x: P.decimate(x, q, return_filter=True),
+        fs,
+        fs / q,
+        100_000,
+        passband_hz=[1e3, 0.5 * nyq, 0.8 * nyq],
+        stop_hz=[1.001 * nyq, 1.5 * nyq, 3.7 * nyq, 0.49 * fs],
+    )
     y = P.decimate(np.ones(1001), q)
     assert y.size == 101
     with pytest.raises(ConfigError, match="q"):
@@ -156,8 +162,14 @@ def test_decimate_passband_and_alias_rejection():
 def test_resample_100mhz_to_6p75mhz():
     fs, fs_new = 100e6, 6.75e6  # dissertation §3.2: x 27/400
     nyq = fs_new / 2
-    _check_rate_change(lambda x: P.resample(x, fs, fs_new, return_filter=True), fs, fs_new, 200_000,
-                       passband_hz=[0.9e6, 1.35e6, 0.8 * nyq], stop_hz=[1.002 * nyq, 5e6, 20e6, 45e6])
+    _check_rate_change(
+        lambda x: P.resample(x, fs, fs_new, return_filter=True),
+        fs,
+        fs_new,
+        200_000,
+        passband_hz=[0.9e6, 1.35e6, 0.8 * nyq],
+        stop_hz=[1.002 * nyq, 5e6, 20e6, 45e6],
+    )
     assert P.resample(np.ones(400), fs, fs_new).size == 27
     with pytest.raises(ConfigError, match="ratio"):
         P.resample(np.ones(100), 1.0, np.pi)
@@ -168,7 +180,7 @@ def test_antialias_filter_design_specs():
     from scipy.signal import freqz
 
     h = P.antialias_filter(1, 10)
-    w, H = freqz(h, worN=2 ** 16, fs=1.0)
+    w, H = freqz(h, worN=2**16, fs=1.0)
     db = 20 * np.log10(np.abs(H) + 1e-300)
     assert np.max(np.abs(db[w <= 0.8 * 0.05])) < 0.1
     assert np.max(db[w >= 0.05]) < -60
@@ -181,7 +193,7 @@ def butterworth_bp_gain_db(f, fs, f1, f2, order):
     filtering squares it once more."""
     W = lambda x: 2 * fs * np.tan(np.pi * x / fs)  # noqa: E731
     O, O1, O2 = W(np.asarray(f)), W(f1), W(f2)
-    x = (O ** 2 - O1 * O2) / (O * (O2 - O1))
+    x = (O**2 - O1 * O2) / (O * (O2 - O1))
     return 2 * 10 * np.log10(1.0 / (1.0 + x ** (2 * order)))
 
 
@@ -252,22 +264,22 @@ def test_suggest_rate_on_oversampled_resonator_recovers_expected_factor():
     # the largest factor is floor(105/10) = 10 (the lags are computed from the closed form below).
     P_d, zeta = 370.0, 0.2
     th = 2 * np.pi / P_d
-    rho = np.exp(-zeta * th / np.sqrt(1 - zeta ** 2))
+    rho = np.exp(-zeta * th / np.sqrt(1 - zeta**2))
     k = np.arange(1000)
-    c = np.cos(th) * (1 - rho ** 2) / ((1 + rho ** 2) * np.sin(th))
-    r = rho ** k * (np.cos(th * k) + c * np.sin(th * k))
+    c = np.cos(th) * (1 - rho**2) / ((1 + rho**2) * np.sin(th))
+    r = rho**k * (np.cos(th * k) + c * np.sin(th * k))
 
     def first_min(v):
         d = np.diff(v)
         return int(np.flatnonzero((d[:-1] <= 0) & (d[1:] > 0))[0] + 1)
 
-    tau_lin, tau_nl = first_min(r), first_min(r ** 2)
+    tau_lin, tau_nl = first_min(r), first_min(r**2)
     assert abs(tau_lin - 185) <= 2 and abs(tau_nl - 105) <= 2
     expected = min(tau_lin, tau_nl) // 10
     assert expected == 10
 
     e = np.random.default_rng(0).standard_normal(400_000)
-    y = lfilter([1.0], [1.0, -2 * rho * np.cos(th), rho ** 2], e)[5000:] + 3.0  # an offset does not matter
+    y = lfilter([1.0], [1.0, -2 * rho * np.cos(th), rho**2], e)[5000:] + 3.0  # an offset does not matter
     s = P.suggest_rate(y, fs=100e6)
     assert abs(s["tau_linear"] - tau_lin) <= 3 and abs(s["tau_nonlinear"] - tau_nl) <= 3
     assert s["factor"] == expected
@@ -289,17 +301,26 @@ def test_apply_steps_in_order_and_recorded():
     y = 2 * u + 0.01 * rng.standard_normal(n)
     y[1234] = 50.0
     rec = Record(u=u, y=y, fs=1000.0, meta={"protocol": "test"})
-    out = P.apply_steps(rec, [
-        "remove_offset",
-        ("outliers", {"window": 5, "n_sigma": 6, "signals": "y"}),
-        {"step": "moving_average", "span": 3},
-        {"step": "decimate", "q": 4},
-        {"step": "segment", "length": 250, "overlap": 50},
-        "suggest_rate",
-    ])
+    out = P.apply_steps(
+        rec,
+        [
+            "remove_offset",
+            ("outliers", {"window": 5, "n_sigma": 6, "signals": "y"}),
+            {"step": "moving_average", "span": 3},
+            {"step": "decimate", "q": 4},
+            {"step": "segment", "length": 250, "overlap": 50},
+            "suggest_rate",
+        ],
+    )
     log = out.meta["preprocessing"]
-    assert [e["step"] for e in log] == ["remove_offset", "hampel", "moving_average", "decimate", "segment",
-                                        "suggest_rate"]
+    assert [e["step"] for e in log] == [
+        "remove_offset",
+        "hampel",
+        "moving_average",
+        "decimate",
+        "segment",
+        "suggest_rate",
+    ]
     assert log[0]["changes"]["offset"]["u"] == pytest.approx(0.5, abs=1e-9)
     assert [c["index"] for c in log[1]["changes"]["replaced"]["y"]] == [1234]
     assert log[3]["changes"]["fs_after"] == 250.0 and out.fs == 250.0 and len(out) == 1000

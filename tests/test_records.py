@@ -30,11 +30,13 @@ class ToySeeded(ToyARX):
 
 # ---------------------------------------------------------------------------- full-mode seeds
 
+
 def test_full_mode_scores_every_requested_seed_with_mean_and_sd():
     ds = load_dataset("cascaded-tanks")
     del ds.tests["test-official"]  # one test (window 4): the rows below are unpacked as one
-    (r,), _ = scoring.score_pair("toy", ds, quick=False, factory=lambda n: ToySeeded, params={"ny": 2, "nu": 2},
-                                 seeds=[0, 1, 2])
+    (r,), _ = scoring.score_pair(
+        "toy", ds, quick=False, factory=lambda n: ToySeeded, params={"ny": 2, "nu": 2}, seeds=[0, 1, 2]
+    )
     assert r["seeds"] == [0, 1, 2] and r["seed"] == 1  # the median seed's model gives the row's metrics
     by_seed = r["free_run_rmse_by_seed"]
     assert len(by_seed) == 3 and len(r["one_step_rmse_by_seed"]) == 3 and by_seed == sorted(by_seed)
@@ -56,8 +58,9 @@ def test_deterministic_identifier_is_fitted_once_and_says_so():
             fits.append(1)
             return super().fit(data)
 
-    (r,), _ = scoring.score_pair("toy", ds, quick=False, factory=lambda n: Counting, params={"ny": 2, "nu": 2},
-                                 seeds=[0, 1, 2])
+    (r,), _ = scoring.score_pair(
+        "toy", ds, quick=False, factory=lambda n: Counting, params={"ny": 2, "nu": 2}, seeds=[0, 1, 2]
+    )
     assert len(fits) == 1 and r["seeds"] == "deterministic"
     assert r["free_run_rmse_mean"] == r["free_run"]["rmse"] and r["free_run_rmse_sd"] == 0.0
     assert r["fit_seconds_mean"] == r["fit_seconds"]
@@ -66,8 +69,9 @@ def test_deterministic_identifier_is_fitted_once_and_says_so():
 def test_floors_ignore_a_deterministic_seeds_mark():
     ds = load_dataset("cascaded-tanks")
     del ds.tests["test-official"]  # one test (window 4): the rows below are unpacked as one
-    rows, _ = scoring.score_pair("toy", ds, quick=False, factory=lambda n: ToyARX, params={"ny": 2, "nu": 2},
-                                 seeds=[0, 1, 2])
+    rows, _ = scoring.score_pair(
+        "toy", ds, quick=False, factory=lambda n: ToyARX, params={"ny": 2, "nu": 2}, seeds=[0, 1, 2]
+    )
     floors = scoring.make_floors([{"format": "piezotwin-score/1", "mode": "full", "rows": rows}])
     floor = floors["modes"]["full"]["toy"]["cascaded-tanks"]["test"]
     assert "seeds" not in floor and floor["measured"] == pytest.approx(rows[0]["free_run"]["rmse"], rel=1e-5)
@@ -75,47 +79,122 @@ def test_floors_ignore_a_deterministic_seeds_mark():
 
 # ---------------------------------------------------------------------------- rendering from stored rows
 
+
 def _score_row(ident, dname, test, rmse, units, seeds=None, by_seed=None, fit=2.0, ref=None):
-    row = {"identifier": ident, "dataset": dname, "test": test, "status": "ok", "params": {"ny": 2, "nu": 24},
-           "n_parameters": 10, "fit_seconds": fit, "units": units, "free_run": {"rmse": rmse, "nrmse": 0.1, "r2": 0.9},
-           "one_step": {"rmse": rmse / 10, "nrmse": 0.01, "r2": 0.99}, "references": ref or {}}
+    row = {
+        "identifier": ident,
+        "dataset": dname,
+        "test": test,
+        "status": "ok",
+        "params": {"ny": 2, "nu": 24},
+        "n_parameters": 10,
+        "fit_seconds": fit,
+        "units": units,
+        "free_run": {"rmse": rmse, "nrmse": 0.1, "r2": 0.9},
+        "one_step": {"rmse": rmse / 10, "nrmse": 0.01, "r2": 0.99},
+        "references": ref or {},
+    }
     if seeds is None:
         row.update(seeds="deterministic", free_run_rmse_mean=rmse, free_run_rmse_sd=0.0, fit_seconds_mean=fit)
     else:
-        row.update(seed=seeds[1], seeds=seeds, free_run_rmse_by_seed=by_seed, fit_seconds_mean=fit,
-                   free_run_rmse_mean=float(np.mean(by_seed)), free_run_rmse_sd=float(np.std(by_seed, ddof=1)))
+        row.update(
+            seed=seeds[1],
+            seeds=seeds,
+            free_run_rmse_by_seed=by_seed,
+            fit_seconds_mean=fit,
+            free_run_rmse_mean=float(np.mean(by_seed)),
+            free_run_rmse_sd=float(np.std(by_seed, ddof=1)),
+        )
     return row
 
 
 def _stored(dname, ident, score_rows, wall=100.0):
-    return {"format": records.ROW_FORMAT, "dataset": dname, "identifier": ident, "seeds": [0, 1, 2],
-            "command": records.command(dname, ident), "why": "test",
-            "measured": {"date": "2026-11-26T00:00:00Z", "machine": {"cpu": "Toy CPU", "cores": 2},
-                         "versions": {"python": "3.11"}, "load_average_before": [1.5, 1, 1],
-                         "load_average_after": [2.5, 1, 1], "wall_seconds": wall, "cpu_seconds": wall / 2},
-            "score": {"format": "piezotwin-score/1", "mode": "full", "rows": score_rows, "sysidentpy": []}}
+    return {
+        "format": records.ROW_FORMAT,
+        "dataset": dname,
+        "identifier": ident,
+        "seeds": [0, 1, 2],
+        "command": records.command(dname, ident),
+        "why": "test",
+        "measured": {
+            "date": "2026-11-26T00:00:00Z",
+            "machine": {"cpu": "Toy CPU", "cores": 2},
+            "versions": {"python": "3.11"},
+            "load_average_before": [1.5, 1, 1],
+            "load_average_after": [2.5, 1, 1],
+            "wall_seconds": wall,
+            "cpu_seconds": wall / 2,
+        },
+        "score": {"format": "piezotwin-score/1", "mode": "full", "rows": score_rows, "sysidentpy": []},
+    }
 
 
 @pytest.fixture
 def fake(tmp_path):
     """A settings file of three rows, two stored: a seeded Silverbox row and a deterministic tanks row."""
     settings = tmp_path / "records.toml"
-    settings.write_text('[silverbox]\nidentifier = "ss-encoder"\nwhy = "seeded toy"\n\n'
-                        '[cascaded-tanks]\nidentifier = "narx-poly-sim"\nwhy = "deterministic toy"\n\n'
-                        '[bouc-wen]\nidentifier = "ss-encoder"\nwhy = "not measured"\n')
+    settings.write_text(
+        '[silverbox]\nidentifier = "ss-encoder"\nwhy = "seeded toy"\n\n'
+        '[cascaded-tanks]\nidentifier = "narx-poly-sim"\nwhy = "deterministic toy"\n\n'
+        '[bouc-wen]\nidentifier = "ss-encoder"\nwhy = "not measured"\n'
+    )
     stored = tmp_path / "stored"
     sb_ref = {"best_published": {"value": 0.31e-3, "unit": "V", "model": "GRU"}}
-    records.write_row(_stored("silverbox", "ss-encoder", [
-        _score_row("ss-encoder", "silverbox", "multisine", 0.85e-3, "V", [0, 1, 2], [0.84e-3, 0.85e-3, 0.86e-3],
-                   fit=240.0, ref=sb_ref),
-        _score_row("ss-encoder", "silverbox", "arrow", 2.7e-3, "V", [0, 1, 2], [2.5e-3, 2.7e-3, 3.0e-3], fit=240.0),
-        _score_row("arx", "silverbox", "multisine", 9e-3, "V")]), stored)  # another identifier's row: not shown
-    records.write_row(_stored("cascaded-tanks", "narx-poly-sim", [
-        _score_row("narx-poly-sim", "cascaded-tanks", "test", 0.358, "V", fit=1.5,
-                   ref={"best_published": {"value": 0.34, "unit": "V", "model": "black-box"}})]), stored)
+    records.write_row(
+        _stored(
+            "silverbox",
+            "ss-encoder",
+            [
+                _score_row(
+                    "ss-encoder",
+                    "silverbox",
+                    "multisine",
+                    0.85e-3,
+                    "V",
+                    [0, 1, 2],
+                    [0.84e-3, 0.85e-3, 0.86e-3],
+                    fit=240.0,
+                    ref=sb_ref,
+                ),
+                _score_row(
+                    "ss-encoder", "silverbox", "arrow", 2.7e-3, "V", [0, 1, 2], [2.5e-3, 2.7e-3, 3.0e-3], fit=240.0
+                ),
+                _score_row("arx", "silverbox", "multisine", 9e-3, "V"),
+            ],
+        ),
+        stored,
+    )  # another identifier's row: not shown
+    records.write_row(
+        _stored(
+            "cascaded-tanks",
+            "narx-poly-sim",
+            [
+                _score_row(
+                    "narx-poly-sim",
+                    "cascaded-tanks",
+                    "test",
+                    0.358,
+                    "V",
+                    fit=1.5,
+                    ref={"best_published": {"value": 0.34, "unit": "V", "model": "black-box"}},
+                )
+            ],
+        ),
+        stored,
+    )
     out = {"md": tmp_path / "benchmarks.md", "json": tmp_path / "records.json"}
-    argv = ["records", "--render-only", "--settings", str(settings), "--stored", str(stored),
-            "--markdown", str(out["md"]), "--records-json", str(out["json"])]
+    argv = [
+        "records",
+        "--render-only",
+        "--settings",
+        str(settings),
+        "--stored",
+        str(stored),
+        "--markdown",
+        str(out["md"]),
+        "--records-json",
+        str(out["json"]),
+    ]
     return argv, out, stored
 
 
@@ -134,7 +213,10 @@ def test_render_puts_each_value_in_its_cell(fake, capsys):
     sb = data["silverbox"]
     assert sb["identifier"] == "ss-encoder" and sb["seconds"] == 240.0
     assert sb["rmse"]["multisine"]["mean"] == pytest.approx(0.85e-3) and sb["rmse"]["multisine"]["seeds"] == {
-        "0": 0.84e-3, "1": 0.85e-3, "2": 0.86e-3}
+        "0": 0.84e-3,
+        "1": 0.85e-3,
+        "2": 0.86e-3,
+    }
     assert sb["rmse"]["arrow"]["sd"] == pytest.approx(np.std([2.5e-3, 2.7e-3, 3.0e-3], ddof=1))
     # the published record comes from today's reference table where it has the test, else from the stored row
     from benchmarks.datasets.references import references_for
@@ -147,8 +229,14 @@ def test_render_puts_each_value_in_its_cell(fake, capsys):
 
     md = out["md"].read_text()
     ms = _cells(md, "| silverbox / multisine")
-    assert ms == ["silverbox / multisine", "`ss-encoder`: ny=2, nu=24", "0.850 ± 0.01 mV (seeds 0-2)", "240",
-                  "0.310 mV (GRU)", f"`{sb['command']}`"]
+    assert ms == [
+        "silverbox / multisine",
+        "`ss-encoder`: ny=2, nu=24",
+        "0.850 ± 0.01 mV (seeds 0-2)",
+        "240",
+        "0.310 mV (GRU)",
+        f"`{sb['command']}`",
+    ]
     assert _cells(md, "| silverbox / arrow")[4] == "1.41 mV (SUBNET (arrow full))"  # stored without, found in the table
     assert _cells(md, "| cascaded-tanks / test")[2:5] == ["0.358 V (deterministic)", "1.5", "0.340 V (black-box)"]
     assert "| silverbox / multisine | `arx`" not in md
@@ -197,19 +285,22 @@ def test_write_is_atomic_a_failed_write_leaves_the_old_files(fake, monkeypatch, 
     assert not [p for p in out["md"].parent.iterdir() if ".tmp-" in p.name]
 
 
-@pytest.mark.parametrize("case, expected", [
-    ("unknown-dataset", "--datasets: 'nosuch' has no row"),
-    ("bad-row", "cannot read a stored records row"),
-    ("not-a-row", "not a stored records row"),
-    ("no-why", "needs exactly `identifier` and a `why` line"),
-    ("bad-identifier", "identifier 'nosuch-ident' unknown"),
-    ("bad-seeds", "--seeds"),
-    ("render-only-datasets", "--render-only renders every stored row"),
-    ("bad-beside", "beside identifier 'nosuch-ident' unknown"),
-    ("beside-itself", "`beside` repeats an identifier or names the row's own 'arx'"),
-    ("beside-not-list", "`beside` must be a list of identifiers"),
-    ("unknown-identifiers", "--identifiers: 'narx-poly' has no row in the chosen datasets"),
-])
+@pytest.mark.parametrize(
+    "case, expected",
+    [
+        ("unknown-dataset", "--datasets: 'nosuch' has no row"),
+        ("bad-row", "cannot read a stored records row"),
+        ("not-a-row", "not a stored records row"),
+        ("no-why", "needs exactly `identifier` and a `why` line"),
+        ("bad-identifier", "identifier 'nosuch-ident' unknown"),
+        ("bad-seeds", "--seeds"),
+        ("render-only-datasets", "--render-only renders every stored row"),
+        ("bad-beside", "beside identifier 'nosuch-ident' unknown"),
+        ("beside-itself", "`beside` repeats an identifier or names the row's own 'arx'"),
+        ("beside-not-list", "`beside` must be a list of identifiers"),
+        ("unknown-identifiers", "--identifiers: 'narx-poly' has no row in the chosen datasets"),
+    ],
+)
 def test_bad_input_exits_2_with_one_line(fake, case, expected, capsys):
     argv, out, stored = fake
     settings = Path(argv[argv.index("--settings") + 1])
@@ -250,10 +341,21 @@ def test_a_row_beside_the_chosen_one_is_shown_under_it_and_kept_out_of_records_j
     row not stored yet is named with the command that measures only it."""
     argv, out, stored = fake
     settings = Path(argv[argv.index("--settings") + 1])
-    settings.write_text(settings.read_text().replace('why = "deterministic toy"\n',
-                                                     'why = "deterministic toy"\nbeside = ["narx-poly", "arx"]\n'))
-    records.write_row(_stored("cascaded-tanks", "narx-poly", [
-        _score_row("narx-poly", "cascaded-tanks", "test", 0.467, "V", fit=0.5)], wall=7.0), stored, beside=True)
+    settings.write_text(
+        settings.read_text().replace(
+            'why = "deterministic toy"\n', 'why = "deterministic toy"\nbeside = ["narx-poly", "arx"]\n'
+        )
+    )
+    records.write_row(
+        _stored(
+            "cascaded-tanks",
+            "narx-poly",
+            [_score_row("narx-poly", "cascaded-tanks", "test", 0.467, "V", fit=0.5)],
+            wall=7.0,
+        ),
+        stored,
+        beside=True,
+    )
     assert (stored / "cascaded-tanks--narx-poly.json").exists()
     assert main(argv) == 0
     err = capsys.readouterr().err
@@ -262,8 +364,10 @@ def test_a_row_beside_the_chosen_one_is_shown_under_it_and_kept_out_of_records_j
     assert data["cascaded-tanks"]["identifier"] == "narx-poly-sim"
     md = out["md"].read_text()
     lines = [ln for ln in md.splitlines() if ln.startswith("| cascaded-tanks / test")]
-    assert [_cells(ln, "|")[1] for ln in lines] == ["`narx-poly-sim`: ny=2, nu=24",
-                                                    "`narx-poly` (*beside*): ny=2, nu=24"]
+    assert [_cells(ln, "|")[1] for ln in lines] == [
+        "`narx-poly-sim`: ny=2, nu=24",
+        "`narx-poly` (*beside*): ny=2, nu=24",
+    ]
     assert _cells(lines[1], "|")[2:4] == ["0.467 V (deterministic)", "0.5"]
     assert _cells(md, "| cascaded-tanks (`narx-poly`, beside)")[5:7] == ["7.0", "3.5"]
     assert "no stored row for cascaded-tanks (arx)" in err
@@ -271,6 +375,7 @@ def test_a_row_beside_the_chosen_one_is_shown_under_it_and_kept_out_of_records_j
 
 
 # ---------------------------------------------------------------------------- real rows
+
 
 def _fresh_score(command: str, capsys) -> dict:
     argv = shlex.split(command)
@@ -364,8 +469,27 @@ def test_identifiers_measures_only_the_row_beside(tmp_path, capsys):
     settings = tmp_path / "records.toml"
     settings.write_text('[cascaded-tanks]\nidentifier = "narx-poly"\nwhy = "chosen"\nbeside = ["arx"]\n')
     stored, md, js = tmp_path / "stored", tmp_path / "b.md", tmp_path / "r.json"
-    assert main(["records", "--datasets", "cascaded-tanks", "--identifiers", "arx", "--settings", str(settings),
-                 "--stored", str(stored), "--markdown", str(md), "--records-json", str(js), "--in-process"]) == 0
+    assert (
+        main(
+            [
+                "records",
+                "--datasets",
+                "cascaded-tanks",
+                "--identifiers",
+                "arx",
+                "--settings",
+                str(settings),
+                "--stored",
+                str(stored),
+                "--markdown",
+                str(md),
+                "--records-json",
+                str(js),
+                "--in-process",
+            ]
+        )
+        == 0
+    )
     err = capsys.readouterr().err
     assert sorted(p.name for p in stored.iterdir()) == ["cascaded-tanks--arx.json"]
     row = json.loads((stored / "cascaded-tanks--arx.json").read_text())

@@ -28,11 +28,23 @@ def broken_images(index: Path, tmp: Path) -> tuple[int, list[str]]:
     probe = index.with_name("_imgcheck.html")
     probe.write_text(index.read_text().replace("</body>", _CHECK + "</body>"))
     try:
-        proc = subprocess.run([str(CHROMIUM), "--headless", "--no-sandbox", "--disable-gpu",
-                               "--disable-background-networking", "--no-first-run",
-                               f"--user-data-dir={tmp / 'chromium-profile'}",
-                               "--virtual-time-budget=10000", "--dump-dom", probe.resolve().as_uri()],
-                              capture_output=True, text=True, timeout=120)
+        proc = subprocess.run(
+            [
+                str(CHROMIUM),
+                "--headless",
+                "--no-sandbox",
+                "--disable-gpu",
+                "--disable-background-networking",
+                "--no-first-run",
+                f"--user-data-dir={tmp / 'chromium-profile'}",
+                "--virtual-time-budget=10000",
+                "--dump-dom",
+                probe.resolve().as_uri(),
+            ],
+            capture_output=True,
+            text=True,
+            timeout=120,
+        )
     finally:
         probe.unlink()
     m = re.search(r"IMGCHECK (\d+) (\[.*?\])", proc.stdout)

@@ -20,19 +20,35 @@ import pytest
 CHROMIUM = Path(shutil.which("chromium") or "/usr/bin/chromium")  # Debian package "chromium" (.ci/run installs it)
 pytestmark = pytest.mark.browser
 
-_PROBE = ("<script>window.addEventListener('load',function(){var out={h:document.documentElement.scrollHeight,"
-          "w:document.documentElement.scrollWidth,img:{}};var im=document.images;for(var i=0;i<im.length;i++){"
-          "var r=im[i].getBoundingClientRect();out.img[im[i].getAttribute('src')]=[r.left,r.top,r.width,r.height,"
-          "im[i].naturalWidth];}var p=document.getElementById('provenance');if(p){var r=p.getBoundingClientRect();"
-          "out.prov=[r.left,r.top,r.width,r.height];out.provText=p.innerText;}var d=document.createElement('pre');"
-          "d.id='probe';d.textContent='PROBE '+JSON.stringify(out);document.body.appendChild(d);});</script>")
+_PROBE = (
+    "<script>window.addEventListener('load',function(){var out={h:document.documentElement.scrollHeight,"
+    "w:document.documentElement.scrollWidth,img:{}};var im=document.images;for(var i=0;i<im.length;i++){"
+    "var r=im[i].getBoundingClientRect();out.img[im[i].getAttribute('src')]=[r.left,r.top,r.width,r.height,"
+    "im[i].naturalWidth];}var p=document.getElementById('provenance');if(p){var r=p.getBoundingClientRect();"
+    "out.prov=[r.left,r.top,r.width,r.height];out.provText=p.innerText;}var d=document.createElement('pre');"
+    "d.id='probe';d.textContent='PROBE '+JSON.stringify(out);document.body.appendChild(d);});</script>"
+)
 
 
 def _chromium(args: list[str], tmp: Path) -> subprocess.CompletedProcess:
-    return subprocess.run([str(CHROMIUM), "--headless", "--no-sandbox", "--disable-gpu", "--hide-scrollbars",
-                           "--disable-background-networking", "--no-first-run", "--force-device-scale-factor=1",
-                           f"--user-data-dir={tmp / 'chromium-profile'}", "--virtual-time-budget=10000", *args],
-                          capture_output=True, text=True, timeout=180)
+    return subprocess.run(
+        [
+            str(CHROMIUM),
+            "--headless",
+            "--no-sandbox",
+            "--disable-gpu",
+            "--hide-scrollbars",
+            "--disable-background-networking",
+            "--no-first-run",
+            "--force-device-scale-factor=1",
+            f"--user-data-dir={tmp / 'chromium-profile'}",
+            "--virtual-time-budget=10000",
+            *args,
+        ],
+        capture_output=True,
+        text=True,
+        timeout=180,
+    )
 
 
 def render(index: Path, tmp: Path) -> tuple[dict, np.ndarray]:
@@ -56,11 +72,11 @@ def render(index: Path, tmp: Path) -> tuple[dict, np.ndarray]:
 
 def _crop(img: np.ndarray, rect) -> np.ndarray:
     x, y, w, h = (int(round(v)) for v in rect[:4])
-    return img[y:y + h, x:x + w]
+    return img[y : y + h, x : x + w]
 
 
 def _mask(img: np.ndarray, hex_color: str, tol: float = 0.06) -> np.ndarray:
-    rgb = np.array([int(hex_color[i:i + 2], 16) for i in (1, 3, 5)]) / 255.0
+    rgb = np.array([int(hex_color[i : i + 2], 16) for i in (1, 3, 5)]) / 255.0
     return np.all(np.abs(img - rgb) < tol, axis=-1)
 
 
@@ -84,11 +100,13 @@ def trace_reaches_end(img: np.ndarray) -> tuple[float, float]:
         return 0.0, 0.0
     span = (cols[-1] - cols[0]) / img.shape[1]
     n = cols.size
+
     def extent(c):  # vertical extent of the trace over a range of columns
         rows = np.flatnonzero(m[:, c].any(axis=1))
         return float(np.ptp(rows)) if rows.size else 0.0
-    end = extent(cols[int(0.97 * n):])
-    before = extent(cols[int(0.1 * n):int(0.8 * n)])
+
+    end = extent(cols[int(0.97 * n) :])
+    before = extent(cols[int(0.1 * n) : int(0.8 * n)])
     return float(span), float(end / max(before, 1.0))
 
 
@@ -110,7 +128,7 @@ def page(tmp_path_factory):
     fs, n = 100.0, 20000
     t = np.arange(n) / fs
     y = np.sin(2 * np.pi * 0.2 * t)
-    y[-n // 20:] *= 3.0  # the burst at the end of the record
+    y[-n // 20 :] *= 3.0  # the burst at the end of the record
     yhat = 0.97 * y + 0.02
     (rep / "fig").mkdir(parents=True)
     plot_measured_vs_predicted(t, y, {"model": yhat}, rep / "fig" / "trace.png", unit="µm")
@@ -157,8 +175,15 @@ def test_provenance_is_present(page):
     layout, img = page
     assert "prov" in layout and layout["prov"][3] > 50
     text = layout["provText"]
-    for key in ("Provenance", f"piezotwin {version('piezotwin')}", "git commit", "command", "date (UTC)", "machine",
-                "data"):
+    for key in (
+        "Provenance",
+        f"piezotwin {version('piezotwin')}",
+        "git commit",
+        "command",
+        "date (UTC)",
+        "machine",
+        "data",
+    ):
         assert key in text, key
     assert re.search(r"[0-9a-f]{40}|not a git checkout", text)
     block = _crop(img, layout["prov"])

@@ -47,8 +47,11 @@ def test_float64_one_step_training_is_the_same_with_generic_and_avx2_kernels():
     it); float32 differs ~1e8 times more (measured 2e-8)."""
     import numpy as np
 
-    w = {(dt, isa): np.array(json.loads(_run(TRAIN.replace("{dtype}", dt), ATEN_CPU_CAPABILITY=isa)))
-         for dt in ("float64", "float32") for isa in ("default", "avx2")}
+    w = {
+        (dt, isa): np.array(json.loads(_run(TRAIN.replace("{dtype}", dt), ATEN_CPU_CAPABILITY=isa)))
+        for dt in ("float64", "float32")
+        for isa in ("default", "avx2")
+    }
     scale = np.abs(w["float64", "avx2"]).max()
     d64 = np.abs(w["float64", "default"] - w["float64", "avx2"]).max() / scale
     d32 = np.abs(w["float32", "default"] - w["float32", "avx2"]).max() / scale
@@ -58,8 +61,10 @@ def test_float64_one_step_training_is_the_same_with_generic_and_avx2_kernels():
 
 def test_scored_rows_do_not_depend_on_the_blas_thread_count():
     """The scorer pins BLAS to one thread: the same rows with OPENBLAS_NUM_THREADS 1 and 2."""
-    code = ("import json; from benchmarks import scoring; r = scoring.score(['arx', 'narx-poly'], ['cascaded-tanks'], "
-            "quick=True, sysidentpy=False); print(json.dumps([(x['identifier'], x['free_run'], x['one_step']) "
-            "for x in r.rows]))")
+    code = (
+        "import json; from benchmarks import scoring; r = scoring.score(['arx', 'narx-poly'], ['cascaded-tanks'], "
+        "quick=True, sysidentpy=False); print(json.dumps([(x['identifier'], x['free_run'], x['one_step']) "
+        "for x in r.rows]))"
+    )
     a, b = (json.loads(_run(code, OPENBLAS_NUM_THREADS=n)) for n in ("1", "2"))
     assert a == b

@@ -12,7 +12,7 @@ def test_xcorr_matches_eq_2_33_directly():
     rng = np.random.default_rng(0)
     x, y = rng.standard_normal(300), rng.standard_normal(300)
     xm, ym = x - x.mean(), y - y.mean()
-    den = np.sqrt(np.sum(xm ** 2) * np.sum(ym ** 2))
+    den = np.sqrt(np.sum(xm**2) * np.sum(ym**2))
     lags = np.array([-7, -1, 0, 1, 5, 20])
     want = [np.sum(xm[: 300 - t] * ym[t:]) / den if t >= 0 else np.sum(xm[-t:] * ym[: 300 + t]) / den for t in lags]
     np.testing.assert_allclose(xcorr(x, y, lags), want, atol=1e-12)
@@ -57,19 +57,19 @@ def test_each_test_detects_its_own_kind_of_dependence():
         r = correlation_tests(e, u, max_lag=10)
         return {t["name"] for t in r["tests"] if not t["passed"]}, {t["name"]: t for t in r["tests"]}
 
-    coloured = w + 0.6 * np.r_[0, w[:-1]]            # MA(1): r_ee at lag 1
+    coloured = w + 0.6 * np.r_[0, w[:-1]]  # MA(1): r_ee at lag 1
     f, t = failing(coloured)
     assert "r_ee" in f and 1 in t["r_ee"]["failing_lags"]
-    linear_u = w + 0.5 * np.r_[0, 0, 0, u[:-3]]      # unmodelled u(t-3)
+    linear_u = w + 0.5 * np.r_[0, 0, 0, u[:-3]]  # unmodelled u(t-3)
     f, t = failing(linear_u)
     assert "r_ue" in f and 3 in t["r_ue"]["failing_lags"]
     quad_u = w + 1.0 * (np.r_[0, 0, u[:-2]] ** 2 - 1 / 3)  # unmodelled u(t-2)^2
     f, t = failing(quad_u)
     assert "r_u2'e" in f and 2 in t["r_u2'e"]["failing_lags"] and "r_ue" not in f
-    cross = w + 0.8 * np.r_[0, w[:-1] * u[:-1]]      # unmodelled e(t-1) u(t-1)
+    cross = w + 0.8 * np.r_[0, w[:-1] * u[:-1]]  # unmodelled e(t-1) u(t-1)
     f, t = failing(cross)
     assert "r_e(eu)" in f and 0 in t["r_e(eu)"]["failing_lags"]
-    hetero = w * (1 + 1.5 * np.r_[0, u[:-1] ** 2])     # variance depends on u(t-1)^2
+    hetero = w * (1 + 1.5 * np.r_[0, u[:-1] ** 2])  # variance depends on u(t-1)^2
     f, t = failing(hetero)
     assert "r_u2'e2" in f and 1 in t["r_u2'e2"]["failing_lags"]
     assert set(names) == set(t)

@@ -14,19 +14,42 @@ from benchmarks.datasets import load_dataset
 
 
 def _row(ident, dataset, test, rmse, status="ok", refs=None):
-    return {"identifier": ident, "dataset": dataset, "test": test, "status": status, "units": "V",
-            "free_run": {"rmse": rmse, "nrmse": rmse, "r2": 1 - rmse ** 2}, "one_step": {"rmse": rmse / 10},
-            "references": refs or {}}
+    return {
+        "identifier": ident,
+        "dataset": dataset,
+        "test": test,
+        "status": status,
+        "units": "V",
+        "free_run": {"rmse": rmse, "nrmse": rmse, "r2": 1 - rmse**2},
+        "one_step": {"rmse": rmse / 10},
+        "references": refs or {},
+    }
 
 
 def test_check_names_every_pair_above_its_ceiling():
-    base = {"format": scoring.BASELINES_FORMAT, "rules": [], "modes": {"quick": {
-        "narx-poly": {"silverbox": {"multisine": {"max_rmse": 5e-3, "measured": 4e-3},
-                                    "arrow": {"max_rmse": 5e-3, "measured": 4e-3}}},
-        "arx": {"cascaded-tanks": {"test": {"max_rmse": 1.2, "measured": 1.0}}}}}}
-    run = {"mode": "quick", "rows": [_row("narx-poly", "silverbox", "multisine", 4.5e-3),
-                                     _row("narx-poly", "silverbox", "arrow", 6e-3),
-                                     _row("arx", "cascaded-tanks", "test", float("nan"), status="diverged")]}
+    base = {
+        "format": scoring.BASELINES_FORMAT,
+        "rules": [],
+        "modes": {
+            "quick": {
+                "narx-poly": {
+                    "silverbox": {
+                        "multisine": {"max_rmse": 5e-3, "measured": 4e-3},
+                        "arrow": {"max_rmse": 5e-3, "measured": 4e-3},
+                    }
+                },
+                "arx": {"cascaded-tanks": {"test": {"max_rmse": 1.2, "measured": 1.0}}},
+            }
+        },
+    }
+    run = {
+        "mode": "quick",
+        "rows": [
+            _row("narx-poly", "silverbox", "multisine", 4.5e-3),
+            _row("narx-poly", "silverbox", "arrow", 6e-3),
+            _row("arx", "cascaded-tanks", "test", float("nan"), status="diverged"),
+        ],
+    }
     fails = scoring.check(run, base)
     assert len(fails) == 2
     assert any("narx-poly on silverbox/arrow" in f and "0.006 " in f for f in fails)
@@ -39,16 +62,28 @@ def test_check_names_every_pair_above_its_ceiling():
 
 
 def test_rules_beat_linear_and_published():
-    base = {"format": scoring.BASELINES_FORMAT, "modes": {}, "rules": [
-        {"rule": "beats_linear", "linear": "arx", "datasets": ["wiener-hammerstein"]},
-        {"rule": "beats_value", "identifier": "narmax-poly", "dataset": "silverbox",
-         "tests": {"multisine": 7.73e-3, "arrow": 4.15e-3}, "what": "SysIdentPy's published number"}]}
+    base = {
+        "format": scoring.BASELINES_FORMAT,
+        "modes": {},
+        "rules": [
+            {"rule": "beats_linear", "linear": "arx", "datasets": ["wiener-hammerstein"]},
+            {
+                "rule": "beats_value",
+                "identifier": "narmax-poly",
+                "dataset": "silverbox",
+                "tests": {"multisine": 7.73e-3, "arrow": 4.15e-3},
+                "what": "SysIdentPy's published number",
+            },
+        ],
+    }
     bla = {"linear_baseline": {"value": 44.4e-3, "model": "BLA"}}
-    rows = [_row("arx", "wiener-hammerstein", "test", 56e-3, refs=bla),
-            _row("narx-poly", "wiener-hammerstein", "test", 17e-3, refs=bla),
-            _row("narmax-poly", "wiener-hammerstein", "test", 50e-3, refs=bla),  # beats ARX, not the BLA
-            _row("narmax-poly", "silverbox", "multisine", 3e-3),
-            _row("narmax-poly", "silverbox", "arrow", 4.2e-3)]  # does not beat 4.15 mV
+    rows = [
+        _row("arx", "wiener-hammerstein", "test", 56e-3, refs=bla),
+        _row("narx-poly", "wiener-hammerstein", "test", 17e-3, refs=bla),
+        _row("narmax-poly", "wiener-hammerstein", "test", 50e-3, refs=bla),  # beats ARX, not the BLA
+        _row("narmax-poly", "silverbox", "multisine", 3e-3),
+        _row("narmax-poly", "silverbox", "arrow", 4.2e-3),
+    ]  # does not beat 4.15 mV
     fails = scoring.check_rules({"mode": "quick", "rows": rows}, base)
     assert len(fails) == 2
     assert any("narmax-poly on wiener-hammerstein/test" in f and "BLA" in f for f in fails)
@@ -72,14 +107,14 @@ def test_scores_match_an_independent_computation():
     skip = max(ds.init_samples, 2)
     assert r["skip"] == 4
     e = y[skip:] - yfr[skip:]
-    assert r["free_run"]["rmse"] == pytest.approx(np.sqrt(np.mean(e ** 2)), rel=1e-12)
+    assert r["free_run"]["rmse"] == pytest.approx(np.sqrt(np.mean(e**2)), rel=1e-12)
     assert r["free_run"]["r2"] == pytest.approx(1 - np.sum(e**2) / np.sum((y[skip:] - y[skip:].mean()) ** 2), rel=1e-12)
     assert np.array_equal(preds["test"], yfr)
     assert r["n_parameters"] == 5 and r["references"]["linear_baseline"]["value"] == 0.75
     # the same samples scored after the official dataloader's 50-sample window
     assert official["test"] == "test-official" and official["skip"] == 50
     e50 = y[50:] - yfr[50:]
-    assert official["free_run"]["rmse"] == pytest.approx(np.sqrt(np.mean(e50 ** 2)), rel=1e-12)
+    assert official["free_run"]["rmse"] == pytest.approx(np.sqrt(np.mean(e50**2)), rel=1e-12)
 
 
 def test_normalised_wrapper_is_exact_for_an_affine_invariant_model():
@@ -126,13 +161,19 @@ def test_settings_files_name_real_identifiers_and_datasets_and_say_why(tmp_path)
 
 
 def test_make_floors_adds_margin_and_keeps_rules():
-    run = {"mode": "quick", "rows": [_row("arx", "cascaded-tanks", "test", 1.0),
-                                     _row("x", "d", "t", float("nan"), status="diverged")]}
-    prev = {"format": scoring.BASELINES_FORMAT, "modes": {"full": {"a": {}}},
-            "rules": [{"rule": "beats_linear", "datasets": []}]}
+    run = {
+        "mode": "quick",
+        "rows": [_row("arx", "cascaded-tanks", "test", 1.0), _row("x", "d", "t", float("nan"), status="diverged")],
+    }
+    prev = {
+        "format": scoring.BASELINES_FORMAT,
+        "modes": {"full": {"a": {}}},
+        "rules": [{"rule": "beats_linear", "datasets": []}],
+    }
     new = scoring.make_floors(run, margin=0.1, previous=prev)
-    assert new["modes"]["quick"] == {"arx": {"cascaded-tanks": {"test": {"max_rmse": 1.1, "measured": 1.0, "units": "V",
-                                                                          "r2_measured": 0.0}}}}
+    assert new["modes"]["quick"] == {
+        "arx": {"cascaded-tanks": {"test": {"max_rmse": 1.1, "measured": 1.0, "units": "V", "r2_measured": 0.0}}}
+    }
     assert new["modes"]["full"] == {"a": {}} and new["rules"] == prev["rules"]
     # the diverged pair cannot get a floor: it is dropped, with the reason, and so stays visible
     (drop,) = new["dropped"]["quick"]
@@ -144,17 +185,28 @@ def test_make_floors_adds_margin_and_keeps_rules():
 def _seeded_row(ident, rmse_by_seed):
     seeds = list(range(len(rmse_by_seed)))
     k = sorted(seeds, key=lambda i: rmse_by_seed[i])[(len(seeds) - 1) // 2]
-    return {**_row(ident, "silverbox", "arrow", rmse_by_seed[k]), "seed": k, "seeds": seeds,
-            "free_run_rmse_by_seed": rmse_by_seed}
+    return {
+        **_row(ident, "silverbox", "arrow", rmse_by_seed[k]),
+        "seed": k,
+        "seeds": seeds,
+        "free_run_rmse_by_seed": rmse_by_seed,
+    }
 
 
 def test_floors_from_several_runs_take_the_worst_and_a_seeded_margin():
     """Runs measured with different CPU kernels / thread counts: the worst value of each pair sets the floor;
     pairs scored over several seeds get the wider seeded margin."""
-    runs = [{"mode": "quick", "environment": {"ATEN_CPU_CAPABILITY": isa},
-             "rows": [_row("arx", "cascaded-tanks", "test", 1.0 + d),
-                      _seeded_row("narx-mlp", [3e-3 + d / 1e3, 2e-3, 4e-3, 2.5e-3, 3.5e-3])]}
-            for isa, d in (("default", 0.0), ("avx2", 0.2))]
+    runs = [
+        {
+            "mode": "quick",
+            "environment": {"ATEN_CPU_CAPABILITY": isa},
+            "rows": [
+                _row("arx", "cascaded-tanks", "test", 1.0 + d),
+                _seeded_row("narx-mlp", [3e-3 + d / 1e3, 2e-3, 4e-3, 2.5e-3, 3.5e-3]),
+            ],
+        }
+        for isa, d in (("default", 0.0), ("avx2", 0.2))
+    ]
     new = scoring.make_floors(runs, margin=0.1, seeded_margin=0.5)
     arx = new["modes"]["quick"]["arx"]["cascaded-tanks"]["test"]
     assert (arx["measured"], arx["measured_min"], arx["runs"]) == (1.2, 1.0, 2)
@@ -179,11 +231,18 @@ def test_floors_from_several_runs_take_the_worst_and_a_seeded_margin():
 
 def test_check_fails_for_missing_floors_unscored_floors_and_unknown_names():
     f = {"max_rmse": 2.0, "measured": 1.0}
-    base = {"format": scoring.BASELINES_FORMAT, "rules": [], "modes": {"quick": {
-        "arx": {"cascaded-tanks": {"test": f}, "silverbox": {"arrow": f}},
-        "nosuch-ident": {"cascaded-tanks": {"test": f}},
-        "narx-poly": {"nosuch-data": {"test": f}}}},
-        "dropped": {"quick": [{"identifier": "armax", "dataset": "cascaded-tanks", "test": "*", "reason": "unstable"}]}}
+    base = {
+        "format": scoring.BASELINES_FORMAT,
+        "rules": [],
+        "modes": {
+            "quick": {
+                "arx": {"cascaded-tanks": {"test": f}, "silverbox": {"arrow": f}},
+                "nosuch-ident": {"cascaded-tanks": {"test": f}},
+                "narx-poly": {"nosuch-data": {"test": f}},
+            }
+        },
+        "dropped": {"quick": [{"identifier": "armax", "dataset": "cascaded-tanks", "test": "*", "reason": "unstable"}]},
+    }
     run = {
         "mode": "quick",
         "selection": {"identifiers": ["arx", "armax", "narx-poly"], "datasets": ["cascaded-tanks", "silverbox"]},
@@ -207,6 +266,7 @@ def test_check_fails_for_missing_floors_unscored_floors_and_unknown_names():
 def test_seeded_identifier_is_scored_by_its_median_seed():
     """A toy identifier whose error grows with its seed: the row is the run of seed 2 (median of 0-4), its
     metrics equal an independent fit of that seed, and every seed's free-run RMSE is listed."""
+
     class ToySeeded(ToyARX):
         def __init__(self, ny=2, nu=2, seed=0):
             super().__init__(ny, nu, degrade=0.2 * (seed + 1))
@@ -229,11 +289,19 @@ def test_seeded_identifier_is_scored_by_its_median_seed():
     assert "seeds" not in r1 and r1["free_run"]["rmse"] == pytest.approx(by_seed[1], rel=1e-12)
 
 
-@pytest.mark.parametrize("content, what", [("{not json", "not JSON"), ("[]", "not a baselines file"),
-                                           ('{"format": "other"}', "not a baselines file"),
-                                           (None, "not found"),
-                                           ('{"format": "piezotwin-baselines/1", "modes": {"quick": {"arx": '
-                                            '{"d": {"t": {"max_rmse": "x"}}}}}}', "max_rmse")])
+@pytest.mark.parametrize(
+    "content, what",
+    [
+        ("{not json", "not JSON"),
+        ("[]", "not a baselines file"),
+        ('{"format": "other"}', "not a baselines file"),
+        (None, "not found"),
+        (
+            '{"format": "piezotwin-baselines/1", "modes": {"quick": {"arx": {"d": {"t": {"max_rmse": "x"}}}}}}',
+            "max_rmse",
+        ),
+    ],
+)
 def test_unreadable_baselines_exit_2_with_one_line(tmp_path, capsys, content, what):
     path = tmp_path / "b.json"
     if content is not None:
@@ -241,8 +309,23 @@ def test_unreadable_baselines_exit_2_with_one_line(tmp_path, capsys, content, wh
     with pytest.raises(scoring.ConfigError, match=what):
         scoring.load_baselines(path)
     capsys.readouterr()
-    assert main(["score", "--quick", "--check", "--identifiers", "arx", "--datasets", "cascaded-tanks",
-                 "--no-sysidentpy", "--baselines", str(path)]) == 2
+    assert (
+        main(
+            [
+                "score",
+                "--quick",
+                "--check",
+                "--identifiers",
+                "arx",
+                "--datasets",
+                "cascaded-tanks",
+                "--no-sysidentpy",
+                "--baselines",
+                str(path),
+            ]
+        )
+        == 2
+    )
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and what in err and "Traceback" not in err
 
@@ -304,8 +387,11 @@ def test_score_cli_check_exit_codes(tmp_path, capsys):
     args = ["score", "--quick", "--identifiers", "narx-poly", "--datasets", "cascaded-tanks", "--no-sysidentpy"]
     assert main(args + ["--check", "--report", str(tmp_path / "rep")]) == 0
     assert (tmp_path / "rep" / "score.md").read_text().count("narx-poly") == 1
-    impossible = {"format": scoring.BASELINES_FORMAT, "rules": [],
-                  "modes": {"quick": {"narx-poly": {"cascaded-tanks": {"test": {"max_rmse": 1e-9, "measured": 1e-9}}}}}}
+    impossible = {
+        "format": scoring.BASELINES_FORMAT,
+        "rules": [],
+        "modes": {"quick": {"narx-poly": {"cascaded-tanks": {"test": {"max_rmse": 1e-9, "measured": 1e-9}}}}},
+    }
     path = tmp_path / "b.json"
     path.write_text(json.dumps(impossible))
     capsys.readouterr()
@@ -325,11 +411,18 @@ def test_every_quick_pair_has_a_floor_or_a_reason():
     floors, dropped = base["modes"]["quick"], scoring.dropped_pairs(base, "quick")
     left_out = scoring.QUICK_SKIP_IDENTIFIERS  # not in the default quick run, each with its reason
     only = {i: spec["datasets"] for i, spec in scoring.QUICK_ONLY_DATASETS.items()}
-    missing = [(i, d) for i in available_identifiers() if i not in left_out for d in only.get(i, scoring.QUICK_DATASETS)
-               if d not in floors.get(i, {}) and not any(k[:2] == (i, d) for k in dropped)]
+    missing = [
+        (i, d)
+        for i in available_identifiers()
+        if i not in left_out
+        for d in only.get(i, scoring.QUICK_DATASETS)
+        if d not in floors.get(i, {}) and not any(k[:2] == (i, d) for k in dropped)
+    ]
     assert not missing
-    assert all(reason for reason in [*dropped.values(), *left_out.values(), *(s["why"] for s in
-                                                                          scoring.QUICK_ONLY_DATASETS.values())])
+    assert all(
+        reason
+        for reason in [*dropped.values(), *left_out.values(), *(s["why"] for s in scoring.QUICK_ONLY_DATASETS.values())]
+    )
 
 
 def test_a_regression_injected_by_a_setting_fails_the_check():
@@ -354,8 +447,21 @@ def test_floors_tightened_by_half_fail_and_name_every_pair(tmp_path, capsys):
     path = tmp_path / "tight.json"
     path.write_text(json.dumps(base))
     capsys.readouterr()
-    code = main(["score", "--quick", "--check", "--identifiers", ",".join(idents), "--datasets", ",".join(dsets),
-                 "--no-sysidentpy", "--json", "--baselines", str(path)])
+    code = main(
+        [
+            "score",
+            "--quick",
+            "--check",
+            "--identifiers",
+            ",".join(idents),
+            "--datasets",
+            ",".join(dsets),
+            "--no-sysidentpy",
+            "--json",
+            "--baselines",
+            str(path),
+        ]
+    )
     err = capsys.readouterr().err
     assert code == 1
     for i in idents:
@@ -367,9 +473,16 @@ def test_update_baselines_from_saved_runs(tmp_path, capsys):
     runs = []
     for k, isa in enumerate(("default", "avx2")):
         p = tmp_path / f"run{k}.json"
-        p.write_text(json.dumps({"format": "piezotwin-score/1", "mode": "quick",
-                                 "environment": {"ATEN_CPU_CAPABILITY": isa},
-                                 "rows": [_row("arx", "cascaded-tanks", "test", 1.0 + k)]}))
+        p.write_text(
+            json.dumps(
+                {
+                    "format": "piezotwin-score/1",
+                    "mode": "quick",
+                    "environment": {"ATEN_CPU_CAPABILITY": isa},
+                    "rows": [_row("arx", "cascaded-tanks", "test", 1.0 + k)],
+                }
+            )
+        )
         runs.append(str(p))
     out = tmp_path / "b.json"
     assert (
@@ -386,8 +499,20 @@ def test_update_baselines_from_saved_runs(tmp_path, capsys):
         )
     assert exc.value.code == 2
     (tmp_path / "bad.json").write_text("[1]")
-    assert main(["score", "--quick", "--update-baselines", "--baselines", str(out),
-                 "--from-runs", str(tmp_path / "bad.json")]) == 2
+    assert (
+        main(
+            [
+                "score",
+                "--quick",
+                "--update-baselines",
+                "--baselines",
+                str(out),
+                "--from-runs",
+                str(tmp_path / "bad.json"),
+            ]
+        )
+        == 2
+    )
     assert json.loads(out.read_text())["modes"]["quick"]["arx"]["cascaded-tanks"]["test"]["measured"] == 2.0
 
 

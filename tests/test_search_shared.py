@@ -40,11 +40,35 @@ def _search(files: Path, storage: str, study: str, *extra: str, grace: int = 30)
     """A search process; heartbeat every second, grace ``grace`` s (long by default: on a loaded machine a
     starved heartbeat thread must not make a live trial look dead; a killed process on this host is
     detected by its pid at once)."""
-    env = {**os.environ, "PYTHONPATH": str(REPO), "OPENBLAS_NUM_THREADS": "1", "PIEZOTWIN_HEARTBEAT_S": "1",
-           "PIEZOTWIN_GRACE_S": str(grace)}
-    cmd = [sys.executable, "-m", "benchmarks.cli", "search", "narx-mlp", "--est", str(files / "est.npz"),
-           "--val", str(files / "val.npz"), "--grid", GRID, "--set", "epochs=150,hidden=16-16,device=cpu",
-           "--storage", storage, "--study", study, "--no-progress", "--json", *extra]
+    env = {
+        **os.environ,
+        "PYTHONPATH": str(REPO),
+        "OPENBLAS_NUM_THREADS": "1",
+        "PIEZOTWIN_HEARTBEAT_S": "1",
+        "PIEZOTWIN_GRACE_S": str(grace),
+    }
+    cmd = [
+        sys.executable,
+        "-m",
+        "benchmarks.cli",
+        "search",
+        "narx-mlp",
+        "--est",
+        str(files / "est.npz"),
+        "--val",
+        str(files / "val.npz"),
+        "--grid",
+        GRID,
+        "--set",
+        "epochs=150,hidden=16-16,device=cpu",
+        "--storage",
+        storage,
+        "--study",
+        study,
+        "--no-progress",
+        "--json",
+        *extra,
+    ]
     return subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=files)
 
 
@@ -80,12 +104,22 @@ def _kill_in_trial(victim: subprocess.Popen, storage: str, study: str, timeout: 
             mine = [t for t in _trials(storage, study) if t.user_attrs.get("pid") == victim.pid]
         except Exception:  # the study does not exist yet
             mine = []
-        done = [(t.datetime_complete - t.datetime_start).total_seconds() for t in mine
-                if t.state == TrialState.COMPLETE and t.datetime_complete and t.datetime_start]
+        done = [
+            (t.datetime_complete - t.datetime_start).total_seconds()
+            for t in mine
+            if t.state == TrialState.COMPLETE and t.datetime_complete and t.datetime_start
+        ]
         # "just started": younger than half the shortest trial it finished, so the kill lands before its end
         now = datetime.now()
-        young = [t for t in mine if done and t.state == TrialState.RUNNING and t.user_attrs.get("claimed")
-                 and t.datetime_start is not None and (now - t.datetime_start).total_seconds() < min(done) / 2]
+        young = [
+            t
+            for t in mine
+            if done
+            and t.state == TrialState.RUNNING
+            and t.user_attrs.get("claimed")
+            and t.datetime_start is not None
+            and (now - t.datetime_start).total_seconds() < min(done) / 2
+        ]
         if young:
             victim.send_signal(signal.SIGKILL)
             victim.wait()
@@ -112,12 +146,20 @@ def test_two_processes_on_postgres_finish_exactly_the_grid_and_survive_sigkill(f
     from optuna.trial import TrialState
 
     trials = _trials(postgres_url, "pg")
-    killed = [t for t in trials if t.user_attrs.get("pid") == a.pid and t.user_attrs.get("config_key") == interrupted
-              and t.state != TrialState.COMPLETE]
+    killed = [
+        t
+        for t in trials
+        if t.user_attrs.get("pid") == a.pid
+        and t.user_attrs.get("config_key") == interrupted
+        and t.state != TrialState.COMPLETE
+    ]
     assert [t.state for t in killed] == [TrialState.FAIL]  # the interrupted trial was failed, not left RUNNING
     # and its configuration was finished by the other process
-    assert [t.user_attrs["pid"] for t in trials if t.state == TrialState.COMPLETE
-            and t.user_attrs["config_key"] == interrupted] == [b.pid]
+    assert [
+        t.user_attrs["pid"]
+        for t in trials
+        if t.state == TrialState.COMPLETE and t.user_attrs["config_key"] == interrupted
+    ] == [b.pid]
 
 
 @pytest.mark.slow
@@ -190,8 +232,22 @@ def test_search_that_cannot_complete_says_how_many_are_missing_and_exits_1(tmp_p
         return real(spec, config, *args)
 
     monkeypatch.setattr(S, "run_one", broken)
-    code = main(["search", "arx", "--est", str(tmp_path / "e.npz"), "--val", str(tmp_path / "e.npz"),
-                 "--grid", "ny=1,2,3", "--storage", str(tmp_path / "m.db"), "--no-progress", "--json"])
+    code = main(
+        [
+            "search",
+            "arx",
+            "--est",
+            str(tmp_path / "e.npz"),
+            "--val",
+            str(tmp_path / "e.npz"),
+            "--grid",
+            "ny=1,2,3",
+            "--storage",
+            str(tmp_path / "m.db"),
+            "--no-progress",
+            "--json",
+        ]
+    )
     captured = capsys.readouterr()
     assert code == 1
     assert "search: 1 of 3 requested configurations did not complete" in captured.err

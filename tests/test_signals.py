@@ -19,12 +19,13 @@ def line_db(u: np.ndarray, n0: int) -> np.ndarray:
 @pytest.mark.parametrize("periods", [1, 3])
 def test_periodic_multisine_flat_lines_and_empty_elsewhere(phase, periods):
     fs, n0 = 1000.0, 1000
-    u, info = S.multisine(fs, duration=periods * n0 / fs, band=(10, 200), phase=phase, periods=periods, seed=3,
-                          return_info=True)
+    u, info = S.multisine(
+        fs, duration=periods * n0 / fs, band=(10, 200), phase=phase, periods=periods, seed=3, return_info=True
+    )
     assert u.size == periods * n0 and info["period_samples"] == n0 and info["periodic"]
     # every period is the same signal
     for p in range(1, periods):
-        np.testing.assert_allclose(u[p * n0:(p + 1) * n0], u[:n0], atol=1e-12)
+        np.testing.assert_allclose(u[p * n0 : (p + 1) * n0], u[:n0], atol=1e-12)
     # spectrum of the whole record: excited lines at p*m
     X = np.abs(np.fft.rfft(u))
     db = 20 * np.log10(np.maximum(X, 1e-300) / X.max())
@@ -39,7 +40,7 @@ def test_periodic_multisine_flat_lines_and_empty_elsewhere(phase, periods):
 
 def test_multisine_rms_amplitude_and_line_amplitude():
     u, info = S.multisine(1000.0, duration=1.0, band=(5, 100), amplitude=2.5, rms=True, seed=1, return_info=True)
-    assert np.sqrt(np.mean(u ** 2)) == pytest.approx(2.5, rel=1e-12)
+    assert np.sqrt(np.mean(u**2)) == pytest.approx(2.5, rel=1e-12)
     # Parseval for a sum of nf cosines of amplitude A: rms^2 = nf A^2 / 2 (eq. 2-1)
     assert info["line_amplitude"] == pytest.approx(2.5 * np.sqrt(2.0 / info["n_components"]), rel=1e-12)
     assert info["crest_factor"] == pytest.approx(np.max(np.abs(u)) / 2.5, rel=1e-12)
@@ -78,30 +79,33 @@ def test_odd_grid_has_no_even_lines():
 
 def test_odd_odd_grid_and_detection_lines_reveal_distortion():
     fs, n0 = 1000.0, 1000
-    u, info = S.multisine(fs, duration=1.0, band=(1, 120), grid="odd-odd", detection_fraction=0.25, seed=5,
-                          return_info=True)
+    u, info = S.multisine(
+        fs, duration=1.0, band=(1, 120), grid="odd-odd", detection_fraction=0.25, seed=5, return_info=True
+    )
     exc, det = info["excited_bins"], info["detection_bins"]
     assert np.all(exc % 4 == 1) and np.all(det % 4 == 1)
     cand = np.arange(1, 121, 4)  # 30 candidate lines, blocks of 4 -> 7 detection lines, one per block
     assert det.size == cand.size // 4 and np.intersect1d(exc, det).size == 0
     np.testing.assert_array_equal(np.union1d(exc, det), cand)
     for b in range(cand.size // 4):
-        assert np.isin(cand[4 * b:4 * b + 4], det).sum() == 1
+        assert np.isin(cand[4 * b : 4 * b + 4], det).sum() == 1
     db = line_db(u, n0)
     assert db[det].max() < -100 and db[exc].min() > -0.1
     # odd (cubic) distortion falls on m = 3 mod 4 and on the detection lines, never on even lines
-    y3 = u + 0.3 * u ** 3
+    y3 = u + 0.3 * u**3
     d3 = line_db(y3, n0)
     assert d3[0::2].max() < -100
     assert d3[3::4][:60].max() > -60 and d3[det].max() > -80
     # even (quadratic) distortion falls on even lines
-    y2 = u + 0.3 * u ** 2
+    y2 = u + 0.3 * u**2
     assert line_db(y2, n0)[2::2][:240].max() > -60
     # seeded: same seed same lines, another seed other lines
-    det2 = S.multisine(fs, duration=1.0, band=(1, 120), grid="odd-odd", detection_fraction=0.25, seed=5,
-                       return_info=True)[1]["detection_bins"]
-    det3 = S.multisine(fs, duration=1.0, band=(1, 120), grid="odd-odd", detection_fraction=0.25, seed=6,
-                       return_info=True)[1]["detection_bins"]
+    det2 = S.multisine(
+        fs, duration=1.0, band=(1, 120), grid="odd-odd", detection_fraction=0.25, seed=5, return_info=True
+    )[1]["detection_bins"]
+    det3 = S.multisine(
+        fs, duration=1.0, band=(1, 120), grid="odd-odd", detection_fraction=0.25, seed=6, return_info=True
+    )[1]["detection_bins"]
     np.testing.assert_array_equal(det, det2)
     assert not np.array_equal(det, det3)
 
@@ -113,17 +117,20 @@ def test_multisine_resolution_and_truncation():
     assert info["n_components"] == 50 and np.max(np.abs(u)) == pytest.approx(1.0)
 
 
-@pytest.mark.parametrize("kw, match", [
-    (dict(band=(200, 100)), "fmin"),
-    (dict(band=(10, 500)), "Nyquist"),
-    (dict(band=(10, 20), components=50), "do not fit"),
-    (dict(band=(10, 20), phase="bogus"), "phase"),
-    (dict(band=(10, 20), grid="even"), "grid"),
-    (dict(band=(10, 20), resolution=0.3), "resolution"),
-    (dict(band=(10, 20), periods=3), "periods"),
-    (dict(band=(10, 20), detection_fraction=0.9), "detection_fraction"),
-    (dict(band=(10, 20), amplitude=-1), "amplitude"),
-])
+@pytest.mark.parametrize(
+    "kw, match",
+    [
+        (dict(band=(200, 100)), "fmin"),
+        (dict(band=(10, 500)), "Nyquist"),
+        (dict(band=(10, 20), components=50), "do not fit"),
+        (dict(band=(10, 20), phase="bogus"), "phase"),
+        (dict(band=(10, 20), grid="even"), "grid"),
+        (dict(band=(10, 20), resolution=0.3), "resolution"),
+        (dict(band=(10, 20), periods=3), "periods"),
+        (dict(band=(10, 20), detection_fraction=0.9), "detection_fraction"),
+        (dict(band=(10, 20), amplitude=-1), "amplitude"),
+    ],
+)
 def test_multisine_bad_arguments(kw, match):
     with pytest.raises(ConfigError, match=match):
         S.multisine(1000.0, duration=1.0, **kw)
@@ -185,9 +192,9 @@ def test_periodic_chirp_eq_2_2():
     fs, T0 = 10e3, 0.1  # k1 = 100 Hz * T0 = 10, k2 = 2000 Hz * T0 = 200
     u = S.chirp(fs, 3 * T0, 100.0, 2000.0, periodic=True, periods=3)
     n0 = int(fs * T0)
-    np.testing.assert_allclose(u[n0:2 * n0], u[:n0], atol=1e-12)
+    np.testing.assert_allclose(u[n0 : 2 * n0], u[:n0], atol=1e-12)
     t = np.arange(n0) / fs
-    a, b = np.pi * (200 - 10) / T0 ** 2, 2 * np.pi * 10 / T0  # eq. 2-2: a = pi (k2 - k1) f0^2, b = 2 pi k1 f0
+    a, b = np.pi * (200 - 10) / T0**2, 2 * np.pi * 10 / T0  # eq. 2-2: a = pi (k2 - k1) f0^2, b = 2 pi k1 f0
     np.testing.assert_allclose(u[:n0], np.cos((a * t + b) * t), atol=1e-9)
     with pytest.raises(ConfigError, match="integer"):
         S.chirp(fs, T0, 105.0, 2000.0, periodic=True)
@@ -209,7 +216,7 @@ def test_stepped_sine_windows_and_continuity():
         assert step["measure_start"] - step["start"] == 2000
         n = step["stop"] - step["measure_start"]
         assert n == round(step["cycles"] * fs / step["freq_hz"])
-        seg = u[step["measure_start"]:step["stop"]]
+        seg = u[step["measure_start"] : step["stop"]]
         X = np.abs(np.fft.rfft(seg)) * 2 / n
         assert X[step["cycles"]] == pytest.approx(2.0, rel=1e-9)  # whole periods: all power on one line
     assert u.size == info["steps"][-1]["stop"]
@@ -221,7 +228,7 @@ def test_stepped_sine_windows_and_continuity():
 @pytest.mark.parametrize("order", range(2, 19))
 def test_prbs_is_maximum_length_sequence(order):
     u = S.prbs(1.0, order=order)
-    N = 2 ** order - 1
+    N = 2**order - 1
     assert u.size == N and set(np.unique(u)) == {-1.0, 1.0}
     assert (u > 0).sum() == 2 ** (order - 1)  # balance of an m-sequence
     # two-valued circular autocorrelation: N at lag 0, -1 elsewhere (only m-sequences have it)
@@ -259,15 +266,32 @@ from hypothesis import strategies as st  # noqa: E402
 
 
 @settings(max_examples=40, deadline=None)
-@given(n0=st.integers(16, 600), lo=st.floats(0, 0.45), width=st.floats(0.01, 0.5), grid=st.sampled_from(S.GRIDS),
-       amp=st.floats(1e-3, 1e3), rms=st.booleans(), phase=st.sampled_from(S.PHASES), seed=st.integers(0, 10))
+@given(
+    n0=st.integers(16, 600),
+    lo=st.floats(0, 0.45),
+    width=st.floats(0.01, 0.5),
+    grid=st.sampled_from(S.GRIDS),
+    amp=st.floats(1e-3, 1e3),
+    rms=st.booleans(),
+    phase=st.sampled_from(S.PHASES),
+    seed=st.integers(0, 10),
+)
 def test_multisine_invariants(n0, lo, width, grid, amp, rms, phase, seed):
     fs = 1000.0
     fmin = lo * fs / 2
     fmax = min(fmin + width * fs / 2, 0.999 * fs / 2)
     try:
-        u, info = S.multisine(fs, duration=n0 / fs, band=(fmin, fmax), amplitude=amp, rms=rms, grid=grid,
-                              phase=phase, seed=seed, return_info=True)
+        u, info = S.multisine(
+            fs,
+            duration=n0 / fs,
+            band=(fmin, fmax),
+            amplitude=amp,
+            rms=rms,
+            grid=grid,
+            phase=phase,
+            seed=seed,
+            return_info=True,
+        )
     except ConfigError as e:  # only refusal allowed: no grid line in a narrow band
         assert "no " in str(e) and "grid line" in str(e)
         return
@@ -275,7 +299,7 @@ def test_multisine_invariants(n0, lo, width, grid, amp, rms, phase, seed):
     df = fs / n0
     assert np.all(m * df >= fmin - 1e-9) and np.all(m * df <= fmax + 1e-9) and np.all(2 * m < n0)
     assert {"full": True, "odd": np.all(m % 2 == 1), "odd-odd": np.all(m % 4 == 1)}[grid]
-    level = np.sqrt(np.mean(u ** 2)) if rms else np.max(np.abs(u))
+    level = np.sqrt(np.mean(u**2)) if rms else np.max(np.abs(u))
     assert level == pytest.approx(amp, rel=1e-9)
     X = np.abs(np.fft.rfft(u))
     others = np.setdiff1d(np.arange(X.size), m)

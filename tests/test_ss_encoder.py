@@ -13,7 +13,7 @@ from sysid.base import load_model  # noqa: E402
 from sysid.data.record import Record  # noqa: E402
 from sysid.neural.ss_encoder import SSEncoder  # noqa: E402
 
-A = np.array([[1.6, -0.8], [1.0, 0.0]])   # poles 0.8 ± 0.4j (|p| = 0.894)
+A = np.array([[1.6, -0.8], [1.0, 0.0]])  # poles 0.8 ± 0.4j (|p| = 0.894)
 B = np.array([1.0, 0.0])
 C = np.array([0.2, 0.1])
 
@@ -34,8 +34,20 @@ def linear_fit():
     rng = np.random.default_rng(0)
     u = rng.standard_normal(3000)
     y, _ = simulate(u, [0.0, 0.0])
-    model = SSEncoder(nx=2, ny=4, nu=4, f_hidden=0, h_hidden=0, e_hidden=0, T=30, batch_size=64, epochs=20, lr=1e-2,
-                      device="cpu", seed=0)
+    model = SSEncoder(
+        nx=2,
+        ny=4,
+        nu=4,
+        f_hidden=0,
+        h_hidden=0,
+        e_hidden=0,
+        T=30,
+        batch_size=64,
+        epochs=20,
+        lr=1e-2,
+        device="cpu",
+        seed=0,
+    )
     return model.fit(Record(u=u, y=y, fs=1.0))
 
 
@@ -80,7 +92,7 @@ def test_encoder_state_is_true_state_up_to_similarity(linear_fit):
     X = np.column_stack([xs[ks], np.ones(ks.size)])
     coef, *_ = np.linalg.lstsq(X, xh, rcond=None)
     assert np.max(np.abs(X @ coef - xh)) < 1e-4 * np.max(np.abs(xh))
-    M = coef[:2].T                                  # x̂ = M x + c
+    M = coef[:2].T  # x̂ = M x + c
     Ah, Bh, Ch = learned_abc(linear_fit)
     np.testing.assert_allclose(Ah, M @ A @ np.linalg.inv(M), atol=1e-4)
     norm = linear_fit.normaliser_
@@ -128,8 +140,21 @@ def test_cosine_decay_to_lr_is_the_constant_step_and_decays_otherwise():
     rng = np.random.default_rng(3)
     u = rng.standard_normal(600)
     y, _ = simulate(u, [0.0, 0.0])
-    common = dict(nx=2, ny=4, nu=4, f_hidden=8, h_hidden=0, e_hidden=0, T=20, batch_size=32, epochs=4, lr=1e-2,
-                  device="cpu", seed=0, val_fraction=0.0)
+    common = dict(
+        nx=2,
+        ny=4,
+        nu=4,
+        f_hidden=8,
+        h_hidden=0,
+        e_hidden=0,
+        T=20,
+        batch_size=32,
+        epochs=4,
+        lr=1e-2,
+        device="cpu",
+        seed=0,
+        val_fraction=0.0,
+    )
     rec = Record(u=u, y=y, fs=1.0)
     const = SSEncoder(**common).fit(rec)
     same = SSEncoder(lr_min=1e-2, **common).fit(rec)

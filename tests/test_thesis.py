@@ -88,7 +88,8 @@ def test_committed_page_is_the_rendering_of_the_committed_rows():
     assert rows, "docs/dissertation/rows.json holds no rows"
     link = "dissertation/" + thesis.HISTOGRAM_NAME if "fig-5.13/est" in rows else None
     assert thesis.PAGE_PATH.read_text(encoding="utf-8") == render(rows, link), (
-        "docs/dissertation.md differs from the stored rows: run `piezotwin thesis --render-only`")
+        "docs/dissertation.md differs from the stored rows: run `piezotwin thesis --render-only`"
+    )
 
 
 def test_row_format_is_checked(quick, tmp_path):
@@ -116,11 +117,14 @@ def test_row_selection():
     assert select_rows(None) == ROW_IDS
 
 
-@pytest.mark.parametrize("argv, expected", [
-    (["--rows", "table-9.9"], "--rows: 'table-9.9' is not a row id or table"),
-    (["--render-only", "--rows", "table-4.2"], "--render-only renders every stored row"),
-    (["--quick", "--tier", "full"], "--quick is --tier quick"),
-])
+@pytest.mark.parametrize(
+    "argv, expected",
+    [
+        (["--rows", "table-9.9"], "--rows: 'table-9.9' is not a row id or table"),
+        (["--render-only", "--rows", "table-4.2"], "--render-only renders every stored row"),
+        (["--quick", "--tier", "full"], "--quick is --tier quick"),
+    ],
+)
 def test_bad_input_exits_2_with_one_line(argv, expected, tmp_path, capsys):
     code = main(["thesis", *argv, "--stored", str(tmp_path / "r.json"), "--markdown", str(tmp_path / "p.md")])
     err = capsys.readouterr().err.strip().splitlines()
@@ -133,8 +137,7 @@ def test_published_numbers_and_their_slips():
     Table 5.6's five validation runs average Table 5.5's 75-75 row; Table 5.4 row 2's SD is impossible."""
     assert np.mean(list(targets.TABLE_4_3.values())) == pytest.approx(targets.TABLE_4_2[(5, 25)][0], abs=5e-9)
     assert np.mean(targets.TABLE_5_6["frs-val"]) == pytest.approx(targets.TABLE_5_5["75x2-sigmoid"][0], abs=1e-4)
-    assert np.std(targets.TABLE_5_6["frs-val"], ddof=1) == pytest.approx(targets.TABLE_5_5["75x2-sigmoid"][1],
-                                                                         abs=1e-4)
+    assert np.std(targets.TABLE_5_6["frs-val"], ddof=1) == pytest.approx(targets.TABLE_5_5["75x2-sigmoid"][1], abs=1e-4)
     assert np.mean(targets.TABLE_5_6["frs-est"]) == pytest.approx(targets.TABLE_5_4["75x2-sigmoid"][0], abs=1e-4)
     assert targets._max_sd(0.9628, 5) < targets.TABLE_5_4["256-2-tanh"][1] / 6
     # Table 4.2's parameter counts are the 4 x 25 network's: 20 inputs, ReLU layers, one output

@@ -39,14 +39,17 @@ def _reference(model: torch.nn.Module, pairs, draws: int | None, seed: int, clip
     gen = torch.Generator().manual_seed(seed)
     opt = torch.optim.Adam(model.parameters(), lr=1e-2)
     for _ in range(EPOCHS):
-        order = (torch.randperm(len(secs), generator=gen) if draws is None
-                 else torch.randint(0, len(secs), (draws,), generator=gen)).tolist()
+        order = (
+            torch.randperm(len(secs), generator=gen)
+            if draws is None
+            else torch.randint(0, len(secs), (draws,), generator=gen)
+        ).tolist()
         for a in range(0, len(order), BATCH):
-            chosen = [secs[i] for i in order[a:a + BATCH]]
-            ypast = torch.as_tensor(np.stack([y[k - LAG:k] for u, y, k in chosen]), dtype=torch.float32)
-            upast = torch.as_tensor(np.stack([u[k - LAG:k] for u, y, k in chosen]), dtype=torch.float32)
-            useq = torch.as_tensor(np.stack([u[k:k + T] for u, y, k in chosen]), dtype=torch.float32)
-            target = torch.as_tensor(np.stack([y[k:k + T] for u, y, k in chosen]), dtype=torch.float32)
+            chosen = [secs[i] for i in order[a : a + BATCH]]
+            ypast = torch.as_tensor(np.stack([y[k - LAG : k] for u, y, k in chosen]), dtype=torch.float32)
+            upast = torch.as_tensor(np.stack([u[k - LAG : k] for u, y, k in chosen]), dtype=torch.float32)
+            useq = torch.as_tensor(np.stack([u[k : k + T] for u, y, k in chosen]), dtype=torch.float32)
+            target = torch.as_tensor(np.stack([y[k : k + T] for u, y, k in chosen]), dtype=torch.float32)
             d = model(ypast, upast, useq) - target
             loss = (d * d).mean()
             opt.zero_grad()
@@ -69,8 +72,9 @@ def test_the_shared_loop_is_adam_on_the_section_simulation_error(which, draws):
     net = dict(_networks())[which]
     ref = copy.deepcopy(net)
     pairs = _pairs()
-    train_simulation(net, pairs, LAG, T, EPOCHS, BATCH, lr=1e-2, clip=0.5, draws=draws,
-                     generator=torch.Generator().manual_seed(3))
+    train_simulation(
+        net, pairs, LAG, T, EPOCHS, BATCH, lr=1e-2, clip=0.5, draws=draws, generator=torch.Generator().manual_seed(3)
+    )
     _reference(ref, pairs, draws, seed=3, clip=0.5)
     got, want = net.state_dict(), ref.state_dict()
     assert all(torch.equal(got[k], want[k]) for k in want)

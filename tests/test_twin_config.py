@@ -48,14 +48,17 @@ def test_options_order_and_types():
     assert _Toy.from_options(effects="none").effects == frozenset()
 
 
-@pytest.mark.parametrize("kw,needle", [
-    (dict(set_=["nope=1"]), "valid: gain"),
-    (dict(set_=["gain=99"]), "out of range"),
-    (dict(set_=["fluid=honey"]), "not one of"),
-    (dict(effect=["bogus"]), "valid: offset, lag"),
-    (dict(effect=["offset:zzz=1"]), "valid: value"),
-    (dict(set_=["gain=abc"]), "expected float"),
-])
+@pytest.mark.parametrize(
+    "kw,needle",
+    [
+        (dict(set_=["nope=1"]), "valid: gain"),
+        (dict(set_=["gain=99"]), "out of range"),
+        (dict(set_=["fluid=honey"]), "not one of"),
+        (dict(effect=["bogus"]), "valid: offset, lag"),
+        (dict(effect=["offset:zzz=1"]), "valid: value"),
+        (dict(set_=["gain=abc"]), "expected float"),
+    ],
+)
 def test_bad_options_refused_with_valid_list(kw, needle):
     with pytest.raises(ConfigError, match=needle):
         _Toy.from_options(**kw)
@@ -79,6 +82,7 @@ def test_params_file_round_trip_and_calibration(tmp_path):
 
 def test_parameter_bounds_for_the_searches():
     """The searches over a parameter read its documented range as floats; a parameter without one is refused."""
+
     @dataclasses.dataclass(frozen=True)
     class P:
         gain: float = pfield(2.0, "V/V", 1, 10, "gain")

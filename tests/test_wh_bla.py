@@ -20,7 +20,7 @@ def true_system(u: np.ndarray) -> np.ndarray:
     exactly) of x / 4, G2 = (1 − 0.3 q⁻¹)/(1 − 0.5 q⁻¹ + 0.3 q⁻²), from rest."""
     x = np.r_[0.0, lfilter([1.0, 0.5], [1.0, -1.2, 0.5], u)[:-1]]
     x = x / 4.0  # RMS about 0.7: the BLA keeps the gain 1 − 0.6 E[x²] ≈ 0.7 far from zero
-    w = x + 0.3 * x ** 2 - 0.2 * x ** 3
+    w = x + 0.3 * x**2 - 0.2 * x**3
     return lfilter([1.0, -0.3], [1.0, -0.5, 0.3], w)
 
 
@@ -48,10 +48,10 @@ def test_jacobian_equals_finite_differences():
         b1 = g1.b.copy()
         b1[free1] = t[:2]
         a1 = np.r_[1.0, t[2:4]]
-        cc = t[4:4 + f.n]
+        cc = t[4 : 4 + f.n]
         b2 = g2.b.copy()
-        b2[free2] = t[4 + f.n:5 + f.n]
-        a2 = np.r_[1.0, t[5 + f.n:]]
+        b2[free2] = t[4 + f.n : 5 + f.n]
+        a2 = np.r_[1.0, t[5 + f.n :]]
         return wb.simulate(wb.Filter(b1, a1, 2), f, cc, wb.Filter(b2, a2, 1), u)[0]
 
     yh, J = wb.jacobian(g1, f, c, g2, u, free1, free2)
@@ -64,12 +64,12 @@ def test_jacobian_equals_finite_differences():
 def test_spline_holds_a_cubic_and_continues_by_its_tangents():
     x = np.linspace(-2.0, 2.0, 400)
     f = wb.Spline.at_quantiles(x, 4, 0.5)
-    target = x + 0.3 * x ** 2 - 0.2 * x ** 3
+    target = x + 0.3 * x**2 - 0.2 * x**3
     c = np.linalg.lstsq(f.basis(x), target, rcond=None)[0]
     np.testing.assert_allclose(f(x, c), target, atol=1e-10)
     xo = np.array([f.hi + 1.0])  # one beyond the end: the tangent there
-    slope = 1 + 0.6 * f.hi - 0.6 * f.hi ** 2
-    end = f.hi + 0.3 * f.hi ** 2 - 0.2 * f.hi ** 3
+    slope = 1 + 0.6 * f.hi - 0.6 * f.hi**2
+    end = f.hi + 0.3 * f.hi**2 - 0.2 * f.hi**3
     np.testing.assert_allclose(f(xo, c), end + slope, atol=1e-9)
     np.testing.assert_allclose(f.basis(xo) @ c, end + slope, atol=1e-9)
 
@@ -77,7 +77,7 @@ def test_spline_holds_a_cubic_and_continues_by_its_tangents():
 def test_root_groups_keep_conjugate_pairs_together():
     groups = wb.root_groups(np.roots(np.poly([0.5 + 0.2j, 0.5 - 0.2j, -0.3])))
     assert sorted(len(g) for g in groups) == [1, 2]
-    assert len(list(wb.splits(np.array([0.1]), np.array([0.5 + 0.2j, 0.5 - 0.2j, -0.3])))) == 2 ** 3
+    assert len(list(wb.splits(np.array([0.1]), np.array([0.5 + 0.2j, 0.5 - 0.2j, -0.3])))) == 2**3
 
 
 def test_recovers_a_noise_free_wiener_hammerstein_system(fitted):
@@ -94,8 +94,9 @@ def test_recovers_a_noise_free_wiener_hammerstein_system(fitted):
     for z in (-0.5, 0.3):
         assert np.min(np.abs(zeros - z)) < 1e-6
     poles = sorted(abs(p) for p in np.r_[fitted.g1_.poles(), fitted.g2_.poles()])
-    np.testing.assert_allclose(poles, sorted(np.abs(np.r_[np.roots([1, -1.2, 0.5]), np.roots([1, -0.5, 0.3])])),
-                               atol=1e-6)
+    np.testing.assert_allclose(
+        poles, sorted(np.abs(np.r_[np.roots([1, -1.2, 0.5]), np.roots([1, -0.5, 0.3])])), atol=1e-6
+    )
 
 
 def test_save_load_predicts_identically(fitted, tmp_path):

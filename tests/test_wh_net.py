@@ -35,8 +35,9 @@ def test_iir_gradients_match_finite_differences():
     assert torch.autograd.gradcheck(MIMOFilter.apply, (x, layer.b, layer.a))
     assert torch.autograd.gradcheck(layer, (x,))  # with the delay, the input gradient only
     y = layer(x).detach().numpy()
-    np.testing.assert_allclose(y, filter_np(x.detach().numpy(), layer.b.detach().numpy(), layer.a.detach().numpy(), 1),
-                               rtol=0, atol=1e-13)
+    np.testing.assert_allclose(
+        y, filter_np(x.detach().numpy(), layer.b.detach().numpy(), layer.a.detach().numpy(), 1), rtol=0, atol=1e-13
+    )
 
 
 def test_linear_system_learned_exactly():
@@ -61,8 +62,18 @@ def test_linear_system_learned_exactly_from_sections():
 
     def fit(seed):
         layer = LinearDynamic(1, 1, nb=2, na=2, generator=torch.Generator().manual_seed(0))
-        res = train_records(layer, [(u[:, None], y[:, None])], warmup=40, epochs=150, lr=0.05, lr_min=1e-4,
-                            val_fraction=0.1, window=200, batch=8, seed=seed)
+        res = train_records(
+            layer,
+            [(u[:, None], y[:, None])],
+            warmup=40,
+            epochs=150,
+            lr=0.05,
+            lr_min=1e-4,
+            val_fraction=0.1,
+            window=200,
+            batch=8,
+            seed=seed,
+        )
         return layer, res
 
     layer, res = fit(0)
@@ -86,8 +97,19 @@ def _wh_fit(epochs: int) -> tuple[WHNet, float]:
     u = rng.standard_normal(2000)
     y = _wh_system(u)
     noise = 0.01 * np.std(y)
-    model = WHNet(channels=3, hidden=12, nb=3, na=2, epochs=epochs, lr=3e-2, lr_min=1e-4, val_fraction=0.2, warmup=10,
-                  seed=0, device="cpu")
+    model = WHNet(
+        channels=3,
+        hidden=12,
+        nb=3,
+        na=2,
+        epochs=epochs,
+        lr=3e-2,
+        lr_min=1e-4,
+        val_fraction=0.2,
+        warmup=10,
+        seed=0,
+        device="cpu",
+    )
     model.fit(Record(u=u, y=y + noise * rng.standard_normal(u.size), fs=1.0))
     return model, noise
 
@@ -150,8 +172,17 @@ def test_linear_path_and_blocks_have_the_stated_shapes():
 
 def test_bad_options_are_refused():
     rec = Record(u=np.sin(np.arange(200.0)), y=np.cos(np.arange(200.0)), fs=1.0)
-    for bad in ({"channels": 0}, {"hidden": "x"}, {"na": -1}, {"lr": 0}, {"lr": 1e-3, "lr_min": 1e-2},
-                {"val_fraction": 0.9}, {"activation": "cube"}, {"window": 50}, {"window": 100, "batch": 0}):
+    for bad in (
+        {"channels": 0},
+        {"hidden": "x"},
+        {"na": -1},
+        {"lr": 0},
+        {"lr": 1e-3, "lr_min": 1e-2},
+        {"val_fraction": 0.9},
+        {"activation": "cube"},
+        {"window": 50},
+        {"window": 100, "batch": 0},
+    ):
         with pytest.raises(ConfigError):
             WHNet(epochs=1, device="cpu", **bad).fit(rec)
     m = WHNet.from_assignments({"hidden": "16-8", "linear": "true"})

@@ -26,11 +26,16 @@ def test_wheel_holds_no_tests_and_only_the_benchmark_library_and_cli(tmp_path):
     src.mkdir()
     ignore = shutil.ignore_patterns("__pycache__", "*.pyc", "*.egg-info", "build")
     for name in SHIPPED:  # a copy, so that building leaves no build/ or egg-info in the checkout
-        (shutil.copytree if (ROOT / name).is_dir() else shutil.copy2)(ROOT / name, src / name, **(
-            {"ignore": ignore} if (ROOT / name).is_dir() else {}))
+        (shutil.copytree if (ROOT / name).is_dir() else shutil.copy2)(
+            ROOT / name, src / name, **({"ignore": ignore} if (ROOT / name).is_dir() else {})
+        )
     out = tmp_path / "dist"
-    subprocess.run([sys.executable, "-m", "pip", "wheel", str(src), "--no-deps", "--no-build-isolation", "-q",
-                    "-w", str(out)], check=True, cwd=tmp_path, timeout=600)
+    subprocess.run(
+        [sys.executable, "-m", "pip", "wheel", str(src), "--no-deps", "--no-build-isolation", "-q", "-w", str(out)],
+        check=True,
+        cwd=tmp_path,
+        timeout=600,
+    )
     (wheel,) = out.glob("piezotwin-*.whl")
     names = zipfile.ZipFile(wheel).namelist()
     modules = [n for n in names if n.endswith(".py")]

@@ -55,13 +55,28 @@ class EffectSpec:
     time_varying: bool = False
 
     def to_dict(self, params_cls: type | None = None) -> dict[str, Any]:
-        d: dict[str, Any] = {"id": self.id, "twin": self.twin, "description": self.description,
-                             "signature": self.signature, "default_on": self.default_on, "group": self.group,
-                             "time_varying": self.time_varying}
+        d: dict[str, Any] = {
+            "id": self.id,
+            "twin": self.twin,
+            "description": self.description,
+            "signature": self.signature,
+            "default_on": self.default_on,
+            "group": self.group,
+            "time_varying": self.time_varying,
+        }
         info = param_info(params_cls) if params_cls is not None else {}
         d["params"] = {
-            k: ({"field": f, "unit": info[f].unit, "range": list(info[f].range), "default": info[f].default,
-                 "doc": info[f].doc} if f in info else {"field": f})
+            k: (
+                {
+                    "field": f,
+                    "unit": info[f].unit,
+                    "range": list(info[f].range),
+                    "default": info[f].default,
+                    "doc": info[f].doc,
+                }
+                if f in info
+                else {"field": f}
+            )
             for k, f in self.params.items()
         }
         return d
@@ -129,8 +144,12 @@ class Twin(ABC):
 
     def config(self) -> dict[str, Any]:
         """JSON-able configuration: twin, parameters, effects, seed."""
-        return {"twin": self.name, "params": dataclasses.asdict(self.params), "effects": sorted(self.effects),
-                "seed": self.seed}
+        return {
+            "twin": self.name,
+            "params": dataclasses.asdict(self.params),
+            "effects": sorted(self.effects),
+            "seed": self.seed,
+        }
 
     # ------------------------------------------------------------------ simulation
     @abstractmethod
@@ -152,8 +171,9 @@ class Twin(ABC):
         if protocol not in self.PROTOCOLS:
             raise ConfigError(f"unknown protocol {protocol!r} for twin {self.name}; valid: {', '.join(self.PROTOCOLS)}")
 
-    def calibrate(self, data: Record, val: Record | None = None, names: Iterable[str] | None = None,
-                  **options: Any) -> CalibrationResult[Self]:
+    def calibrate(
+        self, data: Record, val: Record | None = None, names: Iterable[str] | None = None, **options: Any
+    ) -> CalibrationResult[Self]:
         """Fit ``names`` (default ``CALIBRATION_PARAMS``) to ``data`` by free-run output error.
 
         Twins override this to add a good start (e.g. a linear pre-fit) or a staged fit.
@@ -173,9 +193,15 @@ class Twin(ABC):
 
     # ------------------------------------------------------------------ configuration from the CLI
     @classmethod
-    def from_options(cls, params_file: str | Path | None = None, set_: Iterable[str] | None = None,
-                     effect: Iterable[str] | None = None, without: Iterable[str] | None = None,
-                     effects: str | None = None, seed: int | None = 0) -> Twin:
+    def from_options(
+        cls,
+        params_file: str | Path | None = None,
+        set_: Iterable[str] | None = None,
+        effect: Iterable[str] | None = None,
+        without: Iterable[str] | None = None,
+        effects: str | None = None,
+        seed: int | None = 0,
+    ) -> Twin:
         """Build a configured twin from the options every twin command takes (``--params``, ``--set``,
         ``--effect``, ``--without``, ``--effects``, ``--seed``).
 
@@ -238,14 +264,18 @@ def _coerce_all(cls: type[Twin], raw: Mapping[str, Any], where: str) -> dict[str
     for key, value in raw.items():
         if key not in info:
             raise ConfigError(f"{where}: unknown parameter {key!r} for twin {cls.name}; valid: {', '.join(info)}")
-        out[key] = coerce(value, info[key].default, key) if isinstance(value, str) else \
-            _json_value(value, info[key].default, key, where)
+        out[key] = (
+            coerce(value, info[key].default, key)
+            if isinstance(value, str)
+            else _json_value(value, info[key].default, key, where)
+        )
     return out
 
 
 def _json_value(value: Any, default: Any, key: str, where: str) -> Any:
     """A parameter value from a JSON file: its JSON type must fit the parameter's (numbers for numbers, a
     list for a list ...); refused with one line otherwise, never silently converted."""
+
     def kind(v: Any) -> str:
         if isinstance(v, bool):
             return "bool"
@@ -254,6 +284,7 @@ def _json_value(value: Any, default: Any, key: str, where: str) -> Any:
         if isinstance(v, (list, tuple)):
             return "list"
         return type(v).__name__
+
     if default is None:
         if isinstance(value, (dict, list, tuple)):
             raise ConfigError(f"{where}: parameter {key!r} must be a number, a string or null, got {kind(value)}")
@@ -273,5 +304,3 @@ def load_params_file(path: str | Path, twin: str | None = None) -> dict[str, Any
     if twin is not None and data.get("twin") != twin:
         raise DataError(f"{p}: parameter file is for twin {data.get('twin')!r}, not {twin!r}")
     return data
-
-

@@ -148,8 +148,9 @@ def calibrate(
     zlo, zhi = (lo - start) / scale, (hi - start) / scale
     from scipy.optimize import least_squares  # here: twins.base imports this module, and the CLI starts without scipy
 
-    res = least_squares(residual, np.zeros(len(names)), bounds=(zlo, zhi), x_scale=1.0, max_nfev=max_nfev,
-                        **lsq_options)
+    res = least_squares(
+        residual, np.zeros(len(names)), bounds=(zlo, zhi), x_scale=1.0, max_nfev=max_nfev, **lsq_options
+    )
     x = start + res.x * scale
     fitted_twin = build(x)
     # Standard errors: covariance of the physical parameters from the scaled Jacobian.
@@ -186,9 +187,18 @@ def _linear_params(twin: Twin, names: Sequence[str], data: Record) -> list[str]:
     return [n for n in names if n in declared and basis(n, 2, data.fs) is not None]
 
 
-def _calibrate_projected(twin: Twin, data: Record, names: list[str], lin: list[str], val: Record | None, skip: int,
-                         x0: dict[str, float] | None, sim: Callable, max_nfev: int,
-                         **lsq_options: Any) -> CalibrationResult:
+def _calibrate_projected(
+    twin: Twin,
+    data: Record,
+    names: list[str],
+    lin: list[str],
+    val: Record | None,
+    skip: int,
+    x0: dict[str, float] | None,
+    sim: Callable,
+    max_nfev: int,
+    **lsq_options: Any,
+) -> CalibrationResult:
     """:func:`calibrate` with the linear parameters ``lin`` solved by least squares inside every evaluation
     (module docstring); the solution is clipped to their documented ranges."""
     nl = [n for n in names if n not in lin]
@@ -225,8 +235,14 @@ def _calibrate_projected(twin: Twin, data: Record, names: list[str], lin: list[s
 
         from scipy.optimize import least_squares
 
-        res = least_squares(lambda z: project(build(z))[1], np.zeros(len(nl)), bounds=((lo - start) / scale,
-                            (hi - start) / scale), x_scale=1.0, max_nfev=max_nfev, **lsq_options)
+        res = least_squares(
+            lambda z: project(build(z))[1],
+            np.zeros(len(nl)),
+            bounds=((lo - start) / scale, (hi - start) / scale),
+            x_scale=1.0,
+            max_nfev=max_nfev,
+            **lsq_options,
+        )
         fitted_twin, r, B = project(build(res.x))
         jac = res.jac / scale[None, :] * ysd
         message = str(res.message)
@@ -243,9 +259,15 @@ def _calibrate_projected(twin: Twin, data: Record, names: list[str], lin: list[s
     scores = {"estimation": _score(fitted_twin, data, sim, skip)}
     if val is not None:
         scores["validation"] = _score(fitted_twin, val, sim, skip)
-    return CalibrationResult(twin=fitted_twin, fitted={n: float(getattr(fitted_twin.params, n)) for n in names},
-                             stderr=stderr, scores=scores, n_evaluations=count[0],
-                             seconds=time.perf_counter() - t0, message=message)
+    return CalibrationResult(
+        twin=fitted_twin,
+        fitted={n: float(getattr(fitted_twin.params, n)) for n in names},
+        stderr=stderr,
+        scores=scores,
+        n_evaluations=count[0],
+        seconds=time.perf_counter() - t0,
+        message=message,
+    )
 
 
 def _basis(twin: Twin, lin: list[str], data: Record, skip: int) -> np.ndarray:
@@ -254,9 +276,18 @@ def _basis(twin: Twin, lin: list[str], data: Record, skip: int) -> np.ndarray:
     return np.column_stack([np.asarray(basis(n, len(data), data.fs), dtype=np.float64)[skip:] for n in lin])
 
 
-def _shape_grid_start(twin: Twin, data: Record, nl: list[str], lin: list[str], zero: dict[str, float],
-                      x0: dict[str, float] | None, sim: Callable, y: np.ndarray, skip: int,
-                      points: int = 60) -> dict[str, float] | None:
+def _shape_grid_start(
+    twin: Twin,
+    data: Record,
+    nl: list[str],
+    lin: list[str],
+    zero: dict[str, float],
+    x0: dict[str, float] | None,
+    sim: Callable,
+    y: np.ndarray,
+    skip: int,
+    points: int = 60,
+) -> dict[str, float] | None:
     """``x0`` with each basis-shape parameter among ``nl`` set to the best point of a log grid over its range (the
     other parameters at ``x0``); unchanged when the twin declares none."""
     shape = [n for n in nl if n in getattr(type(twin), "OUTPUT_BASIS_SHAPE_PARAMS", ())]

@@ -323,8 +323,16 @@ def sensor_lowpass(y: np.ndarray, bandwidth_hz: float, fs: float) -> np.ndarray:
     return signal.lfilter(b, a, y, zi=zi)[0]
 
 
-def drift(n: int, fs: float, amplitude: float, tau_s: float, rate: float = 0.0, sine: float = 0.0,
-          cosine: float = 0.0, period_s: float = 1.0) -> np.ndarray:
+def drift(
+    n: int,
+    fs: float,
+    amplitude: float,
+    tau_s: float,
+    rate: float = 0.0,
+    sine: float = 0.0,
+    cosine: float = 0.0,
+    period_s: float = 1.0,
+) -> np.ndarray:
     """The slow drift D·(1 − e^(−t/τ)) + r·t + a·sin(2πt/P) + b·(1 − cos(2πt/P)) at t = k/fs, k = 0 … n−1:
     a settling exponential, a ramp that has not settled and a slow cycle (any phase), all zero at t = 0."""
     t = np.arange(n) / fs

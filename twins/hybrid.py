@@ -139,8 +139,9 @@ class HybridTwin:
 
         own = self.fs_
         if own is not None and abs(float(fs) - own) > 1e-9 * own:
-            raise ConfigError(f"hybrid twin: its remainder model is discrete-time at {own:g} Hz; it cannot step "
-                              f"at {float(fs):g} Hz")
+            raise ConfigError(
+                f"hybrid twin: its remainder model is discrete-time at {own:g} Hz; it cannot step at {float(fs):g} Hz"
+            )
         core = dict(core) if core is not None else choose_core(self.physics, fs)
         return HybridStepper(build_core(self.physics, fs, core), make_stepper(self.model_), dict(self.scales_))
 
@@ -157,8 +158,9 @@ class HybridTwin:
         y_twin = np.asarray(self.physics.simulate(est.u, est.fs), float)
         r = y - y_twin
         self.scales_ = {"u": _scale(est.u), "y_twin": _scale(y_twin), "r": _scale(r)}
-        rec = Record(u=self._inputs(est.u, y_twin), y=r / self.scales_["r"], fs=est.fs,
-                     source=f"{est.source} remainder")
+        rec = Record(
+            u=self._inputs(est.u, y_twin), y=r / self.scales_["r"], fs=est.fs, source=f"{est.source} remainder"
+        )
         table: list[dict[str, Any]] = []
         best: tuple[float, Any, str, dict[str, Any]] | None = None
         for ident, settings in self.candidates:
@@ -178,8 +180,10 @@ class HybridTwin:
             if model is not None and math.isfinite(cost) and (best is None or cost < best[0]):
                 best = (cost, model, ident, dict(settings))
         if best is None:
-            raise DataError("hybrid twin: no remainder model could be fitted: "
-                            + "; ".join(f"{r['identifier']}: {r.get('error', 'free run diverged')}" for r in table))
+            raise DataError(
+                "hybrid twin: no remainder model could be fitted: "
+                + "; ".join(f"{r['identifier']}: {r.get('error', 'free run diverged')}" for r in table)
+            )
         _, self.model_, self.identifier_, self.settings_ = best
         self.fit_table_ = table
         return self
@@ -194,15 +198,25 @@ class HybridTwin:
         y_twin = np.asarray(self.physics.simulate(rec.u, rec.fs), float)
         yh = y_twin + self.remainder(rec.u, y_twin, rec.fs)
         y = np.asarray(rec.output, float).reshape(-1)
-        return {"r2_twin": r2(y, y_twin, skip), "nrmse_twin": nrmse(y, y_twin, skip),
-                "r2_hybrid": r2(y, yh, skip), "nrmse_hybrid": nrmse(y, yh, skip)}
+        return {
+            "r2_twin": r2(y, y_twin, skip),
+            "nrmse_twin": nrmse(y, y_twin, skip),
+            "r2_hybrid": r2(y, yh, skip),
+            "nrmse_hybrid": nrmse(y, yh, skip),
+        }
 
     def describe(self) -> dict[str, Any]:
         """JSON-able summary: the twin, the remainder's identifier, settings, inputs and scales."""
         self._check_fitted()
-        return {"twin": self.physics.name, "effects": sorted(self.physics.effects), "identifier": self.identifier_,
-                "settings": self.settings_, "inputs": ["u", "y_twin"], "scales": dict(self.scales_),
-                "n_parameters": getattr(self.model_, "n_parameters_", None)}
+        return {
+            "twin": self.physics.name,
+            "effects": sorted(self.physics.effects),
+            "identifier": self.identifier_,
+            "settings": self.settings_,
+            "inputs": ["u", "y_twin"],
+            "scales": dict(self.scales_),
+            "n_parameters": getattr(self.model_, "n_parameters_", None),
+        }
 
     # ------------------------------------------------------------------ files
     def save(self, path: str | Path) -> Path:
@@ -212,8 +226,14 @@ class HybridTwin:
             tmp = Path(d) / "remainder.json"
             self.model_.save(tmp)
             remainder = json.loads(tmp.read_text())
-        doc = {"format": HYBRID_FORMAT, "physics": self.physics.config(), "identifier": self.identifier_,
-               "settings": self.settings_, "scales": self.scales_, "remainder": remainder}
+        doc = {
+            "format": HYBRID_FORMAT,
+            "physics": self.physics.config(),
+            "identifier": self.identifier_,
+            "settings": self.settings_,
+            "scales": self.scales_,
+            "remainder": remainder,
+        }
         return atomic_write_text(path, json.dumps(doc))
 
     @classmethod

@@ -18,15 +18,27 @@ from sysid.errors import ConfigError
 __all__ = ["pfield", "ParamInfo", "param_info", "with_ranges"]
 
 
-def pfield(default: Any, unit: str, lo: float | None = None, hi: float | None = None, doc: str = "",
-           choices: Iterable[Any] | None = None, source: str = "") -> Any:
+def pfield(
+    default: Any,
+    unit: str,
+    lo: float | None = None,
+    hi: float | None = None,
+    doc: str = "",
+    choices: Iterable[Any] | None = None,
+    source: str = "",
+) -> Any:
     """A dataclass field for a physical parameter: default, unit, documented range [lo, hi], description.
 
     ``source`` says where the value comes from (physics notes section, paper). ``choices`` restricts
     string-valued parameters (e.g. a fluid name).
     """
-    meta = {"unit": unit, "range": (lo, hi), "doc": doc, "source": source,
-            "choices": tuple(choices) if choices is not None else None}
+    meta = {
+        "unit": unit,
+        "range": (lo, hi),
+        "doc": doc,
+        "source": source,
+        "choices": tuple(choices) if choices is not None else None,
+    }
     if isinstance(default, (list, dict)):
         return field(default_factory=functools.partial(type(default), default), metadata=meta)  # a fresh copy each
     return field(default=default, metadata=meta)
@@ -55,10 +67,20 @@ def param_info(params_cls: type) -> dict[str, ParamInfo]:
     out = {}
     for f in dataclasses.fields(params_cls):
         md: Mapping[str, Any] = f.metadata or {}
-        default = f.default if f.default is not dataclasses.MISSING else (
-            f.default_factory() if f.default_factory is not dataclasses.MISSING else None)
-        out[f.name] = ParamInfo(f.name, default, md.get("unit", ""), tuple(md.get("range", (None, None))),
-                                md.get("doc", ""), md.get("source", ""), md.get("choices"))
+        default = (
+            f.default
+            if f.default is not dataclasses.MISSING
+            else (f.default_factory() if f.default_factory is not dataclasses.MISSING else None)
+        )
+        out[f.name] = ParamInfo(
+            f.name,
+            default,
+            md.get("unit", ""),
+            tuple(md.get("range", (None, None))),
+            md.get("doc", ""),
+            md.get("source", ""),
+            md.get("choices"),
+        )
     return out
 
 

@@ -24,16 +24,24 @@ from sysid.errors import ConfigError
 
 
 def register(sub) -> None:
-    p = sub.add_parser("bla", help="Best Linear Approximation from multisine realisations; odd/even distortion",
-                       description="Best Linear Approximation (robust method) and nonlinearity detection.")
+    p = sub.add_parser(
+        "bla",
+        help="Best Linear Approximation from multisine realisations; odd/even distortion",
+        description="Best Linear Approximation (robust method) and nonlinearity detection.",
+    )
     p.add_argument("files", nargs="+", metavar="FILE", help="one record per multisine realisation (u and y)")
     p.add_argument("--periods", type=int, required=True, metavar="P", help="periods in each record")
     p.add_argument("--drop", type=int, default=0, metavar="K", help="leave out the first K (transient) periods")
-    p.add_argument("--detrend", type=int, default=1, metavar="ORDER",
-                   help="periodic: remove a drift of this polynomial degree fitted to the period means (0: none;"
-                        " default 1)")
-    p.add_argument("--alpha", type=float, default=1e-3,
-                   help="false-alarm probability of the detection-line test (default 1e-3)")
+    p.add_argument(
+        "--detrend",
+        type=int,
+        default=1,
+        metavar="ORDER",
+        help="periodic: remove a drift of this polynomial degree fitted to the period means (0: none; default 1)",
+    )
+    p.add_argument(
+        "--alpha", type=float, default=1e-3, help="false-alarm probability of the detection-line test (default 1e-3)"
+    )
     add_data_args(p)
     p.add_argument("--json", action="store_true", help="print the result as JSON")
     p.add_argument("-o", "--output", metavar="OUT.csv", help="write f_hz, re, im, var_noise, var_distortion as CSV")
@@ -65,22 +73,30 @@ def estimate(records, periods: int, drop: int = 0, alpha: float = 1e-3, detrend:
         found = [excited_from_meta(r, len(r) // periods) for r in records]
         if all(x is not None for x in found):
             lines = found
-    return best_linear_approximation([(r.u, r.y) for r in records], fs, periods, drop=drop, lines=lines, alpha=alpha,
-                                     detrend=detrend)
+    return best_linear_approximation(
+        [(r.u, r.y) for r in records], fs, periods, drop=drop, lines=lines, alpha=alpha, detrend=detrend
+    )
 
 
 def to_json(res) -> dict[str, Any]:
     nl = {k: v for k, v in res.nonlinearity.items()}
-    return {"f_hz": res.f_hz, "re": res.G.real, "im": res.G.imag, "var_noise": res.var_noise,
-            "var_distortion": res.var_distortion, "var_total": res.var_total, "nonlinearity": nl,
-            "info": dict(res.info)}
+    return {
+        "f_hz": res.f_hz,
+        "re": res.G.real,
+        "im": res.G.imag,
+        "var_noise": res.var_noise,
+        "var_distortion": res.var_distortion,
+        "var_total": res.var_total,
+        "nonlinearity": nl,
+        "info": dict(res.info),
+    }
 
 
 def sentence(nl: dict[str, Any]) -> str:
     """One line such as ``odd nonlinear distortion 23.1 dB above noise; even: none (0.2 dB)``."""
     parts = []
     both = not nl.get("classified", True)
-    for kind in (("odd", "even") if not both else ("odd",)):
+    for kind in ("odd", "even") if not both else ("odd",):
         lvl = nl.get(f"{kind}_db")
         name = kind if not both else "odd or even"
         if lvl is None:
@@ -97,22 +113,26 @@ def run(args: argparse.Namespace) -> int:
     res = estimate(records, args.periods, args.drop, args.alpha, args.detrend)
     payload = to_json(res)
     if args.output:
-        write_csv({k: payload[k] for k in ("f_hz", "re", "im", "var_noise", "var_distortion", "var_total")},
-                  args.output)
+        write_csv(
+            {k: payload[k] for k in ("f_hz", "re", "im", "var_noise", "var_distortion", "var_total")}, args.output
+        )
     if args.plot:
         from sysid.report.plots import plot_bla
 
         rec = records[0]
         unit = f"{rec.units.get('y', '')}/{rec.units.get('u', '')}" if rec.units.get("y") else ""
-        plot_bla(res, args.plot, title=f"BLA of {len(records)} realisation(s), {res.info['periods_used']} periods",
-                 unit=unit)
+        plot_bla(
+            res, args.plot, title=f"BLA of {len(records)} realisation(s), {res.info['periods_used']} periods", unit=unit
+        )
     if args.json:
         emit_json({"files": list(args.files), **payload})
         return 0
     nl = res.nonlinearity
     info = res.info
-    print(f"BLA: {info['realisations']} realisation(s) x {info['periods_used']} periods, {res.f_hz.size} excited "
-          f"lines {res.f_hz[0]:g} .. {res.f_hz[-1]:g} Hz")
+    print(
+        f"BLA: {info['realisations']} realisation(s) x {info['periods_used']} periods, {res.f_hz.size} excited "
+        f"lines {res.f_hz[0]:g} .. {res.f_hz[-1]:g} Hz"
+    )
     with np.errstate(divide="ignore", invalid="ignore"):
         g2 = np.mean(np.abs(res.G) ** 2)
         snr = 10 * np.log10(g2 / np.nanmean(res.var_noise))

@@ -12,8 +12,10 @@ import argparse
 import sys
 from pathlib import Path
 
-HEADER = ("<!-- Generated from the argument parser by `python -m benchmarks.cli.clidoc -o docs/cli.md` "
-          "(`make docs`). Do not edit: tests/test_docs.py compares it with the parser. -->")
+HEADER = (
+    "<!-- Generated from the argument parser by `python -m benchmarks.cli.clidoc -o docs/cli.md` "
+    "(`make docs`). Do not edit: tests/test_docs.py compares it with the parser. -->"
+)
 _COMMON = {"help", "version", "quiet", "verbose"}
 
 
@@ -103,12 +105,24 @@ def generate() -> str:
     from benchmarks.cli import build_parser
 
     parser = build_parser()
-    lines = [HEADER, "", "# CLI reference", "", _cell(parser.description or ""), "",
-             "```", "piezotwin [--version] [-q | -v] COMMAND [options]", "```", "",
-             "Every command also takes `-h/--help`, `--version` (print the version), `-q/--quiet` (only results on",
-             "stdout: no progress bars, information or warnings) and `-v/--verbose` (debug messages), before or after",
-             "the command name. Bad input exits with status 2 and one line on stderr.", "",
-             "| command | what it does |", "|---|---|"]
+    lines = [
+        HEADER,
+        "",
+        "# CLI reference",
+        "",
+        _cell(parser.description or ""),
+        "",
+        "```",
+        "piezotwin [--version] [-q | -v] COMMAND [options]",
+        "```",
+        "",
+        "Every command also takes `-h/--help`, `--version` (print the version), `-q/--quiet` (only results on",
+        "stdout: no progress bars, information or warnings) and `-v/--verbose` (debug messages), before or after",
+        "the command name. Bad input exits with status 2 and one line on stderr.",
+        "",
+        "| command | what it does |",
+        "|---|---|",
+    ]
     commands = list(_subparsers(parser))
     for name, _, text in commands:
         lines.append(f"| [`{name}`](#piezotwin-{name}) | {_cell(text)} |")

@@ -33,6 +33,7 @@ def seed_range(text: str) -> list[int]:
 def number(lo: float | None = None, hi: float | None = None, integer: bool = False, lo_open: bool = False):
     """An argparse ``type``: a finite number (an integer if ``integer``) in [lo, hi] (``(lo, hi]`` with
     ``lo_open``). Refuses nan, inf, huge values and text with one line."""
+
     def parse(text: str):
         try:
             v = float(text)
@@ -51,6 +52,7 @@ def number(lo: float | None = None, hi: float | None = None, integer: bool = Fal
         if hi is not None and v > hi:
             raise argparse.ArgumentTypeError(f"must be <= {hi:g}, got {text}")
         return v
+
     parse.__name__ = "integer" if integer else "number"
     return parse
 
@@ -66,6 +68,8 @@ def FS(text: str) -> float:
     if not FS_MIN <= v <= FS_MAX:
         raise argparse.ArgumentTypeError(f"sampling rate {v:g} Hz outside the accepted range {FS_MIN:g}..{FS_MAX:g} Hz")
     return v
+
+
 def SEED(text: str) -> int:
     """argparse type of a seed: an integer 0..2**32-1 (numpy's seed range; larger values are refused)."""
     try:
@@ -76,6 +80,8 @@ def SEED(text: str) -> int:
     if not ok:
         raise argparse.ArgumentTypeError(f"seed must be a non-negative integer, got {text} (at most 2**32-1)")
     return int(v)
+
+
 COUNT = number(1, 10**9, integer=True)  # a positive count (repeats, trials, workers, periods ...)
 NONNEG_INT = number(0, 10**12, integer=True)
 POSITIVE = number(0, 1e12, lo_open=True)  # a positive finite quantity (durations, amplitudes ...)
@@ -90,8 +96,12 @@ def add_set_arg(p: argparse.ArgumentParser, help: str) -> None:
 def add_data_args(p: argparse.ArgumentParser) -> None:
     """Options of every command that reads a data file."""
     g = p.add_argument_group("data files")
-    g.add_argument("--fs", type=FS, help="sampling rate [Hz] when the file has no t column / fs (a file that has"
-                   " its own rate must agree with --fs, else it is refused)")
+    g.add_argument(
+        "--fs",
+        type=FS,
+        help="sampling rate [Hz] when the file has no t column / fs (a file that has"
+        " its own rate must agree with --fs, else it is refused)",
+    )
     g.add_argument("--u-col", default="u", help="CSV column(s) of the input (comma-separated for several); default u")
     g.add_argument("--y-col", default="y", help="CSV column(s) of the output; default y")
     g.add_argument("--u-var", default="u", help="MAT variable of the input; default u")
@@ -102,8 +112,16 @@ def add_data_args(p: argparse.ArgumentParser) -> None:
 
 
 def read_data(args: argparse.Namespace, path: str, require_y: bool = True) -> Record:
-    return read_record(path, fs=args.fs, u_col=args.u_col, y_col=args.y_col, u_var=args.u_var, y_var=args.y_var,
-                       require_y=require_y, fill_missing=args.fill_missing)
+    return read_record(
+        path,
+        fs=args.fs,
+        u_col=args.u_col,
+        y_col=args.y_col,
+        u_var=args.u_var,
+        y_var=args.y_var,
+        require_y=require_y,
+        fill_missing=args.fill_missing,
+    )
 
 
 def same_fs(records: list[Record]) -> None:
@@ -113,8 +131,10 @@ def same_fs(records: list[Record]) -> None:
         if not math.isclose(r.fs, first.fs, rel_tol=1e-9):
             from sysid.errors import DataError
 
-            raise DataError(f"{r.source}: sampling rate {r.fs:g} Hz differs from {first.source}'s {first.fs:g} Hz; "
-                            "records used together must share fs (resample one with piezotwin preprocess --resample)")
+            raise DataError(
+                f"{r.source}: sampling rate {r.fs:g} Hz differs from {first.source}'s {first.fs:g} Hz; "
+                "records used together must share fs (resample one with piezotwin preprocess --resample)"
+            )
 
 
 # ---------------------------------------------------------------------------- checks before the work
@@ -148,8 +168,9 @@ def preflight(args: argparse.Namespace) -> None:
             if name == "output" and args.command in RECORD_OUTPUT_COMMANDS and not collection:  # .h5: checked there
                 suffix = Path(v).suffix.lower()
                 if suffix not in SUPPORTED_SUFFIXES:
-                    raise DataError(f"{v}: unknown format {suffix or '(no suffix)'!r}; supported: "
-                                    f"{', '.join(SUPPORTED_SUFFIXES)}")
+                    raise DataError(
+                        f"{v}: unknown format {suffix or '(no suffix)'!r}; supported: {', '.join(SUPPORTED_SUFFIXES)}"
+                    )
     for name in OUTPUT_DIR_ARGS:
         v = getattr(args, name, None)
         if isinstance(v, str) and v:
@@ -168,8 +189,14 @@ def add_twin_args(p: argparse.ArgumentParser, seed: bool = True) -> None:
     """Options of every command that builds a twin."""
     g = p.add_argument_group("twin configuration")
     g.add_argument("--params", metavar="FILE", help="saved calibration (parameter file) to start from")
-    g.add_argument("--set", dest="set_", action="append", default=[], metavar="KEY=VALUE[,...]",
-                   help="set parameters by name (SI units unless the name says otherwise); may repeat")
+    g.add_argument(
+        "--set",
+        dest="set_",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE[,...]",
+        help="set parameters by name (SI units unless the name says otherwise); may repeat",
+    )
     g.add_argument("--effect", action="append", default=[], metavar="NAME[:k=v,...]", help="add an effect; may repeat")
     g.add_argument("--without", action="append", default=[], metavar="NAME", help="remove an effect; may repeat")
     g.add_argument("--effects", metavar="LIST", help="exact set of effects (comma-separated); 'none' = bare core")
@@ -181,8 +208,14 @@ def twin_from_args(name: str, args: argparse.Namespace):
     from twins.registry import get_twin
 
     cls = get_twin(name)
-    return cls.from_options(params_file=args.params, set_=args.set_, effect=args.effect, without=args.without,
-                            effects=args.effects, seed=getattr(args, "seed", 0))
+    return cls.from_options(
+        params_file=args.params,
+        set_=args.set_,
+        effect=args.effect,
+        without=args.without,
+        effects=args.effects,
+        seed=getattr(args, "seed", 0),
+    )
 
 
 def emit_json(obj: Any, stream=None) -> None:

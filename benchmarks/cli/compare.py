@@ -23,10 +23,18 @@ def register(sub) -> None:
     p = sub.add_parser("compare", help="compare saved models on measured data (fit %%, R2, RMSE, figures)")
     p.add_argument("models", nargs="+", metavar="MODEL", help="model files written by identify -o")
     p.add_argument("--data", required=True, metavar="FILE", help="measured record (needs y)")
-    p.add_argument("--horizon", default="inf", metavar="1|K|inf",
-                   help="1 = one step, K = K steps ahead, inf = free-run simulation (default inf)")
-    p.add_argument("--fir-est", metavar="FILE", help="also fit the least-squares FIR reference (identify fir, taps "
-                   "chosen on a hold-out) on this estimation record and show it beside the models")
+    p.add_argument(
+        "--horizon",
+        default="inf",
+        metavar="1|K|inf",
+        help="1 = one step, K = K steps ahead, inf = free-run simulation (default inf)",
+    )
+    p.add_argument(
+        "--fir-est",
+        metavar="FILE",
+        help="also fit the least-squares FIR reference (identify fir, taps "
+        "chosen on a hold-out) on this estimation record and show it beside the models",
+    )
     add_data_args(p)
     p.add_argument("--json", action="store_true", help="print the result as JSON")
     p.add_argument("--report", metavar="DIR", help="write the figures to DIR")
@@ -46,8 +54,13 @@ def run(args: argparse.Namespace) -> int:
     preds, rows = compare(models, rec, horizon, names=names)
     if args.fir_est:
         rows[-1]["reference"] = True
-    result: dict[str, Any] = {"data": str(args.data), "n_samples": len(rec), "fs": rec.fs,
-              "horizon": "inf" if horizon is None else horizon, "models": rows}
+    result: dict[str, Any] = {
+        "data": str(args.data),
+        "n_samples": len(rec),
+        "fs": rec.fs,
+        "horizon": "inf" if horizon is None else horizon,
+        "models": rows,
+    }
     if args.report:
         result["report"] = compare_report(models, names, rec, preds, rows, args.report)
     if args.json:
@@ -59,8 +72,10 @@ def run(args: argparse.Namespace) -> int:
     for r in rows:
         m = r["metrics"]
         extra = f"  diverged at sample {r['diverged_at']}" if r["diverged_at"] is not None else ""
-        print(f"  {r['model']:<{width}}  {r['identifier']:<12} {m['fit_percent']:9.3f} {m['r2']:10.6f} "
-              f"{m['rmse']:11.5g}{extra}")
+        print(
+            f"  {r['model']:<{width}}  {r['identifier']:<12} {m['fit_percent']:9.3f} {m['r2']:10.6f} "
+            f"{m['rmse']:11.5g}{extra}"
+        )
     if args.report:
         for key, path in result["report"]["files"].items():
             print(f"  {key} -> {path}")

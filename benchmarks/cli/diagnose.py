@@ -173,8 +173,12 @@ def run(args: argparse.Namespace) -> int:
         print(f"  {hybrid_text(result['hybrid'])}")
     if save_hybrid:
         saved = result["hybrid"].get("saved")
-        print(f"  hybrid twin -> {saved}" if saved else f"  no hybrid twin saved: the verdict is {result['verdict']} "
-              "(the hybrid is fitted when the residual stays far above the noise)")
+        print(
+            f"  hybrid twin -> {saved}"
+            if saved
+            else f"  no hybrid twin saved: the verdict is {result['verdict']} "
+            "(the hybrid is fitted when the residual stays far above the noise)"
+        )
     elif not result["causes"]:
         print(f"  residual: {result['unexplained']['description']}")
     for row in result.get("at_bound", []):

@@ -19,12 +19,20 @@ def register(sub) -> None:
     p = sub.add_parser("export-fmu", help="export a twin or an identified model as an FMI 2.0 co-simulation FMU")
     p.add_argument("twin", nargs="?", help="twin to export (or give --model)")
     p.add_argument("--model", metavar="MODEL", help="export this identified model file (identify -o) instead of a twin")
-    p.add_argument("--hybrid", metavar="FILE", help="export this hybrid twin file (diagnose --save-hybrid: the twin "
-                                                    "plus its fitted remainder) instead of a twin")
+    p.add_argument(
+        "--hybrid",
+        metavar="FILE",
+        help="export this hybrid twin file (diagnose --save-hybrid: the twin "
+        "plus its fitted remainder) instead of a twin",
+    )
     add_twin_args(p)
-    p.add_argument("--fs", type=FS, default=None,
-                   help="sampling rate [Hz] = 1/communication step (default: the twin's rate, "
-                        "cantilever 10 kHz, acoustic 100 MHz)")
+    p.add_argument(
+        "--fs",
+        type=FS,
+        default=None,
+        help="sampling rate [Hz] = 1/communication step (default: the twin's rate, "
+        "cantilever 10 kHz, acoustic 100 MHz)",
+    )
     p.add_argument("-o", "--output", metavar="FILE", help="output .fmu (default fmus/TWIN.fmu)")
     p.add_argument("--no-validate", action="store_true", help="skip the fmpy validation of the written FMU")
     p.add_argument("--json", action="store_true", help="print a JSON summary")
@@ -68,10 +76,18 @@ def run(args: argparse.Namespace) -> int:
 
     with zipfile.ZipFile(path) as z:
         cfg = json.loads(z.read("resources/piezotwin_fmu.json"))
-    summary = {"twin": twin.name, "fmu": str(path), "bytes": Path(path).stat().st_size, "fs": cfg["fs"],
-               "core": cfg["core"], "effects": sorted(twin.effects), "seed": twin.seed,
-               "parameters": [v["name"] for v in fmu_variables(twin, cfg["fs"])],
-               "validation_problems": problems, "build_seconds": round(seconds, 3)}
+    summary = {
+        "twin": twin.name,
+        "fmu": str(path),
+        "bytes": Path(path).stat().st_size,
+        "fs": cfg["fs"],
+        "core": cfg["core"],
+        "effects": sorted(twin.effects),
+        "seed": twin.seed,
+        "parameters": [v["name"] for v in fmu_variables(twin, cfg["fs"])],
+        "validation_problems": problems,
+        "build_seconds": round(seconds, 3),
+    }
     if args.json:
         emit_json(summary)
     else:
@@ -79,11 +95,15 @@ def run(args: argparse.Namespace) -> int:
         extra = ""
         if core == "response" and "accuracy" in cfg["core"]:
             acc = cfg["core"]["accuracy"]
-            extra = (f", response core vs simulate: relative RMS {acc['relative_rms']:.1e} "
-                     f"(linear stage {acc['linear_relative_rms']:.1e}) on a {acc['signal']}")
-        print(f"exported {twin.name} ({', '.join(sorted(twin.effects)) or 'no effects'}; fs {cfg['fs']:g} Hz; "
-              f"core {core}{extra}) -> {path} ({summary['bytes'] / 1e3:.0f} kB, "
-              f"{'valid' if not problems else 'INVALID'})")
+            extra = (
+                f", response core vs simulate: relative RMS {acc['relative_rms']:.1e} "
+                f"(linear stage {acc['linear_relative_rms']:.1e}) on a {acc['signal']}"
+            )
+        print(
+            f"exported {twin.name} ({', '.join(sorted(twin.effects)) or 'no effects'}; fs {cfg['fs']:g} Hz; "
+            f"core {core}{extra}) -> {path} ({summary['bytes'] / 1e3:.0f} kB, "
+            f"{'valid' if not problems else 'INVALID'})"
+        )
     if problems:
         for p in problems:
             print(f"validation: {p}")
@@ -104,10 +124,21 @@ def _run_model(args: argparse.Namespace) -> int:
     out = args.output or f"fmus/{Path(args.model).stem}.fmu"
     path, seconds, problems = _export(export_model_fmu, model, out, args)
     fs = args.fs or model.fs_
-    summary = {"model": str(args.model), "identifier": model.name, "fmu": str(path), "bytes": Path(path).stat().st_size,
-               "fs": fs, "validation_problems": problems, "build_seconds": round(seconds, 3)}
-    return _finish(args, summary, f"exported {model.name} model {args.model} (fs {fs:g} Hz, step 1/fs) -> {path} "
-                                  f"({summary['bytes'] / 1e3:.0f} kB, {'valid' if not problems else 'INVALID'})")
+    summary = {
+        "model": str(args.model),
+        "identifier": model.name,
+        "fmu": str(path),
+        "bytes": Path(path).stat().st_size,
+        "fs": fs,
+        "validation_problems": problems,
+        "build_seconds": round(seconds, 3),
+    }
+    return _finish(
+        args,
+        summary,
+        f"exported {model.name} model {args.model} (fs {fs:g} Hz, step 1/fs) -> {path} "
+        f"({summary['bytes'] / 1e3:.0f} kB, {'valid' if not problems else 'INVALID'})",
+    )
 
 
 def _run_hybrid(args: argparse.Namespace) -> int:
@@ -123,12 +154,24 @@ def _run_hybrid(args: argparse.Namespace) -> int:
     out = args.output or f"fmus/{Path(args.hybrid).stem}.fmu"
     path, seconds, problems = _export(export_hybrid_fmu, hybrid, out, args)
     fs = args.fs or hybrid.fs_
-    summary = {"hybrid": str(args.hybrid), "twin": hybrid.physics.name, "effects": sorted(hybrid.physics.effects),
-               "identifier": hybrid.identifier_, "fmu": str(path), "bytes": Path(path).stat().st_size, "fs": fs,
-               "validation_problems": problems, "build_seconds": round(seconds, 3)}
-    return _finish(args, summary, f"exported hybrid twin {args.hybrid} ({hybrid.physics.name} + {hybrid.identifier_} "
-                                  f"remainder; fs {fs:g} Hz, step 1/fs) -> {path} ({summary['bytes'] / 1e3:.0f} kB, "
-                                  f"{'valid' if not problems else 'INVALID'})")
+    summary = {
+        "hybrid": str(args.hybrid),
+        "twin": hybrid.physics.name,
+        "effects": sorted(hybrid.physics.effects),
+        "identifier": hybrid.identifier_,
+        "fmu": str(path),
+        "bytes": Path(path).stat().st_size,
+        "fs": fs,
+        "validation_problems": problems,
+        "build_seconds": round(seconds, 3),
+    }
+    return _finish(
+        args,
+        summary,
+        f"exported hybrid twin {args.hybrid} ({hybrid.physics.name} + {hybrid.identifier_} "
+        f"remainder; fs {fs:g} Hz, step 1/fs) -> {path} ({summary['bytes'] / 1e3:.0f} kB, "
+        f"{'valid' if not problems else 'INVALID'})",
+    )
 
 
 def _finish(args: argparse.Namespace, summary: dict, line: str) -> int:

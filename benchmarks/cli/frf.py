@@ -24,17 +24,34 @@ from sysid.errors import ConfigError
 
 
 def register(sub) -> None:
-    p = sub.add_parser("frf", help="nonparametric FRF: H1/Welch with coherence, or periodic (multisine) with std",
-                       description="Nonparametric frequency response function of a record (SISO).")
+    p = sub.add_parser(
+        "frf",
+        help="nonparametric FRF: H1/Welch with coherence, or periodic (multisine) with std",
+        description="Nonparametric frequency response function of a record (SISO).",
+    )
     p.add_argument("file", help="record with u and y")
     add_data_args(p)
-    p.add_argument("--periods", type=int, metavar="P", help="the record holds P periods of a periodic input "
-                   "(multisine): average per line over the periods, std of G from their spread (P >= 2)")
-    p.add_argument("--drop", type=int, default=0, metavar="K",
-                   help="periodic: leave out the first K periods (transient); default 0")
-    p.add_argument("--detrend", type=int, default=1, metavar="ORDER",
-                   help="periodic: remove a drift of this polynomial degree fitted to the period means (0: none;"
-                        " default 1)")
+    p.add_argument(
+        "--periods",
+        type=int,
+        metavar="P",
+        help="the record holds P periods of a periodic input "
+        "(multisine): average per line over the periods, std of G from their spread (P >= 2)",
+    )
+    p.add_argument(
+        "--drop",
+        type=int,
+        default=0,
+        metavar="K",
+        help="periodic: leave out the first K periods (transient); default 0",
+    )
+    p.add_argument(
+        "--detrend",
+        type=int,
+        default=1,
+        metavar="ORDER",
+        help="periodic: remove a drift of this polynomial degree fitted to the period means (0: none; default 1)",
+    )
     p.add_argument("--window", default="hann", help="H1: window of the Welch segments (scipy name; default hann)")
     p.add_argument("--nperseg", type=int, help="H1: segment length in samples (default min(N, 1024))")
     p.add_argument("--noverlap", type=int, help="H1: overlap in samples (default nperseg/2)")
@@ -54,15 +71,23 @@ def excited_from_meta(rec: Record, n0: int) -> np.ndarray | None:
     return np.asarray(bins, dtype=np.int64)
 
 
-def estimate(rec: Record, periods: int | None = None, drop: int = 0, window: str = "hann",
-             nperseg: int | None = None, noverlap: int | None = None, detrend: int = 1):
+def estimate(
+    rec: Record,
+    periods: int | None = None,
+    drop: int = 0,
+    window: str = "hann",
+    nperseg: int | None = None,
+    noverlap: int | None = None,
+    detrend: int = 1,
+):
     """The FRF of a record the way the command computes it (H1, or periodic with ``periods``)."""
     from sysid.linear.frf import frf_periodic, frf_welch
 
     rec.require_output()
     if rec.u.ndim != 1 or rec.output.ndim != 1:
-        raise ConfigError(f"{rec.source}: frf handles one input and one output "
-                          f"(got u{rec.u.shape}, y{rec.output.shape})")
+        raise ConfigError(
+            f"{rec.source}: frf handles one input and one output (got u{rec.u.shape}, y{rec.output.shape})"
+        )
     if periods is None:
         if drop:
             raise ConfigError("--drop needs --periods")

@@ -23,8 +23,13 @@ def collect(kind: str) -> list[dict]:
         out = []
         for name in available_twins():
             cls = get_twin(name)
-            out.append({"id": name, "description": (cls.__doc__ or "").strip().splitlines()[0],
-                        "default_effects": sorted(cls.default_effects())})
+            out.append(
+                {
+                    "id": name,
+                    "description": (cls.__doc__ or "").strip().splitlines()[0],
+                    "default_effects": sorted(cls.default_effects()),
+                }
+            )
         return out
     if kind == "protocols":
         return [
@@ -36,8 +41,9 @@ def collect(kind: str) -> list[dict]:
         from twins.generic_effects import GENERIC_EFFECTS, generic_params_class
 
         generic = generic_params_class()  # the model-agnostic catalog that wraps a user's model or FMU
-        return ([e.to_dict(get_twin(n).Params) for n in available_twins() for e in get_twin(n).EFFECTS.values()]
-                + [e.to_dict(generic) for e in GENERIC_EFFECTS.values()])
+        return [e.to_dict(get_twin(n).Params) for n in available_twins() for e in get_twin(n).EFFECTS.values()] + [
+            e.to_dict(generic) for e in GENERIC_EFFECTS.values()
+        ]
     if kind == "identifiers":
         from sysid.registry import IDENTIFIERS, available_identifiers
 

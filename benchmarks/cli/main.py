@@ -84,8 +84,9 @@ def _add_common(p: argparse.ArgumentParser, top: bool) -> None:
         help="print only results: no progress, information or warnings",
         **({"default": False} if top else default),
     )
-    g.add_argument("-v", "--verbose", action="count", help="more messages (debug)",
-                   **({"default": 0} if top else default))
+    g.add_argument(
+        "-v", "--verbose", action="count", help="more messages (debug)", **({"default": 0} if top else default)
+    )
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -223,11 +224,13 @@ def _run(args: argparse.Namespace) -> int:
         print(f"piezotwin {args.command}: interrupted", file=sys.stderr)
         return 130
     except MemoryError as exc:  # a request the guards did not foresee: still one line, nothing written
-        print(f"piezotwin {args.command}: error: not enough memory for this request ({exc or 'MemoryError'});"
-              " ask for fewer samples", file=sys.stderr)
+        print(
+            f"piezotwin {args.command}: error: not enough memory for this request ({exc or 'MemoryError'});"
+            " ask for fewer samples",
+            file=sys.stderr,
+        )
         return 2
     finally:
         protect_inputs([])
         if previous is not None:
             signal.signal(signal.SIGTERM, previous)
-

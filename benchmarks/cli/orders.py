@@ -25,8 +25,14 @@ def register(sub) -> None:
     p.add_argument("--val", metavar="FILE", help="validation record (free-run R² per order)")
     p.add_argument("--grid", default="1-2-3-4-6-8-10-12", metavar="N-N-...", help="orders to try (dash-separated)")
     p.add_argument("--max-delay", type=int, default=30, help="largest delay considered [samples] (default 30)")
-    p.add_argument("--set", dest="set_", action="append", default=[], metavar="KEY=VALUE[,...]",
-                   help="further identifier options (e.g. nk=3); the order options are set by the grid")
+    p.add_argument(
+        "--set",
+        dest="set_",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE[,...]",
+        help="further identifier options (e.g. nk=3); the order options are set by the grid",
+    )
     add_data_args(p)
     p.add_argument("--json", action="store_true", help="print the result as JSON")
     p.add_argument("--plot", metavar="PNG", help="write the order-selection figure")
@@ -78,8 +84,10 @@ def run(args: argparse.Namespace) -> int:
             print(f"  {r['order']:>5} failed: {r['error']}")
             continue
         fmt = lambda v, f: "-" if v is None or not math.isfinite(v) else format(v, f)  # noqa: E731
-        print(f"  {r['order']:>5} {r['n_parameters']:>6} {fmt(r['aic'], '12.1f')} {fmt(r['bic'], '12.1f')} "
-              f"{fmt(r.get('val_r2'), '9.5f')}")
+        print(
+            f"  {r['order']:>5} {r['n_parameters']:>6} {fmt(r['aic'], '12.1f')} {fmt(r['bic'], '12.1f')} "
+            f"{fmt(r.get('val_r2'), '9.5f')}"
+        )
     print("  best: " + ", ".join(f"{k} -> {v}" for k, v in best.items()))
     if args.plot:
         print(f"  figure -> {out['plot']}")

@@ -27,8 +27,12 @@ def register(sub) -> None:
     p = sub.add_parser("predict", help="predict data with a saved model (one-step, K-step or free run)")
     p.add_argument("model", metavar="MODEL", help="model file written by identify -o")
     p.add_argument("--data", required=True, metavar="FILE", help="data record (.npz/.csv/.mat); y is optional")
-    p.add_argument("--horizon", default=None, metavar="1|K|inf",
-                   help="1 = one step, K = K steps ahead, inf = free-run simulation (default: 1 with y, inf without)")
+    p.add_argument(
+        "--horizon",
+        default=None,
+        metavar="1|K|inf",
+        help="1 = one step, K = K steps ahead, inf = free-run simulation (default: 1 with y, inf without)",
+    )
     add_data_args(p)
     p.add_argument("--json", action="store_true", help="print the result as JSON")
     p.add_argument("-o", "--output", metavar="OUT", help="write input + prediction as a record (.npz/.csv/.mat)")
@@ -43,22 +47,38 @@ def run(args: argparse.Namespace) -> int:
     else:
         horizon = parse_horizon(args.horizon)
     yh, summary = predict_scores(model, rec, horizon)
-    summary = {"model": str(args.model), "identifier": model.name, "data": str(args.data), "n_samples": len(rec),
-               "fs": rec.fs, **summary, "output": None}
+    summary = {
+        "model": str(args.model),
+        "identifier": model.name,
+        "data": str(args.data),
+        "n_samples": len(rec),
+        "fs": rec.fs,
+        **summary,
+        "output": None,
+    }
     finite = bool(np.isfinite(yh).all())
     if args.output:
         if not finite:
-            raise DataError(f"{args.data}: the {horizon_label(horizon)} prediction diverged at sample "
-                            f"{summary['diverged_at']}; nothing written to {args.output}")
-        meta = {"prediction": {"model": Path(args.model).name, "identifier": model.name,
-                               "horizon": summary["horizon"], "initial_conditions": summary["initial_conditions"]},
-                "provenance": {"file": Path(args.data).name}}
+            raise DataError(
+                f"{args.data}: the {horizon_label(horizon)} prediction diverged at sample "
+                f"{summary['diverged_at']}; nothing written to {args.output}"
+            )
+        meta = {
+            "prediction": {
+                "model": Path(args.model).name,
+                "identifier": model.name,
+                "horizon": summary["horizon"],
+                "initial_conditions": summary["initial_conditions"],
+            },
+            "provenance": {"file": Path(args.data).name},
+        }
         units = dict(rec.units)
         est = getattr(model, "estimation_", None) or {}
         if not units.get("y") and est.get("units", {}).get("y"):
             units["y"] = est["units"]["y"]
-        out = rec.replace(y=yh.reshape((len(rec),) if yh.ndim == 1 or yh.shape[1] == 1 else yh.shape), units=units,
-                          meta=meta)
+        out = rec.replace(
+            y=yh.reshape((len(rec),) if yh.ndim == 1 or yh.shape[1] == 1 else yh.shape), units=units, meta=meta
+        )
         with atomic_path(args.output) as tmp:
             write_record(out, tmp)
         summary["output"] = str(args.output)
@@ -71,8 +91,10 @@ def run(args: argparse.Namespace) -> int:
     m = summary["metrics"]
     if m is not None:
         unit = rec.units.get("y", "")
-        print(f"  fit {m['fit_percent']:.3f} %  R2 {m['r2']:.6f}  RMSE {m['rmse']:.6g}{' ' + unit if unit else ''}"
-              f"  (after the first {summary['skip']} samples)")
+        print(
+            f"  fit {m['fit_percent']:.3f} %  R2 {m['r2']:.6f}  RMSE {m['rmse']:.6g}{' ' + unit if unit else ''}"
+            f"  (after the first {summary['skip']} samples)"
+        )
     if summary["diverged_at"] is not None:
         print(f"  diverged at sample {summary['diverged_at']}")
     if summary["output"]:

@@ -36,30 +36,71 @@ class _Step(argparse.Action):
 
 
 def register(sub) -> None:
-    p = sub.add_parser("preprocess", help="offset/trend/outliers/moving average/decimation/resampling/band-pass ...",
-                       description="Apply preprocessing steps to a record, in the order given on the command line.")
+    p = sub.add_parser(
+        "preprocess",
+        help="offset/trend/outliers/moving average/decimation/resampling/band-pass ...",
+        description="Apply preprocessing steps to a record, in the order given on the command line.",
+    )
     p.add_argument("file")
     add_data_args(p)
     g = p.add_argument_group("steps (applied in the order given)")
     g.add_argument("--remove-offset", action=_Step, step="remove_offset", nargs=0, help="subtract the mean")
-    g.add_argument("--detrend", action=_Step, step="detrend", nargs="?", const="1", metavar="ORDER",
-                   help="remove a polynomial trend (default order 1: linear)")
-    g.add_argument("--outliers", action=_Step, step="hampel", nargs="?", const="", metavar="HALFWIDTH[:NSIGMA]",
-                   help="Hampel filter: replace samples beyond NSIGMA robust std of the local median (default 10:3)")
-    g.add_argument("--moving-average", action=_Step, step="moving_average", metavar="N",
-                   help="centred moving average of N samples (the dissertation used 100)")
+    g.add_argument(
+        "--detrend",
+        action=_Step,
+        step="detrend",
+        nargs="?",
+        const="1",
+        metavar="ORDER",
+        help="remove a polynomial trend (default order 1: linear)",
+    )
+    g.add_argument(
+        "--outliers",
+        action=_Step,
+        step="hampel",
+        nargs="?",
+        const="",
+        metavar="HALFWIDTH[:NSIGMA]",
+        help="Hampel filter: replace samples beyond NSIGMA robust std of the local median (default 10:3)",
+    )
+    g.add_argument(
+        "--moving-average",
+        action=_Step,
+        step="moving_average",
+        metavar="N",
+        help="centred moving average of N samples (the dissertation used 100)",
+    )
     g.add_argument("--decimate", action=_Step, step="decimate", metavar="Q", help="anti-aliased decimation by Q")
     g.add_argument(
         "--resample", action=_Step, step="resample", metavar="FS", help="anti-aliased rational resampling to FS Hz"
     )
-    g.add_argument("--bandpass", action=_Step, step="bandpass", metavar="FMIN:FMAX[:ORDER]",
-                   help="zero-phase Butterworth band-pass (default order 5)")
-    g.add_argument("--segment", action=_Step, step="segment", metavar="LENGTH[:OVERLAP]",
-                   help="mark segments of LENGTH samples in meta['segments']")
-    g.add_argument("--suggest-rate", action=_Step, step="suggest_rate", nargs=0,
-                   help="report the decimation factor of the covariance rule (Aguirre)")
-    p.add_argument("--signals", choices=("u", "y", "both"), default="both",
-                   help="signals the filtering steps act on (default both; decimation/resampling always act on both)")
+    g.add_argument(
+        "--bandpass",
+        action=_Step,
+        step="bandpass",
+        metavar="FMIN:FMAX[:ORDER]",
+        help="zero-phase Butterworth band-pass (default order 5)",
+    )
+    g.add_argument(
+        "--segment",
+        action=_Step,
+        step="segment",
+        metavar="LENGTH[:OVERLAP]",
+        help="mark segments of LENGTH samples in meta['segments']",
+    )
+    g.add_argument(
+        "--suggest-rate",
+        action=_Step,
+        step="suggest_rate",
+        nargs=0,
+        help="report the decimation factor of the covariance rule (Aguirre)",
+    )
+    p.add_argument(
+        "--signals",
+        choices=("u", "y", "both"),
+        default="both",
+        help="signals the filtering steps act on (default both; decimation/resampling always act on both)",
+    )
     p.add_argument("--json", action="store_true", help="print the recorded steps as JSON")
     p.add_argument("-o", "--output", required=True, metavar="OUT", help="output record")
     p.set_defaults(func=run, steps=[])
@@ -136,8 +177,11 @@ def run(args: argparse.Namespace) -> int:
         if st["step"] == "resample" and st["fs_new"] <= FS_MAX:
             from sysid.data.safeio import check_memory
 
-            check_memory(len(rec) * max(1.0, st["fs_new"] / rec.fs) * max(rec.n_inputs + rec.n_outputs, 1),
-                         f"preprocess --resample {st['fs_new']:g}", copies=4)
+            check_memory(
+                len(rec) * max(1.0, st["fs_new"] / rec.fs) * max(rec.n_inputs + rec.n_outputs, 1),
+                f"preprocess --resample {st['fs_new']:g}",
+                copies=4,
+            )
     n0 = len(rec.meta.get("preprocessing", []))
     out = apply_steps(rec, steps)
     write_record(out, args.output)

@@ -22,23 +22,40 @@ def register(sub) -> None:
     p = sub.add_parser(
         "records", help="measure the records rows and write docs/benchmarks.md and benchmarks/records.json"
     )
-    p.add_argument("--datasets", metavar="X,Y", help="measure only these rows of the records settings (default: every "
-                                                     "row); the others are rendered as stored")
-    p.add_argument("--identifiers", metavar="X,Y", help="measure only the rows of these identifiers (the chosen "
-                                                        "one or those shown beside it; default: every row of "
-                                                        "the chosen datasets)")
-    p.add_argument("--render-only", action="store_true", help="fit nothing: render the page and records.json from the "
-                                                              "stored rows")
-    p.add_argument("--seeds", metavar="A-B", type=seed_range, default=None,
-                   help="training seeds of every measured row (default 0-2); deterministic identifiers are fitted once")
-    p.add_argument("--settings", metavar="FILE", help="dataset -> identifier table (default "
-                                                      "benchmarks/settings/records.toml)")
+    p.add_argument(
+        "--datasets",
+        metavar="X,Y",
+        help="measure only these rows of the records settings (default: every row); the others are rendered as stored",
+    )
+    p.add_argument(
+        "--identifiers",
+        metavar="X,Y",
+        help="measure only the rows of these identifiers (the chosen "
+        "one or those shown beside it; default: every row of "
+        "the chosen datasets)",
+    )
+    p.add_argument(
+        "--render-only", action="store_true", help="fit nothing: render the page and records.json from the stored rows"
+    )
+    p.add_argument(
+        "--seeds",
+        metavar="A-B",
+        type=seed_range,
+        default=None,
+        help="training seeds of every measured row (default 0-2); deterministic identifiers are fitted once",
+    )
+    p.add_argument(
+        "--settings", metavar="FILE", help="dataset -> identifier table (default benchmarks/settings/records.toml)"
+    )
     p.add_argument("--stored", metavar="DIR", help="folder of the stored rows (default docs/records)")
     p.add_argument("--markdown", metavar="FILE", help="page to write (default docs/benchmarks.md)")
     p.add_argument("--records-json", metavar="FILE", help="summary to write (default benchmarks/records.json)")
-    p.add_argument("--in-process", action="store_true",
-                   help="measure the rows in this process, not each in a fresh one (quicker to start; a row's times "
-                        "then include no numba compilation that an earlier row already paid)")
+    p.add_argument(
+        "--in-process",
+        action="store_true",
+        help="measure the rows in this process, not each in a fresh one (quicker to start; a row's times "
+        "then include no numba compilation that an earlier row already paid)",
+    )
     p.add_argument("--json", action="store_true", help="print the records.json mapping")
     add_execution_args(p)
     p.set_defaults(func=run)
@@ -69,8 +86,7 @@ def run(args: argparse.Namespace) -> int:
         valid = dict.fromkeys(e.identifier for e in chosen)
         for w in wanted:
             if w not in valid:
-                raise ConfigError(f"--identifiers: {w!r} has no row in the chosen datasets; valid: "
-                                  f"{', '.join(valid)}")
+                raise ConfigError(f"--identifiers: {w!r} has no row in the chosen datasets; valid: {', '.join(valid)}")
         chosen = [e for e in chosen if e.identifier in wanted]
     if args.render_only and (args.datasets is not None or args.identifiers is not None):
         raise ConfigError("--render-only renders every stored row: give it without --datasets or --identifiers")
@@ -92,15 +108,18 @@ def run(args: argparse.Namespace) -> int:
     rows, missing = records.load_rows(entries, stored)
     data = records.write_outputs(entries, rows, missing, markdown, summary_path)
     for e in missing:  # a warning: -q leaves it out
-        logging.getLogger(__name__).warning("no stored row for %s (%s): run `piezotwin records --datasets %s`",
-                                            e.dataset, e.identifier, e.dataset)
+        logging.getLogger(__name__).warning(
+            "no stored row for %s (%s): run `piezotwin records --datasets %s`", e.dataset, e.identifier, e.dataset
+        )
     if args.json:
         emit_json(data)
         return 0
     if not quiet:
         for dname, entry in data.items():
-            print(f"{dname:<20} {entry['identifier']:<14} " + "  ".join(
-                f"{t} {records.fmt_spread(v, _unit(rows[dname], t))}" for t, v in entry["rmse"].items()))
+            print(
+                f"{dname:<20} {entry['identifier']:<14} "
+                + "  ".join(f"{t} {records.fmt_spread(v, _unit(rows[dname], t))}" for t, v in entry["rmse"].items())
+            )
         print(f"{len(data)} rows, {len(missing)} missing -> {markdown}, {summary_path}")
     return 0
 

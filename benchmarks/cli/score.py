@@ -26,8 +26,11 @@ def _names(text: str | None) -> list[str] | None:
 def register(sub) -> None:
     p = sub.add_parser("score", help="score identifiers x datasets against references and accuracy baselines")
     p.add_argument("--identifiers", metavar="A,B", help="comma-separated identifier ids (default: every available one)")
-    p.add_argument("--datasets", metavar="X,Y", help="comma-separated dataset ids (default: every available one; "
-                                                     "--quick: the quick set)")
+    p.add_argument(
+        "--datasets",
+        metavar="X,Y",
+        help="comma-separated dataset ids (default: every available one; --quick: the quick set)",
+    )
     p.add_argument("--quick", action="store_true", help="reduced settings and data budgets (the CI check)")
     p.add_argument(
         "--check", action="store_true", help="exit 1 if any pair falls below its floor in benchmarks/baselines.json"
@@ -39,16 +42,28 @@ def register(sub) -> None:
     p.add_argument(
         "--margin", type=number(0, 10), default=0.15, help="margin of --update-baselines (default 0.15 = 15 %%)"
     )
-    p.add_argument("--seeded-margin", type=number(0, 10), default=0.5,
-                   help="margin of --update-baselines for identifiers scored over several training seeds (default 0.5)")
-    p.add_argument("--seeds", metavar="A-B", type=seed_range,
-                   help="training seeds of the seeded (neural) identifiers, each test scored by the median seed and "
-                        "listed per seed with mean and SD (default: 0-4 with --quick, the identifier's own seed "
-                        "without); deterministic identifiers are fitted once and say so; quick runs over other seeds "
-                        "add single-seed draws to --update-baselines --from-runs")
-    p.add_argument("--from-runs", nargs="+", metavar="RUN.json",
-                   help="with --update-baselines: set floors from these saved `score --json` runs (e.g. one per CPU "
-                        "kernel set and BLAS thread count; the worst value of each pair counts) instead of scoring now")
+    p.add_argument(
+        "--seeded-margin",
+        type=number(0, 10),
+        default=0.5,
+        help="margin of --update-baselines for identifiers scored over several training seeds (default 0.5)",
+    )
+    p.add_argument(
+        "--seeds",
+        metavar="A-B",
+        type=seed_range,
+        help="training seeds of the seeded (neural) identifiers, each test scored by the median seed and "
+        "listed per seed with mean and SD (default: 0-4 with --quick, the identifier's own seed "
+        "without); deterministic identifiers are fitted once and say so; quick runs over other seeds "
+        "add single-seed draws to --update-baselines --from-runs",
+    )
+    p.add_argument(
+        "--from-runs",
+        nargs="+",
+        metavar="RUN.json",
+        help="with --update-baselines: set floors from these saved `score --json` runs (e.g. one per CPU "
+        "kernel set and BLAS thread count; the worst value of each pair counts) instead of scoring now",
+    )
     p.add_argument("--no-sysidentpy", action="store_true", help="do not run SysIdentPy's FROLS beside the rows")
     p.add_argument("--report", metavar="DIR", help="write score.json, score.md and figures to DIR")
     p.add_argument("--json", action="store_true", help="print the results as JSON")
@@ -83,9 +98,16 @@ def run(args: argparse.Namespace) -> int:
         return _floors_from_runs(args, bpath, baselines)
     quiet = args.json
     with executor_from_args(args) as ex:
-        res = scoring.score(idents, dsets, quick=args.quick, sysidentpy=not args.no_sysidentpy,
-                            progress=not (quiet or getattr(args, "quiet", False)),
-                            log=None if quiet else (lambda s: print(s, flush=True)), seeds=args.seeds, executor=ex)
+        res = scoring.score(
+            idents,
+            dsets,
+            quick=args.quick,
+            sysidentpy=not args.no_sysidentpy,
+            progress=not (quiet or getattr(args, "quiet", False)),
+            log=None if quiet else (lambda s: print(s, flush=True)),
+            seeds=args.seeds,
+            executor=ex,
+        )
     out = scoring._clean(res.to_dict())
     if args.check:
         failures = scoring.check(res, baselines)
@@ -109,10 +131,12 @@ def run(args: argparse.Namespace) -> int:
             print(f"skipped {what}: {s['reason']}")
         for row in res.sysidentpy:
             if row.get("status") == "ok":
-                print(f"{'sysidentpy':<12} {row['dataset']:<20} {row['test']:<22} "
-                      f"free-run RMSE {scoring._fmt(row['free_run']['rmse'])} "
-                      f"(R2 {scoring._fmt(row['free_run']['r2'])})  fit {row['fit_seconds']:.2f} s  "
-                      f"{row['n_parameters']} terms")
+                print(
+                    f"{'sysidentpy':<12} {row['dataset']:<20} {row['test']:<22} "
+                    f"free-run RMSE {scoring._fmt(row['free_run']['rmse'])} "
+                    f"(R2 {scoring._fmt(row['free_run']['r2'])})  fit {row['fit_seconds']:.2f} s  "
+                    f"{row['n_parameters']} terms"
+                )
             else:
                 print(f"{'sysidentpy':<12} {row['dataset']:<20} {row['test']:<22} skipped: {row.get('reason', '')}")
         if args.report:

@@ -27,18 +27,25 @@ from sysid.config import parse_assignments
 
 
 def register(sub) -> None:
-    p = sub.add_parser("search", help="structure sweep with repeated runs (grid / random / TPE, Optuna storage)",
-                       formatter_class=argparse.RawDescriptionHelpFormatter,
-                       epilog="SPEC: KEY=V1,V2,... items separated by ';'. Keys are the identifier's options (as for\n"
-                              "identify --set); list values use dashes (hidden=25-25,25-25-25-25 is two choices);\n"
-                              "a..b is every integer from a to b; 'lags' sets ny and nu together (n_enc for rnn).\n"
-                              "Example: --grid 'lags=5,10;hidden=25-25,25-25-25-25;activation=relu,tanh'\n"
-                              "Re-running the same command resumes the sweep stored in --storage/--study.")
+    p = sub.add_parser(
+        "search",
+        help="structure sweep with repeated runs (grid / random / TPE, Optuna storage)",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+        epilog="SPEC: KEY=V1,V2,... items separated by ';'. Keys are the identifier's options (as for\n"
+        "identify --set); list values use dashes (hidden=25-25,25-25-25-25 is two choices);\n"
+        "a..b is every integer from a to b; 'lags' sets ny and nu together (n_enc for rnn).\n"
+        "Example: --grid 'lags=5,10;hidden=25-25,25-25-25-25;activation=relu,tanh'\n"
+        "Re-running the same command resumes the sweep stored in --storage/--study.",
+    )
     p.add_argument("identifier", help="identifier id (narx-mlp, narx-mlp-sim, rnn, narx-poly, ...)")
     p.add_argument("--est", required=True, action="append", metavar="FILE", help="estimation record; may repeat")
     p.add_argument("--val", required=True, metavar="FILE", help="validation record")
-    p.add_argument("--grid", required=True, metavar="SPEC",
-                   help="choices, e.g. 'lags=5,10;hidden=25-25,25-25-25-25;activation=relu,tanh'")
+    p.add_argument(
+        "--grid",
+        required=True,
+        metavar="SPEC",
+        help="choices, e.g. 'lags=5,10;hidden=25-25,25-25-25-25;activation=relu,tanh'",
+    )
     p.add_argument(
         "--repeats", type=COUNT, default=1, metavar="R", help="runs per configuration (seeds seed..seed+R-1)"
     )
@@ -141,10 +148,14 @@ def run(args: argparse.Namespace) -> int:
     if args.json:
         emit_json(summary)
         return 1 if missing else 0
-    print(f"{args.identifier}: {summary['n_configs']} configurations, {summary['n_runs']} runs  "
-          f"(storage {url}, study {args.study})")
-    print(f"  {'configuration':<44} {'params':>7}  {'R2 OSA est':>10} {'R2 FRS est':>17} "
-          f"{'R2 OSA val':>10} {'R2 FRS val':>17}")
+    print(
+        f"{args.identifier}: {summary['n_configs']} configurations, {summary['n_runs']} runs  "
+        f"(storage {url}, study {args.study})"
+    )
+    print(
+        f"  {'configuration':<44} {'params':>7}  {'R2 OSA est':>10} {'R2 FRS est':>17} "
+        f"{'R2 OSA val':>10} {'R2 FRS val':>17}"
+    )
     for c in summary["configs"]:
         print(
             f"  {c['config_key']:<44} {c['n_parameters']:>7}  {_fmt(c['r2_est_osa_mean']):>10} "

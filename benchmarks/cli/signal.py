@@ -21,8 +21,17 @@ from sysid.data.record import Record
 from sysid.errors import ConfigError
 from sysid.signals import excitation as signals
 
-KINDS = ("multisine", "chirp", "sine", "stepped-sine", "prbs", "aprbs", "thesis-cantilever", "thesis-acoustic",
-         "thesis-chirp")
+KINDS = (
+    "multisine",
+    "chirp",
+    "sine",
+    "stepped-sine",
+    "prbs",
+    "aprbs",
+    "thesis-cantilever",
+    "thesis-acoustic",
+    "thesis-chirp",
+)
 
 
 def parse_pair(text: str, option: str, allow_empty_max: bool = False) -> tuple[float, float | None]:
@@ -41,8 +50,11 @@ def parse_pair(text: str, option: str, allow_empty_max: bool = False) -> tuple[f
 
 
 def register(sub) -> None:
-    p = sub.add_parser("signal", help="generate an excitation signal (record with u only)",
-                       description=__doc__.split("\n\n")[1] if __doc__ else None)
+    p = sub.add_parser(
+        "signal",
+        help="generate an excitation signal (record with u only)",
+        description=__doc__.split("\n\n")[1] if __doc__ else None,
+    )
     p.add_argument("kind", choices=KINDS)
     p.add_argument("--fs", type=FS, help="sampling rate [Hz]")
     p.add_argument("--duration", type=POSITIVE, help="length [s]")
@@ -59,8 +71,12 @@ def register(sub) -> None:
     p.add_argument("--rms", action="store_true", help="--amplitude is the RMS value")
     p.add_argument("--phase", choices=signals.PHASES, default="random", help="multisine phases (default random)")
     p.add_argument("--grid", choices=signals.GRIDS, default="full", help="multisine line grid (default full)")
-    p.add_argument("--detection-fraction", type=number(0, 1), default=0.0,
-                   help="multisine: fraction of lines left out at random as detection lines (default 0)")
+    p.add_argument(
+        "--detection-fraction",
+        type=number(0, 1),
+        default=0.0,
+        help="multisine: fraction of lines left out at random as detection lines (default 0)",
+    )
     p.add_argument("--periods", type=COUNT, default=1, help="number of periods in --duration (multisine, chirp, prbs)")
     p.add_argument("--seed", type=SEED, default=0, help="seed of random phases / detection lines / APRBS (default 0)")
     p.add_argument("--method", choices=("linear", "log"), default="linear", help="chirp sweep law (default linear)")
@@ -119,9 +135,19 @@ def build(args: argparse.Namespace) -> tuple[np.ndarray, float, dict, dict]:
         if args.duration is None and args.resolution is None:
             raise ConfigError("signal multisine needs --duration or --resolution")
         band = parse_pair(args.band, "--band", allow_empty_max=True) if args.band else (0.0, None)
-        params = dict(duration=args.duration, band=band, components=args.components, resolution=args.resolution,
-                      amplitude=amp, rms=args.rms, phase=args.phase, grid=args.grid,
-                      detection_fraction=args.detection_fraction, periods=args.periods, seed=args.seed)
+        params = dict(
+            duration=args.duration,
+            band=band,
+            components=args.components,
+            resolution=args.resolution,
+            amplitude=amp,
+            rms=args.rms,
+            phase=args.phase,
+            grid=args.grid,
+            detection_fraction=args.detection_fraction,
+            periods=args.periods,
+            seed=args.seed,
+        )
         u, info = signals.multisine(fs, return_info=True, **params)
         return u, fs, params, info
     if kind not in ("prbs", "stepped-sine"):
@@ -129,8 +155,16 @@ def build(args: argparse.Namespace) -> tuple[np.ndarray, float, dict, dict]:
     if kind == "chirp":
         _need(args, "band")
         f0, f1 = parse_pair(args.band, "--band")
-        params = dict(duration=args.duration, f0=f0, f1=f1, amplitude=1.0 if args.rms else amp, method=args.method,
-                      periodic=args.periodic, phase=args.sine_phase, periods=args.periods)
+        params = dict(
+            duration=args.duration,
+            f0=f0,
+            f1=f1,
+            amplitude=1.0 if args.rms else amp,
+            method=args.method,
+            periodic=args.periodic,
+            phase=args.sine_phase,
+            periods=args.periods,
+        )
         u = signals.chirp(fs, **params)
     elif kind == "sine":
         _need(args, "freq")
@@ -145,14 +179,26 @@ def build(args: argparse.Namespace) -> tuple[np.ndarray, float, dict, dict]:
         params = dict(freqs=freqs, amplitude=1.0 if args.rms else amp, settle=args.settle, cycles=args.cycles)
         u, info = signals.stepped_sine(fs, return_info=True, **params)
     elif kind == "prbs":
-        params = dict(order=args.order, duration=args.duration, periods=args.periods, bit_samples=args.bit_samples,
-                      amplitude=1.0 if args.rms else amp)
+        params = dict(
+            order=args.order,
+            duration=args.duration,
+            periods=args.periods,
+            bit_samples=args.bit_samples,
+            amplitude=1.0 if args.rms else amp,
+        )
         u = signals.prbs(fs, **params)
     elif kind == "aprbs":
         lo_hold, hi_hold = parse_pair(args.hold, "--hold") if args.hold else (None, None)
         a = 1.0 if args.rms else amp
-        params = dict(duration=args.duration, low=-a, high=a, min_hold=lo_hold, max_hold=hi_hold, levels=args.levels,
-                      seed=args.seed)
+        params = dict(
+            duration=args.duration,
+            low=-a,
+            high=a,
+            min_hold=lo_hold,
+            max_hold=hi_hold,
+            levels=args.levels,
+            seed=args.seed,
+        )
         u, info = signals.aprbs(fs, return_info=True, **params)
     else:  # pragma: no cover - argparse restricts the choices
         raise ConfigError(f"unknown signal kind {kind!r}")
@@ -171,7 +217,7 @@ def _expected_samples(args: argparse.Namespace) -> float:
     if args.kind == "thesis-chirp":
         return (args.duration or 0.0) * 100e6
     if args.kind == "prbs":
-        n = (2 ** args.order - 1) * args.bit_samples * args.periods
+        n = (2**args.order - 1) * args.bit_samples * args.periods
         return max(n, (args.duration or 0.0) * fs)
     if args.kind == "stepped-sine":
         try:
@@ -191,12 +237,24 @@ def run(args: argparse.Namespace) -> int:
     if args.amplitude is not None and (not math.isfinite(args.amplitude) or args.amplitude <= 0):
         raise ConfigError(f"--amplitude must be positive, got {args.amplitude}")
     u, fs, params, info = build(args)
-    summary = {"kind": args.kind, "samples": int(u.size), "fs": fs, "duration_s": u.size / fs,
-               "peak": float(np.max(np.abs(u))), "rms": float(np.sqrt(np.mean(u * u))),
-               "crest_factor": signals.crest_factor(u)}
+    summary = {
+        "kind": args.kind,
+        "samples": int(u.size),
+        "fs": fs,
+        "duration_s": u.size / fs,
+        "peak": float(np.max(np.abs(u))),
+        "rms": float(np.sqrt(np.mean(u * u))),
+        "crest_factor": signals.crest_factor(u),
+    }
     info = {k: v for k, v in info.items() if k != "phases_rad"}  # the signal itself is saved; keep meta small
-    meta: dict[str, Any] = {"signal": {"kind": args.kind, "params": params, "info": info,
-                       **{k: summary[k] for k in ("peak", "rms", "crest_factor")}}}
+    meta: dict[str, Any] = {
+        "signal": {
+            "kind": args.kind,
+            "params": params,
+            "info": info,
+            **{k: summary[k] for k in ("peak", "rms", "crest_factor")},
+        }
+    }
     if "steps" in info:
         meta["segments"] = [
             {"start": s["measure_start"], "stop": s["stop"], "freq_hz": s["freq_hz"]} for s in info["steps"]
@@ -207,6 +265,8 @@ def run(args: argparse.Namespace) -> int:
     if args.json:
         emit_json({**summary, "output": args.output})
     else:
-        print(f"{args.kind}: {u.size} samples at {fs:g} Hz ({u.size / fs:g} s), peak {summary['peak']:.4g},"
-              f" crest factor {summary['crest_factor']:.3f} -> {args.output}")
+        print(
+            f"{args.kind}: {u.size} samples at {fs:g} Hz ({u.size / fs:g} s), peak {summary['peak']:.4g},"
+            f" crest factor {summary['crest_factor']:.3f} -> {args.output}"
+        )
     return 0

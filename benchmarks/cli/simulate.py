@@ -28,12 +28,26 @@ def register(sub) -> None:
     g.add_argument("twin")
     g.add_argument("protocol")
     add_twin_args(g)
-    g.add_argument("--option", action="append", default=[], metavar="KEY=VALUE",
-                   help="protocol option (see the twin's protocol docs), may repeat")
-    g.add_argument("-o", "--output", required=True, metavar="OUT",
-                   help="output record (.npz); with --grid/--seeds an HDF5 collection (.h5)")
-    g.add_argument("--grid", metavar="P=V1-V2,...", help="parameter grid: items separated by ',', values by '-' "
-                   "(e.g. distance_m=0.02-0.04-0.08,temperature_c=20-40); writes an HDF5 collection")
+    g.add_argument(
+        "--option",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="protocol option (see the twin's protocol docs), may repeat",
+    )
+    g.add_argument(
+        "-o",
+        "--output",
+        required=True,
+        metavar="OUT",
+        help="output record (.npz); with --grid/--seeds an HDF5 collection (.h5)",
+    )
+    g.add_argument(
+        "--grid",
+        metavar="P=V1-V2,...",
+        help="parameter grid: items separated by ',', values by '-' "
+        "(e.g. distance_m=0.02-0.04-0.08,temperature_c=20-40); writes an HDF5 collection",
+    )
     g.add_argument("--seeds", metavar="A-B", help="noise seeds of the collection (e.g. 0-9 or 0,3,7; replaces --seed)")
     g.add_argument("--no-progress", action="store_true", help="no progress bar")
     add_execution_args(g)
@@ -84,7 +98,8 @@ def _run_collection(args: argparse.Namespace, twin) -> int:
     seeds = parse_seeds(args.seeds) if args.seeds else [args.seed]
     options = parse_assignments(args.option, "--option")
     with executor_from_args(args) as ex:
-        out = generate_collection(twin, args.protocol, grid, seeds, args.output, options=options, executor=ex,
-                                  progress=not args.no_progress)
+        out = generate_collection(
+            twin, args.protocol, grid, seeds, args.output, options=options, executor=ex, progress=not args.no_progress
+        )
     print(f"generated {out['records']} {args.twin} {args.protocol} records -> {out['file']} (index {out['index']})")
     return 0

@@ -37,8 +37,9 @@ def run(args: argparse.Namespace) -> int:
     twin = twin_from_args(args.twin, args)
     name, values = parse_spec(args.spec, type(twin.params))
     with executor_from_args(args) as ex:
-        result = sweep(twin, name, values, args.protocol, identify=not args.no_identify, executor=ex,
-                       progress=not args.json)
+        result = sweep(
+            twin, name, values, args.protocol, identify=not args.no_identify, executor=ex, progress=not args.json
+        )
     if args.report:
         result["report_files"] = write_report(result, Path(args.report))
     if args.json:

@@ -18,14 +18,23 @@ from benchmarks.execution import add_execution_args
 def register(sub) -> None:
     p = sub.add_parser("thesis", help="the dissertation's tables and figures on the twins -> docs/dissertation.md")
     p.add_argument("--quick", action="store_true", help="every row at a tiny budget (1 epoch, 1 run, short records)")
-    p.add_argument("--tier", choices=("quick", "middle", "full"), default=None,
-                   help="budget: middle (default; 100/75 epochs, 2-3 runs, 20 runs for Fig. 5.13) or full (the "
-                        "dissertation's: 5 runs, 75 for Fig. 5.13)")
-    p.add_argument("--rows", "--only", metavar="ID,...", help="rows or tables to measure, e.g. table-4.2,fig-3.4/peak "
-                                                    "(default: every row)")
+    p.add_argument(
+        "--tier",
+        choices=("quick", "middle", "full"),
+        default=None,
+        help="budget: middle (default; 100/75 epochs, 2-3 runs, 20 runs for Fig. 5.13) or full (the "
+        "dissertation's: 5 runs, 75 for Fig. 5.13)",
+    )
+    p.add_argument(
+        "--rows",
+        "--only",
+        metavar="ID,...",
+        help="rows or tables to measure, e.g. table-4.2,fig-3.4/peak (default: every row)",
+    )
     p.add_argument("--repeats", type=COUNT, metavar="N", help="runs of every repeated experiment (overrides the tier)")
-    p.add_argument("--store", action="store_true", help="merge the measured rows into the stored rows and render "
-                                                        "the page")
+    p.add_argument(
+        "--store", action="store_true", help="merge the measured rows into the stored rows and render the page"
+    )
     p.add_argument("--render-only", action="store_true", help="fit nothing: render the page from the stored rows")
     p.add_argument("--stored", metavar="FILE", help="stored rows (default docs/dissertation/rows.json)")
     p.add_argument("--markdown", metavar="FILE", help="page to write (default docs/dissertation.md)")
@@ -47,8 +56,9 @@ def run(args: argparse.Namespace) -> int:
     if args.quick and args.tier not in (None, "quick"):
         raise ConfigError(f"--quick is --tier quick: give one of them, not --tier {args.tier}")
     if args.render_only and (args.rows or args.store or args.quick or args.tier or args.repeats):
-        raise ConfigError("--render-only renders every stored row: give it without --rows/--store/--quick/--tier/"
-                          "--repeats")
+        raise ConfigError(
+            "--render-only renders every stored row: give it without --rows/--store/--quick/--tier/--repeats"
+        )
     stored = check_output_path(args.stored or thesis.ROWS_PATH)
     page = check_output_path(args.markdown or thesis.PAGE_PATH)
     quiet = args.json or getattr(args, "quiet", False)

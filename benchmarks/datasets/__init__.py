@@ -58,27 +58,37 @@ class Dataset:
         return list(self.est) if isinstance(self.est, (list, tuple)) else [self.est]
 
     def summary(self) -> dict[str, Any]:
-        return {"id": self.name, "kind": self.kind, "fs_hz": self.fs, "init_samples": self.init_samples,
-                "test_init_samples": {t: self.init_for(t) for t in self.tests},
-                "est_samples": sum(len(r) for r in self.est_records),
-                "tests": {k: len(v) for k, v in self.tests.items()}, "units": dict(self.units),
-                "references": self.references, "description": self.description}
+        return {
+            "id": self.name,
+            "kind": self.kind,
+            "fs_hz": self.fs,
+            "init_samples": self.init_samples,
+            "test_init_samples": {t: self.init_for(t) for t in self.tests},
+            "est_samples": sum(len(r) for r in self.est_records),
+            "tests": {k: len(v) for k, v in self.tests.items()},
+            "units": dict(self.units),
+            "references": self.references,
+            "description": self.description,
+        }
 
 
 LAB_DESCRIPTIONS = {
     "silverbox": "Silverbox (electronic Duffing oscillator, measured; Wigren & Schoukens 2013): multisine "
-                 "estimation, multisine and arrow (full / no extrapolation) tests",
+    "estimation, multisine and arrow (full / no extrapolation) tests",
     "wiener-hammerstein": "Wiener-Hammerstein 2009 benchmark (measured circuit): estimation samples 1-100000, "
-                          "test 100001-188000",
+    "test 100001-188000",
     "cascaded-tanks": "Cascaded Tanks (measured; Schoukens et al.): uEst/yEst estimation, uVal/yVal test, Ts 4 s",
     "bouc-wen": "Bouc-Wen hysteretic benchmark (simulated; Noel & Schoukens 2016): Forgione's generated training "
-                "multisine, official multisine and sine-sweep tests",
-    "piezo-tue": "measured piezo actuator (150 V, 1 Hz sine; Chandra et al. 2023): first 5 s estimation, "
-                 "last 5 s test",
+    "multisine, official multisine and sine-sweep tests",
+    "piezo-tue": "measured piezo actuator (150 V, 1 Hz sine; Chandra et al. 2023): first 5 s estimation, last 5 s test",
 }
-_LAB_FS = {"silverbox": lab.SILVERBOX_FS_HZ, "wiener-hammerstein": lab.WH_FS_HZ,
-           "cascaded-tanks": 1.0 / lab.CASCADED_TANKS_TS_S, "bouc-wen": lab.BOUC_WEN_FS_HZ,
-           "piezo-tue": lab.PIEZO_TUE_FS_HZ}
+_LAB_FS = {
+    "silverbox": lab.SILVERBOX_FS_HZ,
+    "wiener-hammerstein": lab.WH_FS_HZ,
+    "cascaded-tanks": 1.0 / lab.CASCADED_TANKS_TS_S,
+    "bouc-wen": lab.BOUC_WEN_FS_HZ,
+    "piezo-tue": lab.PIEZO_TUE_FS_HZ,
+}
 
 
 def dataset_names() -> list[str]:
@@ -100,19 +110,36 @@ def list_datasets() -> list[dict[str, Any]]:
     out = []
     for name in lab.LAB_SPECS:
         split = lab.SPLITS[name]
-        out.append({"id": name, "kind": "lab", "fs_hz": _LAB_FS[name],
-                    "est_samples": split["est"][2] - split["est"][1],
-                    "tests": {t: b - a for t, (_, a, b) in split["tests"].items()},
-                    "init_samples": lab.INIT_SAMPLES[name],
-                    "test_init_samples": {t: lab.TEST_INIT_SAMPLES.get(name, {}).get(t, lab.INIT_SAMPLES[name])
-                                          for t in split["tests"]}, "available": True,
-                    "description": LAB_DESCRIPTIONS[name]})
+        out.append(
+            {
+                "id": name,
+                "kind": "lab",
+                "fs_hz": _LAB_FS[name],
+                "est_samples": split["est"][2] - split["est"][1],
+                "tests": {t: b - a for t, (_, a, b) in split["tests"].items()},
+                "init_samples": lab.INIT_SAMPLES[name],
+                "test_init_samples": {
+                    t: lab.TEST_INIT_SAMPLES.get(name, {}).get(t, lab.INIT_SAMPLES[name]) for t in split["tests"]
+                },
+                "available": True,
+                "description": LAB_DESCRIPTIONS[name],
+            }
+        )
     for name, spec in twin.TWIN_DATASETS.items():
         ok, why = _twin_available(spec.twin)
-        out.append({"id": name, "kind": "twin", "fs_hz": spec.fs, "est_samples": None,
-                    "tests": {t: None for t in spec.tests}, "init_samples": spec.init_samples,
-                    "test_init_samples": {t: spec.init_samples for t in spec.tests},
-                    "available": ok, "description": spec.description + ("" if ok else f" [not available: {why}]")})
+        out.append(
+            {
+                "id": name,
+                "kind": "twin",
+                "fs_hz": spec.fs,
+                "est_samples": None,
+                "tests": {t: None for t in spec.tests},
+                "init_samples": spec.init_samples,
+                "test_init_samples": {t: spec.init_samples for t in spec.tests},
+                "available": ok,
+                "description": spec.description + ("" if ok else f" [not available: {why}]"),
+            }
+        )
     return out
 
 

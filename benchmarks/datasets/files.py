@@ -24,8 +24,17 @@ from benchmarks.datasets import lab
 from sysid.data.record import Record
 from sysid.errors import ConfigError, DataError
 
-__all__ = ["LabData", "LAB_DATA", "SCORED_LAB", "get", "read", "piezo_tue_record", "water_fir",
-           "read_water_fir", "WATER_DISTANCES_MM"]
+__all__ = [
+    "LabData",
+    "LAB_DATA",
+    "SCORED_LAB",
+    "get",
+    "read",
+    "piezo_tue_record",
+    "water_fir",
+    "read_water_fir",
+    "WATER_DISTANCES_MM",
+]
 
 DATA_DIR = lab.DATA_DIR
 
@@ -96,21 +105,31 @@ def _vendored(name: str) -> Callable[[Path], dict[str, Record]]:
     return load
 
 
-_LICENCES = {"silverbox": "LICENSE_pytorch-ident_repo.txt",
-             "wiener-hammerstein": "LICENSE_sysid-neural-estimator_repo.txt",
-             "cascaded-tanks": "LICENSE_sysid-neural-continuous_repo.txt",
-             "bouc-wen": "LICENSE_dynonet_repo.txt",
-             "piezo-tue": "LICENSE_from_initial_commit.txt"}
+_LICENCES = {
+    "silverbox": "LICENSE_pytorch-ident_repo.txt",
+    "wiener-hammerstein": "LICENSE_sysid-neural-estimator_repo.txt",
+    "cascaded-tanks": "LICENSE_sysid-neural-continuous_repo.txt",
+    "bouc-wen": "LICENSE_dynonet_repo.txt",
+    "piezo-tue": "LICENSE_from_initial_commit.txt",
+}
 
 # the scored benchmarks (``load_dataset``), in their registry order
 SCORED_LAB: tuple[str, ...] = tuple(lab.LAB_SPECS)
 
 LAB_DATA: dict[str, LabData] = {
-    **{name: LabData(name, spec.folder, tuple(f"{stem}.npz" for stem in spec.records), _LICENCES[name], _vendored(name))
-       for name, spec in lab.LAB_SPECS.items()},
-    "ultrasound-water-fir": LabData("ultrasound-water-fir", "ultrasound_water_fir",
-                                    tuple(f"charac/charac_water_{d}.mat" for d in WATER_DISTANCES_MM), "LICENSE.txt",
-                                    read_water_fir),
+    **{
+        name: LabData(
+            name, spec.folder, tuple(f"{stem}.npz" for stem in spec.records), _LICENCES[name], _vendored(name)
+        )
+        for name, spec in lab.LAB_SPECS.items()
+    },
+    "ultrasound-water-fir": LabData(
+        "ultrasound-water-fir",
+        "ultrasound_water_fir",
+        tuple(f"charac/charac_water_{d}.mat" for d in WATER_DISTANCES_MM),
+        "LICENSE.txt",
+        read_water_fir,
+    ),
 }
 
 

@@ -164,15 +164,32 @@ def _label(rec: Record, u_unit: str, y_unit: str, *files: Path) -> Record:
 
 LAB_SPECS: dict[str, LabSpec] = {
     "silverbox": LabSpec("silverbox", "silverbox", ("SNLS80mV",), ("SNLS80mV.csv",), silverbox_original),
-    "wiener-hammerstein": LabSpec("wiener-hammerstein", "wiener_hammerstein", ("WienerHammerBenchmark",),
-                                  ("WienerHammerBenchmark.csv",), wiener_hammerstein_original),
-    "cascaded-tanks": LabSpec("cascaded-tanks", "cascaded_tanks", ("est", "val"), ("dataBenchmark.csv",),
-                              cascaded_tanks_original),
-    "bouc-wen": LabSpec("bouc-wen", "bouc_wen_benchmark", ("train", "test_multisine", "test_sinesweep"),
-                        ("train_forgione_generated.h5", "uval_multisine.mat", "yval_multisine.mat",
-                         "uval_sinesweep.mat", "yval_sinesweep.mat"), bouc_wen_original),
-    "piezo-tue": LabSpec("piezo-tue", "piezo_tue_150v_1hz", ("hysteresis_v_150_1hz",),
-                         ("hysteresis_v_150_1hz.csv",), piezo_tue_original),
+    "wiener-hammerstein": LabSpec(
+        "wiener-hammerstein",
+        "wiener_hammerstein",
+        ("WienerHammerBenchmark",),
+        ("WienerHammerBenchmark.csv",),
+        wiener_hammerstein_original,
+    ),
+    "cascaded-tanks": LabSpec(
+        "cascaded-tanks", "cascaded_tanks", ("est", "val"), ("dataBenchmark.csv",), cascaded_tanks_original
+    ),
+    "bouc-wen": LabSpec(
+        "bouc-wen",
+        "bouc_wen_benchmark",
+        ("train", "test_multisine", "test_sinesweep"),
+        (
+            "train_forgione_generated.h5",
+            "uval_multisine.mat",
+            "yval_multisine.mat",
+            "uval_sinesweep.mat",
+            "yval_sinesweep.mat",
+        ),
+        bouc_wen_original,
+    ),
+    "piezo-tue": LabSpec(
+        "piezo-tue", "piezo_tue_150v_1hz", ("hysteresis_v_150_1hz",), ("hysteresis_v_150_1hz.csv",), piezo_tue_original
+    ),
 }
 
 
@@ -206,20 +223,31 @@ def read_vendored_folder(name: str, folder: Path) -> dict[str, Record]:
 SPLITS: dict[str, dict[str, Any]] = {
     # Silverbox: official dataloader (nonlinear_benchmarks): multisine part [40650, 127400), its first 75 %
     # estimation, last 25 % test; arrow (full) test [100, 40575); arrow without extrapolation = its first 32000.
-    "silverbox": {"est": ("SNLS80mV", 40650, 105712),
-                  "tests": {"multisine": ("SNLS80mV", 105712, 127400), "arrow": ("SNLS80mV", 100, 40575),
-                            "arrow-no-extrapolation": ("SNLS80mV", 100, 32100)}},
+    "silverbox": {
+        "est": ("SNLS80mV", 40650, 105712),
+        "tests": {
+            "multisine": ("SNLS80mV", 105712, 127400),
+            "arrow": ("SNLS80mV", 100, 40575),
+            "arrow-no-extrapolation": ("SNLS80mV", 100, 32100),
+        },
+    },
     # Wiener-Hammerstein 2009: estimation samples 1..100000, test 100001..188000 (1-based, SYSID 2009 call);
     # "test-official": the official dataloader's test [105200, 184000) (nonlinear_benchmarks 1.0.1, the test set of
     # SUBNET's published number; its training part [5200, 105200) overlaps this estimation part, which is kept).
-    "wiener-hammerstein": {"est": ("WienerHammerBenchmark", 0, 100000),
-                           "tests": {"test": ("WienerHammerBenchmark", 100000, 188000),
-                                     "test-official": ("WienerHammerBenchmark", 105200, 184000)}},
+    "wiener-hammerstein": {
+        "est": ("WienerHammerBenchmark", 0, 100000),
+        "tests": {
+            "test": ("WienerHammerBenchmark", 100000, 188000),
+            "test-official": ("WienerHammerBenchmark", 105200, 184000),
+        },
+    },
     # Cascaded tanks: "test" with the 4-sample window of the benchmark description, "test-official" the same samples
     # with the official dataloader's 50-sample window (TEST_INIT_SAMPLES).
     "cascaded-tanks": {"est": ("est", 0, 1024), "tests": {"test": ("val", 0, 1024), "test-official": ("val", 0, 1024)}},
-    "bouc-wen": {"est": ("train", 0, 40960),
-                 "tests": {"multisine": ("test_multisine", 0, 8192), "sinesweep": ("test_sinesweep", 0, 153000)}},
+    "bouc-wen": {
+        "est": ("train", 0, 40960),
+        "tests": {"multisine": ("test_multisine", 0, 8192), "sinesweep": ("test_sinesweep", 0, 153000)},
+    },
     # piezo actuator (one 10 s record): first 5 s estimation, last 5 s test.
     "piezo-tue": {"est": ("hysteresis_v_150_1hz", 0, 25000), "tests": {"test": ("hysteresis_v_150_1hz", 25000, 50001)}},
 }

@@ -54,5 +54,7 @@ REFERENCES: dict[str, dict[str, dict[str, dict[str, Any]]]] = {
 
 def references_for(dataset: str) -> dict[str, dict[str, dict[str, Any]]]:
     """Reference numbers of ``dataset`` by test name (empty when none are published)."""
-    return {t: {k: dict(v, metric="free-run RMSE") for k, v in kinds.items()}
-            for t, kinds in REFERENCES.get(dataset, {}).items()}
+    return {
+        t: {k: dict(v, metric="free-run RMSE") for k, v in kinds.items()}
+        for t, kinds in REFERENCES.get(dataset, {}).items()
+    }

@@ -83,8 +83,13 @@ def make_twin(spec: TwinDatasetSpec):
 
 
 def cache_key(spec: TwinDatasetSpec, twin) -> str:
-    payload = {"format": CACHE_FORMAT, "config": twin.config(), "est": spec.est, "tests": spec.tests,
-               "code": _source_digest(spec.twin)}
+    payload = {
+        "format": CACHE_FORMAT,
+        "config": twin.config(),
+        "est": spec.est,
+        "tests": spec.tests,
+        "code": _source_digest(spec.twin),
+    }
     text = json.dumps(payload, sort_keys=True, default=str)
     return hashlib.sha256(text.encode()).hexdigest()[:16]
 
@@ -115,8 +120,11 @@ def generate_records(
         tmp.mkdir(parents=True, exist_ok=True)
         for key, rec in out.items():
             write_record(rec, tmp / f"{key}.npz")
-        (tmp / "config.json").write_text(json.dumps({"dataset": spec.name, **twin.config(), "est": spec.est,
-                                                     "tests": spec.tests}, indent=2, default=str))
+        (tmp / "config.json").write_text(
+            json.dumps(
+                {"dataset": spec.name, **twin.config(), "est": spec.est, "tests": spec.tests}, indent=2, default=str
+            )
+        )
         if folder.exists():  # another process won the race; keep its copy
             import shutil
 
@@ -130,8 +138,13 @@ def generate_records(
 # The dissertation's estimation → validation pairs. Cantilever §3.1: thesis-multisine (80 000 samples at
 # 10 kHz) → thesis-sines. Acoustic §3.2 (second dataset): multisine → 1 ms linear chirp, both after the
 # preprocessing recipe (100-point moving average, resampling to 6.75 MHz, band-pass).
-_CANTILEVER: dict[str, Any] = dict(twin="cantilever", est=("thesis-multisine", {}),
-                                   tests={"thesis-sines": ("thesis-sines", {})}, fs=10_000.0, init_samples=0)
+_CANTILEVER: dict[str, Any] = dict(
+    twin="cantilever",
+    est=("thesis-multisine", {}),
+    tests={"thesis-sines": ("thesis-sines", {})},
+    fs=10_000.0,
+    init_samples=0,
+)
 # The dissertation truncated to 2000 / 1000 samples because its tools could not take more; here the
 # estimation keeps 20 000 preprocessed samples (10 ms recorded) and the test one whole 1 ms sweep (6750).
 _ACOUSTIC: dict[str, Any] = dict(

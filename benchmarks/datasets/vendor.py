@@ -60,16 +60,28 @@ def vendor(name: str, shared_data: Path, out_dir: Path = lab.DATA_DIR) -> list[P
     lines += [f"  {h}  {f}" for f, h in originals.items()]
     lines += ["", "Vendored files (samples, fs, sha256 of the float64 bytes of u and y):"]
     for stem, rec in raws.items():
-        meta = {"units": dict(rec.units), "dataset": name, "record": stem,
-                "provenance": {"original_files": {f: originals[f] for f in rec.meta["provenance"]["files"]
-                                                  if f in originals},
-                               "made_by": "benchmarks.datasets.vendor", "see": "PROVENANCE.txt, SOURCE.txt"}}
+        meta = {
+            "units": dict(rec.units),
+            "dataset": name,
+            "record": stem,
+            "provenance": {
+                "original_files": {f: originals[f] for f in rec.meta["provenance"]["files"] if f in originals},
+                "made_by": "benchmarks.datasets.vendor",
+                "see": "PROVENANCE.txt, SOURCE.txt",
+            },
+        }
         path = dst / f"{stem}.npz"
-        np.savez_compressed(path, u=np.asarray(rec.u, dtype=np.float64), y=np.asarray(rec.y, dtype=np.float64),
-                            fs=np.float64(rec.fs), meta=np.array(json.dumps(meta)))
+        np.savez_compressed(
+            path,
+            u=np.asarray(rec.u, dtype=np.float64),
+            y=np.asarray(rec.y, dtype=np.float64),
+            fs=np.float64(rec.fs),
+            meta=np.array(json.dumps(meta)),
+        )
         written.append(path)
-        lines.append(f"  {path.name}: n={len(rec)}, fs={rec.fs:g} Hz, u {sha256_array(rec.u)}, "
-                     f"y {sha256_array(rec.output)}")
+        lines.append(
+            f"  {path.name}: n={len(rec)}, fs={rec.fs:g} Hz, u {sha256_array(rec.u)}, y {sha256_array(rec.output)}"
+        )
     for pattern in COPY_PATTERNS:
         for f in sorted(src.glob(pattern)):
             shutil.copyfile(f, dst / f.name)

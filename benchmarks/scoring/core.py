@@ -78,7 +78,6 @@ def evaluate(model, record: Record, init_samples: int = 0) -> dict[str, Any]:
     return out
 
 
-
 @dataclass
 class ScoreRun:
     """Rows of one scoring run (one per identifier × dataset × test) plus what was skipped and why."""
@@ -94,9 +93,16 @@ class ScoreRun:
     environment: dict[str, Any] = field(default_factory=dict)
 
     def to_dict(self) -> dict[str, Any]:
-        return {"format": "piezotwin-score/1", "mode": "quick" if self.quick else "full", "rows": self.rows,
-                "sysidentpy": self.sysidentpy, "skipped": self.skipped, "seconds": self.seconds,
-                "selection": self.selection, "environment": self.environment}
+        return {
+            "format": "piezotwin-score/1",
+            "mode": "quick" if self.quick else "full",
+            "rows": self.rows,
+            "sysidentpy": self.sysidentpy,
+            "skipped": self.skipped,
+            "seconds": self.seconds,
+            "selection": self.selection,
+            "environment": self.environment,
+        }
 
 
 #: keys of a score run that measure time: two runs of the same command differ in them only
@@ -120,8 +126,13 @@ def blas_kernels() -> str:
     over several sets (docs/regression-check.md), so a run records which one it had."""
     from threadpoolctl import threadpool_info
 
-    sets = sorted({f"{i.get('internal_api', '?')}:{i.get('architecture') or '?'}" for i in threadpool_info()
-                   if i.get("user_api") == "blas"})
+    sets = sorted(
+        {
+            f"{i.get('internal_api', '?')}:{i.get('architecture') or '?'}"
+            for i in threadpool_info()
+            if i.get("user_api") == "blas"
+        }
+    )
     return ",".join(sets)
 
 
@@ -181,6 +192,7 @@ def prepare_dataset(ds, quick: bool):
 def _median_run(runs: list[dict[str, Any]]) -> dict[str, Any]:
     """The run of median free-run RMSE (a diverged or non-finite run counts as +inf; the lower median for an even
     count), so the scored row is one real model with consistent metrics."""
+
     def key(ev: dict[str, Any]) -> float:
         rmse = (ev.get("free_run") or {}).get("rmse")
         return rmse if _finite(rmse) and not ev.get("diverged") else math.inf
@@ -189,9 +201,14 @@ def _median_run(runs: list[dict[str, Any]]) -> dict[str, Any]:
     return runs[order[(len(runs) - 1) // 2]]
 
 
-def score_pair(identifier: str, ds, quick: bool = False, factory: Callable[[str], Any] | None = None,
-               params: dict[str, Any] | None = None,
-               seeds: Sequence[int] | None = None) -> tuple[list[dict[str, Any]], dict[str, np.ndarray]]:
+def score_pair(
+    identifier: str,
+    ds,
+    quick: bool = False,
+    factory: Callable[[str], Any] | None = None,
+    params: dict[str, Any] | None = None,
+    seeds: Sequence[int] | None = None,
+) -> tuple[list[dict[str, Any]], dict[str, np.ndarray]]:
     """Fit ``identifier`` on ``ds.est`` and score every test of ``ds``; returns (rows, free-run predictions).
 
     A seeded identifier is fitted once per seed of ``seeds`` (default: :data:`QUICK_SEEDS` in quick mode, the
@@ -278,18 +295,29 @@ def _assemble(
         preds[test] = ev.pop("_yhat_free_run")
         seed, fit_s, n_par = ev.pop("seed"), ev.pop("fit_seconds"), ev.pop("n_parameters")
         row = {
-            "identifier": identifier, "dataset": ds.name, "test": test,
+            "identifier": identifier,
+            "dataset": ds.name,
+            "test": test,
             "status": "diverged" if ev["diverged"] else "ok",
-            "params": params, "n_parameters": n_par, "fit_seconds": fit_s,
-            "n_est": sum(len(r) for r in ds.est_records), "n_test": len(rec), "units": ds.units.get("y", ""),
-            **ev, "references": ds.references.get(test, {}),
+            "params": params,
+            "n_parameters": n_par,
+            "fit_seconds": fit_s,
+            "n_est": sum(len(r) for r in ds.est_records),
+            "n_test": len(rec),
+            "units": ds.units.get("y", ""),
+            **ev,
+            "references": ds.references.get(test, {}),
         }
         if seed is not None:
             row.update(seed=seed, seeds=list(pair_seeds), **_seed_columns(runs[test]))
         elif seeds is not None:
             rmse = ev["free_run"]["rmse"]
-            row.update(seeds="deterministic", free_run_rmse_mean=rmse if _finite(rmse) else None,
-                       free_run_rmse_sd=0.0 if _finite(rmse) else None, fit_seconds_mean=fit_s)
+            row.update(
+                seeds="deterministic",
+                free_run_rmse_mean=rmse if _finite(rmse) else None,
+                free_run_rmse_sd=0.0 if _finite(rmse) else None,
+                fit_seconds_mean=fit_s,
+            )
         rows.append(row)
     return rows, preds
 
@@ -297,16 +325,20 @@ def _assemble(
 def _seed_columns(runs: list[dict[str, Any]]) -> dict[str, Any]:
     """Per-seed free-run and one-step RMSE of one test (None where not finite), the mean and sample SD of the
     finite free-run values (SD 0 for one value; None when none is finite) and the mean fit time."""
+
     def finite(key: str) -> list[float | None]:
         vals = [(r.get(key) or {}).get("rmse") for r in runs]
         return [x if _finite(x) else None for x in vals]
 
     free = finite("free_run")
     ok = np.array([x for x in free if x is not None], dtype=float)
-    return {"free_run_rmse_by_seed": free, "one_step_rmse_by_seed": finite("one_step"),
-            "free_run_rmse_mean": float(ok.mean()) if ok.size else None,
-            "free_run_rmse_sd": (float(ok.std(ddof=1)) if ok.size > 1 else 0.0) if ok.size else None,
-            "fit_seconds_mean": float(np.mean([r["fit_seconds"] for r in runs]))}
+    return {
+        "free_run_rmse_by_seed": free,
+        "one_step_rmse_by_seed": finite("one_step"),
+        "free_run_rmse_mean": float(ok.mean()) if ok.size else None,
+        "free_run_rmse_sd": (float(ok.std(ddof=1)) if ok.size > 1 else 0.0) if ok.size else None,
+        "fit_seconds_mean": float(np.mean([r["fit_seconds"] for r in runs])),
+    }
 
 
 def _guarded(identifier: str, ds, body: Callable[[], Any]) -> tuple[str, Any]:
@@ -317,9 +349,17 @@ def _guarded(identifier: str, ds, body: Callable[[], Any]) -> tuple[str, Any]:
     except ConfigError as exc:
         return "skip", {"identifier": identifier, "dataset": ds.name, "reason": str(exc)}
     except Exception as exc:
-        return "error", [{"identifier": identifier, "dataset": ds.name, "test": t, "status": "error",
-                          "message": f"{type(exc).__name__}: {exc}"[:300], "references": ds.references.get(t, {})}
-                         for t in ds.tests]
+        return "error", [
+            {
+                "identifier": identifier,
+                "dataset": ds.name,
+                "test": t,
+                "status": "error",
+                "message": f"{type(exc).__name__}: {exc}"[:300],
+                "references": ds.references.get(t, {}),
+            }
+            for t in ds.tests
+        ]
 
 
 def _outcome(status: str, value: Any) -> tuple[list[dict[str, Any]], dict[str, np.ndarray], dict[str, str] | None]:
@@ -330,17 +370,23 @@ def _outcome(status: str, value: Any) -> tuple[list[dict[str, Any]], dict[str, n
     return value[0], value[1], None
 
 
-def score_pair_task(identifier: str, ds, quick: bool = False, factory: Callable[[str], Any] | None = None,
-                    seeds: Sequence[int] | None = None
-                    ) -> tuple[list[dict[str, Any]], dict[str, np.ndarray], dict[str, str] | None]:
+def score_pair_task(
+    identifier: str,
+    ds,
+    quick: bool = False,
+    factory: Callable[[str], Any] | None = None,
+    seeds: Sequence[int] | None = None,
+) -> tuple[list[dict[str, Any]], dict[str, np.ndarray], dict[str, str] | None]:
     """One pair as a task: (rows, free-run predictions, skip entry or None). A ConfigError is a skip; any
     other exception of the identifier is a result (rows with status error), not a crashed run."""
-    return _outcome(*_guarded(identifier, ds, lambda: score_pair(identifier, ds, quick=quick, factory=factory,
-                                                                    seeds=seeds)))
+    return _outcome(
+        *_guarded(identifier, ds, lambda: score_pair(identifier, ds, quick=quick, factory=factory, seeds=seeds))
+    )
 
 
-def score_seed_task(identifier: str, ds, quick: bool, factory: Callable[[str], Any] | None,
-                    seeds: Sequence[int] | None, k: int) -> tuple[str, Any]:
+def score_seed_task(
+    identifier: str, ds, quick: bool, factory: Callable[[str], Any] | None, seeds: Sequence[int] | None, k: int
+) -> tuple[str, Any]:
     """One training seed of one pair as a task (the unit the executor spreads: a pair's seeds run in parallel);
     ``(status, value)`` as :func:`_guarded`, with the seed's evaluations (or None) when it ran."""
     from sysid._blas import blas_threads
@@ -355,13 +401,22 @@ def _pair_outcome(identifier, ds, quick, results: list[tuple[str, Any]], seeds: 
     for status, value in results:
         if status != "ok":
             return _outcome(status, value)
-    return _outcome(*_guarded(identifier, ds, lambda: _assemble(identifier, ds, quick, None,
-                                                                  [v for _, v in results], seeds)))
+    return _outcome(
+        *_guarded(identifier, ds, lambda: _assemble(identifier, ds, quick, None, [v for _, v in results], seeds))
+    )
 
 
-def score(identifiers: Iterable[str] | None = None, datasets: Iterable[str] | None = None, quick: bool = False,
-          sysidentpy: bool = True, progress: bool = False, factory: Callable[[str], Any] | None = None,
-          log: Callable[[str], None] | None = None, seeds: Sequence[int] | None = None, executor=None) -> ScoreRun:
+def score(
+    identifiers: Iterable[str] | None = None,
+    datasets: Iterable[str] | None = None,
+    quick: bool = False,
+    sysidentpy: bool = True,
+    progress: bool = False,
+    factory: Callable[[str], Any] | None = None,
+    log: Callable[[str], None] | None = None,
+    seeds: Sequence[int] | None = None,
+    executor=None,
+) -> ScoreRun:
     """Score identifiers × datasets. Unavailable identifiers/datasets are skipped with the reason.
 
     ``executor`` (:class:`benchmarks.execution.Executor`; default in-process) runs the pairs. BLAS runs
@@ -436,8 +491,15 @@ def _score(identifiers, datasets, quick, sysidentpy, progress, factory, log, see
 
     # Larger estimation data first on a cluster (a proxy of a task's cost), so small tasks fill the end.
     size = {d: sum(len(r) for r in loaded[d].est_records) for d in handles}
-    ex.map(score_seed_task, tasks, desc="score", progress=progress, on_result=collect, keep=False,
-           priorities=[size[d] for _, d in pairs for _ in range(n_seeds)])
+    ex.map(
+        score_seed_task,
+        tasks,
+        desc="score",
+        progress=progress,
+        on_result=collect,
+        keep=False,
+        priorities=[size[d] for _, d in pairs for _ in range(n_seeds)],
+    )
     for dname in datasets:
         ds = loaded[dname]
         if isinstance(ds, Exception):
@@ -466,8 +528,10 @@ def format_row(r: dict[str, Any]) -> str:
     if r.get("status") == "error":
         return f"{head} error: {r.get('message', '')}"
     fr, os_ = r["free_run"], r["one_step"]
-    return (f"{head} free-run RMSE {_fmt(fr['rmse'])} {r['units']} (R2 {_fmt(fr['r2'])})  one-step RMSE "
-            f"{_fmt(os_['rmse'])}  fit {r['fit_seconds']:.2f} s  {r['n_parameters']} params")
+    return (
+        f"{head} free-run RMSE {_fmt(fr['rmse'])} {r['units']} (R2 {_fmt(fr['r2'])})  one-step RMSE "
+        f"{_fmt(os_['rmse'])}  fit {r['fit_seconds']:.2f} s  {r['n_parameters']} params"
+    )
 
 
 def _fmt(x: Any) -> str:

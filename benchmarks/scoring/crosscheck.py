@@ -31,18 +31,33 @@ def sysidentpy_frols(ds, quick: bool = False, use_cache: bool = True) -> list[di
         from sysidentpy.model_structure_selection import FROLS
         from sysidentpy.parameter_estimation import LeastSquares
     except ImportError as exc:
-        return [{"dataset": ds.name, "test": t, "status": "skipped", "reason": f"SysIdentPy not installed ({exc})"}
-                for t in ds.tests]
+        return [
+            {"dataset": ds.name, "test": t, "status": "skipped", "reason": f"SysIdentPy not installed ({exc})"}
+            for t in ds.tests
+        ]
     cfg = sysidentpy_settings(ds.name)
     est = ds.est_records
     if len(est) != 1:
-        return [{"dataset": ds.name, "test": t, "status": "skipped",
-                 "reason": "SysIdentPy fits one record; this dataset has several"} for t in ds.tests]
+        return [
+            {
+                "dataset": ds.name,
+                "test": t,
+                "status": "skipped",
+                "reason": "SysIdentPy fits one record; this dataset has several",
+            }
+            for t in ds.tests
+        ]
     est = est[0]
     if quick and len(est) > SYSIDENTPY_QUICK_MAX_EST:
-        return [{"dataset": ds.name, "test": t, "status": "skipped",
-                 "reason": f"quick run: estimation set of {len(est)} samples > {SYSIDENTPY_QUICK_MAX_EST}"}
-                for t in ds.tests]
+        return [
+            {
+                "dataset": ds.name,
+                "test": t,
+                "status": "skipped",
+                "reason": f"quick run: estimation set of {len(est)} samples > {SYSIDENTPY_QUICK_MAX_EST}",
+            }
+            for t in ds.tests
+        ]
     h = hashlib.sha256()
     for rec in [est, *ds.tests.values()]:
         h.update(np.ascontiguousarray(rec.u).tobytes())
@@ -56,8 +71,15 @@ def sysidentpy_frols(ds, quick: bool = False, use_cache: bool = True) -> list[di
     cache = cache_dir() / "sysidentpy" / f"{ds.name}-{h.hexdigest()[:16]}.json"
     if use_cache and cache.exists():
         return json.loads(cache.read_text())
-    model = FROLS(order_selection=True, n_info_values=cfg["n_info_values"], ylag=cfg["ylag"], xlag=cfg["xlag"],
-                  info_criteria="aic", estimator=LeastSquares(), basis_function=Polynomial(degree=cfg["degree"]))
+    model = FROLS(
+        order_selection=True,
+        n_info_values=cfg["n_info_values"],
+        ylag=cfg["ylag"],
+        xlag=cfg["xlag"],
+        info_criteria="aic",
+        estimator=LeastSquares(),
+        basis_function=Polynomial(degree=cfg["degree"]),
+    )
     t0 = time.perf_counter()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
@@ -68,13 +90,25 @@ def sysidentpy_frols(ds, quick: bool = False, use_cache: bool = True) -> list[di
     for t, rec in ds.tests.items():
         x, y = rec.u.reshape(-1, 1), rec.y.reshape(-1, 1)
         skip = max(ds.init_for(t), max_lag)
-        row = {"dataset": ds.name, "test": t, "status": "ok", "settings": cfg, "fit_seconds": fit_s,
-               "n_parameters": int(len(model.final_model)), "skip": skip, "sysidentpy_version": sysidentpy.__version__}
+        row = {
+            "dataset": ds.name,
+            "test": t,
+            "status": "ok",
+            "settings": cfg,
+            "fit_seconds": fit_s,
+            "n_parameters": int(len(model.final_model)),
+            "skip": skip,
+            "sysidentpy_version": sysidentpy.__version__,
+        }
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             for key, steps in (("free_run", None), ("one_step", 1)):
-                yhat = np.asarray(model.predict(X=x, y=y[:max_lag], steps_ahead=None) if steps is None
-                                  else model.predict(X=x, y=y, steps_ahead=1), dtype=float).reshape(-1)
+                yhat = np.asarray(
+                    model.predict(X=x, y=y[:max_lag], steps_ahead=None)
+                    if steps is None
+                    else model.predict(X=x, y=y, steps_ahead=1),
+                    dtype=float,
+                ).reshape(-1)
                 # SysIdentPy returns the series aligned with the input; guard against off-by-one lengths
                 yhat = (
                     yhat[: len(rec)]

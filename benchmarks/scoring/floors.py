@@ -49,11 +49,13 @@ def load_baselines(path: str | Path | None = None) -> dict[str, Any]:
         raise ConfigError(f"{p}: baselines file malformed: 'modes' must map a mode to floors and 'rules' be a list")
     for mode, floors in modes.items():
         for ident, dsets in floors.items():
-            for dname, tests in (dsets.items() if isinstance(dsets, dict) else [(None, None)]):
-                for test, f in (tests.items() if isinstance(tests, dict) else [(None, None)]):
+            for dname, tests in dsets.items() if isinstance(dsets, dict) else [(None, None)]:
+                for test, f in tests.items() if isinstance(tests, dict) else [(None, None)]:
                     if not (isinstance(f, dict) and _finite(f.get("max_rmse")) and f["max_rmse"] > 0):
-                        raise ConfigError(f"{p}: baselines file malformed: floor {mode}/{ident}/{dname}/{test} needs a "
-                                          "finite positive 'max_rmse'")
+                        raise ConfigError(
+                            f"{p}: baselines file malformed: floor {mode}/{ident}/{dname}/{test} needs a "
+                            "finite positive 'max_rmse'"
+                        )
     return data
 
 
@@ -147,8 +149,10 @@ def check(run: ScoreRun | dict[str, Any], baselines: dict[str, Any] | None = Non
             for test in tests:
                 if (ident, dname, test) not in by_key:
                     why = skipped.get((ident, dname)) or skipped.get((None, dname)) or skipped.get((ident, None))
-                    failures.append(f"{ident} on {dname}/{test}: has a floor but was not scored"
-                                    + (f" (skipped: {why})" if why else ""))
+                    failures.append(
+                        f"{ident} on {dname}/{test}: has a floor but was not scored"
+                        + (f" (skipped: {why})" if why else "")
+                    )
     return failures + check_rules(data, base)
 
 
@@ -163,12 +167,18 @@ def version_mismatch(run: ScoreRun | dict[str, Any], baselines: dict[str, Any]) 
     updates = (baselines.get("provenance") or {}).get(data["mode"]) or []
     measured = (updates[-1].get("versions") or {}) if updates else {}
     running = (data.get("environment") or {}).get("versions") or {}
-    diff = [f"{k} {running.get(k)} (floors: {measured[k]})" for k in VERSIONED
-            if k in measured and running.get(k) != measured[k]]
+    diff = [
+        f"{k} {running.get(k)} (floors: {measured[k]})"
+        for k in VERSIONED
+        if k in measured and running.get(k) != measured[k]
+    ]
     if not diff:
         return None
-    return ("score --check: warning: running versions differ from those the floors were measured with: "
-            + ", ".join(diff) + "; install requirements.lock (make install) to compare like with like")
+    return (
+        "score --check: warning: running versions differ from those the floors were measured with: "
+        + ", ".join(diff)
+        + "; install requirements.lock (make install) to compare like with like"
+    )
 
 
 def check_rules(run: ScoreRun | dict[str, Any], baselines: dict[str, Any]) -> list[str]:
@@ -183,8 +193,11 @@ def _check_rule(rule: dict[str, Any], by_key: dict[tuple[str, str, str], dict[st
     mode), and says why."""
     out = []
     kind = rule["rule"]
-    exempt = {(e["identifier"], e["dataset"], e.get("test", "*")) for e in rule.get("exemptions", [])
-              if mode in e.get("modes", [mode])}
+    exempt = {
+        (e["identifier"], e["dataset"], e.get("test", "*"))
+        for e in rule.get("exemptions", [])
+        if mode in e.get("modes", [mode])
+    }
 
     def is_exempt(i: str, d: str, t: str) -> bool:
         return (i, d, t) in exempt or (i, d, "*") in exempt
@@ -202,11 +215,15 @@ def _check_rule(rule: dict[str, Any], by_key: dict[tuple[str, str, str], dict[st
             lin_rmse = (lin or {}).get("free_run", {}).get("rmse") if lin else None
             bla = (r.get("references") or {}).get("linear_baseline", {}).get("value")
             if _finite(lin_rmse) and not (_finite(rmse) and rmse < lin_rmse):
-                out.append(f"{ident} on {dname}/{test}: free-run RMSE {_fmt(rmse)} does not beat the linear baseline "
-                           f"({linear} in this run: {_fmt(lin_rmse)})")
+                out.append(
+                    f"{ident} on {dname}/{test}: free-run RMSE {_fmt(rmse)} does not beat the linear baseline "
+                    f"({linear} in this run: {_fmt(lin_rmse)})"
+                )
             if _finite(bla) and not (_finite(rmse) and rmse < bla):
-                out.append(f"{ident} on {dname}/{test}: free-run RMSE {_fmt(rmse)} does not beat the published "
-                           f"linear baseline (BLA {_fmt(bla)})")
+                out.append(
+                    f"{ident} on {dname}/{test}: free-run RMSE {_fmt(rmse)} does not beat the published "
+                    f"linear baseline (BLA {_fmt(bla)})"
+                )
     elif kind == "beats_value":
         ident, dname = rule["identifier"], rule["dataset"]
         for test, value in rule["tests"].items():
@@ -230,8 +247,12 @@ DEFAULT_MARGIN = 0.15
 SEEDED_MARGIN = 0.5
 
 
-def make_floors(runs: ScoreRun | dict[str, Any] | list, margin: float = DEFAULT_MARGIN,
-                previous: dict[str, Any] | None = None, seeded_margin: float = SEEDED_MARGIN) -> dict[str, Any]:
+def make_floors(
+    runs: ScoreRun | dict[str, Any] | list,
+    margin: float = DEFAULT_MARGIN,
+    previous: dict[str, Any] | None = None,
+    seeded_margin: float = SEEDED_MARGIN,
+) -> dict[str, Any]:
     """Baselines from one or more measured runs of the same mode (e.g. one per CPU kernel set × BLAS threads).
 
     Per pair: ``measured`` = the worst (largest) free-run RMSE over the runs, ``measured_min`` the best, and the
@@ -255,8 +276,9 @@ def make_floors(runs: ScoreRun | dict[str, Any] | list, margin: float = DEFAULT_
     for m in (margin, seeded_margin):
         if not (_finite(m) and m >= 0):
             raise ConfigError(f"margin must be a finite number >= 0, got {m!r}")
-    base: dict[str, Any] = (json.loads(json.dumps(previous)) if previous
-                            else {"format": BASELINES_FORMAT, "modes": {}, "rules": []})
+    base: dict[str, Any] = (
+        json.loads(json.dumps(previous)) if previous else {"format": BASELINES_FORMAT, "modes": {}, "rules": []}
+    )
     base["format"] = BASELINES_FORMAT
     values: dict[tuple[str, str, str], list[tuple[dict[str, Any], float | None]]] = {}
     draws: dict[tuple[str, str, str], list[float | None]] = {}  # single-seed free-run RMSEs of seeded rows
@@ -272,15 +294,24 @@ def make_floors(runs: ScoreRun | dict[str, Any] | list, margin: float = DEFAULT_
             ok = r.get("status") == "ok" and _finite(rmse)
             values.setdefault(key, []).append((r, rmse if ok else None))
     floors = base.setdefault("modes", {}).setdefault(mode, {})
-    dropped = [e for e in base.get("dropped", {}).get(mode, [])
-               if (e["identifier"], e["dataset"], e.get("test", "*")) not in values]
+    dropped = [
+        e
+        for e in base.get("dropped", {}).get(mode, [])
+        if (e["identifier"], e["dataset"], e.get("test", "*")) not in values
+    ]
     for (ident, dname, test), vals in values.items():
         rows = [r for r, _ in vals]
         singles = draws.get((ident, dname, test), [])
         if any(v is None for _, v in vals) or any(x is None or not _finite(x) for x in singles):
             bad = sum(v is None for _, v in vals) + sum(x is None or not _finite(x) for x in singles)
-            dropped.append({"identifier": ident, "dataset": dname, "test": test,
-                            "reason": f"diverged or failed in {bad} of the measured runs/seeds: no stable floor"})
+            dropped.append(
+                {
+                    "identifier": ident,
+                    "dataset": dname,
+                    "test": test,
+                    "reason": f"diverged or failed in {bad} of the measured runs/seeds: no stable floor",
+                }
+            )
             floors.get(ident, {}).get(dname, {}).pop(test, None)
             continue
         rmses = [v for _, v in vals if v is not None]  # every one (a None was dropped above)
@@ -298,24 +329,44 @@ def make_floors(runs: ScoreRun | dict[str, Any] | list, margin: float = DEFAULT_
         if len(vals) > 1:
             floor.update(measured_min=float(f"{best:.6g}"), runs=len(vals))
         if singles:
-            floor.update(seeds=rows[0]["seeds"], worst_single_seed=float(f"{max(seed_rmses):.6g}"),
-                         single_seed_draws=len(singles))
+            floor.update(
+                seeds=rows[0]["seeds"],
+                worst_single_seed=float(f"{max(seed_rmses):.6g}"),
+                single_seed_draws=len(singles),
+            )
         floors.setdefault(ident, {}).setdefault(dname, {})[test] = floor
     base.setdefault("dropped", {})[mode] = sorted(
         dropped, key=lambda e: (e["identifier"], e["dataset"], e.get("test", "*"))
     )
     envs = [d.get("environment") or {} for d in datas]
     updates = base.setdefault("provenance", {}).setdefault(mode, [])
-    updates.append({
-        "date": datetime.date.today().isoformat(),
-        "identifiers": sorted({k[0] for k in values}), "datasets": sorted({k[1] for k in values}),
-        "how": ("max_rmse = worst free-run RMSE over the runs x (1 + margin); seeded identifiers scored as the median "
+    updates.append(
+        {
+            "date": datetime.date.today().isoformat(),
+            "identifiers": sorted({k[0] for k in values}),
+            "datasets": sorted({k[1] for k in values}),
+            "how": (
+                "max_rmse = worst free-run RMSE over the runs x (1 + margin); seeded identifiers scored as the median "
                 f"over training seeds {list(QUICK_SEEDS) if mode == 'quick' else [0]} in each run, their max_rmse = "
-                "max(worst median x (1 + seeded_margin), worst single seed of all runs x (1 + margin))"),
-        "margin": margin, "seeded_margin": seeded_margin,
-        "runs": [{k: e.get(k) for k in ("cpu", "ATEN_CPU_CAPABILITY", "torch_cpu_capability", "OPENBLAS_NUM_THREADS",
-                                        "OPENBLAS_CORETYPE", "blas_kernels")}
-                 for e in envs],
-        "versions": envs[0].get("versions", {}) if envs else {},
-    })
+                "max(worst median x (1 + seeded_margin), worst single seed of all runs x (1 + margin))"
+            ),
+            "margin": margin,
+            "seeded_margin": seeded_margin,
+            "runs": [
+                {
+                    k: e.get(k)
+                    for k in (
+                        "cpu",
+                        "ATEN_CPU_CAPABILITY",
+                        "torch_cpu_capability",
+                        "OPENBLAS_NUM_THREADS",
+                        "OPENBLAS_CORETYPE",
+                        "blas_kernels",
+                    )
+                }
+                for e in envs
+            ],
+            "versions": envs[0].get("versions", {}) if envs else {},
+        }
+    )
     return base

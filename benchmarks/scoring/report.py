@@ -16,9 +16,11 @@ def markdown_table(run: ScoreRun | dict[str, Any]) -> str:
     """The score table: one row per identifier × dataset × test, references and SysIdentPy beside it."""
     data = run.to_dict() if isinstance(run, ScoreRun) else run
     sidp = {(r["dataset"], r["test"]): r for r in data.get("sysidentpy", [])}
-    lines = ["| dataset / test | identifier | free-run RMSE | free-run R² | one-step RMSE | fit s | params | "
-             "SysIdentPy FROLS (same split) | linear baseline | best published | SysIdentPy published |",
-             "|---|---|---|---|---|---|---|---|---|---|---|"]
+    lines = [
+        "| dataset / test | identifier | free-run RMSE | free-run R² | one-step RMSE | fit s | params | "
+        "SysIdentPy FROLS (same split) | linear baseline | best published | SysIdentPy published |",
+        "|---|---|---|---|---|---|---|---|---|---|---|",
+    ]
     for r in data["rows"]:
         ref = r.get("references") or {}
         u = r.get("units", "")
@@ -35,8 +37,10 @@ def markdown_table(run: ScoreRun | dict[str, Any]) -> str:
             return f"{_fmt(v['value'])} ({v['model']})" if v else "—"
 
         if r.get("status") == "error":
-            lines.append(f"| {r['dataset']} / {r['test']} | {r['identifier']} | error | | | | | {stxt} | "
-                         f"{refv('linear_baseline')} | {refv('best_published')} | {refv('sysidentpy')} |")
+            lines.append(
+                f"| {r['dataset']} / {r['test']} | {r['identifier']} | error | | | | | {stxt} | "
+                f"{refv('linear_baseline')} | {refv('best_published')} | {refv('sysidentpy')} |"
+            )
             continue
         fr, os_ = r["free_run"], r["one_step"]
         lines.append(
@@ -95,7 +99,13 @@ def write_report(run: ScoreRun, report_dir: str | Path) -> dict[str, Path]:
             n0 = ds.init_for(test)
             t = np.arange(n0, len(rec)) / rec.fs
             preds = {k[0]: np.asarray(run.predictions[k])[n0:] for k in sorted(keys)}
-            p = plot_measured_vs_predicted(t, rec.y[n0:], preds, out / f"freerun_{dname}_{test}.png",
-                                           title=f"{dname} / {test}: free-run simulation", unit=ds.units.get("y", ""))
+            p = plot_measured_vs_predicted(
+                t,
+                rec.y[n0:],
+                preds,
+                out / f"freerun_{dname}_{test}.png",
+                title=f"{dname} / {test}: free-run simulation",
+                unit=ds.units.get("y", ""),
+            )
             paths[f"freerun_{dname}"] = p
     return paths

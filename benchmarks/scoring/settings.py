@@ -50,8 +50,9 @@ def _tables(doc: dict[str, Any], part: str, path: Path) -> dict[str, dict[str, A
     return out
 
 
-def load_identifier_settings(directory: Path | None = None) -> tuple[dict[str, dict[str, dict[str, Any]]],
-                                                                      dict[str, dict[str, dict[str, Any]]]]:
+def load_identifier_settings(
+    directory: Path | None = None,
+) -> tuple[dict[str, dict[str, dict[str, Any]]], dict[str, dict[str, dict[str, Any]]]]:
     """(settings, quick overrides) per identifier and dataset, from ``identifiers/*.toml`` (by file name)."""
     settings: dict[str, dict[str, dict[str, Any]]] = {}
     quick: dict[str, dict[str, dict[str, Any]]] = {}
@@ -96,7 +97,7 @@ SYSIDENTPY_QUICK_MAX_EST: int = _SYSIDENTPY["quick_max_est"]
 def settings_for(identifier: str, dataset: str, quick: bool = False) -> dict[str, Any]:
     """The constructor options used for ``identifier`` on ``dataset``."""
     out: dict[str, Any] = {}
-    for table in ((SETTINGS, QUICK_SETTINGS) if quick else (SETTINGS,)):
+    for table in (SETTINGS, QUICK_SETTINGS) if quick else (SETTINGS,):
         entry = table.get(identifier, {})
         out.update(entry.get("*", {}))
         out.update(entry.get(dataset, {}))

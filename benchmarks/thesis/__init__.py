@@ -23,8 +23,9 @@ PAGE_PATH = _ROOT / "docs" / "dissertation.md"
 HISTOGRAM_NAME = "fig-5.13.png"
 
 
-def write_page(rows: dict[str, dict[str, Any]], page: str | Path, histogram_dir: str | Path | None = None,
-               draw: bool = True) -> str:
+def write_page(
+    rows: dict[str, dict[str, Any]], page: str | Path, histogram_dir: str | Path | None = None, draw: bool = True
+) -> str:
     """Render the page from ``rows`` and write it (atomically); the histogram goes to ``histogram_dir`` (default:
     the ``dissertation/`` folder beside the page) when ``draw`` and the Figure 5.13 rows are stored."""
     import os

@@ -26,8 +26,19 @@ import numpy as np
 
 from benchmarks.thesis.plan import Tier
 
-__all__ = ["dataset1", "dataset2", "ds1_task", "ds1_candidate_task", "ds1_wavenet_task", "ds2_task", "vna_peaks_task",
-           "DS1_STEPS", "NARX_HIDDEN", "DS2_CANDIDATE_NK", "DS2_DISTANCE_TRIAL_M"]
+__all__ = [
+    "dataset1",
+    "dataset2",
+    "ds1_task",
+    "ds1_candidate_task",
+    "ds1_wavenet_task",
+    "ds2_task",
+    "vna_peaks_task",
+    "DS1_STEPS",
+    "NARX_HIDDEN",
+    "DS2_CANDIDATE_NK",
+    "DS2_DISTANCE_TRIAL_M",
+]
 
 #: §5.1: 10 M → 1 M samples (decimation by 10), then the fifth-order band-pass of the band of interest
 DS1_STEPS = [{"step": "decimate", "q": 10}, {"step": "bandpass", "fmin": 900e3, "fmax": 1350e3, "order": 5}]
@@ -92,18 +103,36 @@ def ds1_model(model: str, nu: int, ny: int, ne: int | None, rho: float | None, s
     if model == "narmax":
         if rho is None:
             raise ValueError("a NARMAX line of Table 5.2 needs its rho_p")
-        kw = {"ny": ny, "nu": nu, "ne": ne, "nk": nk, "degree": 2, "criterion": "err", "rho_p": rho,
-              "rho_n": rho / 10}
+        kw = {"ny": ny, "nu": nu, "ne": ne, "nk": nk, "degree": 2, "criterion": "err", "rho_p": rho, "rho_n": rho / 10}
         return get_identifier("narmax-poly")(**kw), "narmax-poly", kw
     if model == "narx":
-        kw = {"ny": ny, "nu": nu, "nk": nk, "hidden": list(NARX_HIDDEN), "activation": "sigmoid", "linear": True,
-              "lr": NARX_LR, "batch_size": 128, "epochs": t.narx_epochs, "seed": seed}
+        kw = {
+            "ny": ny,
+            "nu": nu,
+            "nk": nk,
+            "hidden": list(NARX_HIDDEN),
+            "activation": "sigmoid",
+            "linear": True,
+            "lr": NARX_LR,
+            "batch_size": 128,
+            "epochs": t.narx_epochs,
+            "seed": seed,
+        }
         return get_identifier("narx-mlp")(**kw), "narx-mlp", kw
     raise ValueError(f"unknown Table 5.2 model {model!r}")
 
 
-def ds1_task(model: str, nu: int, ny: int, ne: int | None, rho: float | None, seed: int, t: Tier,
-             nk: str = "1", lr: float | None = None) -> dict[str, Any]:
+def ds1_task(
+    model: str,
+    nu: int,
+    ny: int,
+    ne: int | None,
+    rho: float | None,
+    seed: int,
+    t: Tier,
+    nk: str = "1",
+    lr: float | None = None,
+) -> dict[str, Any]:
     """One Table 5.2 line fitted on data set 1: FRS R² (and one-step R²) on the estimation samples. ``nk="tof"``
     delays the input by the direct path's time of flight, ``lr`` changes the NARX learning rate (measured
     explanations, not the table's settings). The result also carries what explains a failing fit: for a NARX
@@ -130,9 +159,18 @@ def ds1_task(model: str, nu: int, ny: int, ne: int | None, rho: float | None, se
             diag = _ds1_diagnostics(model, est, rec, kw)
         except DataError as exc:  # e.g. a non-invertible ARMAX noise polynomial: the row says so
             note = f"fit refused: {exc}"
-    return {"identifier": ident, "params": kw, "r2_frs": frs, "r2_osa": osa, "seed": seed, "note": note,
-            "n_parameters": int(getattr(est, "n_parameters_", 0) or 0), **diag,
-            "cpu_seconds": time.process_time() - c0, "wall_seconds": time.perf_counter() - w0}
+    return {
+        "identifier": ident,
+        "params": kw,
+        "r2_frs": frs,
+        "r2_osa": osa,
+        "seed": seed,
+        "note": note,
+        "n_parameters": int(getattr(est, "n_parameters_", 0) or 0),
+        **diag,
+        "cpu_seconds": time.process_time() - c0,
+        "wall_seconds": time.perf_counter() - w0,
+    }
 
 
 def _ds1_diagnostics(model: str, est, rec, kw: dict[str, Any]) -> dict[str, Any]:
@@ -142,8 +180,10 @@ def _ds1_diagnostics(model: str, est, rec, kw: dict[str, Any]) -> dict[str, Any]
 
     if model == "narx":
         lin = get_identifier("arx")(ny=kw["ny"], nu=kw["nu"], nk=kw["nk"], intercept=True).fit(rec)
-        return {"linear_r2_osa": float(r2(rec.output, lin.predict(rec, 1), int(lin.max_lag_))),
-                "linear_r2_frs": _frs_r2(lin, rec)}
+        return {
+            "linear_r2_osa": float(r2(rec.output, lin.predict(rec, 1), int(lin.max_lag_))),
+            "linear_r2_frs": _frs_r2(lin, rec),
+        }
     if model == "narmax":
         import sysid.polynomial.frols as fr
 
@@ -151,9 +191,12 @@ def _ds1_diagnostics(model: str, est, rec, kw: dict[str, Any]) -> dict[str, Any]
         names = [fr.term_name(tm, s.regressors, s.n_outputs, s.n_inputs) for tm in est.terms_[0]]
         errs = [float(e) if e is not None else 0.0 for e in est.err_[0]]
         y_only = sum(e for n, e in zip(names, errs) if n.startswith("y(") and "*" not in n)
-        return {"terms": names, "n_input_terms": sum("u(" in n for n in names),
-                "err_input_terms": float(sum(e for n, e in zip(names, errs) if "u(" in n)),
-                "unexplained_by_output_lags": float(1.0 - y_only)}
+        return {
+            "terms": names,
+            "n_input_terms": sum("u(" in n for n in names),
+            "err_input_terms": float(sum(e for n, e in zip(names, errs) if "u(" in n)),
+            "unexplained_by_output_lags": float(1.0 - y_only),
+        }
     if model == "armax":
         return {"pem_status": str(getattr(est, "pem_status_", ""))}
     return {}
@@ -180,14 +223,22 @@ def ds1_wavenet_task(nu: int, ny: int, t: Tier, nk: str = "1") -> dict[str, Any]
     rec = dataset1(t.short_records)
     c0, w0 = time.process_time(), time.perf_counter()
     model = WaveletNARX(ny=ny, nu=nu, nk=_delay(nk, rec.fs), units=sum(NARX_HIDDEN)).fit(rec)
-    return {"identifier": "wavenet", "params": model.settings(), "r2_frs": _frs_r2(model, rec),
-            "r2_osa": float(r2(rec.output, model.predict(rec, 1), int(model.max_lag_))), "seed": 0, "note": None,
-            "n_parameters": model.n_parameters_,
-            "cpu_seconds": time.process_time() - c0, "wall_seconds": time.perf_counter() - w0}
+    return {
+        "identifier": "wavenet",
+        "params": model.settings(),
+        "r2_frs": _frs_r2(model, rec),
+        "r2_osa": float(r2(rec.output, model.predict(rec, 1), int(model.max_lag_))),
+        "seed": 0,
+        "note": None,
+        "n_parameters": model.n_parameters_,
+        "cpu_seconds": time.process_time() - c0,
+        "wall_seconds": time.perf_counter() - w0,
+    }
 
 
-def ds2_task(ny: int, hidden: tuple[int, ...], activation: str, seed: int, t: Tier, nk: int = 1,
-             distance_m: float | None = None) -> dict[str, Any]:
+def ds2_task(
+    ny: int, hidden: tuple[int, ...], activation: str, seed: int, t: Tier, nk: int = 1, distance_m: float | None = None
+) -> dict[str, Any]:
     """One training of a Table 5.3 network (n_u = 512, n_y = ``ny``) on data set 2: R² OSA/FRS on estimation and
     validation (the four columns of Table 5.6). ``distance_m``: data set 2 of the twin with that plate gap (a
     measured explanation); the result gives the direct path's time of flight in samples at 6.75 MHz."""
@@ -197,14 +248,30 @@ def ds2_task(ny: int, hidden: tuple[int, ...], activation: str, seed: int, t: Ti
     est, val = dataset2(t.short_records, distance_m)
     tw = _twin(distance_m)
     c0, w0 = time.process_time(), time.perf_counter()
-    kw = {"ny": ny, "nu": 512, "nk": nk, "hidden": list(hidden), "activation": activation, "lr": 1e-4,
-          "batch_size": 128, "epochs": t.acoustic_epochs, "seed": seed}
+    kw = {
+        "ny": ny,
+        "nu": 512,
+        "nk": nk,
+        "hidden": list(hidden),
+        "activation": activation,
+        "lr": 1e-4,
+        "batch_size": 128,
+        "epochs": t.acoustic_epochs,
+        "seed": seed,
+    }
     model = get_identifier("narx-mlp")(**kw).fit(est)
     lag = int(model.max_lag_)
-    out = {"params": kw, "seed": seed, "r2_osa_est": float(r2(est.output, model.predict(est, 1), lag)),
-           "r2_frs_est": _frs_r2(model, est), "r2_osa_val": float(r2(val.output, model.predict(val, 1), lag)),
-           "r2_frs_val": _frs_r2(model, val), "n_parameters": int(model.n_parameters_),
-           "distance_m": float(tw.params.distance_m), "tof_samples": float(tw.time_of_flight() * est.fs)}
+    out = {
+        "params": kw,
+        "seed": seed,
+        "r2_osa_est": float(r2(est.output, model.predict(est, 1), lag)),
+        "r2_frs_est": _frs_r2(model, est),
+        "r2_osa_val": float(r2(val.output, model.predict(val, 1), lag)),
+        "r2_frs_val": _frs_r2(model, val),
+        "n_parameters": int(model.n_parameters_),
+        "distance_m": float(tw.params.distance_m),
+        "tof_samples": float(tw.time_of_flight() * est.fs),
+    }
     out.update(cpu_seconds=time.process_time() - c0, wall_seconds=time.perf_counter() - w0)
     return out
 
@@ -226,8 +293,12 @@ def vna_peaks_task(t: Tier) -> dict[str, Any]:
         a, b, c = db[i - 1], db[i], db[i + 1]
         d = 0.5 * (a - c) / (a - 2 * b + c)
         peaks.append((float(f[i] + d * (f[1] - f[0])), float(b - 0.25 * (a - c) * d)))
-    return {"peaks_hz": [p[0] for p in peaks], "levels_db": [p[1] for p in peaks],
-            "cpu_seconds": time.process_time() - c0, "wall_seconds": time.perf_counter() - w0}
+    return {
+        "peaks_hz": [p[0] for p in peaks],
+        "levels_db": [p[1] for p in peaks],
+        "cpu_seconds": time.process_time() - c0,
+        "wall_seconds": time.perf_counter() - w0,
+    }
 
 
 def _delay(nk: str, fs: float) -> int:
@@ -246,6 +317,12 @@ def ds1_candidate_task(nk: str, t: Tier) -> dict[str, Any]:
     c0, w0 = time.process_time(), time.perf_counter()
     kw = {"ny": 4, "nu": 8, "nk": _delay(nk, rec.fs)}
     model = get_identifier("arx")(**kw).fit(rec)
-    return {"identifier": "arx", "params": kw, "r2_frs": _frs_r2(model, rec), "seed": 0,
-            "silent_samples": int(np.argmax(np.abs(rec.output) > 0.05 * np.max(np.abs(rec.output)))),
-            "cpu_seconds": time.process_time() - c0, "wall_seconds": time.perf_counter() - w0}
+    return {
+        "identifier": "arx",
+        "params": kw,
+        "r2_frs": _frs_r2(model, rec),
+        "seed": 0,
+        "silent_samples": int(np.argmax(np.abs(rec.output) > 0.05 * np.max(np.abs(rec.output)))),
+        "cpu_seconds": time.process_time() - c0,
+        "wall_seconds": time.perf_counter() - w0,
+    }

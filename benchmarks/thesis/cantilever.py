@@ -61,8 +61,9 @@ def _timed(fn, *args, **kw) -> tuple[Any, float, float]:
     return out, time.process_time() - c0, time.perf_counter() - w0
 
 
-def mlp_task(layers: int, width: int, seed: int, t: Tier, without: str | None = None,
-             bw_alpha: float | None = None) -> dict[str, Any]:
+def mlp_task(
+    layers: int, width: int, seed: int, t: Tier, without: str | None = None, bw_alpha: float | None = None
+) -> dict[str, Any]:
     """One training of the ``layers`` × ``width`` ReLU network: R² per sine, their mean, estimation FRS R².
     ``without``: a default effect of the twin left out; ``bw_alpha``: another hysteresis share (measured
     explanations, not the table's protocol)."""
@@ -71,9 +72,15 @@ def mlp_task(layers: int, width: int, seed: int, t: Tier, without: str | None = 
     recs = data(t.cantilever_duration_s, t.short_records, without, bw_alpha)
     params = {"hidden": [width] * layers, "epochs": t.cantilever_epochs}
     res, cpu, wall = _timed(cantilever_sines, "narx-mlp", params, seed, recs)
-    return {"r2_per_freq": {f"{f:g}": v for f, v in res["r2_per_freq"].items()}, "r2_mean": res["r2_mean"],
-            "r2_est_frs": res["r2_est_frs"], "n_parameters": res["n_parameters"], "cpu_seconds": cpu,
-            "wall_seconds": wall, "seed": seed}
+    return {
+        "r2_per_freq": {f"{f:g}": v for f, v in res["r2_per_freq"].items()},
+        "r2_mean": res["r2_mean"],
+        "r2_est_frs": res["r2_est_frs"],
+        "n_parameters": res["n_parameters"],
+        "cpu_seconds": cpu,
+        "wall_seconds": wall,
+        "seed": seed,
+    }
 
 
 def candidate_task(identifier: str, seed: int, t: Tier) -> dict[str, Any]:
@@ -85,9 +92,15 @@ def candidate_task(identifier: str, seed: int, t: Tier) -> dict[str, Any]:
     if identifier.startswith("narx-mlp"):
         params["epochs"] = t.cantilever_epochs
     res, cpu, wall = _timed(cantilever_sines, identifier, params, seed, recs)
-    return {"identifier": identifier, "params": params, "r2_mean": res["r2_mean"],
-            "r2_per_freq": {f"{f:g}": v for f, v in res["r2_per_freq"].items()}, "cpu_seconds": cpu,
-            "wall_seconds": wall, "seed": seed}
+    return {
+        "identifier": identifier,
+        "params": params,
+        "r2_mean": res["r2_mean"],
+        "r2_per_freq": {f"{f:g}": v for f, v in res["r2_per_freq"].items()},
+        "cpu_seconds": cpu,
+        "wall_seconds": wall,
+        "seed": seed,
+    }
 
 
 def output_peak_task(t: Tier) -> dict[str, Any]:
@@ -105,8 +118,14 @@ def output_peak_task(t: Tier) -> dict[str, Any]:
     for f1_new in F1_TRIALS_HZ:
         rec = CantileverTwin(params=replace(CantileverParams(), f1_hz=f1_new), seed=0).generate("thesis-multisine")
         moved[f"{f1_new:g}"] = _peak(rec)[0]
-    return {"peak_hz": peak, "peak_rel_db": level, "f1_hz": f1, "peak_hz_with_f1_hz": moved,
-            "cpu_seconds": time.process_time() - c0, "wall_seconds": time.perf_counter() - w0}
+    return {
+        "peak_hz": peak,
+        "peak_rel_db": level,
+        "f1_hz": f1,
+        "peak_hz_with_f1_hz": moved,
+        "cpu_seconds": time.process_time() - c0,
+        "wall_seconds": time.perf_counter() - w0,
+    }
 
 
 def _peak(rec) -> tuple[float, float]:

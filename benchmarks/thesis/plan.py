@@ -52,6 +52,11 @@ def with_repeats(t: Tier, repeats: int) -> Tier:
     """``--repeats N``: every repeated experiment runs N times (Table 5.6 and Fig. 5.13 at least N)."""
     if repeats < 1:
         raise ConfigError(f"--repeats must be ≥ 1, got {repeats}")
-    return replace(t, cantilever_repeats=repeats, acoustic_repeats=repeats, narx_repeats=repeats,
-                   table_5_6_runs=max(repeats, t.table_5_6_runs) if t.name != "quick" else repeats,
-                   fig_5_13_runs=max(repeats, t.fig_5_13_runs))
+    return replace(
+        t,
+        cantilever_repeats=repeats,
+        acoustic_repeats=repeats,
+        narx_repeats=repeats,
+        table_5_6_runs=max(repeats, t.table_5_6_runs) if t.name != "quick" else repeats,
+        fig_5_13_runs=max(repeats, t.fig_5_13_runs),
+    )

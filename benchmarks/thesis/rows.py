@@ -34,21 +34,37 @@ __all__ = ["ROW_FORMAT", "FILE_FORMAT", "build_row", "write_rows", "load_rows", 
 
 ROW_FORMAT = "piezotwin-thesis-row/1"
 FILE_FORMAT = "piezotwin-thesis-rows/1"
-_DS2_KEYS = {"table-5.4": "r2_frs_est", "table-5.5": "r2_frs_val", "osa-est": "r2_osa_est",
-             "frs-est": "r2_frs_est", "osa-val": "r2_osa_val", "frs-val": "r2_frs_val", "est": "r2_frs_est",
-             "val": "r2_frs_val"}
-_METRIC = {"table-4.2": "mean over the 12 sines of the validation FRS R²", "table-4.3": "validation FRS R² of the sine",
-           "table-5.2": "FRS R² on the estimation data (data set 1)", "table-5.4": "estimation FRS R² (data set 2)",
-           "table-5.5": "validation FRS R² (data set 2, 1 ms chirp)", "fig-3.4": "output-spectrum peak above 500 Hz",
-           "fig-3.9": "transmission peak of the gated VNA response"}
+_DS2_KEYS = {
+    "table-5.4": "r2_frs_est",
+    "table-5.5": "r2_frs_val",
+    "osa-est": "r2_osa_est",
+    "frs-est": "r2_frs_est",
+    "osa-val": "r2_osa_val",
+    "frs-val": "r2_frs_val",
+    "est": "r2_frs_est",
+    "val": "r2_frs_val",
+}
+_METRIC = {
+    "table-4.2": "mean over the 12 sines of the validation FRS R²",
+    "table-4.3": "validation FRS R² of the sine",
+    "table-5.2": "FRS R² on the estimation data (data set 1)",
+    "table-5.4": "estimation FRS R² (data set 2)",
+    "table-5.5": "validation FRS R² (data set 2, 1 ms chirp)",
+    "fig-3.4": "output-spectrum peak above 500 Hz",
+    "fig-3.9": "transmission peak of the gated VNA response",
+}
 
 
 def stats(values: list[float | None]) -> dict[str, Any]:
     """mean, SD (n−1), n of the finite values; ``failed`` counts the rest (diverged free runs, refused fits)."""
     ok = [float(v) for v in values if v is not None and math.isfinite(v)]
-    return {"mean": float(np.mean(ok)) if ok else None, "sd": float(np.std(ok, ddof=1)) if len(ok) > 1 else None,
-            "n": len(values), "failed": len(values) - len(ok),
-            "values": [float(v) if v is not None and math.isfinite(v) else None for v in values]}
+    return {
+        "mean": float(np.mean(ok)) if ok else None,
+        "sd": float(np.std(ok, ddof=1)) if len(ok) > 1 else None,
+        "n": len(values),
+        "failed": len(values) - len(ok),
+        "values": [float(v) if v is not None and math.isfinite(v) else None for v in values],
+    }
 
 
 def _verdict(mean: float | None, tg: targets.Target) -> str:
@@ -91,21 +107,56 @@ def build_row(rid: str, results: dict[str, dict[str, Any]], t: Tier, measured: d
     """One row from the fit results (key -> result, see :func:`benchmarks.thesis.runner.tasks_for`)."""
     fam, name = rid.split("/", 1)
     tg = targets.TARGETS[rid]
-    builder = {"table-4.2": _cantilever, "table-4.3": _cantilever, "table-5.2": _ds1, "table-5.4": _ds2,
-               "table-5.5": _ds2, "table-5.6": _ds2, "fig-5.13": _ds2, "fig-3.4": _peaks, "fig-3.9": _peaks}[fam]
+    builder = {
+        "table-4.2": _cantilever,
+        "table-4.3": _cantilever,
+        "table-5.2": _ds1,
+        "table-5.4": _ds2,
+        "table-5.5": _ds2,
+        "table-5.6": _ds2,
+        "fig-5.13": _ds2,
+        "fig-3.4": _peaks,
+        "fig-3.9": _peaks,
+    }[fam]
     values, fits, settings, best = builder(fam, name, results, t)
     proj = {**stats(values), "unit": tg.unit}
     row: dict[str, Any] = {
-        "format": ROW_FORMAT, "id": rid, "item": tg.source, "metric": _METRIC.get(fam, _METRIC_6.get(name, "")),
-        "dissertation": {"value": tg.value, "sd": tg.sd, "n": tg.n, "low": tg.low, "high": tg.high, "unit": tg.unit,
-                         "note": tg.note, **({"runs": tg.extra["runs"]} if "runs" in tg.extra else {})},
-        "project": proj, "verdict": _verdict(proj["mean"], tg), "settings": settings,
-        "differences": explain.differences(fam, t), "command": _command(rid, t), "best": best,
+        "format": ROW_FORMAT,
+        "id": rid,
+        "item": tg.source,
+        "metric": _METRIC.get(fam, _METRIC_6.get(name, "")),
+        "dissertation": {
+            "value": tg.value,
+            "sd": tg.sd,
+            "n": tg.n,
+            "low": tg.low,
+            "high": tg.high,
+            "unit": tg.unit,
+            "note": tg.note,
+            **({"runs": tg.extra["runs"]} if "runs" in tg.extra else {}),
+        },
+        "project": proj,
+        "verdict": _verdict(proj["mean"], tg),
+        "settings": settings,
+        "differences": explain.differences(fam, t),
+        "command": _command(rid, t),
+        "best": best,
         "fits": [_fit(k, r) for k, r in fits],
         "other_fits": [_fit(k, r) for k, r in sorted(results.items()) if k.startswith(_OTHER.get(fam, "\0"))],
-        "measured": {k: measured[k] for k in ("date", "machine", "versions", "load_average_before",
-                                              "load_average_after", "process", "tier", "wall_seconds")
-                     if k in measured},
+        "measured": {
+            k: measured[k]
+            for k in (
+                "date",
+                "machine",
+                "versions",
+                "load_average_before",
+                "load_average_after",
+                "process",
+                "tier",
+                "wall_seconds",
+            )
+            if k in measured
+        },
     }
     row["cpu_seconds"] = float(sum(f["cpu_seconds"] or 0.0 for f in row["fits"]))
     row["explanation"] = explain.explanation(row, results, t)
@@ -113,19 +164,31 @@ def build_row(rid: str, results: dict[str, dict[str, Any]], t: Tier, measured: d
 
 
 #: the fits of the project's other models beside a family's rows (the "best" column, the explanations)
-_OTHER = {"table-4.2": "cant-cand/", "table-4.3": "cant-", "table-5.2": "ds1-cand/", "table-5.4": "ds2-",
-          "table-5.5": "ds2-", "table-5.6": "ds2-", "fig-5.13": "ds2-"}
+_OTHER = {
+    "table-4.2": "cant-cand/",
+    "table-4.3": "cant-",
+    "table-5.2": "ds1-cand/",
+    "table-5.4": "ds2-",
+    "table-5.5": "ds2-",
+    "table-5.6": "ds2-",
+    "fig-5.13": "ds2-",
+}
 
 
 def _fit(key: str, r: dict[str, Any]) -> dict[str, Any]:
     return {"key": key, "cpu_seconds": r.get("cpu_seconds"), "wall_seconds": r.get("wall_seconds")}
 
 
-_METRIC_6 = {"osa-est": "one-step R² on the estimation data", "frs-est": "FRS R² on the estimation data",
-             "osa-val": "one-step R² on the validation data", "frs-val": "FRS R² on the validation data",
-             "est": "FRS R² on the estimation data, over the runs",
-             "val": "FRS R² on the validation data, over the runs",
-             "peak": "largest peak", "second-peak": "second peak"}
+_METRIC_6 = {
+    "osa-est": "one-step R² on the estimation data",
+    "frs-est": "FRS R² on the estimation data",
+    "osa-val": "one-step R² on the validation data",
+    "frs-val": "FRS R² on the validation data",
+    "est": "FRS R² on the estimation data, over the runs",
+    "val": "FRS R² on the validation data, over the runs",
+    "peak": "largest peak",
+    "second-peak": "second peak",
+}
 
 
 def _cantilever(fam, name, results, t: Tier):
@@ -134,15 +197,20 @@ def _cantilever(fam, name, results, t: Tier):
     key = "r2_mean" if fam == "table-4.2" else None
     freq = name[:-2] if fam == "table-4.3" else None
     values = [r[key] if key else r["r2_per_freq"].get(freq) for _, r in runs]
-    settings = {"network": f"{arch.replace('x', ' × ')} ReLU, n_y = n_u = 10", "epochs": t.cantilever_epochs,
-                "repeats": t.cantilever_repeats, "estimation_s": t.cantilever_duration_s or 8.0}
+    settings = {
+        "network": f"{arch.replace('x', ' × ')} ReLU, n_y = n_u = 10",
+        "epochs": t.cantilever_epochs,
+        "repeats": t.cantilever_repeats,
+        "estimation_s": t.cantilever_duration_s or 8.0,
+    }
     cands = []
     for layers, width in targets.TABLE_4_2:
         rr = _runs(results, f"cant/{layers}x{width}/")
         if rr:
             vals = [r[key] if key else r["r2_per_freq"].get(freq) for _, r in rr]
-            cands.append((stats(vals)["mean"], "narx-mlp", {"hidden": f"{layers} × {width}", "activation": "relu"},
-                          len(rr)))
+            cands.append(
+                (stats(vals)["mean"], "narx-mlp", {"hidden": f"{layers} × {width}", "activation": "relu"}, len(rr))
+            )
     for ident in ("narx-poly", "narx-mlp"):
         rr = _runs(results, f"cant-cand/{ident}/")
         if rr:
@@ -155,8 +223,11 @@ def _ds1(fam, name, results, t: Tier):
     runs = _runs(results, f"ds1/{name}/")
     values = [r["r2_frs"] for _, r in runs]
     first = runs[0][1]
-    settings = {"identifier": first["identifier"], **{k: v for k, v in first["params"].items() if k != "seed"},
-                "repeats": len(runs)}
+    settings = {
+        "identifier": first["identifier"],
+        **{k: v for k, v in first["params"].items() if k != "seed"},
+        "repeats": len(runs),
+    }
     notes = sorted({r["note"] for _, r in runs if r.get("note")})
     if notes:
         settings["note"] = "; ".join(notes)
@@ -164,15 +235,27 @@ def _ds1(fam, name, results, t: Tier):
     for line in targets.TABLE_5_2:
         rr = _runs(results, f"ds1/{targets.table_5_2_id(*line[:5]).split('/', 1)[1]}/")
         if rr:
-            cands.append((stats([r["r2_frs"] for _, r in rr])["mean"], rr[0][1]["identifier"],
-                          {k: v for k, v in rr[0][1]["params"].items() if k != "seed"}, len(rr)))
+            cands.append(
+                (
+                    stats([r["r2_frs"] for _, r in rr])["mean"],
+                    rr[0][1]["identifier"],
+                    {k: v for k, v in rr[0][1]["params"].items() if k != "seed"},
+                    len(rr),
+                )
+            )
     groups: dict[str, list[dict[str, Any]]] = {}
     for key, r in results.items():
         if key.startswith("ds1-cand/"):
             groups.setdefault(key.rsplit("/", 1)[0] if key.rsplit("/", 1)[1].isdigit() else key, []).append(r)
     for rr2 in groups.values():
-        cands.append((stats([r["r2_frs"] for r in rr2])["mean"], rr2[0]["identifier"],
-                      {k: v for k, v in rr2[0]["params"].items() if k != "seed"}, len(rr2)))
+        cands.append(
+            (
+                stats([r["r2_frs"] for r in rr2])["mean"],
+                rr2[0]["identifier"],
+                {k: v for k, v in rr2[0]["params"].items() if k != "seed"},
+                len(rr2),
+            )
+        )
     return values, runs, settings, _best(cands)
 
 
@@ -186,40 +269,82 @@ def _ds2(fam, name, results, t: Tier):
     runs = _runs(results, f"ds2/{arch}/", n)
     values = [r[key] for _, r in runs]
     ny, hidden, act = _ARCH[arch]
-    settings = {"network": f"{'-'.join(map(str, hidden))} {act}, n_u = 512, n_y = {ny}", "epochs": t.acoustic_epochs,
-                "repeats": len(runs)}
+    settings = {
+        "network": f"{'-'.join(map(str, hidden))} {act}, n_u = 512, n_y = {ny}",
+        "epochs": t.acoustic_epochs,
+        "repeats": len(runs),
+    }
     cands = []
     for lab, (ny2, hid2, act2) in _ARCH.items():
         rr = _runs(results, f"ds2/{lab}/")
         if rr:
-            cands.append((stats([r[key] for _, r in rr])["mean"], "narx-mlp",
-                          {"hidden": "-".join(map(str, hid2)), "activation": act2, "ny": ny2, "nu": 512}, len(rr)))
+            cands.append(
+                (
+                    stats([r[key] for _, r in rr])["mean"],
+                    "narx-mlp",
+                    {"hidden": "-".join(map(str, hid2)), "activation": act2, "ny": ny2, "nu": 512},
+                    len(rr),
+                )
+            )
     rr = _runs(results, "ds2-cand/")
     if rr:
         p = rr[0][1]["params"]
-        cands.append((stats([r[key] for _, r in rr])["mean"], "narx-mlp",
-                      {"hidden": "-".join(map(str, p["hidden"])), "activation": p["activation"], "ny": p["ny"],
-                       "nu": p["nu"], "nk": p["nk"]}, len(rr)))
+        cands.append(
+            (
+                stats([r[key] for _, r in rr])["mean"],
+                "narx-mlp",
+                {
+                    "hidden": "-".join(map(str, p["hidden"])),
+                    "activation": p["activation"],
+                    "ny": p["ny"],
+                    "nu": p["nu"],
+                    "nk": p["nk"],
+                },
+                len(rr),
+            )
+        )
     return values, runs, settings, _best(cands)
 
 
 def _peaks(fam, name, results, t: Tier):
     if fam == "fig-3.4":
         r = results["cant/peak"]
-        return [r["peak_hz"]], [("cant/peak", r)], {"record": "thesis-multisine, 8 s at 10 kHz, Welch 1 s Hann",
-                                                     "level_db": r["peak_rel_db"]}, None
+        return (
+            [r["peak_hz"]],
+            [("cant/peak", r)],
+            {"record": "thesis-multisine, 8 s at 10 kHz, Welch 1 s Hann", "level_db": r["peak_rel_db"]},
+            None,
+        )
     r = results["vna/peaks"]
     i = 0 if name == "peak" else 1
     val = r["peaks_hz"][i] if len(r["peaks_hz"]) > i else None
-    return [val], [("vna/peaks", r)], {"record": "vna-sweep gated, 900–1350 kHz, 1 kHz grid",
-                                       "level_db": r["levels_db"][i] if val is not None else None}, None
+    return (
+        [val],
+        [("vna/peaks", r)],
+        {
+            "record": "vna-sweep gated, 900–1350 kHz, 1 kHz grid",
+            "level_db": r["levels_db"][i] if val is not None else None,
+        },
+        None,
+    )
 
 
 # ------------------------------------------------------------------------------------------------ storage
 def check_row(row: Any, where: str = "") -> dict[str, Any]:
     """A stored row, or a ConfigError naming what is missing."""
-    need = ("id", "item", "dissertation", "project", "verdict", "settings", "differences", "command", "fits",
-            "cpu_seconds", "measured")
+    need = (
+        "id",
+        "item",
+        "dissertation",
+        "project",
+        "verdict",
+        "settings",
+        "differences",
+        "command",
+        "fits",
+        "cpu_seconds",
+        "measured",
+    )
     if not (isinstance(row, dict) and row.get("format") == ROW_FORMAT and all(k in row for k in need)):
         raise ConfigError(f"{where}: not a stored thesis row (format {ROW_FORMAT!r} with {', '.join(need)})")
     if row["id"] not in targets.TARGETS:
@@ -250,6 +375,7 @@ def write_rows(rows: dict[str, dict[str, Any]], path: str | Path) -> Path:
     merged = {**load_rows(path), **rows}
     ordered = {rid: merged[rid] for rid in targets.TARGETS if rid in merged}
     path.parent.mkdir(parents=True, exist_ok=True)
-    atomic_write_text(path, json.dumps(clean_json({"format": FILE_FORMAT, "rows": ordered}), indent=1,
-                                       ensure_ascii=False) + "\n")
+    atomic_write_text(
+        path, json.dumps(clean_json({"format": FILE_FORMAT, "rows": ordered}), indent=1, ensure_ascii=False) + "\n"
+    )
     return path

@@ -37,8 +37,10 @@ def select_rows(spec: str | None) -> list[str]:
             continue
         hits = [r for r in ROW_IDS if r == item or r.startswith(item.rstrip("/") + "/")]
         if not hits:
-            raise ConfigError(f"--rows: {item!r} is not a row id or table; valid tables: "
-                              f"{', '.join(sorted({r.split('/')[0] for r in ROW_IDS}))} (ids: table-4.2/4x25, ...)")
+            raise ConfigError(
+                f"--rows: {item!r} is not a row id or table; valid tables: "
+                f"{', '.join(sorted({r.split('/')[0] for r in ROW_IDS}))} (ids: table-4.2/4x25, ...)"
+            )
         chosen += [h for h in hits if h not in chosen]
     return [r for r in ROW_IDS if r in chosen]
 
@@ -86,7 +88,9 @@ def tasks_for(row_ids: Sequence[str], t: Tier) -> dict[str, Task]:
     if "table-4.3" in fams:
         for s in range(t.cantilever_repeats):
             tasks[f"cant-without/{cantilever.WITHOUT_FOR_4_3}/{s}"] = (
-                cantilever.mlp_task, (4, 25, s, t, cantilever.WITHOUT_FOR_4_3))
+                cantilever.mlp_task,
+                (4, 25, s, t, cantilever.WITHOUT_FOR_4_3),
+            )
             for alpha in cantilever.ALPHA_TRIALS_FOR_4_3:
                 tasks[f"cant-alpha/{alpha:g}/{s}"] = (cantilever.mlp_task, (4, 25, s, t, None, alpha))
     if "table-5.2" in fams:
@@ -101,14 +105,18 @@ def tasks_for(row_ids: Sequence[str], t: Tier) -> dict[str, Task]:
             if line[0] == "narx":
                 tasks[f"ds1-cand/wavenet-{line[1]}-{line[2]}/0"] = (acoustic.ds1_wavenet_task, (line[1], line[2], t))
         tasks[f"ds1-cand/wavenet-{DS1_DELAYED[0][1]}-{DS1_DELAYED[0][2]}-nktof/0"] = (
-            acoustic.ds1_wavenet_task, (DS1_DELAYED[0][1], DS1_DELAYED[0][2], t, "tof"))
+            acoustic.ds1_wavenet_task,
+            (DS1_DELAYED[0][1], DS1_DELAYED[0][2], t, "tof"),
+        )
         # what each class's failure depends on: the NARX at a smaller RMSprop step, the NARMAX at a smaller rho_p
         narx, narmax = DS1_DELAYED[0], DS1_DELAYED[2]
         name = targets.table_5_2_id(*narx[:5]).split("/", 1)[1]
         for nk in ("1", "tof"):
             for s in range(t.narx_repeats):
                 tasks[f"ds1-cand/{name}-lr{acoustic.NARX_LR_SMALL:g}{'-nktof' if nk == 'tof' else ''}/{s}"] = (
-                    acoustic.ds1_task, (*narx[:5], s, t, nk, acoustic.NARX_LR_SMALL))
+                    acoustic.ds1_task,
+                    (*narx[:5], s, t, nk, acoustic.NARX_LR_SMALL),
+                )
         m, nu, ny, ne, _ = narmax[:5]
         name = targets.table_5_2_id(m, nu, ny, ne, acoustic.NARMAX_RHO_SMALL).split("/", 1)[1]
         tasks[f"ds1-cand/{name}-nktof/0"] = (acoustic.ds1_task, (m, nu, ny, ne, acoustic.NARMAX_RHO_SMALL, 0, t, "tof"))
@@ -116,9 +124,13 @@ def tasks_for(row_ids: Sequence[str], t: Tier) -> dict[str, Task]:
         ny, hidden, act = _ARCH[BEST_DS2]
         for s in range(t.acoustic_repeats):
             tasks[f"ds2-cand/nk{acoustic.DS2_CANDIDATE_NK}/{s}"] = (
-                acoustic.ds2_task, (ny, hidden, act, s, t, acoustic.DS2_CANDIDATE_NK))
+                acoustic.ds2_task,
+                (ny, hidden, act, s, t, acoustic.DS2_CANDIDATE_NK),
+            )
             tasks[f"ds2-dist/{acoustic.DS2_DISTANCE_TRIAL_M:g}/{s}"] = (
-                acoustic.ds2_task, (ny, hidden, act, s, t, 1, acoustic.DS2_DISTANCE_TRIAL_M))
+                acoustic.ds2_task,
+                (ny, hidden, act, s, t, 1, acoustic.DS2_DISTANCE_TRIAL_M),
+            )
     return tasks
 
 
@@ -130,8 +142,13 @@ def _cost(key: str) -> float:
     return 1e4 if key.startswith("ds2") else 1.0
 
 
-def measure(row_ids: Sequence[str], t: Tier, executor=None, progress: bool = False,
-            on_task: Callable[[str, dict[str, Any]], None] | None = None) -> dict[str, dict[str, Any]]:
+def measure(
+    row_ids: Sequence[str],
+    t: Tier,
+    executor=None,
+    progress: bool = False,
+    on_task: Callable[[str, dict[str, Any]], None] | None = None,
+) -> dict[str, dict[str, Any]]:
     """Run the fits of ``row_ids`` at tier ``t`` and return the rows (id -> row), each with how it was measured."""
     from benchmarks.execution import Executor
     from benchmarks.records import provenance
@@ -146,14 +163,24 @@ def measure(row_ids: Sequence[str], t: Tier, executor=None, progress: bool = Fal
         if on_task is not None:
             on_task(keys[i], res)
 
-    results = ex.map(_run, [(tasks[k][0], tasks[k][1]) for k in keys], desc="thesis fits", progress=progress,
-                     on_result=report, priorities=[_cost(k) for k in keys])
+    results = ex.map(
+        _run,
+        [(tasks[k][0], tasks[k][1]) for k in keys],
+        desc="thesis fits",
+        progress=progress,
+        on_result=report,
+        priorities=[_cost(k) for k in keys],
+    )
     by_key = dict(zip(keys, results))
     measured = provenance()
-    measured.update(load_average_before=load0, load_average_after=list(os.getloadavg()),
-                    wall_seconds=time.perf_counter() - w0, cpu_seconds_here=time.process_time() - c0,
-                    process="in-process" if getattr(ex, "client", None) is None else f"dask ({ex.n_workers} workers)",
-                    tier=t.as_dict())
+    measured.update(
+        load_average_before=load0,
+        load_average_after=list(os.getloadavg()),
+        wall_seconds=time.perf_counter() - w0,
+        cpu_seconds_here=time.process_time() - c0,
+        process="in-process" if getattr(ex, "client", None) is None else f"dask ({ex.n_workers} workers)",
+        tier=t.as_dict(),
+    )
     return {rid: build_row(rid, by_key, t, measured) for rid in row_ids}
 
 

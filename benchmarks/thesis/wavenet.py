@@ -34,8 +34,16 @@ class WaveletNARX:
 
     name = "wavenet"
 
-    def __init__(self, ny: int, nu: int, nk: int = 1, units: int = 10, n_centres: int = 200,
-                 spreads: tuple[float, ...] = (0.25, 1.0, 4.0), seed: int = 0):
+    def __init__(
+        self,
+        ny: int,
+        nu: int,
+        nk: int = 1,
+        units: int = 10,
+        n_centres: int = 200,
+        spreads: tuple[float, ...] = (0.25, 1.0, 4.0),
+        seed: int = 0,
+    ):
         self.ny = ny
         self.nu = nu
         self.nk = nk
@@ -52,7 +60,7 @@ class WaveletNARX:
 
     def _kappa(self, z: np.ndarray, centres: np.ndarray, dil: np.ndarray) -> np.ndarray:
         """κ(b_i (z − c_i)) for every row of ``z`` (n × m) and unit i (columns)."""
-        d2 = (np.sum(z * z, axis=1)[:, None] - 2.0 * z @ centres.T + np.sum(centres * centres, axis=1)[None, :])
+        d2 = np.sum(z * z, axis=1)[:, None] - 2.0 * z @ centres.T + np.sum(centres * centres, axis=1)[None, :]
         s2 = np.maximum(d2, 0.0) * dil[None, :] ** 2
         return (z.shape[1] - s2) * np.exp(-0.5 * s2)
 
@@ -125,5 +133,12 @@ class WaveletNARX:
         return sim
 
     def settings(self) -> dict[str, Any]:
-        return {"ny": self.ny, "nu": self.nu, "nk": self.nk, "units": self.units, "n_centres": self.n_centres,
-                "spreads": list(self.spreads), "seed": self.seed}
+        return {
+            "ny": self.ny,
+            "nu": self.nu,
+            "nk": self.nk,
+            "units": self.units,
+            "n_centres": self.n_centres,
+            "spreads": list(self.spreads),
+            "seed": self.seed,
+        }

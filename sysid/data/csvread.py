@@ -37,8 +37,16 @@ from sysid.errors import DataError
 __all__ = ["CsvTable", "parse_csv", "TIME_COLUMNS"]
 
 #: time-column names (lower case) and the factor to seconds
-TIME_COLUMNS = {"t": 1.0, "time": 1.0, "t_s": 1.0, "time_s": 1.0, "t_ms": 1e-3, "time_ms": 1e-3,
-                "t_us": 1e-6, "time_us": 1e-6}
+TIME_COLUMNS = {
+    "t": 1.0,
+    "time": 1.0,
+    "t_s": 1.0,
+    "time_s": 1.0,
+    "t_ms": 1e-3,
+    "time_ms": 1e-3,
+    "t_us": 1e-6,
+    "time_us": 1e-6,
+}
 _NUM = re.compile(r"^[+-]?(\d+\.?\d*|\.\d+)([eE][+-]?\d+)?$|^[+-]?(nan|inf|infinity)$", re.IGNORECASE)
 _NUM_COMMA = re.compile(r"^[+-]?(\d+,?\d*|,\d+)([eE][+-]?\d+)?$")
 _SAMPLE = 200  # lines used to detect the delimiter and decimal mark
@@ -47,8 +55,18 @@ _SAMPLE = 200  # lines used to detect the delimiter and decimal mark
 class CsvTable:
     """Header and column access of a parsed CSV file; columns are parsed on demand."""
 
-    def __init__(self, src: str, header: list[str], body: bytes, line_no: np.ndarray, delimiter: str,
-                 decimal: str, has_header: bool, skip: int = 0, verify_width: bool = False):
+    def __init__(
+        self,
+        src: str,
+        header: list[str],
+        body: bytes,
+        line_no: np.ndarray,
+        delimiter: str,
+        decimal: str,
+        has_header: bool,
+        skip: int = 0,
+        verify_width: bool = False,
+    ):
         self.src, self.header, self.body, self.line_no, self.skip = src, header, body, line_no, skip
         self.nrows: int | None = None  # set when lines that are not data follow the data block
         self.verify_width = verify_width  # parse every column once, so that pandas refuses longer rows
@@ -74,8 +92,9 @@ class CsvTable:
         """Parse the named columns (one pandas pass for all of them) as float64 arrays."""
         for n in names:
             if self.header.count(n) > 1:
-                raise DataError(f"{self.src}: column {n!r} appears {self.header.count(n)} times in the header; "
-                                "rename the copies")
+                raise DataError(
+                    f"{self.src}: column {n!r} appears {self.header.count(n)} times in the header; rename the copies"
+                )
         idx = [self.index[n] for n in names]
         todo = sorted({i for i in idx if i not in self._cache})
         if todo:
@@ -88,21 +107,31 @@ class CsvTable:
         sep = r"\s+" if self.delimiter == " " else self.delimiter
         try:
             data = io.BytesIO(self.body) if isinstance(self.body, bytes) else self.body
-            df = pd.read_csv(data, sep=sep, decimal=self.decimal, header=None,
-                             usecols=None if self.verify_width else cols,
-                             skiprows=self.skip, nrows=self.nrows, engine="c", quotechar='"')
+            df = pd.read_csv(
+                data,
+                sep=sep,
+                decimal=self.decimal,
+                header=None,
+                usecols=None if self.verify_width else cols,
+                skiprows=self.skip,
+                nrows=self.nrows,
+                engine="c",
+                quotechar='"',
+            )
         except pd.errors.ParserError:
             if self.verify_width:  # a row longer than the header: the full check names it
                 parse_csv(Path(self.src), self.src, fast=False)
             raise DataError(f"{self.src}: cannot parse the data rows (rows of unequal length)") from None
         except Exception as exc:  # structural problems were found before; this is a last guard
-            raise DataError(f"{self.src}: cannot parse the data rows ({type(exc).__name__}: "
-                            f"{str(exc).splitlines()[-1] if str(exc) else ''})") from None
+            raise DataError(
+                f"{self.src}: cannot parse the data rows ({type(exc).__name__}: "
+                f"{str(exc).splitlines()[-1] if str(exc) else ''})"
+            ) from None
         if len(df) != len(self):
             raise DataError(f"{self.src}: {len(df)} data rows parsed, {len(self)} expected; check quotes in the file")
         if self.verify_width and len(df.columns) != len(self.header):
             parse_csv(Path(self.src), self.src, fast=False)
-        for c in (cols if keep is None else keep):
+        for c in cols if keep is None else keep:
             s = df[c]
             if s.dtype.kind not in "fiu":
                 num = pd.to_numeric(s, errors="coerce")
@@ -110,10 +139,15 @@ class CsvTable:
                 if bad.size:
                     k = int(bad[0])
                     name = self.header[c]
-                    raise DataError(f"{self.src}: column {name!r} row {k + 1 + self.has_header} is not a number: "
-                                    f"{s.iloc[k]!r} (line {int(self.line_no[k])}, column {c + 1})"
-                                    + ("; decimal commas need ';', tab or space as delimiter"
-                                       if self.decimal == "." and re.match(r"^-?\d+,\d+$", str(s.iloc[k])) else ""))
+                    raise DataError(
+                        f"{self.src}: column {name!r} row {k + 1 + self.has_header} is not a number: "
+                        f"{s.iloc[k]!r} (line {int(self.line_no[k])}, column {c + 1})"
+                        + (
+                            "; decimal commas need ';', tab or space as delimiter"
+                            if self.decimal == "." and re.match(r"^-?\d+,\d+$", str(s.iloc[k]))
+                            else ""
+                        )
+                    )
                 s = num
             self._cache[c] = s.to_numpy(dtype=np.float64, na_value=np.nan)
 
@@ -141,8 +175,13 @@ def _load(p: Path, src: str):
             mm = mmap.mmap(fh.fileno(), 0, access=mmap.ACCESS_READ)
         except (ValueError, OSError):
             mm = None
-    if mm is not None and not mm[:3].startswith((b"\xef\xbb\xbf", b"\xff\xfe", b"\xfe\xff")) \
-            and mm.find(b"\r") < 0 and mm.find(b"\x00") < 0 and np.frombuffer(mm, dtype=np.uint8).max() < 128:
+    if (
+        mm is not None
+        and not mm[:3].startswith((b"\xef\xbb\xbf", b"\xff\xfe", b"\xfe\xff"))
+        and mm.find(b"\r") < 0
+        and mm.find(b"\x00") < 0
+        and np.frombuffer(mm, dtype=np.uint8).max() < 128
+    ):
         return mm, str(p)
     raw = _decode(mm[:] if mm is not None else p.read_bytes(), src)
     return raw, raw
@@ -180,8 +219,10 @@ def _detect(lines: list[str], header_line: str | None, src: str, first_line: int
         elif m == 1 and frac == 1.0 and not any(c in ln for ln in lines for c in ",;\t"):
             delim = ","  # one column
         else:
-            raise DataError(f"{src}: cannot tell the delimiter: lines {first_line}.. split into different numbers "
-                            "of cells by ',', ';', tab and spaces alike; see docs/data-files.md")
+            raise DataError(
+                f"{src}: cannot tell the delimiter: lines {first_line}.. split into different numbers "
+                "of cells by ',', ';', tab and spaces alike; see docs/data-files.md"
+            )
     decimal = "."
     if delim != ",":
         cells = [c for ln in lines for c in _split_cells(ln, delim)]
@@ -206,14 +247,14 @@ def _head_layout(raw: bytes, src: str) -> tuple[str, str, bool, list[str], int]:
         raise DataError(f"{src}: file has no rows (only blank or # comment lines)")
     h = content[0]
     first = lines[h]
-    sample = [lines[i] for i in content[1:_SAMPLE + 1]]
+    sample = [lines[i] for i in content[1 : _SAMPLE + 1]]
     try:
         probe = _detect(sample[:20], None, src, h + 2)[0] if sample else ","
     except DataError:
         probe = ","
     cells0 = _split_cells(first, probe)
     if all(c == "" or _NUM.match(c) or _NUM_COMMA.match(c) for c in cells0):  # no header row
-        delim, decimal = _detect([first] + sample[:_SAMPLE - 1], None, src, h + 1)
+        delim, decimal = _detect([first] + sample[: _SAMPLE - 1], None, src, h + 1)
         width = len(_split_cells(first, delim))
         header = [str(i) for i in range(width)]
         prev = [ln for ln in lines[:h] if ln.startswith("#")]
@@ -231,8 +272,9 @@ def _head_layout(raw: bytes, src: str) -> tuple[str, str, bool, list[str], int]:
     return delim, decimal, True, _split_cells(first, delim), content[1]
 
 
-def _fast_layout(raw: bytes, source, src: str, delim: str, decimal: str, has_header: bool, header: list[str],
-                 first_data: int) -> CsvTable | None:
+def _fast_layout(
+    raw: bytes, source, src: str, delim: str, decimal: str, has_header: bool, header: list[str], first_data: int
+) -> CsvTable | None:
     """The common case without a full scan: no quotes, comments, blank or indented lines after the header.
     Every row has ``width`` cells when the first does, the delimiters total ``rows * (width - 1)`` and no
     row has more (pandas refuses that while parsing every column: :meth:`CsvTable.prefetch`). ``None`` when
@@ -259,7 +301,7 @@ def _fast_layout(raw: bytes, source, src: str, delim: str, decimal: str, has_hea
     if np.isin(after, np.frombuffer(b"#\n \t", dtype=np.uint8)).any():
         return None
     first_end = raw.find(b"\n", start, end)
-    first_line = raw[start: end if first_end < 0 else first_end].decode("utf-8")
+    first_line = raw[start : end if first_end < 0 else first_end].decode("utf-8")
     if first_line.startswith((" ", "\t", "#")) or len(_split_cells(first_line, delim)) != width:
         return None
     rows = nl.size + 1
@@ -305,7 +347,7 @@ def _parse_csv(p: Path, src: str, fast: bool = True) -> CsvTable:
     blank = ends == starts
     lead = np.flatnonzero(~blank & ((first_char == 32) | (first_char == 9)))  # lines starting with blanks
     for i in lead:  # rare outside space-delimited files; those are small in practice
-        stripped = raw[starts[i]:ends[i]].strip()
+        stripped = raw[starts[i] : ends[i]].strip()
         blank[i] = not stripped
         first_char[i] = stripped[0] if stripped else 0
     comment = (first_char == ord("#")) & ~blank
@@ -318,15 +360,16 @@ def _parse_csv(p: Path, src: str, fast: bool = True) -> CsvTable:
     inner_blank = np.flatnonzero(blank[h:last]) + h  # blank lines between data rows are refused
     if inner_blank.size:
         ln = int(inner_blank[0]) + 1
-        raise DataError(f"{src}: line {ln} is blank between data rows; remove it (or start it with #) so no row "
-                        "is dropped silently")
+        raise DataError(
+            f"{src}: line {ln} is blank between data rows; remove it (or start it with #) so no row is dropped silently"
+        )
     body_start = int(starts[data_idx[0]])
-    contiguous = not comment[data_idx[0]:last].any()
+    contiguous = not comment[data_idx[0] : last].any()
     if raw.find(b'"', body_start) >= 0 or delim == " ":  # quotes or runs of spaces: line by line
-        counts = np.array([len(_split_cells(raw[starts[i]:ends[i]].decode("utf-8"), delim)) for i in data_idx])
+        counts = np.array([len(_split_cells(raw[starts[i] : ends[i]].decode("utf-8"), delim)) for i in data_idx])
     elif contiguous:  # delimiters between consecutive newlines of the data block
         lo, hi = np.searchsorted(sep, [body_start, int(ends[last])])
-        block_nl = np.flatnonzero(is_nl[lo:hi + 1][: hi - lo + 1])
+        block_nl = np.flatnonzero(is_nl[lo : hi + 1][: hi - lo + 1])
         if block_nl.size < data_idx.size:  # the last line has no newline
             block_nl = np.append(block_nl, hi - lo)
         counts = np.diff(np.concatenate(([-1], block_nl[: data_idx.size]))) - 1 + 1
@@ -339,11 +382,13 @@ def _parse_csv(p: Path, src: str, fast: bool = True) -> CsvTable:
         ln = int(data_idx[k]) + 1
         what = "more" if counts[k] > width else "fewer"
         hint = " (a decimal comma under a ',' delimiter?)" if counts[k] > width and delim == "," else ""
-        raise DataError(f"{src}: line {ln} (row {k + 1 + has_header}) has {int(counts[k])} cells, {what} than the "
-                        f"{width} of the {'header' if has_header else 'first row'}{hint}")
+        raise DataError(
+            f"{src}: line {ln} (row {k + 1 + has_header}) has {int(counts[k])} cells, {what} than the "
+            f"{width} of the {'header' if has_header else 'first row'}{hint}"
+        )
     skip = 0
     if not contiguous:  # comment lines among the data: keep only the data lines
-        body = b"\n".join(raw[starts[i]:ends[i]] for i in data_idx) + b"\n"
+        body = b"\n".join(raw[starts[i] : ends[i]] for i in data_idx) + b"\n"
     else:  # the data lines are contiguous: parse them in place (no copy of the buffer)
         body, skip = source, int(data_idx[0])
     table = CsvTable(src, header, body, data_idx + 1, delim, decimal, has_header, skip)

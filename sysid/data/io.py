@@ -33,8 +33,19 @@ from sysid.data.record import FS_MAX, FS_MIN, Record, check_array
 from sysid.data.safeio import atomic_path, atomic_write_text, check_output_path, save_figure
 from sysid.errors import DataError
 
-__all__ = ["read_record", "write_record", "output_file", "atomic_path", "atomic_write_text", "check_output_path",
-           "save_figure", "SUPPORTED_SUFFIXES", "FS_MIN", "FS_MAX", "check_fs"]
+__all__ = [
+    "read_record",
+    "write_record",
+    "output_file",
+    "atomic_path",
+    "atomic_write_text",
+    "check_output_path",
+    "save_figure",
+    "SUPPORTED_SUFFIXES",
+    "FS_MIN",
+    "FS_MAX",
+    "check_fs",
+]
 
 SUPPORTED_SUFFIXES = (".npz", ".csv", ".mat")
 _UNIFORM_TOL = 0.01  # relative jitter of the t column accepted as uniform sampling
@@ -80,8 +91,11 @@ def write_record(record: Record, path: str | os.PathLike) -> Path:
         else:
             meta = dict(record.meta)
             meta["units"] = dict(record.units)
-            arrays: dict[str, Any] = {"u": record.u, "fs": np.float64(record.fs),
-                                      "meta": np.array(json.dumps(meta, default=json_default))}
+            arrays: dict[str, Any] = {
+                "u": record.u,
+                "fs": np.float64(record.fs),
+                "meta": np.array(json.dumps(meta, default=json_default)),
+            }
             if record.y is not None:
                 arrays["y"] = record.y
             np.savez(tmp, **arrays)
@@ -156,8 +170,10 @@ def read_record(
         if "time" in where:
             tol = _UNIFORM_TOL
         if not math.isclose(float(fs), file_fs, rel_tol=tol):
-            raise DataError(f"{src}: --fs / fs={float(fs):g} Hz contradicts the file's own sampling rate "
-                            f"{file_fs:.10g} Hz (from {where}); leave out --fs or correct the file")
+            raise DataError(
+                f"{src}: --fs / fs={float(fs):g} Hz contradicts the file's own sampling rate "
+                f"{file_fs:.10g} Hz (from {where}); leave out --fs or correct the file"
+            )
     if require_y and y is None:
         raise DataError(f"{src}: missing output column/variable y")
     meta.pop("_fs_from", None)
@@ -177,10 +193,14 @@ def read_record(
         if filled:
             # same schema as sysid.signals.preprocess.apply_steps (step, params, changes); filled_indices kept at
             # top level too
-            meta.setdefault("preprocessing", []).append({"step": "fill_missing",
-                                                         "params": {"method": "linear", "at": "read"},
-                                                         "changes": {"filled_indices": filled},
-                                                         "filled_indices": filled})
+            meta.setdefault("preprocessing", []).append(
+                {
+                    "step": "fill_missing",
+                    "params": {"method": "linear", "at": "read"},
+                    "changes": {"filled_indices": filled},
+                    "filled_indices": filled,
+                }
+            )
     if y is not None and y.shape[0] != u.shape[0]:
         raise DataError(f"{src}: u and y have unequal lengths ({u.shape[0]} and {y.shape[0]} samples)")
     return Record(u=u, y=y, fs=fs, units=units, meta=meta, source=src)
@@ -240,24 +260,29 @@ def _check_orientation(x: Any, name: str | None, src: str) -> np.ndarray:
     transposed silently (a (1, N) array would be 1 sample of N channels)."""
     a = np.asarray(x)
     if a.ndim == 2 and a.shape[0] < a.shape[1]:
-        raise DataError(f"{src}: {name} has shape {a.shape}: fewer samples than channels; store samples along the "
-                        f"first axis, i.e. shape (N,) or (N, channels) (e.g. {name}.ravel() or {name}.T)")
+        raise DataError(
+            f"{src}: {name} has shape {a.shape}: fewer samples than channels; store samples along the "
+            f"first axis, i.e. shape (N,) or (N, channels) (e.g. {name}.ravel() or {name}.T)"
+        )
     return a
 
 
 def _check_meta(meta: dict, units: Any, src: str) -> None:
     """Types of the metadata keys the library uses (a wrong type is refused here, not as a traceback later)."""
     if not isinstance(units, dict) or not all(isinstance(k, str) and isinstance(v, str) for k, v in units.items()):
-        raise DataError(f"{src}: meta 'units' must be an object of strings, e.g. {{\"u\": \"V\", \"y\": \"um\"}}")
-    if "t0" in meta and (isinstance(meta["t0"], bool) or not isinstance(meta["t0"], (int, float))
-                         or not math.isfinite(meta["t0"])):
+        raise DataError(f'{src}: meta \'units\' must be an object of strings, e.g. {{"u": "V", "y": "um"}}')
+    if "t0" in meta and (
+        isinstance(meta["t0"], bool) or not isinstance(meta["t0"], (int, float)) or not math.isfinite(meta["t0"])
+    ):
         raise DataError(f"{src}: meta 't0' must be a finite number of seconds, got {meta['t0']!r}")
     for key in ("preprocessing", "segments"):
         if key in meta and not isinstance(meta[key], list):
             raise DataError(f"{src}: meta {key!r} must be a list, got {type(meta[key]).__name__}")
     for i, seg in enumerate(meta.get("segments", [])):
-        if not (isinstance(seg, dict) and all(isinstance(v := seg.get(k), int) and not isinstance(v, bool) and v >= 0
-                                              for k in ("start", "stop"))):
+        if not (
+            isinstance(seg, dict)
+            and all(isinstance(v := seg.get(k), int) and not isinstance(v, bool) and v >= 0 for k in ("start", "stop"))
+        ):
             raise DataError(f"{src}: meta 'segments'[{i}] must be an object with integer start and stop >= 0")
     for key in ("provenance", "signal", "twin_config"):
         if key in meta and not isinstance(meta[key], dict):
@@ -414,13 +439,17 @@ def _read_mat73(p: Path, src: str) -> dict[str, np.ndarray]:
             for k in f.keys():
                 link = f.get(k, getlink=True)
                 if isinstance(link, h5py.ExternalLink):  # never follow a path to another file
-                    raise DataError(f"{src}: variable {k!r} is an external link to {link.filename}; "
-                                    "external links are refused (copy the data into the file)")
+                    raise DataError(
+                        f"{src}: variable {k!r} is an external link to {link.filename}; "
+                        "external links are refused (copy the data into the file)"
+                    )
                 v = f.get(k)
                 if isinstance(v, h5py.Dataset):
                     if v.external or v.is_virtual:
-                        raise DataError(f"{src}: variable {k!r} stores its data in another file; refused "
-                                        "(copy the data into the file)")
+                        raise DataError(
+                            f"{src}: variable {k!r} stores its data in another file; refused "
+                            "(copy the data into the file)"
+                        )
                     out[k] = np.asarray(v).T
     except DataError:
         raise

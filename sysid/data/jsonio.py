@@ -55,4 +55,3 @@ def read_json_file(path: str | Path, fmt: str, what: str) -> dict[str, Any]:
     if not isinstance(data, dict) or data.get("format") != fmt:
         raise DataError(f"{p}: not a piezotwin {what} (expected format {fmt!r})")
     return data
-

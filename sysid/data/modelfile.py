@@ -41,8 +41,7 @@ from sysid.data.jsonio import json_default
 from sysid.data.safeio import atomic_path
 from sysid.errors import ConfigError, DataError, InputError
 
-__all__ = ["FORMAT", "VERSION", "LEGACY_FORMAT", "write_model", "read_model", "estimation_info",
-           "data_sha256"]
+__all__ = ["FORMAT", "VERSION", "LEGACY_FORMAT", "write_model", "read_model", "estimation_info", "data_sha256"]
 
 FORMAT = "piezotwin-model"
 VERSION = 2
@@ -68,9 +67,15 @@ def data_sha256(records: Sequence[Any]) -> str:
 def estimation_info(records: Sequence[Any]) -> dict[str, Any]:
     """What a model file records about its estimation data (fs, units, sizes, hash)."""
     r0 = records[0]
-    return {"fs": float(r0.fs), "units": {"u": r0.units.get("u", ""), "y": r0.units.get("y", "")},
-            "n_records": len(records), "n_samples": int(sum(len(r) for r in records)),
-            "n_inputs": int(r0.n_inputs), "n_outputs": int(r0.n_outputs), "sha256": data_sha256(records)}
+    return {
+        "fs": float(r0.fs),
+        "units": {"u": r0.units.get("u", ""), "y": r0.units.get("y", "")},
+        "n_records": len(records),
+        "n_samples": int(sum(len(r) for r in records)),
+        "n_inputs": int(r0.n_inputs),
+        "n_outputs": int(r0.n_outputs),
+        "sha256": data_sha256(records),
+    }
 
 
 def _version() -> str:
@@ -130,8 +135,12 @@ def model_header(model) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
     arrays: dict[str, np.ndarray] = {}
     state = _pack(model._state(), arrays)
     header = {
-        "format": FORMAT, "version": VERSION, "identifier": model.name, "params": model.get_params(),
-        "estimation": getattr(model, "estimation_", None), "software": {"piezotwin": _version()},
+        "format": FORMAT,
+        "version": VERSION,
+        "identifier": model.name,
+        "params": model.get_params(),
+        "estimation": getattr(model, "estimation_", None),
+        "software": {"piezotwin": _version()},
         "state": state,
         "arrays": {k: {"dtype": v.dtype.str, "shape": list(v.shape)} for k, v in arrays.items()},
     }
@@ -183,8 +192,9 @@ def read_model(path: str | os.PathLike):
         except UnicodeDecodeError:
             raise DataError(f"{path}: not a piezotwin model file (neither JSON nor npz)") from None
         except json.JSONDecodeError as exc:
-            raise DataError(f"{path}: not a piezotwin model file, or truncated (invalid JSON: {exc.msg} at "
-                            f"line {exc.lineno})") from None
+            raise DataError(
+                f"{path}: not a piezotwin model file, or truncated (invalid JSON: {exc.msg} at line {exc.lineno})"
+            ) from None
         if isinstance(doc, dict) and doc.get("format") == LEGACY_FORMAT:
             return build_model(path, doc, legacy=True)
         header, arrays = _json_container(path, doc)
@@ -203,8 +213,10 @@ def _read_npz(path: Path) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
     try:
         with open(path, "rb") as fh, np.load(fh, allow_pickle=False) as z:
             if "header" not in z.files:
-                raise DataError(f"{path}: not a piezotwin model file (an npz without a 'header' entry; "
-                                f"entries: {', '.join(sorted(z.files)[:6]) or 'none'})")
+                raise DataError(
+                    f"{path}: not a piezotwin model file (an npz without a 'header' entry; "
+                    f"entries: {', '.join(sorted(z.files)[:6]) or 'none'})"
+                )
             text = str(z["header"])
             arrays = {k: z[k] for k in z.files if k != "header"}
     except DataError:
@@ -243,15 +255,16 @@ def _check_header(path: Path, header: Any) -> None:
     if not isinstance(version, int) or isinstance(version, bool):
         raise DataError(f"{path}: model file has no valid format version ({version!r})")
     if version > VERSION:
-        raise DataError(f"{path}: model file format version {version} is newer than this piezotwin reads "
-                        f"(up to {VERSION}); update piezotwin")
+        raise DataError(
+            f"{path}: model file format version {version} is newer than this piezotwin reads "
+            f"(up to {VERSION}); update piezotwin"
+        )
     missing = [k for k in ("identifier", "params", "state", "checksum") if k not in header]
     if missing:
         raise DataError(f"{path}: model file lacks {', '.join(missing)}")
 
 
-def build_model(path: Path, header: dict[str, Any], arrays: dict[str, np.ndarray] | None = None,
-                legacy: bool = False):
+def build_model(path: Path, header: dict[str, Any], arrays: dict[str, np.ndarray] | None = None, legacy: bool = False):
     """The identifier described by a parsed header (shared by every container and by the torch loader)."""
     from sysid.registry import get_identifier
 
@@ -259,8 +272,10 @@ def build_model(path: Path, header: dict[str, Any], arrays: dict[str, np.ndarray
         if set(header.get("arrays", {})) != set(arrays):
             raise DataError(f"{path}: model file's arrays do not match its header (damaged file)")
         if _checksum(header, arrays) != header["checksum"]:
-            raise DataError(f"{path}: model file content does not match its checksum: edited or damaged "
-                            "(re-save the model instead of editing the file)")
+            raise DataError(
+                f"{path}: model file content does not match its checksum: edited or damaged "
+                "(re-save the model instead of editing the file)"
+            )
     missing = [k for k in ("identifier", "params", "state") if k not in header]
     if missing:
         raise DataError(f"{path}: model file lacks {', '.join(missing)}")
@@ -303,4 +318,3 @@ def header_of(path: str | os.PathLike) -> dict[str, Any]:
         return _read_npz(path)[0]
     doc = json.loads(path.read_text())
     return {k: v for k, v in doc.items() if k != "arrays"}
-

@@ -29,8 +29,19 @@ from pathlib import Path
 
 from sysid.errors import DataError
 
-__all__ = ["check_memory", "available_memory", "atomic_path", "atomic_write_text", "atomic_write_bytes", "save_figure",
-           "check_output_path", "check_output_dir", "protect_inputs", "protected_inputs", "same_file"]
+__all__ = [
+    "check_memory",
+    "available_memory",
+    "atomic_path",
+    "atomic_write_text",
+    "atomic_write_bytes",
+    "save_figure",
+    "check_output_path",
+    "check_output_dir",
+    "protect_inputs",
+    "protected_inputs",
+    "same_file",
+]
 
 _PROTECTED: list[str] = []  # input files of the running CLI command (set by protect_inputs)
 
@@ -60,8 +71,10 @@ def check_output_path(path: str | os.PathLike, inputs: Iterable[str | os.PathLik
     _check_parents(path)
     for src in [*_PROTECTED, *inputs]:
         if same_file(path, src):
-            raise DataError(f"{path}: output is the same file as the input {src}; write to another name "
-                            "(the input is left untouched)")
+            raise DataError(
+                f"{path}: output is the same file as the input {src}; write to another name "
+                "(the input is left untouched)"
+            )
     return path
 
 
@@ -101,9 +114,11 @@ def check_memory(n_values: float, what: str, copies: float = 4.0, itemsize: int 
     need = float(n_values) * itemsize * copies
     avail = available_memory()
     if not need < avail:
-        raise DataError(f"{what}: needs about {need / 2**30:.3g} GiB ({float(n_values):.3g} samples x {copies:g} "
-                        f"working copies x {itemsize} B), more than the {avail / 2**30:.3g} GiB of memory available; "
-                        "ask for fewer samples")
+        raise DataError(
+            f"{what}: needs about {need / 2**30:.3g} GiB ({float(n_values):.3g} samples x {copies:g} "
+            f"working copies x {itemsize} B), more than the {avail / 2**30:.3g} GiB of memory available; "
+            "ask for fewer samples"
+        )
 
 
 def _umask_mode() -> int:
@@ -166,8 +181,9 @@ def _fsync_dir(folder: Path) -> None:
         os.close(fd)
 
 
-def atomic_write_text(path: str | os.PathLike, text: str, inputs: Iterable[str | os.PathLike] = (),
-                      encoding: str = "utf-8") -> Path:
+def atomic_write_text(
+    path: str | os.PathLike, text: str, inputs: Iterable[str | os.PathLike] = (), encoding: str = "utf-8"
+) -> Path:
     """Write ``text`` to ``path`` atomically (see :func:`atomic_path`)."""
     with atomic_path(path, inputs) as tmp:
         with open(tmp, "w", encoding=encoding, newline="") as fh:

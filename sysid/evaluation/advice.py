@@ -46,8 +46,9 @@ def _recs(data) -> list[Record]:
     return [data] if isinstance(data, Record) else list(data)
 
 
-def closed_loop_correlation(data: Record | Sequence[Record], max_lag: int = CORR_LAGS,
-                            ar_order: int = AR_ORDER) -> dict[str, Any]:
+def closed_loop_correlation(
+    data: Record | Sequence[Record], max_lag: int = CORR_LAGS, ar_order: int = AR_ORDER
+) -> dict[str, Any]:
     """Largest |corr(ε_u(t), y(t − k))|, k = 1..max_lag, over input/output pairs (module docstring), its lag and the
     threshold CORR_SIGMAS/√N."""
     best: dict[str, Any] = {"rho": 0.0, "lag": None, "threshold": math.inf}
@@ -61,7 +62,7 @@ def closed_loop_correlation(data: Record | Sequence[Record], max_lag: int = CORR
         thr = CORR_SIGMAS / math.sqrt(N - p - max_lag)
         for i in range(u.shape[1]):
             x = u[:, i] - u[:, i].mean()
-            X = np.column_stack([x[p - k:N - k] for k in range(1, p + 1)])
+            X = np.column_stack([x[p - k : N - k] for k in range(1, p + 1)])
             a = np.linalg.lstsq(X, x[p:], rcond=None)[0]
             eps = x[p:] - X @ a
             for o in range(y.shape[1]):
@@ -102,13 +103,14 @@ def _pole_warning(model, est) -> str | None:
         if abs(p["abs"] - 1.0) < 1e-3
         else ("unstable" if p["abs"] > 1.0 else "marginal")
     )
-    msg = (f"pole at {p['re']:.5f}{p['im']:+.5f}j (|p| = {p['abs']:.5f}) on or outside the unit circle: "
-           f"{kind} model")
+    msg = f"pole at {p['re']:.5f}{p['im']:+.5f}j (|p| = {p['abs']:.5f}) on or outside the unit circle: {kind} model"
     cl = closed_loop_correlation(est)
     if cl["lag"] is not None and abs(cl["rho"]) > cl["threshold"]:
-        msg += (f"; u correlates with past y (rho = {cl['rho']:.2f} at lag {cl['lag']}, open-loop limit "
-                f"{cl['threshold']:.2f}): closed-loop data suspected, consider an instrumental-variable or "
-                "direct-PEM model with a noise model (bj)")
+        msg += (
+            f"; u correlates with past y (rho = {cl['rho']:.2f} at lag {cl['lag']}, open-loop limit "
+            f"{cl['threshold']:.2f}): closed-loop data suspected, consider an instrumental-variable or "
+            "direct-PEM model with a noise model (bj)"
+        )
     return msg
 
 
@@ -119,11 +121,15 @@ def _gap_warning(scores: dict[str, Any] | None, part: str) -> str | None:
     if os_ is None or not np.isfinite(os_) or os_ < 0.5:
         return None
     if fr is None or not np.isfinite(fr):
-        return (f"{part}: one-step R² {os_:.5f} but the free run diverged: the model predicts one step from "
-                "measured outputs and does not simulate the system")
+        return (
+            f"{part}: one-step R² {os_:.5f} but the free run diverged: the model predicts one step from "
+            "measured outputs and does not simulate the system"
+        )
     if os_ - fr > GAP_R2 and (1.0 - fr) > GAP_RATIO * max(1.0 - os_, 1e-12):
-        return (f"{part}: one-step R² {os_:.5f} far above free-run R² {fr:.5f}: one-step prediction leans on the "
-                "measured outputs; judge the model by its free run (try oe / n4sid, or other orders)")
+        return (
+            f"{part}: one-step R² {os_:.5f} far above free-run R² {fr:.5f}: one-step prediction leans on the "
+            "measured outputs; judge the model by its free run (try oe / n4sid, or other orders)"
+        )
     return None
 
 
@@ -140,8 +146,10 @@ def _range_warnings(est, val) -> list[str]:
             beyond = max(lo - vlo, vhi - hi, 0.0) / span
             if beyond > RANGE_TOL:
                 label = name if e.shape[1] == 1 else f"{name}{ch + 1}"
-                out.append(f"validation {label} spans [{vlo:.4g}, {vhi:.4g}], beyond the estimation range "
-                           f"[{lo:.4g}, {hi:.4g}] by {100 * beyond:.0f} % of it: the model extrapolates there")
+                out.append(
+                    f"validation {label} spans [{vlo:.4g}, {vhi:.4g}], beyond the estimation range "
+                    f"[{lo:.4g}, {hi:.4g}] by {100 * beyond:.0f} % of it: the model extrapolates there"
+                )
     return out
 
 
@@ -160,12 +168,16 @@ def practitioner_warnings(model, est, val=None, summary: dict[str, Any] | None =
         chosen = ", ".join(f"{k}={v}" for k, v in ((summary or {}).get("chosen_orders") or {}).items())
         top = max(search.get("grid") or [search.get("grid_max", 0)])
         if search.get("corner"):
-            out.append(f"automatic order ({chosen}) is the largest of its grid (the corner, up to {top}): a larger "
-                       "max_order may simulate the hold-out better")
+            out.append(
+                f"automatic order ({chosen}) is the largest of its grid (the corner, up to {top}): a larger "
+                "max_order may simulate the hold-out better"
+            )
         ref = search.get("reference") or {}
         if search.get("below_reference") and ref.get("holdout_nrmse") is not None:
-            out.append(f"no automatic order up to {top} simulates the hold-out as well as a least-squares FIR "
-                       f"({ref.get('nb')} taps): try a larger max_order, another structure, or the fir identifier")
+            out.append(
+                f"no automatic order up to {top} simulates the hold-out as well as a least-squares FIR "
+                f"({ref.get('nb')} taps): try a larger max_order, another structure, or the fir identifier"
+            )
     if val is not None:
         out += _range_warnings(est, val)
     return out

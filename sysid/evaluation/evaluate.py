@@ -28,8 +28,9 @@ def _records(data: Record | Sequence[Record]) -> list[Record]:
     return [data] if isinstance(data, Record) else list(data)
 
 
-def evaluate(model, data: Record | Sequence[Record], horizons: dict[str, int | None] | None = None,
-             all_metrics: bool = False) -> dict[str, Any]:
+def evaluate(
+    model, data: Record | Sequence[Record], horizons: dict[str, int | None] | None = None, all_metrics: bool = False
+) -> dict[str, Any]:
     """Scores per prediction mode: ``{"one_step": {"r2", "nrmse"}, "free_run": {...}}``.
 
     ``horizons`` maps a key to a horizon (default one_step → 1, free_run → None); ``all_metrics`` adds mse,
@@ -60,8 +61,12 @@ def evaluate(model, data: Record | Sequence[Record], horizons: dict[str, int | N
     return out
 
 
-def identification_summary(model, est: Record | Sequence[Record], val: Record | Sequence[Record] | None = None,
-                           fit_seconds: float | None = None) -> dict[str, Any]:
+def identification_summary(
+    model,
+    est: Record | Sequence[Record],
+    val: Record | Sequence[Record] | None = None,
+    fit_seconds: float | None = None,
+) -> dict[str, Any]:
     """The ``identify`` JSON (interfaces.md): identifier, params, n_parameters, fit_seconds, terms, estimation,
     validation (``None`` without validation data); linear models add ``parameters`` ([{name, value, std}]),
     ``poles`` and ``chosen_orders`` (with ``order_selection`` and ``order_search`` when chosen automatically), the

@@ -81,8 +81,8 @@ def correlation_tests(e, u, max_lag: int = 20, alpha: float = 0.05) -> dict[str,
     band = z / np.sqrt(n)
     both = np.arange(-max_lag, max_lag + 1)
     pos = np.arange(1, max_lag + 1)
-    u2 = u ** 2 - np.mean(u ** 2)
-    e2 = e ** 2 - np.mean(e ** 2)
+    u2 = u**2 - np.mean(u**2)
+    e2 = e**2 - np.mean(e**2)
     # φ_ξ(ξu)(τ): E[ξ(t) · ξ(t−1−τ) u(t−1−τ)], τ ≥ 0  ⇔ correlation of (ξu) at t with ξ at t + 1 + τ
     eu = e * u
     defs = [
@@ -101,13 +101,24 @@ def correlation_tests(e, u, max_lag: int = 20, alpha: float = 0.05) -> dict[str,
         z_fw = stats.norm.ppf(1.0 - a_check / (2.0 * m))
         max_count = int(stats.binom.ppf(1.0 - a_check, m, alpha))
         passed = bool(np.all(np.abs(vals) <= z_fw / np.sqrt(n)) and out.sum() <= max_count)
-        tests.append({
-            "name": name, "passed": passed, "failing_lags": [int(t) for t in shown[out]],
-            "lags": [int(t) for t in shown], "values": vals.tolist(), "band": float(band),
-            "fraction_outside": float(out.mean()),
-        })
-    return {"passed": all(t["passed"] for t in tests), "n": int(n), "band": float(band), "alpha": float(alpha),
-            "tests": tests}
+        tests.append(
+            {
+                "name": name,
+                "passed": passed,
+                "failing_lags": [int(t) for t in shown[out]],
+                "lags": [int(t) for t in shown],
+                "values": vals.tolist(),
+                "band": float(band),
+                "fraction_outside": float(out.mean()),
+            }
+        )
+    return {
+        "passed": all(t["passed"] for t in tests),
+        "n": int(n),
+        "band": float(band),
+        "alpha": float(alpha),
+        "tests": tests,
+    }
 
 
 def tests_summary(ct: dict[str, Any]) -> dict[str, Any]:
@@ -155,5 +166,10 @@ def normality(e, alpha: float = 0.05) -> dict[str, Any]:
     if e.size < 8:
         raise DataError(f"normality test needs at least 8 samples, got {e.size}")
     stat, p = stats.normaltest(e)
-    return {"passed": bool(p >= alpha), "p_value": float(p), "statistic": float(stat),
-            "skewness": float(stats.skew(e)), "excess_kurtosis": float(stats.kurtosis(e))}
+    return {
+        "passed": bool(p >= alpha),
+        "p_value": float(p),
+        "statistic": float(stat),
+        "skewness": float(stats.skew(e)),
+        "excess_kurtosis": float(stats.kurtosis(e)),
+    }

@@ -66,9 +66,14 @@ class _LinearBase(PolynomialModel):
             elif kind == "e" and ch == output:
                 c[lag] = th
                 se["c"][lag] = sd
-        return {"A": a, "B": b if s.n_inputs > 1 else b[0], "C": c,
-                "A_stderr": se["a"], "B_stderr": se["b"] if s.n_inputs > 1 else se["b"][0], "C_stderr": se["c"]}
-
+        return {
+            "A": a,
+            "B": b if s.n_inputs > 1 else b[0],
+            "C": c,
+            "A_stderr": se["a"],
+            "B_stderr": se["b"] if s.n_inputs > 1 else se["b"][0],
+            "C_stderr": se["c"],
+        }
 
     def parameters(self) -> list[dict[str, Any]]:
         """``[{"name", "value", "std"}]`` in MATLAB's convention, so that the numbers compare with its ``arx``:
@@ -78,16 +83,20 @@ class _LinearBase(PolynomialModel):
         if self.structure_.n_outputs != 1:
             return []
         p = self.polynomials(0)
-        out = [{"name": f"a{k}", "value": float(p["A"][k]), "std": float(p["A_stderr"][k])}
-               for k in range(1, len(p["A"]))]
+        out = [
+            {"name": f"a{k}", "value": float(p["A"][k]), "std": float(p["A_stderr"][k])} for k in range(1, len(p["A"]))
+        ]
         B = np.atleast_2d(p["B"])
         Bs = np.atleast_2d(p["B_stderr"])
         for i in range(B.shape[0]):
             suffix = f"_u{i + 1}" if B.shape[0] > 1 else ""
-            out += [{"name": f"b{k + 1}{suffix}", "value": float(B[i, k]), "std": float(Bs[i, k])}
-                    for k in range(B.shape[1])]
-        out += [{"name": f"c{k}", "value": float(p["C"][k]), "std": float(p["C_stderr"][k])}
-                for k in range(1, len(p["C"]))]
+            out += [
+                {"name": f"b{k + 1}{suffix}", "value": float(B[i, k]), "std": float(Bs[i, k])}
+                for k in range(B.shape[1])
+            ]
+        out += [
+            {"name": f"c{k}", "value": float(p["C"][k]), "std": float(p["C_stderr"][k])} for k in range(1, len(p["C"]))
+        ]
         return out
 
     def poles(self) -> list[dict[str, Any]]:
@@ -125,8 +134,15 @@ class ARX(_LinearBase):
 
     name = "arx"
 
-    def __init__(self, ny: Any = None, nu: Any = None, nk: int = 1, intercept: bool = False, orders: Any = None,
-                 max_order: int = 100):
+    def __init__(
+        self,
+        ny: Any = None,
+        nu: Any = None,
+        nk: int = 1,
+        intercept: bool = False,
+        orders: Any = None,
+        max_order: int = 100,
+    ):
         self.ny = ny
         self.nu = nu
         self.nk = nk
@@ -230,9 +246,19 @@ class ARMAX(_LinearBase):
 
     name = "armax"
 
-    def __init__(self, ny: Any = None, nu: Any = None, ne: Any = None, nk: int = 1, method: str = "pem",
-                 intercept: bool = False, max_iter: int = 50, tol: float = 1e-8, orders: Any = None,
-                 max_order: int = 100):
+    def __init__(
+        self,
+        ny: Any = None,
+        nu: Any = None,
+        ne: Any = None,
+        nk: int = 1,
+        method: str = "pem",
+        intercept: bool = False,
+        max_iter: int = 50,
+        tol: float = 1e-8,
+        orders: Any = None,
+        max_order: int = 100,
+    ):
         self.ny = ny
         self.nu = nu
         self.ne = ne
@@ -265,8 +291,9 @@ class ARMAX(_LinearBase):
         self.els_iterations_ = iters
         # PEM: minimise; ELS: keep the ELS estimate but take its standard errors from the prediction-error
         # gradient (regressors filtered by 1/C) — plain LS errors ignore the estimated e and were ~1.6× too small.
-        fits = [self._pem(records, s, terms[o], o, thetas[o], optimise=self.method == "pem")
-                for o in range(s.n_outputs)]
+        fits = [
+            self._pem(records, s, terms[o], o, thetas[o], optimise=self.method == "pem") for o in range(s.n_outputs)
+        ]
         self.pem_status_ = fits[0][2] if len(fits) == 1 else [f[2] for f in fits]
         self.terms_ = terms
         self.theta_ = [np.asarray(f[0]) for f in fits]
@@ -287,8 +314,13 @@ class ARMAX(_LinearBase):
             e_list = fr.fitted_residuals(records, s, terms, th, e_list=e_list)
             theta = np.concatenate(th)
             # relative change per parameter, without an absolute floor (in SI units a parameter may be ~1e-12)
-            if theta_prev is not None and np.max(np.abs(theta - theta_prev) / np.maximum(
-                    np.maximum(np.abs(theta), np.abs(theta_prev)), 1e-300)) < self.tol:
+            if (
+                theta_prev is not None
+                and np.max(
+                    np.abs(theta - theta_prev) / np.maximum(np.maximum(np.abs(theta), np.abs(theta_prev)), 1e-300)
+                )
+                < self.tol
+            ):
                 break
             theta_prev = theta
         return th, e_list, it
@@ -325,7 +357,7 @@ class ARMAX(_LinearBase):
             th_p = theta[: len(proc_idx)]
             c = np.zeros(max(e_lags) + 1)
             c[0] = 1.0
-            for lg, v in zip(e_lags, theta[len(proc_idx):]):
+            for lg, v in zip(e_lags, theta[len(proc_idx) :]):
                 c[lg] = v
             return th_p, c
 
@@ -355,12 +387,13 @@ class ARMAX(_LinearBase):
         x0 = np.concatenate([np.asarray(theta0)[proc_idx], np.asarray(theta0)[idx["e"]]])
         if optimise and not _invertible(split(x0)[1]):
             # ELS gave an unstable noise model: start PEM from C = 1 instead.
-            x0[len(proc_idx):] = 0.0
+            x0[len(proc_idx) :] = 0.0
         if optimise:
             x, notes = x0, []
             for attempt in range(PEM_REFLECTIONS + 1):
-                sol = _scipy_lsq(residual, x, jac=jac, method="lm", xtol=1e-12, ftol=1e-12, gtol=1e-12,
-                                 max_nfev=200 * len(x0))
+                sol = _scipy_lsq(
+                    residual, x, jac=jac, method="lm", xtol=1e-12, ftol=1e-12, gtol=1e-12, max_nfev=200 * len(x0)
+                )
                 x = sol.x
                 c = split(x)[1]
                 if _invertible(c) or attempt == PEM_REFLECTIONS:
@@ -368,16 +401,17 @@ class ARMAX(_LinearBase):
                 # C left the unit circle (Ljung §10.1: the predictor needs 1/C stable). The same noise spectrum
                 # has C with those roots reflected inside (up to a gain), so restart from it.
                 x = x.copy()
-                x[len(proc_idx):] = reflect_inside(c)[e_lags]
+                x[len(proc_idx) :] = reflect_inside(c)[e_lags]
                 notes.append("C reflected inside the unit circle, PEM restarted")
             message = "; ".join([str(sol.message), *notes])
             if not _invertible(split(x)[1]):
                 # PEM keeps returning to a non-invertible C: of its estimate with C reflected and the ELS estimate
                 # (when invertible), keep the one with the smaller prediction error.
                 xr = x.copy()
-                xr[len(proc_idx):] = reflect_inside(split(x)[1])[e_lags]
-                cands = [(xr, "PEM with C reflected")] + ([(x0.copy(), "the ELS estimate")]
-                                                          if _invertible(split(x0)[1]) else [])
+                xr[len(proc_idx) :] = reflect_inside(split(x)[1])[e_lags]
+                cands = [(xr, "PEM with C reflected")] + (
+                    [(x0.copy(), "the ELS estimate")] if _invertible(split(x0)[1]) else []
+                )
                 x, which = min(cands, key=lambda cnd: float(np.sum(residual(cnd[0]) ** 2)))
                 message += f"; C stayed outside the unit circle after {PEM_REFLECTIONS} restarts: kept {which}"
             r, J = residual(x), jac(x)
@@ -397,8 +431,10 @@ class ARMAX(_LinearBase):
         theta[order] = x
         stderr[order] = se
         if not _invertible(split(x)[1]):
-            raise DataError(f"armax ({self.method}): the fit gave a noise polynomial C with roots outside the "
-                            "unit circle (non-invertible); try method=els or other orders")
+            raise DataError(
+                f"armax ({self.method}): the fit gave a noise polynomial C with roots outside the "
+                "unit circle (non-invertible); try method=els or other orders"
+            )
         return theta, stderr, message
 
     def _extra_state(self) -> dict[str, Any]:

@@ -69,9 +69,16 @@ def _spectra(u: np.ndarray, y: np.ndarray, periods: int, drop: int, detrend: int
     return period_spectra(u, periods, drop, detrend), period_spectra(y, periods, drop, detrend)
 
 
-def best_linear_approximation(realisations: Sequence[tuple[Any, Any]], fs: float, periods: int, drop: int = 0,
-                              lines: Any = None, threshold_db: float = EXCITATION_DB,
-                              alpha: float = 1e-3, detrend: int = 1) -> BLA:
+def best_linear_approximation(
+    realisations: Sequence[tuple[Any, Any]],
+    fs: float,
+    periods: int,
+    drop: int = 0,
+    lines: Any = None,
+    threshold_db: float = EXCITATION_DB,
+    alpha: float = 1e-3,
+    detrend: int = 1,
+) -> BLA:
     """Robust BLA of ``M = len(realisations)`` multisine experiments of ``periods`` periods each.
 
     Parameters
@@ -134,8 +141,9 @@ def best_linear_approximation(realisations: Sequence[tuple[Any, Any]], fs: float
         G = Ym[k] / Um[k]
         if Pu >= 2:
             cYU = np.sum((Y[:, k] - Ym[k]) * np.conj(U[:, k] - Um[k]), axis=0) / (Pu - 1) / Pu
-            rel = (vY[k] / np.abs(Ym[k]) ** 2 + vU[k] / np.abs(Um[k]) ** 2
-                   - 2.0 * np.real(cYU / (Ym[k] * np.conj(Um[k]))))
+            rel = (
+                vY[k] / np.abs(Ym[k]) ** 2 + vU[k] / np.abs(Um[k]) ** 2 - 2.0 * np.real(cYU / (Ym[k] * np.conj(Um[k])))
+            )
             vG = np.abs(G) ** 2 * np.maximum(rel, 0.0)
         else:
             vG = np.full(k.size, np.nan)
@@ -144,7 +152,7 @@ def best_linear_approximation(realisations: Sequence[tuple[Any, Any]], fs: float
     Gm_arr = np.array(Gm)
     M = Gm_arr.shape[0]
     G_bla = Gm_arr.mean(axis=0)
-    var_noise = np.sum(np.array(vGm), axis=0) / M ** 2
+    var_noise = np.sum(np.array(vGm), axis=0) / M**2
     if M >= 2:
         var_total = np.sum(np.abs(Gm_arr - G_bla) ** 2, axis=0) / (M * (M - 1))
         var_dist = np.maximum(var_total - var_noise, 0.0)
@@ -154,17 +162,37 @@ def best_linear_approximation(realisations: Sequence[tuple[Any, Any]], fs: float
     Ym_all = np.array([m[1][0] for m in means])
     vY_all = np.array([m[1][1] for m in means])
     verdict, detection = detect_nonlinearity(Ym_all, vY_all, per, Pu, fs / n0, alpha=alpha)
-    return BLA(f_hz=k * fs / n0, G=G_bla, var_noise=var_noise, var_total=var_total, var_distortion=var_dist,
-               lines=k, nonlinearity=verdict, detection=detection,
-               info={"method": "robust BLA (Pintelon & Schoukens 2012, §3.7)", "realisations": M,
-                     "periods": periods, "periods_used": Pu, "drop": int(drop), "detrend": int(detrend),
-                     "period_samples": int(n0),
-                     "fs": fs, "resolution_hz": fs / n0})
+    return BLA(
+        f_hz=k * fs / n0,
+        G=G_bla,
+        var_noise=var_noise,
+        var_total=var_total,
+        var_distortion=var_dist,
+        lines=k,
+        nonlinearity=verdict,
+        detection=detection,
+        info={
+            "method": "robust BLA (Pintelon & Schoukens 2012, §3.7)",
+            "realisations": M,
+            "periods": periods,
+            "periods_used": Pu,
+            "drop": int(drop),
+            "detrend": int(detrend),
+            "period_samples": int(n0),
+            "fs": fs,
+            "resolution_hz": fs / n0,
+        },
+    )
 
 
-def detect_nonlinearity(Y: np.ndarray, var_Y: np.ndarray, excited: np.ndarray | Sequence[np.ndarray],
-                        periods_used: int, resolution_hz: float,
-                        alpha: float = 1e-3) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
+def detect_nonlinearity(
+    Y: np.ndarray,
+    var_Y: np.ndarray,
+    excited: np.ndarray | Sequence[np.ndarray],
+    periods_used: int,
+    resolution_hz: float,
+    alpha: float = 1e-3,
+) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
     """Odd / even nonlinear distortion levels at the detection lines.
 
     ``Y`` and ``var_Y`` are the period-averaged output spectra and the variances of those means, shape
@@ -228,17 +256,31 @@ def detect_nonlinearity(Y: np.ndarray, var_Y: np.ndarray, excited: np.ndarray | 
     else:
         odd_db, odd_det, odd_thr = levels["any"]
         even_db, even_det, even_thr = levels["any"]
-        notes = ["even lines are excited (full grid): odd and even distortion fall on the same detection lines "
-                 "and cannot be told apart; use an odd (or odd-odd) grid"]
+        notes = [
+            "even lines are excited (full grid): odd and even distortion fall on the same detection lines "
+            "and cannot be told apart; use an odd (or odd-odd) grid"
+        ]
     if periods_used < 2:
         notes.append("fewer than 2 periods used: no noise estimate, no detection")
     verdict = {(False, False): "linear", (True, False): "odd", (False, True): "even", (True, True): "odd+even"}[
-        (odd_det, even_det)]
-    out.update(verdict=verdict, odd_db=odd_db, even_db=even_db, odd_detected=odd_det, even_detected=even_det,
-               odd_threshold_db=odd_thr, even_threshold_db=even_thr,
-               odd_lines=count.get("odd", count.get("any")), even_lines=count.get("even", count.get("any")),
-               notes=notes)
-    detection = {"f_hz": np.concatenate(det_f) if det_f else np.empty(0), "kind": np.array(det_kind),
-                 "level": np.concatenate(det_level) if det_level else np.empty(0),
-                 "noise": np.concatenate(det_noise) if det_noise else np.empty(0)}
+        (odd_det, even_det)
+    ]
+    out.update(
+        verdict=verdict,
+        odd_db=odd_db,
+        even_db=even_db,
+        odd_detected=odd_det,
+        even_detected=even_det,
+        odd_threshold_db=odd_thr,
+        even_threshold_db=even_thr,
+        odd_lines=count.get("odd", count.get("any")),
+        even_lines=count.get("even", count.get("any")),
+        notes=notes,
+    )
+    detection = {
+        "f_hz": np.concatenate(det_f) if det_f else np.empty(0),
+        "kind": np.array(det_kind),
+        "level": np.concatenate(det_level) if det_level else np.empty(0),
+        "noise": np.concatenate(det_noise) if det_noise else np.empty(0),
+    }
     return out, detection

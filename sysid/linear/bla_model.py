@@ -93,8 +93,10 @@ class BLAModel(Identifier):
 
             res = best_linear_approximation([(r.u, r.y) for r in recs], fs, periods, drop=int(self.drop))
             f, G = res.f_hz, res.G
-            W = np.mean([np.abs(period_spectra(r.u, periods, int(self.drop)).mean(axis=0)[res.lines]) ** 2
-                         for r in recs], axis=0)
+            W = np.mean(
+                [np.abs(period_spectra(r.u, periods, int(self.drop)).mean(axis=0)[res.lines]) ** 2 for r in recs],
+                axis=0,
+            )
             self.nonlinearity_ = res.nonlinearity
             var = res.var_total if len(recs) >= 2 else res.var_noise
         tf = tfest(f, G, fs, nb=nb, na=nf, nk=nk, weight=W, var=var)
@@ -152,25 +154,34 @@ class BLAModel(Identifier):
         if hasattr(self, "b_"):
             p = np.roots(self.a_)
             names = [f"b{i + 1}" for i in range(int(self.nb))] + [f"f{i + 1}" for i in range(int(self.nf))]
-            values = list(self.b_[int(self.nk):]) + list(self.a_[1:])
+            values = list(self.b_[int(self.nk) :]) + list(self.a_[1:])
             info = getattr(self, "fit_info_", {})
             stds: list[float | None]
             if "std_b" in info:
                 stds = [float(x) for x in (*info["std_b"], *info["std_a"])]
             else:
                 stds = [None] * len(names)
-            d.update(terms=names, parameters=[{"name": n, "value": float(v), "std": sd}
-                                              for n, v, sd in zip(names, values, stds)],
-                     B=self.b_[int(self.nk):].tolist(), F=self.a_.tolist(), poles_abs=np.abs(p).tolist(),
-                     fit={k: v for k, v in self.fit_info_.items() if k not in ("cov", "std_a", "std_b")})
+            d.update(
+                terms=names,
+                parameters=[{"name": n, "value": float(v), "std": sd} for n, v, sd in zip(names, values, stds)],
+                B=self.b_[int(self.nk) :].tolist(),
+                F=self.a_.tolist(),
+                poles_abs=np.abs(p).tolist(),
+                fit={k: v for k, v in self.fit_info_.items() if k not in ("cov", "std_a", "std_b")},
+            )
             if hasattr(self, "nonlinearity_"):
                 d["nonlinearity"] = self.nonlinearity_
         return d
 
     def _state(self) -> dict[str, Any]:
         self._check_fitted()
-        return {"b": self.b_.tolist(), "a": self.a_.tolist(), "u_mean": self.u_mean_, "y_mean": self.y_mean_,
-                "fs": self.fs_}
+        return {
+            "b": self.b_.tolist(),
+            "a": self.a_.tolist(),
+            "u_mean": self.u_mean_,
+            "y_mean": self.y_mean_,
+            "fs": self.fs_,
+        }
 
     def _load_state(self, state: dict[str, Any]) -> None:
         self.b_ = np.asarray(state["b"], dtype=float)

@@ -84,8 +84,10 @@ def echo_lags(records: Sequence[Record], min_echo_lag: int = 50, echo_snr: float
     _, s_uu = scipy.signal.welch(u, nperseg=nper)
     excited = np.isfinite(fr.G) & (s_uu >= EXCITED * np.max(s_uu))
     if np.count_nonzero(excited) < 8:
-        raise DataError(f"{rec.source}: the input excites {np.count_nonzero(excited)} frequencies of {nper // 2 + 1}; "
-                        "too few to locate a delay or an echo")
+        raise DataError(
+            f"{rec.source}: the input excites {np.count_nonzero(excited)} frequencies of {nper // 2 + 1}; "
+            "too few to locate a delay or an echo"
+        )
     g = np.fft.irfft(np.where(excited, fr.G, 0.0), nper)[: nper // 2]
     idx = np.flatnonzero(excited)
     i0, i1 = int(idx[0]), int(idx[-1]) + 1
@@ -122,8 +124,18 @@ class EchoOE(Identifier):
 
     name = "oe-echo"
 
-    def __init__(self, nb: int = 200, nf: int = 4, echo_width: int = 25, nk: Any = None, echo_lag: Any = None,
-                 min_echo_lag: int = 50, echo_snr: float = 8.0, ridge: float = 0.1, max_iter: int = 40):
+    def __init__(
+        self,
+        nb: int = 200,
+        nf: int = 4,
+        echo_width: int = 25,
+        nk: Any = None,
+        echo_lag: Any = None,
+        min_echo_lag: int = 50,
+        echo_snr: float = 8.0,
+        ridge: float = 0.1,
+        max_iter: int = 40,
+    ):
         self.nb = nb
         self.nf = nf
         self.echo_width = echo_width
@@ -159,20 +171,27 @@ class EchoOE(Identifier):
         if tau and tau - w <= nf:
             raise ConfigError(f"{self.name}: echo lag {tau} minus echo_width {w} must exceed nf={nf}")
         w = w if tau else 0  # no echo: C is empty
-        return {"nb": nb, "nf": nf, "nk": nk, "echo_lag": tau, "echo_width": w, "n_echo": 2 * w + 1 if tau else 0,
-                "found": found}
+        return {
+            "nb": nb,
+            "nf": nf,
+            "nk": nk,
+            "echo_lag": tau,
+            "echo_width": w,
+            "n_echo": 2 * w + 1 if tau else 0,
+            "found": found,
+        }
 
     def _polys(self, theta: np.ndarray, s: dict[str, Any] | None = None):
         s = self.structure_ if s is None else s
         nb, nf, nk, tau, w = s["nb"], s["nf"], s["nk"], s["echo_lag"], s["echo_width"]
         b = np.zeros(nk + nb)
         b[nk:] = theta[:nb]
-        f = np.concatenate([[1.0], theta[nb:nb + nf]])
-        c = np.asarray(theta[nb + nf:], float)
+        f = np.concatenate([[1.0], theta[nb : nb + nf]])
+        c = np.asarray(theta[nb + nf :], float)
         a = np.zeros(max(nf, tau + w if tau else 0) + 1)
-        a[:nf + 1] = f
+        a[: nf + 1] = f
         if tau:
-            a[tau - w:tau + w + 1] -= c
+            a[tau - w : tau + w + 1] -= c
         return b, f, c, a
 
     @staticmethod
@@ -197,8 +216,11 @@ class EchoOE(Identifier):
         nb taps of B, −xy(t − k) for F's k = 1 … nf, xy(t − k) for C's lags τ − w … τ + w."""
         nb, nf, nk, tau, w = s["nb"], s["nf"], s["nk"], s["echo_lag"], s["echo_width"]
         echo = range(tau - w, tau + w + 1) if tau else range(0)
-        return np.column_stack([shift(xu, nk + k) for k in range(nb)] + [-shift(xy, k) for k in range(1, nf + 1)]
-                               + [shift(xy, k) for k in echo])
+        return np.column_stack(
+            [shift(xu, nk + k) for k in range(nb)]
+            + [-shift(xy, k) for k in range(1, nf + 1)]
+            + [shift(xy, k) for k in echo]
+        )
 
     def _free_runs(self, theta, us, ys, s, L) -> list[np.ndarray] | None:
         """The free run of every record (the first L samples measured), or None where θ is not admissible or a
@@ -218,7 +240,7 @@ class EchoOE(Identifier):
         if L >= u.size:
             return out
         if L > 0:
-            zi = lfiltic(b, a, y[L - 1::-1], u[L - 1::-1])
+            zi = lfiltic(b, a, y[L - 1 :: -1], u[L - 1 :: -1])
             out[L:] = lfilter(b, a, u[L:], zi=zi)[0]
         else:
             out[:] = lfilter(b, a, u)
@@ -228,8 +250,10 @@ class EchoOE(Identifier):
     def fit(self, data: Record | Sequence[Record]) -> EchoOE:
         records = as_record_list(data)
         if records[0].n_inputs != 1 or records[0].n_outputs != 1:
-            raise ConfigError(f"{self.name}: one input and one output supported, the data have "
-                              f"{records[0].n_inputs} / {records[0].n_outputs}")
+            raise ConfigError(
+                f"{self.name}: one input and one output supported, the data have "
+                f"{records[0].n_inputs} / {records[0].n_outputs}"
+            )
         self._check_options()
         s = self._structure(records)
         nb, nf, nk, tau, w = s["nb"], s["nf"], s["nk"], s["echo_lag"], s["echo_width"]
@@ -244,8 +268,9 @@ class EchoOE(Identifier):
         if tau:
             lags_c = list(range(tau - w, tau + w + 1))
             Z = np.vstack([np.column_stack([shift(y_, k) for k in lags_c])[L:] for y_ in ys])
-            v = np.concatenate([(lfilter(f0, [1.0], y_) - lfilter(np.r_[np.zeros(nk), b0], [1.0], u_))[L:]
-                                for u_, y_ in zip(us, ys)])
+            v = np.concatenate(
+                [(lfilter(f0, [1.0], y_) - lfilter(np.r_[np.zeros(nk), b0], [1.0], u_))[L:] for u_, y_ in zip(us, ys)]
+            )
             ZZ = Z.T @ Z
             lam = float(self.ridge) * float(np.trace(ZZ)) / ZZ.shape[0]
             c0 = np.linalg.solve(ZZ + lam * np.eye(ZZ.shape[0]), Z.T @ v)
@@ -262,8 +287,9 @@ class EchoOE(Identifier):
         def residual(theta):
             runs = self._free_runs(theta, us, ys, s, L)
             last.update(theta=np.array(theta), runs=runs)
-            return np.full(n_res, penalty) if runs is None else np.concatenate(
-                [(y_ - r)[L:] for y_, r in zip(ys, runs)])
+            return (
+                np.full(n_res, penalty) if runs is None else np.concatenate([(y_ - r)[L:] for y_, r in zip(ys, runs)])
+            )
 
         def jac(theta):
             b, f, c, a = self._polys(theta, s)
@@ -283,9 +309,18 @@ class EchoOE(Identifier):
         if not self._admissible(f0, c0):  # pragma: no cover - sriv stabilises F and c0 is scaled
             raise DataError(f"{self.name}: no stable initial estimate")
         if int(self.max_iter) > 0:
-            sol = least_squares(residual, theta0, jac=jac, method="lm", x_scale="jac", xtol=1e-10, ftol=1e-10,
-                                gtol=1e-10, max_nfev=int(self.max_iter))
-            if np.sum(sol.fun ** 2) <= np.sum(residual(theta0) ** 2):
+            sol = least_squares(
+                residual,
+                theta0,
+                jac=jac,
+                method="lm",
+                x_scale="jac",
+                xtol=1e-10,
+                ftol=1e-10,
+                gtol=1e-10,
+                max_nfev=int(self.max_iter),
+            )
+            if np.sum(sol.fun**2) <= np.sum(residual(theta0) ** 2):
                 theta, status = sol.x, str(sol.message)
         r = residual(theta)
         self.structure_ = s
@@ -323,11 +358,11 @@ class EchoOE(Identifier):
                 new = np.linalg.lstsq(ZP, Zy, rcond=None)[0]
             except np.linalg.LinAlgError:  # pragma: no cover - singular instruments
                 break
-            f_new = stabilise(np.r_[1.0, new[nb:nb + nf]])
-            new[nb:nb + nf] = f_new[1:]
-            gain = self._loop_gain(f_new, new[nb + nf:])
+            f_new = stabilise(np.r_[1.0, new[nb : nb + nf]])
+            new[nb : nb + nf] = f_new[1:]
+            gain = self._loop_gain(f_new, new[nb + nf :])
             if gain >= INIT_LOOP_GAIN:
-                new[nb + nf:] *= INIT_LOOP_GAIN / gain
+                new[nb + nf :] *= INIT_LOOP_GAIN / gain
             theta = new
             cost = self._cost(theta, us, ys, s, L)
             if cost < best[0]:
@@ -367,30 +402,50 @@ class EchoOE(Identifier):
         d = super().describe()
         if hasattr(self, "theta_"):
             s = self.structure_
-            d.update(orders={k: s[k] for k in ("nb", "nf", "nk", "echo_lag", "echo_width")},
-                     found=s["found"], loop_gain=self.loop_gain_, noise_variance=self.noise_variance_,
-                     fit=self.fit_status_, max_lag=self.max_lag_, terms=[])
+            d.update(
+                orders={k: s[k] for k in ("nb", "nf", "nk", "echo_lag", "echo_width")},
+                found=s["found"],
+                loop_gain=self.loop_gain_,
+                noise_variance=self.noise_variance_,
+                fit=self.fit_status_,
+                max_lag=self.max_lag_,
+                terms=[],
+            )
         return d
 
     def summary(self) -> str:
         """Orders, where the delay and the round trip came from, and the loop gain (printed by ``identify``)."""
         s, found = self.structure_, self.structure_["found"] or {}
-        lines = [f"{self.name}: nb={s['nb']}, nf={s['nf']}, nk={s['nk']}"
-                 + (f" (found: first arrival at lag {int(found['onset'])})" if self.nk is None and found else "")]
+        lines = [
+            f"{self.name}: nb={s['nb']}, nf={s['nf']}, nk={s['nk']}"
+            + (f" (found: first arrival at lag {int(found['onset'])})" if self.nk is None and found else "")
+        ]
         if s["echo_lag"]:
-            how = (f" (found: cepstral peak {found['echo_snr']:.1f}x the median)" if self.echo_lag is None and found
-                   else "")
-            lines.append(f"  echo round trip {s['echo_lag']} samples{how}, C over lags "
-                         f"{s['echo_lag'] - s['echo_width']}..{s['echo_lag'] + s['echo_width']}, "
-                         f"loop gain max|C/F| = {self.loop_gain_:.4f}")
+            how = (
+                f" (found: cepstral peak {found['echo_snr']:.1f}x the median)"
+                if self.echo_lag is None and found
+                else ""
+            )
+            lines.append(
+                f"  echo round trip {s['echo_lag']} samples{how}, C over lags "
+                f"{s['echo_lag'] - s['echo_width']}..{s['echo_lag'] + s['echo_width']}, "
+                f"loop gain max|C/F| = {self.loop_gain_:.4f}"
+            )
         elif self.echo_lag is None and found:
-            lines.append(f"  no echo term: the largest cepstral peak is {found['echo_snr']:.1f}x the median "
-                         f"(needs {float(self.echo_snr):g}x)")
+            lines.append(
+                f"  no echo term: the largest cepstral peak is {found['echo_snr']:.1f}x the median "
+                f"(needs {float(self.echo_snr):g}x)"
+            )
         return "\n".join(lines)
 
     def _state(self) -> dict[str, Any]:
-        return {"structure": self.structure_, "theta": self.theta_.tolist(), "noise_variance": self.noise_variance_,
-                "y_bound": self.y_bound_, "fit": self.fit_status_}
+        return {
+            "structure": self.structure_,
+            "theta": self.theta_.tolist(),
+            "noise_variance": self.noise_variance_,
+            "y_bound": self.y_bound_,
+            "fit": self.fit_status_,
+        }
 
     def _load_state(self, state: dict[str, Any]) -> None:
         self.structure_ = dict(state["structure"])

@@ -76,7 +76,7 @@ def _lag_corr(x: np.ndarray, v: np.ndarray, M: int, L: int) -> np.ndarray:
     N = len(x)
     import scipy.signal  # on first use: importing it costs about a second
 
-    z = scipy.signal.correlate(v[L - M + 1:N], x[L:N], mode="valid")
+    z = scipy.signal.correlate(v[L - M + 1 : N], x[L:N], mode="valid")
     return z[::-1]
 
 
@@ -125,8 +125,10 @@ def _cholesky(G: np.ndarray, ridge: float = JITTER) -> np.ndarray:
             return scipy.linalg.cholesky(G + lam * np.eye(len(G)), lower=True, check_finite=False)
         except np.linalg.LinAlgError:
             lam *= 100.0
-    raise DataError("fir: the input's lag covariance is not positive definite (is the input constant or "
-                    "periodic with fewer samples per period than taps?); give fewer taps (nb)")
+    raise DataError(
+        "fir: the input's lag covariance is not positive definite (is the input constant or "
+        "periodic with fewer samples per period than taps?); give fewer taps (nb)"
+    )
 
 
 def _solve_leading(Lc: np.ndarray, g: np.ndarray, q: int) -> np.ndarray:
@@ -139,7 +141,7 @@ def _solve_leading(Lc: np.ndarray, g: np.ndarray, q: int) -> np.ndarray:
 def _aligned(u: np.ndarray, y: np.ndarray, nk: int) -> tuple[np.ndarray, np.ndarray]:
     """(u(t − nk), y(t)) rows, t ≥ nk: the delay folded into the data so that the FIR starts at lag 0."""
     N = len(u)
-    return u[:N - nk], y[nk:]
+    return u[: N - nk], y[nk:]
 
 
 def _simulate(u: np.ndarray, taps: np.ndarray, nk: int) -> np.ndarray:
@@ -151,7 +153,7 @@ def _simulate(u: np.ndarray, taps: np.ndarray, nk: int) -> np.ndarray:
     out = np.zeros((N, n_out))
     for o in range(n_out):
         for i in range(m):
-            c = scipy.signal.convolve(u[:, i], taps[o, i])[:N - nk]
+            c = scipy.signal.convolve(u[:, i], taps[o, i])[: N - nk]
             out[nk:, o] += c
     return out
 
@@ -167,12 +169,13 @@ def tap_grid(cap: int) -> list[int]:
     if cap <= GRID_START:
         return list(range(1, cap + 1))
     k = int(math.floor(math.log(cap / GRID_START) / math.log(GRID_RATIO)))
-    grid = sorted({int(round(GRID_START * GRID_RATIO ** j)) for j in range(k + 1)} | {int(cap)})
+    grid = sorted({int(round(GRID_START * GRID_RATIO**j)) for j in range(k + 1)} | {int(cap)})
     return [n for n in grid if n <= cap]
 
 
-def holdout_fir_search(records: Sequence[Any], nk: int, max_order: int,
-                       holdout: float = HOLDOUT) -> tuple[int, list[dict[str, Any]], dict[str, Any]]:
+def holdout_fir_search(
+    records: Sequence[Any], nk: int, max_order: int, holdout: float = HOLDOUT
+) -> tuple[int, list[dict[str, Any]], dict[str, Any]]:
     """Tap count by hold-out free-run NRMSE (module docstring): ``(nb, rows, search)`` with one row per grid point
     (``order``, ``n_parameters``, ``holdout_nrmse``, ``chosen``) and ``search`` = {criterion, holdout, grid_max,
     corner, best_holdout_nrmse, memory_samples} (memory: nb + nk of the choice, the lag beyond which the data show
@@ -183,8 +186,10 @@ def holdout_fir_search(records: Sequence[Any], nk: int, max_order: int,
     fit_rows = min(c - nk for c in cuts)
     cap = min(int(max_order), fit_rows // MIN_FIT_PER_TAP)
     if cap < 1:
-        raise DataError(f"fir: {min(len(r) for r in recs)} samples per record are too few to choose the taps on a "
-                        f"{holdout:.0%} hold-out; give nb explicitly or a longer record")
+        raise DataError(
+            f"fir: {min(len(r) for r in recs)} samples per record are too few to choose the taps on a "
+            f"{holdout:.0%} hold-out; give nb explicitly or a longer record"
+        )
     us = [r.u.reshape(len(r), -1).astype(float) for r in recs]
     ys = [r.output.reshape(len(r), -1).astype(float) for r in recs]
     pairs = [_aligned(u[:c], y[:c], nk) for u, y, c in zip(us, ys, cuts)]
@@ -204,9 +209,17 @@ def holdout_fir_search(records: Sequence[Any], nk: int, max_order: int,
     for r in rows:
         r["chosen"] = r["order"] == chosen
     ridge, ridge_rows = _choose_ridge(G, g, chosen * m, m, nk, us, ys, cuts, ref, best, tol)
-    search = {"criterion": "hold-out free-run NRMSE", "holdout": holdout, "tolerance": tol, "grid_max": int(cap),
-              "corner": bool(chosen == rows[-1]["order"] and len(rows) > 1), "best_holdout_nrmse": best,
-              "memory_samples": int(chosen + nk), "ridge": ridge, "ridge_selection": ridge_rows}
+    search = {
+        "criterion": "hold-out free-run NRMSE",
+        "holdout": holdout,
+        "tolerance": tol,
+        "grid_max": int(cap),
+        "corner": bool(chosen == rows[-1]["order"] and len(rows) > 1),
+        "best_holdout_nrmse": best,
+        "memory_samples": int(chosen + nk),
+        "ridge": ridge,
+        "ridge_selection": ridge_rows,
+    }
     return chosen, rows, search
 
 
@@ -281,26 +294,33 @@ class FIR(Identifier):
             if self.ridge is None:
                 ridge = float(self.order_search_["ridge"])
             if self.order_search_["corner"]:
-                warnings.warn(f"fir: the tap count chosen on the hold-out, {nb}, is the largest of the grid "
-                              f"(max_order {self.order_search_['grid_max']}): the record may be too short for the "
-                              "system's memory; more taps or a longer record may fit better", OrderSearchWarning,
-                              stacklevel=2)
+                warnings.warn(
+                    f"fir: the tap count chosen on the hold-out, {nb}, is the largest of the grid "
+                    f"(max_order {self.order_search_['grid_max']}): the record may be too short for the "
+                    "system's memory; more taps or a longer record may fit better",
+                    OrderSearchWarning,
+                    stacklevel=2,
+                )
         short = [r for r in records if len(r) - nk < nb + 1]
         if short:
-            raise DataError(f"{short[0].source}: {len(short[0])} samples are too few for a FIR with nb={nb} taps and "
-                            f"nk={nk} (need more than nb + nk = {nb + nk} samples per record)")
+            raise DataError(
+                f"{short[0].source}: {len(short[0])} samples are too few for a FIR with nb={nb} taps and "
+                f"nk={nk} (need more than nb + nk = {nb + nk} samples per record)"
+            )
         m = records[0].n_inputs
         us = [r.u.reshape(len(r), -1).astype(float) for r in records]
         ys = [r.output.reshape(len(r), -1).astype(float) for r in records]
         G, g, rows = fir_normal_equations([_aligned(u, y, nk) for u, y in zip(us, ys)], nb)
         if rows <= m * nb:
-            raise DataError(f"fir: {rows} fitted samples are too few for {m * nb} taps (nb={nb} per input); give "
-                            "fewer taps or more data")
+            raise DataError(
+                f"fir: {rows} fitted samples are too few for {m * nb} taps (nb={nb} per input); give "
+                "fewer taps or more data"
+            )
         theta = _solve_leading(_cholesky(G, ridge), g, m * nb)
         self.ridge_ = ridge
         self.taps_ = _taps_from_theta(theta, m)
-        res = np.concatenate([y[nk + nb - 1:] - _simulate(u, self.taps_, nk)[nk + nb - 1:] for u, y in zip(us, ys)])
-        self.noise_variance_ = float(np.mean(res ** 2))
+        res = np.concatenate([y[nk + nb - 1 :] - _simulate(u, self.taps_, nk)[nk + nb - 1 :] for u, y in zip(us, ys)])
+        self.noise_variance_ = float(np.mean(res**2))
         self.nb_, self.nk_ = int(nb), nk
         self._set_common()
         return self
@@ -337,8 +357,16 @@ class FIR(Identifier):
         d = super().describe()
         if hasattr(self, "taps_"):
             taps = self.taps_[0, 0].tolist() if self.taps_.shape[:2] == (1, 1) else self.taps_.tolist()
-            d.update(nb=self.nb_, nk=self.nk_, taps=taps, ridge=self.ridge_, noise_variance=self.noise_variance_,
-                     max_lag=self.max_lag_, terms=[], chosen_orders=self.chosen_orders_)
+            d.update(
+                nb=self.nb_,
+                nk=self.nk_,
+                taps=taps,
+                ridge=self.ridge_,
+                noise_variance=self.noise_variance_,
+                max_lag=self.max_lag_,
+                terms=[],
+                chosen_orders=self.chosen_orders_,
+            )
             if self.order_table_:
                 d["order_selection"] = self.order_table_
                 d["order_search"] = self.order_search_
@@ -348,15 +376,21 @@ class FIR(Identifier):
         how = "chosen on the hold-out" if self.chosen_orders_ else "given"
         h = self.taps_[0, 0]
         k = int(np.argmax(np.abs(h)))
-        return (f"fir: nb = {self.nb_} taps ({how}), nk = {self.nk_}; largest tap h({k + self.nk_}) = {h[k]:.6g}"
-                + (" (output 1, input 1)" if self.taps_.shape[:2] != (1, 1) else ""))
+        return f"fir: nb = {self.nb_} taps ({how}), nk = {self.nk_}; largest tap h({k + self.nk_}) = {h[k]:.6g}" + (
+            " (output 1, input 1)" if self.taps_.shape[:2] != (1, 1) else ""
+        )
 
     def _state(self) -> dict[str, Any]:
         self._check_fitted()
-        return {"taps": np.asarray(self.taps_, float), "nk": self.nk_, "ridge": self.ridge_,
-                "chosen": self.chosen_orders_,
-                "noise_variance": self.noise_variance_, "order_table": self.order_table_,
-                "order_search": self.order_search_}
+        return {
+            "taps": np.asarray(self.taps_, float),
+            "nk": self.nk_,
+            "ridge": self.ridge_,
+            "chosen": self.chosen_orders_,
+            "noise_variance": self.noise_variance_,
+            "order_table": self.order_table_,
+            "order_search": self.order_search_,
+        }
 
     def _load_state(self, state: dict[str, Any]) -> None:
         taps = np.asarray(state["taps"], float)

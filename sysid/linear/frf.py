@@ -70,8 +70,15 @@ def _siso(u: Any, y: Any) -> tuple[np.ndarray, np.ndarray]:
     return u, y
 
 
-def frf_welch(u: Any, y: Any, fs: float, window: str | tuple = "hann", nperseg: int | None = None,
-              noverlap: int | None = None, detrend: str | bool = "constant") -> FRF:
+def frf_welch(
+    u: Any,
+    y: Any,
+    fs: float,
+    window: str | tuple = "hann",
+    nperseg: int | None = None,
+    noverlap: int | None = None,
+    detrend: str | bool = "constant",
+) -> FRF:
     """H1 FRF estimate with coherence from arbitrary (non-periodic) records (Welch's method).
 
     Parameters
@@ -124,9 +131,20 @@ def frf_welch(u: Any, y: Any, fs: float, window: str | tuple = "hann", nperseg: 
         coh = np.clip(np.abs(s_uy) ** 2 / (s_uu * s_yy), 0.0, 1.0)
         n_seg = 1 + (n - nperseg) // (nperseg - noverlap)
         std = np.abs(G) * np.sqrt((1.0 - coh) / (2.0 * n_seg * coh))
-    return FRF(f_hz=f, G=G, coherence=coh, std=std,
-               info={"method": "H1 (Welch)", "window": window, "nperseg": nperseg, "noverlap": noverlap,
-                     "segments": int(n_seg), "fs": fs})
+    return FRF(
+        f_hz=f,
+        G=G,
+        coherence=coh,
+        std=std,
+        info={
+            "method": "H1 (Welch)",
+            "window": window,
+            "nperseg": nperseg,
+            "noverlap": noverlap,
+            "segments": int(n_seg),
+            "fs": fs,
+        },
+    )
 
 
 def period_spectra(x: Any, periods: int, drop: int = 0, detrend: int = 0) -> np.ndarray:
@@ -148,8 +166,10 @@ def period_spectra(x: Any, periods: int, drop: int = 0, detrend: int = 0) -> np.
     if x.ndim != 1:
         raise DataError(f"periodic FRF: 1-D signals expected, got shape {x.shape}")
     if x.size % periods:
-        raise DataError(f"periodic FRF: {x.size} samples do not split into {periods} equal periods "
-                        f"({x.size / periods:.6g} samples each); give the number of periods the record holds")
+        raise DataError(
+            f"periodic FRF: {x.size} samples do not split into {periods} equal periods "
+            f"({x.size / periods:.6g} samples each); give the number of periods the record holds"
+        )
     drop = int(drop)
     if not 0 <= drop < periods:
         raise ConfigError(f"drop (transient periods) must lie in 0..{periods - 1}, got {drop}")
@@ -184,8 +204,16 @@ def _mean_and_var(X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return m, np.sum(np.abs(d) ** 2, axis=0) / (P - 1) / P
 
 
-def frf_periodic(u: Any, y: Any, fs: float, periods: int, drop: int = 0, lines: Any = None,
-                 threshold_db: float = EXCITATION_DB, detrend: int = 1) -> FRF:
+def frf_periodic(
+    u: Any,
+    y: Any,
+    fs: float,
+    periods: int,
+    drop: int = 0,
+    lines: Any = None,
+    threshold_db: float = EXCITATION_DB,
+    detrend: int = 1,
+) -> FRF:
     """FRF of a periodic record (multisine) of ``periods`` periods, averaged per line over the periods.
 
     With :math:`U^{[p]}(k), Y^{[p]}(k)` the DFT of period ``p`` (``p = drop+1 .. P``, ``P' = P - drop`` used)
@@ -244,11 +272,22 @@ def frf_periodic(u: Any, y: Any, fs: float, periods: int, drop: int = 0, lines: 
             raise ConfigError(f"periodic FRF: excited lines must lie in 1..{Um.size - 1}")
     G = Ym[k] / Um[k]
     with np.errstate(divide="ignore", invalid="ignore"):
-        rel = (vY[k] / np.abs(Ym[k]) ** 2 + vU[k] / np.abs(Um[k]) ** 2
-               - 2.0 * np.real(cYU[k] / (Ym[k] * np.conj(Um[k]))))
+        rel = vY[k] / np.abs(Ym[k]) ** 2 + vU[k] / np.abs(Um[k]) ** 2 - 2.0 * np.real(cYU[k] / (Ym[k] * np.conj(Um[k])))
     var_G = np.abs(G) ** 2 * np.maximum(rel, 0.0)
-    return FRF(f_hz=k * fs / n0, G=G, std=np.sqrt(var_G), lines=k,
-               info={"method": "periodic (per-line average over periods)", "period_samples": n0,
-                     "periods": int(periods), "periods_used": int(Pu), "drop": int(drop), "detrend": int(detrend),
-                     "fs": fs,
-                     "var_Y": vY[k], "var_U": vU[k]})
+    return FRF(
+        f_hz=k * fs / n0,
+        G=G,
+        std=np.sqrt(var_G),
+        lines=k,
+        info={
+            "method": "periodic (per-line average over periods)",
+            "period_samples": n0,
+            "periods": int(periods),
+            "periods_used": int(Pu),
+            "drop": int(drop),
+            "detrend": int(detrend),
+            "fs": fs,
+            "var_Y": vY[k],
+            "var_U": vU[k],
+        },
+    )

@@ -43,8 +43,17 @@ from sysid.data.record import Record
 from sysid.errors import ConfigError, DataError, DivergenceWarning, OrderSearchWarning
 from sysid.registry import get_identifier
 
-__all__ = ["delay_estimate", "order_table", "plot_order_table", "select_oe_orders", "select_arx_orders",
-           "select_n4sid_order", "reference_fir", "OrderSearchWarning", "ORDER_GRID"]
+__all__ = [
+    "delay_estimate",
+    "order_table",
+    "plot_order_table",
+    "select_oe_orders",
+    "select_arx_orders",
+    "select_n4sid_order",
+    "reference_fir",
+    "OrderSearchWarning",
+    "ORDER_GRID",
+]
 
 ORDER_GRID = (1, 2, 3, 4, 5, 6, 8, 10, 12, 16, 20, 24, 32, 40, 48, 64, 80, 100, 128)
 HOLDOUT = 0.3
@@ -56,8 +65,9 @@ DELAY_MIN_EXTRA = 10
 DELAY_MAX_EXTRA = 512
 
 
-def delay_estimate(data: Record | Sequence[Record], max_delay: int = 30, n_extra: int | None = None,
-                   alpha: float = 1e-3) -> list[int]:
+def delay_estimate(
+    data: Record | Sequence[Record], max_delay: int = 30, n_extra: int | None = None, alpha: float = 1e-3
+) -> list[int]:
     """Delay (samples) of each input from a least-squares FIR model with lags 0 … max_delay + n_extra (module
     docstring). ``n_extra=None``: the memory of the data (the tap count of :func:`reference_fir`, at least
     ``DELAY_MIN_EXTRA``, at most ``DELAY_MAX_EXTRA``), so that a long impulse response is not left in the residual,
@@ -84,7 +94,7 @@ def delay_estimate(data: Record | Sequence[Record], max_delay: int = 30, n_extra
             raise DataError(f"{rec.source}: {len(rec)} samples are too few for a delay estimate over {M} lags")
         y = rec.output.reshape(len(rec), -1)[:, :1].astype(float)
         pairs.append((rec.u.reshape(len(rec), -1).astype(float), y))
-        yy += float(y[M - 1:, 0] @ y[M - 1:, 0])
+        yy += float(y[M - 1 :, 0] @ y[M - 1 :, 0])
     G, g, n = fir_normal_equations(pairs, M)
     p = m * M
     dof = max(n - p, 1)
@@ -92,7 +102,7 @@ def delay_estimate(data: Record | Sequence[Record], max_delay: int = 30, n_extra
     for i in range(m):
         perm = [k * m + j for j in range(m) if j != i for k in range(M)] + [k * m + i for k in reversed(range(M))]
         z = solve_triangular(_cholesky(G[np.ix_(perm, perm)]), g[perm, 0], lower=True, check_finite=False)
-        cum = np.cumsum(z ** 2)
+        cum = np.cumsum(z**2)
         rss0 = max(yy - float(cum[-1]), 1e-300 * max(yy, 1e-300))
         k_ok = 0
         for k in range(1, int(max_delay) + 1):
@@ -135,8 +145,13 @@ def reference_fir(records: list[Record], nk: int | Sequence[int]) -> dict[str, A
         nb, _, search = holdout_fir_search(_budget(records), k, FIR_MAX_ORDER, HOLDOUT)
     except DataError:
         return None
-    return {"identifier": "fir", "nb": int(nb), "holdout_nrmse": float(search["best_holdout_nrmse"]),
-            "memory_samples": int(search["memory_samples"]), "corner": bool(search["corner"])}
+    return {
+        "identifier": "fir",
+        "nb": int(nb),
+        "holdout_nrmse": float(search["best_holdout_nrmse"]),
+        "memory_samples": int(search["memory_samples"]),
+        "corner": bool(search["corner"]),
+    }
 
 
 def _budget(records: list[Record]) -> list[Record]:
@@ -147,11 +162,12 @@ def _budget(records: list[Record]) -> list[Record]:
 
 def _close_to(err: float, ref: dict[str, Any] | None) -> bool:
     """Whether a hold-out NRMSE is within REF_MARGIN_R2 (in R²) of the FIR reference (no reference: always)."""
-    return ref is None or err ** 2 <= ref["holdout_nrmse"] ** 2 + REF_MARGIN_R2
+    return ref is None or err**2 <= ref["holdout_nrmse"] ** 2 + REF_MARGIN_R2
 
 
-def _search(make, records: list[Record], grid: Sequence[int], what: str, ref: dict[str, Any] | None = None
-            ) -> tuple[int, list[dict[str, Any]], dict[str, Any]]:
+def _search(
+    make, records: list[Record], grid: Sequence[int], what: str, ref: dict[str, Any] | None = None
+) -> tuple[int, list[dict[str, Any]], dict[str, Any]]:
     est, val = _split(_budget(records), HOLDOUT)
     rows: list[dict[str, Any]] = []
     best, since, stopped = math.inf, 0, False
@@ -172,8 +188,10 @@ def _search(make, records: list[Record], grid: Sequence[int], what: str, ref: di
                 break
     scored = [r for r in rows if "holdout_nrmse" in r and np.isfinite(r["holdout_nrmse"])]
     if not scored:
-        raise DataError(f"{what}: no order of the grid {list(grid)} could be fitted and simulated on the hold-out "
-                        "part of the estimation data; give the orders explicitly")
+        raise DataError(
+            f"{what}: no order of the grid {list(grid)} could be fitted and simulated on the hold-out "
+            "part of the estimation data; give the orders explicitly"
+        )
     best = min(r["holdout_nrmse"] for r in scored)
     from sysid.linear.fir import (
         holdout_tolerance,  # here: sysid.linear.fir loads scipy, which the CLI's start-up must not
@@ -185,33 +203,55 @@ def _search(make, records: list[Record], grid: Sequence[int], what: str, ref: di
         r["chosen"] = r["order"] == chosen
     corner = len(grid) > 1 and chosen == max(grid)
     short = not _close_to(best, ref)
-    search = {"criterion": "hold-out free-run NRMSE", "holdout": HOLDOUT, "tolerance": tol,
-              "grid": [int(n) for n in grid], "stopped_early": stopped, "corner": bool(corner),
-              "below_reference": bool(short), "reference": ref,
-              "memory_samples": None if ref is None else ref["memory_samples"]}
+    search = {
+        "criterion": "hold-out free-run NRMSE",
+        "holdout": HOLDOUT,
+        "tolerance": tol,
+        "grid": [int(n) for n in grid],
+        "stopped_early": stopped,
+        "corner": bool(corner),
+        "below_reference": bool(short),
+        "reference": ref,
+        "memory_samples": None if ref is None else ref["memory_samples"],
+    }
     if corner:
-        warnings.warn(f"{what}: the chosen order {chosen} is the largest of the grid (raise max_order: a larger "
-                      "order may simulate the hold-out better)", OrderSearchWarning, stacklevel=4)
+        warnings.warn(
+            f"{what}: the chosen order {chosen} is the largest of the grid (raise max_order: a larger "
+            "order may simulate the hold-out better)",
+            OrderSearchWarning,
+            stacklevel=4,
+        )
     if short and ref is not None:
-        warnings.warn(f"{what}: no order up to {max(grid)} simulates the hold-out as well as a least-squares FIR "
-                      f"(hold-out R² {1 - best ** 2:.4f} against {1 - ref['holdout_nrmse'] ** 2:.4f}); try a larger "
-                      "max_order or another structure", OrderSearchWarning, stacklevel=4)
+        warnings.warn(
+            f"{what}: no order up to {max(grid)} simulates the hold-out as well as a least-squares FIR "
+            f"(hold-out R² {1 - best**2:.4f} against {1 - ref['holdout_nrmse'] ** 2:.4f}); try a larger "
+            "max_order or another structure",
+            OrderSearchWarning,
+            stacklevel=4,
+        )
     return chosen, rows, search
 
 
-def select_oe_orders(records: list[Record], nk: list[int], max_order: int = 12, nb=None, nf=None
-                     ) -> tuple[int, list[dict[str, Any]], dict[str, Any]]:
+def select_oe_orders(
+    records: list[Record], nk: list[int], max_order: int = 12, nb=None, nf=None
+) -> tuple[int, list[dict[str, Any]], dict[str, Any]]:
     """Order n (nb = nf = n unless given) of an OE model by hold-out free-run error (module docstring):
     ``(n, table, search)``."""
     OE = get_identifier("oe")  # through the registry: sysid.linear.pem calls this module when its orders are open
     grid = [n for n in ORDER_GRID if n <= int(max_order)] or [1]
     ref = reference_fir(records, nk)
-    return _search(lambda n: OE(nb=nb if nb is not None else n, nf=nf if nf is not None else n, nk=nk,
-                                max_iter=50), records, grid, "oe order selection", ref)
+    return _search(
+        lambda n: OE(nb=nb if nb is not None else n, nf=nf if nf is not None else n, nk=nk, max_iter=50),
+        records,
+        grid,
+        "oe order selection",
+        ref,
+    )
 
 
-def select_arx_orders(records: list[Record], nk: int, max_order: int = 100, probe=None
-                      ) -> tuple[int, list[dict[str, Any]], dict[str, Any]]:
+def select_arx_orders(
+    records: list[Record], nk: int, max_order: int = 100, probe=None
+) -> tuple[int, list[dict[str, Any]], dict[str, Any]]:
     """Order n (ny = nu = n) of an ARX model by hold-out free-run error (module docstring): ``(n, table,
     search)``. ``probe``: an ARX whose other options (intercept) the candidates copy."""
     ARX = get_identifier("arx")  # through the registry: sysid.linear calls this module for orders="auto"
@@ -221,25 +261,36 @@ def select_arx_orders(records: list[Record], nk: int, max_order: int = 100, prob
     return _search(lambda n: ARX(ny=n, nu=n, nk=nk, intercept=intercept), records, grid, "arx order selection", ref)
 
 
-def select_n4sid_order(records: list[Record], options: dict[str, Any], max_order: int, extra: Sequence[int] = ()
-                       ) -> tuple[int, list[dict[str, Any]], dict[str, Any]]:
+def select_n4sid_order(
+    records: list[Record], options: dict[str, Any], max_order: int, extra: Sequence[int] = ()
+) -> tuple[int, list[dict[str, Any]], dict[str, Any]]:
     """State dimension nx of N4SID by hold-out free-run error (module docstring) over the grid up to ``max_order``
     and the orders in ``extra`` (the singular-value choice); candidates take ``options`` (block rows, focus) with
     the fewest jackknife segments (their uncertainty is not used)."""
     N4SID = get_identifier("n4sid")  # through the registry: sysid.linear.subspace calls this module when nx is open
     grid = sorted({n for n in ORDER_GRID if n <= int(max_order)} | {int(n) for n in extra if 1 <= n <= max_order})
     ref = reference_fir(records, 0)
-    return _search(lambda n: N4SID(**{**options, "nx": n, "segments": 2}), records, grid or [1],
-                   "n4sid order selection", ref)
+    return _search(
+        lambda n: N4SID(**{**options, "nx": n, "segments": 2}), records, grid or [1], "n4sid order selection", ref
+    )
 
 
-_ORDER_KEYS = {"arx": ("ny", "nu"), "armax": ("ny", "nu", "ne"), "oe": ("nb", "nf"), "bj": ("nb", "nf", "nc", "nd"),
-               "n4sid": ("nx",)}
+_ORDER_KEYS = {
+    "arx": ("ny", "nu"),
+    "armax": ("ny", "nu", "ne"),
+    "oe": ("nb", "nf"),
+    "bj": ("nb", "nf", "nc", "nd"),
+    "n4sid": ("nx",),
+}
 
 
-def order_table(identifier: str, est: Record | Sequence[Record], val: Record | Sequence[Record] | None = None,
-                grid: Sequence[int] = (1, 2, 3, 4, 6, 8, 10, 12), options: dict[str, Any] | None = None
-                ) -> list[dict[str, Any]]:
+def order_table(
+    identifier: str,
+    est: Record | Sequence[Record],
+    val: Record | Sequence[Record] | None = None,
+    grid: Sequence[int] = (1, 2, 3, 4, 6, 8, 10, 12),
+    options: dict[str, Any] | None = None,
+) -> list[dict[str, Any]]:
     """One row per order n (every order key of ``identifier`` set to n): n_parameters, AIC, BIC (estimation data,
     one-step errors) and free-run R² / NRMSE on ``val`` (or None). ``options`` are further constructor options."""
     from sysid.evaluation.evaluate import evaluate

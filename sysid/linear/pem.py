@@ -169,20 +169,22 @@ class _PolyPEM(Identifier):
     def _unpack(self, theta, o):
         bs, fs, j = [], [], 0
         for i in range(len(o["nb"])):
-            bs.append(np.asarray(theta[j:j + o["nb"][i]], float))
+            bs.append(np.asarray(theta[j : j + o["nb"][i]], float))
             j += o["nb"][i]
-            fs.append(np.concatenate([[1.0], theta[j:j + o["nf"][i]]]))
+            fs.append(np.concatenate([[1.0], theta[j : j + o["nf"][i]]]))
             j += o["nf"][i]
-        c = np.concatenate([[1.0], theta[j:j + o["nc"]]])
+        c = np.concatenate([[1.0], theta[j : j + o["nc"]]])
         j += o["nc"]
-        d = np.concatenate([[1.0], theta[j:j + o["nd"]]])
+        d = np.concatenate([[1.0], theta[j : j + o["nd"]]])
         return bs, fs, c, d
 
     def fit(self, data: Record | Sequence[Record]) -> _PolyPEM:
         records = as_record_list(data)
         if records[0].n_outputs != 1:
-            raise ConfigError(f"{self.name}: one output supported (MISO), the data have {records[0].n_outputs}; "
-                              "use n4sid for several outputs")
+            raise ConfigError(
+                f"{self.name}: one output supported (MISO), the data have {records[0].n_outputs}; "
+                "use n4sid for several outputs"
+            )
         if int(self.max_iter) < 0:
             raise ConfigError(f"{self.name}: max_iter must be >= 0, got {self.max_iter}")
         o = self._resolve_orders(records)
@@ -250,9 +252,18 @@ class _PolyPEM(Identifier):
         status = "initial estimate (max_iter=0)"
         theta = theta0
         if int(self.max_iter) > 0:
-            sol = _scipy_lsq(residual, theta0, jac=jac, method="lm", x_scale="jac", xtol=1e-10, ftol=1e-10,
-                             gtol=1e-10, max_nfev=int(self.max_iter))
-            if np.sum(sol.fun ** 2) <= np.sum(residual(theta0) ** 2):
+            sol = _scipy_lsq(
+                residual,
+                theta0,
+                jac=jac,
+                method="lm",
+                x_scale="jac",
+                xtol=1e-10,
+                ftol=1e-10,
+                gtol=1e-10,
+                max_nfev=int(self.max_iter),
+            )
+            if np.sum(sol.fun**2) <= np.sum(residual(theta0) ** 2):
                 theta, status = sol.x, str(sol.message)
         r = residual(theta)
         J = jac(theta)
@@ -365,8 +376,13 @@ class _PolyPEM(Identifier):
         """G_i(e^{iωT}) at ``f_hz`` [Hz] for sampling rate ``fs`` [Hz], with its complex std (``std``)."""
         self._check_fitted()
         idx = self._index("b", input) + self._index("f", input)
-        G, std = tf_response_with_std(self.b_[input], self.f_[input], self.orders_["nk"][input],
-                                      2 * np.pi * np.asarray(f_hz, float) / fs, self.cov_[np.ix_(idx, idx)])
+        G, std = tf_response_with_std(
+            self.b_[input],
+            self.f_[input],
+            self.orders_["nk"][input],
+            2 * np.pi * np.asarray(f_hz, float) / fs,
+            self.cov_[np.ix_(idx, idx)],
+        )
         return {"f_hz": np.asarray(f_hz, float), "G": G, "std": std}
 
     def simulation_band(self, record: Record, n_draws: int = 100, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
@@ -390,25 +406,42 @@ class _PolyPEM(Identifier):
     def describe(self) -> dict[str, Any]:
         d = super().describe()
         if hasattr(self, "theta_"):
-            d.update(parameters=self.parameters(), poles=self.poles(), orders=self.orders_,
-                     chosen_orders=self.chosen_orders_, noise_variance=self.noise_variance_, pem=self.pem_status_,
-                     max_lag=self.max_lag_, terms=[])
+            d.update(
+                parameters=self.parameters(),
+                poles=self.poles(),
+                orders=self.orders_,
+                chosen_orders=self.chosen_orders_,
+                noise_variance=self.noise_variance_,
+                pem=self.pem_status_,
+                max_lag=self.max_lag_,
+                terms=[],
+            )
             if getattr(self, "order_table_", None):
                 d["order_selection"] = self.order_table_
         return d
 
     def summary(self) -> str:
-        lines = [f"{self.name}: orders " + ", ".join(f"{k}={v}" for k, v in self.orders_.items())
-                 + (f" (chosen automatically: {', '.join(self.chosen_orders_)})" if self.chosen_orders_ else "")]
+        lines = [
+            f"{self.name}: orders "
+            + ", ".join(f"{k}={v}" for k, v in self.orders_.items())
+            + (f" (chosen automatically: {', '.join(self.chosen_orders_)})" if self.chosen_orders_ else "")
+        ]
         for p in self.parameters():
             lines.append(f"  {p['name']:<8} {p['value']: .6g} ± {p['std']:.2g}")
         return "\n".join(lines)
 
     # ---- persistence
     def _state(self) -> dict[str, Any]:
-        return {"orders": self.orders_, "chosen": self.chosen_orders_, "theta": self.theta_.tolist(),
-                "cov": self.cov_.tolist(), "layout": [list(t) for t in self.layout_],
-                "noise_variance": self.noise_variance_, "y_bound": self.y_bound_, "pem": self.pem_status_}
+        return {
+            "orders": self.orders_,
+            "chosen": self.chosen_orders_,
+            "theta": self.theta_.tolist(),
+            "cov": self.cov_.tolist(),
+            "layout": [list(t) for t in self.layout_],
+            "noise_variance": self.noise_variance_,
+            "y_bound": self.y_bound_,
+            "pem": self.pem_status_,
+        }
 
     def _load_state(self, state: dict[str, Any]) -> None:
         self.orders_ = {k: v for k, v in state["orders"].items()}
@@ -448,8 +481,16 @@ class BJ(_PolyPEM):
     name = "bj"
     _noise = True
 
-    def __init__(self, nb: Any = None, nc: Any = None, nd: Any = None, nf: Any = None, nk: Any = None,
-                 max_order: int = 24, max_iter: int = 200):
+    def __init__(
+        self,
+        nb: Any = None,
+        nc: Any = None,
+        nd: Any = None,
+        nf: Any = None,
+        nk: Any = None,
+        max_order: int = 24,
+        max_iter: int = 200,
+    ):
         self.nb = nb
         self.nc = nc
         self.nd = nd

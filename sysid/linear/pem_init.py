@@ -60,8 +60,9 @@ def oe_sim(b: np.ndarray, f: np.ndarray, nk: int, u: np.ndarray) -> np.ndarray:
     return lfilter(np.concatenate([np.zeros(nk), b]), f, u)
 
 
-def sriv(us: list[np.ndarray], ys: list[np.ndarray], nb: int, nf: int, nk: int,
-         iterations: int = SRIV_ITERATIONS) -> tuple[np.ndarray, np.ndarray]:
+def sriv(
+    us: list[np.ndarray], ys: list[np.ndarray], nb: int, nf: int, nk: int, iterations: int = SRIV_ITERATIONS
+) -> tuple[np.ndarray, np.ndarray]:
     """SISO B/F by the simplified refined instrumental-variable method (Ljung §7.6; Young 1976) on records
     (lists of 1-D arrays). Returns (b, f) with f monic and stable; the iterate of least output-error cost."""
     ulags = list(range(nk, nk + nb))
@@ -117,5 +118,3 @@ def hannan_rissanen(vs: list[np.ndarray], nc: int, nd: int) -> tuple[np.ndarray,
     d = stabilise(np.concatenate([[1.0], th[:nd]]))
     c = stabilise(np.concatenate([[1.0], th[nd:]]))
     return c, d
-
-

@@ -98,7 +98,7 @@ def choose_order(s: np.ndarray, n_max: int, gap: float = ORDER_GAP) -> int:
     a weak one, stands above it by a step), else the n of the largest ratio."""
     s = np.maximum(np.asarray(s, float), 1e-300)
     k = min(int(n_max), s.size - 1)
-    ratio = s[:k] / s[1:k + 1]
+    ratio = s[:k] / s[1 : k + 1]
     ok = (ratio >= gap) & (s[:k] > 1e-9 * s[0])
     return int(np.flatnonzero(ok)[-1]) + 1 if ok.any() else int(np.argmax(ratio)) + 1
 
@@ -106,9 +106,9 @@ def choose_order(s: np.ndarray, n_max: int, gap: float = ORDER_GAP) -> int:
 def _hankel_rows(u: np.ndarray, y: np.ndarray, i: int, j0: int, j1: int) -> np.ndarray:
     """Rows j0..j1−1 of the transposed block-Hankel matrix [U_f | U_p | Y_p | Y_f] (time-ordered block rows)."""
     m, l = u.shape[1], y.shape[1]
-    W = sliding_window_view(u[j0:j1 + 2 * i - 1], 2 * i, axis=0).transpose(0, 2, 1).reshape(j1 - j0, 2 * i * m)
-    V = sliding_window_view(y[j0:j1 + 2 * i - 1], 2 * i, axis=0).transpose(0, 2, 1).reshape(j1 - j0, 2 * i * l)
-    return np.hstack([W[:, i * m:], W[:, :i * m], V[:, :i * l], V[:, i * l:]])
+    W = sliding_window_view(u[j0 : j1 + 2 * i - 1], 2 * i, axis=0).transpose(0, 2, 1).reshape(j1 - j0, 2 * i * m)
+    V = sliding_window_view(y[j0 : j1 + 2 * i - 1], 2 * i, axis=0).transpose(0, 2, 1).reshape(j1 - j0, 2 * i * l)
+    return np.hstack([W[:, i * m :], W[:, : i * m], V[:, : i * l], V[:, i * l :]])
 
 
 def _qr_r(M: np.ndarray) -> np.ndarray:
@@ -220,8 +220,15 @@ class N4SID(Identifier):
 
     name = "n4sid"
 
-    def __init__(self, nx: Any = None, max_order: int = 20, block_rows: Any = None, segments: int = 20,
-                 chunk: int = 20_000, focus: str = "simulation"):
+    def __init__(
+        self,
+        nx: Any = None,
+        max_order: int = 20,
+        block_rows: Any = None,
+        segments: int = 20,
+        chunk: int = 20_000,
+        focus: str = "simulation",
+    ):
         self.nx = nx
         self.focus = focus
         self.max_order = max_order
@@ -269,13 +276,13 @@ class N4SID(Identifier):
         M = P @ L31 @ np.linalg.pinv(L11)
         rows_K, rows_M = [], []
         for c in range(i):
-            Lc = P[:, c * l:(c + 1) * l]
+            Lc = P[:, c * l : (c + 1) * l]
             if c < i - 1:
-                right = P[:, (c + 1) * l:] @ G[:(i - c - 1) * l]
+                right = P[:, (c + 1) * l :] @ G[: (i - c - 1) * l]
             else:
                 right = np.zeros((P.shape[0], n))
             rows_K.append(np.hstack([Lc, right]))
-            rows_M.append(M[:, c * m:(c + 1) * m])
+            rows_M.append(M[:, c * m : (c + 1) * m])
         DB = np.linalg.lstsq(np.vstack(rows_K), np.vstack(rows_M), rcond=None)[0]
         return A, DB[l:], C, DB[:l], s, n
 
@@ -294,8 +301,11 @@ class N4SID(Identifier):
     def fit(self, data: Record | Sequence[Record]) -> N4SID:
         records = as_record_list(data)
         m, l = records[0].n_inputs, records[0].n_outputs
-        n_fixed = None if self.nx is None or (isinstance(self.nx, str) and self.nx.lower() in ("none", "auto")) \
+        n_fixed = (
+            None
+            if self.nx is None or (isinstance(self.nx, str) and self.nx.lower() in ("none", "auto"))
             else int(self.nx)
+        )
         if n_fixed is not None and n_fixed < 1:
             raise ConfigError(f"n4sid: nx must be >= 1, got {self.nx!r}")
         n_max = n_fixed if n_fixed is not None else int(self.max_order)
@@ -327,7 +337,8 @@ class N4SID(Identifier):
 
             n_sv = self._estimate(R, i, m, l, None, n_max)[5]
             n_use, self.order_table_, self.order_search_ = select_n4sid_order(
-                records, {"block_rows": i, "focus": self.focus, "chunk": self.chunk}, n_max, extra=[n_sv])
+                records, {"block_rows": i, "focus": self.focus, "chunk": self.chunk}, n_max, extra=[n_sv]
+            )
             self.order_search_["singular_value_choice"] = int(n_sv)
         A, B, C, D, s, n = self._estimate(R, i, m, l, n_use, n_max)
         un, yn = [u / su for u in us], [y / sy for y in ys]
@@ -372,8 +383,12 @@ class N4SID(Identifier):
 
     def _simulate(self, u: np.ndarray, y: np.ndarray | None, A=None, B=None, C=None, D=None) -> np.ndarray:
         """Simulation with x(0) fitted by least squares to the first max_lag_ samples of y (if given)."""
-        A, B, C, D = (self.A_ if A is None else A, self.B_ if B is None else B, self.C_ if C is None else C,
-                      self.D_ if D is None else D)
+        A, B, C, D = (
+            self.A_ if A is None else A,
+            self.B_ if B is None else B,
+            self.C_ if C is None else C,
+            self.D_ if D is None else D,
+        )
         y0 = ss_simulate(A, B, C, D, u)
         L = min(self.max_lag_, len(u))
         if y is None or L == 0:
@@ -381,7 +396,7 @@ class N4SID(Identifier):
         O = np.empty((L * C.shape[0], A.shape[0]))
         M = C.copy()
         for t in range(L):
-            O[t * C.shape[0]:(t + 1) * C.shape[0]] = M
+            O[t * C.shape[0] : (t + 1) * C.shape[0]] = M
             M = M @ A
         x0 = np.linalg.lstsq(O, (y[:L] - y0[:L]).reshape(-1), rcond=None)[0]
         return ss_simulate(A, B, C, D, u, x0)
@@ -418,8 +433,15 @@ class N4SID(Identifier):
             reps.append(out)
         std = self._jack_std(p, reps)
         order = np.lexsort((-p.imag, -np.abs(p)))
-        return [{"re": float(p[j].real), "im": float(p[j].imag), "abs": float(abs(p[j])),
-                 "std": None if not np.isfinite(std[j]) else float(std[j])} for j in order]
+        return [
+            {
+                "re": float(p[j].real),
+                "im": float(p[j].imag),
+                "abs": float(abs(p[j])),
+                "std": None if not np.isfinite(std[j]) else float(std[j]),
+            }
+            for j in order
+        ]
 
     @staticmethod
     def _freq(A, B, C, D, z: np.ndarray) -> np.ndarray:
@@ -452,16 +474,23 @@ class N4SID(Identifier):
     def describe(self) -> dict[str, Any]:
         d = super().describe()
         if hasattr(self, "A_"):
-            d.update(nx=self.nx_, chosen_orders=self.chosen_orders_, block_rows=self.block_rows_,
-                     reflected_poles=self.reflected_poles_,
-                     singular_values=self.singular_values_[:2 * int(self.max_order) + 2], poles=self.poles(),
-                     state_space={k: getattr(self, k + "_").tolist() for k in "ABCD"}, max_lag=self.max_lag_, terms=[])
+            d.update(
+                nx=self.nx_,
+                chosen_orders=self.chosen_orders_,
+                block_rows=self.block_rows_,
+                reflected_poles=self.reflected_poles_,
+                singular_values=self.singular_values_[: 2 * int(self.max_order) + 2],
+                poles=self.poles(),
+                state_space={k: getattr(self, k + "_").tolist() for k in "ABCD"},
+                max_lag=self.max_lag_,
+                terms=[],
+            )
             if getattr(self, "order_table_", None):
                 d.update(order_selection=self.order_table_, order_search=self.order_search_)
         return d
 
     def summary(self) -> str:
-        sv = ", ".join(f"{v:.3g}" for v in self.singular_values_[:min(len(self.singular_values_), self.nx_ + 4)])
+        sv = ", ".join(f"{v:.3g}" for v in self.singular_values_[: min(len(self.singular_values_), self.nx_ + 4)])
         how = "chosen on the hold-out" if self.chosen_orders_ else "given"
         lines = [f"n4sid: nx = {self.nx_} ({how}; block rows {self.block_rows_}); singular values {sv} ..."]
         for p in self.poles():
@@ -471,10 +500,18 @@ class N4SID(Identifier):
 
     # ------------------------------------------------------------------ persistence
     def _state(self) -> dict[str, Any]:
-        return {"A": self.A_.tolist(), "B": self.B_.tolist(), "C": self.C_.tolist(), "D": self.D_.tolist(),
-                "replicates": [[M.tolist() for M in rep] for rep in self.replicates_],
-                "singular_values": self.singular_values_, "chosen": self.chosen_orders_,
-                "block_rows": self.block_rows_, "y_bound": self.y_bound_, "reflected_poles": self.reflected_poles_}
+        return {
+            "A": self.A_.tolist(),
+            "B": self.B_.tolist(),
+            "C": self.C_.tolist(),
+            "D": self.D_.tolist(),
+            "replicates": [[M.tolist() for M in rep] for rep in self.replicates_],
+            "singular_values": self.singular_values_,
+            "chosen": self.chosen_orders_,
+            "block_rows": self.block_rows_,
+            "y_bound": self.y_bound_,
+            "reflected_poles": self.reflected_poles_,
+        }
 
     def _load_state(self, state: dict[str, Any]) -> None:
         self.A_, self.B_, self.C_, self.D_ = (np.asarray(state[k], float) for k in "ABCD")

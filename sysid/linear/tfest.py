@@ -84,8 +84,18 @@ def _stabilise(a: np.ndarray) -> tuple[np.ndarray, int]:
     return np.real(np.poly(p)), int(bad.sum())
 
 
-def tfest(f_hz: Any, G: Any, fs: float, nb: int, na: int, nk: int = 0, weight: Any = None,
-          iterations: int = 20, refine: bool = True, var: Any = None) -> TransferFunction:
+def tfest(
+    f_hz: Any,
+    G: Any,
+    fs: float,
+    nb: int,
+    na: int,
+    nk: int = 0,
+    weight: Any = None,
+    iterations: int = 20,
+    refine: bool = True,
+    var: Any = None,
+) -> TransferFunction:
     """Fit ``B(z)/A(z)`` (``nb`` numerator coefficients after ``nk`` delays, ``na`` poles) to FRF data.
 
     Parameters
@@ -159,9 +169,15 @@ def tfest(f_hz: Any, G: Any, fs: float, nb: int, na: int, nk: int = 0, weight: A
         return np.concatenate([e.real, e.imag])
 
     if refine and theta.size:
-        sol = scipy.optimize.least_squares(residual, theta, method="lm" if 2 * f.size >= theta.size else "trf",
-                                           xtol=1e-12, ftol=1e-12, max_nfev=200 * (theta.size + 1))
-        if np.all(np.isfinite(sol.x)) and np.sum(sol.fun ** 2) <= np.sum(residual(theta) ** 2):
+        sol = scipy.optimize.least_squares(
+            residual,
+            theta,
+            method="lm" if 2 * f.size >= theta.size else "trf",
+            xtol=1e-12,
+            ftol=1e-12,
+            max_nfev=200 * (theta.size + 1),
+        )
+        if np.all(np.isfinite(sol.x)) and np.sum(sol.fun**2) <= np.sum(residual(theta) ** 2):
             theta = sol.x
     cov = None
     if var is not None:
@@ -170,17 +186,17 @@ def tfest(f_hz: Any, G: Any, fs: float, nb: int, na: int, nk: int = 0, weight: A
             raise DataError(f"tfest: {v.size} variances for {ok.size} frequencies")
         v = v[ok]
         A, B = evalAB(theta)
-        dM = np.hstack([-(B / A ** 2)[:, None] * Za, Zb / A[:, None]])  # dM/da_i, dM/db_i
+        dM = np.hstack([-(B / A**2)[:, None] * Za, Zb / A[:, None]])  # dM/da_i, dM/db_i
         J = -sw[:, None] * dM
         J = np.vstack([J.real, J.imag])
-        sig = np.concatenate([sw ** 2 * v / 2.0] * 2)
+        sig = np.concatenate([sw**2 * v / 2.0] * 2)
         Hinv = np.linalg.pinv(J.T @ J)
         cov = Hinv @ (J.T * sig) @ J @ Hinv
     a_poly = np.concatenate([[1.0], theta[:na]])
     a_poly, n_reflected = _stabilise(a_poly)
     b_coef = theta[na:]
     if n_reflected:  # B for the stabilised A: linear least squares of sw·(G − B/A)
-        A = (_basis(z_inv, na + 1, 0) @ a_poly)
+        A = _basis(z_inv, na + 1, 0) @ a_poly
         b_coef = _ls_complex(Zb * (sw / A)[:, None], G * sw)
     b_poly = np.concatenate([np.zeros(nk), b_coef])
     _, h = scipy.signal.freqz(b_poly, a_poly, worN=f, fs=fs)
@@ -189,7 +205,18 @@ def tfest(f_hz: Any, G: Any, fs: float, nb: int, na: int, nk: int = 0, weight: A
     if cov is not None and not n_reflected:
         sd = np.sqrt(np.maximum(np.diag(cov), 0.0))
         info_cov = {"cov": cov, "std_a": sd[:na], "std_b": sd[na:]}
-    return TransferFunction(b=b_poly, a=a_poly, fs=fs,
-                            info={**info_cov, "nb": nb, "na": na, "nk": nk, "cost": cost,
-                                  "reflected_poles": n_reflected, "points": int(f.size),
-                                  "method": "Levy + Sanathanan-Koerner" + (" + nonlinear LS" if refine else "")})
+    return TransferFunction(
+        b=b_poly,
+        a=a_poly,
+        fs=fs,
+        info={
+            **info_cov,
+            "nb": nb,
+            "na": na,
+            "nk": nk,
+            "cost": cost,
+            "reflected_poles": n_reflected,
+            "points": int(f.size),
+            "method": "Levy + Sanathanan-Koerner" + (" + nonlinear LS" if refine else ""),
+        },
+    )

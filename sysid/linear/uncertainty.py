@@ -49,12 +49,20 @@ def poles_with_std(a: np.ndarray, cov: np.ndarray | None) -> list[dict[str, floa
     p, grad = root_sensitivity(a)
     std = complex_std(grad, cov) if cov is not None and p.size else np.full(p.size, np.nan)
     order = np.lexsort((-p.imag, -np.abs(p)))
-    return [{"re": float(p[j].real), "im": float(p[j].imag), "abs": float(abs(p[j])),
-             "std": (None if not np.isfinite(std[j]) else float(std[j]))} for j in order]
+    return [
+        {
+            "re": float(p[j].real),
+            "im": float(p[j].imag),
+            "abs": float(abs(p[j])),
+            "std": (None if not np.isfinite(std[j]) else float(std[j])),
+        }
+        for j in order
+    ]
 
 
-def tf_response_with_std(b: np.ndarray, f: np.ndarray, nk: int, w: np.ndarray,
-                         cov: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray | None]:
+def tf_response_with_std(
+    b: np.ndarray, f: np.ndarray, nk: int, w: np.ndarray, cov: np.ndarray | None = None
+) -> tuple[np.ndarray, np.ndarray | None]:
     """G(e^{iw}) of B/F with delay nk at normalised angular frequencies ``w`` [rad/sample] and its complex std.
 
     ``cov`` is the covariance of (b₁ … b_nb, f₁ … f_nf) (in that order)."""
@@ -72,8 +80,9 @@ def tf_response_with_std(b: np.ndarray, f: np.ndarray, nk: int, w: np.ndarray,
     return G, complex_std(grad, cov)
 
 
-def monte_carlo_band(simulate: Callable[[np.ndarray], np.ndarray], theta: np.ndarray, cov: np.ndarray,
-                     n_draws: int = 100, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+def monte_carlo_band(
+    simulate: Callable[[np.ndarray], np.ndarray], theta: np.ndarray, cov: np.ndarray, n_draws: int = 100, seed: int = 0
+) -> tuple[np.ndarray, np.ndarray]:
     """Mean and standard deviation per sample of ``simulate(θ)`` over ``n_draws`` draws θ ~ N(θ̂, cov).
 
     Draws whose simulation is not finite (an unstable draw) are dropped; ``simulate`` returns an array."""

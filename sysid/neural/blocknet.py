@@ -31,9 +31,22 @@ _ACT = {"tanh": torch.tanh, "relu": torch.relu, "sigmoid": torch.sigmoid}
 class BlockNet(torch.nn.Module):
     """G1 → F → G2 (+ G0) on ``u`` (B, T, n_in) → ``ŷ`` (B, T, n_out), float64."""
 
-    def __init__(self, n_in: int, n_out: int, channels: int, channels_out: int, hidden: Sequence[int], nb: int, na: int,
-                 nb2: int, na2: int, nk: int = 0, linear: bool = False, activation: str = "tanh",
-                 generator: torch.Generator | None = None):
+    def __init__(
+        self,
+        n_in: int,
+        n_out: int,
+        channels: int,
+        channels_out: int,
+        hidden: Sequence[int],
+        nb: int,
+        na: int,
+        nb2: int,
+        na2: int,
+        nk: int = 0,
+        linear: bool = False,
+        activation: str = "tanh",
+        generator: torch.Generator | None = None,
+    ):
         super().__init__()
         gen = generator or torch.Generator().manual_seed(0)
         self.activation = activation

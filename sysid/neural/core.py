@@ -26,8 +26,18 @@ import torch
 from numba import njit
 
 __all__ = [
-    "regressor_lag", "ACTIVATIONS", "LagData", "FlatMLP", "RMSprop", "mlp_forward_np", "free_run_mlp", "k_step_mlp",
-    "count_mlp_parameters", "n_mlp_weights", "least_squares_linear", "merge_ensemble",
+    "regressor_lag",
+    "ACTIVATIONS",
+    "LagData",
+    "FlatMLP",
+    "RMSprop",
+    "mlp_forward_np",
+    "free_run_mlp",
+    "k_step_mlp",
+    "count_mlp_parameters",
+    "n_mlp_weights",
+    "least_squares_linear",
+    "merge_ensemble",
 ]
 
 ACTIVATIONS = ("sigmoid", "tanh", "relu")
@@ -80,8 +90,8 @@ def merge_ensemble(
     o = 0
     for layer in range(n_layers):
         a, b = sizes[layer], sizes[layer + 1]
-        Ws = [m[o:o + a * b].reshape(b, a) for m in members]
-        bs = [m[o + a * b:o + a * b + b] for m in members]
+        Ws = [m[o : o + a * b].reshape(b, a) for m in members]
+        bs = [m[o + a * b : o + a * b + b] for m in members]
         o += a * b + b
         if n_layers == 1:  # no hidden layer: the mean of affine maps
             W, bias = sum(Ws) / k, sum(bs) / k
@@ -90,13 +100,13 @@ def merge_ensemble(
         elif layer < n_layers - 1:
             W = np.zeros((k * b, k * a))
             for i, Wi in enumerate(Ws):
-                W[i * b:(i + 1) * b, i * a:(i + 1) * a] = Wi
+                W[i * b : (i + 1) * b, i * a : (i + 1) * a] = Wi
             bias = np.concatenate(bs)
         else:
             W, bias = np.concatenate(Ws, axis=1) / k, sum(bs) / k
         parts += [W.reshape(-1), bias]  # type: ignore[union-attr, list-item]  # sum() of arrays is an array
     if linear:
-        Ls = [m[o:o + sizes[0] * sizes[-1]] for m in members]
+        Ls = [m[o : o + sizes[0] * sizes[-1]] for m in members]
         parts.append(Ls[0].copy() if all(np.array_equal(L, Ls[0]) for L in Ls) else sum(Ls) / k)  # type: ignore[arg-type]
     return np.concatenate(parts), merged_sizes
 
@@ -105,8 +115,16 @@ def merge_ensemble(
 class LagData:
     """Φ and Y (eq. 2-14, 2-15) for a list of normalised ``(u, y)`` pairs, 2-D arrays ``(N, channels)``."""
 
-    def __init__(self, pairs: Sequence[tuple[np.ndarray, np.ndarray]], ny: int, nu: int,
-                 device: torch.device, dtype: torch.dtype = torch.float32, prebuild: bool | None = None, nk: int = 1):
+    def __init__(
+        self,
+        pairs: Sequence[tuple[np.ndarray, np.ndarray]],
+        ny: int,
+        nu: int,
+        device: torch.device,
+        dtype: torch.dtype = torch.float32,
+        prebuild: bool | None = None,
+        nk: int = 1,
+    ):
         self.ny, self.nu, self.nk = int(ny), int(nu), int(nk)
         self.lag = regressor_lag(self.ny, self.nu, self.nk)
         self.ny_ch = pairs[0][1].shape[1]
@@ -163,8 +181,9 @@ class LagData:
         return np.concatenate(out) if out else np.zeros(0, dtype=np.int64)
 
 
-def least_squares_linear(pairs: Sequence[tuple[np.ndarray, np.ndarray]], ny: int, nu: int, nk: int = 1,
-                         chunk: int = 20_000) -> tuple[np.ndarray, np.ndarray]:
+def least_squares_linear(
+    pairs: Sequence[tuple[np.ndarray, np.ndarray]], ny: int, nu: int, nk: int = 1, chunk: int = 20_000
+) -> tuple[np.ndarray, np.ndarray]:
     """Least-squares linear model of the NARX regressor: ``y(t) ≈ L φ(t) + c`` over every regressor row of the
     (normalised) ``(u, y)`` pairs, φ(t) as in :class:`LagData` (eq. 2-14/2-15).
 
@@ -178,8 +197,9 @@ def least_squares_linear(pairs: Sequence[tuple[np.ndarray, np.ndarray]], ny: int
     for u, y in pairs:
         for a0 in range(lag, y.shape[0], chunk):
             times = np.arange(a0, min(a0 + chunk, y.shape[0]))
-            X = np.concatenate([lag_matrix_np(y, ny, times), lag_matrix_np(u, nu, times, first=nk),
-                                np.ones((times.size, 1))], axis=1)
+            X = np.concatenate(
+                [lag_matrix_np(y, ny, times), lag_matrix_np(u, nu, times, first=nk), np.ones((times.size, 1))], axis=1
+            )
             G = X.T @ X if G is None else G + X.T @ X
             b = X.T @ y[times] if b is None else b + X.T @ y[times]
     d = np.sqrt(np.maximum(np.diag(G), 1e-300))
@@ -196,8 +216,17 @@ class FlatMLP(torch.nn.Module):
     optimiser updates all 2501 weights of the 4 × 25 net with a handful of whole-buffer operations.
     """
 
-    def __init__(self, n_in: int, hidden: Sequence[int], n_out: int, activation: str, generator: torch.Generator,
-                 device: torch.device, dtype: torch.dtype = torch.float32, linear: bool = False):
+    def __init__(
+        self,
+        n_in: int,
+        hidden: Sequence[int],
+        n_out: int,
+        activation: str,
+        generator: torch.Generator,
+        device: torch.device,
+        dtype: torch.dtype = torch.float32,
+        linear: bool = False,
+    ):
         super().__init__()
         sizes = [int(n_in), *[int(h) for h in hidden], int(n_out)]
         self.sizes = sizes
@@ -210,7 +239,7 @@ class FlatMLP(torch.nn.Module):
         o = 0
         for a, b in zip(sizes[:-1], sizes[1:]):
             lim = (6.0 / (a + b)) ** 0.5
-            init[o:o + a * b] = (torch.rand(a * b, generator=generator, dtype=torch.float64) * 2 - 1) * lim
+            init[o : o + a * b] = (torch.rand(a * b, generator=generator, dtype=torch.float64) * 2 - 1) * lim
             o += a * b + b  # biases stay zero
         self.flat = torch.nn.Parameter(init.to(device=device, dtype=dtype))
         self.flat.grad = torch.zeros_like(self.flat)
@@ -218,22 +247,22 @@ class FlatMLP(torch.nn.Module):
         o = 0
         for a, b in zip(sizes[:-1], sizes[1:]):
             W = torch.empty(0, dtype=dtype, device=device)
-            W.data = self.flat.data[o:o + a * b].view(b, a)
+            W.data = self.flat.data[o : o + a * b].view(b, a)
             W.requires_grad_(True)
-            W.grad = self.flat.grad[o:o + a * b].view(b, a)
+            W.grad = self.flat.grad[o : o + a * b].view(b, a)
             o += a * b
             bias = torch.empty(0, dtype=dtype, device=device)
-            bias.data = self.flat.data[o:o + b]
+            bias.data = self.flat.data[o : o + b]
             bias.requires_grad_(True)
-            bias.grad = self.flat.grad[o:o + b]
+            bias.grad = self.flat.grad[o : o + b]
             o += b
             self.layers.append((W, bias))
         self.L: torch.Tensor | None = None
         if self.linear:  # the bypass starts at zero; init_linear() sets it (e.g. to least squares)
             L = torch.empty(0, dtype=dtype, device=device)
-            L.data = self.flat.data[o:o + n_in * n_out].view(n_out, n_in)
+            L.data = self.flat.data[o : o + n_in * n_out].view(n_out, n_in)
             L.requires_grad_(True)
-            L.grad = self.flat.grad[o:o + n_in * n_out].view(n_out, n_in)
+            L.grad = self.flat.grad[o : o + n_in * n_out].view(n_out, n_in)
             self.L = L
 
     @torch.no_grad()
@@ -311,8 +340,9 @@ class FlatMLP(torch.nn.Module):
         """True while every layer's gradient still lives in ``flat.grad`` (autograd accumulates in place)."""
         g = self.flat.grad
         leaves = [W for W, _ in self.layers] + ([self.L] if self.L is not None else [])
-        return all(W.grad is not None and W.grad.untyped_storage().data_ptr() == g.untyped_storage().data_ptr()
-                   for W in leaves)
+        return all(
+            W.grad is not None and W.grad.untyped_storage().data_ptr() == g.untyped_storage().data_ptr() for W in leaves
+        )
 
     def weights_np(self) -> np.ndarray:
         return self.flat.detach().to("cpu", torch.float64).numpy().copy()
@@ -336,9 +366,9 @@ class RMSprop:
     def step(self) -> None:
         g = self.p.grad
         p = self.p.data
-        self.v.mul_(self.alpha).addcmul_(g, g, value=1.0 - self.alpha)            # eq. 2-25
+        self.v.mul_(self.alpha).addcmul_(g, g, value=1.0 - self.alpha)  # eq. 2-25
         torch.add(self.v, self.eps, out=self._tmp).sqrt_()
-        p.addcdiv_(g, self._tmp, value=-self.lr)                                   # eq. 2-26
+        p.addcdiv_(g, self._tmp, value=-self.lr)  # eq. 2-26
 
 
 # ---------------------------------------------------------------------------------------------- prediction
@@ -359,14 +389,14 @@ def mlp_forward_np(
     last = len(sizes) - 2
     x0 = x
     for i, (a, b) in enumerate(zip(sizes[:-1], sizes[1:])):
-        W = flat[o:o + a * b].reshape(b, a)
+        W = flat[o : o + a * b].reshape(b, a)
         o += a * b
-        x = x @ W.T + flat[o:o + b]
+        x = x @ W.T + flat[o : o + b]
         o += b
         if i < last:
             x = _act_np(x, code)
     if linear:
-        x = x + x0 @ flat[o:o + sizes[0] * sizes[-1]].reshape(sizes[-1], sizes[0]).T
+        x = x + x0 @ flat[o : o + sizes[0] * sizes[-1]].reshape(sizes[-1], sizes[0]).T
     return x
 
 
@@ -445,15 +475,35 @@ def _free_run_kernel(flat, sizes, code, y0, un, ny, nu, nk, start, bound, linear
     return out, diverged
 
 
-def free_run_mlp(flat: np.ndarray, sizes: Sequence[int], code: int, yn: np.ndarray, un: np.ndarray,
-                 ny: int, nu: int, bound: float, nk: int = 1, linear: bool = False) -> tuple[np.ndarray, int]:
+def free_run_mlp(
+    flat: np.ndarray,
+    sizes: Sequence[int],
+    code: int,
+    yn: np.ndarray,
+    un: np.ndarray,
+    ny: int,
+    nu: int,
+    bound: float,
+    nk: int = 1,
+    linear: bool = False,
+) -> tuple[np.ndarray, int]:
     """Free-run simulation (eq. 2-29/2-30) in normalised units: the first ``regressor_lag`` samples of ``yn``
     are the measured initial conditions, the rest is simulated from ``un``. Returns (ŷ, diverged index or -1).
     ``linear``: the network has the linear bypass (see :class:`FlatMLP`)."""
     lag = regressor_lag(ny, nu, nk)
-    return _free_run_kernel(np.ascontiguousarray(flat, dtype=np.float64), np.asarray(sizes, dtype=np.int64), int(code),
-                            np.ascontiguousarray(yn, dtype=np.float64), np.ascontiguousarray(un, dtype=np.float64),
-                            int(ny), int(nu), int(nk), int(lag), float(bound), bool(linear))
+    return _free_run_kernel(
+        np.ascontiguousarray(flat, dtype=np.float64),
+        np.asarray(sizes, dtype=np.int64),
+        int(code),
+        np.ascontiguousarray(yn, dtype=np.float64),
+        np.ascontiguousarray(un, dtype=np.float64),
+        int(ny),
+        int(nu),
+        int(nk),
+        int(lag),
+        float(bound),
+        bool(linear),
+    )
 
 
 def lag_matrix_np(series: np.ndarray, lags: int, times: np.ndarray, first: int = 1) -> np.ndarray:
@@ -462,8 +512,19 @@ def lag_matrix_np(series: np.ndarray, lags: int, times: np.ndarray, first: int =
     return series[idx].reshape(times.size, -1)
 
 
-def k_step_mlp(flat: np.ndarray, sizes: Sequence[int], code: int, yn: np.ndarray, un: np.ndarray, ny: int, nu: int,
-               k: int, bound: float, nk: int = 1, linear: bool = False) -> np.ndarray:
+def k_step_mlp(
+    flat: np.ndarray,
+    sizes: Sequence[int],
+    code: int,
+    yn: np.ndarray,
+    un: np.ndarray,
+    ny: int,
+    nu: int,
+    k: int,
+    bound: float,
+    nk: int = 1,
+    linear: bool = False,
+) -> np.ndarray:
     """k-step-ahead prediction ŷ(t | t-k) at every sample t ≥ lag, vectorised over t.
 
     With P_j(t) = ŷ(t | t-j-1), P_0 is the one-step prediction and P_j uses, for lag i, the earlier

@@ -44,11 +44,12 @@ def _np(t: torch.Tensor) -> np.ndarray:
 def _shifted_dots(gt: np.ndarray, x: np.ndarray, n: int, first: int) -> np.ndarray:
     """``Σ_batch Σ_s gt(s+j) x(s)`` for j = first … first+n-1 (arrays (B, T))."""
     T = x.shape[1]
-    return np.array([float(np.vdot(gt[:, j:], x[:, :T - j])) if j < T else 0.0 for j in range(first, first + n)])
+    return np.array([float(np.vdot(gt[:, j:], x[:, : T - j])) if j < T else 0.0 for j in range(first, first + n)])
 
 
-def _pair_backward(g: np.ndarray, u: np.ndarray, y: np.ndarray, b: np.ndarray, a: np.ndarray,
-                   gu: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+def _pair_backward(
+    g: np.ndarray, u: np.ndarray, y: np.ndarray, b: np.ndarray, a: np.ndarray, gu: np.ndarray | None
+) -> tuple[np.ndarray, np.ndarray]:
     """Gradients of one pair y = B/A u (arrays (B, T)) from its output gradient ``g``: returns (∂L/∂b, ∂L/∂a) and,
     when ``gu`` is given, adds ∂L/∂u to it in place."""
     gt = np.ascontiguousarray(lfilter([1.0], np.concatenate([[1.0], a]), g[:, ::-1], axis=1)[:, ::-1])  # g̃ = (1/A)ᵀ g
@@ -56,7 +57,7 @@ def _pair_backward(g: np.ndarray, u: np.ndarray, y: np.ndarray, b: np.ndarray, a
         T = u.shape[1]
         for j, bj in enumerate(b):
             if j < T:
-                gu[:, :T - j] += bj * gt[:, j:]
+                gu[:, : T - j] += bj * gt[:, j:]
     return _shifted_dots(gt, u, b.size, 0), -_shifted_dots(gt, y, a.size, 1)
 
 
@@ -78,8 +79,11 @@ class IIRFilter(torch.autograd.Function):
         gun = np.zeros_like(un) if ctx.needs_input_grad[0] else None
         gb, ga = _pair_backward(_np(grad_y), un, ctx.y, _np(b), _np(a), gun)
         as_t = lambda x, like: torch.as_tensor(x, dtype=like.dtype, device=like.device)  # noqa: E731
-        return (None if gun is None else as_t(gun, u), as_t(gb, b) if ctx.needs_input_grad[1] else None,
-                as_t(ga, a) if ctx.needs_input_grad[2] else None)
+        return (
+            None if gun is None else as_t(gun, u),
+            as_t(gb, b) if ctx.needs_input_grad[1] else None,
+            as_t(ga, a) if ctx.needs_input_grad[2] else None,
+        )
 
 
 def iir_filter(u: torch.Tensor, b: torch.Tensor, a: torch.Tensor) -> torch.Tensor:
@@ -115,13 +119,20 @@ class MIMOFilter(torch.autograd.Function):
         gb, ga = np.zeros_like(bn), np.zeros_like(an)
         for o in range(n_out):
             for i in range(n_in):
-                gb[o, i], ga[o, i] = _pair_backward(g[o], un[i], ys[o, i], bn[o, i], an[o, i],
-                                                    None if gun is None else gun[i])
+                gb[o, i], ga[o, i] = _pair_backward(
+                    g[o], un[i], ys[o, i], bn[o, i], an[o, i], None if gun is None else gun[i]
+                )
         dtype, device = ctx.u_meta
-        gu = None if gun is None else torch.as_tensor(np.ascontiguousarray(np.moveaxis(gun, 0, 2)), dtype=dtype,
-                                                      device=device)
-        return (gu, torch.as_tensor(gb, dtype=b.dtype, device=b.device),
-                torch.as_tensor(ga, dtype=a.dtype, device=a.device))
+        gu = (
+            None
+            if gun is None
+            else torch.as_tensor(np.ascontiguousarray(np.moveaxis(gun, 0, 2)), dtype=dtype, device=device)
+        )
+        return (
+            gu,
+            torch.as_tensor(gb, dtype=b.dtype, device=b.device),
+            torch.as_tensor(ga, dtype=a.dtype, device=a.device),
+        )
 
 
 def filter_np(u: np.ndarray, b: np.ndarray, a: np.ndarray, nk: int = 0) -> np.ndarray:
@@ -129,7 +140,7 @@ def filter_np(u: np.ndarray, b: np.ndarray, a: np.ndarray, nk: int = 0) -> np.nd
     ``a`` (n_out, n_in, na) → ``y`` (B, T, n_out), each output the sum over inputs of its pair's filter."""
     u = np.asarray(u, dtype=np.float64)
     if nk:
-        u = np.concatenate([np.zeros((u.shape[0], nk, u.shape[2])), u[:, :u.shape[1] - nk]], axis=1)
+        u = np.concatenate([np.zeros((u.shape[0], nk, u.shape[2])), u[:, : u.shape[1] - nk]], axis=1)
     n_out, n_in = b.shape[:2]
     y = np.zeros((u.shape[0], u.shape[1], n_out))
     for o in range(n_out):
@@ -146,8 +157,16 @@ class LinearDynamic(torch.nn.Module):
     perturbation, numerators uniform in ±1/sqrt(n_in · nb) (a unit-size response summed over the inputs).
     """
 
-    def __init__(self, n_in: int, n_out: int, nb: int, na: int, nk: int = 0, generator: torch.Generator | None = None,
-                 dtype: torch.dtype = torch.float64):
+    def __init__(
+        self,
+        n_in: int,
+        n_out: int,
+        nb: int,
+        na: int,
+        nk: int = 0,
+        generator: torch.Generator | None = None,
+        dtype: torch.dtype = torch.float64,
+    ):
         super().__init__()
         self.n_in, self.n_out, self.nb, self.na, self.nk = int(n_in), int(n_out), int(nb), int(na), int(nk)
         gen = generator or torch.Generator().manual_seed(0)
@@ -159,7 +178,7 @@ class LinearDynamic(torch.nn.Module):
 
     def forward(self, u: torch.Tensor) -> torch.Tensor:
         if self.nk:
-            u = torch.nn.functional.pad(u, (0, 0, self.nk, 0))[:, :u.shape[1]]
+            u = torch.nn.functional.pad(u, (0, 0, self.nk, 0))[:, : u.shape[1]]
         return MIMOFilter.apply(u, self.b, self.a)
 
     def numpy_weights(self) -> dict[str, np.ndarray]:

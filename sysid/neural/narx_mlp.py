@@ -94,10 +94,12 @@ class _NeuralNARXBase(TorchFileSave, Identifier):
         if not isinstance(nk, (int, np.integer)) or isinstance(nk, bool) or not 0 <= nk <= 100_000:
             raise ConfigError(f"{self.name}: nk={nk!r} must be an integer in [0, 100000] (input delay in samples)")
         hidden = list(self.hidden) if isinstance(self.hidden, (list, tuple)) else None
-        if hidden is None or not all(isinstance(h, (int, np.integer)) and not isinstance(h, bool) and 1 <= h <= 65536
-                                     for h in hidden):
-            raise ConfigError(f"{self.name}: hidden={self.hidden!r} must be a list of layer widths ≥ 1, "
-                              "e.g. hidden=25-25-25-25")
+        if hidden is None or not all(
+            isinstance(h, (int, np.integer)) and not isinstance(h, bool) and 1 <= h <= 65536 for h in hidden
+        ):
+            raise ConfigError(
+                f"{self.name}: hidden={self.hidden!r} must be a list of layer widths ≥ 1, e.g. hidden=25-25-25-25"
+            )
         self.hidden = [int(h) for h in hidden]
         if self.activation not in ACTIVATIONS:
             raise ConfigError(f"{self.name}: activation={self.activation!r} not one of: {', '.join(ACTIVATIONS)}")
@@ -111,13 +113,17 @@ class _NeuralNARXBase(TorchFileSave, Identifier):
             raise ConfigError(f"{self.name}: seed={self.seed!r} must be an integer")
         if not isinstance(self.linear, (bool, np.bool_)):
             raise ConfigError(f"{self.name}: linear={self.linear!r} must be true or false")
-        if not (isinstance(self.select_tail, (int, float)) and not isinstance(self.select_tail, bool)
-                and 0 <= self.select_tail < 0.5):
+        if not (
+            isinstance(self.select_tail, (int, float))
+            and not isinstance(self.select_tail, bool)
+            and 0 <= self.select_tail < 0.5
+        ):
             raise ConfigError(f"{self.name}: select_tail={self.select_tail!r} must be a fraction in [0, 0.5)")
         k = getattr(self, "ensemble", 1)
         if not isinstance(k, (int, np.integer)) or isinstance(k, bool) or not 1 <= k <= MAX_ENSEMBLE:
-            raise ConfigError(f"{self.name}: ensemble={k!r} must be an integer in [1, {MAX_ENSEMBLE}] "
-                              "(networks averaged)")
+            raise ConfigError(
+                f"{self.name}: ensemble={k!r} must be an integer in [1, {MAX_ENSEMBLE}] (networks averaged)"
+            )
         train_dtype(getattr(self, "dtype", "float32"), self.name)
         if check_device:  # a saved model trained on a GPU must still load (and predict) on a CPU machine
             select_device(self.device)
@@ -139,10 +145,12 @@ class _NeuralNARXBase(TorchFileSave, Identifier):
             lag = regressor_lag(self.ny, self.nu, self.nk)
             cut = len(last) - n_hold
             if n_hold < 1 or cut - lag < max(1, int(getattr(self, "window", 1))) or cut < lag + 1:
-                raise DataError(f"{self.name}: select_tail={self.select_tail} leaves {cut} training / {n_hold} "
-                                f"held-out samples of {last.source}, need more than the lag {lag} and one window "
-                                "in each")
-            self._tail = last[cut - lag:]  # the held-out samples with their lag of measured initial conditions
+                raise DataError(
+                    f"{self.name}: select_tail={self.select_tail} leaves {cut} training / {n_hold} "
+                    f"held-out samples of {last.source}, need more than the lag {lag} and one window "
+                    "in each"
+                )
+            self._tail = last[cut - lag :]  # the held-out samples with their lag of measured initial conditions
             recs = [*recs[:-1], last[:cut]]
         try:
             return self._fit(recs)
@@ -153,9 +161,19 @@ class _NeuralNARXBase(TorchFileSave, Identifier):
         """Free-run R² (normalised units; R² is scale-free) on the held-out tail, after the initial conditions."""
         from sysid.evaluation.metrics import r2
 
-        (un, yn), = normalised_pairs([self._tail], self.normaliser_)
-        yh, div = free_run_mlp(net.weights_np(), list(net.sizes), ACT_CODE[self.activation], yn, un, self.ny, self.nu,
-                               DIVERGENCE_BOUND, self.nk, self.linear)
+        ((un, yn),) = normalised_pairs([self._tail], self.normaliser_)
+        yh, div = free_run_mlp(
+            net.weights_np(),
+            list(net.sizes),
+            ACT_CODE[self.activation],
+            yn,
+            un,
+            self.ny,
+            self.nu,
+            DIVERGENCE_BOUND,
+            self.nk,
+            self.linear,
+        )
         lag = regressor_lag(self.ny, self.nu, self.nk)
         return -np.inf if div >= 0 or not np.isfinite(yh).all() else float(r2(yn, yh, lag))
 
@@ -213,8 +231,11 @@ class _NeuralNARXBase(TorchFileSave, Identifier):
         self.fit_seconds_ = time.perf_counter() - t0
         self.diverged_at_ = None
         if not np.isfinite(self.weights_).all():
-            warnings.warn(f"{self.name}: training diverged (non-finite weights); predictions will be nan",
-                          DivergenceWarning, stacklevel=2)
+            warnings.warn(
+                f"{self.name}: training diverged (non-finite weights); predictions will be nan",
+                DivergenceWarning,
+                stacklevel=2,
+            )
         return self
 
     def _real_n_parameters(self, n_in: int, n_out: int) -> int:
@@ -222,11 +243,20 @@ class _NeuralNARXBase(TorchFileSave, Identifier):
         same least-squares ARX, fixed, in every member). The zeros between members in the merged network
         (:func:`merge_ensemble`) are not parameters and are not counted."""
         k = int(getattr(self, "ensemble", 1))
-        return (k * count_mlp_parameters(n_in, self.hidden, n_out, False)
-                + (int(n_in) * int(n_out) if self.linear else 0))
+        return k * count_mlp_parameters(n_in, self.hidden, n_out, False) + (
+            int(n_in) * int(n_out) if self.linear else 0
+        )
 
-    def _train_one_step(self, net: FlatMLP, data: LagData, gen: torch.Generator, epochs: int, lr: float,
-                        batch_size: int | None = None, select: bool = False) -> None:
+    def _train_one_step(
+        self,
+        net: FlatMLP,
+        data: LagData,
+        gen: torch.Generator,
+        epochs: int,
+        lr: float,
+        batch_size: int | None = None,
+        select: bool = False,
+    ) -> None:
         """Series-parallel training (eq. 2-14/2-15): shuffled mini-batches of regressor rows, MSE, RMSprop.
         ``select`` (with a held-out tail): keep the weights, initial or after an epoch, of best tail free-run R²."""
         best = (self._tail_r2(net), 0, net.flat.detach().clone()) if select and self._tail is not None else None
@@ -277,32 +307,51 @@ class _NeuralNARXBase(TorchFileSave, Identifier):
         check_predict_input(self, record, horizon)
         lag = self.max_lag_
         n = len(record)
-        (un, yn), = normalised_pairs([record], self.normaliser_)
+        ((un, yn),) = normalised_pairs([record], self.normaliser_)
         code = ACT_CODE[self.activation]
         self.diverged_at_ = None
         if horizon is None or horizon >= n - lag:
-            yhat, div = free_run_mlp(self.weights_, self.sizes_, code, yn, un, self.ny, self.nu, DIVERGENCE_BOUND,
-                                     self.nk, self.linear)
+            yhat, div = free_run_mlp(
+                self.weights_, self.sizes_, code, yn, un, self.ny, self.nu, DIVERGENCE_BOUND, self.nk, self.linear
+            )
             if div >= 0:
                 self.diverged_at_ = int(div)
-                warnings.warn(f"{self.name}: free-run simulation diverged at sample {div} of {n}; the rest is nan",
-                              DivergenceWarning, stacklevel=2)
+                warnings.warn(
+                    f"{self.name}: free-run simulation diverged at sample {div} of {n}; the rest is nan",
+                    DivergenceWarning,
+                    stacklevel=2,
+                )
         elif horizon == 1:
             times = np.arange(lag, n)
-            x = np.concatenate([lag_matrix_np(yn, self.ny, times), lag_matrix_np(un, self.nu, times, first=self.nk)],
-                               axis=1)
+            x = np.concatenate(
+                [lag_matrix_np(yn, self.ny, times), lag_matrix_np(un, self.nu, times, first=self.nk)], axis=1
+            )
             yhat = yn.copy()
             with np.errstate(over="ignore", invalid="ignore"):
                 yhat[lag:] = mlp_forward_np(self.weights_, self.sizes_, code, x, self.linear)
         else:
-            yhat = k_step_mlp(self.weights_, self.sizes_, code, yn, un, self.ny, self.nu, int(horizon),
-                              DIVERGENCE_BOUND, self.nk, self.linear)
+            yhat = k_step_mlp(
+                self.weights_,
+                self.sizes_,
+                code,
+                yn,
+                un,
+                self.ny,
+                self.nu,
+                int(horizon),
+                DIVERGENCE_BOUND,
+                self.nk,
+                self.linear,
+            )
         if horizon is not None and not np.isfinite(yhat).all():
             bad = np.flatnonzero(~np.isfinite(yhat).all(axis=1))
             self.diverged_at_ = int(bad[0])
             yhat[bad] = np.nan
-            warnings.warn(f"{self.name}: {bad.size} non-finite {horizon}-step predictions, first at sample {bad[0]}",
-                          DivergenceWarning, stacklevel=2)
+            warnings.warn(
+                f"{self.name}: {bad.size} non-finite {horizon}-step predictions, first at sample {bad[0]}",
+                DivergenceWarning,
+                stacklevel=2,
+            )
         out = self.normaliser_.inverse_y(yhat)
         out[:lag] = _as2d(record.y)[:lag]  # initial conditions copied exactly, not through the scaling round trip
         return out[:, 0] if record.y.ndim == 1 else out
@@ -311,17 +360,28 @@ class _NeuralNARXBase(TorchFileSave, Identifier):
     def describe(self) -> dict[str, Any]:
         d = super().describe()
         if hasattr(self, "weights_"):
-            d.update({
-                "structure": {"inputs": self.sizes_[0], "hidden": list(self.hidden), "outputs": self.sizes_[-1],
-                              "activation": self.activation, "ny": self.ny, "nu": self.nu, "nk": self.nk,
-                              "n_y": self.ny, "n_u": self.nu,  # old key names, kept for readers of earlier output
-                              "linear": bool(self.linear), "ensemble": int(getattr(self, "ensemble", 1))},
-                "terms": [],
-                "max_lag": self.max_lag_,
-                "device": self.device_used_,
-                "final_loss": self.loss_history_[-1] if self.loss_history_ else None,
-                "epochs_run": len(self.loss_history_),
-            })
+            d.update(
+                {
+                    "structure": {
+                        "inputs": self.sizes_[0],
+                        "hidden": list(self.hidden),
+                        "outputs": self.sizes_[-1],
+                        "activation": self.activation,
+                        "ny": self.ny,
+                        "nu": self.nu,
+                        "nk": self.nk,
+                        "n_y": self.ny,
+                        "n_u": self.nu,  # old key names, kept for readers of earlier output
+                        "linear": bool(self.linear),
+                        "ensemble": int(getattr(self, "ensemble", 1)),
+                    },
+                    "terms": [],
+                    "max_lag": self.max_lag_,
+                    "device": self.device_used_,
+                    "final_loss": self.loss_history_[-1] if self.loss_history_ else None,
+                    "epochs_run": len(self.loss_history_),
+                }
+            )
         return d
 
     def _state(self) -> dict[str, Any]:
@@ -343,8 +403,10 @@ class _NeuralNARXBase(TorchFileSave, Identifier):
         self.sizes_ = [int(s) for s in state["sizes"]]
         expected = count_mlp_parameters(self.sizes_[0], self.sizes_[1:-1], self.sizes_[-1], self.linear)
         if expected != self.weights_.size:
-            raise DataError(f"{self.name}: saved weights ({self.weights_.size}) do not match layer sizes {self.sizes_}"
-                            f"{' with the linear bypass' if self.linear else ''} ({expected})")
+            raise DataError(
+                f"{self.name}: saved weights ({self.weights_.size}) do not match layer sizes {self.sizes_}"
+                f"{' with the linear bypass' if self.linear else ''} ({expected})"
+            )
         self.normaliser_ = Normaliser.from_dict(state["normaliser"])
         self.n_inputs_, self.n_outputs_ = int(state["n_inputs"]), int(state["n_outputs"])
         self.loss_history_ = [float(v) for v in state.get("loss_history", [])]
@@ -352,12 +414,13 @@ class _NeuralNARXBase(TorchFileSave, Identifier):
         self.fit_seconds_ = float(state.get("fit_seconds", float("nan")))
         k = int(getattr(self, "ensemble", 1))
         if self.sizes_[1:-1] != [k * h for h in self.hidden]:
-            raise DataError(f"{self.name}: saved layer sizes {self.sizes_} do not match hidden={self.hidden} with "
-                            f"ensemble={k} (merged hidden widths are k × hidden)")
+            raise DataError(
+                f"{self.name}: saved layer sizes {self.sizes_} do not match hidden={self.hidden} with "
+                f"ensemble={k} (merged hidden widths are k × hidden)"
+            )
         self.max_lag_ = regressor_lag(self.ny, self.nu, self.nk)
         self.n_parameters_ = self._real_n_parameters(self.sizes_[0], self.sizes_[-1])
         self.diverged_at_ = None
-
 
 
 class NARXMLP(_NeuralNARXBase):
@@ -409,10 +472,23 @@ class NARXMLP(_NeuralNARXBase):
 
     name = "narx-mlp"
 
-    def __init__(self, ny: int = 10, nu: int = 10, hidden: Sequence[int] = (25, 25, 25, 25), activation: str = "relu",
-                 lr: float = 1e-4, batch_size: int = 128, epochs: int = 100, seed: int = 0, device: str = "auto",
-                 nk: int = 1, linear: bool = False, select_tail: float = 0.0, ensemble: int = 1,
-                 dtype: str = "float32"):
+    def __init__(
+        self,
+        ny: int = 10,
+        nu: int = 10,
+        hidden: Sequence[int] = (25, 25, 25, 25),
+        activation: str = "relu",
+        lr: float = 1e-4,
+        batch_size: int = 128,
+        epochs: int = 100,
+        seed: int = 0,
+        device: str = "auto",
+        nk: int = 1,
+        linear: bool = False,
+        select_tail: float = 0.0,
+        ensemble: int = 1,
+        dtype: str = "float32",
+    ):
         self.dtype = dtype
         self.linear = linear
         self.select_tail = select_tail
@@ -468,11 +544,27 @@ class NARXMLPSim(_NeuralNARXBase):
 
     name = "narx-mlp-sim"
 
-    def __init__(self, ny: int = 10, nu: int = 10, hidden: Sequence[int] = (25, 25, 25, 25), activation: str = "relu",
-                 lr: float = 1e-3, batch_size: int = 32, epochs: int = 100, seed: int = 0, device: str = "auto",
-                 window: int = 50, pretrain_epochs: int = 10, pretrain_lr: float = 1e-3, nk: int = 1,
-                 select_tail: float = 0.0, pretrain_batch_size: int | None = None, linear: bool = False,
-                 ensemble: int = 1, dtype: str = "float32"):
+    def __init__(
+        self,
+        ny: int = 10,
+        nu: int = 10,
+        hidden: Sequence[int] = (25, 25, 25, 25),
+        activation: str = "relu",
+        lr: float = 1e-3,
+        batch_size: int = 32,
+        epochs: int = 100,
+        seed: int = 0,
+        device: str = "auto",
+        window: int = 50,
+        pretrain_epochs: int = 10,
+        pretrain_lr: float = 1e-3,
+        nk: int = 1,
+        select_tail: float = 0.0,
+        pretrain_batch_size: int | None = None,
+        linear: bool = False,
+        ensemble: int = 1,
+        dtype: str = "float32",
+    ):
         self.dtype = dtype
         self.linear = linear
         self.ensemble = ensemble
@@ -496,10 +588,14 @@ class NARXMLPSim(_NeuralNARXBase):
         super()._check_params(check_device)
         pb = self.pretrain_batch_size
         if pb is not None and (not isinstance(pb, (int, np.integer)) or isinstance(pb, bool) or pb < 1):
-            raise ConfigError(f"{self.name}: pretrain_batch_size={pb!r} must be a positive integer "
-                              "(or None: batch_size)")
-        if (not isinstance(self.window, (int, np.integer)) or isinstance(self.window, bool)
-                or not 1 <= self.window <= 100_000):
+            raise ConfigError(
+                f"{self.name}: pretrain_batch_size={pb!r} must be a positive integer (or None: batch_size)"
+            )
+        if (
+            not isinstance(self.window, (int, np.integer))
+            or isinstance(self.window, bool)
+            or not 1 <= self.window <= 100_000
+        ):
             raise ConfigError(f"{self.name}: window={self.window!r} must be an integer in [1, 100000]")
         if not isinstance(self.pretrain_epochs, (int, np.integer)) or self.pretrain_epochs < 0:
             raise ConfigError(f"{self.name}: pretrain_epochs={self.pretrain_epochs!r} must be a non-negative integer")
@@ -536,7 +632,7 @@ class NARXMLPSim(_NeuralNARXBase):
                 for j in range(T):
                     yh = net(torch.cat([yreg, Xw[:, j, nyr:]], dim=1))
                     preds.append(yh)
-                    yreg = torch.cat([yh, yreg[:, :nyr - ch]], dim=1) if nyr > ch else yh
+                    yreg = torch.cat([yh, yreg[:, : nyr - ch]], dim=1) if nyr > ch else yh
                 d = torch.stack(preds, dim=1) - target
                 loss = (d * d).mean()
                 opt.zero_grad()

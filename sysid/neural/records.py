@@ -14,8 +14,15 @@ from sysid.base import Identifier, check_records
 from sysid.data.record import Normaliser, Record
 from sysid.errors import ConfigError, DataError
 
-__all__ = ["MAX_LAG", "DIVERGENCE_BOUND", "normalised_pairs", "fit_normaliser", "check_channels", "check_predict_input",
-           "hidden_widths"]
+__all__ = [
+    "MAX_LAG",
+    "DIVERGENCE_BOUND",
+    "normalised_pairs",
+    "fit_normaliser",
+    "check_channels",
+    "check_predict_input",
+    "hidden_widths",
+]
 
 MAX_LAG = 1024
 # A simulated output beyond this many standard deviations of the estimation output is a divergence.
@@ -52,8 +59,10 @@ def check_predict_input(model: Identifier, record: Record, horizon: int | None) 
     more samples than the model's lag, and a horizon that is a positive integer or ``None`` (free run)."""
     record.require_output()
     if (record.n_inputs, record.n_outputs) != (model.n_inputs_, model.n_outputs_):
-        raise DataError(f"{record.source}: {record.n_inputs} inputs / {record.n_outputs} outputs, model has "
-                        f"{model.n_inputs_} / {model.n_outputs_}")
+        raise DataError(
+            f"{record.source}: {record.n_inputs} inputs / {record.n_outputs} outputs, model has "
+            f"{model.n_inputs_} / {model.n_outputs_}"
+        )
     if len(record) <= model.max_lag_:
         raise DataError(f"{record.source}: {len(record)} samples, need more than the model's lag {model.max_lag_}")
     if horizon is not None and (not isinstance(horizon, (int, np.integer)) or isinstance(horizon, bool) or horizon < 1):
@@ -67,7 +76,8 @@ def hidden_widths(v, key: str, name: str) -> list[int]:
         v = [v] if v > 0 else []
     if isinstance(v, (list, tuple)) and len(v) == 1 and isinstance(v[0], (int, np.integer)) and v[0] == 0:
         v = []
-    if not isinstance(v, (list, tuple)) or not all(isinstance(w, (int, np.integer)) and not isinstance(w, bool)
-                                                   and 1 <= w <= 65536 for w in v):
+    if not isinstance(v, (list, tuple)) or not all(
+        isinstance(w, (int, np.integer)) and not isinstance(w, bool) and 1 <= w <= 65536 for w in v
+    ):
         raise ConfigError(f"{name}: {key}={v!r} must be a list of hidden widths (e.g. 64 or 64-64; 0 or [] for none)")
     return [int(w) for w in v]

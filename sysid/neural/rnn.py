@@ -56,8 +56,17 @@ FILTER_MIN_STEPS = 64
 
 
 class _Net(torch.nn.Module):
-    def __init__(self, n_enc_in: int, enc_hidden: Sequence[int], n_state: int, nu: int, ny: int, cell: str,
-                 linear: int = 0, n_enc: int = 0):
+    def __init__(
+        self,
+        n_enc_in: int,
+        enc_hidden: Sequence[int],
+        n_state: int,
+        nu: int,
+        ny: int,
+        cell: str,
+        linear: int = 0,
+        n_enc: int = 0,
+    ):
         super().__init__()
         self.cell = cell
         self.n_state = n_state
@@ -90,7 +99,7 @@ class _Net(torch.nn.Module):
         """``x0`` (B, n_enc_in) past regressor, ``useq`` (B, T, nu) inputs u(t0-1) … u(t0+T-2) → ŷ (B, T, ny)."""
         z = self.encoder(x0)
         if self.cell == "lstm":
-            h0 = (z[:, : self.n_state].unsqueeze(0).contiguous(), z[:, self.n_state:].unsqueeze(0).contiguous())
+            h0 = (z[:, : self.n_state].unsqueeze(0).contiguous(), z[:, self.n_state :].unsqueeze(0).contiguous())
         else:
             h0 = z.unsqueeze(0).contiguous()
         out, _ = self.rnn(useq, h0)
@@ -103,14 +112,14 @@ class _Net(torch.nn.Module):
         B, T = useq.shape[0], useq.shape[1]
         nyr = self.n_enc * ny
         # u(t0-k) … u(t0-2) from the encoder window (lags k … 2), then u(t0-1) … u(t0+T-2)
-        upast = x0[:, nyr:nyr + k * nu].reshape(B, k, nu).flip(1)[:, : k - 1]
-        ufull = torch.cat([upast, useq], dim=1)                      # ufull[:, m] = u(t0-k+m)
-        win = ufull.unfold(1, k, 1)[:, :T]                            # (B, T, nu, k): u(t0+j-k) … u(t0+j-1)
+        upast = x0[:, nyr : nyr + k * nu].reshape(B, k, nu).flip(1)[:, : k - 1]
+        ufull = torch.cat([upast, useq], dim=1)  # ufull[:, m] = u(t0-k+m)
+        win = ufull.unfold(1, k, 1)[:, :T]  # (B, T, nu, k): u(t0+j-k) … u(t0+j-1)
         ureg = win.flip(-1).permute(0, 1, 3, 2).reshape(B, T, k * nu)  # lag-major u(t0+j-1) … u(t0+j-k)
         W = self.arx.weight
-        v = torch.matmul(ureg, W[:, k * ny:].t()) + self.arx.bias      # input part and intercept, all steps at once
+        v = torch.matmul(ureg, W[:, k * ny :].t()) + self.arx.bias  # input part and intercept, all steps at once
         Ay = W[:, : k * ny]
-        hist = x0[:, : k * ny]                                        # measured y(t0-1) … y(t0-k)
+        hist = x0[:, : k * ny]  # measured y(t0-1) … y(t0-k)
         if ny == 1 and T >= FILTER_MIN_STEPS and v.dtype == torch.float64 and not torch.is_grad_enabled():
             return self._linear_path_filter(v, hist, Ay)
         outs = []
@@ -172,9 +181,22 @@ class RNNStateSpace(SequenceIdentifier):
     name = "rnn"
     _fitted_attr = "state_dict_"
 
-    def __init__(self, n_state: int = 32, n_enc: int = 20, enc_hidden: Sequence[int] = (64,), cell: str = "gru",
-                 window: int = 100, batch_size: int = 32, epochs: int = 30, lr: float = 3e-3, clip: float = 1.0,
-                 seed: int = 0, device: str = "auto", linear: int = 0, dtype: str = "float32"):
+    def __init__(
+        self,
+        n_state: int = 32,
+        n_enc: int = 20,
+        enc_hidden: Sequence[int] = (64,),
+        cell: str = "gru",
+        window: int = 100,
+        batch_size: int = 32,
+        epochs: int = 30,
+        lr: float = 3e-3,
+        clip: float = 1.0,
+        seed: int = 0,
+        device: str = "auto",
+        linear: int = 0,
+        dtype: str = "float32",
+    ):
         self.dtype = dtype
         self.linear = linear
         self.n_state = n_state
@@ -199,7 +221,8 @@ class RNNStateSpace(SequenceIdentifier):
         self._check_int("linear", 0, int(self.n_enc))
         eh = self.enc_hidden
         if not isinstance(eh, (list, tuple)) or not all(
-                isinstance(w, (int, np.integer)) and not isinstance(w, bool) and w >= 1 for w in eh):
+            isinstance(w, (int, np.integer)) and not isinstance(w, bool) and w >= 1 for w in eh
+        ):
             raise ConfigError(f"{self.name}: enc_hidden={eh!r} must be a list of widths, e.g. enc_hidden=64 or 64-64")
         self.enc_hidden = [int(w) for w in eh]
         if self.cell not in CELLS:

@@ -35,8 +35,16 @@ import torch
 
 from sysid.progress import progress
 
-__all__ = ["Sections", "SimTrainResult", "BlockTrainResult", "BestWeights", "train_simulation", "train_records",
-           "validation_rmse", "adam_step"]
+__all__ = [
+    "Sections",
+    "SimTrainResult",
+    "BlockTrainResult",
+    "BestWeights",
+    "train_simulation",
+    "train_records",
+    "validation_rmse",
+    "adam_step",
+]
 
 MAX_RESTARTS = 20  # unstable steps undone (each halving the learning rate) before train_records gives up
 
@@ -44,8 +52,14 @@ MAX_RESTARTS = 20  # unstable steps undone (each halving the learning rate) befo
 class Sections:
     """All sections ``[k - lag, k + T)`` of a list of ``(u, y)`` records, as tensors on ``device``."""
 
-    def __init__(self, pairs: Sequence[tuple[np.ndarray, np.ndarray]], lag: int, T: int, device: torch.device,
-                 dtype: torch.dtype = torch.float32):
+    def __init__(
+        self,
+        pairs: Sequence[tuple[np.ndarray, np.ndarray]],
+        lag: int,
+        T: int,
+        device: torch.device,
+        dtype: torch.dtype = torch.float32,
+    ):
         self.lag, self.T = int(lag), int(T)
         us, ys, starts = [], [], []
         offset = 0
@@ -123,12 +137,16 @@ class BestWeights:
             model.load_state_dict(self.state)
 
 
-def _optimiser(model: torch.nn.Module, lr: float, epochs: int, lr_min: float | None
-               ) -> tuple[torch.optim.Optimizer, torch.optim.lr_scheduler.CosineAnnealingLR | None]:
+def _optimiser(
+    model: torch.nn.Module, lr: float, epochs: int, lr_min: float | None
+) -> tuple[torch.optim.Optimizer, torch.optim.lr_scheduler.CosineAnnealingLR | None]:
     """Adam on the trainable parameters and, with ``lr_min``, the cosine schedule from ``lr`` to it over ``epochs``."""
     opt = torch.optim.Adam([p for p in model.parameters() if p.requires_grad], lr=float(lr))
-    sched = (torch.optim.lr_scheduler.CosineAnnealingLR(opt, T_max=max(int(epochs), 1), eta_min=float(lr_min))
-             if lr_min is not None else None)
+    sched = (
+        torch.optim.lr_scheduler.CosineAnnealingLR(opt, T_max=max(int(epochs), 1), eta_min=float(lr_min))
+        if lr_min is not None
+        else None
+    )
     return opt, sched
 
 
@@ -142,8 +160,13 @@ def adam_step(model: torch.nn.Module, opt: torch.optim.Optimizer, loss: torch.Te
 
 
 @torch.no_grad()
-def validation_rmse(model: torch.nn.Module, pairs: Sequence[tuple[np.ndarray, np.ndarray]], lag: int,
-                    device: torch.device, dtype: torch.dtype = torch.float32) -> float:
+def validation_rmse(
+    model: torch.nn.Module,
+    pairs: Sequence[tuple[np.ndarray, np.ndarray]],
+    lag: int,
+    device: torch.device,
+    dtype: torch.dtype = torch.float32,
+) -> float:
     """Free-run RMSE (normalised units) over validation records, each simulated from its first ``lag``
     samples; ``inf`` when the simulation is non-finite."""
     se, n = 0.0, 0
@@ -162,13 +185,26 @@ def validation_rmse(model: torch.nn.Module, pairs: Sequence[tuple[np.ndarray, np
     return math.sqrt(se / n) if n else math.inf
 
 
-def train_simulation(model: torch.nn.Module, train: Sequence[tuple[np.ndarray, np.ndarray]], lag: int, T: int,
-                     epochs: int, batch_size: int = 256, lr: float = 1e-3,
-                     val: Sequence[tuple[np.ndarray, np.ndarray]] | None = None, patience: int = 0,
-                     clip: float = 0.0, generator: torch.Generator | None = None,
-                     device: torch.device = torch.device("cpu"), log: Callable[[str], None] | None = None,
-                     max_seconds: float | None = None, lr_min: float | None = None, draws: int | None = None,
-                     dtype: torch.dtype = torch.float32, desc: str | None = None) -> SimTrainResult:
+def train_simulation(
+    model: torch.nn.Module,
+    train: Sequence[tuple[np.ndarray, np.ndarray]],
+    lag: int,
+    T: int,
+    epochs: int,
+    batch_size: int = 256,
+    lr: float = 1e-3,
+    val: Sequence[tuple[np.ndarray, np.ndarray]] | None = None,
+    patience: int = 0,
+    clip: float = 0.0,
+    generator: torch.Generator | None = None,
+    device: torch.device = torch.device("cpu"),
+    log: Callable[[str], None] | None = None,
+    max_seconds: float | None = None,
+    lr_min: float | None = None,
+    draws: int | None = None,
+    dtype: torch.dtype = torch.float32,
+    desc: str | None = None,
+) -> SimTrainResult:
     """Minimise the truncated T-step simulation loss of ``model`` on ``train`` with Adam (see the module
     docstring); early stopping on the free-run RMSE of ``val`` when given (the best weights are loaded back into
     ``model``). ``patience`` > 0 stops after that many epochs without a better validation RMSE; ``clip`` > 0
@@ -232,8 +268,9 @@ def train_simulation(model: torch.nn.Module, train: Sequence[tuple[np.ndarray, n
 
 
 # ------------------------------------------------------------------------------------------------ from rest
-def _masks(pairs: Sequence[tuple[np.ndarray, np.ndarray]], warmup: int,
-           val_fraction: float) -> list[tuple[slice, slice | None]]:
+def _masks(
+    pairs: Sequence[tuple[np.ndarray, np.ndarray]], warmup: int, val_fraction: float
+) -> list[tuple[slice, slice | None]]:
     """(training samples, hold-out samples) of each record: training skips the first ``warmup``; the hold-out is the
     last ``val_fraction`` of the last record."""
     out = []

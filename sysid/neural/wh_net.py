@@ -92,11 +92,28 @@ class WHNet(SequenceIdentifier):
     name = "wh-net"
     _fitted_attr = "model_"
 
-    def __init__(self, channels: int = 8, hidden: Sequence[int] = (16,), nb: int = 8, na: int = 8,
-                 nb2: int | None = None, na2: int | None = None, nk: int = 0, linear: bool = False,
-                 activation: str = "tanh", warmup: int = 50, epochs: int = 2000, lr: float = 1e-2,
-                 lr_min: float = 1e-4, val_fraction: float = 0.1, patience: int = 0, window: int = 0,
-                 batch: int = 16, seed: int = 0, device: str = "auto"):
+    def __init__(
+        self,
+        channels: int = 8,
+        hidden: Sequence[int] = (16,),
+        nb: int = 8,
+        na: int = 8,
+        nb2: int | None = None,
+        na2: int | None = None,
+        nk: int = 0,
+        linear: bool = False,
+        activation: str = "tanh",
+        warmup: int = 50,
+        epochs: int = 2000,
+        lr: float = 1e-2,
+        lr_min: float = 1e-4,
+        val_fraction: float = 0.1,
+        patience: int = 0,
+        window: int = 0,
+        batch: int = 16,
+        seed: int = 0,
+        device: str = "auto",
+    ):
         self.channels = channels
         self.hidden = list(hidden) if isinstance(hidden, tuple) else hidden
         self.nb = nb
@@ -131,8 +148,9 @@ class WHNet(SequenceIdentifier):
         self._check_int("window", 0, 100_000_000)
         self._check_int("batch", 1, 100_000)
         if self.window and self.window <= self.warmup:
-            raise ConfigError(f"{self.name}: window={self.window} must exceed warmup={self.warmup} "
-                              "(or be 0: full batch)")
+            raise ConfigError(
+                f"{self.name}: window={self.window} must exceed warmup={self.warmup} (or be 0: full batch)"
+            )
         self.hidden = hidden_widths(self.hidden, "hidden", self.name)
         if self.activation not in _ACTIVATIONS:
             raise ConfigError(f"{self.name}: activation={self.activation!r} not one of: {', '.join(_ACTIVATIONS)}")

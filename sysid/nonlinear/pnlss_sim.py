@@ -39,7 +39,7 @@ def monomials(n_vars: int, degree: int, constant: bool = False) -> np.ndarray:
     rows += [c for d in range(2, int(degree) + 1) for c in combinations_with_replacement(range(n_vars), d)]
     fac = -np.ones((len(rows), max(int(degree), 1)), dtype=np.int64)
     for i, c in enumerate(rows):
-        fac[i, :len(c)] = c
+        fac[i, : len(c)] = c
     return fac
 
 
@@ -224,6 +224,13 @@ def simulate(
     n = mats[0].shape[0]
     u2 = np.ascontiguousarray(np.asarray(u, dtype=float).reshape(len(u), -1))
     x = np.zeros(n) if x0 is None else np.ascontiguousarray(np.asarray(x0, dtype=float).reshape(n))
-    out = _sim(*mats, np.ascontiguousarray(facE), np.ascontiguousarray(facF), u2, x, float(bound),  # type: ignore[call-arg]
-               bool(jacobian))
+    out = _sim(
+        *mats,
+        np.ascontiguousarray(facE),
+        np.ascontiguousarray(facF),
+        u2,
+        x,
+        float(bound),  # type: ignore[call-arg]
+        bool(jacobian),
+    )
     return out if final_state else out[:3]

@@ -83,8 +83,10 @@ def splits(zeros: np.ndarray, poles: np.ndarray) -> Iterator[tuple[np.ndarray, n
     """Every (b1, a1, b2, a2) whose roots share the zeros and poles between G1 and G2 (gains left to the caller)."""
     zg, pg = root_groups(zeros), root_groups(poles)
     if 2 ** (len(zg) + len(pg)) > MAX_SPLITS:
-        raise ValueError(f"{len(zg)} zero and {len(pg)} pole groups give {2 ** (len(zg) + len(pg))} splits "
-                         f"(at most {MAX_SPLITS}); lower the BLA's orders")
+        raise ValueError(
+            f"{len(zg)} zero and {len(pg)} pole groups give {2 ** (len(zg) + len(pg))} splits "
+            f"(at most {MAX_SPLITS}); lower the BLA's orders"
+        )
     for zmask in itertools.product((True, False), repeat=len(zg)):
         z1 = [r for g, m in zip(zg, zmask) if m for r in g]
         z2 = [r for g, m in zip(zg, zmask) if not m for r in g]
@@ -109,15 +111,16 @@ class Spline:
         self.t = np.r_[[self.lo] * 3, inner, [self.hi] * 3]
         self.n = len(self.t) - 4
         eye = np.eye(self.n)
-        self._slope = np.array([[BSpline(self.t, eye[k], 3).derivative()(e) for k in range(self.n)]
-                                for e in (self.lo, self.hi)])
+        self._slope = np.array(
+            [[BSpline(self.t, eye[k], 3).derivative()(e) for k in range(self.n)] for e in (self.lo, self.hi)]
+        )
 
     @classmethod
     def at_quantiles(cls, x: np.ndarray, knots: int, margin: float) -> Spline:
         """Knots at ``knots`` inner quantiles of x, the ends ``margin`` × RMS(x) beyond its extremes. Quantiles
         closer than 1e-6 × RMS(x) (x on a few levels, e.g. a quantised input through a short FIR) are merged, so
         such data get fewer knots."""
-        s = float(np.sqrt(np.mean(x ** 2))) or 1.0
+        s = float(np.sqrt(np.mean(x**2))) or 1.0
         inner = np.quantile(x, np.linspace(0.0, 1.0, knots + 2)[1:-1])
         inner = inner[np.r_[True, np.diff(inner) > 1e-6 * s]]
         return cls(np.r_[x.min() - margin * s, inner, x.max() + margin * s])
@@ -131,8 +134,11 @@ class Spline:
 
     def __call__(self, x: np.ndarray, c: np.ndarray) -> np.ndarray:
         xc = np.clip(x, self.lo, self.hi)
-        return (BSpline(self.t, c, 3)(xc) + np.minimum(x - self.lo, 0.0) * (self._slope[0] @ c)
-                + np.maximum(x - self.hi, 0.0) * (self._slope[1] @ c))
+        return (
+            BSpline(self.t, c, 3)(xc)
+            + np.minimum(x - self.lo, 0.0) * (self._slope[0] @ c)
+            + np.maximum(x - self.hi, 0.0) * (self._slope[1] @ c)
+        )
 
     def derivative(self, x: np.ndarray, c: np.ndarray) -> np.ndarray:
         """f′(x) (the end slopes outside [lo, hi])."""
@@ -146,8 +152,9 @@ def simulate(g1: Filter, f: Spline, c: np.ndarray, g2: Filter, u: np.ndarray) ->
     return g2(w), x, w
 
 
-def jacobian(g1: Filter, f: Spline, c: np.ndarray, g2: Filter, u: np.ndarray,
-             free_b1: np.ndarray, free_b2: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def jacobian(
+    g1: Filter, f: Spline, c: np.ndarray, g2: Filter, u: np.ndarray, free_b1: np.ndarray, free_b2: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
     """ŷ and ∂ŷ/∂θ for θ = (b1[free_b1], a1[1:], c, b2[free_b2], a2[1:]) (samples × parameters)."""
     x = g1(u)
     B = f.basis(x)

@@ -87,9 +87,19 @@ class WienerHammerstein(Identifier):
 
     name = "wh-bla"
 
-    def __init__(self, nb: int = 7, nf: int = 6, nk: int = 0, knots: int = 30, extra_zeros: int = 2,
-                 split_samples: int = 20000, warmup: int = 50, max_nfev: int = 400, xtol: float = 1e-8,
-                 ftol: float = 1e-10):
+    def __init__(
+        self,
+        nb: int = 7,
+        nf: int = 6,
+        nk: int = 0,
+        knots: int = 30,
+        extra_zeros: int = 2,
+        split_samples: int = 20000,
+        warmup: int = 50,
+        max_nfev: int = 400,
+        xtol: float = 1e-8,
+        ftol: float = 1e-10,
+    ):
         self.nb = nb
         self.nf = nf
         self.nk = nk
@@ -103,9 +113,19 @@ class WienerHammerstein(Identifier):
 
     # ------------------------------------------------------------------ fitting
     def _check_options(self) -> dict[str, int]:
-        out = {k: _int_option(k, getattr(self, k), low) for k, low in
-               (("nb", 1), ("nf", 1), ("nk", 0), ("knots", 1), ("extra_zeros", 0), ("split_samples", 0),
-                ("warmup", 0), ("max_nfev", 0))}
+        out = {
+            k: _int_option(k, getattr(self, k), low)
+            for k, low in (
+                ("nb", 1),
+                ("nf", 1),
+                ("nk", 0),
+                ("knots", 1),
+                ("extra_zeros", 0),
+                ("split_samples", 0),
+                ("warmup", 0),
+                ("max_nfev", 0),
+            )
+        }
         for k in ("xtol", "ftol"):
             v = getattr(self, k)
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not v > 0:
@@ -118,8 +138,9 @@ class WienerHammerstein(Identifier):
         o = self._check_options()
         records = as_record_list(data)
         if records[0].n_inputs != 1 or records[0].n_outputs != 1:
-            raise DataError(f"wh-bla: one input and one output only; the data have {records[0].n_inputs} / "
-                            f"{records[0].n_outputs}")
+            raise DataError(
+                f"wh-bla: one input and one output only; the data have {records[0].n_inputs} / {records[0].n_outputs}"
+            )
         n_par = o["nb"] + o["nf"] + o["knots"] + 4 + 2 * o["extra_zeros"]
         check_records(records, o["warmup"] + o["nb"] + o["nf"] + o["nk"], n_par + 1, self.name)
         us = [r.u.reshape(-1).astype(float) for r in records]
@@ -129,8 +150,13 @@ class WienerHammerstein(Identifier):
         bla = OE(nb=o["nb"], nf=o["nf"], nk=o["nk"]).fit(records)
         self.bla_ = {"b": np.asarray(bla.b_[0], float), "a": np.asarray(bla.f_[0], float)}
         g1, f, c, g2, cost = self._best_split(self.bla_["b"], self.bla_["a"], o, us[0], ys[0])
-        self.split_ = {"rms": cost, "g1_poles": len(g1.a) - 1, "g2_poles": len(g2.a) - 1,
-                       "g1_zeros": len(g1.zeros()), "g2_zeros": len(g2.zeros())}
+        self.split_ = {
+            "rms": cost,
+            "g1_poles": len(g1.a) - 1,
+            "g2_poles": len(g2.a) - 1,
+            "g1_zeros": len(g1.zeros()),
+            "g2_zeros": len(g2.zeros()),
+        }
         stages: list[dict[str, Any]] = []
         f, c = self._spline_on_all(g1, g2, us, ys, o)
         for k in range(2 + RESTAGES):
@@ -209,14 +235,14 @@ class WienerHammerstein(Identifier):
         def unpack(th: np.ndarray):
             b1 = th[:n1b]
             i = n1b
-            a1 = np.r_[1.0, th[i:i + n1a]]
+            a1 = np.r_[1.0, th[i : i + n1a]]
             i += n1a
-            cc = th[i:i + nc]
+            cc = th[i : i + nc]
             i += nc
             b2 = g2.b.copy()
-            b2[free2] = th[i:i + len(free2)]
+            b2[free2] = th[i : i + len(free2)]
             i += len(free2)
-            a2 = np.r_[1.0, th[i:i + n2a]]
+            a2 = np.r_[1.0, th[i : i + n2a]]
             return wb.Filter(b1, a1, g1.nk), cc, wb.Filter(b2, a2, g2.nk)
 
         def fun(th: np.ndarray) -> np.ndarray:
@@ -239,13 +265,21 @@ class WienerHammerstein(Identifier):
 
         th0 = np.concatenate([g1.b, g1.a[1:], c, g2.b[free2], g2.a[1:]])
         r0 = fun(th0)
-        cost0 = float(np.mean(r0 ** 2))
+        cost0 = float(np.mean(r0**2))
         info: dict[str, Any] = {"start_rms": float(np.sqrt(cost0)), "nfev": 0, "status": "start", "converged": False}
         th, cost_kept = th0, cost0
         if o["max_nfev"] > 0:
-            res = least_squares(fun, th0, jac=jac, method="lm", x_scale="jac", max_nfev=o["max_nfev"],
-                                xtol=float(self.xtol), ftol=float(self.ftol))
-            cost = float(np.mean(res.fun ** 2))
+            res = least_squares(
+                fun,
+                th0,
+                jac=jac,
+                method="lm",
+                x_scale="jac",
+                max_nfev=o["max_nfev"],
+                xtol=float(self.xtol),
+                ftol=float(self.ftol),
+            )
+            cost = float(np.mean(res.fun**2))
             info.update(nfev=int(res.nfev), status=str(res.message), converged=bool(res.status > 0))
             if np.isfinite(cost) and cost <= cost0:
                 th, cost_kept = res.x, cost
@@ -259,8 +293,9 @@ class WienerHammerstein(Identifier):
         self.max_lag_ = int(self.warmup)
         self.diverged_at_ = None
         # B1, A1 less its leading 1, f, B2 less its pinned coefficient, A2 less its leading 1
-        self.n_parameters_ = int(len(self.g1_.b) + len(self.g1_.a) - 1 + len(self.c_) + len(self.g2_.b) - 1
-                                 + len(self.g2_.a) - 1)
+        self.n_parameters_ = int(
+            len(self.g1_.b) + len(self.g1_.a) - 1 + len(self.c_) + len(self.g2_.b) - 1 + len(self.g2_.a) - 1
+        )
 
     # ------------------------------------------------------------------ prediction
     def _check_fitted(self) -> None:
@@ -283,14 +318,25 @@ class WienerHammerstein(Identifier):
     def describe(self) -> dict[str, Any]:
         d = super().describe()
         if hasattr(self, "g1_"):
+
             def roots(r: np.ndarray) -> list[dict[str, float]]:
                 return [{"re": float(z.real), "im": float(z.imag), "abs": float(abs(z))} for z in r]
 
             d.update(
-                g1={"b": self.g1_.b.tolist(), "a": self.g1_.a.tolist(), "nk": self.g1_.nk,
-                    "poles": roots(self.g1_.poles()), "zeros": roots(self.g1_.zeros())},
-                g2={"b": self.g2_.b.tolist(), "a": self.g2_.a.tolist(), "nk": self.g2_.nk,
-                    "poles": roots(self.g2_.poles()), "zeros": roots(self.g2_.zeros())},
+                g1={
+                    "b": self.g1_.b.tolist(),
+                    "a": self.g1_.a.tolist(),
+                    "nk": self.g1_.nk,
+                    "poles": roots(self.g1_.poles()),
+                    "zeros": roots(self.g1_.zeros()),
+                },
+                g2={
+                    "b": self.g2_.b.tolist(),
+                    "a": self.g2_.a.tolist(),
+                    "nk": self.g2_.nk,
+                    "poles": roots(self.g2_.poles()),
+                    "zeros": roots(self.g2_.zeros()),
+                },
                 spline={"knots": self.spline_.inner.tolist(), "coefficients": self.c_.tolist()},
                 split=dict(self.split_),
                 optimisation=dict(self.optimisation_),
@@ -313,8 +359,10 @@ class WienerHammerstein(Identifier):
         }
 
     def _load_state(self, state: dict[str, Any]) -> None:
-        self.g1_, self.g2_ = (wb.Filter(np.asarray(state[g]["b"], float), np.asarray(state[g]["a"], float),
-                                        int(state[g]["nk"])) for g in ("g1", "g2"))
+        self.g1_, self.g2_ = (
+            wb.Filter(np.asarray(state[g]["b"], float), np.asarray(state[g]["a"], float), int(state[g]["nk"]))
+            for g in ("g1", "g2")
+        )
         self.spline_ = wb.Spline(np.asarray(state["knots"], float))
         self.c_ = np.asarray(state["c"], float)
         self.bla_ = {k: np.asarray(v, float) for k, v in state["bla"].items()}

@@ -34,8 +34,15 @@ from sysid._blas import blas_threads
 from sysid.errors import ConfigError, DataError
 
 __all__ = [
-    "make_regressors", "candidate_terms", "term_name", "Structure", "gram_matrix", "frols", "FrolsResult",
-    "least_squares", "CRITERIA",
+    "make_regressors",
+    "candidate_terms",
+    "term_name",
+    "Structure",
+    "gram_matrix",
+    "frols",
+    "FrolsResult",
+    "least_squares",
+    "CRITERIA",
 ]
 
 CRITERIA = ("err", "aic", "bic", "fpe", "lilc")
@@ -60,8 +67,10 @@ def make_regressors(ny: int, nu: int, ne: int = 0, nk: int = 1, n_outputs: int =
             raise ConfigError(f"{name} must be a non-negative integer, got {v}")
     count = n_outputs * (ny + ne) + n_inputs * nu
     if count > MAX_CANDIDATES:  # checked before building the list (ny=1e8 would take minutes to refuse)
-        raise ConfigError(f"ny={ny}, nu={nu}, ne={ne} give {count:.4g} regressors (limit {MAX_CANDIDATES} candidate"
-                          " terms); lower the lags")
+        raise ConfigError(
+            f"ny={ny}, nu={nu}, ne={ne} give {count:.4g} regressors (limit {MAX_CANDIDATES} candidate"
+            " terms); lower the lags"
+        )
     regs = []
     for o in range(n_outputs):
         regs += [("y", o, j) for j in range(1, ny + 1)]
@@ -294,8 +303,8 @@ def gram_matrix(records, structure: Structure, terms=None, e_list=None, chunk: i
 # ---------------------------------------------------------------------------------------------------- FROLS
 @dataclass
 class FrolsResult:
-    selected: list[int]            # candidate indices in order of selection
-    err: list[float]               # ERR of each selected term (eq. 2-20)
+    selected: list[int]  # candidate indices in order of selection
+    err: list[float]  # ERR of each selected term (eq. 2-20)
     criterion_values: list[float]  # information criterion after 1, 2, ... terms (nan for criterion="err")
     n_samples: int
     ssr: list[float] = field(default_factory=list)  # residual sum of squares after each kept term
@@ -320,9 +329,18 @@ def _info_criterion(name: str, n_theta: int, n_samples: int, e_var: float) -> fl
     raise ConfigError(f"unknown criterion {name!r}; valid: {', '.join(CRITERIA)}")
 
 
-def frols(G: np.ndarray, n_candidates: int, output: int = 0, n_samples: int = 0, criterion: str = "bic",
-          rho: float = 1e-4, max_terms: int | None = None, forced: Sequence[int] = (), allowed=None,
-          continue_err: bool = False) -> FrolsResult:
+def frols(
+    G: np.ndarray,
+    n_candidates: int,
+    output: int = 0,
+    n_samples: int = 0,
+    criterion: str = "bic",
+    rho: float = 1e-4,
+    max_terms: int | None = None,
+    forced: Sequence[int] = (),
+    allowed=None,
+    continue_err: bool = False,
+) -> FrolsResult:
     """FROLS term selection on a Gram matrix from :func:`gram_matrix`.
 
     Parameters
@@ -424,8 +442,9 @@ class LSResult:
     n_samples: int
 
 
-def least_squares(records, structure: Structure, terms, output: int = 0, e_list=None,
-                  chunk: int = DEFAULT_CHUNK) -> LSResult:
+def least_squares(
+    records, structure: Structure, terms, output: int = 0, e_list=None, chunk: int = DEFAULT_CHUNK
+) -> LSResult:
     """Least squares on the given terms by chunked QR (TSQR): θ, standard errors σ̂²(RᵀR)⁻¹ and SSR."""
     k = len(terms)
     R = np.zeros((0, k + 1))
@@ -445,8 +464,10 @@ def least_squares(records, structure: Structure, terms, output: int = 0, e_list=
     if R.shape[0] < k + 1:
         R = np.vstack([R, np.zeros((k + 1 - R.shape[0], k + 1))])
     if not np.isfinite(R).all():
-        raise DataError("least squares on non-finite or overflowing regressors (e.g. a diverged residual recursion); "
-                        "no parameters estimated")
+        raise DataError(
+            "least squares on non-finite or overflowing regressors (e.g. a diverged residual recursion); "
+            "no parameters estimated"
+        )
     Rk = R[:k, :k]
     if k:
         # Scale-invariant rank test: |R_jj| is the norm of column j orthogonalised against the columns before it,
@@ -457,9 +478,11 @@ def least_squares(records, structure: Structure, terms, output: int = 0, e_list=
         rel = np.abs(np.diag(Rk)) / np.where(col_norm > 0, col_norm, 1.0)
         if not np.all(rel > LS_DEPENDENT_TOL):
             j = int(np.argmin(rel))
-            raise DataError(f"the selected regressors are linearly dependent (rank-deficient least squares: term "
-                            f"{j + 1} of {k} is a combination of the others to {rel[j]:.1e} relative); the input may "
-                            "not excite the system enough")
+            raise DataError(
+                f"the selected regressors are linearly dependent (rank-deficient least squares: term "
+                f"{j + 1} of {k} is a combination of the others to {rel[j]:.1e} relative); the input may "
+                "not excite the system enough"
+            )
     theta = np.linalg.solve(Rk, R[:k, k]) if k else np.zeros(0)
     if not np.isfinite(theta).all():
         raise DataError("least squares gave non-finite parameters (non-finite or overflowing regressors)")
@@ -475,8 +498,9 @@ def least_squares(records, structure: Structure, terms, output: int = 0, e_list=
     return LSResult(theta=theta, stderr=stderr, ssr=ssr, n_samples=n_rows)
 
 
-def fitted_residuals(records, structure: Structure, terms_per_output, theta_per_output, e_list=None,
-                     chunk: int = DEFAULT_CHUNK) -> list[np.ndarray]:
+def fitted_residuals(
+    records, structure: Structure, terms_per_output, theta_per_output, e_list=None, chunk: int = DEFAULT_CHUNK
+) -> list[np.ndarray]:
     """e(t) = y(t) − Σ θ p(t) per record (zeros for t < max_lag), computed with the given lagged e (ELS step)."""
     L = structure.max_lag
     out = []

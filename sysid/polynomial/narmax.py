@@ -95,9 +95,18 @@ class PolynomialModel(Identifier):
                     theta[o, i] = self.theta_[o][i]
             col = [s.column_of(r) for r in range(len(s.regressors))]
             lag = [lg for _, _, lg in s.regressors]
-            compiled = self._compiled = sim.CompiledModel(n_out, s.n_inputs, s.has_e, col, lag, terms,
-                                                          [len(t) for t in self.terms_], theta, s.max_lag,
-                                                          kinds=[k for k, _, _ in s.regressors])
+            compiled = self._compiled = sim.CompiledModel(
+                n_out,
+                s.n_inputs,
+                s.has_e,
+                col,
+                lag,
+                terms,
+                [len(t) for t in self.terms_],
+                theta,
+                s.max_lag,
+                kinds=[k for k, _, _ in s.regressors],
+            )
         return compiled
 
     def _check_fitted(self) -> None:
@@ -113,8 +122,10 @@ class PolynomialModel(Identifier):
         self._check_fitted()
         record.require_output()
         if record.n_inputs != self.n_inputs_ or record.n_outputs != self.n_outputs_:
-            raise DataError(f"{record.source}: {record.n_inputs} inputs / {record.n_outputs} outputs, model was fitted "
-                            f"on {self.n_inputs_} / {self.n_outputs_}")
+            raise DataError(
+                f"{record.source}: {record.n_inputs} inputs / {record.n_outputs} outputs, model was fitted "
+                f"on {self.n_inputs_} / {self.n_outputs_}"
+            )
         m = self.compiled()
         u = record.u.reshape(len(record), -1)
         y = record.output.reshape(len(record), -1)
@@ -136,8 +147,12 @@ class PolynomialModel(Identifier):
         if bad >= 0:
             self.diverged_at_ = int(bad)
             what = "free run" if horizon is None else f"{horizon}-step prediction"
-            warnings.warn(f"{self.name}: {what} diverged at sample {bad} (beyond ±{self.y_bound_:.3g} or non-finite); "
-                          "the remaining samples are nan", DivergenceWarning, stacklevel=2)
+            warnings.warn(
+                f"{self.name}: {what} diverged at sample {bad} (beyond ±{self.y_bound_:.3g} or non-finite); "
+                "the remaining samples are nan",
+                DivergenceWarning,
+                stacklevel=2,
+            )
         return yhat.reshape(record.output.shape)
 
     def residuals(self, record: Record) -> np.ndarray:
@@ -153,9 +168,12 @@ class PolynomialModel(Identifier):
         names_all = self.structure_.regressors
         for o in range(len(self.terms_)):
             for i, term in enumerate(self.terms_[o]):
-                row = {"term": fr.term_name(term, names_all, self.structure_.n_outputs, self.structure_.n_inputs),
-                       "parameter": float(self.theta_[o][i]), "stderr": float(self.stderr_[o][i]),
-                       "err": (None if self.err_[o][i] is None else float(self.err_[o][i]))}
+                row = {
+                    "term": fr.term_name(term, names_all, self.structure_.n_outputs, self.structure_.n_inputs),
+                    "parameter": float(self.theta_[o][i]),
+                    "stderr": float(self.stderr_[o][i]),
+                    "err": (None if self.err_[o][i] is None else float(self.err_[o][i])),
+                }
                 if self.structure_.n_outputs > 1:
                     row["output"] = o
                 out.append(row)
@@ -181,7 +199,8 @@ class PolynomialModel(Identifier):
         s = self.structure_
         return {
             "regressors": [list(r) for r in s.regressors],
-            "n_outputs": s.n_outputs, "n_inputs": s.n_inputs,
+            "n_outputs": s.n_outputs,
+            "n_inputs": s.n_inputs,
             "terms": [[list(t) for t in ts] for ts in self.terms_],
             "theta": [np.asarray(t).tolist() for t in self.theta_],
             "stderr": [np.asarray(t).tolist() for t in self.stderr_],
@@ -196,8 +215,9 @@ class PolynomialModel(Identifier):
     def _load_state(self, state: dict[str, Any]) -> None:
         regs = [(str(k), int(c), int(lg)) for k, c, lg in state["regressors"]]
         terms = [[tuple(int(i) for i in t) for t in ts] for ts in state["terms"]]
-        self.structure_ = fr.Structure(regs, sorted({t for ts in terms for t in ts}), int(state["n_outputs"]),
-                                       int(state["n_inputs"]))
+        self.structure_ = fr.Structure(
+            regs, sorted({t for ts in terms for t in ts}), int(state["n_outputs"]), int(state["n_inputs"])
+        )
         self.terms_ = terms
         self.theta_ = [np.asarray(t, dtype=float) for t in state["theta"]]
         self.stderr_ = [np.asarray(t, dtype=float) for t in state["stderr"]]
@@ -242,8 +262,18 @@ class NARXPoly(PolynomialModel):
 
     name = "narx-poly"
 
-    def __init__(self, ny: int = 2, nu: int = 2, nk: int = 1, degree: int = 2, criterion: str = "bic",
-                 rho_p: float = 1e-4, max_terms: int = 40, constant: bool = True, chunk: int = fr.DEFAULT_CHUNK):
+    def __init__(
+        self,
+        ny: int = 2,
+        nu: int = 2,
+        nk: int = 1,
+        degree: int = 2,
+        criterion: str = "bic",
+        rho_p: float = 1e-4,
+        max_terms: int = 40,
+        constant: bool = True,
+        chunk: int = fr.DEFAULT_CHUNK,
+    ):
         self.ny = ny
         self.nu = nu
         self.nk = nk
@@ -305,9 +335,22 @@ class NARMAXPoly(PolynomialModel):
 
     name = "narmax-poly"
 
-    def __init__(self, ny: int = 2, nu: int = 2, ne: int = 2, nk: int = 1, degree: int = 2, criterion: str = "bic",
-                 rho_p: float = 1e-4, rho_n: float = 1e-5, max_terms: int = 40, els_iter: int = 20,
-                 els_tol: float = 1e-6, constant: bool = True, chunk: int = fr.DEFAULT_CHUNK):
+    def __init__(
+        self,
+        ny: int = 2,
+        nu: int = 2,
+        ne: int = 2,
+        nk: int = 1,
+        degree: int = 2,
+        criterion: str = "bic",
+        rho_p: float = 1e-4,
+        rho_n: float = 1e-5,
+        max_terms: int = 40,
+        els_iter: int = 20,
+        els_tol: float = 1e-6,
+        constant: bool = True,
+        chunk: int = fr.DEFAULT_CHUNK,
+    ):
         self.ny = ny
         self.nu = nu
         self.ne = ne
@@ -325,9 +368,13 @@ class NARMAXPoly(PolynomialModel):
     def describe(self) -> dict[str, Any]:
         d = super().describe()
         if hasattr(self, "els_status_"):
-            d["els"] = {"iterations": self.els_iterations_, "converged": self.els_converged_,
-                        "unstable_iterations": list(self.els_unstable_), "removed_terms": list(self.els_removed_terms_),
-                        "status": self.els_status_}
+            d["els"] = {
+                "iterations": self.els_iterations_,
+                "converged": self.els_converged_,
+                "unstable_iterations": list(self.els_unstable_),
+                "removed_terms": list(self.els_removed_terms_),
+                "status": self.els_status_,
+            }
         return d
 
     def _recursion_bounded(self, records, s, terms_all, thetas, e_list, kicks: bool = False):
@@ -356,8 +403,10 @@ class NARMAXPoly(PolynomialModel):
                     y[at] += KICK_SIZE * big * np.where(np.arange(at.size) % 2 == 0, 1.0, -1.0)[:, None]
                     kicked.append(Record(rec.u, y.reshape(rec.y.shape), fs=rec.fs))
                 ek = self._recursive_residuals(kicked, s, terms_all, thetas)
-                ok = all(np.isfinite(e).all() for e in ek) and \
-                    max(float(np.max(np.abs(e), initial=0.0)) for e in ek) <= lim
+                ok = (
+                    all(np.isfinite(e).all() for e in ek)
+                    and max(float(np.max(np.abs(e), initial=0.0)) for e in ek) <= lim
+                )
         self._last_plain = plain
         return new_e, ok
 
@@ -389,12 +438,13 @@ class NARMAXPoly(PolynomialModel):
                 keep = [i for i in range(len(terms)) if i not in drop]
                 terms_all[o] = [terms[i] for i in keep]
                 errs_all[o] = [errs_all[o][i] for i in keep]
-                lss[o] = self._refit_noise(records, s, terms_all[o], lss[o].theta[keep], lss[o].stderr[keep], o,
-                                           e_list)
+                lss[o] = self._refit_noise(records, s, terms_all[o], lss[o].theta[keep], lss[o].stderr[keep], o, e_list)
             first = False
             if not changed:
-                raise DataError(f"{self.name}: the one-step recursion of the process-only model is not finite "
-                                "(non-finite parameters or regressors)")
+                raise DataError(
+                    f"{self.name}: the one-step recursion of the process-only model is not finite "
+                    "(non-finite parameters or regressors)"
+                )
             new_e, ok = self._recursion_bounded(records, s, terms_all, [ls.theta for ls in lss], e_list, kicks=True)
         return terms_all, lss, errs_all, removed
 
@@ -447,8 +497,9 @@ class NARMAXPoly(PolynomialModel):
             res = fr.frols(G, len(process), o, n, self.criterion, self.rho_p, self.max_terms)
             proc_sel.append([process[j] for j in res.selected])
             proc_err.append(res.err)
-        thetas = [fr.least_squares(records, s, proc_sel[o], o, e_list=zeros, chunk=self.chunk).theta
-                  for o in range(n_out)]
+        thetas = [
+            fr.least_squares(records, s, proc_sel[o], o, e_list=zeros, chunk=self.chunk).theta for o in range(n_out)
+        ]
         e_list = fr.fitted_residuals(records, s, proc_sel, thetas, e_list=zeros, chunk=self.chunk)
         # Step 3: noise terms on the residuals, extended least squares until terms and parameters settle.
         # With criterion="err" the process terms of step 2 stay and noise terms are added while ERR >= rho_n.
@@ -472,8 +523,18 @@ class NARMAXPoly(PolynomialModel):
                     forced = [cand.index(t) for t in proc_sel[o]]
                     allowed = np.array([False] * len(union_proc) + [True] * len(noise))
                     max_terms = len(forced) + (self.max_terms if self.max_terms is not None else len(noise))
-                    res = fr.frols(G, len(cand), o, n, "err", self.rho_n, max_terms, forced=forced,
-                                   allowed=allowed, continue_err=True)
+                    res = fr.frols(
+                        G,
+                        len(cand),
+                        o,
+                        n,
+                        "err",
+                        self.rho_n,
+                        max_terms,
+                        forced=forced,
+                        allowed=allowed,
+                        continue_err=True,
+                    )
                 terms = [cand[j] for j in res.selected]
                 ls = fr.least_squares(records, s, terms, o, e_list=e_list, chunk=self.chunk)
                 terms_all.append(terms)
@@ -497,8 +558,14 @@ class NARMAXPoly(PolynomialModel):
             if prev is not None and prev[0] == terms_all:
                 # relative change per parameter, scale-invariant (no absolute floor: in SI units a parameter can
                 # be ~1e-12 and still matter)
-                change = max((float(np.max(np.abs(a - b) / np.maximum(np.maximum(np.abs(a), np.abs(b)), 1e-300)))
-                              if a.size else 0.0) for a, b in zip(cur[1], prev[1]))
+                change = max(
+                    (
+                        float(np.max(np.abs(a - b) / np.maximum(np.maximum(np.abs(a), np.abs(b)), 1e-300)))
+                        if a.size
+                        else 0.0
+                    )
+                    for a, b in zip(cur[1], prev[1])
+                )
                 done = change < self.els_tol
             prev = cur
             e_list = new_e
@@ -513,11 +580,17 @@ class NARMAXPoly(PolynomialModel):
         # estimation data. If it does not, noise terms are removed until it does (the process part, hence the free
         # run, stays exactly the ELS estimate), and the reason is reported.
         terms_all, lss, errs_all, removed = self._stable_noise_model(records, s, terms_all, lss, errs_all, e_list)
-        what = ("converged" if self.els_converged_ else f"stopped after els_iter={self.els_iterations_} iterations "
-                f"(relative parameter change not yet below els_tol={self.els_tol:g})")
+        what = (
+            "converged"
+            if self.els_converged_
+            else f"stopped after els_iter={self.els_iterations_} iterations "
+            f"(relative parameter change not yet below els_tol={self.els_tol:g})"
+        )
         if self.els_unstable_:
-            what += (f"; the noise models of iterations {self.els_unstable_} had an unstable residual recursion "
-                     "(ELS continued from the plain residual)")
+            what += (
+                f"; the noise models of iterations {self.els_unstable_} had an unstable residual recursion "
+                "(ELS continued from the plain residual)"
+            )
         if removed:
             what += (
                 f"; the final noise model's residual recursion diverged on the estimation data: removed "
@@ -534,5 +607,6 @@ class NARMAXPoly(PolynomialModel):
             self.theta_.append(lss[o].theta)
             self.stderr_.append(lss[o].stderr)
             self.err_.append(errs_all[o])
-        self.noise_terms_ = [[fr.term_name(t, s.regressors, s.n_outputs, s.n_inputs) for t in ts if s.is_noise(t)]
-                             for ts in self.terms_]
+        self.noise_terms_ = [
+            [fr.term_name(t, s.regressors, s.n_outputs, s.n_inputs) for t in ts if s.is_noise(t)] for ts in self.terms_
+        ]

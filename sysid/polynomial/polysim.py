@@ -117,16 +117,34 @@ def _tables(structure: fr.Structure, terms_per_output: Sequence[Sequence[tuple[i
     return kind, ch, lag, fac[: len(flat)], out_of[: len(flat)]
 
 
-def simulate_sensitivity(structure: fr.Structure, terms_per_output, theta: np.ndarray, u: np.ndarray, y: np.ndarray,
-                         bound: float = np.inf, jacobian: bool = True) -> tuple[np.ndarray, np.ndarray, int]:
+def simulate_sensitivity(
+    structure: fr.Structure,
+    terms_per_output,
+    theta: np.ndarray,
+    u: np.ndarray,
+    y: np.ndarray,
+    bound: float = np.inf,
+    jacobian: bool = True,
+) -> tuple[np.ndarray, np.ndarray, int]:
     """Free run of a polynomial NARX (first ``max_lag`` samples from ``y``) and its sensitivity to the stacked
     parameters ``theta`` (all outputs' terms in order): returns (ŷ (N, n_out), S (N, n_out, P), divergence
     index or -1). ``S`` is (1, n_out, P) zeros when ``jacobian`` is False."""
     kind, ch, lag, fac, out_of = _tables(structure, terms_per_output)
     u2 = np.ascontiguousarray(np.asarray(u, dtype=float).reshape(len(u), -1))
     y2 = np.ascontiguousarray(np.asarray(y, dtype=float).reshape(len(y), -1))
-    return _sim_sens(y2, u2, kind, ch, lag, fac, out_of, np.ascontiguousarray(theta, dtype=float),
-                     int(structure.max_lag), float(bound), bool(jacobian))
+    return _sim_sens(
+        y2,
+        u2,
+        kind,
+        ch,
+        lag,
+        fac,
+        out_of,
+        np.ascontiguousarray(theta, dtype=float),
+        int(structure.max_lag),
+        float(bound),
+        bool(jacobian),
+    )
 
 
 class NARXPolySim(NARXPoly):
@@ -145,11 +163,32 @@ class NARXPolySim(NARXPoly):
 
     name = "narx-poly-sim"
 
-    def __init__(self, ny: int = 2, nu: int = 2, nk: int = 1, degree: int = 2, criterion: str = "bic",
-                 rho_p: float = 1e-4, max_terms: int = 40, constant: bool = True, chunk: int = fr.DEFAULT_CHUNK,
-                 max_nfev: int = 100, xtol: float = 1e-10, ftol: float = 1e-10):
-        super().__init__(ny=ny, nu=nu, nk=nk, degree=degree, criterion=criterion, rho_p=rho_p, max_terms=max_terms,
-                         constant=constant, chunk=chunk)
+    def __init__(
+        self,
+        ny: int = 2,
+        nu: int = 2,
+        nk: int = 1,
+        degree: int = 2,
+        criterion: str = "bic",
+        rho_p: float = 1e-4,
+        max_terms: int = 40,
+        constant: bool = True,
+        chunk: int = fr.DEFAULT_CHUNK,
+        max_nfev: int = 100,
+        xtol: float = 1e-10,
+        ftol: float = 1e-10,
+    ):
+        super().__init__(
+            ny=ny,
+            nu=nu,
+            nk=nk,
+            degree=degree,
+            criterion=criterion,
+            rho_p=rho_p,
+            max_terms=max_terms,
+            constant=constant,
+            chunk=chunk,
+        )
         self.max_nfev = max_nfev
         self.xtol = xtol
         self.ftol = ftol
@@ -195,8 +234,8 @@ class NARXPolySim(NARXPoly):
                     r = (yh[L:] - y[L:]) / scale
                     J = S[L:] / scale[None, :, None]
                     if div >= 0:
-                        r[div - L:] = DIVERGED_RESIDUAL
-                        J[div - L:] = 0.0
+                        r[div - L :] = DIVERGED_RESIDUAL
+                        J[div - L :] = 0.0
                         first = div if first < 0 else min(first, div)
                     res.append(r.reshape(-1))
                     jac.append(J.reshape(-1, theta.size))
@@ -204,9 +243,16 @@ class NARXPolySim(NARXPoly):
             return cache["r"], cache["J"], cache["div"]
 
         def solve(theta: np.ndarray, n: int | None):
-            return least_squares(lambda th: run(th, n)[0], theta, jac=lambda th: run(th, n)[1], method="lm",
-                                 x_scale="jac", max_nfev=int(self.max_nfev), xtol=float(self.xtol),
-                                 ftol=float(self.ftol))
+            return least_squares(
+                lambda th: run(th, n)[0],
+                theta,
+                jac=lambda th: run(th, n)[1],
+                method="lm",
+                x_scale="jac",
+                max_nfev=int(self.max_nfev),
+                xtol=float(self.xtol),
+                ftol=float(self.ftol),
+            )
 
         r0, _, div0 = run(theta0)
         # Continuation when the least-squares start diverges in simulation: refine on each record's first n samples,
@@ -223,16 +269,22 @@ class NARXPolySim(NARXPoly):
         sol = solve(theta, None)
         theta, nfev = sol.x, nfev + int(sol.nfev)
         r1, J, _ = run(theta)
-        rms0, rms1 = float(np.sqrt(np.mean(r0 ** 2))), float(np.sqrt(np.mean(r1 ** 2)))
+        rms0, rms1 = float(np.sqrt(np.mean(r0**2))), float(np.sqrt(np.mean(r1**2)))
         status = sol.message
         if not np.isfinite(rms1) or rms1 > rms0:  # never return something worse than the start
             theta, rms1, status = theta0, rms0, f"kept the least-squares start ({sol.message})"
             r1, J, _ = run(theta)
-        self.refine_info_ = {"nfev": nfev, "status": str(status), "rms_ls": rms0, "rms_sim": rms1,
-                             "continuation_lengths": stages, "start_diverged_at": int(div0)}
+        self.refine_info_ = {
+            "nfev": nfev,
+            "status": str(status),
+            "rms_ls": rms0,
+            "rms_sim": rms1,
+            "continuation_lengths": stages,
+            "start_diverged_at": int(div0),
+        }
         # standard errors: r and J are both divided by the output SD, so σ̂² (JᵀJ)⁻¹ is in θ's own units
         try:
-            cov = np.linalg.inv(J.T @ J) * float(np.mean(r1 ** 2))
+            cov = np.linalg.inv(J.T @ J) * float(np.mean(r1**2))
             se = np.sqrt(np.clip(np.diag(cov), 0.0, None))
         except np.linalg.LinAlgError:
             se = np.full(theta.size, np.nan)
@@ -248,8 +300,10 @@ class NARXPolySim(NARXPoly):
         return d
 
     def _extra_state(self) -> dict[str, Any]:
-        return {"theta_ls": [np.asarray(t).tolist() for t in getattr(self, "theta_ls_", [])],
-                "refine_info": getattr(self, "refine_info_", {})}
+        return {
+            "theta_ls": [np.asarray(t).tolist() for t in getattr(self, "theta_ls_", [])],
+            "refine_info": getattr(self, "refine_info_", {}),
+        }
 
     def _load_extra(self, extra: dict[str, Any]) -> None:
         self.theta_ls_ = [np.asarray(t, dtype=float) for t in extra.get("theta_ls", [])]

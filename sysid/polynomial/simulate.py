@@ -177,8 +177,7 @@ class CompiledModel:
     "e" for regressor r (used to group the terms).
     """
 
-    def __init__(self, n_out: int, n_in: int, has_e: bool, col, lag, terms, n_terms, theta, max_lag: int,
-                 kinds=None):
+    def __init__(self, n_out: int, n_in: int, has_e: bool, col, lag, terms, n_terms, theta, max_lag: int, kinds=None):
         self.n_out = int(n_out)
         self.n_in = int(n_in)
         self.has_e = bool(has_e)
@@ -231,8 +230,19 @@ def one_step(model: CompiledModel, u: np.ndarray, y: np.ndarray) -> tuple[np.nda
     """One-step-ahead prediction ŷ(t|t−1) (N, n_out) and the residuals e (N, n_out) or None for NARX."""
     Z = model.signal_matrix(u, y)
     x = model.exogenous(Z)
-    yhat = _one_step(Z, x, model.n_out, model.n_out + model.n_in, model.has_e, model.max_lag, model.fac,
-                     model.theta, model.n_exo, model.n_dyn, model.n_terms)
+    yhat = _one_step(
+        Z,
+        x,
+        model.n_out,
+        model.n_out + model.n_in,
+        model.has_e,
+        model.max_lag,
+        model.fac,
+        model.theta,
+        model.n_exo,
+        model.n_dyn,
+        model.n_terms,
+    )
     e = Z[:, model.n_out + model.n_in : model.ncol - 1].copy() if model.has_e else None
     return yhat, e
 
@@ -261,6 +271,19 @@ def k_step(model: CompiledModel, u: np.ndarray, y: np.ndarray, k: int, bound: fl
     x = model.exogenous(Z)
     N = Z.shape[0]
     k = int(min(k, max(N - model.max_lag, 1)))
-    yhat, bad = _k_step(Z, x, model.n_out, model.n_out + model.n_in, model.has_e, model.max_lag, k, model.fac,
-                        model.theta, model.n_exo, model.n_dyn, model.n_terms, float(bound))
+    yhat, bad = _k_step(
+        Z,
+        x,
+        model.n_out,
+        model.n_out + model.n_in,
+        model.has_e,
+        model.max_lag,
+        k,
+        model.fac,
+        model.theta,
+        model.n_exo,
+        model.n_dyn,
+        model.n_terms,
+        float(bound),
+    )
     return yhat, int(bad)

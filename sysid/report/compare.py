@@ -26,8 +26,15 @@ from sysid.data.record import Record
 from sysid.errors import ConfigError, DataError, DivergenceWarning
 from sysid.evaluation import metrics
 
-__all__ = ["parse_horizon", "horizon_label", "check_rate", "predict_scores", "compare", "compare_report",
-           "fir_reference"]
+__all__ = [
+    "parse_horizon",
+    "horizon_label",
+    "check_rate",
+    "predict_scores",
+    "compare",
+    "compare_report",
+    "fir_reference",
+]
 
 #: relative difference between the data's and the model's sampling rate still accepted
 RATE_TOLERANCE = 1e-6
@@ -61,8 +68,10 @@ def check_rate(model, record: Record) -> None:
     """Refuse data at another sampling rate than the model's estimation data (when the file says which)."""
     fs_model = getattr(model, "fs_", None)
     if fs_model and not math.isclose(record.fs, fs_model, rel_tol=RATE_TOLERANCE):
-        raise DataError(f"{record.source}: sampled at {record.fs:.10g} Hz, but the model was identified at "
-                        f"{fs_model:.10g} Hz; resample the data first (piezotwin preprocess)")
+        raise DataError(
+            f"{record.source}: sampled at {record.fs:.10g} Hz, but the model was identified at "
+            f"{fs_model:.10g} Hz; resample the data first (piezotwin preprocess)"
+        )
 
 
 def _predict(model, record: Record, horizon: int | None) -> np.ndarray:
@@ -82,16 +91,21 @@ def predict_scores(
     yh = _predict(model, record, horizon)
     skip = int(getattr(model, "max_lag_", 0) or 0) if skip is None else int(skip)
     div = getattr(model, "diverged_at_", None)
-    out: dict[str, Any] = {"horizon": "inf" if horizon is None else int(horizon),
-                           "initial_conditions": "measured" if record.y is not None else "zero",
-                           "skip": skip, "diverged_at": None if div is None else int(div), "metrics": None}
+    out: dict[str, Any] = {
+        "horizon": "inf" if horizon is None else int(horizon),
+        "initial_conditions": "measured" if record.y is not None else "zero",
+        "skip": skip,
+        "diverged_at": None if div is None else int(div),
+        "metrics": None,
+    }
     if record.y is not None:
         out["metrics"] = metrics.score(record.y, yh.reshape(record.y.shape), skip=skip)
     return yh, out
 
 
-def compare(models: Sequence[Any], record: Record, horizon: int | None = None,
-            names: Sequence[str] | None = None) -> tuple[list[np.ndarray], list[dict[str, Any]]]:
+def compare(
+    models: Sequence[Any], record: Record, horizon: int | None = None, names: Sequence[str] | None = None
+) -> tuple[list[np.ndarray], list[dict[str, Any]]]:
     """Predict ``record`` with every model and score all on the same samples (after the largest max_lag_)."""
     record.require_output()
     names = list(names) if names is not None else [m.name for m in models]
@@ -113,8 +127,15 @@ def fir_reference(est: Record | Sequence[Record]):
     return get_identifier("fir")().fit(est)
 
 
-def compare_report(models: Sequence[Any], names: Sequence[str], record: Record, preds: Sequence[np.ndarray],
-                   rows: Sequence[dict[str, Any]], out_dir: str | Path, max_lag: int = 20) -> dict[str, Any]:
+def compare_report(
+    models: Sequence[Any],
+    names: Sequence[str],
+    record: Record,
+    preds: Sequence[np.ndarray],
+    rows: Sequence[dict[str, Any]],
+    out_dir: str | Path,
+    max_lag: int = 20,
+) -> dict[str, Any]:
     """Write ``compare.png`` (measured vs predicted, whole record and zoom) and ``residual_tests_<n>.png``
     (correlation tests of each model's one-step residuals); return the paths and the test results."""
     from sysid.evaluation.residuals import correlation_tests
@@ -129,9 +150,20 @@ def compare_report(models: Sequence[Any], names: Sequence[str], record: Record, 
         fit = row["metrics"]["fit_percent"]
         labels.append(f"{row['model']}: fit {fit:.2f} %" if np.isfinite(fit) else f"{row['model']}: diverged")
     curves = [(p if p.ndim == 1 else p[:, 0]) for p in preds]
-    files: dict[str, Any] = {"compare": str(plot_compare(record.t, y, curves, labels, out / "compare.png", skip=skip,
-                                                         title=f"measured vs {horizon_label(_h(rows))} prediction",
-                                                         unit=record.units.get("y", "")))}
+    files: dict[str, Any] = {
+        "compare": str(
+            plot_compare(
+                record.t,
+                y,
+                curves,
+                labels,
+                out / "compare.png",
+                skip=skip,
+                title=f"measured vs {horizon_label(_h(rows))} prediction",
+                unit=record.units.get("y", ""),
+            )
+        )
+    }
     tests = {}
     for k, (name, m) in enumerate(zip(names, models)):
         y1 = _predict(m, record, 1)
@@ -142,8 +174,9 @@ def compare_report(models: Sequence[Any], names: Sequence[str], record: Record, 
             continue
         res = correlation_tests(e, u[L:], max_lag=min(max_lag, e.size - 2))
         tag = f"{k + 1}"
-        files[f"residual_tests_{tag}"] = str(plot_correlation_tests(res, out / f"residual_tests_{tag}.png",
-                                                                   title=f"{name}: one-step residual tests"))
+        files[f"residual_tests_{tag}"] = str(
+            plot_correlation_tests(res, out / f"residual_tests_{tag}.png", title=f"{name}: one-step residual tests")
+        )
         tests[name] = {"passed": res["passed"], "failed": [t["name"] for t in res["tests"] if not t["passed"]]}
     return {"files": files, "residual_tests": tests}
 

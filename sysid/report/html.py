@@ -36,8 +36,12 @@ def _attr(name: str, value: str | None) -> str:
     return f" {name}='{esc(value)}'" if value else ""
 
 
-def table(header: Sequence[str], rows: Iterable[Sequence[Any]], cls: str | None = None,
-          row_classes: Sequence[str | None] | None = None) -> str:
+def table(
+    header: Sequence[str],
+    rows: Iterable[Sequence[Any]],
+    cls: str | None = None,
+    row_classes: Sequence[str | None] | None = None,
+) -> str:
     """A ``<table>`` with one header row; ``header`` and the cells of ``rows`` are HTML (escape data with
     :func:`esc` first). ``row_classes`` gives each body row a class (e.g. a stage's status)."""
     head = "<tr>" + "".join(f"<th>{h}</th>" for h in header) + "</tr>"
@@ -61,14 +65,25 @@ def figure(src: str, caption: str) -> str:
 def provenance_section(prov: dict[str, Any]) -> str:
     """The provenance record of :func:`sysid.report.provenance.collect` as ``<section id="provenance">``: version,
     commit, command, date, machine and every data file with its size and sha256."""
-    rows = [("version", f"{prov['package']} {prov['version']}"), ("git commit", prov["commit"]),
-            ("command", prov["command"]), ("date (UTC)", prov["date_utc"]), ("machine", prov["machine"])]
+    rows = [
+        ("version", f"{prov['package']} {prov['version']}"),
+        ("git commit", prov["commit"]),
+        ("command", prov["command"]),
+        ("date (UTC)", prov["date_utc"]),
+        ("machine", prov["machine"]),
+    ]
     cells = "".join(f"<tr><th>{esc(k)}</th><td><code>{esc(v)}</code></td></tr>" for k, v in rows)
     if prov["data"]:
-        files = "".join(f"<li><code>{esc(d['file'])}</code> — "
-                        + (f"{d['bytes']} bytes, sha256 <code>{d['sha256']}</code>" if d["sha256"]
-                           else "not a file (built in memory)")
-                        + "</li>" for d in prov["data"])
+        files = "".join(
+            f"<li><code>{esc(d['file'])}</code> — "
+            + (
+                f"{d['bytes']} bytes, sha256 <code>{d['sha256']}</code>"
+                if d["sha256"]
+                else "not a file (built in memory)"
+            )
+            + "</li>"
+            for d in prov["data"]
+        )
         cells += f"<tr><th>data</th><td><ul class='files'>{files}</ul></td></tr>"
     else:
         cells += "<tr><th>data</th><td>none read from files (generated in this run)</td></tr>"
@@ -81,12 +96,15 @@ def page(title: str, body: str | Iterable[str], css: str = "", provenance: dict[
     parts = [body] if isinstance(body, str) else list(body)
     if provenance is not None:
         parts.append(provenance_section(provenance))
-    return (f"<!doctype html><html><head><meta charset='utf-8'><title>{esc(title)}</title>"
-            f"<style>{css}{REPORT_CSS}</style></head><body>\n" + "\n".join(parts) + "\n</body></html>")
+    return (
+        f"<!doctype html><html><head><meta charset='utf-8'><title>{esc(title)}</title>"
+        f"<style>{css}{REPORT_CSS}</style></head><body>\n" + "\n".join(parts) + "\n</body></html>"
+    )
 
 
-def write_page(path: str | Path, title: str, body: str | Iterable[str], css: str = "",
-               provenance: dict[str, Any] | None = None) -> Path:
+def write_page(
+    path: str | Path, title: str, body: str | Iterable[str], css: str = "", provenance: dict[str, Any] | None = None
+) -> Path:
     """Write :func:`page` to ``path`` atomically; returns the path."""
     from sysid.data.safeio import atomic_write_text
 

@@ -20,8 +20,9 @@ from sysid.report.plots import _save, pyplot
 __all__ = ["plot_simulation_band", "plot_bode_with_std", "linear_report"]
 
 
-def plot_simulation_band(model, record: Record, path, z: float = 2.0, n_draws: int = 100, seed: int = 0,
-                         max_points: int = 1000) -> Path:
+def plot_simulation_band(
+    model, record: Record, path, z: float = 2.0, n_draws: int = 100, seed: int = 0, max_points: int = 1000
+) -> Path:
     mean, std = model.simulation_band(record, n_draws=n_draws, seed=seed)
     y = np.asarray(record.y, float).reshape(len(record), -1)
     sim = np.asarray(model.predict(record, None), float).reshape(len(record), -1)
@@ -32,8 +33,14 @@ def plot_simulation_band(model, record: Record, path, z: float = 2.0, n_draws: i
     for o, ax in enumerate(axes[:, 0]):
         ax.plot(t, y[:n, o], color="0.6", lw=0.8, label="measured")
         ax.plot(t, sim[:n, o], color="C0", lw=0.9, label="free run")
-        ax.fill_between(t, sim[:n, o] - z * std[:n, o], sim[:n, o] + z * std[:n, o], color="C0", alpha=0.3,
-                        label=f"± {z:g} std (model uncertainty)")
+        ax.fill_between(
+            t,
+            sim[:n, o] - z * std[:n, o],
+            sim[:n, o] + z * std[:n, o],
+            color="C0",
+            alpha=0.3,
+            label=f"± {z:g} std (model uncertainty)",
+        )
         ax.set_ylabel(f"y{o + 1}" if y.shape[1] > 1 else "y")
     axes[-1, 0].set_xlabel("time [s]")
     axes[0, 0].legend(loc="upper right", fontsize=8)

@@ -28,9 +28,23 @@ import numpy as np
 from sysid.errors import DivergenceWarning
 from sysid.evaluation.residuals import correlation_tests, residual_spectrum
 
-__all__ = ["plot_residuals", "plot_correlation_tests", "plot_scatter", "plot_horizon_residuals", "plot_frf", "plot_bla",
-           "plot_compare", "identification_report", "plot_measured_vs_predicted", "draw_correlation_test",
-           "whole_periods", "BAND_COLOR", "ZOOM_COLOR", "pyplot", "save_and_close"]
+__all__ = [
+    "plot_residuals",
+    "plot_correlation_tests",
+    "plot_scatter",
+    "plot_horizon_residuals",
+    "plot_frf",
+    "plot_bla",
+    "plot_compare",
+    "identification_report",
+    "plot_measured_vs_predicted",
+    "draw_correlation_test",
+    "whole_periods",
+    "BAND_COLOR",
+    "ZOOM_COLOR",
+    "pyplot",
+    "save_and_close",
+]
 
 # Colours that mean one thing in every report (the browser test looks for them): the 95 % confidence band of
 # a correlation test, and the span of the whole record that the zoomed panel shows.
@@ -154,9 +168,17 @@ def _envelope(t: np.ndarray, y: np.ndarray, max_points: int) -> tuple[np.ndarray
     return np.asarray(tt), np.asarray(yy)
 
 
-def plot_measured_vs_predicted(t: np.ndarray, y: np.ndarray, predictions: dict[str, np.ndarray], path,
-                               title: str = "measured vs predicted", unit: str = "", zoom_samples: int = 1000,
-                               zoom: tuple[int, int] | None = None, max_points: int = 20000) -> Path:
+def plot_measured_vs_predicted(
+    t: np.ndarray,
+    y: np.ndarray,
+    predictions: dict[str, np.ndarray],
+    path,
+    title: str = "measured vs predicted",
+    unit: str = "",
+    zoom_samples: int = 1000,
+    zoom: tuple[int, int] | None = None,
+    max_points: int = 20000,
+) -> Path:
     """Two panels: the whole record (every sample up to ``max_points``, beyond that the min/max envelope of
     each bin) and a zoom of ``zoom_samples`` samples around the largest error of the first prediction (or the
     sample range ``zoom``), shaded in :data:`ZOOM_COLOR` on the whole-record panel.
@@ -240,7 +262,7 @@ def plot_horizon_residuals(model, record, path, horizons: Sequence[int | None] =
             warnings.simplefilter("ignore", DivergenceWarning)
             yh = np.asarray(model.predict(record, horizon=h)).reshape(np.shape(record.y))
         r = (record.y - yh)[L:]
-        rms = np.sqrt(np.nanmean(r ** 2)) if np.isfinite(r).any() else np.nan
+        rms = np.sqrt(np.nanmean(r**2)) if np.isfinite(r).any() else np.nan
         ax.plot(t[L:], r if r.ndim == 1 else r[:, 0], lw=0.5)
         ax.set_ylabel("free run" if h is None else f"k = {h}")
         ax.set_title(f"RMS {rms:.3g}", fontsize=8, loc="right")
@@ -249,9 +271,17 @@ def plot_horizon_residuals(model, record, path, horizons: Sequence[int | None] =
     return _save(fig, path)
 
 
-def plot_compare(t: np.ndarray, y: np.ndarray, predictions: Sequence[np.ndarray], labels: Sequence[str], path,
-                 skip: int = 0, zoom: tuple[int, int] | None = None, title: str = "measured vs predicted",
-                 unit: str = "") -> Path:
+def plot_compare(
+    t: np.ndarray,
+    y: np.ndarray,
+    predictions: Sequence[np.ndarray],
+    labels: Sequence[str],
+    path,
+    skip: int = 0,
+    zoom: tuple[int, int] | None = None,
+    title: str = "measured vs predicted",
+    unit: str = "",
+) -> Path:
     """Two panels: the whole record, and a zoom (default: 400 samples, or a twentieth of the record if longer,
     at its middle) on samples ``zoom = (start, stop)``. The first ``skip`` samples (initial conditions) are
     shaded."""
@@ -297,7 +327,8 @@ def identification_report(model, record, out_dir, max_lag: int = 20) -> dict[str
     files = {"residuals": plot_residuals(e, record.fs, out / "residuals.png", unit=record.units.get("y", ""))}
     if np.isfinite(e).all() and e.size > 3:  # a non-finite one-step residual has no correlation to test
         files["correlation_tests"] = plot_correlation_tests(
-            correlation_tests(e, u[L:], max_lag=min(max_lag, e.size - 2)), out / "correlation_tests.png")
+            correlation_tests(e, u[L:], max_lag=min(max_lag, e.size - 2)), out / "correlation_tests.png"
+        )
     files["scatter_one_step"] = plot_scatter(y[L:], y1[L:], out / "scatter_one_step.png", "one-step")
     files["scatter_free_run"] = plot_scatter(y[L:], yf[L:], out / "scatter_free_run.png", "free run")
     files["horizons"] = plot_horizon_residuals(model, record, out / "horizons.png")
@@ -355,8 +386,14 @@ def plot_bla(bla, path, title: str = "Best Linear Approximation", unit: str = ""
             for kind, mark in (("odd", "o"), ("even", "s"), ("any", "o")):
                 sel = kinds == kind
                 if sel.any():
-                    ax[2].plot(det["f_hz"][sel], 10 * np.log10(det["level"][sel]), mark, ms=3, mfc="none",
-                               label=f"output at {kind} detection lines")
+                    ax[2].plot(
+                        det["f_hz"][sel],
+                        10 * np.log10(det["level"][sel]),
+                        mark,
+                        ms=3,
+                        mfc="none",
+                        label=f"output at {kind} detection lines",
+                    )
             ax[2].plot(det["f_hz"], 10 * np.log10(det["noise"]), ".", ms=2, color="gray", label="noise variance")
         ax[2].legend(loc="best", fontsize=8)
     txt = f"verdict: {nl.get('verdict')}"

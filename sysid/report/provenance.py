@@ -52,8 +52,11 @@ def _git(*args: str) -> str | None:
     return out.stdout.strip() if out.returncode == 0 else None
 
 
-def collect(files: Iterable[str | os.PathLike] = (), records: Iterable[Any] = (), command: list[str] | None = None,
-            ) -> dict[str, Any]:
+def collect(
+    files: Iterable[str | os.PathLike] = (),
+    records: Iterable[Any] = (),
+    command: list[str] | None = None,
+) -> dict[str, Any]:
     """Provenance of a run as a JSON-able dict.
 
     ``files``: data files read (hashed); ``records``: :class:`sysid.data.record.Record` objects whose ``source`` is

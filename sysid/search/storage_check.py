@@ -47,18 +47,23 @@ def check_storage(storage: str | None, study: str) -> str:
     try:
         u = make_url(url)
     except ArgumentError:
-        raise ConfigError(f"--storage {shown!r}: not a database URL (expected e.g. sqlite:///file.db, "
-                          "postgresql://user:pw@host/db, or a file name)") from None
+        raise ConfigError(
+            f"--storage {shown!r}: not a database URL (expected e.g. sqlite:///file.db, "
+            "postgresql://user:pw@host/db, or a file name)"
+        ) from None
     try:
         dialect = u.get_dialect()
     except NoSuchModuleError:
-        raise ConfigError(f"--storage {shown!r}: unknown database kind {u.drivername!r} (sqlite, postgresql, "
-                          "mysql ...)") from None
+        raise ConfigError(
+            f"--storage {shown!r}: unknown database kind {u.drivername!r} (sqlite, postgresql, mysql ...)"
+        ) from None
     try:
         dialect.import_dbapi()
     except ImportError as exc:
-        raise ConfigError(f"--storage {shown!r}: the Python driver for {u.drivername} is not installed "
-                          f"({exc.name or exc}); install it or use an SQLite file") from None
+        raise ConfigError(
+            f"--storage {shown!r}: the Python driver for {u.drivername} is not installed "
+            f"({exc.name or exc}); install it or use an SQLite file"
+        ) from None
     path = sqlite_path(url)
     if path is not None:
         if not path.parent.is_dir():
@@ -68,8 +73,9 @@ def check_storage(storage: str | None, study: str) -> str:
         if path.exists() and path.stat().st_size > 0:
             with open(path, "rb") as fh:
                 if fh.read(16) != SQLITE_MAGIC:
-                    raise ConfigError(f"--storage {shown!r}: exists and is not an SQLite database; "
-                                      "refusing to use (and overwrite) it")
+                    raise ConfigError(
+                        f"--storage {shown!r}: exists and is not an SQLite database; refusing to use (and overwrite) it"
+                    )
     return url
 
 

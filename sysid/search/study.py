@@ -73,8 +73,11 @@ def _pid_alive(pid: int) -> bool:
 def done_keys(study) -> set[str]:
     from optuna.trial import TrialState
 
-    return {t.user_attrs["config_key"] for t in study.get_trials(deepcopy=False, states=(TrialState.COMPLETE,))
-            if "config_key" in t.user_attrs}
+    return {
+        t.user_attrs["config_key"]
+        for t in study.get_trials(deepcopy=False, states=(TrialState.COMPLETE,))
+        if "config_key" in t.user_attrs
+    }
 
 
 def _snapshot(study) -> tuple[set[str], set[str]]:
@@ -119,8 +122,11 @@ def claim(trial, key: str, target: int) -> str | None:
     done = {t.user_attrs.get("config_key") for t in trials if t.state == TrialState.COMPLETE} - {None}
     if key in done:
         return "configuration already done"
-    others = {t.user_attrs.get("config_key") for t in trials
-              if t.state == TrialState.RUNNING and t._trial_id != trial._trial_id} - {None}
+    others = {
+        t.user_attrs.get("config_key")
+        for t in trials
+        if t.state == TrialState.RUNNING and t._trial_id != trial._trial_id
+    } - {None}
     if key in others:
         return "configuration running in another process"
     if len(done | others | {key}) > target:
@@ -128,14 +134,18 @@ def claim(trial, key: str, target: int) -> str | None:
     return None
 
 
-def _next_grid_config(study, spec, target: int, worker: int, n_workers: int, failed: dict[str, int],
-                      rng: random.Random | None) -> dict[str, str] | None:
+def _next_grid_config(
+    study, spec, target: int, worker: int, n_workers: int, failed: dict[str, int], rng: random.Random | None
+) -> dict[str, str] | None:
     """A configuration among the first ``target`` grid points that is neither finished nor running (nor
     given up here): this worker's share (index mod n_workers) first; a random one after a clash."""
     done, running = _snapshot(study)
     taken = done | running
-    missing = [(i, c) for i, c in enumerate(_grid_configs(spec)[:target])
-               if config_key(c) not in taken and failed.get(config_key(c), 0) < MAX_FAILURES]
+    missing = [
+        (i, c)
+        for i, c in enumerate(_grid_configs(spec)[:target])
+        if config_key(c) not in taken and failed.get(config_key(c), 0) < MAX_FAILURES
+    ]
     if not missing:
         return None
     if rng is not None:
@@ -144,8 +154,19 @@ def _next_grid_config(study, spec, target: int, worker: int, n_workers: int, fai
     return (own or [c for _, c in missing])[0]
 
 
-def worker_loop(spec, url: str, study_name: str, est, val, target: int, on_trial: Callable[[], None] | None = None,
-                barrier=None, worker: int = 0, n_workers: int = 1, executor=None) -> None:
+def worker_loop(
+    spec,
+    url: str,
+    study_name: str,
+    est,
+    val,
+    target: int,
+    on_trial: Callable[[], None] | None = None,
+    barrier=None,
+    worker: int = 0,
+    n_workers: int = 1,
+    executor=None,
+) -> None:
     """Run configurations until the study holds ``target`` finished ones, or nothing is left to try here."""
     import optuna
     from optuna.trial import TrialState
@@ -168,8 +189,11 @@ def worker_loop(spec, url: str, study_name: str, est, val, target: int, on_trial
         live = running - done
         waiting = study.get_trials(deepcopy=False, states=(TrialState.WAITING,))
         if spec.sampler == "grid":
-            cfg = None if waiting else _next_grid_config(study, spec, target, worker, n_workers, failed,
-                                                        rng if state["clash"] else None)
+            cfg = (
+                None
+                if waiting
+                else _next_grid_config(study, spec, target, worker, n_workers, failed, rng if state["clash"] else None)
+            )
             if cfg is None and not waiting:
                 if not live:
                     return  # nothing running anywhere and nothing left that may be tried here
@@ -203,17 +227,28 @@ def worker_loop(spec, url: str, study_name: str, est, val, target: int, on_trial
             on_trial()
 
 
-def _worker_main(spec_d: dict, url: str, study_name: str, est, val, target: int, barrier, worker: int,
-                 n_workers: int) -> None:
+def _worker_main(
+    spec_d: dict, url: str, study_name: str, est, val, target: int, barrier, worker: int, n_workers: int
+) -> None:
     from sysid.neural.device import configure_threads
 
     configure_threads(1)
-    worker_loop(SweepSpec(**spec_d), url, study_name, est, val, target, barrier=barrier, worker=worker,
-                n_workers=n_workers)
+    worker_loop(
+        SweepSpec(**spec_d), url, study_name, est, val, target, barrier=barrier, worker=worker, n_workers=n_workers
+    )
 
 
-def run_sweep(spec, est, val, storage: str | None = None, study: str = "piezotwin-search", trials: int | None = None,
-              workers: int = 1, progress: bool = True, executor=None) -> dict[str, Any]:
+def run_sweep(
+    spec,
+    est,
+    val,
+    storage: str | None = None,
+    study: str = "piezotwin-search",
+    trials: int | None = None,
+    workers: int = 1,
+    progress: bool = True,
+    executor=None,
+) -> dict[str, Any]:
     """Run (or resume) a sweep; returns :func:`~sysid.search.summarise` of everything the study holds,
     plus ``requested``, ``complete`` and ``missing`` (configurations)."""
     from sysid.progress import progress as progress_bar
@@ -226,8 +261,14 @@ def run_sweep(spec, est, val, storage: str | None = None, study: str = "piezotwi
         raise ConfigError(f"--trials must be ≥ 1, got {trials}")
     target = min(target, n_all)
     reap(st, spec)
-    bar = progress_bar(total=target, initial=min(len(done_keys(st)), target), unit="config",
-                       desc=f"{spec.identifier} sweep", show=progress, leave=True)
+    bar = progress_bar(
+        total=target,
+        initial=min(len(done_keys(st)), target),
+        unit="config",
+        desc=f"{spec.identifier} sweep",
+        show=progress,
+        leave=True,
+    )
 
     def tick() -> None:
         bar.n = min(len(done_keys(st)), target)
@@ -239,9 +280,14 @@ def run_sweep(spec, est, val, storage: str | None = None, study: str = "piezotwi
         else:
             ctx = mp.get_context("spawn")
             barrier = ctx.Barrier(int(workers))
-            procs = [ctx.Process(target=_worker_main, args=(asdict(spec), url, study, est, val, target, barrier, w,
-                                                            int(workers)), daemon=False)
-                     for w in range(int(workers))]
+            procs = [
+                ctx.Process(
+                    target=_worker_main,
+                    args=(asdict(spec), url, study, est, val, target, barrier, w, int(workers)),
+                    daemon=False,
+                )
+                for w in range(int(workers))
+            ]
             for p in procs:
                 p.start()
             try:

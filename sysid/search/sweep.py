@@ -24,12 +24,24 @@ from sysid.config import ALIASES, coerce, resolve_aliases
 from sysid.data.record import Record
 from sysid.errors import ConfigError, DivergenceWarning
 
-__all__ = ["SweepSpec", "parse_grid", "config_key", "storage_url", "heartbeat_settings", "open_study", "run_one",
-           "run_config"]
+__all__ = [
+    "SweepSpec",
+    "parse_grid",
+    "config_key",
+    "storage_url",
+    "heartbeat_settings",
+    "open_study",
+    "run_one",
+    "run_config",
+]
 
 SAMPLERS = ("grid", "random", "tpe")
-R2_KEYS = (("estimation", "one_step"), ("estimation", "free_run"),
-           ("validation", "one_step"), ("validation", "free_run"))
+R2_KEYS = (
+    ("estimation", "one_step"),
+    ("estimation", "free_run"),
+    ("validation", "one_step"),
+    ("validation", "free_run"),
+)
 DIVERGED_OBJECTIVE = -1.0  # a diverged validation free run counts as R² = -1 in the objective only
 
 
@@ -41,8 +53,9 @@ def _identifier_defaults(identifier: str) -> dict[str, Any]:
 
     cls = get_identifier(identifier)
     sig = inspect.signature(cls.__init__)
-    return {p.name: p.default for p in sig.parameters.values()
-            if p.name != "self" and p.kind is p.POSITIONAL_OR_KEYWORD}
+    return {
+        p.name: p.default for p in sig.parameters.values() if p.name != "self" and p.kind is p.POSITIONAL_OR_KEYWORD
+    }
 
 
 def parse_grid(spec: str, identifier: str) -> dict[str, list[str]]:
@@ -120,8 +133,9 @@ class SweepSpec:
         self.fixed = resolve_aliases(self.fixed, defaults, "--set")
         for k in self.fixed:
             if k not in defaults:
-                raise ConfigError(f"--set: unknown option {k!r} of {self.identifier}; "
-                                  f"valid: {', '.join(sorted(defaults))}")
+                raise ConfigError(
+                    f"--set: unknown option {k!r} of {self.identifier}; valid: {', '.join(sorted(defaults))}"
+                )
             if k in self.grid or (k in ("n_enc", "ny", "nu") and "lags" in self.grid):
                 raise ConfigError(f"--set {k} conflicts with the same option in --grid")
         if "seed" in self.grid:
@@ -166,8 +180,9 @@ def heartbeat_settings() -> tuple[int, int]:
     return beat, grace
 
 
-def _retried(call: Callable[[], Any], errors: tuple[type[BaseException], ...], attempts: int = 10,
-             pause_s: float = 0.2) -> Any:
+def _retried(
+    call: Callable[[], Any], errors: tuple[type[BaseException], ...], attempts: int = 10, pause_s: float = 0.2
+) -> Any:
     """``call()``, called again while it raises one of ``errors``, after pauses of ``pause_s``, 2 ``pause_s``, …
     (at most ``attempts`` calls; the last error propagates). For the races of processes that create the same new
     store or study at once: the loser of a race succeeds once the winner is done."""
@@ -203,8 +218,9 @@ def _open_storage(url: str):
         # an IntegrityError ('UNIQUE constraint failed: alembic_version') or 'database is locked'; retry.
         from sqlalchemy.exc import SQLAlchemyError
 
-        return _retried(lambda: storages.RDBStorage(url, heartbeat_interval=beat, grace_period=grace, **kwargs),
-                        (SQLAlchemyError,))
+        return _retried(
+            lambda: storages.RDBStorage(url, heartbeat_interval=beat, grace_period=grace, **kwargs), (SQLAlchemyError,)
+        )
 
 
 def _make_sampler(spec: SweepSpec):
@@ -230,9 +246,16 @@ def _create_study(storage, study_name: str, spec: SweepSpec):
     import optuna
     from sqlalchemy.exc import SQLAlchemyError
 
-    return _retried(lambda: optuna.create_study(study_name=study_name, storage=storage, sampler=_make_sampler(spec),
-                                                direction="maximize", load_if_exists=True),
-                    (optuna.exceptions.DuplicatedStudyError, SQLAlchemyError))
+    return _retried(
+        lambda: optuna.create_study(
+            study_name=study_name,
+            storage=storage,
+            sampler=_make_sampler(spec),
+            direction="maximize",
+            load_if_exists=True,
+        ),
+        (optuna.exceptions.DuplicatedStudyError, SQLAlchemyError),
+    )
 
 
 def open_study(spec: SweepSpec, url: str, study_name: str, create: bool = True):
@@ -245,15 +268,17 @@ def open_study(spec: SweepSpec, url: str, study_name: str, create: bool = True):
         if saved is None:
             study.set_user_attr("spec", _spec_dict(spec))
         elif saved != json.loads(json.dumps(_spec_dict(spec))):
-            raise ConfigError(f"study {study_name!r} in {url} was made with another sweep ({saved}); "
-                              "use another --study")
+            raise ConfigError(
+                f"study {study_name!r} in {url} was made with another sweep ({saved}); use another --study"
+            )
         return study
     return optuna.load_study(study_name=study_name, storage=storage, sampler=_make_sampler(spec))
 
 
 # ---------------------------------------------------------------------------------------------- one configuration
-def run_one(spec: SweepSpec, config: dict[str, str], repeat: int, est: Record | Sequence[Record],
-            val: Record | Sequence[Record]) -> dict[str, Any]:
+def run_one(
+    spec: SweepSpec, config: dict[str, str], repeat: int, est: Record | Sequence[Record], val: Record | Sequence[Record]
+) -> dict[str, Any]:
     """Fit one run (repeat ``repeat``, seed ``spec.seed + repeat``) of one configuration: a pure function of
     its arguments, so a Dask worker gives the same numbers as this process."""
     from sysid.evaluation.evaluate import evaluate
@@ -266,13 +291,25 @@ def run_one(spec: SweepSpec, config: dict[str, str], repeat: int, est: Record | 
         warnings.simplefilter("ignore", DivergenceWarning)
         model.fit(est)
     fit_s = time.perf_counter() - t0
-    return {"config": dict(config), "repeat": repeat, "seed": seed, "n_parameters": model.n_parameters_,
-            "fit_seconds": fit_s, "estimation": evaluate(model, est), "validation": evaluate(model, val),
-            "pid": os.getpid()}
+    return {
+        "config": dict(config),
+        "repeat": repeat,
+        "seed": seed,
+        "n_parameters": model.n_parameters_,
+        "fit_seconds": fit_s,
+        "estimation": evaluate(model, est),
+        "validation": evaluate(model, val),
+        "pid": os.getpid(),
+    }
 
 
-def run_config(spec: SweepSpec, config: dict[str, str], est: Record | Sequence[Record],
-               val: Record | Sequence[Record], executor=None) -> list[dict[str, Any]]:
+def run_config(
+    spec: SweepSpec,
+    config: dict[str, str],
+    est: Record | Sequence[Record],
+    val: Record | Sequence[Record],
+    executor=None,
+) -> list[dict[str, Any]]:
     """Fit ``spec.repeats`` models of one configuration; one dict per run with the identify-JSON scores.
     ``executor`` (:class:`benchmarks.execution.Executor`, or any object with its ``map``) runs the repeats;
     default: one after the other here. ``est``/``val`` may be handles of ``executor.share``."""
@@ -300,8 +337,15 @@ def _clean(obj: Any) -> Any:
     return obj
 
 
-def _make_objective(spec: SweepSpec, est, val, claim: Callable[[Any, str, int], str | None],
-                    target: int | None = None, executor=None, state: dict[str, Any] | None = None) -> Callable:
+def _make_objective(
+    spec: SweepSpec,
+    est,
+    val,
+    claim: Callable[[Any, str, int], str | None],
+    target: int | None = None,
+    executor=None,
+    state: dict[str, Any] | None = None,
+) -> Callable:
     """The trial: ``claim(trial, key, target)`` the configuration (the coordination of the processes sharing
     the study passes its rule in: :func:`sysid.search.study.claim`), then fit its repeats."""
     import optuna

@@ -51,8 +51,13 @@ def summarise(runs: list[dict[str, Any]]) -> dict[str, Any]:
         by.setdefault(run["config_key"], []).append(run)
     configs = []
     for key, rs in by.items():
-        entry: dict[str, Any] = {"config": rs[0]["config"], "config_key": key, "n_parameters": rs[0]["n_parameters"],
-                                 "runs": len(rs), "fit_seconds_mean": float(np.mean([r["fit_seconds"] for r in rs]))}
+        entry: dict[str, Any] = {
+            "config": rs[0]["config"],
+            "config_key": key,
+            "n_parameters": rs[0]["n_parameters"],
+            "runs": len(rs),
+            "fit_seconds_mean": float(np.mean([r["fit_seconds"] for r in rs])),
+        }
         for part, mode in R2_KEYS:
             mean, sd, n_ok = _stat([r[part][mode]["r2"] for r in rs])
             tag = f"{'est' if part == 'estimation' else 'val'}_{'osa' if mode == 'one_step' else 'frs'}"
@@ -63,17 +68,27 @@ def summarise(runs: list[dict[str, Any]]) -> dict[str, Any]:
         configs.append(entry)
     configs.sort(key=lambda e: -np.inf if e["r2_val_frs_mean"] is None else e["r2_val_frs_mean"], reverse=True)
     best = configs[0]["config_key"] if configs else None
-    best_runs = sorted((r for r in runs if r["config_key"] == best),
-                       key=lambda r: (-np.inf if r["validation"]["free_run"]["r2"] is None
-                                      else r["validation"]["free_run"]["r2"]))
-    return {"n_configs": len(configs), "n_runs": len(runs), "configs": configs,
-            "best": configs[0] if configs else None,
-            "best_runs": [{"repeat": r["repeat"], "seed": r["seed"],
-                           "r2_est_osa": r["estimation"]["one_step"]["r2"],
-                           "r2_est_frs": r["estimation"]["free_run"]["r2"],
-                           "r2_val_osa": r["validation"]["one_step"]["r2"],
-                           "r2_val_frs": r["validation"]["free_run"]["r2"]}
-                          for r in best_runs]}
+    best_runs = sorted(
+        (r for r in runs if r["config_key"] == best),
+        key=lambda r: -np.inf if r["validation"]["free_run"]["r2"] is None else r["validation"]["free_run"]["r2"],
+    )
+    return {
+        "n_configs": len(configs),
+        "n_runs": len(runs),
+        "configs": configs,
+        "best": configs[0] if configs else None,
+        "best_runs": [
+            {
+                "repeat": r["repeat"],
+                "seed": r["seed"],
+                "r2_est_osa": r["estimation"]["one_step"]["r2"],
+                "r2_est_frs": r["estimation"]["free_run"]["r2"],
+                "r2_val_osa": r["validation"]["one_step"]["r2"],
+                "r2_val_frs": r["validation"]["free_run"]["r2"],
+            }
+            for r in best_runs
+        ],
+    }
 
 
 def export_jsonl(runs: list[dict[str, Any]], path: str | Path) -> Path:

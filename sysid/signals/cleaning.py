@@ -66,7 +66,7 @@ def _hampel_core(xp: np.ndarray, n: int, k: int, med: np.ndarray, mad: np.ndarra
             lo = np.searchsorted(s, old)
             for j in range(lo, w - 1):
                 s[j] = s[j + 1]
-            lo = np.searchsorted(s[:w - 1], new)
+            lo = np.searchsorted(s[: w - 1], new)
             for j in range(w - 1, lo, -1):
                 s[j] = s[j - 1]
             s[lo] = new

@@ -54,8 +54,6 @@ def crest_factor(u: np.ndarray) -> float:
     return float(np.max(np.abs(u))) / rms
 
 
-
-
 # ---------------------------------------------------------------------------------------------- multisine
 def multisine(
     fs: float,
@@ -312,8 +310,10 @@ def chirp(
         for name, f in (("f0", f0), ("f1", f1)):
             k = f * T0
             if abs(k - round(k)) > 1e-6:
-                raise ConfigError(f"periodic chirp: {name}*T0 = {k:.6g} must be an integer (eq. 2-2: k1, k2 in N);"
-                                  f" use a multiple of 1/T0 = {1 / T0:g} Hz")
+                raise ConfigError(
+                    f"periodic chirp: {name}*T0 = {k:.6g} must be an integer (eq. 2-2: k1, k2 in N);"
+                    f" use a multiple of 1/T0 = {1 / T0:g} Hz"
+                )
     n = np.arange(n0, dtype=np.float64)
     if method == "linear":
         # cycles(n) = f0 t + (f1 - f0) t^2 / (2 T0), t = n/fs
@@ -409,8 +409,17 @@ def thesis_cantilever_multisine(seed: int = 0, return_info: bool = False):
     is therefore 80 % of one period (not periodic — ``info['periodic']`` is False). This is our reading of
     the text: no other uniform grid puts 5000 lines in (0, 500] Hz. Peak ±100 V, random phases from ``seed``.
     """
-    return multisine(fs=10e3, duration=8.0, band=(0.1, 500.0), components=5000, resolution=0.1, amplitude=100.0,
-                     phase="random", seed=seed, return_info=return_info)
+    return multisine(
+        fs=10e3,
+        duration=8.0,
+        band=(0.1, 500.0),
+        components=5000,
+        resolution=0.1,
+        amplitude=100.0,
+        phase="random",
+        seed=seed,
+        return_info=return_info,
+    )
 
 
 def thesis_acoustic_multisine(seed: int = 0, truncate: int | None = None, return_info: bool = False):
@@ -424,8 +433,16 @@ def thesis_acoustic_multisine(seed: int = 0, truncate: int | None = None, return
     thousand points" before it was played; ``truncate=N`` keeps the first N samples of our 100 MHz version
     to mimic that (the result no longer has a line spectrum). The signal is returned at 100 MHz.
     """
-    out = multisine(fs=100e6, band=(900e3, 1349.99e3), components=45000, resolution=10.0, amplitude=0.4,
-                    phase="random", seed=seed, return_info=True)
+    out = multisine(
+        fs=100e6,
+        band=(900e3, 1349.99e3),
+        components=45000,
+        resolution=10.0,
+        amplitude=0.4,
+        phase="random",
+        seed=seed,
+        return_info=True,
+    )
     u, info = out
     if truncate is not None:
         t = int(positive("truncate", truncate, integer=True))

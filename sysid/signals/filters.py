@@ -13,8 +13,16 @@ from sysid.config import positive
 from sysid.errors import ConfigError
 from sysid.signals.checks import _as_float, _finite, _int_param
 
-__all__ = ["moving_average", "decimate", "resample", "antialias_filter", "bandpass", "bandpass_design",
-           "PASSBAND_DEFAULT", "ATTEN_DB_DEFAULT"]
+__all__ = [
+    "moving_average",
+    "decimate",
+    "resample",
+    "antialias_filter",
+    "bandpass",
+    "bandpass_design",
+    "PASSBAND_DEFAULT",
+    "ATTEN_DB_DEFAULT",
+]
 
 
 def _sps():
@@ -105,8 +113,13 @@ def antialias_filter(
     return _sps().firwin(numtaps, 0.5 * (f_pass + f_stop), window=("kaiser", beta), scale=True)
 
 
-def decimate(x: np.ndarray, q: int, passband: float = PASSBAND_DEFAULT, atten_db: float = ATTEN_DB_DEFAULT,
-             return_filter: bool = False):
+def decimate(
+    x: np.ndarray,
+    q: int,
+    passband: float = PASSBAND_DEFAULT,
+    atten_db: float = ATTEN_DB_DEFAULT,
+    return_filter: bool = False,
+):
     """Keep every ``q``-th sample after an anti-aliasing FIR low-pass (zero phase, polyphase).
 
     In-band (up to ``passband`` x the new Nyquist frequency ``fs/(2q)``) the amplitude changes by at most
@@ -134,8 +147,14 @@ def _ratio(fs: float, fs_new: float, max_den: int = 100000) -> tuple[int, int]:
     return approx.numerator, approx.denominator
 
 
-def resample(x: np.ndarray, fs: float, fs_new: float, passband: float = PASSBAND_DEFAULT,
-             atten_db: float = ATTEN_DB_DEFAULT, return_filter: bool = False):
+def resample(
+    x: np.ndarray,
+    fs: float,
+    fs_new: float,
+    passband: float = PASSBAND_DEFAULT,
+    atten_db: float = ATTEN_DB_DEFAULT,
+    return_filter: bool = False,
+):
     """Rational resampling ``fs -> fs_new`` (e.g. 100 MHz -> 6.75 MHz = x 27/400, dissertation §3.2) with the
     anti-aliasing / anti-imaging FIR of :func:`antialias_filter` (same guarantees as :func:`decimate`,
     relative to the lower of the two Nyquist frequencies). Output length ``ceil(N * up / down)``."""

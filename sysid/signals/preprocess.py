@@ -66,10 +66,25 @@ __all__ = [
 
 
 # ---------------------------------------------------------------------------------------------- record level
-STEPS = ("remove_offset", "detrend", "hampel", "fill_missing", "moving_average", "decimate", "resample", "bandpass",
-         "segment", "suggest_rate")
-_ALIASES = {"outliers": "hampel", "offset": "remove_offset", "fill-missing": "fill_missing",
-            "moving-average": "moving_average", "suggest-rate": "suggest_rate"}
+STEPS = (
+    "remove_offset",
+    "detrend",
+    "hampel",
+    "fill_missing",
+    "moving_average",
+    "decimate",
+    "resample",
+    "bandpass",
+    "segment",
+    "suggest_rate",
+)
+_ALIASES = {
+    "outliers": "hampel",
+    "offset": "remove_offset",
+    "fill-missing": "fill_missing",
+    "moving-average": "moving_average",
+    "suggest-rate": "suggest_rate",
+}
 _PARAMS = {
     "remove_offset": set(),
     "detrend": {"order"},
@@ -105,8 +120,10 @@ def _normalise_step(step: Any) -> tuple[str, dict[str, Any]]:
     allowed = _PARAMS[name] | ({"signals"} if name in _PER_SIGNAL else set())
     unknown = set(params) - allowed
     if unknown:
-        raise ConfigError(f"preprocessing step {name}: unknown parameter(s) {', '.join(sorted(unknown))};"
-                          f" valid: {', '.join(sorted(allowed)) or 'none'}")
+        raise ConfigError(
+            f"preprocessing step {name}: unknown parameter(s) {', '.join(sorted(unknown))};"
+            f" valid: {', '.join(sorted(allowed)) or 'none'}"
+        )
     return name, params
 
 
@@ -176,18 +193,36 @@ def apply_steps(record: Record, steps: Iterable[Any]) -> Record:
                 q = _int_param("decimation factor q", params["q"], 1)
                 fs_new = fs / q
                 # fn is called below, in this same step: binding late to q and params is harmless
-                fn = lambda x: decimate(x, q, params.get("passband", PASSBAND_DEFAULT),  # noqa: E731, B023
-                                        params.get("atten_db", ATTEN_DB_DEFAULT), return_filter=True)  # noqa: B023
+                fn = lambda x: decimate(  # noqa: E731
+                    x,
+                    q,  # noqa: B023
+                    params.get("passband", PASSBAND_DEFAULT),  # noqa: B023
+                    params.get("atten_db", ATTEN_DB_DEFAULT),  # noqa: B023
+                    return_filter=True,
+                )
             else:
                 if "fs_new" not in params:
                     raise ConfigError("preprocessing step resample needs fs_new")
                 fs_new = positive("new sampling rate", params["fs_new"])
-                fn = lambda x: resample(x, fs, fs_new, params.get("passband", PASSBAND_DEFAULT),  # noqa: E731, B023
-                                        params.get("atten_db", ATTEN_DB_DEFAULT), return_filter=True)  # noqa: B023
+                fn = lambda x: resample(  # noqa: E731
+                    x,
+                    fs,  # noqa: B023
+                    fs_new,  # noqa: B023
+                    params.get("passband", PASSBAND_DEFAULT),  # noqa: B023
+                    params.get("atten_db", ATTEN_DB_DEFAULT),  # noqa: B023
+                    return_filter=True,
+                )
             for t in targets:
                 new[t], h = fn(getattr(rec, t))
-            changes.update({"fs_before": fs, "fs_after": fs_new, "n_before": len(rec),
-                            "n_after": int(new["u"].shape[0]), "filter_taps": int(h.size)})
+            changes.update(
+                {
+                    "fs_before": fs,
+                    "fs_after": fs_new,
+                    "n_before": len(rec),
+                    "n_after": int(new["u"].shape[0]),
+                    "filter_taps": int(h.size),
+                }
+            )
             new["fs"] = fs_new
         elif name == "bandpass":
             if "fmin" not in params or "fmax" not in params:
@@ -204,14 +239,22 @@ def apply_steps(record: Record, steps: Iterable[Any]) -> Record:
             target = rec.y if rec.y is not None else rec.u
             if target.ndim == 2:
                 target = target[:, 0]
-            changes = {"signal": "y" if rec.y is not None else "u", "channel": 0,
-                       **suggest_rate(target, fs=fs, max_lag=params.get("max_lag"))}
+            changes = {
+                "signal": "y" if rec.y is not None else "u",
+                "channel": 0,
+                **suggest_rate(target, fs=fs, max_lag=params.get("max_lag")),
+            }
         if new:
             kw = {k: v for k, v in new.items() if k in ("u", "y", "fs")}
             meta = rec.meta
             rec = rec.replace(**kw)
             rec.meta = meta
-        log.append({"step": name, "params": {**params, **({"signals": signals} if name in _PER_SIGNAL else {})},
-                    "changes": changes})
+        log.append(
+            {
+                "step": name,
+                "params": {**params, **({"signals": signals} if name in _PER_SIGNAL else {})},
+                "changes": changes,
+            }
+        )
         rec.meta["preprocessing"] = log
     return rec

@@ -101,8 +101,10 @@ def suggest_rate(y: np.ndarray, fs: float | None = None, max_lag: int | None = N
     tau_n = _first_minimum(r_nl)
     if tau_l is None or tau_n is None:
         which = "linear" if tau_l is None else "nonlinear (y^2)"
-        raise DataError(f"suggest_rate: the {which} autocovariance has no minimum within {max_lag} lags;"
-                        " record longer data or raise max_lag")
+        raise DataError(
+            f"suggest_rate: the {which} autocovariance has no minimum within {max_lag} lags;"
+            " record longer data or raise max_lag"
+        )
     tau_m = min(tau_l, tau_n)
     out: dict[str, Any] = {
         "tau_linear": tau_l,

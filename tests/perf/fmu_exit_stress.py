@@ -70,8 +70,12 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("-n", type=int, default=30, help="number of fresh processes (default 30)")
     ap.add_argument("--fmu", help="FMU to run (default: build the cantilever FMU from the current code)")
-    ap.add_argument("--mode", choices=("fmpy", "project"), default="fmpy",
-                    help="plain FMPy script, or the project's fmu_simulate (default fmpy)")
+    ap.add_argument(
+        "--mode",
+        choices=("fmpy", "project"),
+        default="fmpy",
+        help="plain FMPy script, or the project's fmu_simulate (default fmpy)",
+    )
     ap.add_argument("--pythonpath", default=str(REPO), help="where the project is imported from (--mode project)")
     ap.add_argument("--seed0", type=int, default=1, help="first PYTHONHASHSEED (default 1)")
     args = ap.parse_args(argv)
@@ -86,8 +90,14 @@ def main(argv=None) -> int:
             env["PYTHONHASHSEED"] = str(seed)
             if args.mode == "project":
                 env["PYTHONPATH"] = args.pythonpath
-            proc = subprocess.run([sys.executable, str(script), str(path), args.mode], env=env,
-                                  stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, timeout=600)
+            proc = subprocess.run(
+                [sys.executable, str(script), str(path), args.mode],
+                env=env,
+                stdout=subprocess.DEVNULL,
+                stderr=subprocess.PIPE,
+                text=True,
+                timeout=600,
+            )
             if proc.returncode == -6 or proc.returncode == 134:
                 aborts += 1
                 print(f"seed {seed}: abort ({proc.stderr.strip().splitlines()[-1:]})", flush=True)

@@ -5,7 +5,7 @@ For every benchmark: mean and min time per call, throughput when ``extra_info['i
 reference (``extra_info['reference']`` or the naming rule of :mod:`tests.perf.conftest`) with the speed
 ratio reference/ours (> 1 = faster than the reference; per item when both give ``items``), and its target
 (``extra_info['target_s']``) with the margin. The machine line comes from the JSON (CPU, cores) — timings on a shared
-machine are inflated. """
+machine are inflated."""
 
 from __future__ import annotations
 
@@ -45,8 +45,10 @@ def pair_references(benches: list[dict[str, Any]]) -> dict[str, str]:
     for b in benches:
         ref = (b.get("extra_info") or {}).get("reference")
         if ref:
-            match = next((x for x in benches if x["name"] == ref or _short(x["name"]) == _short(ref)
-                          or x["fullname"] == ref), None)
+            match = next(
+                (x for x in benches if x["name"] == ref or _short(x["name"]) == _short(ref) or x["fullname"] == ref),
+                None,
+            )
             if match is not None:
                 out[b["fullname"]] = match["fullname"]
     refs = [b for b in benches if _is_reference(b["name"])]

@@ -40,8 +40,10 @@ def test_diagnose_100k_samples_at_1khz(benchmark):
     out = benchmark.pedantic(diagnose, args=(CantileverTwin(), rec), rounds=1, iterations=1)
     benchmark.extra_info["cpu_s"] = time.process_time() - cpu0
     benchmark.extra_info["load_after"] = os.getloadavg()[0]
-    print(f"100k diagnosis: CPU {benchmark.extra_info['cpu_s']:.1f} s, load {benchmark.extra_info['load_before']:.1f}"
-          f" -> {benchmark.extra_info['load_after']:.1f}, causes {[c['effect'] for c in out['causes']]}")
+    print(
+        f"100k diagnosis: CPU {benchmark.extra_info['cpu_s']:.1f} s, load {benchmark.extra_info['load_before']:.1f}"
+        f" -> {benchmark.extra_info['load_after']:.1f}, causes {[c['effect'] for c in out['causes']]}"
+    )
     assert out["verdict"] in ("discrepancy", "unexplained")
     assert any(c["effect"] == "creep" for c in out["causes"]), out["causes"]
     stats = getattr(benchmark, "stats", None)

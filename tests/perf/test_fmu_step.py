@@ -39,9 +39,11 @@ def fmus(tmp_path_factory):
 
     d = tmp_path_factory.mktemp("fmu_step")
     m = NARXPoly().fit(narx_record(1500, seed=0, noise=0.01).replace(fs=1000.0))
-    return {"acoustic": (export_fmu(AcousticTwin(), d / "acoustic.fmu"), 100e6),
-            "cantilever": (export_fmu(CantileverTwin(), d / "cantilever.fmu"), 10e3),
-            "narx-poly": (export_model_fmu(m, d / "narx.fmu"), 1000.0)}
+    return {
+        "acoustic": (export_fmu(AcousticTwin(), d / "acoustic.fmu"), 100e6),
+        "cantilever": (export_fmu(CantileverTwin(), d / "cantilever.fmu"), 10e3),
+        "narx-poly": (export_model_fmu(m, d / "narx.fmu"), 1000.0),
+    }
 
 
 class _Host:
@@ -55,8 +57,12 @@ class _Host:
         md = read_model_description(self.folder)
         vr = {v.name: v.valueReference for v in md.modelVariables}
         self.vu, self.vy, self.h, self.t = [vr["u"]], [vr["y"]], 1.0 / fs, 0.0
-        self.fmu = FMU2Slave(guid=md.guid, unzipDirectory=self.folder,
-                             modelIdentifier=md.coSimulation.modelIdentifier, instanceName="bench")
+        self.fmu = FMU2Slave(
+            guid=md.guid,
+            unzipDirectory=self.folder,
+            modelIdentifier=md.coSimulation.modelIdentifier,
+            instanceName="bench",
+        )
         self.fmu.instantiate()
         self.fmu.setupExperiment(startTime=0.0)
         self.fmu.enterInitializationMode()

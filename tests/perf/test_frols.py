@@ -31,7 +31,7 @@ def make_data(n: int, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
     rng = np.random.default_rng(seed)
     u = rng.uniform(-1.0, 1.0, n)
     x = lfilter([0.0, 0.5, 0.3], [1.0, -0.6, 0.1], u)
-    y = x + 0.1 * x ** 2 - 0.05 * np.r_[0.0, x[:-1]] * u + 0.01 * rng.standard_normal(n)
+    y = x + 0.1 * x**2 - 0.05 * np.r_[0.0, x[:-1]] * u + 0.01 * rng.standard_normal(n)
     return u, y
 
 
@@ -42,8 +42,16 @@ def sysidentpy_frols(lags: int):
     from sysidentpy.parameter_estimation import LeastSquares
 
     del sip
-    return FROLS(order_selection=True, info_criteria="bic", n_info_values=15, ylag=lags, xlag=lags,
-                 estimator=LeastSquares(), basis_function=Polynomial(degree=2), model_type="NARMAX")
+    return FROLS(
+        order_selection=True,
+        info_criteria="bic",
+        n_info_values=15,
+        ylag=lags,
+        xlag=lags,
+        estimator=LeastSquares(),
+        basis_function=Polynomial(degree=2),
+        model_type="NARMAX",
+    )
 
 
 def ours(lags: int) -> NARXPoly:
@@ -92,9 +100,17 @@ def test_frols_1e6_samples_231_candidates(benchmark):
     benchmark.pedantic(run, rounds=1, iterations=1, warmup_rounds=0)
     seconds = benchmark.stats.stats.max
     mem = _peak_rss_subprocess(1_000_000, 10)
-    benchmark.extra_info['sysidentpy'] = 'not run at this size (231 x 1e6 candidate matrix alone is 1.8 GB)'
-    benchmark.extra_info.update({"n": 1_000_000, "candidates": 231, "seconds": seconds, "cpu_seconds": cpu[0],
-                                 "subprocess": mem, "n_terms": model.n_parameters_})
+    benchmark.extra_info["sysidentpy"] = "not run at this size (231 x 1e6 candidate matrix alone is 1.8 GB)"
+    benchmark.extra_info.update(
+        {
+            "n": 1_000_000,
+            "candidates": 231,
+            "seconds": seconds,
+            "cpu_seconds": cpu[0],
+            "subprocess": mem,
+            "n_terms": model.n_parameters_,
+        }
+    )
     print(
         f"\nFROLS N=1e6, 231 candidates: {seconds:.2f} s in-process ({cpu[0]:.2f} s CPU); "
         f"fresh process {mem['seconds']:.2f} s, "
@@ -135,8 +151,10 @@ def test_free_run_20_terms_vs_sysidentpy(benchmark):
     info["sysidentpy_samples_per_s"] = m_sip / t_sip
     info["ratio"] = rate / info["sysidentpy_samples_per_s"]
     benchmark.extra_info.update(info)
-    print(f"\nfree run, 20 terms: ours {rate / 1e6:.1f} M samples/s wall ({cpu_rate / 1e6:.1f} M/s of CPU time), "
-          f"SysIdentPy {info['sysidentpy_samples_per_s'] / 1e6:.3f} M samples/s, ratio {info['ratio']:.0f}")
+    print(
+        f"\nfree run, 20 terms: ours {rate / 1e6:.1f} M samples/s wall ({cpu_rate / 1e6:.1f} M/s of CPU time), "
+        f"SysIdentPy {info['sysidentpy_samples_per_s'] / 1e6:.3f} M samples/s, ratio {info['ratio']:.0f}"
+    )
     assert cpu_rate >= 10e6
 
 
@@ -152,11 +170,20 @@ def _ratio_case(benchmark, n: int, lags: int, rounds: int):
     sip.fit(X=u[:500].reshape(-1, 1), y=y[:500].reshape(-1, 1))  # first-call overheads outside the timing
     sip = sysidentpy_frols(lags)
     t_sip = _time_once(lambda: sip.fit(X=u.reshape(-1, 1), y=y.reshape(-1, 1)))
-    info = {"n": n, "lags": lags, "ours_s": t_ours, "sysidentpy_s": t_sip, "ratio": t_sip / t_ours,
-            "ours_terms": model.n_parameters_, "sysidentpy_terms": int(len(sip.final_model))}
+    info = {
+        "n": n,
+        "lags": lags,
+        "ours_s": t_ours,
+        "sysidentpy_s": t_sip,
+        "ratio": t_sip / t_ours,
+        "ours_terms": model.n_parameters_,
+        "sysidentpy_terms": int(len(sip.final_model)),
+    }
     benchmark.extra_info.update(info)
-    print(f"\nFROLS N={n:.0e} lags={lags}: ours {t_ours:.3f} s, SysIdentPy {t_sip:.2f} s, ratio {t_sip / t_ours:.0f}x "
-          f"(terms {model.n_parameters_} vs {len(sip.final_model)})")
+    print(
+        f"\nFROLS N={n:.0e} lags={lags}: ours {t_ours:.3f} s, SysIdentPy {t_sip:.2f} s, ratio {t_sip / t_ours:.0f}x "
+        f"(terms {model.n_parameters_} vs {len(sip.final_model)})"
+    )
     return info
 
 

@@ -75,7 +75,7 @@ def test_free_run_torch_eager_reference(benchmark, fitted, rec80k):
     w = torch.as_tensor(fitted.weights_)
     layers, o = [], 0
     for a, b in zip(sizes[:-1], sizes[1:]):
-        layers.append((w[o:o + a * b].view(b, a), w[o + a * b:o + a * b + b]))
+        layers.append((w[o : o + a * b].view(b, a), w[o + a * b : o + a * b + b]))
         o += a * b + b
     un = torch.as_tensor(fitted.normaliser_.transform_u(rec80k.u[:8000]))
     yn = torch.as_tensor(fitted.normaliser_.transform_y(rec80k.y[:8000]))
@@ -84,7 +84,7 @@ def test_free_run_torch_eager_reference(benchmark, fitted, rec80k):
         y = yn.clone()
         with torch.no_grad():
             for t in range(10, y.shape[0]):
-                x = torch.cat([y[t - 10:t].flip(0), un[t - 10:t].flip(0)])
+                x = torch.cat([y[t - 10 : t].flip(0), un[t - 10 : t].flip(0)])
                 for i, (W, b) in enumerate(layers):
                     x = W @ x + b
                     if i < len(layers) - 1:

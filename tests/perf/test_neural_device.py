@@ -45,9 +45,15 @@ def test_fit_cpu_reference(benchmark, identifier):
 @pytest.mark.skipif(not torch.cuda.is_available(), reason="no CUDA device")
 @pytest.mark.parametrize("identifier", sorted(CASES))
 def test_fit_cuda(benchmark, identifier):
-    benchmark.extra_info.update({"device": "cuda", "dataset": CASES[identifier][0], "epochs": CASES[identifier][1],
-                                 "reference": f"test_fit_cpu_reference[{identifier}]",
-                                 "gpu": torch.cuda.get_device_name(0)})
+    benchmark.extra_info.update(
+        {
+            "device": "cuda",
+            "dataset": CASES[identifier][0],
+            "epochs": CASES[identifier][1],
+            "reference": f"test_fit_cpu_reference[{identifier}]",
+            "gpu": torch.cuda.get_device_name(0),
+        }
+    )
     _fit(identifier, "cuda")  # CUDA context and kernels loaded outside the timing
     rmse = benchmark.pedantic(lambda: _fit(identifier, "cuda"), rounds=1, iterations=1)
     cpu = _rmse.get((identifier, "cpu"))

@@ -33,7 +33,7 @@ def _numpy_reference(A, B, C, D, E, F, fac, u):
     Ps, Po = n * (n + m + K) + n, p * (n + m + K)
     mask = fac >= 0
     S = np.zeros((n, Ps))
-    S[:, Ps - n:] = np.eye(n)
+    S[:, Ps - n :] = np.eye(n)
     x = np.zeros(n)
     J = np.zeros((len(u), p, Ps + Po))
     for t in range(len(u)):

@@ -58,8 +58,15 @@ def test_silverbox_sysidentpy_frols_fit_and_free_run(benchmark, silverbox):
     def work():
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            m = FROLS(order_selection=True, n_info_values=15, ylag=STRUCT["ny"], xlag=STRUCT["nu"], info_criteria="aic",
-                      estimator=LeastSquares(), basis_function=Polynomial(degree=STRUCT["degree"]))
+            m = FROLS(
+                order_selection=True,
+                n_info_values=15,
+                ylag=STRUCT["ny"],
+                xlag=STRUCT["nu"],
+                info_criteria="aic",
+                estimator=LeastSquares(),
+                basis_function=Polynomial(degree=STRUCT["degree"]),
+            )
             m.fit(X=x, y=y)
             return m.predict(X=ms.u.reshape(-1, 1), y=ms.y.reshape(-1, 1)[: m.max_lag])
 

@@ -32,10 +32,14 @@ def make_system(seed: int = 0, n: int = 10):
     A = np.zeros((n, n))
     for k in range(n // 2):
         r, th = rng.uniform(0.75, 0.95), rng.uniform(0.1, 2.8)
-        A[2 * k:2 * k + 2, 2 * k:2 * k + 2] = r * np.array([[np.cos(th), -np.sin(th)], [np.sin(th), np.cos(th)]])
+        A[2 * k : 2 * k + 2, 2 * k : 2 * k + 2] = r * np.array([[np.cos(th), -np.sin(th)], [np.sin(th), np.cos(th)]])
     T = rng.standard_normal((n, n))
-    return T @ A @ np.linalg.inv(T), rng.standard_normal((n, 2)), rng.standard_normal((2, n)), \
-        0.5 * rng.standard_normal((2, 2))
+    return (
+        T @ A @ np.linalg.inv(T),
+        rng.standard_normal((n, 2)),
+        rng.standard_normal((2, n)),
+        0.5 * rng.standard_normal((2, 2)),
+    )
 
 
 def make_data(n: int, seed: int = 1):
@@ -105,9 +109,17 @@ def test_n4sid_1e6_samples_2x2_10th_order(benchmark):
     A = make_system()[0]
     true, est = np.sort(np.abs(np.linalg.eigvals(A))), np.sort(np.abs(np.linalg.eigvals(model.A_)))
     mem = _fresh_process(1_000_000, "ours")
-    info = {"n": 1_000_000, "nx": model.nx_, "seconds": seconds, "cpu_seconds": cpu[0], "subprocess": mem,
-            "target_s": 30.0, "items": 1_000_000, "block_rows": model.block_rows_,
-            "max_pole_modulus_error": float(np.max(np.abs(true - est)))}
+    info = {
+        "n": 1_000_000,
+        "nx": model.nx_,
+        "seconds": seconds,
+        "cpu_seconds": cpu[0],
+        "subprocess": mem,
+        "target_s": 30.0,
+        "items": 1_000_000,
+        "block_rows": model.block_rows_,
+        "max_pole_modulus_error": float(np.max(np.abs(true - est))),
+    }
     benchmark.extra_info.update(info)
     print(
         f"\nn4sid N=1e6, 2x2, order chosen {model.nx_}: {seconds:.2f} s in-process ({cpu[0]:.2f} s CPU); fresh process "
@@ -135,12 +147,20 @@ def test_n4sid_vs_nfoursid_1e4(benchmark):
     t0 = time.perf_counter()
     nfoursid_fit(u, y)
     t_ref = time.perf_counter() - t0
-    info = {"n": 10_000, "ours_s": t_ours, "nfoursid_s": t_ref, "ratio": t_ref / t_ours, "block_rows": BLOCK_ROWS,
-            "reference": "nfoursid 1.0 (same block rows and order)",
-            "nfoursid_1e5": _fresh_process(100_000, "nfoursid")}
+    info = {
+        "n": 10_000,
+        "ours_s": t_ours,
+        "nfoursid_s": t_ref,
+        "ratio": t_ref / t_ours,
+        "block_rows": BLOCK_ROWS,
+        "reference": "nfoursid 1.0 (same block rows and order)",
+        "nfoursid_1e5": _fresh_process(100_000, "nfoursid"),
+    }
     benchmark.extra_info.update(info)
-    print(f"\nPO-MOESP N=1e4 2x2 order 10, i={BLOCK_ROWS}: ours {t_ours:.3f} s, nfoursid {t_ref:.2f} s, "
-          f"ratio {info['ratio']:.1f}x; nfoursid at N=1e5: {info['nfoursid_1e5']}")
+    print(
+        f"\nPO-MOESP N=1e4 2x2 order 10, i={BLOCK_ROWS}: ours {t_ours:.3f} s, nfoursid {t_ref:.2f} s, "
+        f"ratio {info['ratio']:.1f}x; nfoursid at N=1e5: {info['nfoursid_1e5']}"
+    )
 
 
 @pytest.mark.slow

@@ -36,8 +36,15 @@ def voltage_gain(gain_db: float) -> float:
     return float(10.0 ** (gain_db / 20.0))
 
 
-def amplifier_voltage(x: np.ndarray, gain_db: float = 50.0, compression: str | None = None, sat_v: float = 105.0,
-                      smoothness: float = 2.5, even_ratio: float = 0.0, asymmetry: float = 0.0) -> np.ndarray:
+def amplifier_voltage(
+    x: np.ndarray,
+    gain_db: float = 50.0,
+    compression: str | None = None,
+    sat_v: float = 105.0,
+    smoothness: float = 2.5,
+    even_ratio: float = 0.0,
+    asymmetry: float = 0.0,
+) -> np.ndarray:
     """Open-circuit output voltage V_oc [V] of the amplifier for the input ``x`` [V] (memoryless).
 
     ``compression``: None (linear), ``"rapp"`` or ``"cubic"``; ``sat_v``: output saturation A_sat [V peak into
@@ -45,8 +52,14 @@ def amplifier_voltage(x: np.ndarray, gain_db: float = 50.0, compression: str | N
     saturation A(1 ± a) for positive / negative v (0 = odd).
     """
     if compression == "rapp":
-        return _rapp_kernel(np.ascontiguousarray(x, dtype=np.float64), voltage_gain(gain_db), float(sat_v),
-                            float(smoothness), float(even_ratio), float(asymmetry))
+        return _rapp_kernel(
+            np.ascontiguousarray(x, dtype=np.float64),
+            voltage_gain(gain_db),
+            float(sat_v),
+            float(smoothness),
+            float(even_ratio),
+            float(asymmetry),
+        )
     v = voltage_gain(gain_db) * np.asarray(x, dtype=float)
     if compression == "cubic":
         v0: float | np.ndarray = 1.5 * sat_v
@@ -61,8 +74,14 @@ def amplifier_voltage(x: np.ndarray, gain_db: float = 50.0, compression: str | N
     return 2.0 * v
 
 
-def sample_amplifier(gain_db: float = 50.0, compression: str | None = None, sat_v: float = 105.0,
-                     smoothness: float = 2.5, even_ratio: float = 0.0, asymmetry: float = 0.0):
+def sample_amplifier(
+    gain_db: float = 50.0,
+    compression: str | None = None,
+    sat_v: float = 105.0,
+    smoothness: float = 2.5,
+    even_ratio: float = 0.0,
+    asymmetry: float = 0.0,
+):
     """``float -> float``: :func:`amplifier_voltage` for one sample at a time with the same arithmetic (the
     per-sample path of an FMU step: no array, no thread launch), or None for a compression without one."""
     gain, sat, k2, asym = voltage_gain(gain_db), float(sat_v), float(even_ratio), float(asymmetry)

@@ -43,9 +43,22 @@ __all__ = ["calibrate_acoustic", "measured_response_db", "is_frequency_record"]
 
 _THICKNESS = ("pzt_thickness_m", "steel_thickness_m")
 #: parameters fitted on the log-magnitude response; any other name sends a time record to output error
-MAGNITUDE_PARAMS = frozenset({"pzt_thickness_m", "steel_thickness_m", "epoxy_thickness_m", "output_gain", "pzt_qm",
-                              "backing_rayl", "rx_load_ohm", "rx_load_capacitance_f", "source_resistance_ohm",
-                              "aperture_radius_m", "plate_width_m", "plate_height_m"})
+MAGNITUDE_PARAMS = frozenset(
+    {
+        "pzt_thickness_m",
+        "steel_thickness_m",
+        "epoxy_thickness_m",
+        "output_gain",
+        "pzt_qm",
+        "backing_rayl",
+        "rx_load_ohm",
+        "rx_load_capacitance_f",
+        "source_resistance_ohm",
+        "aperture_radius_m",
+        "plate_width_m",
+        "plate_height_m",
+    }
+)
 _NOISE_EFFECTS = ("measurement_noise", "adc_quantization")
 
 
@@ -53,8 +66,9 @@ def is_frequency_record(rec: Record) -> bool:
     return rec.units.get("u") == "Hz" or rec.meta.get("kind") == "frequency_response"
 
 
-def measured_response_db(rec: Record, amp_gain_db: float, nperseg: int | None = None,
-                         band: tuple[float, float] | None = None) -> tuple[np.ndarray, np.ndarray]:
+def measured_response_db(
+    rec: Record, amp_gain_db: float, nperseg: int | None = None, band: tuple[float, float] | None = None
+) -> tuple[np.ndarray, np.ndarray]:
     """(f, 20 log10|Ĥ_chain|) of a time record: H1 estimate of y/u divided by the amplifier's 2·G_v.
 
     Only frequencies where the input spectrum is within 20 dB of its maximum (or inside ``band``) are kept.
@@ -102,8 +116,16 @@ def _bounds(twin, names: list[str], span: float) -> tuple[np.ndarray, np.ndarray
     return np.array(lo), np.array(hi), np.array(x0)
 
 
-def calibrate_acoustic(twin, data: Record, val: Record | None = None, names: Iterable[str] | None = None,
-                       span: float = 0.15, grid: int = 21, max_nfev: int = 200, **_: Any) -> CalibrationResult:
+def calibrate_acoustic(
+    twin,
+    data: Record,
+    val: Record | None = None,
+    names: Iterable[str] | None = None,
+    span: float = 0.15,
+    grid: int = 21,
+    max_nfev: int = 200,
+    **_: Any,
+) -> CalibrationResult:
     """Fit ``names`` (default ``twin.CALIBRATION_PARAMS``) of ``twin`` to ``data`` (see module docstring)."""
     names = list(names) if names is not None else list(twin.CALIBRATION_PARAMS)
     check_calibration_data(data, names, "acoustic calibration")
@@ -160,8 +182,7 @@ def calibrate_acoustic(twin, data: Record, val: Record | None = None, names: Ite
             if cost < best[0]:
                 best = (cost, z)
         start = best[1]
-    res = least_squares(residual, start, bounds=((lo - x0) / scale, (hi - x0) / scale), max_nfev=max_nfev,
-                        x_scale=1.0)
+    res = least_squares(residual, start, bounds=((lo - x0) / scale, (hi - x0) / scale), max_nfev=max_nfev, x_scale=1.0)
     x = x0 + res.x * scale
     fitted = build(x)
     J = res.jac / scale[None, :] * sd
@@ -175,10 +196,16 @@ def calibrate_acoustic(twin, data: Record, val: Record | None = None, names: Ite
     scores = {"estimation": _score(fitted, data, model_db if freq_mode else None, target)}
     if val is not None:
         scores["validation"] = _score(fitted, val, None, None)
-    return CalibrationResult(twin=fitted, fitted={n: float(v) for n, v in zip(names, x)}, stderr=stderr,
-                             scores=scores, n_evaluations=count[0], seconds=time.perf_counter() - t0,
-                             message=f"log-magnitude fit ({'VNA record' if freq_mode else 'H1 estimate'}, "
-                                     f"{f.size} frequencies): {res.message}")
+    return CalibrationResult(
+        twin=fitted,
+        fitted={n: float(v) for n, v in zip(names, x)},
+        stderr=stderr,
+        scores=scores,
+        n_evaluations=count[0],
+        seconds=time.perf_counter() - t0,
+        message=f"log-magnitude fit ({'VNA record' if freq_mode else 'H1 estimate'}, "
+        f"{f.size} frequencies): {res.message}",
+    )
 
 
 def _score(tw, rec: Record, model_db, target) -> dict[str, Any]:

@@ -29,21 +29,53 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["NOT_IN_CHAIN", "NOT_IN_LINEAR", "EFFECTS_OUTSIDE_CHAIN", "EFFECTS_OUTSIDE_LINEAR", "LRU", "chain_key",
-           "linear_key", "grid_key", "CHAIN", "LINEAR", "enabled", "disabled"]
+__all__ = [
+    "NOT_IN_CHAIN",
+    "NOT_IN_LINEAR",
+    "EFFECTS_OUTSIDE_CHAIN",
+    "EFFECTS_OUTSIDE_LINEAR",
+    "LRU",
+    "chain_key",
+    "linear_key",
+    "grid_key",
+    "CHAIN",
+    "LINEAR",
+    "enabled",
+    "disabled",
+]
 
 #: fields that act after the linear chain or before it (amplifier nonlinearity and gain, acquisition)
-NOT_IN_LINEAR: frozenset[str] = frozenset({
-    "amp_gain_db", "amp_compression", "amp_sat_v", "amp_smoothness", "amp_even_ratio", "noise_v", "adc_bits",
-    "adc_range_v"})
+NOT_IN_LINEAR: frozenset[str] = frozenset(
+    {
+        "amp_gain_db",
+        "amp_compression",
+        "amp_sat_v",
+        "amp_smoothness",
+        "amp_even_ratio",
+        "noise_v",
+        "adc_bits",
+        "adc_range_v",
+    }
+)
 #: fields that enter H only through the terms added to (or multiplying) the reverberation series
 NOT_IN_CHAIN: frozenset[str] = NOT_IN_LINEAR | {
-    "amp_f_low_hz", "amp_f_high_hz", "model_max_hz", "output_gain", "wall_distance_m", "wall_reflection",
-    "wall_coupling", "wall_echo_path", "wall_echo_cutoff_hz", "crosstalk_capacitance_f", "crosstalk_resistive",
-    "crosstalk_derivative_s"}
+    "amp_f_low_hz",
+    "amp_f_high_hz",
+    "model_max_hz",
+    "output_gain",
+    "wall_distance_m",
+    "wall_reflection",
+    "wall_coupling",
+    "wall_echo_path",
+    "wall_echo_cutoff_hz",
+    "crosstalk_capacitance_f",
+    "crosstalk_resistive",
+    "crosstalk_derivative_s",
+}
 #: effects outside the linear chain (amplifier, acquisition)
-EFFECTS_OUTSIDE_LINEAR: frozenset[str] = frozenset({
-    "amplifier_compression", "amplifier_even_distortion", "measurement_noise", "adc_quantization"})
+EFFECTS_OUTSIDE_LINEAR: frozenset[str] = frozenset(
+    {"amplifier_compression", "amplifier_even_distortion", "measurement_noise", "adc_quantization"}
+)
 #: effects whose terms are added to the chain's reverberation series (not part of the series itself)
 EFFECTS_OUTSIDE_CHAIN: frozenset[str] = EFFECTS_OUTSIDE_LINEAR | {"wall_echo", "crosstalk"}
 
@@ -100,7 +132,7 @@ class LRU:
 
 def _freeze(val: Any) -> Any:
     """Mark the arrays of an entry read-only (a dict's values or the array itself)."""
-    for a in (val.values() if isinstance(val, dict) else (val,)):
+    for a in val.values() if isinstance(val, dict) else (val,):
         if isinstance(a, np.ndarray):
             a.flags.writeable = False
     return val

@@ -56,9 +56,17 @@ from twins.acoustic.transducer import (
     transmit,
 )
 
-__all__ = ["ChannelGeometry", "geometry", "channel_parts", "frequency_response", "spreading_factor",
-           "misalignment_factor", "wall_path_length", "crosstalk_path",
-           "wall_echo_path"]
+__all__ = [
+    "ChannelGeometry",
+    "geometry",
+    "channel_parts",
+    "frequency_response",
+    "spreading_factor",
+    "misalignment_factor",
+    "wall_path_length",
+    "crosstalk_path",
+    "wall_echo_path",
+]
 
 
 @dataclass(frozen=True)
@@ -135,8 +143,10 @@ def wall_path_length(distance_m: float, wall_distance_m: float) -> float:
 
 def _layers(p, fl: FluidState) -> tuple[Layer, Layer]:
     ep, st = SOLIDS["epoxy"], SOLIDS[p.steel]
-    return (Layer(ep.density, ep.speed, p.epoxy_thickness_m, ep.alpha0_np_m, ep.alpha_power),
-            Layer(st.density, st.speed, p.steel_thickness_m, st.alpha0_np_m, st.alpha_power))
+    return (
+        Layer(ep.density, ep.speed, p.epoxy_thickness_m, ep.alpha0_np_m, ep.alpha_power),
+        Layer(st.density, st.speed, p.steel_thickness_m, st.alpha0_np_m, st.alpha_power),
+    )
 
 
 def channel_parts(f_hz: np.ndarray, p, effects=frozenset()) -> dict[str, Any]:
@@ -170,12 +180,27 @@ def channel_parts(f_hz: np.ndarray, p, effects=frozenset()) -> dict[str, Any]:
     r_v = receive_voltage(tp, z_load) * u2  # V_rx per incident pressure [V/Pa]
     k = 2 * np.pi * f / fl.speed - 1j * fl.alpha(f)
     z_el = electrical_impedance(tp, z_front)
-    return {"t_tx": t_tx, "r_tx": r_tx, "r_rx": r_rx, "r_v": r_v, "v_tx": v_tx, "z_el": z_el, "k": k,
-            "z_load": z_load, "geometry": g}
+    return {
+        "t_tx": t_tx,
+        "r_tx": r_tx,
+        "r_rx": r_rx,
+        "r_v": r_v,
+        "v_tx": v_tx,
+        "z_el": z_el,
+        "k": k,
+        "z_load": z_load,
+        "geometry": g,
+    }
 
 
-def frequency_response(f_hz: np.ndarray, p, effects=frozenset(), parts: dict | None = None,
-                       direct_only: bool = False, include_amplifier: bool = True) -> np.ndarray:
+def frequency_response(
+    f_hz: np.ndarray,
+    p,
+    effects=frozenset(),
+    parts: dict | None = None,
+    direct_only: bool = False,
+    include_amplifier: bool = True,
+) -> np.ndarray:
     """H(f) = V_rx/V_oc [V/V] of the linear chain as configured (effects included); H(0) = 0.
 
     ``direct_only`` keeps only the direct arrival (gated: no reverberation, no echo, no crosstalk).
@@ -275,8 +300,9 @@ def _spreading_constants(p) -> tuple[int, float, float]:
     return (1, np.pi / (2.0 * (p.plate_width_m / 2.0) ** 2), np.pi / (2.0 * (p.plate_height_m / 2.0) ** 2))
 
 
-def _series(w: np.ndarray, k: np.ndarray, loop: np.ndarray, L: float, c: float, orders: int, p,
-            misaligned: bool) -> np.ndarray:
+def _series(
+    w: np.ndarray, k: np.ndarray, loop: np.ndarray, L: float, c: float, orders: int, p, misaligned: bool
+) -> np.ndarray:
     """Σ_{n=0..orders} e^{−jk(2n+1)L} (R_tx R_rx e^{−2jkL})^n D((2n+1)L) M_n, compiled (same maths as
     :func:`spreading_factor` and :func:`misalignment_factor`, checked against them in the tests)."""
     mode, ix, iy = _spreading_constants(p)
@@ -291,9 +317,21 @@ def _series(w: np.ndarray, k: np.ndarray, loop: np.ndarray, L: float, c: float, 
         tilt = float(np.deg2rad(p.misalignment_tilt_deg))
     else:
         overlap, half, tilt = 1.0, 0.0, 0.0
-    return _series_kernel(np.ascontiguousarray(w, dtype=np.float64), np.ascontiguousarray(k, dtype=np.complex128),
-                          np.ascontiguousarray(loop, dtype=np.complex128), float(L), float(c), int(orders), mode,
-                          float(ix), float(iy), bool(misaligned), float(overlap), float(half), tilt)
+    return _series_kernel(
+        np.ascontiguousarray(w, dtype=np.float64),
+        np.ascontiguousarray(k, dtype=np.complex128),
+        np.ascontiguousarray(loop, dtype=np.complex128),
+        float(L),
+        float(c),
+        int(orders),
+        mode,
+        float(ix),
+        float(iy),
+        bool(misaligned),
+        float(overlap),
+        float(half),
+        tilt,
+    )
 
 
 @njit(cache=True, parallel=True)

@@ -23,8 +23,16 @@ from sysid.errors import ConfigError
 from twins.acoustic.materials import power_law_attenuation
 
 __all__ = [
-    "FLUIDS", "FluidState", "fluid_state", "water_sound_speed", "water_density", "water_absorption",
-    "seawater_sound_speed", "seawater_density", "francois_garrison", "WATER_T2_TYPO_KWAVE",
+    "FLUIDS",
+    "FluidState",
+    "fluid_state",
+    "water_sound_speed",
+    "water_density",
+    "water_absorption",
+    "seawater_sound_speed",
+    "seawater_density",
+    "francois_garrison",
+    "WATER_T2_TYPO_KWAVE",
 ]
 
 NP_PER_DB = 1.0 / (20.0 * np.log10(np.e))  # 1 dB = 0.11513 Np
@@ -72,15 +80,25 @@ def water_absorption(f_hz, temperature_c):
 def seawater_sound_speed(temperature_c, salinity_psu=35.0, depth_m=0.0):
     """Mackenzie (1981) nine-term sound speed of seawater [m/s]; 2–30 °C, 25–40 ‰, 0–8000 m."""
     T, S, D = temperature_c, salinity_psu, depth_m
-    return (1448.96 + 4.591 * T - 5.304e-2 * T**2 + 2.374e-4 * T**3 + 1.340 * (S - 35.0) + 1.630e-2 * D
-            + 1.675e-7 * D**2 - 1.025e-2 * T * (S - 35.0) - 7.139e-13 * T * D**3)
+    return (
+        1448.96
+        + 4.591 * T
+        - 5.304e-2 * T**2
+        + 2.374e-4 * T**3
+        + 1.340 * (S - 35.0)
+        + 1.630e-2 * D
+        + 1.675e-7 * D**2
+        - 1.025e-2 * T * (S - 35.0)
+        - 7.139e-13 * T * D**3
+    )
 
 
 def seawater_density(temperature_c, salinity_psu=35.0):
     """One-atmosphere density of seawater [kg/m³], UNESCO 1981 (Millero & Poisson 1981) [K]."""
     T, S = temperature_c, salinity_psu
-    rho_w = (999.842594 + 6.793952e-2 * T - 9.095290e-3 * T**2 + 1.001685e-4 * T**3 - 1.120083e-6 * T**4
-             + 6.536332e-9 * T**5)
+    rho_w = (
+        999.842594 + 6.793952e-2 * T - 9.095290e-3 * T**2 + 1.001685e-4 * T**3 - 1.120083e-6 * T**4 + 6.536332e-9 * T**5
+    )
     a = 8.24493e-1 - 4.0899e-3 * T + 7.6438e-5 * T**2 - 8.2467e-7 * T**3 + 5.3875e-9 * T**4
     b = -5.72466e-3 + 1.0227e-4 * T - 1.6546e-6 * T**2
     c = 4.8314e-4
@@ -130,23 +148,25 @@ FLUIDS: dict[str, TabulatedFluid | str] = {
     "water": "distilled water: Marczak c(T), Jones–Harris ρ(T), Pinkerton α(f, T) ∝ f²",
     "seawater": "seawater S = 35 ‰: Mackenzie c(T), UNESCO ρ(T), Francois–Garrison α(f, T)",
     # c 1162 m/s at 20 °C [S: Kaye & Laby via vendor table]; ρ 789; α/f² ≈ 50e-15 Np s²/m [K]; β 1.09e-3/K [K]
-    "ethanol": TabulatedFluid("ethanol", 789.0, 1162.0, 20.0, -3.6, 1.09e-3, 0.05, 2.0,
-                              "notes B.6: c [S Kaye & Laby], α [K]"),
+    "ethanol": TabulatedFluid(
+        "ethanol", 789.0, 1162.0, 20.0, -3.6, 1.09e-3, 0.05, 2.0, "notes B.6: c [S Kaye & Laby], α [K]"
+    ),
     # c 1920 m/s (Olympus) at 20 °C, 1904 (Aldred) [S]; α ≈ 2.8 Np/m classical viscous estimate [C]; β 0.50e-3 [K]
-    "glycerol": TabulatedFluid("glycerol", 1260.0, 1920.0, 20.0, -2.0, 0.50e-3, 2.8, 2.0,
-                               "notes B.6: c [S Olympus/Aldred], α [K/C]"),
+    "glycerol": TabulatedFluid(
+        "glycerol", 1260.0, 1920.0, 20.0, -2.0, 0.50e-3, 2.8, 2.0, "notes B.6: c [S Olympus/Aldred], α [K/C]"
+    ),
     # PDMS ~30 cSt: 990 m/s (Micronics) [S partial]; α grade dependent 1-10 Np/m [K]; β 0.96e-3 [K]
-    "silicone_oil": TabulatedFluid("silicone oil (PDMS ~30 cSt)", 970.0, 990.0, 25.0, -3.2, 0.96e-3, 3.0, 2.0,
-                                   "notes B.6: c [S Micronics], α [K]"),
+    "silicone_oil": TabulatedFluid(
+        "silicone oil (PDMS ~30 cSt)", 970.0, 990.0, 25.0, -3.2, 0.96e-3, 3.0, 2.0, "notes B.6: c [S Micronics], α [K]"
+    ),
     # c 1440 m/s at 22 °C [S]; α 0.3-1 dB/cm [K] → 5 Np/m; β 0.72e-3 [K]
-    "olive_oil": TabulatedFluid("olive oil", 912.0, 1440.0, 22.0, -2.8, 0.72e-3, 5.0, 1.8,
-                                "notes B.6: c [S], α [K]"),
+    "olive_oil": TabulatedFluid("olive oil", 912.0, 1440.0, 22.0, -2.8, 0.72e-3, 5.0, 1.8, "notes B.6: c [S], α [K]"),
     # c 1500 m/s at 19 °C [S]; α ≈ 0.8-1.0 dB/cm ≈ 10 Np/m, y ≈ 1.6-1.7 [K]; β 0.70e-3 [K]
-    "castor_oil": TabulatedFluid("castor oil", 960.0, 1500.0, 19.0, -4.1, 0.70e-3, 10.0, 1.65,
-                                 "notes B.6: c [S], α [K]"),
+    "castor_oil": TabulatedFluid(
+        "castor oil", 960.0, 1500.0, 19.0, -4.1, 0.70e-3, 10.0, 1.65, "notes B.6: c [S], α [K]"
+    ),
     # c 1315-1324 m/s at 25 °C [S]; ρ 800-870 → 810; α low [K] ≈ 0.5 Np/m; β 0.99e-3 [K]
-    "kerosene": TabulatedFluid("kerosene", 810.0, 1319.0, 25.0, -3.6, 0.99e-3, 0.5, 2.0,
-                               "notes B.6: c [S], α [K]"),
+    "kerosene": TabulatedFluid("kerosene", 810.0, 1319.0, 25.0, -3.6, 0.99e-3, 0.5, 2.0, "notes B.6: c [S], α [K]"),
 }
 
 FLUID_NAMES = tuple(FLUIDS)

@@ -41,8 +41,7 @@ from sysid.errors import DataError
 from twins.acoustic.channel import frequency_response
 from twins.acoustic.params import AcousticParams
 
-__all__ = ["FS_FIR", "load_charac", "lab_params", "fit_transducer", "compare", "measured_decays",
-           "LAB_APERTURE_M"]
+__all__ = ["FS_FIR", "load_charac", "lab_params", "fit_transducer", "compare", "measured_decays", "LAB_APERTURE_M"]
 
 FS_FIR = 5e6  # Hz, the sampling rate every measured response states
 DISTANCES_MM = (1, 20, 40, 80)
@@ -59,13 +58,16 @@ def load_charac(distance_mm: int, data: FirData | None) -> np.ndarray:
     """The measured impulse responses at ``distance_mm`` (4 × 5 at the published distances: shape (20, 2000))
     from ``data``."""
     if data is None:
-        raise DataError("no measured impulse responses given: pass data = {distance_mm: responses} "
-                        "(the vendored copy is the dataset 'ultrasound-water-fir')")
+        raise DataError(
+            "no measured impulse responses given: pass data = {distance_mm: responses} "
+            "(the vendored copy is the dataset 'ultrasound-water-fir')"
+        )
     try:
         h = data[int(distance_mm)]
     except KeyError:
-        raise DataError(f"no measured impulse responses at {distance_mm} mm "
-                        f"(given: {', '.join(map(str, sorted(data)))} mm)") from None
+        raise DataError(
+            f"no measured impulse responses at {distance_mm} mm (given: {', '.join(map(str, sorted(data)))} mm)"
+        ) from None
     return np.atleast_2d(np.asarray(h, dtype=float))
 
 
@@ -88,10 +90,21 @@ def measured_decays(data: FirData | None) -> dict[str, dict[str, float]]:
 
 def lab_params(distance_m: float = 0.04, **changes: Any) -> AcousticParams:
     """The twin configured as the USbodyComm water path (see module docstring); ``changes`` override fields."""
-    base = AcousticParams(distance_m=distance_m, temperature_c=20.0, fluid="water", aperture="circular",
-                          aperture_radius_m=LAB_APERTURE_M, steel_thickness_m=0.0, epoxy_thickness_m=0.0,
-                          pzt_thickness_m=1.9e-3, backing_rayl=10e6, rx_load_ohm=50.0, rx_load_capacitance_f=0.0,
-                          reverb_orders=0, output_gain=10.0)
+    base = AcousticParams(
+        distance_m=distance_m,
+        temperature_c=20.0,
+        fluid="water",
+        aperture="circular",
+        aperture_radius_m=LAB_APERTURE_M,
+        steel_thickness_m=0.0,
+        epoxy_thickness_m=0.0,
+        pzt_thickness_m=1.9e-3,
+        backing_rayl=10e6,
+        rx_load_ohm=50.0,
+        rx_load_capacitance_f=0.0,
+        reverb_orders=0,
+        output_gain=10.0,
+    )
     return dataclasses.replace(base, **changes)
 
 
@@ -105,8 +118,9 @@ def _measured_spectrum(h: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return f, np.abs(np.fft.rfft(h, _NFFT, axis=1)).mean(axis=0)
 
 
-def fit_transducer(distance_mm: int = 40, data: FirData | None = None,
-                   params: AcousticParams | None = None) -> tuple[AcousticParams, dict[str, Any]]:
+def fit_transducer(
+    distance_mm: int = 40, data: FirData | None = None, params: AcousticParams | None = None
+) -> tuple[AcousticParams, dict[str, Any]]:
     """Fit PZT thickness (resonance), backing impedance (bandwidth) and output gain to the mean magnitude
     spectrum at ONE distance, in dB over 0.75–1.5 MHz. Coarse grid over (thickness, backing), then bounded
     least squares. Returns (fitted params at that distance, fit summary)."""
@@ -116,8 +130,9 @@ def fit_transducer(distance_mm: int = 40, data: FirData | None = None,
     fb, target = f[band], 20 * np.log10(mag[band])
 
     def build(x):
-        return dataclasses.replace(p0, pzt_thickness_m=float(x[0]), backing_rayl=float(np.exp(x[1])),
-                                   output_gain=float(np.exp(x[2])))
+        return dataclasses.replace(
+            p0, pzt_thickness_m=float(x[0]), backing_rayl=float(np.exp(x[1])), output_gain=float(np.exp(x[2]))
+        )
 
     def residual(x):
         return 20 * np.log10(np.abs(_model_spectrum(build(x), distance_mm, fb)) + 1e-300) - target
@@ -135,10 +150,15 @@ def fit_transducer(distance_mm: int = 40, data: FirData | None = None,
                 best = (cost, x)
     res = least_squares(residual, best[1], bounds=(lo, hi))
     fitted = build(res.x)
-    return fitted, {"distance_mm": distance_mm, "band_hz": list(FIT_BAND_HZ),
-                    "rms_db": float(np.sqrt(np.mean(res.fun**2))),
-                    "pzt_thickness_m": fitted.pzt_thickness_m, "backing_rayl": fitted.backing_rayl,
-                    "output_gain": fitted.output_gain, "aperture_radius_m": fitted.aperture_radius_m}
+    return fitted, {
+        "distance_mm": distance_mm,
+        "band_hz": list(FIT_BAND_HZ),
+        "rms_db": float(np.sqrt(np.mean(res.fun**2))),
+        "pzt_thickness_m": fitted.pzt_thickness_m,
+        "backing_rayl": fitted.backing_rayl,
+        "output_gain": fitted.output_gain,
+        "aperture_radius_m": fitted.aperture_radius_m,
+    }
 
 
 def model_impulse_response(p: AcousticParams, distance_mm: float, n: int = 2000) -> np.ndarray:
@@ -162,16 +182,25 @@ def compare(p: AcousticParams, distances=(20, 40, 80), data: FirData | None = No
         fpk_m = float(f[band][np.argmax(mag[band])])
         fpk_t = float(f[band][np.argmax(model)])
         spread = 20 * np.log10(np.abs(np.fft.rfft(H, _NFFT, axis=1))[:, band]).std(axis=0).mean()
-        out["per_distance"][d] = {"envelope_peak_measured": amp_m[d], "envelope_peak_twin": amp_t[d],
-                                  "spectrum_rms_error_db": float(np.sqrt(np.mean(err**2))),
-                                  "spectrum_mean_error_db": float(np.mean(err)),
-                                  "spectrum_max_abs_error_db": float(np.max(np.abs(err))),
-                                  "measurement_spread_db": float(spread),
-                                  "peak_frequency_measured_hz": fpk_m, "peak_frequency_twin_hz": fpk_t}
+        out["per_distance"][d] = {
+            "envelope_peak_measured": amp_m[d],
+            "envelope_peak_twin": amp_t[d],
+            "spectrum_rms_error_db": float(np.sqrt(np.mean(err**2))),
+            "spectrum_mean_error_db": float(np.mean(err)),
+            "spectrum_max_abs_error_db": float(np.max(np.abs(err))),
+            "measurement_spread_db": float(spread),
+            "peak_frequency_measured_hz": fpk_m,
+            "peak_frequency_twin_hz": fpk_t,
+        }
     ds = sorted(distances)
-    out["decay"] = {f"{a}_{b}": {"measured": amp_m[b] / amp_m[a], "twin": amp_t[b] / amp_t[a],
-                                 "relative_error": (amp_t[b] / amp_t[a]) / (amp_m[b] / amp_m[a]) - 1.0}
-                    for a, b in zip(ds[:-1], ds[1:])}
+    out["decay"] = {
+        f"{a}_{b}": {
+            "measured": amp_m[b] / amp_m[a],
+            "twin": amp_t[b] / amp_t[a],
+            "relative_error": (amp_t[b] / amp_t[a]) / (amp_m[b] / amp_m[a]) - 1.0,
+        }
+        for a, b in zip(ds[:-1], ds[1:])
+    }
     return out
 
 
@@ -189,8 +218,9 @@ def report_figure(p: AcousticParams, path: str | Path, distances=(20, 40, 80), d
         _, mag = _measured_spectrum(H)
         col = f"C{i}"
         axes[0].plot(f / 1e3, 20 * np.log10(mag), col, lw=0.8, label=f"measured {d} mm")
-        axes[0].plot(f[1:] / 1e3, 20 * np.log10(np.abs(_model_spectrum(p, d, f[1:]))), col + "--", lw=1.2,
-                     label=f"twin {d} mm")
+        axes[0].plot(
+            f[1:] / 1e3, 20 * np.log10(np.abs(_model_spectrum(p, d, f[1:]))), col + "--", lw=1.2, label=f"twin {d} mm"
+        )
         env_m = np.abs(hilbert(H, axis=1)).mean(axis=0)
         h_t = model_impulse_response(p, d)
         env_t = np.abs(hilbert(h_t))

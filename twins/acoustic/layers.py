@@ -57,8 +57,12 @@ def chain(mats: Sequence[Mat]) -> Mat:
     """Product M_1 M_2 … M_n (first layer first, as the wave meets them)."""
     a11, a12, a21, a22 = mats[0]
     for b11, b12, b21, b22 in mats[1:]:
-        a11, a12, a21, a22 = (a11 * b11 + a12 * b21, a11 * b12 + a12 * b22,
-                              a21 * b11 + a22 * b21, a21 * b12 + a22 * b22)
+        a11, a12, a21, a22 = (
+            a11 * b11 + a12 * b21,
+            a11 * b12 + a12 * b22,
+            a21 * b11 + a22 * b21,
+            a21 * b12 + a22 * b22,
+        )
     return a11, a12, a21, a22
 
 
@@ -74,16 +78,20 @@ def propagate_forward(m: Mat, force: np.ndarray, velocity: np.ndarray) -> tuple[
     return m22 * force - m12 * velocity, -m21 * force + m11 * velocity
 
 
-def slab_coefficients(f_hz: np.ndarray, layers: Sequence[Layer], z1_rayl: float, z2_rayl: float,
-                      area: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+def slab_coefficients(
+    f_hz: np.ndarray, layers: Sequence[Layer], z1_rayl: float, z2_rayl: float, area: float = 1.0
+) -> tuple[np.ndarray, np.ndarray]:
     """Pressure reflection R and transmission T of a stack between half-spaces of impedance z1 (incident) and z2.
 
     A wave p_i = 1 arrives from medium 1; medium 2 is semi-infinite (only a forward wave). Energy balance for
     lossless layers: |R|² + (z1/z2)|T|² = 1.
     """
     f = np.asarray(f_hz, dtype=float)
-    m = chain([layer_matrix(f, lay, area) for lay in layers]) if layers else (
-        np.ones_like(f, complex), np.zeros_like(f, complex), np.zeros_like(f, complex), np.ones_like(f, complex))
+    m = (
+        chain([layer_matrix(f, lay, area) for lay in layers])
+        if layers
+        else (np.ones_like(f, complex), np.zeros_like(f, complex), np.zeros_like(f, complex), np.ones_like(f, complex))
+    )
     zl = z2_rayl * area
     zin = input_impedance(m, zl)
     z1 = z1_rayl * area

@@ -81,11 +81,13 @@ class Piezo:
 
 PIEZOS: dict[str, Piezo] = {
     # [K] Berlincourt, Curran & Jaffe 1964 / Morgan Electro Ceramics data (notes B.4): v^D = 4604 m/s, k_t ≈ 0.51
-    "pzt4": Piezo("PZT-4 (Navy I)", 7500.0, 15.9e10, 15.1, 635.0, 500.0, 0.004,
-                  "notes B.4 [K: Berlincourt/Morgan data]"),
+    "pzt4": Piezo(
+        "PZT-4 (Navy I)", 7500.0, 15.9e10, 15.1, 635.0, 500.0, 0.004, "notes B.4 [K: Berlincourt/Morgan data]"
+    ),
     # [K] same sources: v^D = 4355 m/s, k_t ≈ 0.49
-    "pzt5a": Piezo("PZT-5A (Navy II)", 7750.0, 14.7e10, 15.8, 830.0, 75.0, 0.02,
-                   "notes B.4 [K: Berlincourt/Morgan data]"),
+    "pzt5a": Piezo(
+        "PZT-5A (Navy II)", 7750.0, 14.7e10, 15.8, 830.0, 75.0, 0.02, "notes B.4 [K: Berlincourt/Morgan data]"
+    ),
 }
 
 SOLIDS: dict[str, Solid] = {

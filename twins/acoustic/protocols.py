@@ -40,18 +40,19 @@ RECIPE_KEEP = {"thesis-chirp-100ms": 2000, "thesis-multisine": 2000, "thesis-chi
 
 PROTOCOLS = {
     "thesis-chirp-100ms": "linear chirp 900-1350 kHz over 100 ms, 80 mVpp before the amplifier, 100 MHz "
-                          "(10 M samples); options duration, fs, preprocess, start, keep",
+    "(10 M samples); options duration, fs, preprocess, start, keep",
     "thesis-multisine": "45 000 random-phase lines 900-1350 kHz, 0.4 V peak, 10 MS/s file truncated to 5000 points "
-                        "and repeated, 100 MHz; options duration, fs, awg_rate_hz, warmup_s, preprocess, start, keep",
+    "and repeated, 100 MHz; options duration, fs, awg_rate_hz, warmup_s, preprocess, start, keep",
     "thesis-chirp-1ms": "1 ms linear up-chirp 900-1350 kHz, 150 mVpp, repeated (validation signal), 100 MHz; "
-                        "options duration, fs, warmup_s, preprocess, start, keep",
+    "options duration, fs, warmup_s, preprocess, start, keep",
     "vna-sweep": "magnitude response |V_rx/V_oc| as a VNA measures it (Figure 3.9 analogue); options f_start, f_stop, "
-                 "points, gated, preprocess (multiplies by the recipe's filters)",
+    "points, gated, preprocess (multiplies by the recipe's filters)",
 }
 
 
-def excitation(protocol: str, fs: float = FS_ACQ, duration: float = 0.1, seed: int | None = 0,
-               awg_rate_hz: float = 10e6) -> tuple[np.ndarray, bool, dict]:
+def excitation(
+    protocol: str, fs: float = FS_ACQ, duration: float = 0.1, seed: int | None = 0, awg_rate_hz: float = 10e6
+) -> tuple[np.ndarray, bool, dict]:
     """Input ``u`` [V, before the amplifier] of a time-domain protocol: (u, periodic, info)."""
     from sysid.signals import excitation as signals
 
@@ -75,8 +76,16 @@ def excitation(protocol: str, fs: float = FS_ACQ, duration: float = 0.1, seed: i
     if protocol == "thesis-multisine":
         from sysid.signals.preprocess import resample
 
-        file_, info = signals.multisine(fs=awg_rate_hz, band=(BAND_HZ[0], BAND_HZ[1] - 10.0), components=45000,
-                                        resolution=10.0, amplitude=0.4, phase="random", seed=seed, return_info=True)
+        file_, info = signals.multisine(
+            fs=awg_rate_hz,
+            band=(BAND_HZ[0], BAND_HZ[1] - 10.0),
+            components=45000,
+            resolution=10.0,
+            amplitude=0.4,
+            phase="random",
+            seed=seed,
+            return_info=True,
+        )
         piece = file_[:5000]
         period_s = piece.size / awg_rate_hz
         if abs(awg_rate_hz - fs) < 1e-6:
@@ -85,11 +94,19 @@ def excitation(protocol: str, fs: float = FS_ACQ, duration: float = 0.1, seed: i
             # interpolate one repetition of the played piece, periodically (the generator loops it)
             one = resample(np.tile(piece, 3), awg_rate_hz, fs)
             m = int(round(period_s * fs))
-            one = one[m:2 * m]
+            one = one[m : 2 * m]
         reps = -(-n // one.size)
-        return (np.tile(one, reps)[:n], True,
-                {"awg_rate_hz": awg_rate_hz, "file_points": int(file_.size), "played_points": 5000,
-                 "period_s": period_s, "crest_factor_file": float(info["crest_factor"])})
+        return (
+            np.tile(one, reps)[:n],
+            True,
+            {
+                "awg_rate_hz": awg_rate_hz,
+                "file_points": int(file_.size),
+                "played_points": 5000,
+                "period_s": period_s,
+                "crest_factor_file": float(info["crest_factor"]),
+            },
+        )
     raise ConfigError(f"{protocol} is not a time-domain protocol")
 
 
@@ -114,9 +131,11 @@ def _chirp_kernel(n, a, b, amplitude):  # pragma: no cover - compiled
 def recipe_steps() -> list[dict]:
     """The dissertation's preprocessing (§3.2) as :func:`sysid.signals.preprocess.apply_steps` steps (before
     truncation)."""
-    return [{"step": "moving_average", "span": MA_SPAN},
-            {"step": "resample", "fs_new": FS_RECIPE},
-            {"step": "bandpass", "fmin": BAND_HZ[0], "fmax": BAND_HZ[1], "order": 5}]
+    return [
+        {"step": "moving_average", "span": MA_SPAN},
+        {"step": "resample", "fs_new": FS_RECIPE},
+        {"step": "bandpass", "fmin": BAND_HZ[0], "fmax": BAND_HZ[1], "order": 5},
+    ]
 
 
 def apply_recipe(rec: Record, keep: int, start: int = 0) -> Record:
@@ -126,7 +145,8 @@ def apply_recipe(rec: Record, keep: int, start: int = 0) -> Record:
     out = apply_steps(rec, recipe_steps())
     if start < 0 or keep < 1 or start + keep > len(out):
         raise ConfigError(f"truncation start={start}, keep={keep} exceeds the {len(out)} preprocessed samples")
-    sliced = out[start:start + keep]
+    sliced = out[start : start + keep]
     sliced.meta.setdefault("preprocessing", []).append(
-        {"step": "truncate", "params": {"start": start, "keep": keep}, "changes": {"n_before": len(out)}})
+        {"step": "truncate", "params": {"start": start, "keep": keep}, "changes": {"n_before": len(out)}}
+    )
     return sliced

@@ -28,8 +28,10 @@ def _identified_accuracy(twin, protocol: str | None, identifier: str = "arx") ->
 
         cls = get_identifier(identifier)
     except Exception as exc:  # a build without the identifier's dependencies: the column is null, with the reason
-        return {"identified_model_r2": None,
-                "identified_model_note": f"{exc} — left null until the identifiers are merged"}
+        return {
+            "identified_model_r2": None,
+            "identified_model_note": f"{exc} — left null until the identifiers are merged",
+        }
     from sysid.evaluation.metrics import r2 as _r2
     from twins.acoustic.protocols import FS_RECIPE
 
@@ -42,9 +44,11 @@ def _identified_accuracy(twin, protocol: str | None, identifier: str = "arx") ->
     try:
         model = cls(ny=4, nu=8, nk=nk).fit(est)
         yh = model.predict(val, horizon=None)
-        return {"identified_model_r2": float(_r2(val.y, yh)),
-                "identified_model_note": f"{identifier}(ny=4, nu=8, nk={nk}) on {est_p}+recipe, free run on "
-                                         "thesis-chirp-1ms+recipe"}
+        return {
+            "identified_model_r2": float(_r2(val.y, yh)),
+            "identified_model_note": f"{identifier}(ny=4, nu=8, nk={nk}) on {est_p}+recipe, free run on "
+            "thesis-chirp-1ms+recipe",
+        }
     except Exception as exc:
         return {"identified_model_r2": None, "identified_model_note": f"{identifier} failed: {exc}"}
 
@@ -64,5 +68,3 @@ def sweep_spectrum(twin, band=(0.5e6, 2.0e6), points: int = 2000) -> tuple[np.nd
     direct = 20 * np.log10(np.abs(twin.frequency_response(f, direct_only=True, include_amplifier=False)) + 1e-300)
     full = 20 * np.log10(np.abs(twin.frequency_response(f, include_amplifier=False)) + 1e-300)
     return f, {"direct": direct, "full": full}
-
-

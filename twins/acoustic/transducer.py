@@ -28,8 +28,15 @@ import numpy as np
 
 from twins.acoustic.materials import Piezo
 
-__all__ = ["PlateTwoPort", "plate_two_port", "electrical_impedance", "face_impedance", "transmit", "receive_voltage",
-           "parallel_rc"]
+__all__ = [
+    "PlateTwoPort",
+    "plate_two_port",
+    "electrical_impedance",
+    "face_impedance",
+    "transmit",
+    "receive_voltage",
+    "parallel_rc",
+]
 
 
 @dataclass

@@ -37,56 +37,99 @@ _TOF_GROUP = "time_of_flight"
 
 EFFECTS: dict[str, EffectSpec] = {
     "measurement_noise": EffectSpec(
-        "measurement_noise", _T, "white Gaussian noise of the receiver/scope front end",
-        "white residual, flat spectrum, uncorrelated with u at every lag", {"std": "noise_v"}, default_on=True),
+        "measurement_noise",
+        _T,
+        "white Gaussian noise of the receiver/scope front end",
+        "white residual, flat spectrum, uncorrelated with u at every lag",
+        {"std": "noise_v"},
+        default_on=True,
+    ),
     "adc_quantization": EffectSpec(
-        "adc_quantization", _T, "scope ADC: uniform quantisation to adc_bits over ±adc_range_v, clipping beyond",
+        "adc_quantization",
+        _T,
+        "scope ADC: uniform quantisation to adc_bits over ±adc_range_v, clipping beyond",
         "uniform residual within ±LSB/2 (LSB = 2·range/2^bits); flat-topped output where |y| reaches the range",
-        {"bits": "adc_bits", "range": "adc_range_v"}, default_on=True),
+        {"bits": "adc_bits", "range": "adc_range_v"},
+        default_on=True,
+    ),
     "amplifier_compression": EffectSpec(
-        "amplifier_compression", _T, "AM/AM compression of the RF power amplifier: a monotone limiter family "
+        "amplifier_compression",
+        _T,
+        "AM/AM compression of the RF power amplifier: a monotone limiter family "
         "(Rapp curve whose smoothness spans tanh-like to a hard clip, or a cubic soft clip; optionally asymmetric)",
         "residual at 3f, 5f (odd harmonics) growing faster than the drive; gain loss at large amplitude; "
-        "r_u²'e² correlation test fails", {"model": "amp_compression", "sat": "amp_sat_v", "p": "amp_smoothness",
-                                           "asymmetry": "amp_asymmetry"},
-        default_on=True),
+        "r_u²'e² correlation test fails",
+        {"model": "amp_compression", "sat": "amp_sat_v", "p": "amp_smoothness", "asymmetry": "amp_asymmetry"},
+        default_on=True,
+    ),
     "amplifier_even_distortion": EffectSpec(
-        "amplifier_even_distortion", _T, "even-order term k2·v²/A_sat of the amplifier (push-pull imbalance)",
+        "amplifier_even_distortion",
+        _T,
+        "even-order term k2·v²/A_sat of the amplifier (push-pull imbalance)",
         "residual at 2f (and near DC, removed by the AC-coupled chain); r_u²'e correlation test fails",
-        {"k2": "amp_even_ratio"}),
+        {"k2": "amp_even_ratio"},
+    ),
     "wall_echo": EffectSpec(
-        "wall_echo", _T, "tank side-wall echo, delayed by (√(L²+4w²) − L)/c after the direct arrival: the image "
+        "wall_echo",
+        _T,
+        "tank side-wall echo, delayed by (√(L²+4w²) − L)/c after the direct arrival: the image "
         "path or a delayed copy of the received signal, through a fitted first-order low-pass",
         "residual is a delayed, scaled copy of the direct arrival: cross-correlation of e with the "
-        "simulated output peaks at the geometric extra delay", {"distance": "wall_distance_m",
-                                                                 "reflection": "wall_reflection",
-                                                                 "coupling": "wall_coupling",
-                                                                 "path": "wall_echo_path",
-                                                                 "cutoff": "wall_echo_cutoff_hz"}),
+        "simulated output peaks at the geometric extra delay",
+        {
+            "distance": "wall_distance_m",
+            "reflection": "wall_reflection",
+            "coupling": "wall_coupling",
+            "path": "wall_echo_path",
+            "cutoff": "wall_echo_cutoff_hz",
+        },
+    ),
     "crosstalk": EffectSpec(
-        "crosstalk", _T, "electrical coupling paths from the drive into the Rx node: a stray capacitance from "
+        "crosstalk",
+        _T,
+        "electrical coupling paths from the drive into the Rx node: a stray capacitance from "
         "the Tx terminal, an in-phase (resistive / common-ground) tap and a derivative (capacitive into a "
         "resistive node, or inductive) tap of the drive",
         "residual with no acoustic delay: correlated with u at lag 0 (before the time of flight)",
-        {"capacitance": "crosstalk_capacitance_f", "resistive": "crosstalk_resistive",
-         "derivative": "crosstalk_derivative_s"}),
+        {
+            "capacitance": "crosstalk_capacitance_f",
+            "resistive": "crosstalk_resistive",
+            "derivative": "crosstalk_derivative_s",
+        },
+    ),
     "temperature_offset": EffectSpec(
-        "temperature_offset", _T, "fluid temperature differs from the assumed one (sound speed c(T))",
+        "temperature_offset",
+        _T,
+        "fluid temperature differs from the assumed one (sound speed c(T))",
         "time-of-flight shift (≈ −123 ns/K at 100 mm of water): residual ∝ dy/dt, cross-correlation peak off 0; "
-        "reverberation comb spacing c/2L changes", {"dT": "temperature_offset_k"}, group=_TOF_GROUP),
+        "reverberation comb spacing c/2L changes",
+        {"dT": "temperature_offset_k"},
+        group=_TOF_GROUP,
+    ),
     "distance_offset": EffectSpec(
-        "distance_offset", _T, "plate gap differs from the assumed one",
+        "distance_offset",
+        _T,
+        "plate gap differs from the assumed one",
         "time-of-flight shift (L/c): residual ∝ dy/dt; comb spacing c/2L changes",
-        {"dd": "distance_offset_m"}, group=_TOF_GROUP),
+        {"dd": "distance_offset_m"},
+        group=_TOF_GROUP,
+    ),
     "fluid_mismatch": EffectSpec(
-        "fluid_mismatch", _T, "the tank holds another fluid (e.g. seawater instead of distilled water)",
+        "fluid_mismatch",
+        _T,
+        "the tank holds another fluid (e.g. seawater instead of distilled water)",
         "time-of-flight shift and a small gain change (fluid impedance); residual ∝ dy/dt",
-        {"fluid": "mismatch_fluid"}, group=_TOF_GROUP),
+        {"fluid": "mismatch_fluid"},
+        group=_TOF_GROUP,
+    ),
     "misalignment": EffectSpec(
-        "misalignment", _T, "lateral offset (overlap loss) and tilt (phase averaging across the Rx face)",
+        "misalignment",
+        _T,
+        "lateral offset (overlap loss) and tilt (phase averaging across the Rx face)",
         "frequency-dependent gain loss growing with f (tilt) plus a flat loss (offset); reverberations decay "
         "faster than the aligned model predicts",
-        {"offset": "misalignment_offset_m", "tilt": "misalignment_tilt_deg"}),
+        {"offset": "misalignment_offset_m", "tilt": "misalignment_tilt_deg"},
+    ),
 }
 
 _SINGLE_PRECISION_FROM = 1 << 21  # samples
@@ -116,26 +159,39 @@ class AcousticTwin(Twin):
         Multiply ``amplifier(x)`` by it (in the frequency domain) to get the noise-free output; H(0) = 0.
         (:meth:`simulate` additionally sets H = 0 above ``model_max_hz``, where |H| < −74 dB re its peak.)
         """
-        return frequency_response(np.asarray(f_hz, dtype=float), self.params, self.effects,
-                                  direct_only=direct_only, include_amplifier=include_amplifier)
+        return frequency_response(
+            np.asarray(f_hz, dtype=float),
+            self.params,
+            self.effects,
+            direct_only=direct_only,
+            include_amplifier=include_amplifier,
+        )
 
     def amplifier(self, x) -> np.ndarray:
         """Open-circuit amplifier voltage V_oc [V] for the generator signal ``x`` [V] (memoryless)."""
         p = self.params
-        return amplifier_voltage(x, p.amp_gain_db,
-                                 p.amp_compression if self.has("amplifier_compression") else None,
-                                 p.amp_sat_v, p.amp_smoothness,
-                                 p.amp_even_ratio if self.has("amplifier_even_distortion") else 0.0,
-                                 p.amp_asymmetry)
+        return amplifier_voltage(
+            x,
+            p.amp_gain_db,
+            p.amp_compression if self.has("amplifier_compression") else None,
+            p.amp_sat_v,
+            p.amp_smoothness,
+            p.amp_even_ratio if self.has("amplifier_even_distortion") else 0.0,
+            p.amp_asymmetry,
+        )
 
     def sample_amplifier(self):
         """:meth:`amplifier` as a ``float -> float`` function for one sample at a time (same arithmetic), or
         None where the compression has no per-sample form (the FMU core then calls :meth:`amplifier`)."""
         p = self.params
-        return sample_amplifier(p.amp_gain_db, p.amp_compression if self.has("amplifier_compression") else None,
-                                p.amp_sat_v, p.amp_smoothness,
-                                p.amp_even_ratio if self.has("amplifier_even_distortion") else 0.0,
-                                p.amp_asymmetry)
+        return sample_amplifier(
+            p.amp_gain_db,
+            p.amp_compression if self.has("amplifier_compression") else None,
+            p.amp_sat_v,
+            p.amp_smoothness,
+            p.amp_even_ratio if self.has("amplifier_even_distortion") else 0.0,
+            p.amp_asymmetry,
+        )
 
     def sample_measure(self, fs: float):
         """:meth:`measure` as ``(y: float, rng) -> float`` for one sample at a time: the same float32 noise
@@ -144,7 +200,7 @@ class AcousticTwin(Twin):
         p = self.params
         noise = np.float32(p.noise_v) if self.has("measurement_noise") and p.noise_v > 0 else None
         adc = self.has("adc_quantization")
-        lsb = 2.0 * p.adc_range_v / 2 ** p.adc_bits
+        lsb = 2.0 * p.adc_range_v / 2**p.adc_bits
         lo, hi = -p.adc_range_v, p.adc_range_v - lsb
         f32 = np.float32
 
@@ -170,7 +226,7 @@ class AcousticTwin(Twin):
             # single-precision draws (half the time for 10^7 samples; noise needs no 53-bit mantissa)
             y += p.noise_v * rng.standard_normal(y.shape, dtype=np.float32)
         if self.has("adc_quantization"):
-            lsb = 2.0 * p.adc_range_v / 2 ** p.adc_bits
+            lsb = 2.0 * p.adc_range_v / 2**p.adc_bits
             np.clip(y, -p.adc_range_v, p.adc_range_v - lsb, out=y)
             np.round(y / lsb, out=y)
             y *= lsb
@@ -180,8 +236,9 @@ class AcousticTwin(Twin):
         """Not provided: the chain is an FFT convolution with a ≈ 5 ms impulse response (reverberation), which
         has no compact sample-by-sample form here. The FMU export builds its own core from
         :meth:`frequency_response`, :meth:`amplifier` and :meth:`measure` (interfaces.md)."""
-        raise NotImplementedError("acoustic twin: no stepper; build the FMU core from frequency_response(), "
-                                  "amplifier() and measure()")
+        raise NotImplementedError(
+            "acoustic twin: no stepper; build the FMU core from frequency_response(), amplifier() and measure()"
+        )
 
     # ------------------------------------------------------------------ linear chain in the time domain
     def response_duration(self) -> float:
@@ -227,7 +284,7 @@ class AcousticTwin(Twin):
             h = scipy.fft.irfft(H, n_grid)
             e = h * h
             total = float(e.sum())
-            tail = float(e[-n_grid // 8:].sum()) / total if total > 0 else 0.0
+            tail = float(e[-n_grid // 8 :].sum()) / total if total > 0 else 0.0
             if tail <= _TAIL_TOL:
                 break
             n_grid = scipy.fft.next_fast_len(2 * n_grid, real=True)
@@ -275,10 +332,10 @@ class AcousticTwin(Twin):
             lo = max(start - (m - 1), 0)  # input needed: [start − m + 1, stop)
             buf.fill(0.0)
             offset = (m - 1) - (start - lo)
-            buf[offset:offset + (stop - lo)] = v[lo:stop]
+            buf[offset : offset + (stop - lo)] = v[lo:stop]
             spec = scipy.fft.rfft(buf)
             spec *= hspec
-            out[start:stop] = scipy.fft.irfft(spec, nfft)[m - 1:m - 1 + (stop - start)]
+            out[start:stop] = scipy.fft.irfft(spec, nfft)[m - 1 : m - 1 + (stop - start)]
         return out
 
     def simulate(self, u, fs: float) -> np.ndarray:
@@ -343,10 +400,17 @@ class AcousticTwin(Twin):
         j = int(np.argmax(full_db))
         f_full, g_full = _parabolic_peak(ff, full_db, j)
         geo = geometry(self.params, self.effects)
-        return {"peak_frequency_hz": f_pk, "peak_gain_db": g_pk, "bandwidth_hz": float(f_hi - f_lo),
-                "bandwidth_limited_by_band": bool(limited), "peak_frequency_full_hz": f_full,
-                "peak_gain_full_db": g_full, "time_of_flight_s": self.time_of_flight(),
-                "fluid_delay_s": geo.distance_m / geo.fluid.speed, "sound_speed_m_s": geo.fluid.speed}
+        return {
+            "peak_frequency_hz": f_pk,
+            "peak_gain_db": g_pk,
+            "bandwidth_hz": float(f_hi - f_lo),
+            "bandwidth_limited_by_band": bool(limited),
+            "peak_frequency_full_hz": f_full,
+            "peak_gain_full_db": g_full,
+            "time_of_flight_s": self.time_of_flight(),
+            "fluid_delay_s": geo.distance_m / geo.fluid.speed,
+            "sound_speed_m_s": geo.fluid.speed,
+        }
 
     def sweep_metrics(self, protocol: str | None = None, identify: bool = True) -> dict[str, Any]:
         """Figures of ``piezotwin sweep`` (see :func:`twins.acoustic.studies.sweep_metrics`)."""
@@ -368,8 +432,15 @@ class AcousticTwin(Twin):
             return self._vna(**options)
         # warm-up of the periodic protocols: the whole impulse response (all summed reverberations), so the
         # record starts in the steady state the looping generator had reached before the scope triggered
-        opts = {"duration": 0.1, "fs": FS_ACQ, "warmup_s": self.response_duration(), "awg_rate_hz": 10e6,
-                "preprocess": False, "start": 0, "keep": RECIPE_KEEP[protocol]}
+        opts = {
+            "duration": 0.1,
+            "fs": FS_ACQ,
+            "warmup_s": self.response_duration(),
+            "awg_rate_hz": 10e6,
+            "preprocess": False,
+            "start": 0,
+            "keep": RECIPE_KEEP[protocol],
+        }
         unknown = set(options) - set(opts)
         if unknown:
             raise ConfigError(
@@ -394,8 +465,12 @@ class AcousticTwin(Twin):
             u, y = u_all[warm:], y_all[warm:]
         else:
             u, y = u_all, self.simulate(u_all, fs)
-        meta = {"protocol": protocol, "protocol_options": {k: opts[k] for k in opts}, "excitation": info,
-                **self.config()}
+        meta = {
+            "protocol": protocol,
+            "protocol_options": {k: opts[k] for k in opts},
+            "excitation": info,
+            **self.config(),
+        }
         rec = Record(u=u, y=y, fs=fs, units=dict(self.units), meta=meta, source=f"acoustic:{protocol}")
         if opts["preprocess"]:
             rec = apply_recipe(rec, int(opts["keep"]), int(opts["start"]))
@@ -418,11 +493,17 @@ class AcousticTwin(Twin):
         if opts["preprocess"]:
             H = H * recipe_filter_response(f)
         mag_db = 20 * np.log10(np.abs(H) + 1e-300)
-        meta = {"protocol": "vna-sweep", "kind": "frequency_response", "protocol_options": opts,
-                "quantity": "20*log10|V_rx/V_oc| (u = frequency in Hz, fs = 1/df)",
-                "phase_rad": np.angle(H).tolist(), **self.config()}
-        return Record(u=f, y=mag_db, fs=1.0 / (f[1] - f[0]), units={"u": "Hz", "y": "dB"}, meta=meta,
-                      source="acoustic:vna-sweep")
+        meta = {
+            "protocol": "vna-sweep",
+            "kind": "frequency_response",
+            "protocol_options": opts,
+            "quantity": "20*log10|V_rx/V_oc| (u = frequency in Hz, fs = 1/df)",
+            "phase_rad": np.angle(H).tolist(),
+            **self.config(),
+        }
+        return Record(
+            u=f, y=mag_db, fs=1.0 / (f[1] - f[0]), units={"u": "Hz", "y": "dB"}, meta=meta, source="acoustic:vna-sweep"
+        )
 
     # ------------------------------------------------------------------ calibration
     def calibrate(self, data: Record, val: Record | None = None, names=None, **options: Any):
@@ -460,4 +541,3 @@ def recipe_filter_response(f_hz) -> np.ndarray:
     sos = bandpass_design(FS_RECIPE, BAND_HZ[0], BAND_HZ[1], 5)
     _, hb = sps.sosfreqz(sos, worN=np.minimum(f, FS_RECIPE / 2 * 0.999), fs=FS_RECIPE)
     return np.abs(ma) * np.abs(hb) ** 2
-

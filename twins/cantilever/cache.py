@@ -94,8 +94,12 @@ def add_drift(base, fcfg, quant_on, out):  # pragma: no cover - compiled
     for k in range(base.shape[0]):
         y = base[k]
         tk = tkf * T
-        y += (drift * (-math.expm1(-tk / drift_tau)) + d_rate * tk + d_sin * math.sin(d_omega * tk)
-              + d_cos * (1.0 - math.cos(d_omega * tk)))
+        y += (
+            drift * (-math.expm1(-tk / drift_tau))
+            + d_rate * tk
+            + d_sin * math.sin(d_omega * tk)
+            + d_cos * (1.0 - math.cos(d_omega * tk))
+        )
         if quant_on:
             y = q * math.floor(y / q + 0.5)
         out[k] = y

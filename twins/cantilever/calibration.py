@@ -35,10 +35,27 @@ from twins.calibration import CalibrationResult, calibrate, check_calibration_da
 __all__ = ["calibrate_cantilever", "continues"]
 
 #: parameters that the lab-data fit uses (the issue's list plus the sensor offset and initial state)
-LAB_FIT = ("gain_um_per_v", "bw_alpha", "bw_beta", "bw_gamma", "f1_hz", "zeta1", "creep_per_decade", "offset_um",
-           "initial_state_um")
-PI_FIT = ("gain_um_per_v", "pi_p0_fraction", "pi_decay", "f1_hz", "zeta1", "creep_per_decade", "offset_um",
-          "initial_state_um")
+LAB_FIT = (
+    "gain_um_per_v",
+    "bw_alpha",
+    "bw_beta",
+    "bw_gamma",
+    "f1_hz",
+    "zeta1",
+    "creep_per_decade",
+    "offset_um",
+    "initial_state_um",
+)
+PI_FIT = (
+    "gain_um_per_v",
+    "pi_p0_fraction",
+    "pi_decay",
+    "f1_hz",
+    "zeta1",
+    "creep_per_decade",
+    "offset_um",
+    "initial_state_um",
+)
 
 
 def continues(first: Record, second: Record | None) -> bool:
@@ -57,9 +74,16 @@ def continues(first: Record, second: Record | None) -> bool:
     return bool(a) and a == b
 
 
-def calibrate_cantilever(twin, data: Record, val: Record | None = None, names: Iterable[str] | None = None,
-                         prefit: bool = True, substep_s: float | None = 5e-5, max_nfev: int = 60,
-                         **options: Any) -> CalibrationResult:
+def calibrate_cantilever(
+    twin,
+    data: Record,
+    val: Record | None = None,
+    names: Iterable[str] | None = None,
+    prefit: bool = True,
+    substep_s: float | None = 5e-5,
+    max_nfev: int = 60,
+    **options: Any,
+) -> CalibrationResult:
     """Fit ``names`` (default: the twin's ``CALIBRATION_PARAMS``; Bouc–Wen names are swapped for the PI ones
     when ``hysteresis = prandtl-ishlinskii``) to ``data``. ``substep_s`` (default 50 µs) overrides
     ``max_substep_s`` while fitting when it is coarser: the response error is O(h²), 1·10⁻⁴ of the span at
@@ -118,7 +142,7 @@ def calibrate_cantilever(twin, data: Record, val: Record | None = None, names: I
     def sim(tw, rec: Record) -> np.ndarray:
         if val is not None and rec is val and continues(data, val):
             u = np.concatenate([data.u, val.u])
-            return tw.simulate(u, rec.fs)[len(data):]
+            return tw.simulate(u, rec.fs)[len(data) :]
         return tw.simulate(rec.u, rec.fs)
 
     # tr_solver="lsmr": the dense SVD of the trust-region step costs seconds in a threaded LAPACK on a busy

@@ -53,9 +53,11 @@ def loop_metrics(u: np.ndarray, y: np.ndarray, freq_hz: float, fs: float) -> dic
         yd = np.interp(grid, u[dn][idn], y[dn][idn])
         width = float(np.max(np.abs(yd - yu)))
     area = abs(float(np.sum(0.5 * (y[1:] + y[:-1]) * np.diff(u))))
-    return {"width_ratio": width / span_y if span_y else float("nan"),
-            "area": area / (span_u * span_y) if span_u and span_y else float("nan"),
-            "phase_deg": float(lag)}
+    return {
+        "width_ratio": width / span_y if span_y else float("nan"),
+        "area": area / (span_u * span_y) if span_u and span_y else float("nan"),
+        "phase_deg": float(lag),
+    }
 
 
 def plot_sine_loops(measured: Record, twin, path: str | Path, title: str = "") -> Path:

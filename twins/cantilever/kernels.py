@@ -28,20 +28,91 @@ import math
 import numpy as np
 from numba import njit
 
-__all__ = ["expm_small", "foh_discretise", "run_block", "pi_play", "pi_inverse_weights",
-           "I_M", "I_DELAY", "I_HYST", "I_NPI", "I_NCR", "I_SAT", "I_AMPLP", "I_RATE", "I_ASYM", "I_DRIFT",
-           "I_QUANT", "N_ICFG",
-           "F_T", "F_H", "F_MU", "F_VS", "F_SATP", "F_LIM", "F_LPA", "F_LPB0", "F_LPB1", "F_D", "F_ALPHA",
-           "F_BETA", "F_GAMMA", "F_RATEREF", "F_ASYM", "F_OFFSET", "F_DRIFT", "F_DRIFTTAU", "F_Q", "F_RATEA",
-           "F_DRATE", "F_DSIN", "F_DCOS", "F_DOMEGA", "N_FCFG",
-           "S_CPREV", "S_VPREV", "S_H", "S_FPREV", "S_K", "S_BUFI", "S_CRPREV", "S_RHO", "N_SCAL", "NZ"]
+__all__ = [
+    "expm_small",
+    "foh_discretise",
+    "run_block",
+    "pi_play",
+    "pi_inverse_weights",
+    "I_M",
+    "I_DELAY",
+    "I_HYST",
+    "I_NPI",
+    "I_NCR",
+    "I_SAT",
+    "I_AMPLP",
+    "I_RATE",
+    "I_ASYM",
+    "I_DRIFT",
+    "I_QUANT",
+    "N_ICFG",
+    "F_T",
+    "F_H",
+    "F_MU",
+    "F_VS",
+    "F_SATP",
+    "F_LIM",
+    "F_LPA",
+    "F_LPB0",
+    "F_LPB1",
+    "F_D",
+    "F_ALPHA",
+    "F_BETA",
+    "F_GAMMA",
+    "F_RATEREF",
+    "F_ASYM",
+    "F_OFFSET",
+    "F_DRIFT",
+    "F_DRIFTTAU",
+    "F_Q",
+    "F_RATEA",
+    "F_DRATE",
+    "F_DSIN",
+    "F_DCOS",
+    "F_DOMEGA",
+    "N_FCFG",
+    "S_CPREV",
+    "S_VPREV",
+    "S_H",
+    "S_FPREV",
+    "S_K",
+    "S_BUFI",
+    "S_CRPREV",
+    "S_RHO",
+    "N_SCAL",
+    "NZ",
+]
 
 # integer configuration indices
 I_M, I_DELAY, I_HYST, I_NPI, I_NCR, I_SAT, I_AMPLP, I_RATE, I_ASYM, I_DRIFT, I_QUANT = range(11)
 N_ICFG = 11
 # float configuration indices
-(F_T, F_H, F_MU, F_VS, F_SATP, F_LIM, F_LPA, F_LPB0, F_LPB1, F_D, F_ALPHA, F_BETA, F_GAMMA, F_RATEREF, F_ASYM,
- F_OFFSET, F_DRIFT, F_DRIFTTAU, F_Q, F_RATEA, F_DRATE, F_DSIN, F_DCOS, F_DOMEGA) = range(24)
+(
+    F_T,
+    F_H,
+    F_MU,
+    F_VS,
+    F_SATP,
+    F_LIM,
+    F_LPA,
+    F_LPB0,
+    F_LPB1,
+    F_D,
+    F_ALPHA,
+    F_BETA,
+    F_GAMMA,
+    F_RATEREF,
+    F_ASYM,
+    F_OFFSET,
+    F_DRIFT,
+    F_DRIFTTAU,
+    F_Q,
+    F_RATEA,
+    F_DRATE,
+    F_DSIN,
+    F_DCOS,
+    F_DOMEGA,
+) = range(24)
 N_FCFG = 24
 # scalar state indices
 S_CPREV, S_VPREV, S_H, S_FPREV, S_K, S_BUFI, S_CRPREV, S_RHO = range(8)
@@ -79,7 +150,7 @@ def expm_small(A: np.ndarray) -> np.ndarray:
             break
     norm = float(np.max(np.sum(np.abs(A), axis=0))) if A.size else 0.0
     s = max(0, int(math.ceil(math.log2(norm / 0.25)))) if norm > 0.25 else 0
-    X = A / (2.0 ** s)
+    X = A / (2.0**s)
     E = np.eye(A.shape[0])
     term = np.eye(A.shape[0])
     for k in range(1, 19):
@@ -147,8 +218,9 @@ def _bouc_wen(h, w, a, beta, gamma):
 
 
 @njit(cache=True)
-def run_block(u, noise, out, icfg, fcfg, sc, z, xc, play, buf, vsub, Phi, G0, G1, Cout, cr_a, cr_b0, cr_b1,
-              cr_g, pi_r, pi_p):
+def run_block(
+    u, noise, out, icfg, fcfg, sc, z, xc, play, buf, vsub, Phi, G0, G1, Cout, cr_a, cr_b0, cr_b1, cr_g, pi_r, pi_p
+):
     """Advance the twin over the samples ``u`` (V) writing ``out`` (µm); all state arrays are updated in place.
 
     ``noise`` holds σ·n_k per sample (zeros when measurement noise is off). ``sc`` holds the scalar states
@@ -284,8 +356,16 @@ def run_block(u, noise, out, icfg, fcfg, sc, z, xc, play, buf, vsub, Phi, G0, G1
             z[2] = Phi[2, 2] * z2 + Phi[2, 3] * z3 + G0[2] * f0 + G1[2] * f1
             z[3] = Phi[3, 2] * z2 + Phi[3, 3] * z3 + G0[3] * f0 + G1[3] * f1
             for i in range(4, 6):
-                zn[i] = (Phi[i, 0] * z0 + Phi[i, 1] * z1 + Phi[i, 2] * z2 + Phi[i, 3] * z3 + Phi[i, 4] * z4
-                         + Phi[i, 5] * z5 + G0[i] * f0 + G1[i] * f1)
+                zn[i] = (
+                    Phi[i, 0] * z0
+                    + Phi[i, 1] * z1
+                    + Phi[i, 2] * z2
+                    + Phi[i, 3] * z3
+                    + Phi[i, 4] * z4
+                    + Phi[i, 5] * z5
+                    + G0[i] * f0
+                    + G1[i] * f1
+                )
             z[4] = zn[4]
             z[5] = zn[5]
             f0 = f1
@@ -301,8 +381,12 @@ def run_block(u, noise, out, icfg, fcfg, sc, z, xc, play, buf, vsub, Phi, G0, G1
             y += Cout[i] * z[i]
         if drift_on:
             tk = sc[S_K] * T
-            y += (drift * (-math.expm1(-tk / drift_tau)) + d_rate * tk + d_sin * math.sin(d_omega * tk)
-                  + d_cos * (1.0 - math.cos(d_omega * tk)))
+            y += (
+                drift * (-math.expm1(-tk / drift_tau))
+                + d_rate * tk
+                + d_sin * math.sin(d_omega * tk)
+                + d_cos * (1.0 - math.cos(d_omega * tk))
+            )
         if quant_on:
             y = q * math.floor(y / q + 0.5)
         out[k] = y

@@ -55,8 +55,14 @@ def lab_twin(hysteresis: str = "bouc-wen"):
     return CantileverTwin(effects=["creep"]).with_params(hysteresis=hysteresis, amp_limit_v=150.0, pi_r_max_v=150.0)
 
 
-def calibrate_lab(hysteresis: str = "bouc-wen", est: Record | None = None, val: Record | None = None,
-                  substep_s: float | None = 5e-5, max_nfev: int = 60, rec: Record | None = None):
+def calibrate_lab(
+    hysteresis: str = "bouc-wen",
+    est: Record | None = None,
+    val: Record | None = None,
+    substep_s: float | None = 5e-5,
+    max_nfev: int = 60,
+    rec: Record | None = None,
+):
     """Calibrate :func:`lab_twin` on ``est`` and score ``val``; without them, on the first 5 s and the last
     5 s of the measured record ``rec``."""
     if est is None or val is None:

@@ -81,17 +81,33 @@ def thesis_multisine(options: dict[str, Any]) -> tuple[np.ndarray, float, dict[s
     except ImportError:
         multisine = None
     if multisine is not None:
-        u = multisine(fs=fs, duration=duration, band=(1.0 / period, f_max), components=n_comp, resolution=1.0 / period,
-                      amplitude=1.0, phase="random", seed=seed)
+        u = multisine(
+            fs=fs,
+            duration=duration,
+            band=(1.0 / period, f_max),
+            components=n_comp,
+            resolution=1.0 / period,
+            amplitude=1.0,
+            phase="random",
+            seed=seed,
+        )
         generator = "sysid.signals.multisine"
     else:
         x = multisine_local(fs, period, n_comp, f_max, seed)
         u = np.tile(x, int(np.ceil(n / x.size)))[:n]
     u = np.asarray(u, dtype=float)[:n]
     u = amp * u / np.max(np.abs(u))
-    meta = {"protocol": "thesis-multisine", "components": n_comp, "f_max_hz": f_max, "grid_hz": 1.0 / period,
-            "period_s": period, "amplitude_v": amp, "signal_seed": seed, "generator": generator,
-            "crest_factor": float(np.max(np.abs(u)) / np.sqrt(np.mean(u ** 2)))}
+    meta = {
+        "protocol": "thesis-multisine",
+        "components": n_comp,
+        "f_max_hz": f_max,
+        "grid_hz": 1.0 / period,
+        "period_s": period,
+        "amplitude_v": amp,
+        "signal_seed": seed,
+        "generator": generator,
+        "crest_factor": float(np.max(np.abs(u)) / np.sqrt(np.mean(u**2))),
+    }
     return u, fs, meta
 
 

@@ -22,8 +22,9 @@ __all__ = ["CantileverTwin", "CantileverStepper"]
 
 #: the additive drift after the sensor: its effects and parameters (the cached base output excludes them)
 _DRIFT_EFFECTS = frozenset({"thermal_drift", "slow_drift"})
-_DRIFT_FIELDS = frozenset({"thermal_drift_um", "thermal_tau_s", "drift_rate_um_per_s", "drift_sin_um", "drift_cos_um",
-                           "drift_period_s"})
+_DRIFT_FIELDS = frozenset(
+    {"thermal_drift_um", "thermal_tau_s", "drift_rate_um_per_s", "drift_sin_um", "drift_cos_um", "drift_period_s"}
+)
 
 
 class CantileverTwin(Twin):
@@ -54,17 +55,28 @@ class CantileverTwin(Twin):
     PROTOCOLS = PROTOCOLS
     units = {"u": "V", "y": "um"}
     #: fitted by ``piezotwin calibrate`` (Bouc–Wen; with hysteresis=prandtl-ishlinskii the PI weights replace α, β, γ)
-    CALIBRATION_PARAMS = ("gain_um_per_v", "bw_alpha", "bw_beta", "bw_gamma", "f1_hz", "zeta1", "creep_per_decade",
-                          "offset_um", "initial_state_um")
+    CALIBRATION_PARAMS = (
+        "gain_um_per_v",
+        "bw_alpha",
+        "bw_beta",
+        "bw_gamma",
+        "f1_hz",
+        "zeta1",
+        "creep_per_decade",
+        "offset_um",
+        "initial_state_um",
+    )
     #: parameters that may change while a simulation runs (FMU ``tunable``, :meth:`CantileverStepper.retune`):
     #: every real-valued field except the three that are not a property of the running physics:
     #: ``input_delay_s`` (sets the length of the delay buffer, a state), ``max_substep_s`` (sets the number
     #: of sub-steps, the length of a state array) and ``initial_state_um`` (an initial condition, used only
     #: at rest). Integers (``pi_operators``, ``creep_elements``: array lengths) and ``hysteresis`` (which
     #: operator's state is live) are structural as well.
-    TUNABLE_PARAMS = tuple(f.name for f in dataclasses.fields(CantileverParams)
-                           if f.type in ("float", float)
-                           and f.name not in ("input_delay_s", "max_substep_s", "initial_state_um"))
+    TUNABLE_PARAMS = tuple(
+        f.name
+        for f in dataclasses.fields(CantileverParams)
+        if f.type in ("float", float) and f.name not in ("input_delay_s", "max_substep_s", "initial_state_um")
+    )
 
     #: parameters that enter the output additively and linearly (the drifts' sizes: the slow drift's coefficients
     #: and the settling drift's final value): a calibration solves them by linear least squares for each value of
@@ -184,7 +196,7 @@ class CantileverTwin(Twin):
             dl = p.input_delay_s * fs
             D = int(math.floor(dl + 1e-12))
             mu = max(0.0, dl - D)
-            delay = zi ** D * ((1.0 - mu) + mu * zi)
+            delay = zi**D * ((1.0 - mu) + mu * zi)
         return delay * force * lin
 
     def substeps(self, fs: float) -> int:
@@ -241,17 +253,35 @@ class CantileverTwin(Twin):
         fcfg[K.F_Q] = p.quant_um
         fcfg[K.F_RATEA] = math.exp(-h / p.rate_tau_s)
         cr = np.array([_first_order_foh(tau, T) for tau in taus]).reshape(-1, 3)
-        cfg: dict[str, Any] = dict(icfg=icfg, fcfg=fcfg, Phi=np.ascontiguousarray(Phi), G0=G0, G1=G1, Cout=C,
-                   cr_a=cr[:, 0].copy(), cr_b0=cr[:, 1].copy(), cr_b1=cr[:, 2].copy(),
-                   cr_g=np.full(taus.size, p.creep_per_decade), pi_r=r, pi_p=np.concatenate(([p0], pw)),
-                   buf_len=D + 2, M=M)
+        cfg: dict[str, Any] = dict(
+            icfg=icfg,
+            fcfg=fcfg,
+            Phi=np.ascontiguousarray(Phi),
+            G0=G0,
+            G1=G1,
+            Cout=C,
+            cr_a=cr[:, 0].copy(),
+            cr_b0=cr[:, 1].copy(),
+            cr_b1=cr[:, 2].copy(),
+            cr_g=np.full(taus.size, p.creep_per_decade),
+            pi_r=r,
+            pi_p=np.concatenate(([p0], pw)),
+            buf_len=D + 2,
+            M=M,
+        )
         self._cache[fs] = cfg
         return cfg
 
     def _fresh_state(self, cfg: dict[str, Any]) -> dict[str, np.ndarray]:
         """States at rest at 0 V, in equilibrium with the initial hysteresis output Γ₀ = initial_state_um."""
-        st = dict(sc=np.zeros(K.N_SCAL), z=np.zeros(K.NZ), xc=np.zeros(max(1, cfg["cr_a"].size)),
-                  play=np.zeros(max(1, cfg["pi_r"].size)), buf=np.zeros(cfg["buf_len"]), vsub=np.zeros(cfg["M"] + 1))
+        st = dict(
+            sc=np.zeros(K.N_SCAL),
+            z=np.zeros(K.NZ),
+            xc=np.zeros(max(1, cfg["cr_a"].size)),
+            play=np.zeros(max(1, cfg["pi_r"].size)),
+            buf=np.zeros(cfg["buf_len"]),
+            vsub=np.zeros(cfg["M"] + 1),
+        )
         g0 = float(self.params.initial_state_um)
         if g0 != 0.0:
             if self.params.hysteresis == "bouc-wen":
@@ -292,8 +322,9 @@ class CantileverTwin(Twin):
         _run(u, noise, out, cfg, st)
         return out
 
-    def _base_output(self, u: np.ndarray, fs: float, noise: np.ndarray, cfg: dict[str, Any],
-                     st: dict[str, np.ndarray]) -> np.ndarray:
+    def _base_output(
+        self, u: np.ndarray, fs: float, noise: np.ndarray, cfg: dict[str, Any], st: dict[str, np.ndarray]
+    ) -> np.ndarray:
         """The kernel's reading without the drift and the quantiser (:mod:`.cache`): computed once for an input and
         a configuration that differ only in drift parameters (the drift is added after the sensor)."""
         p = self.params
@@ -345,9 +376,29 @@ def _first_order_foh(tau: float, h: float) -> tuple[float, float, float]:
 
 def _run_args(u, noise, out, cfg, st) -> tuple:
     """The arguments of the kernel ``run_block`` (the state arrays are updated in place)."""
-    return (u, noise, out, cfg["icfg"], cfg["fcfg"], st["sc"], st["z"], st["xc"], st["play"], st["buf"],
-            st["vsub"], cfg["Phi"], cfg["G0"], cfg["G1"], cfg["Cout"], cfg["cr_a"], cfg["cr_b0"], cfg["cr_b1"],
-            cfg["cr_g"], cfg["pi_r"], cfg["pi_p"])
+    return (
+        u,
+        noise,
+        out,
+        cfg["icfg"],
+        cfg["fcfg"],
+        st["sc"],
+        st["z"],
+        st["xc"],
+        st["play"],
+        st["buf"],
+        st["vsub"],
+        cfg["Phi"],
+        cfg["G0"],
+        cfg["G1"],
+        cfg["Cout"],
+        cfg["cr_a"],
+        cfg["cr_b0"],
+        cfg["cr_b1"],
+        cfg["cr_g"],
+        cfg["pi_r"],
+        cfg["pi_p"],
+    )
 
 
 def _run(u, noise, out, cfg, st) -> None:
@@ -399,21 +450,33 @@ class CantileverStepper:
             raise ConfigError(f"cantilever stepper: retune needs a CantileverTwin, got {type(twin).__name__}")
         cfg = twin._config(self.fs)
         old = self._cfg
-        changed = [name for name, i in (("substeps", K.I_M), ("delay samples", K.I_DELAY), ("hysteresis", K.I_HYST),
-                                        ("pi_operators", K.I_NPI), ("creep elements", K.I_NCR),
-                                        ("saturation", K.I_SAT), ("amplifier_bandwidth", K.I_AMPLP),
-                                        ("rate_dependent_hysteresis", K.I_RATE),
-                                        ("asymmetric_hysteresis", K.I_ASYM), ("thermal_drift", K.I_DRIFT),
-                                        ("sensor_quantization", K.I_QUANT))
-                   if cfg["icfg"][i] != old["icfg"][i]]
+        changed = [
+            name
+            for name, i in (
+                ("substeps", K.I_M),
+                ("delay samples", K.I_DELAY),
+                ("hysteresis", K.I_HYST),
+                ("pi_operators", K.I_NPI),
+                ("creep elements", K.I_NCR),
+                ("saturation", K.I_SAT),
+                ("amplifier_bandwidth", K.I_AMPLP),
+                ("rate_dependent_hysteresis", K.I_RATE),
+                ("asymmetric_hysteresis", K.I_ASYM),
+                ("thermal_drift", K.I_DRIFT),
+                ("sensor_quantization", K.I_QUANT),
+            )
+            if cfg["icfg"][i] != old["icfg"][i]
+        ]
         fresh = twin._fresh_state(cfg)
         changed += [f"state {k} shape" for k in fresh if fresh[k].shape != self._st[k].shape]
         for key in ("cr_a", "pi_r", "pi_p"):
             if cfg[key].shape != old[key].shape:
                 changed.append(f"{key} shape")
         if changed:
-            raise ConfigError("cantilever stepper: cannot retune while running, the state layout would change "
-                              f"({', '.join(dict.fromkeys(changed))}); set it before the start")
+            raise ConfigError(
+                "cantilever stepper: cannot retune while running, the state layout would change "
+                f"({', '.join(dict.fromkeys(changed))}); set it before the start"
+            )
         self.twin, self._cfg = twin, cfg
         self._noise_on = twin.has("measurement_noise") and twin.params.noise_um > 0
         self._bind()

@@ -62,8 +62,15 @@ def _fields(twin: Twin, effect: str) -> list[str]:
     return effect_fields(twin, twin.EFFECTS[effect].params.values())
 
 
-def retest_trials(bases: Sequence[Twin], effects: Sequence[str], est: Record, val: Record, core: list[str],
-                  analysis: dict[str, Any], opts: DiagnoseOptions) -> list[Trial]:
+def retest_trials(
+    bases: Sequence[Twin],
+    effects: Sequence[str],
+    est: Record,
+    val: Record,
+    core: list[str],
+    analysis: dict[str, Any],
+    opts: DiagnoseOptions,
+) -> list[Trial]:
     """One trial per effect of ``effects`` (P_e and the core refitted; the best of ``bases`` by estimation SSE),
     marked ``retest = True``."""
     out = []
@@ -87,14 +94,26 @@ def retest_trials(bases: Sequence[Twin], effects: Sequence[str], est: Record, va
     return out
 
 
-def attributable(tr: Trial, est: Record, val: Record, configured: Twin, n_eff: float, level: float, min_rel_gain: float,
-                 skip: int) -> bool:
+def attributable(
+    tr: Trial, est: Record, val: Record, configured: Twin, n_eff: float, level: float, min_rel_gain: float, skip: int
+) -> bool:
     """Step 2 of the module docstring: P_e back at their configured values must be significantly worse."""
     return holds(tr.twin, tr.effect, tr.sse_val, tr.n_added, est, val, configured, n_eff, level, min_rel_gain, skip)
 
 
-def holds(twin: Twin, effect: str, sse_val: float, n_added: int, est: Record, val: Record, configured: Twin,
-          n_eff: float, level: float, min_rel_gain: float, skip: int) -> bool:
+def holds(
+    twin: Twin,
+    effect: str,
+    sse_val: float,
+    n_added: int,
+    est: Record,
+    val: Record,
+    configured: Twin,
+    n_eff: float,
+    level: float,
+    min_rel_gain: float,
+    skip: int,
+) -> bool:
     """``twin`` (validation SSE ``sse_val``) with ``effect``'s parameters back at their configured values is
     significantly worse (F-test below ``level`` and a relative gain of at least ``min_rel_gain``)."""
     fields = _fields(configured, effect) + choice_fields(configured, configured.EFFECTS[effect].params.values())
@@ -118,10 +137,17 @@ def cause_fields(tr: Trial, nrmse_before: float, configured: Twin) -> dict[str, 
     for c in choice_fields(configured, configured.EFFECTS[tr.effect].params.values()):
         if c in tr.effect_params and tr.effect_params[c] != getattr(configured.params, c):
             size += f", {c} {tr.effect_params[c]} instead of the configured {getattr(configured.params, c)}"
-    text = (f"{tr.effect} (on by default) mis-sized: {size}, gain {100 * tr.gain:.0f} % NRMSE (validation NRMSE "
-            f"{nrmse_before:.4g} → {tr.nrmse_val:.4g}, F-test p = {tr.p_value:.2g})")
-    return {"kind": "mis-sized default", "evidence": text, "ratio_to_configured": ratio, "family": "default",
-            "gain": tr.gain}
+    text = (
+        f"{tr.effect} (on by default) mis-sized: {size}, gain {100 * tr.gain:.0f} % NRMSE (validation NRMSE "
+        f"{nrmse_before:.4g} → {tr.nrmse_val:.4g}, F-test p = {tr.p_value:.2g})"
+    )
+    return {
+        "kind": "mis-sized default",
+        "evidence": text,
+        "ratio_to_configured": ratio,
+        "family": "default",
+        "gain": tr.gain,
+    }
 
 
 def contributions(twin: Twin, effects: Sequence[str], est: Record, val: Record, skip: int) -> list[dict[str, Any]]:
@@ -137,7 +163,13 @@ def contributions(twin: Twin, effects: Sequence[str], est: Record, val: Record, 
         except (ConfigError, DataError, ValueError):
             continue
         n_wo = nrmse(val.y, y_wo, skip)
-        out.append({"effect": e, "nrmse_val": float(n_with), "nrmse_val_removed": float(n_wo),
-                    "share": float(max(0.0, 1.0 - n_with / n_wo)) if n_wo > 0 else 0.0,
-                    "params": {f: getattr(twin.params, f) for f in _fields(twin, e)}})
+        out.append(
+            {
+                "effect": e,
+                "nrmse_val": float(n_with),
+                "nrmse_val_removed": float(n_wo),
+                "share": float(max(0.0, 1.0 - n_with / n_wo)) if n_wo > 0 else 0.0,
+                "params": {f: getattr(twin.params, f) for f in _fields(twin, e)},
+            }
+        )
     return out

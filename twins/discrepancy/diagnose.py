@@ -82,8 +82,16 @@ from .unexplained import generic_residual_model
 
 __all__ = ["diagnose", "run_diagnosis", "NOISE_EFFECTS", "significance"]
 
-def diagnose(twin: Twin, data: Record, val: Record | None = None, max_rounds: int = 3, *,
-             threads: int | None = None, **options: Any) -> dict[str, Any]:
+
+def diagnose(
+    twin: Twin,
+    data: Record,
+    val: Record | None = None,
+    max_rounds: int = 3,
+    *,
+    threads: int | None = None,
+    **options: Any,
+) -> dict[str, Any]:
     """Diagnose what ``twin`` gets wrong about ``data``; return the JSON-able result (:meth:`.Diagnosis.to_dict`).
 
     ``data`` and ``val`` are the estimation and validation records (without ``val`` the data is split at
@@ -98,8 +106,15 @@ def diagnose(twin: Twin, data: Record, val: Record | None = None, max_rounds: in
     return run_diagnosis(twin, data, val, max_rounds, opts, threads=threads).to_dict(keep_stages=opts.keep_stages)
 
 
-def run_diagnosis(twin: Twin, data: Record, val: Record | None = None, max_rounds: int = 3,
-                  options: DiagnoseOptions | None = None, *, threads: int | None = None) -> Diagnosis:
+def run_diagnosis(
+    twin: Twin,
+    data: Record,
+    val: Record | None = None,
+    max_rounds: int = 3,
+    options: DiagnoseOptions | None = None,
+    *,
+    threads: int | None = None,
+) -> Diagnosis:
     """The diagnosis as a typed :class:`.result.Diagnosis` (steps in the module docstring).
 
     ``threads``: threads of the twin's compiled (numba) kernels during the diagnosis. Default: 1 for records
@@ -185,9 +200,11 @@ def _prepare(twin: Twin, data: Record, val: Record | None, opts: DiagnoseOptions
         raise DataError(f"estimation and validation records have different fs ({data.fs} and {val.fs} Hz)")
     short = min((len(data), "estimation"), (len(val), "validation"))
     if short[0] - opts.skip < MIN_SCORED_SAMPLES:
-        raise DataError(f"skip={opts.skip} leaves {max(short[0] - opts.skip, 0)} of the {short[0]} {short[1]} samples "
-                        f"to score; the diagnosis needs at least {MIN_SCORED_SAMPLES} (skip <= "
-                        f"{max(short[0] - MIN_SCORED_SAMPLES, 0)})")
+        raise DataError(
+            f"skip={opts.skip} leaves {max(short[0] - opts.skip, 0)} of the {short[0]} {short[1]} samples "
+            f"to score; the diagnosis needs at least {MIN_SCORED_SAMPLES} (skip <= "
+            f"{max(short[0] - MIN_SCORED_SAMPLES, 0)})"
+        )
     unknown = [e for e in (opts.candidates or []) if e not in twin.EFFECTS]
     if unknown:
         raise ConfigError(f"unknown effect {unknown[0]!r} for twin {twin.name}; valid: {', '.join(twin.EFFECTS)}")
@@ -196,13 +213,17 @@ def _prepare(twin: Twin, data: Record, val: Record | None, opts: DiagnoseOptions
     fit = numeric_fields(twin, core)
     if opts.calibration_params is not None and len(fit) < len(set(core)):
         bad = next(c for c in core if c not in fit)
-        raise ConfigError(f"cannot calibrate {bad!r} of twin {twin.name}: not a numeric parameter with a range; "
-                          f"valid: {', '.join(numeric_fields(twin, param_info(type(twin.params))))}")
+        raise ConfigError(
+            f"cannot calibrate {bad!r} of twin {twin.name}: not a numeric parameter with a range; "
+            f"valid: {', '.join(numeric_fields(twin, param_info(type(twin.params))))}"
+        )
     core = fit
     opts.say(f"diagnose {twin.name}: {len(data)} + {len(val)} samples" + "".join(f"; {n}" for n in range_notes))
     given = deterministic(twin)
-    saturation = {"estimation": ft.saturation_rails(data.output, simulate(given, data)),
-                  "validation": ft.saturation_rails(val.output, simulate_val(given, data, val))}
+    saturation = {
+        "estimation": ft.saturation_rails(data.output, simulate(given, data)),
+        "validation": ft.saturation_rails(val.output, simulate_val(given, data, val)),
+    }
     data, val = with_rails(data, saturation["estimation"]), with_rails(val, saturation["validation"])
     noise = unx.noise_level(np.concatenate([data.u, val.u]), np.concatenate([data.y, val.y]), data.fs)
     return _Inputs(twin, given, data, val, core, split_info, range_notes, saturation, t_start, substep_auto, noise)
@@ -280,39 +301,75 @@ def _conclude(inp: _Inputs, cal: _Calibrated, base: Stage, ext: Extension, opts:
     causes = ext.causes + _quantization_causes(inp, opts)
     unexplained = _generic_structure(inp, stage, opts)
     if unexplained["significant"]:
-        causes.append({"effect": "unexplained", "confidence": float(1 - unexplained["p_value"]) * 0.5,
-                       "evidence": ("structure no catalog effect explains: a generic residual model (FIR of u, u², u³ "
-                                    f"and a trend) removes {100 * (1 - unexplained['nrmse_ratio'] ** 2):.0f} % of the "
-                                    f"validation residual variance; {unexplained['description']}"),
-                       "params": {}})
+        causes.append(
+            {
+                "effect": "unexplained",
+                "confidence": float(1 - unexplained["p_value"]) * 0.5,
+                "evidence": (
+                    "structure no catalog effect explains: a generic residual model (FIR of u, u², u³ "
+                    f"and a trend) removes {100 * (1 - unexplained['nrmse_ratio'] ** 2):.0f} % of the "
+                    f"validation residual variance; {unexplained['description']}"
+                ),
+                "params": {},
+            }
+        )
     causes.sort(key=lambda c: -float(c["confidence"]))  # strongest first (stable: round order among equals)
-    verdict, beyond, at_bound = realdata.final_verdict(inp.val, stage.yhat_val, causes, stage.twin, cal.info,
-                                                       opts.skip, inp.noise)
+    verdict, beyond, at_bound = realdata.final_verdict(
+        inp.val, stage.yhat_val, causes, stage.twin, cal.info, opts.skip, inp.noise
+    )
     opts.say(f"verdict {verdict}")
     defaults = dflt.contributions(stage.twin, cal.retest, inp.est, inp.val, opts.skip)
     hybrid, hybrid_twin = None, None
     if verdict == "unexplained" and opts.hybrid:
         opts.say("fitting the hybrid twin (black-box remainder)")
         hybrid, hybrid_twin = hybrid_block(inp, stage, opts.skip)
-    return Diagnosis(verdict=verdict, causes=causes, baseline=base, extended=stage, twin=inp.twin,
-                     calibration=cal.info, saturation=inp.saturation, rounds=ext.rounds, unexplained=unexplained,
-                     residual_vs_noise=beyond, split=inp.split, ranges=inp.ranges, defaults=defaults,
-                     at_bound=at_bound, est=inp.est, val=inp.val, seconds=time.perf_counter() - inp.t_start,
-                     hybrid=hybrid, hybrid_twin=hybrid_twin)
+    return Diagnosis(
+        verdict=verdict,
+        causes=causes,
+        baseline=base,
+        extended=stage,
+        twin=inp.twin,
+        calibration=cal.info,
+        saturation=inp.saturation,
+        rounds=ext.rounds,
+        unexplained=unexplained,
+        residual_vs_noise=beyond,
+        split=inp.split,
+        ranges=inp.ranges,
+        defaults=defaults,
+        at_bound=at_bound,
+        est=inp.est,
+        val=inp.val,
+        seconds=time.perf_counter() - inp.t_start,
+        hybrid=hybrid,
+        hybrid_twin=hybrid_twin,
+    )
 
 
 def _quantization_causes(inp: _Inputs, opts: DiagnoseOptions) -> list[dict[str, Any]]:
     """Quantisation: no prediction can follow it, the evidence is the lattice of the measured values."""
     twin, out = inp.twin, []
-    for e in [c for c in (opts.candidates if opts.candidates is not None else twin.EFFECTS)
-              if c in twin.EFFECTS and c not in twin.effects and ev.family_of(twin.EFFECTS[c]) == "quantization"]:
+    for e in [
+        c
+        for c in (opts.candidates if opts.candidates is not None else twin.EFFECTS)
+        if c in twin.EFFECTS and c not in twin.effects and ev.family_of(twin.EFFECTS[c]) == "quantization"
+    ]:
         q = ft.quantization_step(np.concatenate([inp.est.y, inp.val.y]))
         s = ev.signature_evidence(twin.EFFECTS[e], {"quantization": q}, twin)
         if q.get("p_value", 1.0) < opts.alpha * 1e-3 and s["score"] > 0.3:
-            out.append({"effect": e, "confidence": float(s["score"]), "params": quant_params(twin, e, q["step"]),
-                        "evidence": (s["text"] + "; quantisation error depends on the noise, so adding it cannot "
-                                     "lower the residual (no validation gain expected)"),
-                        "family": "quantization", "round": 0})
+            out.append(
+                {
+                    "effect": e,
+                    "confidence": float(s["score"]),
+                    "params": quant_params(twin, e, q["step"]),
+                    "evidence": (
+                        s["text"] + "; quantisation error depends on the noise, so adding it cannot "
+                        "lower the residual (no validation gain expected)"
+                    ),
+                    "family": "quantization",
+                    "round": 0,
+                }
+            )
     return out
 
 

@@ -94,8 +94,10 @@ def _echo(a: dict, twin: Twin) -> tuple[float, str]:
     score = _clip01((z - 4.0) / 12.0)
     c = sound_speed(twin)
     path = f" ≈ {tau * c * 1e3:.0f} mm extra path at c = {c:.0f} m/s" if c and math.isfinite(tau) else ""
-    return score, (f"residual matches a delayed copy of the simulated output: echo at {_us(tau)}{path}, "
-                   f"amplitude {ec.get('coef', 0.0):+.3f} (peak {z:.1f} robust σ above the lag spread)")
+    return score, (
+        f"residual matches a delayed copy of the simulated output: echo at {_us(tau)}{path}, "
+        f"amplitude {ec.get('coef', 0.0):+.3f} (peak {z:.1f} robust σ above the lag spread)"
+    )
 
 
 def _delay(a: dict, twin: Twin) -> tuple[float, str]:
@@ -105,8 +107,10 @@ def _delay(a: dict, twin: Twin) -> tuple[float, str]:
     score = _clip01((frac - 0.05) / 0.5) * _clip01((d["corr"] - 0.3) / 0.4)
     c = sound_speed(twin)
     path = f" (≈ {sh * c * 1e3:.2f} mm of path at c = {c:.0f} m/s)" if c else ""
-    return score, (f"measured output lags the simulation by {_us(sh)} = {d['shift_samples']:.2f} samples{path}; "
-                   f"input–output delay {_us(a['io_delay_s'])} measured vs {_us(a['io_delay_sim_s'])} simulated")
+    return score, (
+        f"measured output lags the simulation by {_us(sh)} = {d['shift_samples']:.2f} samples{path}; "
+        f"input–output delay {_us(a['io_delay_s'])} measured vs {_us(a['io_delay_sim_s'])} simulated"
+    )
 
 
 def _crosstalk(a: dict, twin: Twin) -> tuple[float, str]:
@@ -115,23 +119,28 @@ def _crosstalk(a: dict, twin: Twin) -> tuple[float, str]:
         # before the first (acoustic) arrival only an electrical path can correlate the residual with the input:
         # the early peak must stand out of the chance level (negative lags) and exceed the correlation after it
         score = _clip01((ei["ratio"] - 4.0) / 8.0) * _clip01((ei["early_over_late"] - 0.8) / 0.4)
-        return score, (f"residual correlates with the input at {_us(ei['lag_s'])} lag, before the model's first "
-                       f"arrival at {_us(ei['first_arrival_s'])}: |r| = {ei['r_max']:.3f}, {ei['ratio']:.1f}× the "
-                       f"chance level and {ei['early_over_late']:.2f}× the largest correlation after it: a path "
-                       "without acoustic delay (electrical crosstalk)")
+        return score, (
+            f"residual correlates with the input at {_us(ei['lag_s'])} lag, before the model's first "
+            f"arrival at {_us(ei['first_arrival_s'])}: |r| = {ei['r_max']:.3f}, {ei['ratio']:.1f}× the "
+            f"chance level and {ei['early_over_late']:.2f}× the largest correlation after it: a path "
+            "without acoustic delay (electrical crosstalk)"
+        )
     il = a["input_lag"]
     z = il.get("z", 0.0)
     near = il.get("lag_samples", 99) <= 3
     score = _clip01((z - 4.0) / 12.0) * (1.0 if near else 0.3)
-    return score, (f"residual contains a scaled copy of the input at lag {il.get('lag_samples', 0)} samples, "
-                   f"coefficient {il.get('coef', 0.0):+.3g} ({z:.1f} robust σ): direct electrical coupling")
+    return score, (
+        f"residual contains a scaled copy of the input at lag {il.get('lag_samples', 0)} samples, "
+        f"coefficient {il.get('coef', 0.0):+.3g} ({z:.1f} robust σ): direct electrical coupling"
+    )
 
 
 def _nl_db(a: dict) -> tuple[float | None, str]:
     ln = a.get("lines", {})
     if ln.get("valid") and ln.get("odd_grid") and ln.get("n_even", 0) > 0 and ln.get("n_odd_detection", 0) > 0:
-        return ln["odd_minus_even_db"], (f"odd detection lines {ln['e_odd_db']:.1f} dB, even lines "
-                                         f"{ln['e_even_db']:.1f} dB re excited lines")
+        return ln["odd_minus_even_db"], (
+            f"odd detection lines {ln['e_odd_db']:.1f} dB, even lines {ln['e_even_db']:.1f} dB re excited lines"
+        )
     h = a.get("harmonics", {})
     if h.get("sine_share", 0.0) > 0.8:
         f0 = h["f0_hz"]
@@ -150,8 +159,10 @@ def _odd(a: dict, twin: Twin) -> tuple[float, str]:
     if db is not None:
         score = max(score, _clip01((db - 3.0) / 15.0)) if db > 0 else score * 0.3
         txt = f"; {txt}: odd-order distortion dominates by {db:.1f} dB" if db > 0 else f"; {txt}"
-    return score, (f"residual correlates with the cubic part of the input/output (|r| = {c3:.3f}, band {band:.3f}) "
-                   f"more than with the square (|r| = {c2:.3f}){txt}: odd-order compression")
+    return score, (
+        f"residual correlates with the cubic part of the input/output (|r| = {c3:.3f}, band {band:.3f}) "
+        f"more than with the square (|r| = {c2:.3f}){txt}: odd-order compression"
+    )
 
 
 def _even(a: dict, twin: Twin) -> tuple[float, str]:
@@ -176,8 +187,10 @@ def _even(a: dict, twin: Twin) -> tuple[float, str]:
             f"{pb['sum_db']:.1f} dB) vs the excited band {pb['in_db']:.1f} dB and the odd skirts "
             f"{pb['skirt_db']:.1f} dB above the quietest band"
         )
-    return score, (f"residual correlates with the square of the input/output (|r| = {c2:.3f}, band {band:.3f}) "
-                   f"more than with the cube (|r| = {c3:.3f}){txt}: even-order (asymmetric) distortion")
+    return score, (
+        f"residual correlates with the square of the input/output (|r| = {c2:.3f}, band {band:.3f}) "
+        f"more than with the cube (|r| = {c3:.3f}){txt}: even-order (asymmetric) distortion"
+    )
 
 
 def _creep(a: dict, twin: Twin) -> tuple[float, str]:
@@ -185,19 +198,25 @@ def _creep(a: dict, twin: Twin) -> tuple[float, str]:
     tr = a["trend"]
     if sd["n_steps"] > 0:
         score = _clip01((sd["share"] - 0.05) / 0.4)
-        return score, (f"after {sd['n_steps']} input steps the residual drifts logarithmically: "
-                       f"{sd['gain_per_decade']:+.3g} per input unit per decade, {100 * sd['share']:.0f} % of the "
-                       "in-hold residual variance: creep")
+        return score, (
+            f"after {sd['n_steps']} input steps the residual drifts logarithmically: "
+            f"{sd['gain_per_decade']:+.3g} per input unit per decade, {100 * sd['share']:.0f} % of the "
+            "in-hold residual variance: creep"
+        )
     score = _clip01((tr["drift_share"] - 0.1) / 0.5) * 0.7
-    return score, (f"slow residual component ({100 * tr['drift_share']:.0f} % of its variance is a trend); no input "
-                   "steps to confirm a logarithmic creep law")
+    return score, (
+        f"slow residual component ({100 * tr['drift_share']:.0f} % of its variance is a trend); no input "
+        "steps to confirm a logarithmic creep law"
+    )
 
 
 def _drift(a: dict, twin: Twin) -> tuple[float, str]:
     tr = a["trend"]
     score = _clip01((tr["drift_share"] - 0.1) / 0.5)
-    return score, (f"residual drifts by {tr['drift_total']:+.3g} over the record ({tr['slope_per_s']:+.3g}/s, "
-                   f"{100 * tr['drift_share']:.0f} % of the residual variance): slow thermal drift")
+    return score, (
+        f"residual drifts by {tr['drift_total']:+.3g} over the record ({tr['slope_per_s']:+.3g}/s, "
+        f"{100 * tr['drift_share']:.0f} % of the residual variance): slow thermal drift"
+    )
 
 
 def _resonance(a: dict, twin: Twin) -> tuple[float, str]:
@@ -206,8 +225,10 @@ def _resonance(a: dict, twin: Twin) -> tuple[float, str]:
         return 0.0, "no narrow peak in the residual spectrum"
     p = pk[0]
     score = _clip01((p["prominence_db"] - 6.0) / 14.0)
-    return score, (f"narrow residual peak at {p['freq_hz']:.4g} Hz, {p['prominence_db']:.1f} dB above the "
-                   f"residual floor ({p['residual_over_output_db']:.1f} dB re output): unmodelled resonance")
+    return score, (
+        f"narrow residual peak at {p['freq_hz']:.4g} Hz, {p['prominence_db']:.1f} dB above the "
+        f"residual floor ({p['residual_over_output_db']:.1f} dB re output): unmodelled resonance"
+    )
 
 
 def _lowpass(a: dict, twin: Twin) -> tuple[float, str]:
@@ -215,17 +236,21 @@ def _lowpass(a: dict, twin: Twin) -> tuple[float, str]:
     d = a["delay"]
     # a missing low-pass makes the residual grow with frequency and look like a small lag of the output
     score = _clip01((abs(d["shift_samples"]) - 0.02) / 0.5) * 0.6 + _clip01(-b["in_band_db"] / 40.0) * 0.2
-    return score, (f"residual is {b['in_band_db']:.1f} dB below the output in the excited band "
-                   f"{b['band_hz'][0]:.4g}–{b['band_hz'][1]:.4g} Hz and behaves like a {d['shift_samples']:.2f}-sample "
-                   "group delay: missing band limitation")
+    return score, (
+        f"residual is {b['in_band_db']:.1f} dB below the output in the excited band "
+        f"{b['band_hz'][0]:.4g}–{b['band_hz'][1]:.4g} Hz and behaves like a {d['shift_samples']:.2f}-sample "
+        "group delay: missing band limitation"
+    )
 
 
 def _quant(a: dict, twin: Twin) -> tuple[float, str]:
     q = a["quantization"]
     coh = q.get("coherence", 0.0)
     score = _clip01((coh - 0.2) / 0.6) if q.get("p_value", 1.0) < 1e-6 else 0.0
-    return score, (f"measured values lie on a lattice of step {q['step']:.4g} (coherence {coh:.2f}, "
-                   f"{q.get('distinct_levels', 0)} levels): quantisation")
+    return score, (
+        f"measured values lie on a lattice of step {q['step']:.4g} (coherence {coh:.2f}, "
+        f"{q.get('distinct_levels', 0)} levels): quantisation"
+    )
 
 
 def _rate(a: dict, twin: Twin) -> tuple[float, str]:
@@ -237,9 +262,11 @@ def _rate(a: dict, twin: Twin) -> tuple[float, str]:
     dl = np.array([s["lag_deg_measured"] - s["lag_deg_simulated"] for s in h])
     slope = float(np.polyfit(np.log10(f), dw, 1)[0]) if np.ptp(np.log10(f)) > 0 else 0.0
     score = _clip01((abs(slope) - 0.005) / 0.03)
-    return score, (f"loop width measured − simulated changes by {100 * slope:+.1f} % of span per decade of frequency "
-                   f"({f.min():.3g}–{f.max():.3g} Hz; phase lag difference {dl.min():+.1f}…{dl.max():+.1f}°): "
-                   "rate-dependent hysteresis")
+    return score, (
+        f"loop width measured − simulated changes by {100 * slope:+.1f} % of span per decade of frequency "
+        f"({f.min():.3g}–{f.max():.3g} Hz; phase lag difference {dl.min():+.1f}…{dl.max():+.1f}°): "
+        "rate-dependent hysteresis"
+    )
 
 
 def _generic(a: dict, twin: Twin) -> tuple[float, str]:
@@ -247,14 +274,26 @@ def _generic(a: dict, twin: Twin) -> tuple[float, str]:
 
 
 _SCORERS: dict[str, Callable[[dict, Twin], tuple[float, str]]] = {
-    "echo": _echo, "crosstalk": _crosstalk, "time_of_flight": _delay, "delay": _delay, "creep": _creep,
-    "drift": _drift, "rate_hysteresis": _rate, "even_nl": _even, "odd_nl": _odd, "resonance": _resonance,
-    "lowpass": _lowpass, "quantization": _quant, "noise": _generic, "generic": _generic,
+    "echo": _echo,
+    "crosstalk": _crosstalk,
+    "time_of_flight": _delay,
+    "delay": _delay,
+    "creep": _creep,
+    "drift": _drift,
+    "rate_hysteresis": _rate,
+    "even_nl": _even,
+    "odd_nl": _odd,
+    "resonance": _resonance,
+    "lowpass": _lowpass,
+    "quantization": _quant,
+    "noise": _generic,
+    "generic": _generic,
 }
 
 
-def signature_evidence(spec: EffectSpec, analysis: dict[str, Any], twin: Twin,
-                       also: dict[str, Any] | None = None) -> dict[str, Any]:
+def signature_evidence(
+    spec: EffectSpec, analysis: dict[str, Any], twin: Twin, also: dict[str, Any] | None = None
+) -> dict[str, Any]:
     """Signature score in [0, 1] and sentence for one catalog effect, from the validation residual analysis
     (and, when ``also`` is given, the estimation one: the clearer of the two is kept; the estimation record
     may show a signature the validation input cannot, e.g. intermodulation of a multisine versus a chirp)."""
@@ -282,9 +321,11 @@ def describe_generic(a: dict[str, Any]) -> str:
         parts.append(f"a timing shift of {a['delay']['shift_samples']:+.2f} samples")
     ei = a.get("early_input", {})
     if ei.get("valid") and ei["ratio"] > 8 and ei["early_over_late"] > 1:
-        parts.append(f"a path without acoustic delay: the residual correlates with the input at {_us(ei['lag_s'])} "
-                     f"(|r| = {ei['r_max']:.3f}, {ei['ratio']:.0f}× chance), before the first arrival at "
-                     f"{_us(ei['first_arrival_s'])}")
+        parts.append(
+            f"a path without acoustic delay: the residual correlates with the input at {_us(ei['lag_s'])} "
+            f"(|r| = {ei['r_max']:.3f}, {ei['ratio']:.0f}× chance), before the first arrival at "
+            f"{_us(ei['first_arrival_s'])}"
+        )
     nl = a["nonlinear"]
     if max(nl["u2"], nl["y2"]) > 3 * nl["band"]:
         parts.append(f"even-order correlation |r| = {max(nl['u2'], nl['y2']):.3f}")
@@ -312,26 +353,42 @@ def describe_generic(a: dict[str, Any]) -> str:
 
 #: experiments that separate effects with the same signature (by family pair, order-free)
 SEPARATING_EXPERIMENTS: dict[frozenset, str] = {
-    frozenset({"time_of_flight"}): ("measure the time of flight at two distances and two temperatures: a distance "
-                                    "offset adds a constant path, a sound-speed (temperature/fluid) change scales "
-                                    "the whole time of flight with distance"),
-    frozenset({"time_of_flight", "delay"}): ("measure the time of flight at two distances: an electronic delay is the "
-                                             "same at both, a sound-speed or distance change is not"),
-    frozenset({"delay", "lowpass"}): ("excite beyond the band edge (or measure the phase at two frequencies): a pure "
-                                      "delay has linear phase and flat magnitude, a low-pass attenuates"),
-    frozenset({"creep", "drift"}): ("hold the input at zero for as long as the record: thermal drift continues, creep "
-                                    "after a step decays logarithmically and scales with the step"),
-    frozenset({"odd_nl"}): ("drive at several amplitudes: hard saturation leaves small signals untouched, a smooth "
-                            "compression bends them already"),
-    frozenset({"odd_nl", "even_nl"}): ("use an odd multisine: odd-order distortion lands on the odd detection lines, "
-                                       "even-order on the even lines"),
-    frozenset({"echo", "crosstalk"}): ("change the distance: an acoustic echo moves with it, electrical crosstalk "
-                                       "stays at the excitation time"),
-    frozenset({"resonance", "lowpass"}): ("sweep a sine through the suspected band: a resonance has a phase jump of "
-                                          "180°, a low-pass only a gradual roll-off"),
-    frozenset({"rate_hysteresis", "lowpass"}): ("measure loops at several frequencies with a small amplitude: "
-                                                "rate-dependent hysteresis widens with amplitude and frequency, a "
-                                                "linear lag only with frequency"),
+    frozenset({"time_of_flight"}): (
+        "measure the time of flight at two distances and two temperatures: a distance "
+        "offset adds a constant path, a sound-speed (temperature/fluid) change scales "
+        "the whole time of flight with distance"
+    ),
+    frozenset({"time_of_flight", "delay"}): (
+        "measure the time of flight at two distances: an electronic delay is the "
+        "same at both, a sound-speed or distance change is not"
+    ),
+    frozenset({"delay", "lowpass"}): (
+        "excite beyond the band edge (or measure the phase at two frequencies): a pure "
+        "delay has linear phase and flat magnitude, a low-pass attenuates"
+    ),
+    frozenset({"creep", "drift"}): (
+        "hold the input at zero for as long as the record: thermal drift continues, creep "
+        "after a step decays logarithmically and scales with the step"
+    ),
+    frozenset({"odd_nl"}): (
+        "drive at several amplitudes: hard saturation leaves small signals untouched, a smooth "
+        "compression bends them already"
+    ),
+    frozenset({"odd_nl", "even_nl"}): (
+        "use an odd multisine: odd-order distortion lands on the odd detection lines, even-order on the even lines"
+    ),
+    frozenset({"echo", "crosstalk"}): (
+        "change the distance: an acoustic echo moves with it, electrical crosstalk stays at the excitation time"
+    ),
+    frozenset({"resonance", "lowpass"}): (
+        "sweep a sine through the suspected band: a resonance has a phase jump of "
+        "180°, a low-pass only a gradual roll-off"
+    ),
+    frozenset({"rate_hysteresis", "lowpass"}): (
+        "measure loops at several frequencies with a small amplitude: "
+        "rate-dependent hysteresis widens with amplitude and frequency, a "
+        "linear lag only with frequency"
+    ),
 }
 
 
@@ -346,5 +403,7 @@ def separating_experiment(families: list[str]) -> str:
         fam = next(iter(fams))
         if frozenset({fam}) in SEPARATING_EXPERIMENTS:
             return SEPARATING_EXPERIMENTS[frozenset({fam})]
-    return ("repeat the experiment while changing one quantity that only one of these effects depends on "
-            "(amplitude, frequency, distance, temperature or hold time)")
+    return (
+        "repeat the experiment while changing one quantity that only one of these effects depends on "
+        "(amplitude, frequency, distance, temperature or hold time)"
+    )

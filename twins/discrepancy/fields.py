@@ -17,8 +17,18 @@ from twins.base import Twin, param_info
 
 from . import evidence as ev
 
-__all__ = ["numeric_fields", "choice_fields", "int_fields", "effect_fields", "grid", "guesses", "echo_path_guesses",
-           "core_for", "quant_params", "fmt_params"]
+__all__ = [
+    "numeric_fields",
+    "choice_fields",
+    "int_fields",
+    "effect_fields",
+    "grid",
+    "guesses",
+    "echo_path_guesses",
+    "core_for",
+    "quant_params",
+    "fmt_params",
+]
 
 
 def numeric_fields(twin: Twin, fields: Iterable[str]) -> list[str]:
@@ -44,8 +54,11 @@ def choice_fields(twin: Twin, fields: Iterable[str]) -> list[str]:
 
 
 def int_fields(twin: Twin, fields: Iterable[str]) -> list[str]:
-    return [f for f in fields if isinstance(getattr(twin.params, f, None), int)
-            and not isinstance(getattr(twin.params, f, None), bool)]
+    return [
+        f
+        for f in fields
+        if isinstance(getattr(twin.params, f, None), int) and not isinstance(getattr(twin.params, f, None), bool)
+    ]
 
 
 def grid(lo: float, hi: float, n: int, is_int: bool) -> np.ndarray:

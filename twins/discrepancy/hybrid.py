@@ -42,8 +42,10 @@ def hybrid_block(inp: Any, stage: Stage, skip: int) -> tuple[dict[str, Any], Hyb
     yh = simulate_val(cast(Twin, hy), est, val)
     ok = bool(np.all(np.isfinite(yh[skip:])))
     s0, s1 = stage.sse_val, sse(y, yh, skip)
-    after = {"r2_val": r2(y, yh, skip) if ok else float("-inf"),
-             "nrmse_val": nrmse(y, yh, skip) if ok else float("inf")}
+    after = {
+        "r2_val": r2(y, yh, skip) if ok else float("-inf"),
+        "nrmse_val": nrmse(y, yh, skip) if ok else float("inf"),
+    }
     block = {
         "fitted": True,
         **hy.describe(),
@@ -63,6 +65,8 @@ def hybrid_text(block: dict[str, Any]) -> str:
     if not block.get("fitted"):
         return f"hybrid twin: no remainder model ({block.get('error', '')})"
     b, a = block["before"], block["after"]
-    return (f"hybrid twin (twin + {block['identifier']} remainder on u and the twin's output): validation R2 "
-            f"{b['r2_val']:.4g} -> {a['r2_val']:.4g}, NRMSE {b['nrmse_val']:.4g} -> {a['nrmse_val']:.4g}; the "
-            f"remainder takes {100 * block['share_taken']:.1f} % of the discrepancy (no physical cause named)")
+    return (
+        f"hybrid twin (twin + {block['identifier']} remainder on u and the twin's output): validation R2 "
+        f"{b['r2_val']:.4g} -> {a['r2_val']:.4g}, NRMSE {b['nrmse_val']:.4g} -> {a['nrmse_val']:.4g}; the "
+        f"remainder takes {100 * block['share_taken']:.1f} % of the discrepancy (no physical cause named)"
+    )

@@ -30,16 +30,30 @@ from .trials import Stage
 __all__ = ["joint_step"]
 
 
-def joint_step(loop: Any, ext: Any, ranking: Ranking, rnd: int, n_max: int, *, adopt: Callable[..., Stage],
-               beyond_noise: Callable[..., bool], round_trials: Callable[..., Any]) -> bool:
+def joint_step(
+    loop: Any,
+    ext: Any,
+    ranking: Ranking,
+    rnd: int,
+    n_max: int,
+    *,
+    adopt: Callable[..., Stage],
+    beyond_noise: Callable[..., bool],
+    round_trials: Callable[..., Any],
+) -> bool:
     """Try the leader of round ``rnd`` (``ranking``, not significant alone) jointly with each other candidate;
     when a pair is significant, add both causes to ``ext`` (in place) and return True (module docstring).
     ``adopt``, ``beyond_noise`` and ``round_trials`` are those of :mod:`.rounds` (which calls this)."""
     inp, cal, opts, skip = loop.inp, loop.cal, loop.opts, loop.opts.skip
     stage: Stage = ext.stage
     top = ranking.top
-    if (not opts.pairs or top.retest or len(ext.causes) + 2 > n_max or top.sse_val >= stage.sse_val
-            or not beyond_noise(inp, stage, skip)):
+    if (
+        not opts.pairs
+        or top.retest
+        or len(ext.causes) + 2 > n_max
+        or top.sse_val >= stage.sse_val
+        or not beyond_noise(inp, stage, skip)
+    ):
         return False
     tent = adopt(inp, top.twin, opts)
     top_fields = effect_fields(top.twin, top.twin.EFFECTS[top.effect].params.values())
@@ -57,11 +71,18 @@ def joint_step(loop: Any, ext: Any, ranking: Ranking, rnd: int, n_max: int, *, a
         p = significance(stage.sse_val, tr.sse_val, n_eff0, top.n_added + tr.n_added)
         gain = max(0.0, 1.0 - tr.nrmse_val / stage.nrmse_val) if stage.nrmse_val > 0 else 0.0
         judged.append((tr, p, gain))
-    row: dict[str, Any] = {"round": rnd, "pair_with": top.effect, "nrmse_val_before": stage.nrmse_val,
-                           "n_eff": n_eff0, "level": level,
-                           "pairs": [{"effect": tr.effect, "nrmse_val": tr.nrmse_val, "p_joint": p, "gain": g,
-                                      "params": tr.effect_params} for tr, p, g in judged],
-                           "kept": None}
+    row: dict[str, Any] = {
+        "round": rnd,
+        "pair_with": top.effect,
+        "nrmse_val_before": stage.nrmse_val,
+        "n_eff": n_eff0,
+        "level": level,
+        "pairs": [
+            {"effect": tr.effect, "nrmse_val": tr.nrmse_val, "p_joint": p, "gain": g, "params": tr.effect_params}
+            for tr, p, g in judged
+        ],
+        "kept": None,
+    }
     ext.rounds.append(row)
     passing = [(tr, p, g) for tr, p, g in judged if p < level and g >= opts.min_rel_gain]
     if not passing:
@@ -69,8 +90,16 @@ def joint_step(loop: Any, ext: Any, ranking: Ranking, rnd: int, n_max: int, *, a
     second, p_joint, gain = min(passing, key=lambda x: x[0].sse_val)
     row["kept"] = second.effect
     # the second effect's row and group as a round from the tentative configuration would give them
-    ranking2 = rank_round(trials, tent, inp.est, inp.val, inp.twin, cal.prior, ft.effective_samples(
-        inp.val.y[skip:] - tent.yhat_val[skip:]), opts)
+    ranking2 = rank_round(
+        trials,
+        tent,
+        inp.est,
+        inp.val,
+        inp.twin,
+        cal.prior,
+        ft.effective_samples(inp.val.y[skip:] - tent.yhat_val[skip:]),
+        opts,
+    )
     i2 = next(i for i, t in enumerate(ranking2.trials) if t is second)
     order = [i2] + [i for i in range(len(ranking2.trials)) if i != i2]
     group2 = ranking2.group if ranking2.trials[0] is second else [second.effect]
@@ -78,16 +107,21 @@ def joint_step(loop: Any, ext: Any, ranking: Ranking, rnd: int, n_max: int, *, a
     first = cause_from(ranking, stage, inp.twin, cal.prior, rnd)
     other = cause_from(ranking2, tent, inp.twin, cal.prior, rnd)
     other["params"] = dict(second.effect_params)
-    first["params"] = {f: float(getattr(second.twin.params, f)) for f in first["params"]
-                       if hasattr(second.twin.params, f)} or first["params"]
-    for c, mate, score in ((first, second.effect, ranking.rows[0]["signature_score"]),
-                           (other, top.effect, ranking2.rows[0]["signature_score"])):
+    first["params"] = {
+        f: float(getattr(second.twin.params, f)) for f in first["params"] if hasattr(second.twin.params, f)
+    } or first["params"]
+    for c, mate, score in (
+        (first, second.effect, ranking.rows[0]["signature_score"]),
+        (other, top.effect, ranking2.rows[0]["signature_score"]),
+    ):
         c["joint_with"] = mate
         c["p_joint"] = p_joint
         c["confidence"] = float(max(0.0, min(0.5, (1.0 - p_joint) * 0.5 * (0.8 + 0.2 * score))))
-        c["evidence"] += (f"; significant jointly with {mate}: together they lower the validation NRMSE "
-                          f"{stage.nrmse_val:.4g} → {second.nrmse_val:.4g} (F-test p = {p_joint:.2g} with "
-                          f"{top.n_added + second.n_added} parameters, level {level:.2g})")
+        c["evidence"] += (
+            f"; significant jointly with {mate}: together they lower the validation NRMSE "
+            f"{stage.nrmse_val:.4g} → {second.nrmse_val:.4g} (F-test p = {p_joint:.2g} with "
+            f"{top.n_added + second.n_added} parameters, level {level:.2g})"
+        )
     ext.causes += [first, other]
     ext.stage = adopt(inp, second.twin, opts)
     return True

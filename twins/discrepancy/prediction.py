@@ -20,8 +20,18 @@ from twins.base import Twin
 from . import evidence as ev
 from .features import clip_to_rails
 
-__all__ = ["NOISE_EFFECTS", "unpredictable", "deterministic", "simulate", "simulate_val", "with_rails", "sse",
-           "significance", "continues", "MIN_SCORED_SAMPLES"]
+__all__ = [
+    "NOISE_EFFECTS",
+    "unpredictable",
+    "deterministic",
+    "simulate",
+    "simulate_val",
+    "with_rails",
+    "sse",
+    "significance",
+    "continues",
+    "MIN_SCORED_SAMPLES",
+]
 
 #: effects that model unpredictable noise: never a candidate cause, always off in the fitted prediction
 NOISE_EFFECTS: tuple[str, ...] = ("measurement_noise",)
@@ -70,7 +80,7 @@ def continues(est: Record, val: Record) -> bool:
 def simulate_val(twin: Twin, est: Record, val: Record) -> np.ndarray:
     """The prediction of the validation record (as the continuation of ``est`` where it continues it)."""
     if continues(est, val):
-        y = simulate(twin, Record(u=np.concatenate([est.u, val.u]), y=None, fs=est.fs))[len(est):]
+        y = simulate(twin, Record(u=np.concatenate([est.u, val.u]), y=None, fs=est.fs))[len(est) :]
         return clip_to_rails(y, val.meta.get(RAILS_KEY))
     return simulate(twin, val)
 

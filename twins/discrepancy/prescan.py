@@ -58,8 +58,9 @@ class _Search:
         return isinstance(getattr(self.tw.params, f), int)
 
 
-def prescan(tw: Twin, est: Record, fields: list[str], a: dict[str, Any], points: int, skip: int,
-            choices: Sequence[str] = ()) -> dict[str, Any]:
+def prescan(
+    tw: Twin, est: Record, fields: list[str], a: dict[str, Any], points: int, skip: int, choices: Sequence[str] = ()
+) -> dict[str, Any]:
     """Coordinate-wise scan of each effect parameter over its range and the feature guesses (est SSE);
     parameters with a list of values (``choices``) are tried value by value."""
     start: dict[str, Any] = {f: float(getattr(tw.params, f)) for f in fields}
@@ -126,8 +127,9 @@ def _joint_guesses(s: _Search, fields: list[str], a: dict[str, Any], lin_guess: 
     keys = list(guess)
     for combo in itertools.islice(itertools.product(*(guess[k][:8] for k in keys)), 96):
         trial = dict(s.best)
-        trial.update({k: (int(round(v)) if isinstance(getattr(s.tw.params, k), int) else float(v))
-                      for k, v in zip(keys, combo)})
+        trial.update(
+            {k: (int(round(v)) if isinstance(getattr(s.tw.params, k), int) else float(v)) for k, v in zip(keys, combo)}
+        )
         s.offer(trial)
 
 
@@ -180,17 +182,29 @@ def _echo_basins(s: _Search, f: str, a: dict[str, Any]) -> None:
         h = float(grid_[1] - grid_[0]) if grid_.size > 1 else 0.0
         if h > 0:
             best = s.best
-            r = minimize_scalar(lambda v: s.cost({**best, f: float(v)}),  # noqa: B023 (used up in this iteration)
-                                bounds=(max(lo, x - h), min(hi, x + h)),
-                                method="bounded", options={"maxiter": 12, "xatol": h * 1e-3})
+            r = minimize_scalar(
+                lambda v: s.cost({**best, f: float(v)}),  # noqa: B023 (used up in this iteration)
+                bounds=(max(lo, x - h), min(hi, x + h)),
+                method="bounded",
+                options={"maxiter": 12, "xatol": h * 1e-3},
+            )
             if r.fun < cx:
                 x, cx = float(r.x), float(r.fun)
         if cx < s.best_cost:
             s.best_cost, s.best = cx, {**s.best, f: x}
 
 
-def continuation_scan(tw: Twin, est: Record, vals: dict[str, Any], f: str, lo: float, hi: float, points: int,
-                      skip: int, extra: Sequence[float] = ()) -> float:
+def continuation_scan(
+    tw: Twin,
+    est: Record,
+    vals: dict[str, Any],
+    f: str,
+    lo: float,
+    hi: float,
+    points: int,
+    skip: int,
+    extra: Sequence[float] = (),
+) -> float:
     """Scan of ``f`` on the first eighth of the record: a coarse grid over the range, a dense one around the
     configured value (the prior) and the ``extra`` guesses; the four best points are refined by a bounded 1-D
     search; the winner is then re-refined on a quarter, a half and the whole record (continuation in the record
@@ -214,15 +228,22 @@ def continuation_scan(tw: Twin, est: Record, vals: dict[str, Any], f: str, lo: f
     cands = []
     for i in np.argsort(costs)[:4]:
         v = float(first[i])
-        r = minimize_scalar(lambda x: cost_on(part, x), bounds=(max(lo, v - step), min(hi, v + step)),
-                            method="bounded", options={"maxiter": 14, "xatol": step * 1e-3})
+        r = minimize_scalar(
+            lambda x: cost_on(part, x),
+            bounds=(max(lo, v - step), min(hi, v + step)),
+            method="bounded",
+            options={"maxiter": 14, "xatol": step * 1e-3},
+        )
         cands.append((float(r.fun), float(r.x)) if r.fun < costs[i] else (float(costs[i]), v))
     best_x = min(cands)[1]
     for frac in (4, 2, 1):
         part = est[: max(n // frac, min(n, 64))]
-        r = minimize_scalar(lambda x: cost_on(part, x),  # noqa: B023 (used up in this iteration)
-                            bounds=(max(lo, best_x - step / 4), min(hi, best_x + step / 4)),
-                            method="bounded", options={"maxiter": 14, "xatol": step * 1e-4})
+        r = minimize_scalar(
+            lambda x: cost_on(part, x),  # noqa: B023 (used up in this iteration)
+            bounds=(max(lo, best_x - step / 4), min(hi, best_x + step / 4)),
+            method="bounded",
+            options={"maxiter": 14, "xatol": step * 1e-4},
+        )
         if r.fun <= cost_on(part, best_x):
             best_x = float(r.x)
     return best_x

@@ -38,8 +38,7 @@ from sysid.errors import DataError
 from twins.base import Twin, param_info
 from twins.paramfields import with_ranges
 
-__all__ = ["AMPLITUDE_OPTIONS", "follow_record", "substep_followed", "substep_for", "at_bounds", "widened",
-           "BOUND_TOL"]
+__all__ = ["AMPLITUDE_OPTIONS", "follow_record", "substep_followed", "substep_for", "at_bounds", "widened", "BOUND_TOL"]
 
 #: twin → parameters that must reach max|u| [V] (the second only for the PI operator)
 AMPLITUDE_OPTIONS: dict[str, tuple[str, ...]] = {"cantilever": ("amp_limit_v", "pi_r_max_v")}
@@ -62,12 +61,15 @@ def follow_record(twin: Twin, est: Record, val: Record) -> tuple[Twin, list[str]
         if umax > cur:
             hi = info[opt].range[1]
             if hi is not None and umax > float(hi):
-                raise DataError(f"the input reaches |u| = {umax:g} {est.units.get('u', 'V')}, above the largest "
-                                f"{opt} the {twin.name} twin takes ({float(hi):g} {info[opt].unit}); scale the "
-                                f"record or set {opt} (--set {opt}=...) within its range")
+                raise DataError(
+                    f"the input reaches |u| = {umax:g} {est.units.get('u', 'V')}, above the largest "
+                    f"{opt} the {twin.name} twin takes ({float(hi):g} {info[opt].unit}); scale the "
+                    f"record or set {opt} (--set {opt}=...) within its range"
+                )
             changes[opt] = umax
-            notes.append(f"{opt} raised {cur:g} -> {umax:g} {info[opt].unit} (the input exceeds it; "
-                         f"--set {opt}=... overrides)")
+            notes.append(
+                f"{opt} raised {cur:g} -> {umax:g} {info[opt].unit} (the input exceeds it; --set {opt}=... overrides)"
+            )
     duration = (len(est) + len(val)) / est.fs
     if twin.has("creep") and "creep_elements" in info and "creep_tau_min_s" in info:
         n = int(twin.params.creep_elements)
@@ -78,8 +80,10 @@ def follow_record(twin: Twin, est: Record, val: Record) -> tuple[Twin, list[str]
             n_new = min(need, n_max)
             if n_new > n:
                 changes["creep_elements"] = n_new
-                notes.append(f"creep_elements {n} -> {n_new}: longest creep time constant "
-                             f"{tau1 * 10 ** (n_new - 1):g} s for a {duration:.4g} s record")
+                notes.append(
+                    f"creep_elements {n} -> {n_new}: longest creep time constant "
+                    f"{tau1 * 10 ** (n_new - 1):g} s for a {duration:.4g} s record"
+                )
     tw = twin.with_params(**changes) if changes else twin
     follow = getattr(tw, "follow_records", None)  # a twin whose own ranges follow the data (twins.external)
     if callable(follow):
@@ -91,8 +95,10 @@ def follow_record(twin: Twin, est: Record, val: Record) -> tuple[Twin, list[str]
         if h > cur * (1 + 1e-9):
             tw = tw.with_params(max_substep_s=h)
             steps = tw.substeps(est.fs)  # type: ignore[attr-defined]  # substep_followed: a cantilever twin
-            notes.append(f"max_substep_s {cur:g} -> {h:.3g} s: {steps} sub-steps per sample "
-                         "suffice for this record's bandwidth (FOH error bound ≤ 1e-4 of the span)")
+            notes.append(
+                f"max_substep_s {cur:g} -> {h:.3g} s: {steps} sub-steps per sample "
+                "suffice for this record's bandwidth (FOH error bound ≤ 1e-4 of the span)"
+            )
     return tw, notes
 
 
@@ -100,8 +106,11 @@ def substep_followed(twin: Twin) -> bool:
     """The twin's integration sub-step is chosen from the records (a cantilever at the default ``max_substep_s``;
     a value the user set is kept)."""
     info = param_info(type(twin.params))
-    return (twin.name == "cantilever" and "max_substep_s" in info
-            and float(twin.params.max_substep_s) == float(info["max_substep_s"].default))
+    return (
+        twin.name == "cantilever"
+        and "max_substep_s" in info
+        and float(twin.params.max_substep_s) == float(info["max_substep_s"].default)
+    )
 
 
 def _chosen_substep(twin: Twin, est: Record, val: Record) -> float:
@@ -148,8 +157,15 @@ def at_bounds(twin: Twin, names: Iterable[str], tol: float = BOUND_TOL) -> list[
         else:
             near_lo, near_hi = v - lo <= tol * w, hi - v <= tol * w
         if near_lo or near_hi:
-            out.append({"param": n, "value": v, "bound": lo if near_lo else hi, "side": "lower" if near_lo else "upper",
-                        "unit": info[n].unit})
+            out.append(
+                {
+                    "param": n,
+                    "value": v,
+                    "bound": lo if near_lo else hi,
+                    "side": "lower" if near_lo else "upper",
+                    "unit": info[n].unit,
+                }
+            )
     return out
 
 
@@ -177,7 +193,13 @@ def widened(twin: Twin, hits: list[dict[str, Any]]) -> tuple[Twin, list[dict[str
 
 
 def bound_text(rows: list[dict[str, Any]]) -> str:
-    """"f1_hz=3000 Hz at its upper bound 3000" lines joined (for messages)."""
-    return "; ".join(f"{r['param']}={r['value']:.4g} {r['unit']} at its {r['side']} bound {r['bound']:g}"
-                     + (f" (refitted with the range widened to [{r['widened_to'][0]:g}, {r['widened_to'][1]:g}])"
-                        if "widened_to" in r else "") for r in rows)
+    """ "f1_hz=3000 Hz at its upper bound 3000" lines joined (for messages)."""
+    return "; ".join(
+        f"{r['param']}={r['value']:.4g} {r['unit']} at its {r['side']} bound {r['bound']:g}"
+        + (
+            f" (refitted with the range widened to [{r['widened_to'][0]:g}, {r['widened_to'][1]:g}])"
+            if "widened_to" in r
+            else ""
+        )
+        for r in rows
+    )

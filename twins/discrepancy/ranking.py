@@ -59,12 +59,22 @@ class Ranking:
         return self.trials[0]
 
 
-def rank_round(trials: list[Trial], stage: Stage, est: Record, val: Record, twin: Twin, prior: Twin,
-               n_eff0: float, opts: DiagnoseOptions) -> Ranking:
+def rank_round(
+    trials: list[Trial],
+    stage: Stage,
+    est: Record,
+    val: Record,
+    twin: Twin,
+    prior: Twin,
+    n_eff0: float,
+    opts: DiagnoseOptions,
+) -> Ranking:
     """Judge, order and group the (non-empty) ``trials`` of a round that started from ``stage``."""
     _judge(trials, stage, est, val, prior, n_eff0, opts)
-    sig_ev = {tr.effect: ev.signature_evidence(twin.EFFECTS[tr.effect], stage.analysis_val, twin,
-                                               also=stage.analysis_est) for tr in trials}
+    sig_ev = {
+        tr.effect: ev.signature_evidence(twin.EFFECTS[tr.effect], stage.analysis_val, twin, also=stage.analysis_est)
+        for tr in trials
+    }
     trials.sort(key=lambda t: (t.significant, t.gain + 0.01 * sig_ev[t.effect]["score"] * t.gain), reverse=True)
     group = _group(trials, twin, val, opts)
     return Ranking(trials, group, _rows(trials, group, sig_ev))
@@ -82,8 +92,9 @@ def judged_span(effect: str, twin: Twin, est: Record, val: Record) -> int:
     return min(val.n, int(round(len(est) / est.fs * val.fs)))
 
 
-def _judge(trials: list[Trial], stage: Stage, est: Record, val: Record, prior: Twin, n_eff0: float,
-           opts: DiagnoseOptions) -> None:
+def _judge(
+    trials: list[Trial], stage: Stage, est: Record, val: Record, prior: Twin, n_eff0: float, opts: DiagnoseOptions
+) -> None:
     """p-value, gain and significance of each trial against ``stage`` (module docstring); a drift between separate
     records on the validation samples of :func:`judged_span` only."""
     skip = opts.skip
@@ -124,8 +135,12 @@ def _group(trials: list[Trial], twin: Twin, val: Record, opts: DiagnoseOptions) 
         # the data cannot tell tr from the leader when the leader's residual is not significantly smaller
         not_better = significance(tr.sse_val, top.sse_val, n_eff_top, 1) > opts.alpha
         # a catalog ambiguity group: members that explain the data nearly as well (NRMSE within 2×) go together
-        same_group = (bool(top_group) and twin.EFFECTS[tr.effect].group == top_group and tr.significant
-                      and tr.nrmse_val <= 2.0 * top.nrmse_val)
+        same_group = (
+            bool(top_group)
+            and twin.EFFECTS[tr.effect].group == top_group
+            and tr.significant
+            and tr.nrmse_val <= 2.0 * top.nrmse_val
+        )
         d_pred = float(np.sqrt(np.mean((tr.yhat_val[skip:] - top.yhat_val[skip:]) ** 2)))
         equal = tr.significant and (tr.sse_val <= top.sse_val * (1 + tol) or not_better) and d_pred < 0.5 * e_rms_top
         if same_group or equal:
@@ -152,33 +167,59 @@ def _rows(trials: list[Trial], group: list[str], sig_ev: dict[str, dict[str, Any
     for tr in trials:
         s = sig_ev[tr.effect]
         conf = _confidence(tr, trials[0], tr.effect in group, g2, s["score"])
-        rows.append({"effect": tr.effect, "family": s["family"], "significant": tr.significant,
-                     "retest": bool(tr.retest),
-                     "confidence": conf, "signature_score": s["score"], "signature": s["text"],
-                     "nrmse_val": tr.nrmse_val, "r2_val": tr.r2_val, "gain": tr.gain, "p_value": tr.p_value,
-                     "n_params": tr.n_added, "n_params_total": tr.n_total,
-                     "params": tr.effect_params, "stderr": tr.stderr, "seconds": tr.seconds,
-                     "judged_samples": tr.judged_samples})
+        rows.append(
+            {
+                "effect": tr.effect,
+                "family": s["family"],
+                "significant": tr.significant,
+                "retest": bool(tr.retest),
+                "confidence": conf,
+                "signature_score": s["score"],
+                "signature": s["text"],
+                "nrmse_val": tr.nrmse_val,
+                "r2_val": tr.r2_val,
+                "gain": tr.gain,
+                "p_value": tr.p_value,
+                "n_params": tr.n_added,
+                "n_params_total": tr.n_total,
+                "params": tr.effect_params,
+                "stderr": tr.stderr,
+                "seconds": tr.seconds,
+                "judged_samples": tr.judged_samples,
+            }
+        )
     return rows
 
 
 def cause_from(ranking: Ranking, stage: Stage, twin: Twin, prior: Twin, rnd: int) -> dict[str, Any]:
     """The cause a round names: its leader (significant), with its group and the experiment to separate it."""
     top, row, group = ranking.top, ranking.rows[0], ranking.group
-    text = (f"{row['signature']}; adding {top.effect} and fitting "
-            f"{fmt_params(top.effect_params) or 'the core'} lowers the "
-            f"validation NRMSE {stage.nrmse_val:.4g} → {top.nrmse_val:.4g} (F-test p = {top.p_value:.2g})")
-    cause = {"effect": top.effect, "confidence": row["confidence"], "evidence": text,
-             "params": dict(top.effect_params), "stderr": dict(top.stderr), "family": row["family"],
-             "round": rnd, "nrmse_val_before": stage.nrmse_val, "nrmse_val_after": top.nrmse_val,
-             "p_value": top.p_value}
+    text = (
+        f"{row['signature']}; adding {top.effect} and fitting "
+        f"{fmt_params(top.effect_params) or 'the core'} lowers the "
+        f"validation NRMSE {stage.nrmse_val:.4g} → {top.nrmse_val:.4g} (F-test p = {top.p_value:.2g})"
+    )
+    cause = {
+        "effect": top.effect,
+        "confidence": row["confidence"],
+        "evidence": text,
+        "params": dict(top.effect_params),
+        "stderr": dict(top.stderr),
+        "family": row["family"],
+        "round": rnd,
+        "nrmse_val_before": stage.nrmse_val,
+        "nrmse_val_after": top.nrmse_val,
+        "p_value": top.p_value,
+    }
     if top.retest:
         cause.update(dflt.cause_fields(top, stage.nrmse_val, prior))
     if len(group) > 1:
         cause["group"] = group
         cause["separate_by"] = ev.separating_experiment([ev.family_of(twin.EFFECTS[g]) for g in group])
         gains_txt = ", ".join(f"{r['gain']:.3f}" for r in ranking.rows if r["effect"] in group)
-        cause["evidence"] += (f"; the data cannot tell {', '.join(group)} apart "
-                              f"(gains {gains_txt}); "
-                              f"to separate them: {cause['separate_by']}")
+        cause["evidence"] += (
+            f"; the data cannot tell {', '.join(group)} apart "
+            f"(gains {gains_txt}); "
+            f"to separate them: {cause['separate_by']}"
+        )
     return cause

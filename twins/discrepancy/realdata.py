@@ -22,8 +22,9 @@ from . import unexplained as unx
 __all__ = ["prepare", "refit_at_bounds", "final_verdict"]
 
 
-def prepare(twin: Twin, data: Record, val: Record | None, split: float, follow_ranges: bool
-            ) -> tuple[Twin, Record, Record, dict[str, Any], list[str]]:
+def prepare(
+    twin: Twin, data: Record, val: Record | None, split: float, follow_ranges: bool
+) -> tuple[Twin, Record, Record, dict[str, Any], list[str]]:
     """Split (validation with excitation, or a ``val`` that has it) and the twin's ranges from the records."""
     data.require_output()
     if val is None:
@@ -37,8 +38,14 @@ def prepare(twin: Twin, data: Record, val: Record | None, split: float, follow_r
     return twin, data, val, split_info, notes
 
 
-def refit_at_bounds(fitted: Twin, names: list[str], data: Record, sse: Callable[[Twin], float],
-                    simulate: Callable, say: Callable[[str], None]) -> tuple[Twin, dict[str, Any] | None]:
+def refit_at_bounds(
+    fitted: Twin,
+    names: list[str],
+    data: Record,
+    sse: Callable[[Twin], float],
+    simulate: Callable,
+    say: Callable[[str], None],
+) -> tuple[Twin, dict[str, Any] | None]:
     """When a fitted parameter of ``names`` ends within 1 % of its bound, refit once with the bound widened
     (:func:`.ranges.widened`); returns the better twin and, when the refit was kept, its calibration info."""
     hits = rg.at_bounds(fitted, names)
@@ -57,9 +64,15 @@ def refit_at_bounds(fitted: Twin, names: list[str], data: Record, sse: Callable[
     return fitted, None
 
 
-def final_verdict(val: Record, yhat_val: np.ndarray, causes: list[dict[str, Any]], twin: Twin,
-                  calib_info: dict[str, Any], skip: int, noise: dict[str, Any]
-                  ) -> tuple[str, dict[str, Any], list[dict[str, Any]]]:
+def final_verdict(
+    val: Record,
+    yhat_val: np.ndarray,
+    causes: list[dict[str, Any]],
+    twin: Twin,
+    calib_info: dict[str, Any],
+    skip: int,
+    noise: dict[str, Any],
+) -> tuple[str, dict[str, Any], list[dict[str, Any]]]:
     """(verdict, residual against noise, parameters at a bound): ``unexplained`` when the validation residual
     after the extension is far above ``noise`` (:func:`.unexplained.noise_level` of both records, measured from
     the data), else ``discrepancy`` with causes or ``none``."""
@@ -67,5 +80,6 @@ def final_verdict(val: Record, yhat_val: np.ndarray, causes: list[dict[str, Any]
     verdict = "unexplained" if beyond["outside"] else ("discrepancy" if causes else "none")
     names = set(calib_info.get("fitted", {})) | {k for c in causes for k in c.get("params", {})}
     at_bound = rg.at_bounds(twin, sorted(names)) + [
-        {**r, "value": float(getattr(twin.params, r["param"]))} for r in calib_info.get("widened", [])]
+        {**r, "value": float(getattr(twin.params, r["param"]))} for r in calib_info.get("widened", [])
+    ]
     return verdict, beyond, at_bound

@@ -37,10 +37,15 @@ def write_report(result: dict[str, Any], directory: str | Path) -> Path:
     d.mkdir(parents=True, exist_ok=True)
     val, base, ext = st["val"], st["baseline"], st["extended"]
     e0, e1 = val.y - base.yhat_val, val.y - ext.yhat_val
-    files = [_residuals_png(result, val, base, ext, d / "residuals.png"),
-             _spectra_png(result, val, e0, e1, d / "spectra.png"),
-             _tests_png(base.analysis_val["_tests_full"]["tests"], ext.analysis_val["_tests_full"]["tests"],
-                        d / "correlation_tests.png")]
+    files = [
+        _residuals_png(result, val, base, ext, d / "residuals.png"),
+        _spectra_png(result, val, e0, e1, d / "spectra.png"),
+        _tests_png(
+            base.analysis_val["_tests_full"]["tests"],
+            ext.analysis_val["_tests_full"]["tests"],
+            d / "correlation_tests.png",
+        ),
+    ]
     hy0 = result["analysis"]["baseline"]["validation"].get("hysteresis") or []
     hy1 = result["analysis"]["extended"]["validation"].get("hysteresis") or []
     if hy0:

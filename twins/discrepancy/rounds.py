@@ -78,8 +78,11 @@ def extend(inp: Any, cal: Any, base: Stage, max_rounds: int, opts: DiagnoseOptio
     # trials refit the core without the parameters of the effects that are on: a trial that refitted the creep
     # rate would credit any added effect with the re-test's gain (the re-tests fit those parameters themselves)
     core_r = [c for c in inp.core if c not in cal.held]
-    pool = [e for e in (opts.candidates if opts.candidates is not None else twin.EFFECTS)
-            if e in twin.EFFECTS and e not in twin.effects and e not in NOISE_EFFECTS and e not in unpredictable(twin)]
+    pool = [
+        e
+        for e in (opts.candidates if opts.candidates is not None else twin.EFFECTS)
+        if e in twin.EFFECTS and e not in twin.effects and e not in NOISE_EFFECTS and e not in unpredictable(twin)
+    ]
     loop = _Loop(inp, cal, pool, core_r, opts, list(cal.retest))
     ext = Extension(base, [], [])
     n_max = max(int(max_rounds), 0)
@@ -116,20 +119,27 @@ def _branch(loop: _Loop, ext: Extension, base: Stage, n_max: int) -> None:
     ranking = Ranking([first.trials[i] for i in order], [runner.effect], [first.rows[i] for i in order])
     opts.say(f"the rounds from {leader} left the residual far above the noise: trying round 1 with {runner.effect}")
     loop.retest_left = [e for e in loop.cal.retest if not (runner.retest and e == runner.effect)]
-    alt = Extension(adopt(inp, runner.twin, opts), [cause_from(ranking, base, inp.twin, loop.cal.prior, 1)],
-                    [{"round": 1, "branch": runner.effect, "instead_of": leader}])
+    alt = Extension(
+        adopt(inp, runner.twin, opts),
+        [cause_from(ranking, base, inp.twin, loop.cal.prior, 1)],
+        [{"round": 1, "branch": runner.effect, "instead_of": leader}],
+    )
     _rounds(loop, alt, n_max)
-    n_eff = ft.effective_samples(inp.val.y[opts.skip:] - ext.stage.yhat_val[opts.skip:])
-    kept = bool(alt.stage.sse_val < ext.stage.sse_val
-                and significance(ext.stage.sse_val, alt.stage.sse_val, n_eff, 1) < opts.alpha)
+    n_eff = ft.effective_samples(inp.val.y[opts.skip :] - ext.stage.yhat_val[opts.skip :])
+    kept = bool(
+        alt.stage.sse_val < ext.stage.sse_val
+        and significance(ext.stage.sse_val, alt.stage.sse_val, n_eff, 1) < opts.alpha
+    )
     ext.rounds += [{**r, "branch": runner.effect} for r in alt.rounds]
     ext.rounds[-len(alt.rounds)]["kept"] = kept
     if not kept:
         loop.retest_left = saved
         return
-    alt.causes[0]["evidence"] += (f"; named in place of {leader}, round 1's leader: the rounds from {leader} left "
-                                  f"the validation NRMSE at {ext.stage.nrmse_val:.4g}, those from {runner.effect} "
-                                  f"at {alt.stage.nrmse_val:.4g}")
+    alt.causes[0]["evidence"] += (
+        f"; named in place of {leader}, round 1's leader: the rounds from {leader} left "
+        f"the validation NRMSE at {ext.stage.nrmse_val:.4g}, those from {runner.effect} "
+        f"at {alt.stage.nrmse_val:.4g}"
+    )
     ext.causes, ext.stage = alt.causes, alt.stage
 
 
@@ -156,15 +166,32 @@ def _recheck_defaults(loop: _Loop, ext: Extension) -> None:
         fields = effect_fields(twin, twin.EFFECTS[eff].params.values())
         cause.setdefault("params_first_fit", dict(cause["params"]))
         cause["params"] = {f: float(getattr(twin.params, f)) for f in fields}
-        ratio = {f: (cause["params"][f] / float(getattr(prior.params, f)) if float(getattr(prior.params, f)) != 0
-                     else float("inf")) for f in fields}
+        ratio = {
+            f: (
+                cause["params"][f] / float(getattr(prior.params, f))
+                if float(getattr(prior.params, f)) != 0
+                else float("inf")
+            )
+            for f in fields
+        }
         cause["ratio_to_configured"] = ratio
         if all(abs(math.log(max(r, 1e-300))) <= math.log(_SAME_SIZE) for r in ratio.values()):
             note = f"refitted to within {100 * (_SAME_SIZE - 1):.0f} % of its configured size"
         else:
             n_eff = ft.effective_samples(inp.val.y[skip:] - ext.stage.yhat_val[skip:])
-            if dflt.holds(twin, eff, ext.stage.sse_val, len(fields), inp.est, inp.val, prior, n_eff, opts.alpha,
-                          opts.min_rel_gain, skip):
+            if dflt.holds(
+                twin,
+                eff,
+                ext.stage.sse_val,
+                len(fields),
+                inp.est,
+                inp.val,
+                prior,
+                n_eff,
+                opts.alpha,
+                opts.min_rel_gain,
+                skip,
+            ):
                 continue
             note = "back at its configured size the final configuration fits not significantly worse"
             ext.stage = adopt(inp, _taken_out(twin, eff, True, prior), opts)
@@ -191,14 +218,22 @@ def _greedy(loop: _Loop, ext: Extension, n_max: int) -> None:
         if not trials:
             break
         ranking = rank_round(trials, stage, inp.est, inp.val, inp.twin, cal.prior, n_eff0, opts)
-        ext.rounds.append({"round": rnd, "nrmse_val_before": stage.nrmse_val, "n_eff": n_eff0,
-                           "candidates": ranking.rows, "group": ranking.group})
+        ext.rounds.append(
+            {
+                "round": rnd,
+                "nrmse_val_before": stage.nrmse_val,
+                "n_eff": n_eff0,
+                "candidates": ranking.rows,
+                "group": ranking.group,
+            }
+        )
         if rnd == 1:
             loop.first = ranking
         top = ranking.top
         if not top.significant:
-            if joint_step(loop, ext, ranking, rnd, n_max, adopt=adopt, beyond_noise=beyond_noise,
-                          round_trials=round_trials):
+            if joint_step(
+                loop, ext, ranking, rnd, n_max, adopt=adopt, beyond_noise=beyond_noise, round_trials=round_trials
+            ):
                 continue
             break
         ext.causes.append(cause_from(ranking, stage, inp.twin, cal.prior, rnd))
@@ -227,8 +262,9 @@ def revisit(loop: _Loop, ext: Extension) -> bool:
         eff, retest = cause["effect"], cause.get("kind") == "mis-sized default"
         base = make_stage(_taken_out(twin, eff, retest, cal.prior), inp.est, inp.val, opts)
         others = [c["effect"] for c in ext.causes if c is not cause]
-        core_x = loop.core_r + [f for o in others for f in effect_fields(twin, twin.EFFECTS[o].params.values())
-                                if f not in loop.core_r]
+        core_x = loop.core_r + [
+            f for o in others for f in effect_fields(twin, twin.EFFECTS[o].params.values()) if f not in loop.core_r
+        ]
         cands = [e for e in loop.pool if e not in base.twin.effects]
         opts.say(f"revisiting {eff}: {len(cands) + retest} candidates in its place")
         trials, errors = round_trials(inp, cal, base, cands, [eff] if retest else [], core_x, f"revisit {eff}", opts)
@@ -237,8 +273,15 @@ def revisit(loop: _Loop, ext: Extension) -> bool:
             continue
         n_eff0 = ft.effective_samples(inp.val.y[skip:] - base.yhat_val[skip:])
         ranking = rank_round(trials, base, inp.est, inp.val, inp.twin, cal.prior, n_eff0, opts)
-        row = {"round": cause["round"], "revisit": eff, "nrmse_val_before": base.nrmse_val, "n_eff": n_eff0,
-               "candidates": ranking.rows, "group": ranking.group, "replaced_by": None}
+        row = {
+            "round": cause["round"],
+            "revisit": eff,
+            "nrmse_val_before": base.nrmse_val,
+            "n_eff": n_eff0,
+            "candidates": ranking.rows,
+            "group": ranking.group,
+            "replaced_by": None,
+        }
         ext.rounds.append(row)
         top = ranking.top
         if top.effect == eff:
@@ -296,8 +339,16 @@ def _beats(top: Trial, trials: list[Trial], incumbent: str, stage: Stage, n_eff:
     return bool(top.sse_val < ref and significance(ref, top.sse_val, n_eff, 1) < opts.alpha)
 
 
-def round_trials(inp: Any, cal: Any, stage: Stage, remaining: list[str], retest_left: list[str],
-                  core_r: list[str], rnd: int | str, opts: DiagnoseOptions) -> tuple[list[Trial], list[dict[str, Any]]]:
+def round_trials(
+    inp: Any,
+    cal: Any,
+    stage: Stage,
+    remaining: list[str],
+    retest_left: list[str],
+    core_r: list[str],
+    rnd: int | str,
+    opts: DiagnoseOptions,
+) -> tuple[list[Trial], list[dict[str, Any]]]:
     """The trials of one round (stage A for every candidate, stage B for the best, the re-tests) and a row for
     each candidate that could not run."""
     # features that guide the pre-scan come from the estimation residual (the data the trial is fitted to)
@@ -332,13 +383,17 @@ def _starting_points(stage: Stage, prior: Twin, core: list[str]) -> list[Twin]:
     where the calibration moved a core parameter by more than 2 % of its value, the configuration as given."""
     cur_core = core_for(stage.twin, core)
     prior_base = stage.twin.with_params(**{c: getattr(prior.params, c) for c in cur_core})
-    moved = any(abs(float(getattr(prior.params, c)) - float(getattr(stage.twin.params, c)))
-                > 0.02 * max(abs(float(getattr(prior.params, c))), 1e-300) for c in cur_core)
+    moved = any(
+        abs(float(getattr(prior.params, c)) - float(getattr(stage.twin.params, c)))
+        > 0.02 * max(abs(float(getattr(prior.params, c))), 1e-300)
+        for c in cur_core
+    )
     return [stage.twin] + ([prior_base] if moved else [])
 
 
-def _refine(trials: list[Trial], stage: Stage, inp: Any, core_r: list[str], a_est: dict[str, Any],
-            opts: DiagnoseOptions) -> None:
+def _refine(
+    trials: list[Trial], stage: Stage, inp: Any, core_r: list[str], a_est: dict[str, Any], opts: DiagnoseOptions
+) -> None:
     """Stage B: the leader, and whoever comes close to it (within a factor 1.5 in validation SSE), refitted
     together with the core parameters (``opts.refine`` at most), the estimation leader if it is not among them and
     the other members of the leader's ambiguity group (``EffectSpec.group``); kept where the estimation SSE
@@ -350,8 +405,11 @@ def _refine(trials: list[Trial], stage: Stage, inp: Any, core_r: list[str], a_es
     fits (two hidden effects, creep + thermal drift on steps: creep lost 0 % gain against a 2nd-mode 3 %)."""
     trials.sort(key=lambda t: t.sse_val)
     n = min(max(int(opts.refine), 0), len(trials))
-    picked = [i for i, tr in enumerate(trials[:n])
-              if i == 0 or not (tr.sse_val > 1.5 * trials[0].sse_val or tr.sse_val >= stage.sse_val * (1 - 1e-9))]
+    picked = [
+        i
+        for i, tr in enumerate(trials[:n])
+        if i == 0 or not (tr.sse_val > 1.5 * trials[0].sse_val or tr.sse_val >= stage.sse_val * (1 - 1e-9))
+    ]
     if n and trials:
         j = min(range(len(trials)), key=lambda k: trials[k].sse_est)
         if j not in picked and trials[j].sse_est < sse(inp.est.y, stage.yhat_est, opts.skip):
@@ -359,8 +417,9 @@ def _refine(trials: list[Trial], stage: Stage, inp: Any, core_r: list[str], a_es
     # the leader's group is refined with it, so its members are judged alike (a core that absorbed a settling drift
     # leaves thermal_drift no gain with the core held, while slow_drift, refitted, takes it)
     group = inp.twin.EFFECTS[trials[0].effect].group if trials else ""
-    picked += [i for i, tr in enumerate(trials)
-               if group and i not in picked and inp.twin.EFFECTS[tr.effect].group == group]
+    picked += [
+        i for i, tr in enumerate(trials) if group and i not in picked and inp.twin.EFFECTS[tr.effect].group == group
+    ]
     if opts.starts > 1:  # every candidate, from several starts (DiagnoseOptions.starts)
         picked = list(range(len(trials)))
     for i in picked:
@@ -368,8 +427,7 @@ def _refine(trials: list[Trial], stage: Stage, inp: Any, core_r: list[str], a_es
         spent = tr.seconds  # stage A and every full refit, kept or not
         for start in [tr.effect_params] + spread_starts(tr, opts.starts):
             try:
-                trB = run_trial(tr.base, tr.effect, inp.est, inp.val, core_r, a_est, opts, refit_core=True,
-                                start=start)
+                trB = run_trial(tr.base, tr.effect, inp.est, inp.val, core_r, a_est, opts, refit_core=True, start=start)
             except _TRIAL_ERRORS:
                 continue
             spent += trB.seconds

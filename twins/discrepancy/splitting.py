@@ -53,8 +53,10 @@ def choose_split(data: Record, fraction: float = 0.6) -> tuple[Record, Record, d
         est, val = data.split(fraction=fraction)
         return est, val, {"fraction": fraction, "moved": False}
     if not float(np.std(u)) > 0:
-        raise DataError(f"{data.source}: the input u is constant over the whole record: nothing excites the twin, "
-                        "nothing can be diagnosed")
+        raise DataError(
+            f"{data.source}: the input u is constant over the whole record: nothing excites the twin, "
+            "nothing can be diagnosed"
+        )
     order = [float(fraction)] + [f for f in FRACTIONS if abs(f - float(fraction)) > 1e-9]
     tried = []
     for f in order:
@@ -65,19 +67,28 @@ def choose_split(data: Record, fraction: float = 0.6) -> tuple[Record, Record, d
         tried.append((f, xe, xv))
         if xe >= MIN_EXCITATION and xv >= MIN_EXCITATION:
             est, val = data.split(index=k)
-            info: dict[str, Any] = {"fraction": f, "index": k, "excitation_est": xe, "excitation_val": xv,
-                                    "moved": f != float(fraction)}
+            info: dict[str, Any] = {
+                "fraction": f,
+                "index": k,
+                "excitation_est": xe,
+                "excitation_val": xv,
+                "moved": f != float(fraction),
+            }
             if info["moved"]:
                 f0, xe0, xv0 = tried[0]
                 part = "validation" if xv0 < MIN_EXCITATION else "estimation"
-                info["note"] = (f"the default split at {100 * f0:.0f} % leaves the {part} part without excitation "
-                                f"(std(u) {min(xe0, xv0):.3g}× the record's, u ≈ constant: a hold); split at "
-                                f"{100 * f:.0f} % instead (validation: last {100 * (1 - f):.0f} %, "
-                                f"t ≥ {k / data.fs:.4g} s)")
+                info["note"] = (
+                    f"the default split at {100 * f0:.0f} % leaves the {part} part without excitation "
+                    f"(std(u) {min(xe0, xv0):.3g}× the record's, u ≈ constant: a hold); split at "
+                    f"{100 * f:.0f} % instead (validation: last {100 * (1 - f):.0f} %, "
+                    f"t ≥ {k / data.fs:.4g} s)"
+                )
             return est, val, info
-    raise DataError(f"{data.source}: no split of the record leaves excitation in both estimation and validation "
-                    f"(tried estimation fractions {', '.join(f'{f:g}' for f, _, _ in tried)}; std(u) of a part must "
-                    f"be ≥ {MIN_EXCITATION:g}× the record's); give a validation record with --val")
+    raise DataError(
+        f"{data.source}: no split of the record leaves excitation in both estimation and validation "
+        f"(tried estimation fractions {', '.join(f'{f:g}' for f, _, _ in tried)}; std(u) of a part must "
+        f"be ≥ {MIN_EXCITATION:g}× the record's); give a validation record with --val"
+    )
 
 
 def check_validation(est: Record, val: Record) -> dict[str, Any]:
@@ -88,7 +99,9 @@ def check_validation(est: Record, val: Record) -> dict[str, Any]:
     u_all = np.concatenate([ue, uv])
     x = excitation(uv, u_all)
     if not x >= MIN_EXCITATION or not math.isfinite(x):
-        raise DataError(f"{val.source}: the validation input carries no excitation (std(u) {x:.3g}× the records' "
-                        f"together, u ≈ constant {float(np.mean(uv)):.4g}); it would validate nothing: give a "
-                        "validation record whose input moves")
+        raise DataError(
+            f"{val.source}: the validation input carries no excitation (std(u) {x:.3g}× the records' "
+            f"together, u ≈ constant {float(np.mean(uv)):.4g}); it would validate nothing: give a "
+            "validation record whose input moves"
+        )
     return {"excitation_val": x}

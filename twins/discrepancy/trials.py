@@ -54,9 +54,18 @@ class Trial:
     judged_samples: int = 0  # validation samples (after skip) its gain and p-value were judged on (:mod:`.ranking`)
 
 
-def run_trial(base: Twin, effect: str, est: Record, val: Record, core: list[str], a_val: dict[str, Any],
-              opts: DiagnoseOptions, refit_core: bool, start: dict[str, float] | None = None,
-              choice: dict[str, Any] | None = None) -> Trial:
+def run_trial(
+    base: Twin,
+    effect: str,
+    est: Record,
+    val: Record,
+    core: list[str],
+    a_val: dict[str, Any],
+    opts: DiagnoseOptions,
+    refit_core: bool,
+    start: dict[str, float] | None = None,
+    choice: dict[str, Any] | None = None,
+) -> Trial:
     """Add ``effect`` to ``base`` and fit it to ``est``: stage A (``refit_core=False``) fits the effect's own
     parameters after a pre-scan with the core held at its calibration; stage B also refits the core.
 
@@ -85,19 +94,33 @@ def run_trial(base: Twin, effect: str, est: Record, val: Record, core: list[str]
         return best
     if choice is not None:
         tw = tw.with_params(**choice)
-        x0 = {**(prescan(tw, est, eff_fields, a_val, opts.scan_points, opts.skip, ()) if eff_fields else {}),
-              **choice}
+        x0 = {**(prescan(tw, est, eff_fields, a_val, opts.scan_points, opts.skip, ()) if eff_fields else {}), **choice}
     elif start is None:
-        x0 = (prescan(tw, est, eff_fields, a_val, opts.scan_points, opts.skip, cat_fields)
-              if (eff_fields or cat_fields) else {})
+        x0 = (
+            prescan(tw, est, eff_fields, a_val, opts.scan_points, opts.skip, cat_fields)
+            if (eff_fields or cat_fields)
+            else {}
+        )
     else:
         x0 = dict(start)
     return _fit(base, tw, effect, est, val, core, x0, eff_fields, cat_fields, opts, refit_core, t0, choice)
 
 
-def _fit(base: Twin, tw: Twin, effect: str, est: Record, val: Record, core: list[str], x0: dict[str, Any],
-         eff_fields: list[str], cat_fields: list[str], opts: DiagnoseOptions, refit_core: bool, t0: float,
-         choice: dict[str, Any] | None = None) -> Trial:
+def _fit(
+    base: Twin,
+    tw: Twin,
+    effect: str,
+    est: Record,
+    val: Record,
+    core: list[str],
+    x0: dict[str, Any],
+    eff_fields: list[str],
+    cat_fields: list[str],
+    opts: DiagnoseOptions,
+    refit_core: bool,
+    t0: float,
+    choice: dict[str, Any] | None = None,
+) -> Trial:
     """Least squares from the start ``x0`` (categorical and integer parameters stay at their scanned values)."""
     fixed = {k: v for k, v in x0.items() if k in cat_fields or k in int_fields(tw, eff_fields)}
     # k: the numeric parameters fitted or scanned, and a list-valued one scanned here (a fluid) — not one fixed by
@@ -120,18 +143,34 @@ def _fit(base: Twin, tw: Twin, effect: str, est: Record, val: Record, core: list
     yv = simulate_val(fit_tw, est, val)
     ok = bool(np.all(np.isfinite(yv)))
     eff_all = eff_fields + [c for c in cat_fields if c not in eff_fields]
-    return Trial(effect=effect, twin=fit_tw, fitted=fitted,
-                 effect_params={f: fitted.get(f, getattr(fit_tw.params, f)) for f in eff_all},
-                 stderr={f: stderr.get(f, float("nan")) for f in eff_fields},
-                 sse_est=sse(est.output, ye, opts.skip), sse_val=sse(val.output, yv, opts.skip), yhat_val=yv,
-                 nrmse_val=nrmse(val.y, yv, opts.skip) if ok else float("inf"),
-                 r2_val=r2(val.y, yv, opts.skip) if ok else float("-inf"),
-                 seconds=time.perf_counter() - t0, n_added=max(k, 1), n_total=max(k, 1) + n_core, base=base)
+    return Trial(
+        effect=effect,
+        twin=fit_tw,
+        fitted=fitted,
+        effect_params={f: fitted.get(f, getattr(fit_tw.params, f)) for f in eff_all},
+        stderr={f: stderr.get(f, float("nan")) for f in eff_fields},
+        sse_est=sse(est.output, ye, opts.skip),
+        sse_val=sse(val.output, yv, opts.skip),
+        yhat_val=yv,
+        nrmse_val=nrmse(val.y, yv, opts.skip) if ok else float("inf"),
+        r2_val=r2(val.y, yv, opts.skip) if ok else float("-inf"),
+        seconds=time.perf_counter() - t0,
+        n_added=max(k, 1),
+        n_total=max(k, 1) + n_core,
+        base=base,
+    )
 
 
-def _least_squares(base: Twin, tw: Twin, est: Record, core: list[str], x0: dict[str, Any], names: list[str],
-                   opts: DiagnoseOptions, refit_core: bool) -> tuple[Twin, dict[str, float], dict[str, float],
-                                                                    np.ndarray]:
+def _least_squares(
+    base: Twin,
+    tw: Twin,
+    est: Record,
+    core: list[str],
+    x0: dict[str, Any],
+    names: list[str],
+    opts: DiagnoseOptions,
+    refit_core: bool,
+) -> tuple[Twin, dict[str, float], dict[str, float], np.ndarray]:
     """Least squares of ``names`` from ``x0``; never a worse estimation fit than the start.
 
     ``scipy.optimize.least_squares`` moves a start that lies on a bound strictly inside the bounds. For a
@@ -151,8 +190,9 @@ def _least_squares(base: Twin, tw: Twin, est: Record, core: list[str], x0: dict[
 
     out = run(tw, names)
     info = param_info(type(tw.params))
-    on_bound = {f: float(start_vals[f]) for f in names
-                if f in x0 and f in info and float(start_vals[f]) in tuple(info[f].range)}
+    on_bound = {
+        f: float(start_vals[f]) for f in names if f in x0 and f in info and float(start_vals[f]) in tuple(info[f].range)
+    }
     if not on_bound:
         return out
     t_start = tw.with_params(**{f: v for f, v in start_vals.items() if f in names})

@@ -67,7 +67,7 @@ def noise_level(u: np.ndarray, y: np.ndarray, fs: float) -> dict[str, Any]:
     est: dict[str, float] = {}
     hv = []
     for a, b in _holds(u):
-        seg = y[a + (b - a) // 2: b]
+        seg = y[a + (b - a) // 2 : b]
         if seg.size >= 20:
             t = np.arange(seg.size)
             c = np.polyfit(t, seg, 1)
@@ -102,8 +102,9 @@ def outside(e: np.ndarray, noise: dict[str, Any]) -> bool:
     return bool(excess_ratio(float(np.mean(e * e)), float(noise["sigma2"])) > EXCESS_LIMIT)
 
 
-def judge(u: np.ndarray, y: np.ndarray, yhat: np.ndarray, fs: float, skip: int = 0,
-          noise: dict[str, Any] | None = None) -> dict[str, Any]:
+def judge(
+    u: np.ndarray, y: np.ndarray, yhat: np.ndarray, fs: float, skip: int = 0, noise: dict[str, Any] | None = None
+) -> dict[str, Any]:
     """Compare the residual y − ŷ with the noise level; ``outside`` True when it is far above it."""
     u = np.asarray(u, float).ravel()[skip:]
     y = np.asarray(y, float).ravel()[skip:]
@@ -113,14 +114,23 @@ def judge(u: np.ndarray, y: np.ndarray, yhat: np.ndarray, fs: float, skip: int =
     p_e = float(np.mean(e * e))
     ratio = excess_ratio(p_e, s2)
     frac = max(0.0, 1.0 - s2 / p_e) if p_e > 0 else 0.0
-    out: dict[str, Any] = {"noise_var": s2, "noise_source": nl["source"], "noise_estimates": nl["estimates"],
-                           "residual_var": p_e, "excess_ratio": ratio, "unexplained_fraction": frac,
-                           "limit": EXCESS_LIMIT, "outside": bool(ratio > EXCESS_LIMIT)}
+    out: dict[str, Any] = {
+        "noise_var": s2,
+        "noise_source": nl["source"],
+        "noise_estimates": nl["estimates"],
+        "residual_var": p_e,
+        "excess_ratio": ratio,
+        "unexplained_fraction": frac,
+        "limit": EXCESS_LIMIT,
+        "outside": bool(ratio > EXCESS_LIMIT),
+    }
     sig = signature(u, e, fs)
     out["signature"] = sig
-    out["text"] = (f"outside the model class: {100 * frac:.0f} % of residual power unexplained (residual RMS "
-                   f"{math.sqrt(p_e):.3g}, noise RMS {math.sqrt(s2):.3g} from {nl['source'].replace('_', ' ')}; "
-                   f"{ratio:.3g}× the noise power); its signature: {sig['text']}")
+    out["text"] = (
+        f"outside the model class: {100 * frac:.0f} % of residual power unexplained (residual RMS "
+        f"{math.sqrt(p_e):.3g}, noise RMS {math.sqrt(s2):.3g} from {nl['source'].replace('_', ' ')}; "
+        f"{ratio:.3g}× the noise power); its signature: {sig['text']}"
+    )
     return out
 
 
@@ -142,32 +152,40 @@ def signature(u: np.ndarray, e: np.ndarray, fs: float) -> dict[str, Any]:
         return float(a @ b / d) if d > 0 else 0.0
 
     du = np.gradient(u)
-    cu = {"u": corr(e, u), "|u|": corr(e, np.abs(u)), "sign(du/dt)": corr(e, np.sign(du)),
-          "trend": corr(e, np.arange(n, dtype=float))}
+    cu = {
+        "u": corr(e, u),
+        "|u|": corr(e, np.abs(u)),
+        "sign(du/dt)": corr(e, np.sign(du)),
+        "trend": corr(e, np.arange(n, dtype=float)),
+    }
     mean_share = float(np.mean(e) ** 2 / max(np.mean(e * e), 1e-300))
     strongest = max(cu, key=lambda k: abs(cu[k]))
-    text = (f"{100 * low:.0f} % of its power below {f_lo:.3g} Hz, {100 * high:.0f} % above {f_hi:.3g} Hz, spectral "
-            f"peak at {peak:.4g} Hz; correlation with u {cu['u']:+.2f}, |u| {cu['|u|']:+.2f}, "
-            f"sign(du/dt) {cu['sign(du/dt)']:+.2f}, time {cu['trend']:+.2f} (strongest: {strongest}); "
-            f"mean {100 * mean_share:.0f} % of its power")
-    return {"band_low": low, "band_high": high, "peak_hz": peak, "corr": cu, "mean_share": mean_share,
-            "text": text}
+    text = (
+        f"{100 * low:.0f} % of its power below {f_lo:.3g} Hz, {100 * high:.0f} % above {f_hi:.3g} Hz, spectral "
+        f"peak at {peak:.4g} Hz; correlation with u {cu['u']:+.2f}, |u| {cu['|u|']:+.2f}, "
+        f"sign(du/dt) {cu['sign(du/dt)']:+.2f}, time {cu['trend']:+.2f} (strongest: {strongest}); "
+        f"mean {100 * mean_share:.0f} % of its power"
+    )
+    return {"band_low": low, "band_high": high, "peak_hz": peak, "corr": cu, "mean_share": mean_share, "text": text}
 
 
-def generic_residual_model(est: Record, val: Record, e_est: np.ndarray, e_val: np.ndarray, lags: int,
-                            skip: int) -> dict[str, Any]:
+def generic_residual_model(
+    est: Record, val: Record, e_est: np.ndarray, e_val: np.ndarray, lags: int, skip: int
+) -> dict[str, Any]:
     """Structure no catalog entry explains: a FIR model of the residual on u, (u²)′, (u³)′ (lags 0…L) and a
     trend, fitted on the estimation residual and scored on the validation residual (relative SSE, F-test)."""
+
     def design(rec: Record) -> np.ndarray:
         u = np.asarray(rec.u, float)
         sc = float(np.std(est.u)) or 1.0
         mu = float(np.mean(est.u))
         z = (u - mu) / sc
         cols = [np.ones_like(z), np.linspace(-1, 1, z.size)]
-        for x in (z, z ** 2 - 1.0, z ** 3 - 3 * z):
+        for x in (z, z**2 - 1.0, z**3 - 3 * z):
             for k in range(lags + 1):
                 cols.append(np.r_[np.zeros(k), x[: x.size - k]])
         return np.column_stack(cols)
+
     A = design(est)[skip:]
     # ridge-regularised least squares: lagged copies of a slow input are nearly collinear, and an unregularised
     # fit would extrapolate wildly to the validation record

@@ -89,8 +89,14 @@ class FMUCore:
         self.u_var = self._pick("input", input_name)
         self.y_var = self._pick("output", output_name)
         fs_var = self.vars.get("fs")
-        self.fs_name = ("fs" if fs_var is not None and fs_var.causality == "parameter" and fs_var.type == "Real"
-                        and (fs_var.unit or "Hz") == "Hz" else None)
+        self.fs_name = (
+            "fs"
+            if fs_var is not None
+            and fs_var.causality == "parameter"
+            and fs_var.type == "Real"
+            and (fs_var.unit or "Hz") == "Hz"
+            else None
+        )
         self.params = [v for v in self.md.modelVariables if v.causality == "parameter" and v.name != self.fs_name]
         self.switches: dict[str, str] = {}  # effect id -> its Boolean switch parameter (declare_effects)
         self.cs = self.md.coSimulation is not None and self.md.fmiVersion == "2.0"
@@ -105,16 +111,22 @@ class FMUCore:
         if name is not None:
             v = self.vars.get(name)
             if v is None or v.causality != causality:
-                raise ConfigError(f"{self.path}: no {causality} variable {name!r}; {causality}s: "
-                                  f"{', '.join(c.name for c in cands) or 'none'}")
+                raise ConfigError(
+                    f"{self.path}: no {causality} variable {name!r}; {causality}s: "
+                    f"{', '.join(c.name for c in cands) or 'none'}"
+                )
         elif len(cands) != 1:
-            raise ConfigError(f"{self.path}: the FMU has {len(cands)} {causality}s "
-                              f"({', '.join(c.name for c in cands) or 'none'}); name one with --fmu-{causality}")
+            raise ConfigError(
+                f"{self.path}: the FMU has {len(cands)} {causality}s "
+                f"({', '.join(c.name for c in cands) or 'none'}); name one with --fmu-{causality}"
+            )
         else:
             v = cands[0]
         if v.type != "Real":
-            raise ConfigError(f"{self.path}: {causality} {v.name!r} is a {v.type} variable; only Real signals map to "
-                              "a record's column")
+            raise ConfigError(
+                f"{self.path}: {causality} {v.name!r} is a {v.type} variable; only Real signals map to "
+                "a record's column"
+            )
         return v
 
     # ------------------------------------------------------------------ the instance
@@ -129,8 +141,12 @@ class FMUCore:
         try:
             if self._unzip is None:
                 self._unzip = extract(str(self.path))
-            slave = FMU2Slave(guid=self.md.guid, unzipDirectory=self._unzip,
-                              modelIdentifier=self.md.coSimulation.modelIdentifier, instanceName="piezotwin")
+            slave = FMU2Slave(
+                guid=self.md.guid,
+                unzipDirectory=self._unzip,
+                modelIdentifier=self.md.coSimulation.modelIdentifier,
+                instanceName="piezotwin",
+            )
             slave.instantiate()
         except Exception as exc:  # noqa: BLE001 — a missing binary for this platform, a crash in the FMU's init
             raise ConfigError(f"{self.path}: the FMU fails to instantiate ({type(exc).__name__}: {exc})") from None
@@ -167,8 +183,12 @@ class FMUCore:
 
     def _set(self, values: Mapping[str, Any]) -> None:
         s = self._slave
-        by: dict[str, tuple[list[int], list[Any]]] = {"Real": ([], []), "Integer": ([], []), "Boolean": ([], []),
-                                                      "String": ([], [])}
+        by: dict[str, tuple[list[int], list[Any]]] = {
+            "Real": ([], []),
+            "Integer": ([], []),
+            "Boolean": ([], []),
+            "String": ([], []),
+        }
         for name, val in values.items():
             v = self.vars[name]
             t = "Integer" if v.type == "Enumeration" else v.type
@@ -212,15 +232,21 @@ class FMUCore:
         sig[self.u_var.name][:n] = u
         sig[self.u_var.name][n] = u[-1]
         try:
-            res = fmpy.simulate_fmu(str(self.path), stop_time=n / fs, output_interval=1.0 / fs, input=sig,
-                                    output=[self.y_var.name], start_values=dict(values),
-                                    model_description=self.md)
+            res = fmpy.simulate_fmu(
+                str(self.path),
+                stop_time=n / fs,
+                output_interval=1.0 / fs,
+                input=sig,
+                output=[self.y_var.name],
+                start_values=dict(values),
+                model_description=self.md,
+            )
         except Exception as exc:  # noqa: BLE001
             raise DataError(f"{self.path.name}: simulation failed ({type(exc).__name__}: {exc})") from None
         y = np.asarray(res[self.y_var.name], dtype=float)
         if len(y) < n + 1:
             raise DataError(f"{self.path.name}: simulation stopped after {len(y) - 1} of {n} samples")
-        return y[1:n + 1]
+        return y[1 : n + 1]
 
     # ------------------------------------------------------------------ effects the FMU models itself
     def declare_effects(self, effects: Mapping[str, Iterable[str]] | None) -> dict[str, EffectSpec]:
@@ -228,11 +254,18 @@ class FMUCore:
         one line: no switch, a parameter the FMU lacks or that declares no range."""
         out: dict[str, EffectSpec] = {}
         for eid, pnames in dict(effects or {}).items():
-            sw = next((n for n in (f"effect_{eid}", eid) if n in self.vars and self.vars[n].causality == "parameter"
-                       and self.vars[n].type == "Boolean"), None)
+            sw = next(
+                (
+                    n
+                    for n in (f"effect_{eid}", eid)
+                    if n in self.vars and self.vars[n].causality == "parameter" and self.vars[n].type == "Boolean"
+                ),
+                None,
+            )
             if sw is None:
-                raise ConfigError(f"{self.path}: effect {eid!r} needs a Boolean parameter effect_{eid} (or {eid}) "
-                                  "that switches it on")
+                raise ConfigError(
+                    f"{self.path}: effect {eid!r} needs a Boolean parameter effect_{eid} (or {eid}) that switches it on"
+                )
             pnames = list(dict.fromkeys(pnames))
             if not pnames:
                 raise ConfigError(f"{self.path}: effect {eid!r} names no parameter to fit")
@@ -253,16 +286,26 @@ class FMUCore:
         fields = []
         for v in self.params:
             if v.type == "String" and v.start is None:
-                raise ConfigError(f"{self.path}: String parameter {v.name!r} has no start value; the diagnosis "
-                                  "cannot set strings it does not know")
+                raise ConfigError(
+                    f"{self.path}: String parameter {v.name!r} has no start value; the diagnosis "
+                    "cannot set strings it does not know"
+                )
             if v.type not in _PY_TYPES:
                 continue
             lo, hi = (_num(v.min), _num(v.max)) if v.type in ("Real", "Integer") else (None, None)
-            fields.append((v.name, _PY_TYPES[v.type], pfield(_start(v), v.unit or "", lo, hi, v.description or "",
-                                                             source=f"FMU {self.path.name}")))
+            fields.append(
+                (
+                    v.name,
+                    _PY_TYPES[v.type],
+                    pfield(_start(v), v.unit or "", lo, hi, v.description or "", source=f"FMU {self.path.name}"),
+                )
+            )
         params_cls = dataclasses.make_dataclass(f"{_ident(self.md.modelName)}Params", fields)
-        ranged = [v.name for v in self.params if v.type == "Real" and _num(v.min) is not None
-                  and _num(v.max) is not None and float(v.max) > float(v.min)]
+        ranged = [
+            v.name
+            for v in self.params
+            if v.type == "Real" and _num(v.min) is not None and _num(v.max) is not None and float(v.max) > float(v.min)
+        ]
         if names is None:
             if not ranged:
                 raise ConfigError(f"{self.path}: no Real parameter declares min and max; nothing to calibrate")
@@ -275,8 +318,9 @@ class FMUCore:
             if v.type != "Real":
                 raise ConfigError(f"{self.path}: parameter {n!r} is {v.type}; only Real parameters are calibrated")
             if n not in ranged:
-                raise ConfigError(f"{self.path}: parameter {n!r} declares no range (min and max); it cannot be "
-                                  "calibrated")
+                raise ConfigError(
+                    f"{self.path}: parameter {n!r} declares no range (min and max); it cannot be calibrated"
+                )
         return params_cls, chosen
 
 
@@ -285,9 +329,13 @@ def _ident(text: str) -> str:
     return s[0].upper() + s[1:] if not s[0].isdigit() else "Fmu" + s
 
 
-def fmu_twin_class(path: str | Path, names: Iterable[str] | None = None, input_name: str | None = None,
-                   output_name: str | None = None,
-                   effects: Mapping[str, Iterable[str]] | None = None) -> type[ExternalTwin]:
+def fmu_twin_class(
+    path: str | Path,
+    names: Iterable[str] | None = None,
+    input_name: str | None = None,
+    output_name: str | None = None,
+    effects: Mapping[str, Iterable[str]] | None = None,
+) -> type[ExternalTwin]:
     """The twin class of the FMU at ``path``: ``names`` the calibration parameters (default: every Real parameter
     with a declared range that no declared effect owns), ``input_name``/``output_name`` its signals (default: its
     only Real input/output), ``effects`` the mechanisms it models behind a switch (module docstring)."""
@@ -299,5 +347,12 @@ def fmu_twin_class(path: str | Path, names: Iterable[str] | None = None, input_n
         calib = [c for c in calib if c not in owned]
     units = {"u": core.u_var.unit or "", "y": core.y_var.unit or ""}
     name = f"fmu:{Path(path).stem}"  # prefixed: never mistaken for a shipped twin of the same name
-    return external_twin_class(name, core, params_cls, model_effects, calib, units,
-                               doc=f"FMU {Path(path).name} ({core.md.modelName}), {core.md.generationTool or ''}")
+    return external_twin_class(
+        name,
+        core,
+        params_cls,
+        model_effects,
+        calib,
+        units,
+        doc=f"FMU {Path(path).name} ({core.md.modelName}), {core.md.generationTool or ''}",
+    )

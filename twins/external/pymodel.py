@@ -96,8 +96,9 @@ def model_twin_class(obj: Any, default_name: str = "model") -> type[ExternalTwin
         raise ConfigError(f"model {name}: defines neither simulate(u, fs, p) nor step(x, u, dt, p)")
     effects = {k: _effect_spec(name, k, v) for k, v in dict(getattr(obj, "EFFECTS", {}) or {}).items()}
     calib = getattr(obj, "CALIBRATION_PARAMS", None)
-    return external_twin_class(name, core, params_cls, effects, calib, getattr(obj, "UNITS", None),
-                               doc=inspect.getdoc(obj) or "")
+    return external_twin_class(
+        name, core, params_cls, effects, calib, getattr(obj, "UNITS", None), doc=inspect.getdoc(obj) or ""
+    )
 
 
 def _effect_spec(model: str, eid: str, v: Any) -> EffectSpec:
@@ -108,8 +109,15 @@ def _effect_spec(model: str, eid: str, v: Any) -> EffectSpec:
     params = v.get("params", {})
     if isinstance(params, (list, tuple)):
         params = {p: p for p in params}
-    return EffectSpec(eid, model, str(v.get("description", eid)), str(v.get("signature", "")), dict(params),
-                      default_on=bool(v.get("default_on", False)), group=str(v.get("group", "")))
+    return EffectSpec(
+        eid,
+        model,
+        str(v.get("description", eid)),
+        str(v.get("signature", "")),
+        dict(params),
+        default_on=bool(v.get("default_on", False)),
+        group=str(v.get("group", "")),
+    )
 
 
 def _takes_effects(fn: Callable) -> bool:
@@ -125,6 +133,7 @@ def _simulate_core(name: str, sim: Callable) -> Callable:
 
     def core(u: np.ndarray, fs: float, p: Any, effects: frozenset) -> np.ndarray:
         return sim(u, fs, p, effects=effects) if with_effects else sim(u, fs, p)
+
     return core
 
 
@@ -139,4 +148,5 @@ def _step_core(name: str, step: Callable, init: Callable) -> Callable:
         for k, uk in enumerate(u.tolist()):
             x, y[k] = step(x, uk, dt, p, **kw)
         return y
+
     return core

@@ -48,8 +48,9 @@ class ExternalTwin(Twin):
 
     def model_params(self) -> Any:
         """The model's own parameter dataclass instance (its fields of :attr:`params`)."""
-        return self.MODEL_PARAMS(**{f.name: getattr(self.params, f.name)
-                                    for f in dataclasses.fields(self.MODEL_PARAMS) if f.init})
+        return self.MODEL_PARAMS(
+            **{f.name: getattr(self.params, f.name) for f in dataclasses.fields(self.MODEL_PARAMS) if f.init}
+        )
 
     def simulate(self, u: np.ndarray, fs: float) -> np.ndarray:
         """Output for the input samples ``u`` at ``fs`` [Hz]: input effects → model → output effects."""
@@ -84,9 +85,12 @@ class ExternalTwin(Twin):
         params = with_ranges(self.params, ranges, "generic ranges from the records")
         clipped = {k: float(np.clip(getattr(params, k), lo, hi)) for k, (lo, hi) in ranges.items()}
         active = {f for e in self.effects if e in GENERIC_EFFECTS for f in self.EFFECTS[e].params.values()}
-        notes = [f"{k} moved {float(getattr(params, k)):g} -> {v:g} (into its range from the records "
-                 f"[{ranges[k][0]:g}, {ranges[k][1]:g}])" for k, v in clipped.items()
-                 if k in active and v != float(getattr(params, k))]
+        notes = [
+            f"{k} moved {float(getattr(params, k)):g} -> {v:g} (into its range from the records "
+            f"[{ranges[k][0]:g}, {ranges[k][1]:g}])"
+            for k, v in clipped.items()
+            if k in active and v != float(getattr(params, k))
+        ]
         params = dataclasses.replace(params, **clipped)
         return type(self)(params, self.effects, self.seed), notes
 
@@ -107,9 +111,15 @@ def _generic_field(name: str, field_name: str, units: Mapping[str, str]) -> tupl
     return field_name, float, pfield(g.default, unit, g.lo, g.hi, g.doc, source="twins.generic_effects")
 
 
-def external_twin_class(name: str, core: Core, params_cls: type, model_effects: Mapping[str, EffectSpec] | None = None,
-                        calibration_params: Iterable[str] | None = None, units: Mapping[str, str] | None = None,
-                        doc: str = "") -> type[ExternalTwin]:
+def external_twin_class(
+    name: str,
+    core: Core,
+    params_cls: type,
+    model_effects: Mapping[str, EffectSpec] | None = None,
+    calibration_params: Iterable[str] | None = None,
+    units: Mapping[str, str] | None = None,
+    doc: str = "",
+) -> type[ExternalTwin]:
     """A :class:`ExternalTwin` subclass for a model: ``core`` simulates, ``params_cls`` is its parameter dataclass
     (fields with unit and range from :func:`twins.base.pfield`), ``model_effects`` its own effects,
     ``calibration_params`` what ``calibrate`` and the diagnosis fit by default (default: every numeric field
@@ -126,41 +136,65 @@ def external_twin_class(name: str, core: Core, params_cls: type, model_effects: 
     gnames = {k: (f"generic_{k}" if k in own else k) for k in GENERIC_FIELDS}
     clash = sorted(own & {v for k, v in gnames.items() if v != k})
     if clash:
-        raise ConfigError(f"model {name}: parameters {clash[0][8:]!r} and {clash[0]!r} clash with a generic effect's "
-                          "parameter; rename one")
+        raise ConfigError(
+            f"model {name}: parameters {clash[0][8:]!r} and {clash[0]!r} clash with a generic effect's "
+            "parameter; rename one"
+        )
     clash = sorted(set(model_effects) & set(GENERIC_EFFECTS))
     if clash:
         raise ConfigError(f"model {name}: effect {clash[0]!r} clashes with a generic effect; rename it")
     for eid, spec in model_effects.items():
         missing = [f for f in spec.params.values() if f not in own]
         if missing:
-            raise ConfigError(f"model {name}: effect {eid!r} names parameter {missing[0]!r}, not a field of "
-                              f"{params_cls.__name__}")
+            raise ConfigError(
+                f"model {name}: effect {eid!r} names parameter {missing[0]!r}, not a field of {params_cls.__name__}"
+            )
     try:
         params_cls()
     except TypeError as exc:
         raise ConfigError(f"model {name}: every parameter needs a default value ({exc})") from None
     fields = [(f.name, f.type, f) for f in dataclasses.fields(params_cls)]
     fields += [_generic_field(k, gnames[k], units) for k in GENERIC_FIELDS]
-    all_params = dataclasses.make_dataclass(f"{params_cls.__name__}WithEffects",
-                                            [(n, t, _copy_field(f)) for n, t, f in fields])
+    all_params = dataclasses.make_dataclass(
+        f"{params_cls.__name__}WithEffects", [(n, t, _copy_field(f)) for n, t, f in fields]
+    )
     all_params.__doc__ = f"Parameters of {params_cls.__name__} and of the generic effects."
-    effects = {**{k: dataclasses.replace(v, twin=name, params={pk: gnames[f] for pk, f in v.params.items()}, generic=k)
-                  for k, v in GENERIC_EFFECTS.items()},
-               **{k: dataclasses.replace(v, twin=name) for k, v in model_effects.items()}}
+    effects = {
+        **{
+            k: dataclasses.replace(v, twin=name, params={pk: gnames[f] for pk, f in v.params.items()}, generic=k)
+            for k, v in GENERIC_EFFECTS.items()
+        },
+        **{k: dataclasses.replace(v, twin=name) for k, v in model_effects.items()},
+    }
     if calibration_params is None:
         owned = {f for s in model_effects.values() for f in s.params.values()}
         info = param_info(params_cls)
-        calibration_params = [k for k, i in info.items() if k not in owned and i.range[0] is not None
-                              and i.range[1] is not None and isinstance(i.default, (int, float))
-                              and not isinstance(i.default, (bool, int))]
+        calibration_params = [
+            k
+            for k, i in info.items()
+            if k not in owned
+            and i.range[0] is not None
+            and i.range[1] is not None
+            and isinstance(i.default, (int, float))
+            and not isinstance(i.default, (bool, int))
+        ]
     calib = tuple(calibration_params)
     unknown = [c for c in calib if c not in own]
     if unknown:
         raise ConfigError(f"model {name}: calibration parameter {unknown[0]!r} is not a field of {params_cls.__name__}")
-    attrs = {"name": name, "Params": all_params, "EFFECTS": effects, "PROTOCOLS": {}, "units": units,
-             "CALIBRATION_PARAMS": calib, "CORE": staticmethod(core), "MODEL_PARAMS": params_cls,
-             "MODEL_EFFECTS": frozenset(model_effects), "GENERIC_NAMES": gnames, "__doc__": doc or ExternalTwin.__doc__}
+    attrs = {
+        "name": name,
+        "Params": all_params,
+        "EFFECTS": effects,
+        "PROTOCOLS": {},
+        "units": units,
+        "CALIBRATION_PARAMS": calib,
+        "CORE": staticmethod(core),
+        "MODEL_PARAMS": params_cls,
+        "MODEL_EFFECTS": frozenset(model_effects),
+        "GENERIC_NAMES": gnames,
+        "__doc__": doc or ExternalTwin.__doc__,
+    }
     return type(f"{params_cls.__name__}Twin", (ExternalTwin,), attrs)
 
 

@@ -13,8 +13,9 @@ from sysid.errors import DataError
 __all__ = ["fmu_simulate", "relative_rms"]
 
 
-def fmu_simulate(path: str | Path, u: np.ndarray, fs: float, start_values: Mapping[str, Any] | None = None,
-                 model_description=None) -> np.ndarray:
+def fmu_simulate(
+    path: str | Path, u: np.ndarray, fs: float, start_values: Mapping[str, Any] | None = None, model_description=None
+) -> np.ndarray:
     """Output of the FMU at ``path`` (a ``.fmu`` or a folder it was extracted to) for the input samples ``u`` at ``fs``
     [Hz], aligned with ``simulate``.
 
@@ -34,8 +35,15 @@ def fmu_simulate(path: str | Path, u: np.ndarray, fs: float, start_values: Mappi
     sig["time"] = t
     sig["u"][:n] = u
     sig["u"][n] = u[-1]
-    res = fmpy.simulate_fmu(str(path), stop_time=n / fs, output_interval=1.0 / fs, input=sig, output=["y"],
-                            start_values=dict(start_values or {}), model_description=model_description)
+    res = fmpy.simulate_fmu(
+        str(path),
+        stop_time=n / fs,
+        output_interval=1.0 / fs,
+        input=sig,
+        output=["y"],
+        start_values=dict(start_values or {}),
+        model_description=model_description,
+    )
     y = np.asarray(res["y"], dtype=float)
     if len(y) != n + 1:
         raise RuntimeError(f"fmpy returned {len(y)} samples, expected {n + 1}")
@@ -45,5 +53,5 @@ def fmu_simulate(path: str | Path, u: np.ndarray, fs: float, start_values: Mappi
 def relative_rms(y: np.ndarray, ref: np.ndarray) -> float:
     """``rms(y - ref) / rms(ref)``."""
     y, ref = np.asarray(y, float), np.asarray(ref, float)
-    den = float(np.sqrt(np.mean(ref ** 2)))
+    den = float(np.sqrt(np.mean(ref**2)))
     return float(np.sqrt(np.mean((y - ref) ** 2))) / den if den > 0 else float(np.sqrt(np.mean((y - ref) ** 2)))

@@ -112,8 +112,14 @@ def _project_version() -> str:
         return "0.1.0"
 
 
-def export_fmu(twin: Twin, path: str | Path, fs: float | None = None, model_name: str | None = None,
-               packages: Iterable[str] = SHIPPED_PACKAGES, core: dict[str, Any] | None = None) -> Path:
+def export_fmu(
+    twin: Twin,
+    path: str | Path,
+    fs: float | None = None,
+    model_name: str | None = None,
+    packages: Iterable[str] = SHIPPED_PACKAGES,
+    core: dict[str, Any] | None = None,
+) -> Path:
     """Build the FMU of ``twin`` (as configured: parameters, effects, seed) at ``path`` (a ``.fmu`` file).
 
     ``fs`` [Hz] is the sampling rate (default: :func:`default_fs`); the communication step is ``1/fs``.

@@ -52,8 +52,13 @@ def hybrid_slave_source(model_name: str, twin_name: str, identifier: str) -> str
     )
 
 
-def export_hybrid_fmu(hybrid: HybridTwin, path: str | Path, fs: float | None = None, model_name: str | None = None,
-                      packages: Iterable[str] = SHIPPED_PACKAGES) -> Path:
+def export_hybrid_fmu(
+    hybrid: HybridTwin,
+    path: str | Path,
+    fs: float | None = None,
+    model_name: str | None = None,
+    packages: Iterable[str] = SHIPPED_PACKAGES,
+) -> Path:
     """Build the FMU of the fitted ``hybrid`` at ``path`` (``.fmu``). ``fs`` [Hz] defaults to the remainder's
     estimation rate (:attr:`HybridTwin.fs_`); another rate is refused (the remainder is discrete-time)."""
     path = Path(path)
@@ -73,12 +78,20 @@ def export_hybrid_fmu(hybrid: HybridTwin, path: str | Path, fs: float | None = N
     with tempfile.TemporaryDirectory(prefix="piezotwin_fmu_") as tmp:
         stage = Path(tmp)
         hybrid.save(stage / HYBRID_FILE)
-        cfg = {"format": HYBRID_FMU_FORMAT, "twin": physics.name, "identifier": hybrid.identifier_, "fs": fs,
-               "hybrid_file": HYBRID_FILE, "core": core, "units": dict(physics.units),
-               "project_version": _project_version()}
+        cfg = {
+            "format": HYBRID_FMU_FORMAT,
+            "twin": physics.name,
+            "identifier": hybrid.identifier_,
+            "fs": fs,
+            "hybrid_file": HYBRID_FILE,
+            "core": core,
+            "units": dict(physics.units),
+            "project_version": _project_version(),
+        }
         (stage / HYBRID_CONFIG_NAME).write_text(json.dumps(cfg, indent=1, default=json_default))
         files = [stage / HYBRID_CONFIG_NAME, stage / HYBRID_FILE]
         files += stage_packages(stage, packages)
-        build_from_source(stage, model_name, hybrid_slave_source(model_name, physics.name, hybrid.identifier_),
-                          files, path)
+        build_from_source(
+            stage, model_name, hybrid_slave_source(model_name, physics.name, hybrid.identifier_), files, path
+        )
     return path

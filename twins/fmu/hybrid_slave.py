@@ -40,13 +40,18 @@ class HybridSlave(PiezoSlave):
     def __init__(self, **kwargs):
         super().__init__(**kwargs)
         cfg = load_hybrid_config(self.resources)
-        self._header(cfg, f"PiezoTwin hybrid twin: the {cfg['twin']} twin plus a {cfg['identifier']} remainder on "
-                          f"the drive and the twin's output (free run at {cfg['fs']:g} Hz)", "input (drive)",
-                     "hybrid twin's output sample for the last input sample")
+        self._header(
+            cfg,
+            f"PiezoTwin hybrid twin: the {cfg['twin']} twin plus a {cfg['identifier']} remainder on "
+            f"the drive and the twin's output (free run at {cfg['fs']:g} Hz)",
+            "input (drive)",
+            "hybrid twin's output sample for the last input sample",
+        )
         self.twin, self.identifier = str(cfg["twin"]), str(cfg["identifier"])
         for name, text in (("twin", "physics twin of the hybrid"), ("identifier", "identifier of the remainder")):
-            self.register_variable(String(name, causality=Fmi2Causality.parameter,
-                                          variability=Fmi2Variability.fixed, description=text))
+            self.register_variable(
+                String(name, causality=Fmi2Causality.parameter, variability=Fmi2Variability.fixed, description=text)
+            )
         self._stepper: Any = None
         release_wrapper_state(self.resources)  # pythonfmu 0.7: double release of its PyState at exit
 

@@ -38,8 +38,13 @@ def model_slave_source(model_name: str, identifier: str) -> str:
     )
 
 
-def export_model_fmu(model, path: str | Path, fs: float | None = None, model_name: str | None = None,
-                     packages: Iterable[str] = SHIPPED_PACKAGES) -> Path:
+def export_model_fmu(
+    model,
+    path: str | Path,
+    fs: float | None = None,
+    model_name: str | None = None,
+    packages: Iterable[str] = SHIPPED_PACKAGES,
+) -> Path:
     """Build the FMU of the fitted ``model`` at ``path`` (``.fmu``). ``fs`` [Hz] defaults to the model's
     estimation rate (``model.fs_``); it must be given for model files that do not record it."""
     path = Path(path)
@@ -57,8 +62,14 @@ def export_model_fmu(model, path: str | Path, fs: float | None = None, model_nam
     with tempfile.TemporaryDirectory(prefix="piezotwin_fmu_") as tmp:
         stage = Path(tmp)
         write_model(model, stage / "model.npz")
-        cfg = {"format": MODEL_FORMAT, "identifier": model.name, "fs": float(fs), "model_file": "model.npz",
-               "units": est.get("units", {}), "project_version": _project_version()}
+        cfg = {
+            "format": MODEL_FORMAT,
+            "identifier": model.name,
+            "fs": float(fs),
+            "model_file": "model.npz",
+            "units": est.get("units", {}),
+            "project_version": _project_version(),
+        }
         (stage / MODEL_CONFIG_NAME).write_text(json.dumps(cfg, indent=1))
         files = [stage / MODEL_CONFIG_NAME, stage / "model.npz"]
         files += stage_packages(stage, packages)

@@ -39,11 +39,21 @@ class ModelSlave(PiezoSlave):
     def __init__(self, **kwargs):
         super().__init__(**kwargs)
         cfg = load_model_config(self.resources)
-        self._header(cfg, f"PiezoTwin identified {cfg['identifier']} model (free run at {cfg['fs']:g} Hz)", "input",
-                     "model output sample for the last input sample")
+        self._header(
+            cfg,
+            f"PiezoTwin identified {cfg['identifier']} model (free run at {cfg['fs']:g} Hz)",
+            "input",
+            "model output sample for the last input sample",
+        )
         self.identifier = str(cfg["identifier"])
-        self.register_variable(String("identifier", causality=Fmi2Causality.parameter,
-                                      variability=Fmi2Variability.fixed, description="identifier of the model"))
+        self.register_variable(
+            String(
+                "identifier",
+                causality=Fmi2Causality.parameter,
+                variability=Fmi2Variability.fixed,
+                description="identifier of the model",
+            )
+        )
         self._stepper = None
         release_wrapper_state(self.resources)  # pythonfmu 0.7: double release of its PyState at exit
 

@@ -39,8 +39,7 @@ __all__ = ["impulse_response", "sparse_segments", "plan", "ResponseCore", "prepa
 DEFAULTS: dict[str, Any] = {"energy_tol": 1e-14, "block_min": 64, "block_max": 8192, "merge_gap": 1024}
 
 
-def impulse_response(twin, fs: float, tail_tol: float = 1e-12, n_min: int = 2 ** 15,
-                     n_max: int = 2 ** 22) -> np.ndarray:
+def impulse_response(twin, fs: float, tail_tol: float = 1e-12, n_min: int = 2**15, n_max: int = 2**22) -> np.ndarray:
     """Real impulse response of the twin's linear chain sampled at ``fs`` [Hz].
 
     A twin that exposes ``impulse_response(fs)`` (the h its own ``simulate`` convolves with: the acoustic
@@ -56,13 +55,18 @@ def impulse_response(twin, fs: float, tail_tol: float = 1e-12, n_min: int = 2 **
         h = np.fft.irfft(np.asarray(twin.frequency_response(f), dtype=complex), n)
         e = h * h
         total = float(e.sum())
-        if total == 0.0 or float(e[-n // 8:].sum()) <= tail_tol * total or n >= n_max:
+        if total == 0.0 or float(e[-n // 8 :].sum()) <= tail_tol * total or n >= n_max:
             return h
         n *= 2
 
 
-def sparse_segments(h: np.ndarray, energy_tol: float, block: int = 32, merge_gap: int = DEFAULTS["merge_gap"],
-                    total: float | None = None) -> tuple[list[tuple[int, np.ndarray]], float]:
+def sparse_segments(
+    h: np.ndarray,
+    energy_tol: float,
+    block: int = 32,
+    merge_gap: int = DEFAULTS["merge_gap"],
+    total: float | None = None,
+) -> tuple[list[tuple[int, np.ndarray]], float]:
     """Segments ``[(start, taps), ...]`` of ``h`` dropping its weakest ``block``-sample pieces while the
     dropped energy stays <= ``energy_tol * total`` (``total`` defaults to the energy of ``h``).
 
@@ -71,7 +75,7 @@ def sparse_segments(h: np.ndarray, energy_tol: float, block: int = 32, merge_gap
     h = np.asarray(h, dtype=float)
     n_blocks = -(-len(h) // block)
     padded = np.zeros(n_blocks * block)
-    padded[:len(h)] = h
+    padded[: len(h)] = h
     be = (padded.reshape(n_blocks, block) ** 2).sum(axis=1)
     total = float(be.sum()) if total is None else float(total)
     if total == 0.0 or n_blocks == 0:
@@ -97,8 +101,12 @@ def sparse_segments(h: np.ndarray, energy_tol: float, block: int = 32, merge_gap
 _NS_PER_DOT, _NS_PER_TAP, _NS_PER_FFT_NLOGN = 1000.0, 0.5, 0.9
 
 
-def plan(h: np.ndarray, energy_tol: float = DEFAULTS["energy_tol"], block_min: int = DEFAULTS["block_min"],
-         block_max: int = DEFAULTS["block_max"]) -> dict[str, Any]:
+def plan(
+    h: np.ndarray,
+    energy_tol: float = DEFAULTS["energy_tol"],
+    block_min: int = DEFAULTS["block_min"],
+    block_max: int = DEFAULTS["block_max"],
+) -> dict[str, Any]:
     """Block size, head segments and tail of ``h`` (see the module docstring).
 
     For every power of two ``B`` in [block_min, block_max] the head is ``h[:B]`` without its weakest
@@ -119,23 +127,40 @@ def plan(h: np.ndarray, energy_tol: float = DEFAULTS["energy_tol"], block_min: i
     while B <= block_max:
         head, dropped = sparse_segments(h[:B], energy_tol, total=total)
         n = scipy.fft.next_fast_len(max(last, B + 1) - 1, real=True)
-        cost = (len(head) * _NS_PER_DOT + sum(len(t) for _, t in head) * _NS_PER_TAP
-                + _NS_PER_FFT_NLOGN * n * np.log2(n) / B)
+        cost = (
+            len(head) * _NS_PER_DOT
+            + sum(len(t) for _, t in head) * _NS_PER_TAP
+            + _NS_PER_FFT_NLOGN * n * np.log2(n) / B
+        )
         if best is None or cost < best[0]:
             best = (cost, B, head, dropped)
         B *= 2
     cost, B, head, dropped = best
     tail = h[B:last]  # trailing exact zeros cost FFT length and nothing else
-    return {"block": B, "head": head, "tail": tail, "arrival": arrival, "head_dropped": dropped,
-            "est_ns_per_sample": float(cost)}
+    return {
+        "block": B,
+        "head": head,
+        "tail": tail,
+        "arrival": arrival,
+        "head_dropped": dropped,
+        "est_ns_per_sample": float(cost),
+    }
 
 
 class ResponseCore:
     """``step(u) -> y``: amplifier, linear chain ``h`` (head FIR + block-FFT tail), measurement."""
 
-    def __init__(self, h: np.ndarray, amplifier, measure=None, fs: float = 1.0, seed: int | None = 0,
-                 energy_tol: float = DEFAULTS["energy_tol"], block_min: int = DEFAULTS["block_min"],
-                 block_max: int = DEFAULTS["block_max"]):
+    def __init__(
+        self,
+        h: np.ndarray,
+        amplifier,
+        measure=None,
+        fs: float = 1.0,
+        seed: int | None = 0,
+        energy_tol: float = DEFAULTS["energy_tol"],
+        block_min: int = DEFAULTS["block_min"],
+        block_max: int = DEFAULTS["block_max"],
+    ):
         p = plan(h, energy_tol, block_min, block_max)
         self.block = B = p["block"]
         self.arrival = p["arrival"]
@@ -187,7 +212,7 @@ class ResponseCore:
             hist[p + L] = x
             for start, taps in self.head:
                 a = p + start
-                y += float(np.dot(taps, hist[a:a + len(taps)]))
+                y += float(np.dot(taps, hist[a : a + len(taps)]))
         acc = self.acc
         apos = self.apos
         y += float(acc[apos])
@@ -212,9 +237,9 @@ class ResponseCore:
         n = self.block + self.tail_len - 1
         c = scipy.fft.irfft(scipy.fft.rfft(self.blockbuf, self.nfft) * self.tail_spec, self.nfft)[:n]
         first = min(n, self.n_acc - self.apos)
-        self.acc[self.apos:self.apos + first] += c[:first]
+        self.acc[self.apos : self.apos + first] += c[:first]
         if first < n:
-            self.acc[:n - first] += c[first:]
+            self.acc[: n - first] += c[first:]
 
     def run(self, u: np.ndarray) -> np.ndarray:
         """``step`` over an array (for checks)."""
@@ -288,8 +313,9 @@ def check_chirp(fs: float, h: np.ndarray, n: int) -> tuple[np.ndarray, str]:
     return u, f"linear chirp 1 V {f0:.4g}-{f1:.4g} Hz, {n} samples"
 
 
-def check_accuracy(twin, fs: float, u: np.ndarray | None = None, n: int = 100_000,
-                   core: dict[str, Any] | None = None) -> dict[str, Any]:
+def check_accuracy(
+    twin, fs: float, u: np.ndarray | None = None, n: int = 100_000, core: dict[str, Any] | None = None
+) -> dict[str, Any]:
     """Accuracy of the per-sample core on ``u`` (default: :func:`check_chirp` of ``n`` samples).
 
     ``relative_rms``: core output against the native ``simulate``, both without measurement noise (the ADC,
@@ -314,10 +340,15 @@ def check_accuracy(twin, fs: float, u: np.ndarray | None = None, n: int = 100_00
     core_obj.reset()
     lin = core_obj.run(u)
     v = np.asarray(quiet.amplifier(u), dtype=float) if hasattr(quiet, "amplifier") else np.asarray(u, float)
-    lin_ref = np.asarray(quiet.linear(v, fs) if hasattr(quiet, "linear") else oaconvolve(v, h)[:len(v)], float)
-    return {"signal": what, "relative_rms": relative_rms(y, ref), "max_abs_error": float(np.max(np.abs(y - ref))),
-            "rms_ref": float(np.sqrt(np.mean(ref ** 2))), "linear_relative_rms": relative_rms(lin, lin_ref),
-            "noise_free": True}
+    lin_ref = np.asarray(quiet.linear(v, fs) if hasattr(quiet, "linear") else oaconvolve(v, h)[: len(v)], float)
+    return {
+        "signal": what,
+        "relative_rms": relative_rms(y, ref),
+        "max_abs_error": float(np.max(np.abs(y - ref))),
+        "rms_ref": float(np.sqrt(np.mean(ref**2))),
+        "linear_relative_rms": relative_rms(lin, lin_ref),
+        "noise_free": True,
+    }
 
 
 def prepare_response_core(twin, fs: float, core: dict[str, Any], check_samples: int = 30_000) -> dict[str, Any]:
@@ -328,9 +359,16 @@ def prepare_response_core(twin, fs: float, core: dict[str, Any], check_samples: 
     out.update(opts)
     h = impulse_response(twin, fs)
     p = plan(h, **opts)
-    out.update({"impulse_length": len(h), "block": p["block"], "arrival_samples": p["arrival"],
-                "estimated_core_ns_per_sample": round(p["est_ns_per_sample"]),
-                "head_segments": [[int(s), len(t)] for s, t in p["head"]], "head_dropped_energy": p["head_dropped"],
-                "tail_length": len(p["tail"])})
+    out.update(
+        {
+            "impulse_length": len(h),
+            "block": p["block"],
+            "arrival_samples": p["arrival"],
+            "estimated_core_ns_per_sample": round(p["est_ns_per_sample"]),
+            "head_segments": [[int(s), len(t)] for s, t in p["head"]],
+            "head_dropped_energy": p["head_dropped"],
+            "tail_length": len(p["tail"]),
+        }
+    )
     out["accuracy"] = check_accuracy(twin, fs, n=check_samples, core=out)
     return out

@@ -205,18 +205,26 @@ def build_shim(wrapped_name: str) -> bytes | None:
     why = _why_not()
     if why is None:
         path, soname = libpython()
-        head = (f"#define LIBPYTHON {_c_string(path)}\n#define LIBPYTHON_SONAME {_c_string(soname)}\n"
-                f"#define WRAPPED {_c_string(wrapped_name)}\n")
+        head = (
+            f"#define LIBPYTHON {_c_string(path)}\n#define LIBPYTHON_SONAME {_c_string(soname)}\n"
+            f"#define WRAPPED {_c_string(wrapped_name)}\n"
+        )
         with tempfile.TemporaryDirectory(prefix="piezotwin_shim_") as tmp:
             src, lib = Path(tmp) / "loader.c", Path(tmp) / "loader.so"
             src.write_text(head + SHIM_SOURCE)
-            res = subprocess.run(["gcc", "-shared", "-fPIC", "-O2", "-pthread", "-fvisibility=hidden", "-o", str(lib),
-                                  str(src), "-ldl"], capture_output=True, text=True)
+            res = subprocess.run(
+                ["gcc", "-shared", "-fPIC", "-O2", "-pthread", "-fvisibility=hidden", "-o", str(lib), str(src), "-ldl"],
+                capture_output=True,
+                text=True,
+            )
             if res.returncode == 0:
                 return lib.read_bytes()
             why = f"gcc failed: {res.stderr.strip()[-500:]}"
-    _LOG.warning("FMU without its libpython loader (%s): a C host must be linked with libpython or preload it "
-                 "(LD_PRELOAD); Python hosts are not affected", why)
+    _LOG.warning(
+        "FMU without its libpython loader (%s): a C host must be linked with libpython or preload it "
+        "(LD_PRELOAD); Python hosts are not affected",
+        why,
+    )
     return None
 
 
@@ -224,9 +232,10 @@ def with_loader(members: dict[str, bytes]) -> dict[str, bytes]:
     """The FMU's ``members`` (archive name -> bytes) with each linux64 wrapper replaced by the loader and kept
     beside it as ``<model>.pythonfmu.so``; unchanged where no loader can be built."""
     out = dict(members)
-    for name in [n for n in members if n.startswith("binaries/linux64/") and n.endswith(".so")
-                 and not n.endswith(WRAPPED_SUFFIX)]:
-        wrapped = name[:-len(".so")] + WRAPPED_SUFFIX
+    for name in [
+        n for n in members if n.startswith("binaries/linux64/") and n.endswith(".so") and not n.endswith(WRAPPED_SUFFIX)
+    ]:
+        wrapped = name[: -len(".so")] + WRAPPED_SUFFIX
         loader = build_shim(wrapped.rsplit("/", 1)[1])
         if loader is None:
             return members

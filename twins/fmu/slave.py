@@ -226,13 +226,25 @@ class PiezoSlave(FastIO, Fmi2Slave):
         self.y = 0.0
         units = cfg.get("units", {})
         self._units = {x for x in (units.get("u"), units.get("y")) if x}
-        self.register_variable(_with_attrs(
-            Real("u", causality=Fmi2Causality.input, variability=Fmi2Variability.continuous, description=u_text),
-            unit=units.get("u") or None))
+        self.register_variable(
+            _with_attrs(
+                Real("u", causality=Fmi2Causality.input, variability=Fmi2Variability.continuous, description=u_text),
+                unit=units.get("u") or None,
+            )
+        )
         # initial=exact: the output is defined from the start, so InitialUnknowns is consistent (notes C.4)
-        self.register_variable(_with_attrs(
-            Real("y", causality=Fmi2Causality.output, variability=Fmi2Variability.discrete,
-                 initial=Fmi2Initial.exact, description=y_text), unit=units.get("y") or None))
+        self.register_variable(
+            _with_attrs(
+                Real(
+                    "y",
+                    causality=Fmi2Causality.output,
+                    variability=Fmi2Variability.discrete,
+                    initial=Fmi2Initial.exact,
+                    description=y_text,
+                ),
+                unit=units.get("y") or None,
+            )
+        )
         self._check_io_refs()
         self._step_samples: tuple[float | None, int] = (None, 0)  # (communication step, samples per step) last checked
 
@@ -275,11 +287,14 @@ class PiezoSlave(FastIO, Fmi2Slave):
         ratio = step_size * self._fs
         n = round(ratio)
         if not self.whole_steps and abs(ratio - 1.0) > STEP_TOLERANCE:
-            return self._fail(f"communication step {step_size!r} s must be 1/fs = {1.0 / self._fs!r} s "
-                              "(a discrete-time model)")
+            return self._fail(
+                f"communication step {step_size!r} s must be 1/fs = {1.0 / self._fs!r} s (a discrete-time model)"
+            )
         if n < 1 or abs(ratio - n) > STEP_TOLERANCE * n:
-            return self._fail(f"communication step {step_size!r} s is not a whole number of sampling periods "
-                              f"1/fs = {1.0 / self._fs!r} s")
+            return self._fail(
+                f"communication step {step_size!r} s is not a whole number of sampling periods "
+                f"1/fs = {1.0 / self._fs!r} s"
+            )
         self._step_samples = (step_size, n)
         return n
 
@@ -317,16 +332,23 @@ class TwinSlave(PiezoSlave):
         self._core = None
         self._twin_cls = _resolve(cfg["twin_class"])  # import errors surface at instantiation
         release_wrapper_state(self.resources)  # pythonfmu 0.7: double release of its PyState at exit
-        self._header(cfg, f"PiezoTwin {cfg['twin']} twin: {cfg['description']}", "input (drive voltage)",
-                     "output sample of the twin for the last input sample")
+        self._header(
+            cfg,
+            f"PiezoTwin {cfg['twin']} twin: {cfg['description']}",
+            "input (drive voltage)",
+            "output sample of the twin for the last input sample",
+        )
         for v in cfg["variables"]:
             name = v["name"]
             self._values[name] = v["start"]
             var = _TYPES[v["type"]](
-                name, causality=Fmi2Causality.parameter,
+                name,
+                causality=Fmi2Causality.parameter,
                 variability=Fmi2Variability.tunable if v.get("tunable") else Fmi2Variability.fixed,
                 description=v["description"],
-                getter=(lambda n=name: self._values[n]), setter=(lambda x, n=name: self._set(n, x)))
+                getter=(lambda n=name: self._values[n]),
+                setter=(lambda x, n=name: self._set(n, x)),
+            )
             extra = {}
             if v["type"] == "Real":
                 extra = {"start": float(v["start"]), "unit": v.get("unit"), "min": v.get("min"), "max": v.get("max")}
@@ -354,8 +376,9 @@ class TwinSlave(PiezoSlave):
             try:  # the new parameters act from this step on; the core keeps its dynamic state
                 self._core.retune(self.make_twin())
             except Exception as exc:
-                return self._fail(f"tunable parameter change at t={current_time!r} s refused: "
-                                  f"{type(exc).__name__}: {exc}")
+                return self._fail(
+                    f"tunable parameter change at t={current_time!r} s refused: {type(exc).__name__}: {exc}"
+                )
             self._retune = False
         step = self._core.step
         if n == 1:

@@ -35,8 +35,16 @@ from typing import Any
 from sysid.errors import ConfigError
 from twins.base import Twin, param_info
 
-__all__ = ["CONFIG_NAME", "FORMAT", "RESERVED", "fmu_variables", "fmu_config", "encode_value", "decode_value",
-           "twin_class_path"]
+__all__ = [
+    "CONFIG_NAME",
+    "FORMAT",
+    "RESERVED",
+    "fmu_variables",
+    "fmu_config",
+    "encode_value",
+    "decode_value",
+    "twin_class_path",
+]
 
 CONFIG_NAME = "piezotwin_fmu.json"
 FORMAT = "piezotwin-fmu/1"
@@ -51,7 +59,8 @@ def twin_class_path(twin: Twin) -> str:
 
 def _is_number_list(value: Any) -> bool:
     return isinstance(value, (list, tuple)) and all(
-        isinstance(v, (int, float)) and not isinstance(v, bool) for v in value)
+        isinstance(v, (int, float)) and not isinstance(v, bool) for v in value
+    )
 
 
 def encode_value(value: Any, fmi_type: str) -> Any:
@@ -133,32 +142,69 @@ def fmu_variables(twin: Twin, fs: float, tunable: bool = False) -> list[dict[str
             doc += f" [{pi.unit}]"
         if pi.source:
             doc += f"; source: {pi.source}"
-        out.append({
-            "name": f.name, "kind": "param", "field": f.name, "type": ftype,
-            "start": encode_value(value, ftype),
-            "unit": (pi.unit or None) if ftype == "Real" else None,
-            "min": _bound(lo, ftype, upper=False),
-            "max": _bound(hi, ftype, upper=True),
-            "description": doc,
-            "tunable": ftype == "Real" and f.name in live,
-        })
+        out.append(
+            {
+                "name": f.name,
+                "kind": "param",
+                "field": f.name,
+                "type": ftype,
+                "start": encode_value(value, ftype),
+                "unit": (pi.unit or None) if ftype == "Real" else None,
+                "min": _bound(lo, ftype, upper=False),
+                "max": _bound(hi, ftype, upper=True),
+                "description": doc,
+                "tunable": ftype == "Real" and f.name in live,
+            }
+        )
     for eid, spec in type(twin).EFFECTS.items():
-        out.append({"name": f"effect_{eid}", "kind": "effect", "field": eid, "type": "Boolean",
-                    "start": eid in twin.effects, "unit": None, "min": None, "max": None,
-                    "description": f"effect switch: {spec.description}", "tunable": False})
-    out.append({"name": "seed", "kind": "seed", "field": "seed", "type": "Integer",
-                "start": int(twin.seed if twin.seed is not None else 0), "unit": None, "min": 0, "max": None,
-                "description": "seed of the measurement noise (the same draws as piezotwin simulate --seed)",
-                "tunable": False})
-    out.append({"name": "fs", "kind": "fs", "field": "fs", "type": "Real", "start": float(fs), "unit": "Hz",
-                "min": None, "max": None,
-                "description": "sampling rate; the communication step must be a whole number of periods 1/fs",
-                "tunable": False})
+        out.append(
+            {
+                "name": f"effect_{eid}",
+                "kind": "effect",
+                "field": eid,
+                "type": "Boolean",
+                "start": eid in twin.effects,
+                "unit": None,
+                "min": None,
+                "max": None,
+                "description": f"effect switch: {spec.description}",
+                "tunable": False,
+            }
+        )
+    out.append(
+        {
+            "name": "seed",
+            "kind": "seed",
+            "field": "seed",
+            "type": "Integer",
+            "start": int(twin.seed if twin.seed is not None else 0),
+            "unit": None,
+            "min": 0,
+            "max": None,
+            "description": "seed of the measurement noise (the same draws as piezotwin simulate --seed)",
+            "tunable": False,
+        }
+    )
+    out.append(
+        {
+            "name": "fs",
+            "kind": "fs",
+            "field": "fs",
+            "type": "Real",
+            "start": float(fs),
+            "unit": "Hz",
+            "min": None,
+            "max": None,
+            "description": "sampling rate; the communication step must be a whole number of periods 1/fs",
+            "tunable": False,
+        }
+    )
     return out
 
 
-def fmu_config(twin: Twin, fs: float, core: dict[str, Any], model_name: str,
-               units: dict[str, str] | None = None) -> dict[str, Any]:
+def fmu_config(
+    twin: Twin, fs: float, core: dict[str, Any], model_name: str, units: dict[str, str] | None = None
+) -> dict[str, Any]:
     """JSON-able description baked into the FMU (``resources/piezotwin_fmu.json``)."""
     if not (isinstance(fs, (int, float)) and math.isfinite(fs) and fs > 0):
         raise ConfigError(f"fs must be a positive number of Hz, got {fs!r}")

@@ -68,15 +68,40 @@ from .timing import (
 )
 
 __all__ = [
-    "trend", "step_drift", "lag_regression", "delay_estimate", "band_powers", "harmonics", "odd_even_lines",
-    "nonlinear_correlation", "resonance_peaks", "quantization_step", "hysteresis_by_segment",
-    "correlation_tests", "effective_samples", "analyse", "saturation_rails", "clip_to_rails",
-    "early_input_correlation", "product_bands", "delay_candidates", "io_delay", "excited_band", "tests_summary",
+    "trend",
+    "step_drift",
+    "lag_regression",
+    "delay_estimate",
+    "band_powers",
+    "harmonics",
+    "odd_even_lines",
+    "nonlinear_correlation",
+    "resonance_peaks",
+    "quantization_step",
+    "hysteresis_by_segment",
+    "correlation_tests",
+    "effective_samples",
+    "analyse",
+    "saturation_rails",
+    "clip_to_rails",
+    "early_input_correlation",
+    "product_bands",
+    "delay_candidates",
+    "io_delay",
+    "excited_band",
+    "tests_summary",
 ]
 
 
-def analyse(u: np.ndarray, y: np.ndarray, ysim: np.ndarray, fs: float, meta: dict[str, Any] | None = None,
-            max_lag: int = 20, max_echo_s: float | None = None) -> dict[str, Any]:
+def analyse(
+    u: np.ndarray,
+    y: np.ndarray,
+    ysim: np.ndarray,
+    fs: float,
+    meta: dict[str, Any] | None = None,
+    max_lag: int = 20,
+    max_echo_s: float | None = None,
+) -> dict[str, Any]:
     """All residual numbers for one record (see the module docstring)."""
     meta = meta or {}
     u = np.asarray(u, float)
@@ -84,8 +109,13 @@ def analyse(u: np.ndarray, y: np.ndarray, ysim: np.ndarray, fs: float, meta: dic
     ysim = np.asarray(ysim, float)
     e = y - ysim
     ysd = float(np.std(y)) or 1e-300
-    out: dict[str, Any] = {"n": int(e.size), "fs": float(fs), "rms": float(np.sqrt(np.mean(e ** 2))),
-                           "nrmse": float(np.sqrt(np.mean(e ** 2)) / ysd), "mean": float(np.mean(e))}
+    out: dict[str, Any] = {
+        "n": int(e.size),
+        "fs": float(fs),
+        "rms": float(np.sqrt(np.mean(e**2))),
+        "nrmse": float(np.sqrt(np.mean(e**2)) / ysd),
+        "mean": float(np.mean(e)),
+    }
     out["trend"] = trend(e, fs)
     out["step_drift"] = step_drift(u, e, fs)
     out["delay"] = delay_estimate(y, ysim, fs, max_shift_s=max(64, e.size // 50) / fs)
@@ -98,15 +128,22 @@ def analyse(u: np.ndarray, y: np.ndarray, ysim: np.ndarray, fs: float, meta: dic
     out["early_input"] = early_input_correlation(e, u, ysim, fs)
     segs = [sg for sg in _segments(meta, e.size) if sg["freq_hz"] * (sg["stop"] - sg["start"]) / fs >= 2]
     if segs:  # sine segments: harmonics per segment, odd and even powers summed over segments
-        hs = [harmonics(e[sg["start"]:sg["stop"]], u[sg["start"]:sg["stop"]], fs) for sg in segs]
-        odd = sum(sum(a ** 2 for i, a in enumerate(h["amplitudes"], 1) if i % 2 == 1 and i > 1) for h in hs)
-        even = sum(sum(a ** 2 for i, a in enumerate(h["amplitudes"], 1) if i % 2 == 0) for h in hs)
-        out["harmonics"] = {"f0_hz": [h["f0_hz"] for h in hs], "sine_share": 1.0, "per_segment": hs,
-                            "odd_over_even_db": float(10 * np.log10((odd + 1e-300) / (even + 1e-300)))}
+        hs = [harmonics(e[sg["start"] : sg["stop"]], u[sg["start"] : sg["stop"]], fs) for sg in segs]
+        odd = sum(sum(a**2 for i, a in enumerate(h["amplitudes"], 1) if i % 2 == 1 and i > 1) for h in hs)
+        even = sum(sum(a**2 for i, a in enumerate(h["amplitudes"], 1) if i % 2 == 0) for h in hs)
+        out["harmonics"] = {
+            "f0_hz": [h["f0_hz"] for h in hs],
+            "sine_share": 1.0,
+            "per_segment": hs,
+            "odd_over_even_db": float(10 * np.log10((odd + 1e-300) / (even + 1e-300))),
+        }
     else:
         out["harmonics"] = harmonics(e, u, fs)
-    period = (meta.get("period_samples") or (meta.get("multisine") or {}).get("period_samples")
-              or (meta.get("excitation") or {}).get("period_samples"))
+    period = (
+        meta.get("period_samples")
+        or (meta.get("multisine") or {}).get("period_samples")
+        or (meta.get("excitation") or {}).get("period_samples")
+    )
     out["lines"] = odd_even_lines(u, y, e, fs, period=int(period) if period else None)
     out["nonlinear"] = nonlinear_correlation(e, u, ysim, max_lag=max_lag)
     out["resonances"] = resonance_peaks(e, y, fs)

@@ -30,14 +30,20 @@ def quantization_step(y: np.ndarray, max_levels: int = 200000) -> dict[str, floa
     ph = 2 * np.pi * (y - y[0]) / q
     coh = float(np.hypot(np.mean(np.cos(ph)), np.mean(np.sin(ph))))
     n = y.size
-    p = float(np.exp(-n * coh ** 2))
+    p = float(np.exp(-n * coh**2))
     levels = int(np.unique(np.round((y - y.min()) / q)).size) if np.ptp(y) / q < max_levels else -1
-    return {"step": q, "coherence": coh * float(on), "p_value": p if on > 0.9 else 1.0, "on_lattice": float(on),
-            "distinct_levels": levels}
+    return {
+        "step": q,
+        "coherence": coh * float(on),
+        "p_value": p if on > 0.9 else 1.0,
+        "on_lattice": float(on),
+        "distinct_levels": levels,
+    }
 
 
-def saturation_rails(y: np.ndarray, ysim: np.ndarray, min_count: int = 5, min_share: float = 0.002,
-                     k_rms: float = 2.0) -> dict[str, Any]:
+def saturation_rails(
+    y: np.ndarray, ysim: np.ndarray, min_count: int = 5, min_share: float = 0.002, k_rms: float = 2.0
+) -> dict[str, Any]:
     """Saturation rails of a measured record: the levels where the measuring chain clipped it.
 
     A side (top or bottom) is a rail when (a) the measured extreme value is taken *exactly* by at least
@@ -147,6 +153,7 @@ def hysteresis_by_segment(
             continue
         wm, lm = _loop_metrics(u[a:b], y[a:b], f, fs)
         ws, ls = _loop_metrics(u[a:b], ysim[a:b], f, fs)
-        out.append({"freq_hz": f, "width_measured": wm, "width_simulated": ws, "lag_deg_measured": lm,
-                    "lag_deg_simulated": ls})
+        out.append(
+            {"freq_hz": f, "width_measured": wm, "width_simulated": ws, "lag_deg_measured": lm, "lag_deg_simulated": ls}
+        )
     return out

@@ -13,8 +13,15 @@ from scipy import signal as sps
 
 from .timing import _z
 
-__all__ = ["excited_band", "band_powers", "product_bands", "harmonics", "odd_even_lines", "nonlinear_correlation",
-           "resonance_peaks"]
+__all__ = [
+    "excited_band",
+    "band_powers",
+    "product_bands",
+    "harmonics",
+    "odd_even_lines",
+    "nonlinear_correlation",
+    "resonance_peaks",
+]
 
 
 def _psd(x: np.ndarray, fs: float) -> tuple[np.ndarray, np.ndarray]:
@@ -51,8 +58,13 @@ def band_powers(e: np.ndarray, u: np.ndarray, y: np.ndarray, fs: float) -> dict[
     yout = float(np.sum(py[outside])) or 1e-300
     dens_in = pin / max(inside.sum(), 1)
     dens_out = pout / max(outside.sum(), 1)
-    return {"band_hz": [f0, f1], "in_band_db": 10 * np.log10(pin / yin), "out_band_db": 10 * np.log10(pout / yout),
-            "out_minus_in_db": float(10 * np.log10(dens_out / dens_in)), "in_share": pin / (pin + pout)}
+    return {
+        "band_hz": [f0, f1],
+        "in_band_db": 10 * np.log10(pin / yin),
+        "out_band_db": 10 * np.log10(pout / yout),
+        "out_minus_in_db": float(10 * np.log10(dens_out / dens_in)),
+        "in_share": pin / (pin + pout),
+    }
 
 
 def product_bands(e: np.ndarray, u: np.ndarray, fs: float) -> dict[str, Any]:
@@ -82,17 +94,24 @@ def product_bands(e: np.ndarray, u: np.ndarray, fs: float) -> dict[str, Any]:
         "in": dens(f0 + guard, f1 - guard),
         "diff": dens(max(0.05 * b, f[1] if f.size > 1 else 0.0), b - guard),
         "sum": dens(2 * f0 + guard, min(2 * f1, 0.98 * nyq)),
-        "skirt": float(np.nanmean(
-            [dens(2 * f0 - f1 + guard, f0 - guard), dens(f1 + guard, min(2 * f1 - f0, 2 * f0) - guard)]
-        )),
+        "skirt": float(
+            np.nanmean([dens(2 * f0 - f1 + guard, f0 - guard), dens(f1 + guard, min(2 * f1 - f0, 2 * f0) - guard)])
+        ),
     }
     vals = [v for v in bands.values() if np.isfinite(v) and v > 0]
     if len(vals) < 3:
         return {"valid": False, "even_db": 0.0, "in_db": 0.0, "skirt_db": 0.0}
     floor = min(vals)
     db = {k: (float(10 * np.log10(v / floor)) if np.isfinite(v) and v > 0 else 0.0) for k, v in bands.items()}
-    return {"valid": True, "band_hz": [f0, f1], "even_db": max(db["diff"], db["sum"]), "diff_db": db["diff"],
-            "sum_db": db["sum"], "in_db": db["in"], "skirt_db": db["skirt"]}
+    return {
+        "valid": True,
+        "band_hz": [f0, f1],
+        "even_db": max(db["diff"], db["sum"]),
+        "diff_db": db["diff"],
+        "sum_db": db["sum"],
+        "in_db": db["in"],
+        "skirt_db": db["skirt"],
+    }
 
 
 def harmonics(e: np.ndarray, u: np.ndarray, fs: float, n_harm: int = 5) -> dict[str, Any]:
@@ -110,21 +129,26 @@ def harmonics(e: np.ndarray, u: np.ndarray, fs: float, n_harm: int = 5) -> dict[
     if U.size < 4:
         return {"f0_hz": float("nan"), "amplitudes": [], "odd_over_even_db": 0.0}
     k0 = int(np.argmax(U[1:])) + 1
-    sine_like = U[k0] ** 2 / max(float(np.sum(U ** 2)), 1e-300)
+    sine_like = U[k0] ** 2 / max(float(np.sum(U**2)), 1e-300)
     amps = []
     for h in range(1, n_harm + 1):
         k = h * k0
         if k + 2 >= E.size:
             break
         amps.append(float(np.max(E[max(k - 2, 0) : k + 3])) * 2 / win.sum())
-    odd = sum(a ** 2 for i, a in enumerate(amps, 1) if i % 2 == 1 and i > 1)
-    even = sum(a ** 2 for i, a in enumerate(amps, 1) if i % 2 == 0)
-    return {"f0_hz": float(freqs[k0]), "sine_share": float(sine_like), "amplitudes": amps,
-            "odd_over_even_db": float(10 * np.log10((odd + 1e-300) / (even + 1e-300)))}
+    odd = sum(a**2 for i, a in enumerate(amps, 1) if i % 2 == 1 and i > 1)
+    even = sum(a**2 for i, a in enumerate(amps, 1) if i % 2 == 0)
+    return {
+        "f0_hz": float(freqs[k0]),
+        "sine_share": float(sine_like),
+        "amplitudes": amps,
+        "odd_over_even_db": float(10 * np.log10((odd + 1e-300) / (even + 1e-300))),
+    }
 
 
-def odd_even_lines(u: np.ndarray, y: np.ndarray, e: np.ndarray, fs: float, period: int | None = None,
-                   rel_db: float = -40.0) -> dict[str, Any]:
+def odd_even_lines(
+    u: np.ndarray, y: np.ndarray, e: np.ndarray, fs: float, period: int | None = None, rel_db: float = -40.0
+) -> dict[str, Any]:
     """Power on the excited, odd non-excited (detection) and even lines of a periodic multisine.
 
     The record (or its first whole number of periods of length ``period`` samples, averaged) is transformed;
@@ -141,8 +165,10 @@ def odd_even_lines(u: np.ndarray, y: np.ndarray, e: np.ndarray, fs: float, perio
     nper = u.size // P if P <= u.size else 0
     if nper < 1:
         return {"valid": False}
+
     def avg(x):
         return np.fft.rfft(x[: nper * P].reshape(nper, P).mean(axis=0))
+
     U, Y, E = avg(u), avg(y), avg(e)
     pu = np.abs(U) ** 2
     pu[0] = 0
@@ -161,12 +187,22 @@ def odd_even_lines(u: np.ndarray, y: np.ndarray, e: np.ndarray, fs: float, perio
     even_det = band & (m % 2 == 0)
     odd_grid = bool(np.all((ex_idx // g) % 2 == 1))
     ref = float(np.mean(np.abs(Y[exc]) ** 2)) or 1e-300
+
     def lvl(X, mask):
         return float(10 * np.log10((np.mean(np.abs(X[mask]) ** 2) if mask.any() else 0.0) / ref + 1e-30))
-    out = {"valid": True, "odd_grid": odd_grid, "n_excited": int(exc.sum()), "n_odd_detection": int(odd_det.sum()),
-           "n_even": int(even_det.sum()),
-           "y_odd_db": lvl(Y, odd_det), "y_even_db": lvl(Y, even_det),
-           "e_odd_db": lvl(E, odd_det), "e_even_db": lvl(E, even_det), "e_excited_db": lvl(E, exc)}
+
+    out = {
+        "valid": True,
+        "odd_grid": odd_grid,
+        "n_excited": int(exc.sum()),
+        "n_odd_detection": int(odd_det.sum()),
+        "n_even": int(even_det.sum()),
+        "y_odd_db": lvl(Y, odd_det),
+        "y_even_db": lvl(Y, even_det),
+        "e_odd_db": lvl(E, odd_det),
+        "e_even_db": lvl(E, even_det),
+        "e_excited_db": lvl(E, exc),
+    }
     out["odd_minus_even_db"] = (out["e_odd_db"] - out["e_even_db"]) if (odd_det.any() and even_det.any()) else 0.0
     return out
 
@@ -189,12 +225,12 @@ def nonlinear_correlation(e: np.ndarray, u: np.ndarray, ysim: np.ndarray, max_la
     n = e.size
     out = {"band": 1.96 / np.sqrt(n)}
     for name, x in (("u", _z(u)), ("y", _z(ysim))):
-        x2 = _z(_orth(x ** 2, [x]))
-        x3 = _z(_orth(x ** 3, [x, x ** 2]))
+        x2 = _z(_orth(x**2, [x]))
+        x3 = _z(_orth(x**3, [x, x**2]))
         for tag, s in (("lin", x), ("2", x2), ("3", x3)):
             m = 1 << int(np.ceil(np.log2(2 * n)))
             xc = np.fft.irfft(np.fft.rfft(e, m) * np.conj(np.fft.rfft(s, m)), m)
-            vals = np.r_[xc[: max_lag + 1], xc[m - max_lag:]] / n
+            vals = np.r_[xc[: max_lag + 1], xc[m - max_lag :]] / n
             key = f"{name}{tag}" if tag != "lin" else f"{name}_lin"
             out[key] = float(np.max(np.abs(vals)))
     return out
@@ -218,5 +254,11 @@ def resonance_peaks(
     prom = lp - med
     idx, _ = sps.find_peaks(prom, height=min_db)
     idx = idx[np.argsort(prom[idx])[::-1]][:max_peaks]
-    return [{"freq_hz": float(f[i]), "prominence_db": float(prom[i]),
-             "residual_over_output_db": float(10 * np.log10((pe[i] + 1e-300) / (py[i] + 1e-300)))} for i in idx]
+    return [
+        {
+            "freq_hz": float(f[i]),
+            "prominence_db": float(prom[i]),
+            "residual_over_output_db": float(10 * np.log10((pe[i] + 1e-300) / (py[i] + 1e-300))),
+        }
+        for i in idx
+    ]

@@ -11,8 +11,16 @@ from typing import Any
 import numpy as np
 from scipy import signal as sps
 
-__all__ = ["effective_samples", "trend", "step_drift", "lag_regression", "delay_estimate", "delay_candidates",
-           "io_delay", "early_input_correlation"]
+__all__ = [
+    "effective_samples",
+    "trend",
+    "step_drift",
+    "lag_regression",
+    "delay_estimate",
+    "delay_candidates",
+    "io_delay",
+    "early_input_correlation",
+]
 
 
 def _z(x: np.ndarray) -> np.ndarray:
@@ -20,7 +28,6 @@ def _z(x: np.ndarray) -> np.ndarray:
     x = x - x.mean()
     s = x.std()
     return x / s if s > 0 else x
-
 
 
 def effective_samples(e: np.ndarray, max_lag: int | None = None) -> float:
@@ -43,8 +50,7 @@ def effective_samples(e: np.ndarray, max_lag: int | None = None) -> float:
     if ac[0] <= 0:
         return float(n)
     rho = ac[1:] / ac[0]
-    return float(n / (1.0 + 2.0 * np.sum(rho ** 2)))
-
+    return float(n / (1.0 + 2.0 * np.sum(rho**2)))
 
 
 def trend(e: np.ndarray, fs: float) -> dict[str, float]:
@@ -57,13 +63,17 @@ def trend(e: np.ndarray, fs: float) -> dict[str, float]:
     n = e.size
     t = np.arange(n) / fs
     tc = (t - t.mean()) / max(t.std(), 1e-300)
-    A = np.column_stack([np.ones(n), tc, tc ** 2 - 1.0])
+    A = np.column_stack([np.ones(n), tc, tc**2 - 1.0])
     coef, *_ = np.linalg.lstsq(A, e, rcond=None)
     fit = A @ coef
     var = float(np.var(e)) or 1e-300
     slope = float(coef[1] / max(t.std(), 1e-300))
-    return {"slope_per_s": slope, "drift_total": float(fit[-1] - fit[0]), "offset": float(coef[0]),
-            "drift_share": float(np.var(fit - fit.mean()) / var)}
+    return {
+        "slope_per_s": slope,
+        "drift_total": float(fit[-1] - fit[0]),
+        "offset": float(coef[0]),
+        "drift_share": float(np.var(fit - fit.mean()) / var),
+    }
 
 
 def step_drift(
@@ -108,8 +118,9 @@ def step_drift(
     return {"n_steps": n_used, "gain_per_decade": k, "share": share}
 
 
-def lag_regression(e: np.ndarray, ref: np.ndarray, fs: float, max_lag_s: float | None = None,
-                   min_lag: int = 0) -> dict[str, Any]:
+def lag_regression(
+    e: np.ndarray, ref: np.ndarray, fs: float, max_lag_s: float | None = None, min_lag: int = 0
+) -> dict[str, Any]:
     """Regression coefficient of the residual on the reference delayed by each lag, c(τ) = Σe·r(t−τ)/Σr².
 
     For an unmodelled echo ``y = y₀ + a·y₀(t−τ)`` and ``ref = ŷ ≈ y₀`` the peak of |c| sits at the echo's delay
@@ -142,8 +153,14 @@ def lag_regression(e: np.ndarray, ref: np.ndarray, fs: float, max_lag_s: float |
     if lo > 5:
         pk, _ = sps.find_peaks(env[4:lo])
         short = [float((p + 4) / fs) for p in pk[np.argsort(env[4:lo][pk])[::-1][:3]]]
-    return {"lag_s": kk / fs, "lag_samples": int(k), "coef": float(c[k]), "envelope": float(env[k]), "z": zscore,
-            "short_lags_s": short}
+    return {
+        "lag_s": kk / fs,
+        "lag_samples": int(k),
+        "coef": float(c[k]),
+        "envelope": float(env[k]),
+        "z": zscore,
+        "short_lags_s": short,
+    }
 
 
 def _shift(x: np.ndarray, d: float) -> np.ndarray:
@@ -166,7 +183,7 @@ def delay_estimate(y: np.ndarray, ysim: np.ndarray, fs: float, max_shift_s: floa
     m = 1 << int(np.ceil(np.log2(2 * n)))
     xc = np.fft.irfft(np.fft.rfft(y, m) * np.conj(np.fft.rfft(s, m)), m)
     lags = np.r_[np.arange(0, L + 1), np.arange(-L, 0)]
-    vals = np.r_[xc[: L + 1], xc[m - L:]]
+    vals = np.r_[xc[: L + 1], xc[m - L :]]
     d = float(lags[int(np.argmax(vals))])
     g = 1.0
     for _ in range(8):
@@ -187,8 +204,9 @@ def delay_estimate(y: np.ndarray, ysim: np.ndarray, fs: float, max_shift_s: floa
     return {"shift_s": d / fs, "shift_samples": d, "corr": float(y @ sh) / den, "gain": g}
 
 
-def delay_candidates(y: np.ndarray, ysim: np.ndarray, fs: float, max_shift_s: float | None = None,
-                     k: int = 3) -> list[float]:
+def delay_candidates(
+    y: np.ndarray, ysim: np.ndarray, fs: float, max_shift_s: float | None = None, k: int = 3
+) -> list[float]:
     """Shifts [s] of y relative to ŷ at the ``k`` highest peaks of their cross-correlation, each refined to a
     fraction of a sample (parabola). For narrow-band signals the carrier cycle is ambiguous: the caller tries
     each."""
@@ -200,7 +218,7 @@ def delay_candidates(y: np.ndarray, ysim: np.ndarray, fs: float, max_shift_s: fl
     L = n // 4 if max_shift_s is None else int(min(n // 2, max(2, round(max_shift_s * fs))))
     m = 1 << int(np.ceil(np.log2(2 * n)))
     xc = np.fft.irfft(np.fft.rfft(y, m) * np.conj(np.fft.rfft(s, m)), m)
-    vals = np.r_[xc[m - L:], xc[: L + 1]]
+    vals = np.r_[xc[m - L :], xc[: L + 1]]
     lags = np.arange(-L, L + 1)
     pk, _ = sps.find_peaks(vals)
     if pk.size == 0:
@@ -250,11 +268,18 @@ def early_input_correlation(e: np.ndarray, u: np.ndarray, ysim: np.ndarray, fs: 
     m = 1 << int(np.ceil(np.log2(2 * n)))
     xc = np.fft.irfft(np.fft.rfft(e, m) * np.conj(np.fft.rfft(u, m)), m) / np.sqrt(float(e @ e) * float(u @ u))
     early = np.abs(xc[: k_first // 2])
-    null = xc[m - k_first: m - k_first // 2]
-    null_rms = float(np.sqrt(np.mean(null ** 2))) or 1e-300
-    late = np.abs(xc[k_first // 2: min(3 * k_first, n // 2)])
+    null = xc[m - k_first : m - k_first // 2]
+    null_rms = float(np.sqrt(np.mean(null**2))) or 1e-300
+    late = np.abs(xc[k_first // 2 : min(3 * k_first, n // 2)])
     k = int(np.argmax(early))
-    return {"valid": True, "first_arrival_s": k_first / fs, "lag_s": k / fs, "lag_samples": k,
-            "r_max": float(early[k]), "null_rms": null_rms, "ratio": float(early[k] / null_rms),
-            "r_late": float(late.max()) if late.size else 0.0,
-            "early_over_late": float(early[k] / (late.max() if late.size and late.max() > 0 else 1e-300))}
+    return {
+        "valid": True,
+        "first_arrival_s": k_first / fs,
+        "lag_s": k / fs,
+        "lag_samples": k,
+        "r_max": float(early[k]),
+        "null_rms": null_rms,
+        "ratio": float(early[k] / null_rms),
+        "r_late": float(late.max()) if late.size else 0.0,
+        "early_over_late": float(early[k] / (late.max() if late.size and late.max() > 0 else 1e-300)),
+    }
