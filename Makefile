@@ -52,10 +52,11 @@ test: $(STAMP)
 test-all: $(STAMP)
 	$(PY) -m pytest -q -m "not perf"
 
-# The guards of every change (configuration in pyproject.toml, reasons in docs/development.md): ruff's lint rules
-# and mypy over the library and the CLI. `ruff format` is not adopted yet (docs/development.md says why).
+# The guards of every change (configuration in pyproject.toml, reasons in docs/development.md): ruff's lint rules,
+# ruff's formatter (a file it would change fails) and mypy over the library and the CLI.
 lint: $(STAMP)
 	$(VENV)/bin/ruff check .
+	$(VENV)/bin/ruff format --check .
 	$(VENV)/bin/mypy
 
 bench: $(STAMP)
