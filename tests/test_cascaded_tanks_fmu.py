@@ -107,7 +107,7 @@ def test_spread_starts_cover_the_ranges():
     """j/N of each numeric range (geometric over more than two decades), the rest as first fitted."""
     import dataclasses
 
-    from twins.discrepancy.rounds import spread_starts
+    from twins.discrepancy.candidates import spread_starts
     from twins.paramfields import pfield
 
     @dataclasses.dataclass

@@ -16,7 +16,8 @@ torch = pytest.importorskip("torch")
 from sysid.base import load_model  # noqa: E402
 from sysid.errors import ConfigError, DataError  # noqa: E402
 from sysid.neural.core import ACT_CODE, count_mlp_parameters, merge_ensemble, mlp_forward_np  # noqa: E402
-from sysid.neural.narx_mlp import NARXMLP, NARXMLPSim, normalised_pairs  # noqa: E402
+from sysid.neural.narx_mlp import NARXMLP, NARXMLPSim  # noqa: E402
+from sysid.neural.records import normalised_pairs  # noqa: E402
 from tests.neural_systems import bouc_wen_record, multisine_input  # noqa: E402
 
 FS = 1000.0

@@ -28,10 +28,11 @@ import numpy as np
 from scipy.optimize import least_squares as _scipy_lsq
 from scipy.signal import lfilter
 
+from sysid.base import check_records
 from sysid.data.record import Record
 from sysid.errors import ConfigError, DataError
 from sysid.polynomial import frols as fr
-from sysid.polynomial.narmax import PolynomialModel, check_records
+from sysid.polynomial.model import PolynomialModel
 
 __all__ = ["ARX", "ARMAX"]
 

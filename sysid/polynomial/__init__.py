@@ -13,7 +13,8 @@ from sysid._exports import attach
 
 if TYPE_CHECKING:
     from sysid.polynomial.frols import CRITERIA, FrolsResult, Structure, candidate_terms, make_regressors
-    from sysid.polynomial.narmax import NARMAXPoly, NARXPoly, PolynomialModel, check_records
+    from sysid.polynomial.model import PolynomialModel
+    from sysid.polynomial.narmax import NARMAXPoly, NARXPoly, check_records
     from sysid.polynomial.polysim import NARXPolySim
 
 __getattr__, __dir__, __all__ = attach(__name__, __file__)

@@ -36,7 +36,8 @@ from numba import njit
 from sysid.data.record import Record
 from sysid.errors import ConfigError
 from sysid.polynomial import frols as fr
-from sysid.polynomial.narmax import DIVERGENCE_FACTOR, NARXPoly
+from sysid.polynomial.model import DIVERGENCE_FACTOR
+from sysid.polynomial.narmax import NARXPoly
 
 __all__ = ["NARXPolySim", "simulate_sensitivity"]
 

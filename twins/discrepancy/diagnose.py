@@ -17,7 +17,7 @@
    mis-sized default shows as the gain of its re-test (:mod:`.defaults`).
 2. **Analyse** the residual ``e = y − ŷ`` on estimation and validation data (:func:`.trials.make_stage`,
    :func:`.features.analyse`).
-3. **Trial every catalog effect** the configuration lacks (:func:`.rounds.round_trials`): add it, pre-scan each of
+3. **Trial every catalog effect** the configuration lacks (:func:`.candidates.round_trials`): add it, pre-scan each of
    its parameters over its documented range plus the values the residual features suggest (:mod:`.prescan`),
    then fit its parameters together with the core calibration parameters by free-run output error, and
    re-simulate the validation record (:mod:`.trials`). The validation gain of the trial is the decisive
@@ -61,6 +61,7 @@ from . import features as ft
 from . import ranges as rg
 from . import realdata
 from . import unexplained as unx
+from .candidates import adopt
 from .fields import core_for, numeric_fields, quant_params
 from .hybrid import hybrid_block
 from .options import DiagnoseOptions
@@ -76,7 +77,7 @@ from .prediction import (
     with_rails,
 )
 from .result import Diagnosis
-from .rounds import Extension, adopt, extend
+from .rounds import Extension, extend
 from .trials import Stage
 from .unexplained import generic_residual_model
 

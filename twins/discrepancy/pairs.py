@@ -18,32 +18,21 @@ Off unless :attr:`.options.DiagnoseOptions.pairs` is set.
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from typing import Any
 
 from . import features as ft
+from .candidates import adopt, beyond_noise, round_trials
 from .fields import effect_fields
 from .prediction import significance
 from .ranking import Ranking, cause_from, rank_round
-from .trials import Stage
+from .trials import Stage, Trial
 
 __all__ = ["joint_step"]
 
 
-def joint_step(
-    loop: Any,
-    ext: Any,
-    ranking: Ranking,
-    rnd: int,
-    n_max: int,
-    *,
-    adopt: Callable[..., Stage],
-    beyond_noise: Callable[..., bool],
-    round_trials: Callable[..., Any],
-) -> bool:
+def joint_step(loop: Any, ext: Any, ranking: Ranking, rnd: int, n_max: int) -> bool:
     """Try the leader of round ``rnd`` (``ranking``, not significant alone) jointly with each other candidate;
-    when a pair is significant, add both causes to ``ext`` (in place) and return True (module docstring).
-    ``adopt``, ``beyond_noise`` and ``round_trials`` are those of :mod:`.rounds` (which calls this)."""
+    when a pair is significant, add both causes to ``ext`` (in place) and return True (module docstring)."""
     inp, cal, opts, skip = loop.inp, loop.cal, loop.opts, loop.opts.skip
     stage: Stage = ext.stage
     top = ranking.top
@@ -87,8 +76,28 @@ def joint_step(
     passing = [(tr, p, g) for tr, p, g in judged if p < level and g >= opts.min_rel_gain]
     if not passing:
         return False
-    second, p_joint, gain = min(passing, key=lambda x: x[0].sse_val)
+    second, p_joint, _ = min(passing, key=lambda x: x[0].sse_val)
     row["kept"] = second.effect
+    _name_pair(loop, ext, ranking, trials, tent, second, p_joint, level, rnd)
+    return True
+
+
+def _name_pair(
+    loop: Any,
+    ext: Any,
+    ranking: Ranking,
+    trials: list[Trial],
+    tent: Stage,
+    second: Trial,
+    p_joint: float,
+    level: float,
+    rnd: int,
+) -> None:
+    """Both causes of a significant pair, with the rows and groups a round would give them, added to ``ext``; the
+    configuration with both becomes the stage."""
+    inp, cal, opts, skip = loop.inp, loop.cal, loop.opts, loop.opts.skip
+    stage: Stage = ext.stage
+    top = ranking.top
     # the second effect's row and group as a round from the tentative configuration would give them
     ranking2 = rank_round(
         trials,
@@ -124,4 +133,3 @@ def joint_step(
         )
     ext.causes += [first, other]
     ext.stage = adopt(inp, second.twin, opts)
-    return True

@@ -41,6 +41,7 @@ from . import features as ft
 from .fields import fmt_params
 from .options import DiagnoseOptions
 from .prediction import MIN_SCORED_SAMPLES, continues, significance, sse
+from .separating import separating_experiment
 from .trials import Stage, Trial
 
 __all__ = ["Ranking", "rank_round", "cause_from", "judged_span"]
@@ -215,7 +216,7 @@ def cause_from(ranking: Ranking, stage: Stage, twin: Twin, prior: Twin, rnd: int
         cause.update(dflt.cause_fields(top, stage.nrmse_val, prior))
     if len(group) > 1:
         cause["group"] = group
-        cause["separate_by"] = ev.separating_experiment([ev.family_of(twin.EFFECTS[g]) for g in group])
+        cause["separate_by"] = separating_experiment([ev.family_of(twin.EFFECTS[g]) for g in group])
         gains_txt = ", ".join(f"{r['gain']:.3f}" for r in ranking.rows if r["effect"] in group)
         cause["evidence"] += (
             f"; the data cannot tell {', '.join(group)} apart "

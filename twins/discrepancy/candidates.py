@@ -1,0 +1,163 @@
+"""One round's candidates: every effect tried from the configuration's starting points with the core held (stage
+A), the leaders refitted together with the core (stage B), the re-tests of default effects; and the stage of a
+configuration the diagnosis adopts. :mod:`.rounds` runs the rounds, :mod:`.pairs` the joint trials, both from here.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+from sysid.errors import ConfigError, DataError
+from sysid.progress import progress as progress_bar
+from twins.base import Twin, param_info
+
+from . import defaults as dflt
+from . import ranges as rg
+from . import unexplained as unx
+from .fields import core_for
+from .options import DiagnoseOptions
+from .prediction import sse
+from .trials import Stage, Trial, make_stage, run_trial
+
+__all__ = ["round_trials", "spread_starts", "adopt", "beyond_noise", "TRIAL_ERRORS"]
+
+#: the failures that mean "this candidate cannot run here" (it is left out of the round)
+TRIAL_ERRORS = (ConfigError, DataError, ValueError, np.linalg.LinAlgError)
+
+
+def beyond_noise(inp: Any, stage: Stage, skip: int) -> bool:
+    """The validation residual of ``stage`` is far above the noise measured from the data (the verdict's rule,
+    :func:`.unexplained.outside`, on the noise level measured once from the records)."""
+    return unx.outside(inp.val.y[skip:] - stage.yhat_val[skip:], inp.noise)
+
+
+def adopt(inp: Any, twin: Twin, opts: DiagnoseOptions) -> Stage:
+    """The stage of a configuration the diagnosis adopts (the calibration, a round's leader, a revisit's), its
+    integration sub-step re-chosen for it where the records chose it (:func:`.ranges.substep_for`): the step
+    chosen from the starting twin can miss its error bound once the hysteresis is calibrated or an asymmetry is
+    added (steps at 1 kHz: 1.5× the bound with asym_factor 1.2, 2.2× with α, β, γ at 0.6, 0.05, 0.03)."""
+    if getattr(inp, "substep_auto", False):
+        twin = rg.substep_for(twin, inp.est, inp.val)
+    return make_stage(twin, inp.est, inp.val, opts)
+
+
+def round_trials(
+    inp: Any,
+    cal: Any,
+    stage: Stage,
+    remaining: list[str],
+    retest_left: list[str],
+    core_r: list[str],
+    rnd: int | str,
+    opts: DiagnoseOptions,
+) -> tuple[list[Trial], list[dict[str, Any]]]:
+    """The trials of one round (stage A for every candidate, stage B for the best, the re-tests) and a row for
+    each candidate that could not run."""
+    # features that guide the pre-scan come from the estimation residual (the data the trial is fitted to)
+    a_est = {**stage.analysis_est, "fs": inp.est.fs}
+    bases = _starting_points(stage, cal.prior, inp.core)
+    trials: list[Trial] = []
+    errors: list[dict[str, Any]] = []
+    for i_e, e in enumerate(progress_bar(remaining, desc=f"diagnose round {rnd}", unit="effect")):
+        opts.say(f"round {rnd}: trying {e} ({i_e + 1}/{len(remaining)})")
+        best_tr = None
+        for b in bases:
+            try:
+                tr = run_trial(b, e, inp.est, inp.val, core_r, a_est, opts, refit_core=False)
+            except TRIAL_ERRORS as exc:  # cannot run here
+                errors.append({"round": rnd, "effect": e, "error": str(exc)})
+                continue
+            if best_tr is None or tr.sse_est < best_tr.sse_est:
+                if best_tr is not None:
+                    tr.seconds += best_tr.seconds
+                best_tr = tr
+        if best_tr is not None:
+            trials.append(best_tr)
+    _refine(trials, stage, inp, core_r, a_est, opts)
+    if retest_left:
+        opts.say(f"round {rnd}: re-testing {', '.join(retest_left)}")
+        trials += dflt.retest_trials(bases, retest_left, inp.est, inp.val, core_r, a_est, opts)
+    return trials, errors
+
+
+def _starting_points(stage: Stage, prior: Twin, core: list[str]) -> list[Twin]:
+    """The calibrated configuration (which may have bent its core parameters to mimic the missing effect) and,
+    where the calibration moved a core parameter by more than 2 % of its value, the configuration as given."""
+    cur_core = core_for(stage.twin, core)
+    prior_base = stage.twin.with_params(**{c: getattr(prior.params, c) for c in cur_core})
+    moved = any(
+        abs(float(getattr(prior.params, c)) - float(getattr(stage.twin.params, c)))
+        > 0.02 * max(abs(float(getattr(prior.params, c))), 1e-300)
+        for c in cur_core
+    )
+    return [stage.twin] + ([prior_base] if moved else [])
+
+
+def _refine(
+    trials: list[Trial], stage: Stage, inp: Any, core_r: list[str], a_est: dict[str, Any], opts: DiagnoseOptions
+) -> None:
+    """Stage B: the leader, and whoever comes close to it (within a factor 1.5 in validation SSE), refitted
+    together with the core parameters (``opts.refine`` at most), the estimation leader if it is not among them and
+    the other members of the leader's ambiguity group (``EffectSpec.group``); kept where the estimation SSE
+    improves.
+
+    The estimation leader is refined because stage A holds the core at a calibration that bent to mimic the
+    missing effect: creep added to a core whose gain absorbed creep's slow rise overshoots, fits the estimation
+    record better but the validation record worse, and without the core refit it would never be judged as it
+    fits (two hidden effects, creep + thermal drift on steps: creep lost 0 % gain against a 2nd-mode 3 %)."""
+    trials.sort(key=lambda t: t.sse_val)
+    n = min(max(int(opts.refine), 0), len(trials))
+    picked = [
+        i
+        for i, tr in enumerate(trials[:n])
+        if i == 0 or not (tr.sse_val > 1.5 * trials[0].sse_val or tr.sse_val >= stage.sse_val * (1 - 1e-9))
+    ]
+    if n and trials:
+        j = min(range(len(trials)), key=lambda k: trials[k].sse_est)
+        if j not in picked and trials[j].sse_est < sse(inp.est.y, stage.yhat_est, opts.skip):
+            picked.append(j)
+    # the leader's group is refined with it, so its members are judged alike (a core that absorbed a settling drift
+    # leaves thermal_drift no gain with the core held, while slow_drift, refitted, takes it)
+    group = inp.twin.EFFECTS[trials[0].effect].group if trials else ""
+    picked += [
+        i for i, tr in enumerate(trials) if group and i not in picked and inp.twin.EFFECTS[tr.effect].group == group
+    ]
+    if opts.starts > 1:  # every candidate, from several starts (DiagnoseOptions.starts)
+        picked = list(range(len(trials)))
+    for i in picked:
+        tr = trials[i]
+        spent = tr.seconds  # stage A and every full refit, kept or not
+        for start in [tr.effect_params] + spread_starts(tr, opts.starts):
+            try:
+                trB = run_trial(tr.base, tr.effect, inp.est, inp.val, core_r, a_est, opts, refit_core=True, start=start)
+            except TRIAL_ERRORS:
+                continue
+            spent += trB.seconds
+            if trB.sse_est <= trials[i].sse_est:
+                trials[i] = trB
+        trials[i].seconds = spent
+
+
+def spread_starts(tr: Trial, starts: int) -> list[dict[str, float]]:
+    """``starts − 1`` starting points of a trial's full refit spread over its effect's parameter ranges: for
+    j = 1 … starts − 1 every numeric parameter at the fraction j/starts of its range (geometrically where the
+    range is positive and spans more than two decades), the other parameters as first fitted."""
+    if starts <= 1:
+        return []
+    info = param_info(type(tr.twin.params))
+    out = []
+    for j in range(1, starts):
+        point = dict(tr.effect_params)
+        for f, v in tr.effect_params.items():
+            if f not in info or isinstance(v, (bool, int, str)) or info[f].choices:
+                continue
+            lo, hi = info[f].bounds()
+            if not (math.isfinite(lo) and math.isfinite(hi)) or hi <= lo:
+                continue
+            q = j / starts
+            point[f] = lo * (hi / lo) ** q if lo > 0 and hi / lo > 100 else lo + q * (hi - lo)
+        out.append(point)
+    return out
