@@ -77,9 +77,9 @@ class Executor:
 
         Sent as plain pickle bytes and unpickled once per worker process: Dask's own zero-copy transfer hands
         numpy arrays over as views into its message frames, which need not be 8-byte aligned, and numpy's
-        loops on unaligned float64 data round differently in the last bit (measured: narx-poly on Bouc-Wen,
-        one-step RMSE 7.329531625295761e-06 here vs ...772e-06 on a worker). Unpickled arrays are fresh,
-        aligned allocations, so the task sees the same bytes at the same alignment as the serial run.
+        loops on unaligned float64 data round differently in the last bit (docs/running-at-scale.md). Unpickled
+        arrays are fresh, aligned allocations, so the task sees the same bytes at the same alignment as the
+        serial run.
         """
         if self.client is None:
             return obj
@@ -226,7 +226,7 @@ def make_executor(workers: int | None = None, scheduler: str | None = None) -> E
         # machine; harmless (no dashboard is started)
         warnings.filterwarnings("ignore", message="Port .* is already in use", category=UserWarning)
         cluster = LocalCluster(
-            n_workers=int(workers),
+            n_workers=int(workers or 1),
             processes=True,
             threads_per_worker=1,
             dashboard_address=None,

@@ -1,9 +1,8 @@
 """Limit the threads of the BLAS libraries loaded by numpy and scipy for a block of code (``threadpoolctl``).
 
-Why: the one-pass Gram accumulation of FROLS is a long series of mid-sized BLAS calls. On a machine whose cores
-are shared with other work, OpenBLAS's worker threads spin-wait for each other and a 2-thread ``dsyrk`` ran
-8× slower than a 1-thread one here (2 cores, load ≈ 10). One thread is also within 2× of two on an idle
-2-core machine. The thread count is taken from ``PIEZOTWIN_BLAS_THREADS`` (default 1).
+Why: the one-pass Gram accumulation of FROLS is a long series of mid-sized BLAS calls, and on cores shared with
+other work OpenBLAS's threads spin-wait for each other, so one thread is the faster default (figures in
+docs/running-at-scale.md). The thread count is taken from ``PIEZOTWIN_BLAS_THREADS`` (default 1).
 
 The limiting itself is :func:`threadpoolctl.threadpool_limits` (the library scikit-learn uses), which finds every
 loaded BLAS (OpenBLAS, MKL, BLIS, FlexiBLAS) and restores the previous counts on exit; a BLAS it does not know

@@ -54,3 +54,19 @@ def test_comments_do_not_cite_issues_or_outside_documents():
         if CITATION.search(line)
     ]
     assert hits == []
+
+
+MAX_DOCSTRING_LINES = 29
+
+
+def test_docstrings_say_contract_reason_and_reference_in_under_30_lines():
+    """A docstring says what the code does, its contract and why, with the paper's reference; how a number was
+    measured goes to the docs page of that topic (docs/development.md)."""
+    long = {}
+    for p in _modules(*PACKAGES):
+        for node in ast.walk(ast.parse(p.read_text(encoding="utf-8"))):
+            if isinstance(node, (ast.Module, ast.ClassDef, ast.FunctionDef, ast.AsyncFunctionDef)):
+                doc = ast.get_docstring(node, clean=False)
+                if doc and len(doc.splitlines()) > MAX_DOCSTRING_LINES:
+                    long[f"{p.relative_to(REPO)}:{getattr(node, 'name', '<module>')}"] = len(doc.splitlines())
+    assert long == {}

@@ -347,7 +347,9 @@ class ARMAX(_LinearBase):
         zeros = [np.zeros((len(r), s.n_outputs)) for r in records]
         blocks = []
         for rec, z in zip(records, zeros):
-            X = np.vstack([x for x, _ in fr.lagged_chunks([rec], s, [z])]) if len(rec) > L else None
+            if len(rec) <= L:  # check_records refuses such a record before any fit
+                raise DataError(f"{rec.source}: {len(rec)} samples, not more than the largest lag {L}")
+            X = np.vstack([x for x, _ in fr.lagged_chunks([rec], s, [z])])
             P = fr.term_columns(X, proc_terms)
             yv = rec.y.reshape(len(rec), -1)[L:, output]
             blocks.append((P, yv, len(rec)))

@@ -84,30 +84,27 @@ def best_linear_approximation(
     Parameters
     ----------
     realisations : sequence of (u, y)
-        One pair of 1-D arrays per realisation (phase realisation of the multisine), same length and period.
+        One pair of 1-D arrays per phase realisation, same length and period.
     fs : float
         Sampling rate [Hz].
-    periods : int
-        Periods in each record; ``drop`` leading periods are left out as transient. ``periods - drop >= 2``
-        is needed for the noise variance and the detection-line test.
+    periods, drop : int
+        Periods in each record and leading periods left out as transient; ``periods - drop >= 2`` for the noise
+        variance and the detection-line test.
     lines : array_like of int, optional
-        Excited lines (DFT indices of one period), one array for every realisation or a list of one array
-        per realisation; default: found per
-        realisation from its input spectrum (``threshold_db`` below its strongest line). G_BLA is given at
-        the lines excited in every realisation; each realisation's own non-excited lines serve as its
-        detection lines (random detection lines may differ between realisations).
+        Excited lines (DFT indices of one period), one array or one per realisation; default: found per realisation
+        within ``threshold_db`` of its strongest line. G_BLA is given at the lines excited in every realisation; each
+        realisation's own non-excited lines are its detection lines.
     alpha : float
         False-alarm probability of the detection-line test.
     detrend : int
-        Degree of the slow drift removed from u and y, fitted to the period means
-        (:func:`sysid.linear.frf.period_spectra`); 0: none. A drift would otherwise raise every detection line.
+        Degree of the slow drift removed from u and y, fitted to the period means; 0: none (a drift raises every
+        detection line).
 
     Returns
     -------
     BLA
-        ``G`` (G_BLA), ``var_noise``, ``var_total``, ``var_distortion`` (NaN when ``M == 1``) at ``f_hz``,
-        ``nonlinearity`` = {``verdict``, ``odd_db``, ``even_db``, ...} from :func:`detect_nonlinearity`,
-        ``detection`` (per detection line: ``f_hz``, ``kind``, ``level``, ``noise``) and ``info``.
+        ``G``, ``var_noise``, ``var_total``, ``var_distortion`` (NaN when ``M == 1``) at ``f_hz``, ``nonlinearity``
+        (:func:`detect_nonlinearity`), ``detection`` (per detection line) and ``info``.
     """
     if len(realisations) == 0:
         raise DataError("BLA: no realisation given")

@@ -1,44 +1,26 @@
-"""Output-error model with a reverberation path (registry id ``oe-echo``): a transfer function whose denominator
-holds one round trip of an echo, fitted on the simulation error.
+"""Output-error model with a reverberation path (registry id ``oe-echo``), fitted on the simulation error.
 
 Model, one input, one output::
 
-    y(t) = B(q) / A(q) · u(t − nk) + e(t),      A(q) = F(q) − q^{−τ} C(q)
+    y(t) = B(q) / A(q) · u(t − nk) + e(t),      A(q) = F(q) − q^{−τ} C(q),   C(q) = Σ_{k=−w}^{w} c_k q^{−k}
 
-with B(q) = b1 + … + b_nb q^{−nb+1}, F(q) = 1 + f1 q⁻¹ + … + f_nf q^{−nf} (the direct path's resonances) and
-C(q) = Σ_{k=−w}^{w} c_k q^{−k}, so that
+so that B/A = (B/F) · Σ_n (q^{−τ} C/F)^n: the direct arrival followed by every echo, each one round trip τ
+[samples] later and once more through C/F — a transmission through a fluid between two reflecting plates
+(physics notes B.6; dissertation §3.2), whose round trip (≈ 900 samples at 6.75 MHz over 100 mm of water) no
+dense polynomial of practical order holds.
 
-    B/A = (B/F) · 1/(1 − q^{−τ} C/F) = (B/F) · Σ_n (q^{−τ} C/F)^n:
+From the estimation data (:func:`echo_lags`): τ is the quefrency of the largest real-cepstrum peak of log|Ĝ|
+above ``min_echo_lag`` (Bogert, Healy & Tukey 1963; Ĝ the H1 FRF over the band where the input has ≥ 1 % of
+its peak power), no echo below ``echo_snr`` × the cepstrum's median; nk is the first arrival of the impulse
+response's envelope less nb/8 samples.
 
-the direct arrival followed by every echo, each one round trip τ [samples] later and once more through C/F (the
-reflections at both ends of the path, which share the stack's resonances F). This is the structure of a
-transmission through a fluid between two reflecting plates (physics notes B.6, reverberation orders; the
-dissertation's §3.2 channel), where one round trip (≈ 900 samples at 6.75 MHz over 100 mm of water) is far
-longer than anything a dense polynomial of practical order can hold.
+Estimation: B, F by simplified refined IV (:func:`sysid.linear.pem_init.sriv`, Ljung §7.6), C by ridge least
+squares on the equation error F·y − B·u = q^{−τ}C·y, the whole structure by further SRIV iterations, then every
+parameter by Levenberg–Marquardt on the free-run error with the analytic Jacobian (Ljung eq. 10.42), the first
+``max_lag_`` measured outputs as initial conditions.
 
-Chosen from the estimation data (:func:`echo_lags`), none of it hand-picked:
-
-- the round trip τ: the quefrency of the largest peak of the real cepstrum of log|Ĝ| (Ĝ the H1 FRF,
-  :func:`sysid.linear.frf.frf_welch`,
-  from the first to the last frequency where the input's power is ≥ 1 % of its peak) above
-  ``min_echo_lag`` — the cepstral echo detection of Bogert, Healy & Tukey (1963): an echo at lag τ puts a ripple of
-  period 1/τ on log|G|. No echo term when that peak is below ``echo_snr`` times the cepstrum's median (then the model is
-  an OE of long delay);
-- the delay nk: the first arrival — the lag after which the envelope of the impulse response (the inverse
-  transform of Ĝ at the excited frequencies) stays above the midpoint in dB between its median and its peak
-  up to the peak — less nb/8 samples of margin.
-
-Estimation: B and F by the simplified refined IV method (:func:`sysid.linear.pem_init.sriv`, Ljung §7.6), C by ridge
-least squares on that model's equation error F·y − B·u = q^{−τ}C·y, then the whole structure by further SRIV
-(Steiglitz–McBride) iterations with the echo lags among the instrumented output lags, then every parameter by
-Levenberg–Marquardt (``scipy.optimize.least_squares``) on the free-run simulation error with the analytic Jacobian (each
-column is a regressor filtered by 1/A, Ljung eq. 10.42). The simulation takes the first ``max_lag_`` measured outputs as
-initial conditions (as the polynomial models do) and the residual starts after them.
-
-Stability: F keeps its roots inside the unit circle and |C(e^{iω})/F(e^{iω})| < 1 at every frequency (checked on a
-grid of ``GRID`` points, with the margin ``LOOP_MARGIN``). By Rouché's theorem A = F − q^{−τ}C then has as many
-roots outside the unit circle as F: none, so A is stable without factoring a polynomial of degree τ + w. A step
-that leaves this set is refused (the residual returns a large constant), as in :mod:`sysid.linear.pem`.
+Stability: F's roots inside the unit circle and |C/F| < ``LOOP_MARGIN`` on a grid of ``GRID`` frequencies; by
+Rouché's theorem A = F − q^{−τ}C then has no root outside the unit circle. A step leaving that set is refused.
 """
 
 from __future__ import annotations
@@ -77,7 +59,7 @@ def echo_lags(records: Sequence[Record], min_echo_lag: int = 50, echo_snr: float
     from sysid.linear.frf import frf_welch
 
     rec = max(records, key=len)
-    u, y = rec.u.reshape(-1), rec.y.reshape(-1)
+    u, y = rec.u.reshape(-1), rec.output.reshape(-1)
     n = u.size
     nper = 1 << int(np.floor(np.log2(max(n // 2, 16))))
     fr = frf_welch(u, y, 1.0, nperseg=nper)
@@ -163,7 +145,7 @@ class EchoOE(Identifier):
 
     def _structure(self, records: list[Record]) -> dict[str, Any]:
         nb, nf, w = int(self.nb), int(self.nf), int(self.echo_width)
-        found = None
+        found: dict[str, Any] = {}
         if self.nk is None or self.echo_lag is None:
             found = echo_lags(records, int(self.min_echo_lag), float(self.echo_snr))
         nk = int(self.nk) if self.nk is not None else max(found["onset"] - nb // 8, 0)
@@ -261,7 +243,7 @@ class EchoOE(Identifier):
         n_par = nb + nf + s["n_echo"]
         check_records(records, L, n_par + 1, self.name)
         us = [r.u.reshape(-1) for r in records]
-        ys = [r.y.reshape(-1) for r in records]
+        ys = [r.output.reshape(-1) for r in records]
 
         b0, f0 = sriv(us, ys, nb, nf, nk)
         c0 = np.zeros(s["n_echo"])
@@ -293,7 +275,7 @@ class EchoOE(Identifier):
 
         def jac(theta):
             b, f, c, a = self._polys(theta, s)
-            runs = last["runs"] if np.array_equal(last.get("theta"), theta) else None
+            runs = last["runs"] if "theta" in last and np.array_equal(last["theta"], theta) else None
             if runs is None:
                 runs = [self._run(b, a, u_, y_, L) for u_, y_ in zip(us, ys)]
             blocks = []
@@ -385,9 +367,9 @@ class EchoOE(Identifier):
         if not hasattr(self, "theta_"):
             raise ConfigError(f"{self.name}: model is not fitted (call fit first)")
         check_prediction(self, record, horizon)
-        u, y = record.u.reshape(-1).astype(float), record.y.reshape(-1).astype(float)
+        u, y = record.u.reshape(-1).astype(float), record.output.reshape(-1).astype(float)
         yhat = self._run(self.b_, self.a_, u, y, min(self.max_lag_, u.size))
-        return stop_at_divergence(self, yhat).reshape(record.y.shape)
+        return stop_at_divergence(self, yhat).reshape(record.output.shape)
 
     def frequency_response(self, f_hz: Any, fs: float) -> dict[str, np.ndarray]:
         """G(e^{iωT}) = B/A at ``f_hz`` [Hz] for the sampling rate ``fs`` [Hz] (delay included)."""

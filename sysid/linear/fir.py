@@ -1,42 +1,25 @@
 """Least-squares FIR model (registry id ``fir``): the reference a practitioner fits first.
 
-Model (Ljung, *System Identification*, 2nd ed., §4.2, eq. 4.46: the finite-impulse-response structure, ARX with
-A = 1), for every output o and inputs i = 1 … m::
+Model (Ljung, *System Identification*, 2nd ed., §4.2, eq. 4.46: ARX with A = 1), per output o, inputs i::
 
     y_o(t) = Σ_i Σ_{k=0}^{nb−1} h_{o,i}(k) u_i(t − nk − k) + e_o(t)
 
-estimated by linear least squares over the samples t ≥ nk + nb − 1 of each record (no past input is assumed).
-Its free run, k-step and one-step predictions are the same (no output feedback), so it can never diverge.
+by linear least squares over t ≥ nk + nb − 1 of each record. Free run, k-step and one-step predictions are the
+same (no output feedback): it never diverges.
 
-Normal equations without the N × m·nb regressor matrix: with the parameters in lag-major order (lag 0 of every
-input, then lag 1, …), each block of G = ΦᵀΦ holds G_ab(i, j) = Σ_t u_a(t − i) u_b(t − j) over the fitting window
-L ≤ t < N; its first row and column are cross-correlations (``scipy.signal.correlate``, by FFT for long records)
-and the rest follows from the shift recursion
+Normal equations without the regressor matrix: each block G_ab(i, j) = Σ_t u_a(t − i) u_b(t − j) has
+cross-correlations (``scipy.signal.correlate``) as its first row and column and follows from the shift recursion
+G_ab(i+1, j+1) = G_ab(i, j) + u_a(L−1−i) u_b(L−1−j) − u_a(N−1−i) u_b(N−1−j): O(N log N + (m·nb)²) work. G + λI
+(λ = ``JITTER`` × mean diagonal, raised while Cholesky fails) is factored once; the leading block of its factor
+serves every smaller tap count.
 
-    G_ab(i+1, j+1) = G_ab(i, j) + u_a(L−1−i) u_b(L−1−j) − u_a(N−1−i) u_b(N−1−j),
-
-so the work is O(N log N + (m·nb)²) and the memory O((m·nb)²), whatever N (70 000 samples, 2 000 taps: seconds).
-G + λI (λ = ``JITTER`` × mean diagonal, raised ×100 while the Cholesky factor fails: a band-limited input leaves
-G singular outside its band) is factored once, G = LLᵀ. The leading block of L is the Cholesky factor of the
-leading block of G, i.e. of the normal equations of a FIR with fewer taps: one factor serves every tap count.
-
-Tap count (``nb=None``, the default): the last ``HOLDOUT`` of each estimation record is held out; FIRs with nb on a
-geometric grid (ratio ``GRID_RATIO``) up to ``max_order`` — at most a quarter of the fitting part — are fitted on
-the rest and scored by the NRMSE of their free run on the held-out samples (the FIR simulation needs only the input,
-whose past is known); the smallest nb within ``TOLERANCE`` of the best (or within the NRMSE's standard deviation on
-a short hold-out) is kept (the rule of :mod:`sysid.linear.order`), and the model is refitted with it on all the data. A
-choice on the last grid point is flagged (``order_search["corner"]``): the record is too short for the system's
-memory, or ``max_order`` too small.
-
-Ridge (``ridge=None`` with the taps chosen): a band-limited input determines the taps only inside its band, and
-plain least squares fills the rest with large taps that cancel on the excited band (measured: a multisine over
-3–300 Hz at 1 kHz, 1059 taps, the largest tap 1.2e3 at lag 1052 where the true impulse response is below 1). For
-the chosen tap count the relative ridges of ``RIDGE_GRID`` (λ/mean diagonal of G, i.e. Tikhonov regularisation
-that damps the directions the input barely excites) are scored on the same hold-out and the largest within the
-tolerance of the best is kept: on that record 1e-2 (the grid's largest: a cap, so that the in-band taps keep their
-size), largest tap 2.0 at lag 2 (true: 1.9 at lag 2), validation R² 0.9681 against 0.9682.
-MATLAB's ``impulseest`` regularises its FIR by default for the same reason. Given ``nb`` without ``ridge`` is plain
-least squares; ``ridge`` (a number ≥ 0) sets λ/mean diagonal.
+Tap count (``nb=None``): FIRs on a geometric grid (``GRID_RATIO``) up to ``max_order`` are fitted without the last
+``HOLDOUT`` of each record and scored by the free-run NRMSE there; the smallest within ``TOLERANCE`` of the best
+is kept (the rule of :mod:`sysid.linear.order`), refitted on all data; a choice on the grid's end is flagged
+(``order_search["corner"]``). Ridge (``ridge=None`` with chosen taps): a band-limited input fixes the taps only in
+its band, so the relative ridges of ``RIDGE_GRID`` are scored on the same hold-out and the largest within the
+tolerance kept (as MATLAB's ``impulseest`` regularises by default). Given ``nb`` without ``ridge``: plain least
+squares; a number ``ridge`` ≥ 0 sets λ/mean diagonal. Measurements: docs/linear-identification.md.
 """
 
 from __future__ import annotations

@@ -214,21 +214,12 @@ def frf_periodic(
     threshold_db: float = EXCITATION_DB,
     detrend: int = 1,
 ) -> FRF:
-    """FRF of a periodic record (multisine) of ``periods`` periods, averaged per line over the periods.
+    r"""FRF of a periodic record (multisine) of ``periods`` periods, averaged per line over the periods.
 
-    With :math:`U^{[p]}(k), Y^{[p]}(k)` the DFT of period ``p`` (``p = drop+1 .. P``, ``P' = P - drop`` used)
-    (Pintelon & Schoukens 2012, eqs. 2-36/2-37):
-
-    .. math::
-        \\hat U(k) = \\frac{1}{P'}\\sum_p U^{[p]}(k),\\quad \\hat\\sigma^2_{\\hat Y}(k) = \\frac{1}{P'(P'-1)}
-        \\sum_p |Y^{[p]}(k) - \\hat Y(k)|^2,\\quad \\hat G(k) = \\hat Y(k)/\\hat U(k)
-
-    and the first-order variance of :math:`\\hat G` (eq. 2-40, noise on input and output, correlated):
-
-    .. math::
-        \\hat\\sigma^2_{\\hat G} = |\\hat G|^2\\left(\\frac{\\hat\\sigma^2_{\\hat Y}}{|\\hat Y|^2}
-        + \\frac{\\hat\\sigma^2_{\\hat U}}{|\\hat U|^2}
-        - 2\\,\\mathrm{Re}\\frac{\\hat\\sigma^2_{\\hat Y\\hat U}}{\\hat Y\\,\\overline{\\hat U}}\\right).
+    With :math:`U^{[p]}(k), Y^{[p]}(k)` the DFT of period ``p`` of the :math:`P'` periods used (Pintelon & Schoukens
+    2012, eqs. 2-36/2-37, 2-40): :math:`\hat G(k) = \hat Y(k)/\hat U(k)` of the period means, with the sample
+    variances :math:`\hat\sigma^2_{\hat Y} = \frac{1}{P'(P'-1)}\sum_p |Y^{[p]} - \hat Y|^2` (and of U, and their
+    covariance) giving the first-order variance of :math:`\hat G` for correlated input and output noise (eq. 2-40).
 
     Parameters
     ----------
@@ -236,21 +227,19 @@ def frf_periodic(
         The record, exactly ``periods`` periods long.
     fs : float
         Sampling rate [Hz]; line ``k`` lies at ``k * fs / n0`` with ``n0`` samples per period.
-    periods : int
-        Number of periods in the record.
-    drop : int
-        Leading periods to leave out (transient of a system started at rest).
+    periods, drop : int
+        Periods in the record, and leading periods left out (the transient of a start at rest).
     lines : array_like of int, optional
-        Excited line indices (e.g. ``info['excited_bins']`` of :func:`sysid.signals.multisine`); default:
-        every line whose input amplitude is within ``threshold_db`` dB of the largest.
+        Excited lines (e.g. ``info['excited_bins']`` of :func:`sysid.signals.multisine`); default: every line within
+        ``threshold_db`` dB of the strongest input line.
     detrend : int
-        Degree of the drift removed from u and y before the analysis (:func:`period_spectra`); 0: none.
+        Degree of the drift removed from u and y first (:func:`period_spectra`); 0: none.
 
     Returns
     -------
     FRF
-        At the excited lines: ``f_hz``, ``G``, ``std`` (std of the complex G; NaN with one period used),
-        ``lines``; ``info`` has ``period_samples``, ``periods_used``, ``var_Y`` and ``var_U``.
+        At the excited lines ``f_hz``, ``G``, ``std`` (of the complex G; NaN with one period), ``lines``; ``info``:
+        ``period_samples``, ``periods_used``, ``var_Y``, ``var_U``.
     """
     u, y = _siso(u, y)
     fs = float(fs)

@@ -1,32 +1,21 @@
 """Delay estimation and order selection for the linear identifiers (``arx``, ``oe``, ``bj``, ``n4sid``).
 
-- :func:`delay_estimate` (MATLAB's ``delayest`` in spirit): a least-squares FIR model with lags 0 … M per input
-  (Ljung, *System Identification*, 2nd ed., §7.3), M reaching the data's memory; the delay of input i is the largest
-  k ≤ ``max_delay`` such that dropping its first j taps, for every j ≤ k, does not raise the residual sum of squares
-  significantly (F test of the nested least-squares models at level ``alpha``; Seber & Lee, *Linear Regression
-  Analysis*, §4.3). A joint test, unlike per-tap t-ratios, still works for band-limited inputs, whose individual FIR
-  taps are poorly determined while their sum is not (measured: Wiener–Hammerstein input, every |t| < 1). The normal
-  equations come from :mod:`sysid.linear.fir` (no regressor matrix), so memory is O(M²) whatever N.
-- :func:`order_table`: fit an identifier over a grid of orders and score each fit by the information criteria on the
-  estimation data (AIC = N ln V + 2p, BIC = N ln V + p ln N, V the mean squared one-step prediction error; Ljung
-  §16.4, eq. 16.33) and by the free-run error on validation data (cross-validation, §16.5) — the table a
-  practitioner reads; :func:`plot_order_table` draws it.
-- :func:`select_arx_orders`, :func:`select_oe_orders`, :func:`select_n4sid_order`: what ``arx``/``armax``,
-  ``oe``/``bj`` and ``n4sid`` do when run without orders — hold out the last ``HOLDOUT`` of each estimation record,
-  fit each order of the grid on the rest, score its free run on the held-out samples (NRMSE), and take the smallest
-  order whose hold-out NRMSE is within 1 % (``sysid.linear.fir.TOLERANCE``) of the best (or within the NRMSE's own
-  standard deviation on a short hold-out, :func:`sysid.linear.fir.holdout_tolerance`). Searches use the first
-  ``SEARCH_MAX_SAMPLES``
-  of each record (the chosen order is then fitted on all of it), which bounds their cost. The system's memory is
-  measured first (:func:`reference_fir`: the least-squares FIR whose tap count is chosen on the same hold-out,
-  :mod:`sysid.linear.fir`): its hold-out NRMSE is the level a linear model of the right order reaches. The search stops
-  early (``PATIENCE`` grid points without improvement) only once a candidate is within ``REF_MARGIN_R2`` (in R² = 1
-  − NRMSE²) of that FIR — a lightly damped system's low orders can all simulate badly, so a plateau there is no
-  reason to stop — and otherwise runs to the end of the grid (``max_order``). A choice on the last grid point
-  (``corner``) and a best candidate still short of the FIR (``below_reference``) are flagged with an
-  :class:`OrderSearchWarning`. The table (one row per order) is the model's ``order_table_`` (JSON
-  ``order_selection``), the rest (criterion, grid, corner, FIR reference, memory) its ``order_search_`` (JSON
-  ``order_search``).
+- :func:`delay_estimate` (MATLAB's ``delayest`` in spirit): a least-squares FIR of lags 0 … M per input (Ljung,
+  *System Identification*, 2nd ed., §7.3); the delay of input i is the largest k ≤ ``max_delay`` such that
+  dropping its first j ≤ k taps raises the residual sum of squares not significantly (F test of nested models
+  at level ``alpha``; Seber & Lee, §4.3). A joint test still works for band-limited inputs, whose single taps
+  are poorly determined while their sum is not. Normal equations from :mod:`sysid.linear.fir`: O(M²) memory.
+- :func:`order_table`: an identifier over a grid of orders, each fit scored by AIC and BIC on the estimation data
+  (Ljung §16.4, eq. 16.33) and by the free-run error on validation data (§16.5); :func:`plot_order_table`.
+- :func:`select_arx_orders`, :func:`select_oe_orders`, :func:`select_n4sid_order`: what the identifiers do without
+  orders — each order of the grid fitted without the last ``HOLDOUT`` of each record (its first
+  ``SEARCH_MAX_SAMPLES``), its free run scored there (NRMSE), the smallest order within ``TOLERANCE`` of the best
+  kept (or within the NRMSE's own std on a short hold-out). The reference is the system's memory, measured
+  first (:func:`reference_fir`, the FIR chosen on the same hold-out); the search stops early (``PATIENCE``) only
+  once a candidate is within ``REF_MARGIN_R2`` of it, since a lightly damped system's low orders can all simulate
+  badly. A choice on the grid's end (``corner``) or short of the FIR (``below_reference``) raises an
+  :class:`OrderSearchWarning`. The table is the model's ``order_table_`` (JSON ``order_selection``), the rest its
+  ``order_search_`` (JSON ``order_search``).
 """
 
 from __future__ import annotations

@@ -4,33 +4,20 @@ Model (Ljung, *System Identification*, 2nd ed., §4.2, eq. 4.40/4.41), one outpu
 
     y(t) = Σ_i B_i(q)/F_i(q) u_i(t − nk_i) + C(q)/D(q) e(t)
 
-with B_i(q) = b1 + b2 q⁻¹ + … + b_nb q^{−nb+1} (so u_i(t − nk_i) is multiplied by b1), F_i(q) = 1 + f1 q⁻¹ + …,
-C(q) = 1 + c1 q⁻¹ + …, D(q) = 1 + d1 q⁻¹ + … (MATLAB's convention). Output error (OE) is C = D = 1.
+in MATLAB's convention (B_i = b1 + b2 q⁻¹ + …, F_i, C, D monic); OE is C = D = 1.
 
-Estimation minimises V(θ) = Σ ε(t, θ)² with the prediction error (eq. 4.43, 7.12)
-ε(t) = D/C · [y(t) − Σ_i B_i/F_i u_i(t − nk_i)] by scipy's Levenberg–Marquardt (``least_squares(method="lm")``)
-with the analytic Jacobian (§10.2, eq. 10.42): each column is a regressor filtered by the model's filters,
+Estimation minimises Σ ε(t, θ)², ε = D/C · [y − Σ_i B_i/F_i u_i(t − nk_i)] (eq. 4.43, 7.12), by
+Levenberg–Marquardt with the analytic Jacobian (§10.2, eq. 10.42: each column a regressor through the model's
+filters, from zero initial conditions). F_i, C, D keep their roots inside the unit circle: initial values are
+reflected (r → 1/r̄) and a step to an unstable polynomial is refused.
 
-    ∂ε/∂b_ik = −D/(C F_i) u_i(t − nk_i − k + 1),   ∂ε/∂f_ik = D/(C F_i) x_i(t − k),
-    ∂ε/∂c_k = −ε(t − k)/C,                           ∂ε/∂d_k = v(t − k)/C,
+Initialisation (§7.6): per input the simplified refined IV (Steiglitz–McBride with instruments from the
+simulated output), several inputs by back-fitting; BJ then fits C/D to the OE residual by Hannan–Rissanen.
 
-with x_i = B_i/F_i u_i(t − nk_i) and v = y − Σ x_i. Filters start from zero initial conditions.
-Stable predictors: every F_i, C and D keeps its roots inside the unit circle — the initial values are reflected
-(root r → 1/r̄), and a Levenberg–Marquardt step to a polynomial with a root on or outside the circle is refused
-(the residual returns a large constant, so the step is rejected and the damping grows).
-
-Initialisation (§7.6, "instrumental variables"): per input channel the simplified refined IV (SRIV, Steiglitz–
-McBride with instruments from the simulated output): ARX least squares, then iterations in which the data are
-prefiltered by 1/F and the regressors' output lags are instrumented by the model's own noise-free simulation;
-several inputs by back-fitting (each channel on what the others leave). BJ then fits C/D to the OE residual by
-Hannan–Rissanen (long AR → innovations → least squares of D v = C ê).
-
-Uncertainty: P = σ̂² (JᵀJ)⁻¹ with σ̂² = V/(N − p) (eq. 9.17/9.18); valid for OE when the disturbance is white
-and for BJ when its noise model is right. Orders left as ``None`` are chosen by :mod:`sysid.linear.order` (hold-out
-free-run error over a grid), ``nk=None`` by :func:`sysid.linear.order.delay_estimate`; both are reported.
-Prediction: free run x = Σ B_i/F_i u_i with the initial filter state fitted by least squares to the first
-``max_lag_`` samples (the polynomial models copy those samples likewise); k-step (§3.2, eq. 3.31)
-ŷ(t|t−k) = y − W_k·(y − x), W_k = H̄_k D/C, H̄_k the first k impulse-response terms of H = C/D (OE: ŷ = x).
+Uncertainty: P = σ̂² (JᵀJ)⁻¹, σ̂² = V/(N − p) (eq. 9.17/9.18), valid for OE under white disturbance and for BJ
+with the right noise model. Orders left ``None`` are chosen by :mod:`sysid.linear.order`, ``nk=None`` by
+:func:`sysid.linear.order.delay_estimate`. Prediction: free run x = Σ B_i/F_i u_i from the initial filter state
+fitted to the first ``max_lag_`` samples; k-step (§3.2, eq. 3.31) ŷ(t|t−k) = y − W_k·(y − x), W_k = H̄_k D/C.
 """
 
 from __future__ import annotations
@@ -89,14 +76,15 @@ class _PolyPEM(Identifier):
     def _resolve_orders(self, records: list[Record]) -> dict[str, Any]:
         m = records[0].n_inputs
         nk = _orders(self.nk, m, "nk")
-        chosen = {}
+        chosen: dict[str, Any] = {}
         if nk is None:
             from sysid.linear.order import delay_estimate
 
             nk = [int(v) for v in delay_estimate(records)]
             chosen["nk"] = nk
         nb, nf = _orders(self.nb, m, "nb"), _orders(self.nf, m, "nf")
-        nc = nd = 0
+        nc: int | None = 0
+        nd: int | None = 0
         if self._noise:
             nc = self.nc if self.nc is not None else None
             nd = self.nd if self.nd is not None else None
@@ -112,25 +100,25 @@ class _PolyPEM(Identifier):
             nc, nd = self._choose_noise_orders(records, nb, nf, nk, nc, nd)
             chosen.update(nc=nc, nd=nd)
         for k, v in (("nc", nc), ("nd", nd)):
-            if int(v) < 0 or int(v) != v:
+            if v is None or int(v) < 0 or int(v) != v:
                 raise ConfigError(f"{self.name}: {k} must be a non-negative integer, got {v!r}")
         if sum(nb) == 0:
             raise ConfigError(f"{self.name}: nb = 0 for every input leaves no input dynamics to estimate")
-        return {"nb": nb, "nf": nf, "nk": nk, "nc": int(nc), "nd": int(nd), "chosen": chosen}
+        return {"nb": nb, "nf": nf, "nk": nk, "nc": int(nc or 0), "nd": int(nd or 0), "chosen": chosen}
 
     def _choose_noise_orders(self, records, nb, nf, nk, nc, nd):
         """nc = nd by BIC of the Hannan–Rissanen ARMA fit to the OE residual, over 0..4."""
         bs, fs = self._init_g(records, nb, nf, nk)
         vs = [self._v(r, bs, fs, nk) for r in records]
         n = sum(v.size for v in vs)
-        best = None
+        best = (np.inf, 0, 0)
         for k in range(0, 5):
             cc = nc if nc is not None else k
             dd = nd if nd is not None else k
             c, d = hannan_rissanen(vs, cc, dd)
             e = np.concatenate([lfilter(d, c, v) for v in vs])
             bic = n * np.log(max(float(e @ e) / n, 1e-300)) + (cc + dd) * np.log(n)
-            if best is None or bic < best[0]:
+            if bic < best[0] or k == 0:
                 best = (bic, cc, dd)
         return best[1], best[2]
 
@@ -138,7 +126,7 @@ class _PolyPEM(Identifier):
     def _init_g(self, records, nb, nf, nk):
         m = records[0].n_inputs
         us = [r.u.reshape(len(r), -1) for r in records]
-        ys = [r.y.reshape(-1) for r in records]
+        ys = [r.output.reshape(-1) for r in records]
         bs = [np.zeros(nb[i]) for i in range(m)]
         fs = [np.ones(nf[i] + 1) for i in range(m)]
         X = [np.zeros((len(r), m)) for r in records]
@@ -197,7 +185,7 @@ class _PolyPEM(Identifier):
             c, d = hannan_rissanen([self._v(r, bs, fs, o["nk"]) for r in records], o["nc"], o["nd"])
         theta0 = np.concatenate([np.concatenate([bs[i], fs[i][1:]]) for i in range(len(bs))] + [c[1:], d[1:]])
         us = [r.u.reshape(len(r), -1) for r in records]
-        ys = [r.y.reshape(-1) for r in records]
+        ys = [r.output.reshape(-1) for r in records]
         n_res = sum(len(r) for r in records)
         penalty = 1e3 * (max(float(np.std(np.concatenate(ys))), 1e-300) + float(np.max(np.abs(np.concatenate(ys)))))
 
@@ -318,7 +306,7 @@ class _PolyPEM(Identifier):
                     zi[j] = 1.0
                     basis.append((i, j, lfilter(bb, fs[i], np.zeros(L), zi=zi)[0]))
         zis = [np.zeros(s) for _, s in coeff]
-        if basis:
+        if basis and y is not None:  # basis is built only when y is given (L > 0)
             x0 = sum(lfilter(coeff[i][0], fs[i], u[:L, i]) for i in range(len(bs)))
             Phi = np.column_stack([b for *_, b in basis])
             z = np.linalg.lstsq(Phi, y[:L] - x0, rcond=None)[0]
@@ -334,7 +322,7 @@ class _PolyPEM(Identifier):
         self._check_fitted()
         check_prediction(self, record, horizon)
         u = record.u.reshape(len(record), -1)
-        y = record.y.reshape(-1)
+        y = record.output.reshape(-1)
         x = self._simulate(u, y)
         if horizon is None or not self._noise:
             yhat = x
@@ -344,7 +332,7 @@ class _PolyPEM(Identifier):
         yhat = np.array(yhat, float)
         L = min(self.max_lag_, len(y))
         yhat[:L] = y[:L]
-        return stop_at_divergence(self, yhat).reshape(record.y.shape)
+        return stop_at_divergence(self, yhat).reshape(record.output.shape)
 
     # ---- reporting
     def parameter_names(self) -> list[str]:
@@ -383,13 +371,15 @@ class _PolyPEM(Identifier):
             2 * np.pi * np.asarray(f_hz, float) / fs,
             self.cov_[np.ix_(idx, idx)],
         )
+        if std is None:  # tf_response_with_std returns it whenever a covariance is given
+            raise RuntimeError("no standard deviation from the parameter covariance")
         return {"f_hz": np.asarray(f_hz, float), "G": G, "std": std}
 
     def simulation_band(self, record: Record, n_draws: int = 100, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
         """Mean and std per sample of the free-run output over parameter draws from N(θ̂, P) (Monte Carlo)."""
         self._check_fitted()
         u = record.u.reshape(len(record), -1)
-        y = record.y.reshape(-1)
+        y = record.output.reshape(-1)
         idx = [j for j, (kd, _, _) in enumerate(self.layout_) if kd in ("b", "f")]
 
         def sim(th_g):

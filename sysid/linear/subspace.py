@@ -1,38 +1,23 @@
 """Subspace identification of MIMO state-space models, PO-MOESP with a memory-bounded QR (registry id ``n4sid``).
 
-Model: x(t+1) = A x(t) + B u(t), y(t) = C x(t) + D u(t) + v(t) (an output-error state-space model; ``predict``
-simulates it, so one-step and free-run predictions coincide).
+Model: x(t+1) = A x(t) + B u(t), y(t) = C x(t) + D u(t) + v(t), an output-error state-space model (``predict``
+simulates it: one-step and free-run predictions coincide).
 
-Algorithm (past-output MOESP: Verhaegen, "Identification of the deterministic part of MIMO state space models
-given in innovations form from input-output data", Automatica 30(1), 1994; Verhaegen & Verhaegen & Verdult,
-*Filtering and System Identification*, 2007, §9.6). With i block rows and the block-Hankel matrices of future
-inputs U_f, past inputs and outputs Z_p = [U_p; Y_p] and future outputs Y_f, the LQ factorisation
+Algorithm (past-output MOESP: Verhaegen, Automatica 30(1), 1994; Verhaegen & Verdult, *Filtering and System
+Identification*, 2007, §9.6): the LQ factorisation of [U_f; Z_p; Y_f] (future inputs, past inputs and outputs,
+future outputs; i block rows) gives the extended observability matrix Γ_i from the column space of L32; the
+order from its singular values (:func:`choose_order`, the last step by a factor ≥ 2; one candidate of
+:func:`sysid.linear.order.select_n4sid_order` when ``nx`` is not given); C as Γ_i's first block row, A from its
+shift invariance. B and D by least squares on Γ⊥ᵀ L31 L11⁻¹ = Γ⊥ᵀ H_i (``focus="subspace"``), or, by default
+(``focus="simulation"``, as MATLAB's n4sid), poles outside the unit circle reflected (``reflected_poles_``) and
+B, D by the linear least squares of the simulation error given A and C (modal regressors u_b/(q − λ_a)).
 
-    [U_f; Z_p; Y_f] = [[L11, 0, 0], [L21, L22, 0], [L31, L32, L33]] Q
+Memory: the Hankel matrix is never formed; R (L = Rᵀ) is accumulated by QR of [R; chunk] over chunks of
+``chunk`` rows (Golub & Van Loan, *Matrix Computations*, §6.5): O(chunk · 2i(m+l) + (2i(m+l))²) whatever N.
 
-gives the extended observability matrix Γ_i from the column space of L32 (SVD; the order n is chosen from its
-singular values by :func:`choose_order` — the last step by a factor ≥ 2 between neighbours — which is one candidate of
-the hold-out free-run search of :func:`sysid.linear.order.select_n4sid_order` when ``nx`` is not given), C as the
-first block
-row of Γ_i and A from its shift invariance (least squares). B and D follow linearly: with Γ⊥ the orthogonal
-complement of Γ_i and M = Γ⊥ᵀ L31 L11⁻¹ = Γ⊥ᵀ H_i (H_i the block-Toeplitz matrix of D, CB, CAB, …), column block
-c gives M_c = L_c D + [L_{c+1} … L_i] Γ_{i−c} B (L_c the c-th block column of Γ⊥ᵀ), solved by least squares
-(``focus="subspace"``). By default, poles outside the unit circle are reflected (λ → 1/λ̄, counted in
-``reflected_poles_``) and (``focus="simulation"``, as MATLAB's n4sid option of that name) B and D are
-then re-estimated by the linear least squares that minimises the simulation error given A and C — y is linear
-in (B, D) through modal regressors u_b/(q − λ_a), accumulated in chunks like R. On data from a non-linear or
-higher-order system the Toeplitz estimate can be far off (Wiener–Hammerstein benchmark, nx = 6: free-run test
-R² −38) where the least squares gives the best B, D for the identified poles.
-
-Memory: the Hankel matrix (≈ 2i(m+l) × N) is never formed. Its transpose is built in chunks of ``chunk`` rows
-and the triangular factor R (L = Rᵀ) is accumulated by QR of [R; chunk] (R-factor updating; Golub & Van Loan,
-*Matrix Computations*, §6.5), so memory is O(chunk · 2i(m+l) + (2i(m+l))²) whatever N.
-
-Uncertainty: the data are cut into ``segments`` consecutive parts with their own R factors; the estimate of the
-whole record uses all of them and the delete-one jackknife (Efron & Tibshirani, *An Introduction to the
-Bootstrap*, 1993, §11.2) re-estimates the model without each part in turn (a QR of the other parts' R factors:
-cheap). The jackknife spread gives the std of the poles (matched to the full estimate's poles), of the
-frequency response, and a band on the simulated output.
+Uncertainty: ``segments`` consecutive parts with their own R factors; the delete-one jackknife (Efron &
+Tibshirani 1993, §11.2) re-estimates the model without each part (a QR of the others' R factors) and its spread
+gives the std of the poles, of the frequency response, and a band on the simulated output.
 """
 
 from __future__ import annotations

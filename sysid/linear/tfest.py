@@ -96,7 +96,7 @@ def tfest(
     refine: bool = True,
     var: Any = None,
 ) -> TransferFunction:
-    """Fit ``B(z)/A(z)`` (``nb`` numerator coefficients after ``nk`` delays, ``na`` poles) to FRF data.
+    r"""Fit ``B(z)/A(z)`` (``nb`` numerator coefficients after ``nk`` delays, ``na`` poles) to FRF data.
 
     Parameters
     ----------
@@ -108,23 +108,19 @@ def tfest(
         Numerator coefficients (>= 1), denominator order (>= 0), input delay in samples (>= 0).
     weight : array_like, optional
         Non-negative weights :math:`W_k` (e.g. the input power spectrum, or ``1/var(G)``); default 1.
-    iterations : int
-        Sanathanan–Koerner iterations after Levy's start.
-    refine : bool
-        Minimise the weighted nonlinear criterion with :func:`scipy.optimize.least_squares` afterwards.
+    iterations, refine : int, bool
+        Sanathanan–Koerner iterations after Levy's start; then minimise the weighted nonlinear criterion
+        (:func:`scipy.optimize.least_squares`).
     var : array_like, optional
-        Variance of each (complex, circular) FRF value, e.g. ``var_total`` of a BLA or ``std**2`` of a
-        periodic FRF, assumed independent between the points. Gives the covariance of the parameters by the
-        sandwich formula :math:`H^{-1} J^T \\Sigma J H^{-1}` (:math:`J` the Jacobian of the weighted residuals,
-        :math:`H = J^TJ`, :math:`\\Sigma = \\mathrm{diag}(W_k\\sigma^2_k/2)` for the real and imaginary parts;
-        Pintelon & Schoukens 2012, §7.2): ``info['cov']`` ordered ``a_1..a_na, b_0..b_{nb-1}`` and
-        ``info['std_a']``, ``info['std_b']``; not given (None) when unstable poles had to be reflected.
+        Variance of each (circular, independent) FRF value, e.g. a BLA's ``var_total``: the parameters' covariance
+        by the sandwich :math:`H^{-1} J^T \Sigma J H^{-1}` (Pintelon & Schoukens 2012, §7.2) in ``info['cov']``
+        (order ``a_1..a_na, b_0..b_{nb-1}``), ``info['std_a']``, ``info['std_b']``; None when poles were reflected.
 
     Returns
     -------
     TransferFunction
-        ``b`` (length ``nk + nb``), ``a`` (length ``na + 1``), ``info`` with ``cost`` (weighted criterion
-        divided by the sum of the weights), ``reflected_poles`` and the orders.
+        ``b`` (length ``nk + nb``), ``a`` (length ``na + 1``), ``info`` with ``cost`` (weighted criterion over the
+        sum of the weights), ``reflected_poles`` and the orders.
     """
     f = np.asarray(f_hz, dtype=float).ravel()
     G = np.asarray(G, dtype=complex).ravel()

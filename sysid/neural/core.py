@@ -25,7 +25,10 @@ import numpy as np
 import torch
 from numba import njit
 
+from sysid.errors import ConfigError, DataError
+
 __all__ = [
+    "grad_of",
     "regressor_lag",
     "ACTIVATIONS",
     "LagData",
@@ -43,6 +46,14 @@ __all__ = [
 ACTIVATIONS = ("sigmoid", "tanh", "relu")
 ACT_CODE = {"relu": 0, "tanh": 1, "sigmoid": 2}
 PREBUILD_LIMIT = 40_000_000  # elements of Φ (160 MB in float32) above which rows are gathered per batch
+
+
+def grad_of(t: torch.Tensor) -> torch.Tensor:
+    """The gradient buffer of a trained tensor: allocated with the network (views of one flat buffer) and written
+    in place, so a missing one is a programming error."""
+    if t.grad is None:
+        raise RuntimeError("tensor has no gradient buffer")
+    return t.grad
 
 
 def regressor_lag(ny: int, nu: int, nk: int = 1) -> int:
@@ -146,8 +157,6 @@ class LagData:
             rows += t.size
             offset += n
         if not row_time:
-            from sysid.errors import DataError
-
             raise DataError(f"records too short for lag {self.lag}: need more than {self.lag} samples")
         u_all = np.concatenate(ucat)
         y_all = np.concatenate(ycat)
@@ -202,6 +211,8 @@ def least_squares_linear(
             )
             G = X.T @ X if G is None else G + X.T @ X
             b = X.T @ y[times] if b is None else b + X.T @ y[times]
+    if G is None or b is None:
+        raise DataError(f"no regressor row: every record is at most {lag} samples long")
     d = np.sqrt(np.maximum(np.diag(G), 1e-300))
     theta = np.linalg.lstsq(G / d[:, None] / d[None, :], b / d[:, None], rcond=None)[0] / d[:, None]
     return theta[:-1].T.copy(), theta[-1].copy()
@@ -291,8 +302,10 @@ class FlatMLP(torch.nn.Module):
     @torch.no_grad()
     def freeze_linear(self) -> None:
         """Keep the linear bypass fixed in training: its gradient stays zero (so RMSprop does not move it)."""
+        if self.L is None:
+            raise ValueError("freeze_linear needs a network built with linear=True")
         self.L.requires_grad_(False)
-        self.L.grad.zero_()
+        grad_of(self.L).zero_()
 
     @torch.no_grad()
     def mse_grad_(self, x: torch.Tensor, y: torch.Tensor) -> torch.Tensor:
@@ -318,9 +331,9 @@ class FlatMLP(torch.nn.Module):
         delta = diff.mul_(2.0 / diff.numel())
         if self.L is not None:  # d loss / d L = delta^T x (the bypass is linear in L)
             if self.L.requires_grad:
-                torch.mm(delta.t(), x, out=self.L.grad)
+                torch.mm(delta.t(), x, out=grad_of(self.L))
             else:
-                self.L.grad.zero_()
+                grad_of(self.L).zero_()
         for i in range(last, -1, -1):
             W, b = self.layers[i]
             torch.mm(delta.t(), acts[i], out=W.grad)
@@ -338,7 +351,7 @@ class FlatMLP(torch.nn.Module):
 
     def check_grad_storage(self) -> bool:
         """True while every layer's gradient still lives in ``flat.grad`` (autograd accumulates in place)."""
-        g = self.flat.grad
+        g = grad_of(self.flat)
         leaves = [W for W, _ in self.layers] + ([self.L] if self.L is not None else [])
         return all(
             W.grad is not None and W.grad.untyped_storage().data_ptr() == g.untyped_storage().data_ptr() for W in leaves
@@ -360,11 +373,11 @@ class RMSprop:
             param.grad = torch.zeros_like(param)
 
     def zero_grad(self) -> None:
-        self.p.grad.zero_()
+        grad_of(self.p).zero_()
 
     @torch.no_grad()
     def step(self) -> None:
-        g = self.p.grad
+        g = grad_of(self.p)
         p = self.p.data
         self.v.mul_(self.alpha).addcmul_(g, g, value=1.0 - self.alpha)  # eq. 2-25
         torch.add(self.v, self.eps, out=self._tmp).sqrt_()
@@ -537,7 +550,9 @@ def k_step_mlp(
     U = lag_matrix_np(un, nu, times, first=nk)
     Ymeas = lag_matrix_np(yn, ny, times).reshape(times.size, ny, ny_ch)
     hist: list[np.ndarray] = []  # hist[-i] = P_{j-i} over the full time axis (measured before lag)
-    P = None
+    if k < 1:
+        raise ConfigError(f"k-step prediction needs k >= 1, got {k}")
+    P = yn
     with np.errstate(over="ignore", invalid="ignore"):
         for j in range(k):
             Yreg = Ymeas.copy()

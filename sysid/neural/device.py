@@ -6,8 +6,7 @@ Training data, parameters and optimiser state all live on the chosen device; pre
 the CPU in float64 from the trained weights, so a model trained on a GPU predicts the same on any machine.
 
 Threads: the networks of the dissertation are small (a 4 × 25 MLP has 2501 weights), so one CPU thread per
-process is fastest — extra threads only add synchronisation per tiny matrix product (measured: one epoch on
-80 000 samples takes 0.35 s with 1 thread and 5 s with 2 threads on a shared 2-core machine).
+process is fastest: extra threads only add synchronisation per tiny matrix product (docs/identifiers.md).
 ``PIEZOTWIN_TORCH_THREADS`` overrides the choice.
 """
 

@@ -63,8 +63,9 @@ class NeuralNARXBase(TorchFileSave, Identifier):
     name = "narx-mlp-base"
     hidden: Sequence[int]
     loss_history_: list[float]
-    selected_epoch_: int | list[int] | None  # one per ensemble member after an ensemble fit
-    selection_r2_: float | list[float] | None
+    # one per ensemble member after an ensemble fit (None for a member that selected nothing)
+    selected_epoch_: int | list[int | None] | None
+    selection_r2_: float | list[float | None] | None
     _tail: Record | None
 
     # ------------------------------------------------------------------ checks
@@ -146,6 +147,8 @@ class NeuralNARXBase(TorchFileSave, Identifier):
         """Free-run R² (normalised units; R² is scale-free) on the held-out tail, after the initial conditions."""
         from sysid.evaluation.metrics import r2
 
+        if self._tail is None:
+            raise RuntimeError("no held-out tail: select_tail is 0")
         ((un, yn),) = normalised_pairs([self._tail], self.normaliser_)
         yh, div = free_run_mlp(
             net.weights_np(),
@@ -184,7 +187,7 @@ class NeuralNARXBase(TorchFileSave, Identifier):
             torch.manual_seed(seed)
             gen = torch.Generator().manual_seed(seed)
             net = FlatMLP(data_t.n_in, self.hidden, ny, self.activation, gen, device, dtype=dtype, linear=self.linear)
-            if self.linear:
+            if lin is not None:
                 # The bypass is the least-squares ARX of the same regressor, kept fixed: the network (output layer
                 # started at zero) learns the correction. Training L as well (quick data, free-run RMSE, L trained
                 # vs fixed): one-step training worse on all three datasets tried (cascaded tanks 0.71 vs 0.67 V,
@@ -338,8 +341,9 @@ class NeuralNARXBase(TorchFileSave, Identifier):
                 stacklevel=2,
             )
         out = self.normaliser_.inverse_y(yhat)
-        out[:lag] = _as2d(record.y)[:lag]  # initial conditions copied exactly, not through the scaling round trip
-        return out[:, 0] if record.y.ndim == 1 else out
+        y = record.output
+        out[:lag] = _as2d(y)[:lag]  # initial conditions copied exactly, not through the scaling round trip
+        return out[:, 0] if y.ndim == 1 else out
 
     # ------------------------------------------------------------------ description / persistence
     def describe(self) -> dict[str, Any]:

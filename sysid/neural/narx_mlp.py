@@ -44,45 +44,29 @@ class NARXMLP(NeuralNARXBase):
     Parameters
     ----------
     ny, nu : int
-        Output and input lags (eq. 2-9/2-14), 0 … 1024 (ny ≥ 1). Table 4.1: 10 and 10. The older names
-        ``n_y``, ``n_u`` are accepted as deprecated aliases (:data:`sysid.config.ALIASES`).
+        Output and input lags (eq. 2-9/2-14), 0 … 1024, ny ≥ 1 (Table 4.1: 10, 10; ``n_y``, ``n_u`` deprecated).
     hidden : list of int
         Hidden layer widths, e.g. ``[25, 25, 25, 25]`` (``--set hidden=25-25-25-25``).
     activation : str
-        ``sigmoid`` (eq. 2-11), ``tanh`` (2-12) or ``relu`` (2-13) in every hidden layer; linear output.
+        ``sigmoid``, ``tanh`` or ``relu`` (eq. 2-11 … 2-13) in every hidden layer; linear output.
     lr, batch_size, epochs : float, int, int
-        RMSprop learning rate η (eq. 2-26), input/output pairs per mini-batch and passes over the data
-        (Table 4.1: 1e-4, 128, 100).
+        RMSprop step η (eq. 2-26), pairs per mini-batch, passes over the data (Table 4.1: 1e-4, 128, 100).
     seed : int
-        Seeds the initial weights and the batch order (deterministic on the CPU).
-    device : str
-        ``auto`` (CUDA when present), ``cpu`` or ``cuda``.
+        Seeds the initial weights and the batch order; ``device``: ``auto`` (CUDA when present), ``cpu``, ``cuda``.
     nk : int
-        Input delay in samples: the input regressors are u(t-nk) … u(t-nk-nu+1). The dissertation's eq. 2-14
-        is nk = 1 (default); a transmission channel with a time of flight of d samples wants nk ≈ d, so that
-        nu covers the response instead of the dead time.
+        Input delay [samples]: regressors u(t-nk) … u(t-nk-nu+1). Eq. 2-14 is nk = 1; a channel with a time of
+        flight of d samples wants nk ≈ d.
     linear : bool
-        Linear bypass: ŷ = L φ + MLP(φ) (φ the regressor of eq. 2-14), with L and the output bias started at the
-        least-squares ARX of the same lags (L kept fixed in training) and the network's output layer at zero, so
-        training starts from the ARX model and learns a nonlinear correction. False (default): the dissertation's
-        plain network.
+        Linear bypass ŷ = L φ + MLP(φ), L and the output bias started (and L kept) at the least-squares ARX of the
+        same lags and the output layer at zero: training learns a correction of the ARX model.
     select_tail : float
-        Fraction (0 … 0.5) of the last estimation record held out of training; the weights kept are those,
-        initial or after any epoch, with the best free-run R² on that tail (``selected_epoch_`` 0 = the initial
-        weights, i.e. the ARX model with ``linear``). 0 (default): no hold-out, the last epoch is kept.
+        Share (0 … 0.5) of the last estimation record held out; the weights kept, initial or after any epoch, are
+        those with the best free-run R² there (``selected_epoch_``). 0: the last epoch is kept.
     ensemble : int
-        Number k of networks averaged (1 … 64; default 1 = the single network of ``seed``). Member i is trained
-        exactly as a single model of seed ``seed·k + i`` (its own initial weights, batch order and, with
-        ``select_tail``, its own selected epoch: ``selected_epoch_`` becomes a list); the prediction is the
-        members' mean at every step — in free run the mean is fed back (one model, not k simulations). After
-        training the members are merged into ONE network of hidden widths k·h with block-diagonal weights
-        (:func:`sysid.neural.core.merge_ensemble`), so prediction and saved files use the single-network code;
-        ``n_parameters_`` counts k × a member's parameters plus the linear bypass once, not the zero blocks.
-        Reduces the seed-to-seed spread of the free run at k times the training cost.
+        k networks (seeds ``seed·k + i``) averaged at every step, merged into one network of widths k·h with
+        block-diagonal weights (:func:`sysid.neural.core.merge_ensemble`): less seed-to-seed spread, k× the cost.
     dtype : str
-        Training precision, ``float32`` (default, fastest) or ``float64``. With float64 one-step training gives the
-        same weights on CPUs with different vector instruction sets to about 12 digits; simulation-error training
-        can amplify any rounding difference (see :mod:`sysid.neural.device`). Prediction is float64 either way.
+        Training precision, ``float32`` or ``float64`` (:mod:`sysid.neural.device`); prediction is float64.
     """
 
     name = "narx-mlp"
@@ -124,37 +108,20 @@ class NARXMLP(NeuralNARXBase):
 
 
 class NARXMLPSim(NeuralNARXBase):
-    """The NARX-MLP trained by simulation (output) error over windows — the parallel configuration.
+    """The NARX-MLP trained by simulation (output) error over windows: the parallel configuration.
 
-    Extra parameters (the rest as :class:`NARXMLP`):
+    Each epoch draws ``ceil(rows / window)`` windows at random starts, each started from the measured
+    ``y(s-1) … y(s-ny)``. Extra parameters (the rest as :class:`NARXMLP`; ``select_tail``, ``linear``,
+    ``ensemble`` and ``dtype`` as there, epoch 0 being the pretrained net):
 
     window : int
-        Steps T of each simulated window; the loss is the MSE of the T free-run predictions and is
-        back-propagated through the recursion (truncated BPTT).
+        Steps T of each window; the loss is the MSE of the T free-run predictions, back-propagated through the
+        recursion (truncated BPTT).
     batch_size : int
         Windows simulated in parallel per gradient step.
-    pretrain_epochs : int
-        One-step (series-parallel) epochs before the simulation-error epochs (0 to start from scratch).
-    pretrain_lr : float
-        Learning rate of the one-step pretraining.
-    pretrain_batch_size : int or None
-        Mini-batch of the one-step pretraining (None: ``batch_size``). With the same epochs, learning rate and
-        batch as a :class:`NARXMLP` of the same seed, the pretrained net IS that one-step model (warm start).
-    select_tail : float
-        Fraction (0 … 0.5) of the last estimation record held out of training; the weights kept are those,
-        after pretraining or after any simulation-error epoch, with the best free-run R² on that tail (early
-        stopping / model selection on estimation data only; ``selected_epoch_`` 0 means the pretrained net).
-        0 (default): no hold-out, the last epoch is kept.
-    linear : bool
-        Linear bypass started at the least-squares ARX, as for :class:`NARXMLP`.
-    ensemble : int
-        k networks (seeds ``seed·k + i``) trained alike and averaged, merged into one network, as for
-        :class:`NARXMLP`.
-    dtype : str
-        Training precision ``float32`` (default) or ``float64``, as for :class:`NARXMLP`.
-
-    Each epoch draws ``ceil(rows / window)`` window starts at random positions (so that on average every
-    sample is a target once per epoch); each window starts from the measured ``y(s-1) … y(s-ny)``.
+    pretrain_epochs, pretrain_lr, pretrain_batch_size : int, float, int or None
+        One-step epochs before the simulation-error ones (0: none), their step size and batch (None:
+        ``batch_size``). With a :class:`NARXMLP`'s epochs, step, batch and seed, the pretrained net is that model.
     """
 
     name = "narx-mlp-sim"

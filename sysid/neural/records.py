@@ -37,7 +37,7 @@ def normalised_pairs(recs: Sequence[Record], norm: Normaliser | None) -> list[tu
     out = []
     for r in recs:
         u = norm.transform_u(r.u) if norm is not None else r.u
-        y = norm.transform_y(r.y) if norm is not None else r.y
+        y = norm.transform_y(r.output) if norm is not None else r.output
         out.append((_as2d(np.asarray(u, dtype=float)), _as2d(np.asarray(y, dtype=float))))
     return out
 

@@ -106,6 +106,12 @@ class _Net(torch.nn.Module):
         y = self.readout(out)
         return y if self.arx is None else y + self.linear_path(x0, useq)
 
+    def arx_layer(self) -> torch.nn.Linear:
+        """The ARX path, present when the network was built with ``linear`` > 0."""
+        if self.arx is None:
+            raise ValueError("the network has no ARX path (built with linear=0)")
+        return self.arx
+
     def linear_path(self, x0: torch.Tensor, useq: torch.Tensor) -> torch.Tensor:
         """Free-run simulation of the ARX path over the window: ŷ_lin (B, T, ny) for targets t0 … t0+T-1."""
         k, ny, nu = self.k, self.ny, self.nu
@@ -116,8 +122,9 @@ class _Net(torch.nn.Module):
         ufull = torch.cat([upast, useq], dim=1)  # ufull[:, m] = u(t0-k+m)
         win = ufull.unfold(1, k, 1)[:, :T]  # (B, T, nu, k): u(t0+j-k) … u(t0+j-1)
         ureg = win.flip(-1).permute(0, 1, 3, 2).reshape(B, T, k * nu)  # lag-major u(t0+j-1) … u(t0+j-k)
-        W = self.arx.weight
-        v = torch.matmul(ureg, W[:, k * ny :].t()) + self.arx.bias  # input part and intercept, all steps at once
+        arx = self.arx_layer()
+        W = arx.weight
+        v = torch.matmul(ureg, W[:, k * ny :].t()) + arx.bias  # input part and intercept, all steps at once
         Ay = W[:, : k * ny]
         hist = x0[:, : k * ny]  # measured y(t0-1) … y(t0-k)
         if ny == 1 and T >= FILTER_MIN_STEPS and v.dtype == torch.float64 and not torch.is_grad_enabled():
@@ -146,8 +153,9 @@ class _Net(torch.nn.Module):
     @torch.no_grad()
     def init_linear(self, L: np.ndarray, c: np.ndarray) -> None:
         """ARX path at (L, c) (from :func:`least_squares_linear`), readout at zero: ŷ = the ARX simulation."""
-        self.arx.weight.copy_(torch.as_tensor(L, dtype=self.arx.weight.dtype))
-        self.arx.bias.copy_(torch.as_tensor(c, dtype=self.arx.bias.dtype))
+        arx = self.arx_layer()
+        arx.weight.copy_(torch.as_tensor(L, dtype=arx.weight.dtype))
+        arx.bias.copy_(torch.as_tensor(c, dtype=arx.bias.dtype))
         self.readout.weight.zero_()
         self.readout.bias.zero_()
 
@@ -261,7 +269,7 @@ class RNNStateSpace(SequenceIdentifier):
             # tanks 2.1 V trained vs 0.65 V fixed; piezo 3.5 vs 1.09 um): Adam's steps of about lr per weight
             # move the poles of a finely sampled ARX that far.
             net.init_linear(*least_squares_linear(pairs, int(self.linear), int(self.linear)))
-            net.arx.requires_grad_(False)
+            net.arx_layer().requires_grad_(False)
         net = net.to(device=device, dtype=dtype)
         n_rows = sum(max(0, u.shape[0] - lag) for u, _ in pairs)  # targets with a full encoder window
         res = train_simulation(

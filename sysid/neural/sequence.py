@@ -109,8 +109,9 @@ class SequenceIdentifier(TorchFileSave, Identifier):
         """A normalised prediction (N, ny) in the record's units and shape; the first ``max_lag_`` samples, which
         start the model, are the measurement."""
         out = self.normaliser_.inverse_y(yhat)
-        out[: self.max_lag_] = _as2d(record.y)[: self.max_lag_]
-        return out[:, 0] if record.y.ndim == 1 else out
+        y = record.output
+        out[: self.max_lag_] = _as2d(y)[: self.max_lag_]
+        return out[:, 0] if y.ndim == 1 else out
 
     # ------------------------------------------------------------------ description / persistence
     def _training_summary(self) -> dict[str, Any]:

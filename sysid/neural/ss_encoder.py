@@ -51,33 +51,26 @@ class SSEncoder(SequenceIdentifier):
     Parameters
     ----------
     nx : int
-        State dimension (paper: 4–8 on Silverbox).
+        State dimension (the paper: 4–8 on Silverbox).
     ny, nu : int
-        Past outputs and inputs read by the encoder (the papers' n_a, n_b; named as the lags of every other
-        identifier); ``max_lag_ = max(ny, nu)`` samples start every free run.
+        Past outputs and inputs read by the encoder (the papers' n_a, n_b); ``max_lag_ = max(ny, nu)`` samples start
+        every free run.
     f_hidden, h_hidden, e_hidden : list of int
-        Hidden widths of f, h and the encoder (paper: one layer of 64 tanh units each); ``0`` / ``[]``: linear.
+        Hidden widths of f, h and the encoder (the paper: one layer of 64 tanh units each); ``0`` / ``[]``: linear.
     activation : str
-        ``tanh`` (paper), ``relu`` or ``sigmoid``.
-    feedthrough : bool
-        Output map h(x, u) instead of h(x).
+        ``tanh`` (the paper), ``relu`` or ``sigmoid``; ``feedthrough``: output map h(x, u) instead of h(x).
     T : int
-        Simulated steps per section of the truncated simulation loss (the papers use sections of tens of steps).
-    batch_size, epochs, lr : int, int, float
-        Sections per Adam step, passes over all sections, Adam step size.
-    lr_min : float or None
-        Final Adam step size of a cosine decay from ``lr`` over ``epochs`` (``None``: constant ``lr``). The
-        validation simulation error oscillates by a factor 2–3 between epochs at a constant 1e-3; the decay
-        lets the last epochs settle.
-    val_fraction : float
-        Last fraction (0 … 0.5) of the last estimation record held out for early stopping (0: no hold-out, the
-        last epoch's weights are kept).
-    patience : int
-        Epochs without a better validation RMSE before stopping (0: run all ``epochs``).
+        Simulated steps per section of the truncated simulation loss (the papers: tens of steps).
+    batch_size, epochs, lr, lr_min : int, int, float, float or None
+        Sections per Adam step, passes over all sections, step size, and the last step size of a cosine decay
+        over ``epochs`` (``None``: constant; at a constant 1e-3 the validation error oscillates 2–3× between epochs).
+    val_fraction, patience : float, int
+        Last share (0 … 0.5) of the last record held out for early stopping (0: the last epoch is kept), and epochs
+        without a better validation RMSE before stopping (0: none).
     clip : float
         Gradient-norm clipping (0: off).
     seed, device :
-        Seeds weights and section order; ``auto`` | ``cpu`` | ``cuda`` (see :mod:`sysid.neural.device`).
+        Seeds weights and section order; ``auto`` | ``cpu`` | ``cuda`` (:mod:`sysid.neural.device`).
     """
 
     name = "ss-encoder"

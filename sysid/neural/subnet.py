@@ -100,7 +100,7 @@ class SubnetModel(torch.nn.Module):
 
         With one hidden layer in f (the paper's default) the input's share of f's first layer and of its linear
         map is computed for all T steps at once before the loop, so each step is three matrix products and one
-        activation (the arithmetic of :class:`BypassMLP`, reordered; measured 1.5-2x faster on a CPU)."""
+        activation (the arithmetic of :class:`BypassMLP`, reordered)."""
         f, nx, T = self.f, self.nx, useq.shape[1]
         out = []
         if f.net is not None and len(f.net) == 3:

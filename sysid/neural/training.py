@@ -375,6 +375,8 @@ def train_records(
         raise ValueError(f"window={window} must exceed the warm-up ({warmup}) and fit in a record's training part")
     gen = torch.Generator().manual_seed(int(seed))
     opt, sched = _optimiser(model, lr, epochs, lr_min)
+    if sched is None:  # lr_min is a float here: the cosine schedule is always on
+        raise ValueError("train_records needs lr_min")
     res = BlockTrainResult()
     c0, w0 = time.process_time(), time.perf_counter()
     best = BestWeights()

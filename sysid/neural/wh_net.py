@@ -57,36 +57,29 @@ class WHNet(SequenceIdentifier):
     Parameters
     ----------
     channels : int
-        Outputs of G1 = inputs of F = outputs of F = inputs of G2 (paper: a few to 16).
+        Outputs of G1 = inputs and outputs of F = inputs of G2 (the paper: a few to 16).
     hidden : list of int
         Hidden widths of the static network F (``0`` / ``[]``: F is affine).
-    nb, na : int
-        Numerator coefficients b_0 … b_{nb-1} and denominator coefficients a_1 … a_na of every pair of G1
-        (and of the linear path).
-    nb2, na2 : int or None
-        The same for G2 (``None``: as G1).
+    nb, na, nb2, na2 : int, int, int or None, int or None
+        Numerator b_0 … b_{nb-1} and denominator a_1 … a_na of every pair of G1 and of the linear path, and of G2
+        (``None``: as G1).
     nk : int
-        Input delay of G1 and the linear path in samples (0: direct feedthrough b_0 u(t)).
-    linear : bool
-        Add a linear path G0(q) u in parallel with the block chain.
+        Input delay of G1 and the linear path [samples] (0: direct feedthrough); ``linear``: add G0(q) u in parallel.
     activation : str
-        ``tanh`` (paper), ``relu`` or ``sigmoid``.
+        ``tanh`` (the paper), ``relu`` or ``sigmoid``.
     warmup : int
-        Leading samples of every record treated as the zero-initial-state transient: out of the training loss,
-        copied from the measurement in predictions (``max_lag_``). Set it to the benchmark's initialisation window.
+        Leading samples of every record treated as the zero-start transient: out of the loss, copied from the
+        measurement in predictions (``max_lag_``); the benchmark's initialisation window.
     epochs, lr, lr_min : int, float, float
-        Full-batch Adam steps (one per pass over the estimation records) and the cosine schedule's start and end
-        step sizes.
-    val_fraction : float
-        Last fraction (0 … 0.5) of the last estimation record held out for early stopping (0: keep the last weights).
-    patience : int
-        Epochs without a better hold-out RMSE before stopping (0: run all ``epochs``).
+        Adam epochs and the cosine schedule's first and last step sizes.
+    val_fraction, patience : float, int
+        Last share (0 … 0.5) of the last record held out for early stopping, and epochs without a better hold-out
+        RMSE before stopping (0: none).
     window, batch : int
-        ``window = 0``: full batch, one Adam step per epoch on the whole records. ``window > warmup``: each epoch
-        takes as many steps as cover the training samples once, each on ``batch`` sections of ``window`` samples
-        drawn at random (seeded by ``seed``) and simulated from rest, their first ``warmup`` samples out of the loss.
+        0: one full-batch step per epoch; ``window > warmup``: per epoch as many steps as cover the training samples,
+        each on ``batch`` random sections of ``window`` samples simulated from rest.
     seed, device :
-        Seeds the initial weights; ``auto`` | ``cpu`` | ``cuda`` (see :mod:`sysid.neural.device`).
+        Seeds the initial weights; ``auto`` | ``cpu`` | ``cuda`` (:mod:`sysid.neural.device`).
     """
 
     name = "wh-net"

@@ -1,46 +1,27 @@
 """Polynomial nonlinear state-space model started from the best linear approximation (registry id ``pnlss``).
 
-Model (Paduart, Lauwers, Swevers, Smolders, Schoukens & Pintelon, "Identification of nonlinear systems using
-polynomial nonlinear state space models", Automatica 46 (2010) 647-656, eq. 3)::
+Model (Paduart et al., "Identification of nonlinear systems using polynomial nonlinear state space models",
+Automatica 46 (2010) 647-656, eq. 3)::
 
     x(t+1) = A x(t) + B u(t) + E ζ(x(t), u(t)),      y(t) = C x(t) + D u(t) + F η(x(t), u(t))
 
-with ζ every monomial of z = [x; u] of degree 2 … ``degree`` and η those of degree 2 … ``output_degree``, after
-the constant 1 when ``constant`` (an output offset; :mod:`sysid.nonlinear.pnlss_sim`). The procedure is the paper's §4:
+with ζ the monomials of z = [x; u] of degree 2 … ``degree``, η those of degree 2 … ``output_degree`` (after the
+constant 1 with ``constant``; :mod:`sysid.nonlinear.pnlss_sim`). The procedure is the paper's §4:
 
-1. **Linear start** (§4.1): the linear part (A, B, C, D) is the subspace model of the data
-   (:class:`sysid.linear.subspace.N4SID`, order ``nx``,
-   B and D by output-error least squares: the best linear simulation
-   for the identified poles, an estimate of the BLA's state-space form on non-periodic data; with ``constant``, of
-   the data less their means, the output's constant giving the mean output), E = F = 0 otherwise. The state
-   basis is then scaled so that every state of the linear simulation has unit RMS, and u, y are divided by their
-   RMS, so that the monomials of every degree are of order one.
-2. **Nonlinear optimisation** (§4.2): every parameter, and the initial state x(0) of every record, minimises the
-   simulation error Σ_t ‖y(t) − ŷ(t; θ)‖² (:func:`scipy.optimize.least_squares`, trust-region reflective or
-   Levenberg–Marquardt) with the exact Jacobian of the forward sensitivity recursion (eq. 18-20, compiled).
-   Several records are separate experiments, each with its own x(0). ``starts`` searches follow different
-   paths from the same start (the simulation error has local minima) and the lowest cost is kept, among the
-   searches that converged (met ``ftol``/``xtol``) when any did: a search cut by ``max_nfev`` in a flat valley
-   ends at a point that depends on the last bits of its start (cascaded tanks, nx 2, degree 3, 100 evaluations:
-   test 0.421 V with OpenBLAS's AVX2 kernels, 0.478 V with the generic ones; run to convergence, the two agree
-   to 1e-6), so it is kept only when no search converged, and ``optimisation_["converged"]`` says which. Costs
-   within ``COST_RTOL`` are a tie, kept in search order (cascaded tanks, nx 2, degree 2: both searches converge
-   to the same cost to 1e-11 at different parameters, and the last bit chose between them).
+1. **Linear start** (§4.1): (A, B, C, D) from the subspace model (:class:`sysid.linear.subspace.N4SID`, order
+   ``nx``; B and D by output-error least squares), E = F = 0; states scaled to unit RMS in the linear
+   simulation, u and y by their RMS, so that monomials of every degree are of order one.
+2. **Nonlinear optimisation** (§4.2): every parameter and each record's x(0) minimise the simulation error
+   (:func:`scipy.optimize.least_squares`) with the exact Jacobian of the forward sensitivities (eq. 18-20,
+   compiled). ``starts`` searches take different paths; the lowest cost among those that converged is kept
+   (a search cut by ``max_nfev`` ends where the last bits of its start lead), ties within ``COST_RTOL`` in
+   search order. A step whose simulation leaves ±``DIVERGENCE_FACTOR`` × max|y| is rejected; a result worse
+   than the linear start is never returned. With ``val_fraction`` the θ with the lowest hold-out RMSE is kept
+   and ``patience`` stops the search.
 
-Stability monitoring: a trial parameter vector whose simulation leaves ±``DIVERGENCE_FACTOR`` × max|y| (scaled
-units), or gives a non-finite value, gets the residual ``DIVERGED_RESIDUAL`` on every sample from the divergence
-on, so the step is rejected. A final θ worse than the linear start is never returned.
-
-Hold-out: with ``val_fraction`` > 0 the last fraction of the last record is left out of the cost; each evaluated
-θ is scored on it (free run continued from the estimation part), the θ with the lowest hold-out RMSE is kept and
-the search stops after ``patience`` evaluations without improvement (0: runs to ``max_nfev``).
-
-Prediction: a free run (no noise model, so every ``horizon`` gives the same output), from the initial state that
-fits the first ``max_lag_`` measured outputs by least squares (on the nonlinear free run, with the same Jacobian
-and a small ridge towards the mean initial state of the estimation records); those samples are copied from the
-measurement as for every identifier. With the input alone (no y) the run starts from the mean initial state of
-the estimation records (x = 0 is the state of rest only for data of zero mean; a record that starts at rest gives
-the state of rest).
+Prediction is a free run (every ``horizon`` alike) from the initial state fitted to the first ``max_lag_``
+measured outputs (least squares on the nonlinear free run, a small ridge towards the estimation records' mean
+initial state); without y, from that mean state. Measurements behind these choices: docs/identifiers.md.
 """
 
 from __future__ import annotations
@@ -86,29 +67,21 @@ class PNLSS(Identifier):
     ----------
     nx : int
         State dimension.
-    degree : int
-        Highest total degree of the state-equation monomials ζ of (x, u) (2 … degree; 1: linear state equation).
-    output_degree : int or None
-        Highest degree of the output-equation monomials η (``None``: ``degree``; 1: linear output equation).
+    degree, output_degree : int, int or None
+        Highest total degree of the monomials of (x, u) in the state equation (1: linear) and in the output
+        equation (``None``: ``degree``).
     max_nfev : int
         Most simulations of each search (0: the linear start is the model).
     xtol, ftol : float
         Relative step / cost tolerances of the search (scipy's ``least_squares``).
-    val_fraction : float
-        Last fraction (0 … 0.5) of the last record held out for model selection and early stopping.
-    patience : int
-        Evaluations without a better hold-out RMSE before the search stops (0: none; only with ``val_fraction``).
+    val_fraction, patience : float, int
+        Last share (0 … 0.5) of the last record held out for model selection, and evaluations without a better
+        hold-out RMSE before the search stops (0: none).
     starts : int
-        Searches from the linear start along different paths (:data:`SEARCHES`: trust-region reflective and
-        Levenberg–Marquardt, both scaled by the Jacobian's columns, then Levenberg–Marquardt unscaled), 1 … 3; the
-        lowest cost of those that converged is kept (of all, when none did). One search can stop in a local minimum
-        of the simulation error (18 noise-free systems of nx = 2, degree 2-3, 16 drawn at random and the 2 of the
-        tests: without the output constant the trust-region search stopped at an RMS of about 1e-3 of the output on
-        1, LM on 3, the two together on none; with it, the two together on 1, the degree-2 test system).
+        Searches from the linear start (:data:`SEARCHES`: trust-region reflective and Levenberg–Marquardt scaled
+        by the Jacobian's columns, then LM unscaled), 1 … 3: one search can stop in a local minimum.
     constant : bool
-        Add the constant 1 to η: an output offset (measured data keep their means; Silverbox, 20 000 estimation
-        samples, nx = 2, degree 3: multisine test 0.23 mV with it, 2.7 mV without). A constant in ζ too was
-        measured the same there and adds a shift of the state basis to the model's symmetries.
+        Add the constant 1 to η: an output offset (measured data keep their means).
     """
 
     name = "pnlss"

@@ -6,36 +6,22 @@ Model (:mod:`sysid.nonlinear.wh_blocks`)::
 
 The procedure (Sjöberg, Lauwers & Schoukens 2012, §2-3; Schoukens & Tiels 2017, §5.1):
 
-1. **BLA**: an output-error model B/F of orders ``nb``, ``nf``, delay ``nk`` (:class:`sysid.linear.pem.OE`) of the data.
-   For a Wiener–Hammerstein system driven by Gaussian noise the BLA is G1·G2 up to a gain (Bussgang), so its
-   poles and zeros are those of the two filters.
-2. **Best split**: every way of sharing the BLA's poles and zeros between G1 and G2 (conjugate pairs together,
-   at most 2^12 ways) is scored on the first ``split_samples`` samples: x = G1 u (scaled to unit RMS), the spline
-   f on knots at quantiles of x, and the spline's coefficients by linear least squares on G2[B_k(x)] (the model
-   is linear in them once the filters are fixed). The split with the lowest RMS residual is kept.
-3. **Refinement**: the spline's knots are placed again at quantiles of x over all the records, its coefficients
-   solved again, and every coefficient of B1, A1, f, B2, A2 minimises the simulation error Σ_t (y − ŷ)² by
-   Levenberg–Marquardt (:func:`scipy.optimize.least_squares`, MINPACK, columns scaled by the Jacobian) with the
-   exact Jacobian of :func:`sysid.nonlinear.wh_blocks.jacobian`. The gain exchanged between f and G2 (exact: c·α with
-   B2/α) is pinned by holding the largest coefficient of B2 at its start value. G1's gain is not exchanged
-   exactly (the knots do not scale with x), so B1 stays free: pinned too, on the quick 30 000 Wiener–Hammerstein
-   samples the first search stalled at 1.47 mV estimation RMS against 0.38 mV free, and the end point followed
-   the BLAS kernel set (test 0.313 / 0.296 mV Haswell / SkylakeX against 0.2804 / 0.2805 mV). A trial whose
-   simulation leaves the output bound (an unstable filter) is given a large residual, so the step is rejected;
-   a result worse than the start is never kept. Then ``extra_zeros`` numerator coefficients are appended to B1
-   and to B2 (zero, so the model is unchanged: freedom the BLA's order or the split could not give,
-   e.g. a zero of G2 when the best split gave every BLA zero to G1) and a second search starts from the first
-   one's end, after the knots are placed again. While x then leaves the knots' interval on the estimation data
-   (the searches move G1's gain, and outside it f is only its tangent), the knots are placed again and the search
-   repeated, at most ``RESTAGES`` times. On Wiener–Hammerstein 2009 both searches converge (about 190 + 300
-   evaluations, 2009 test 0.276 mV).
+1. **BLA**: an output-error model B/F (``nb``, ``nf``, ``nk``; :class:`sysid.linear.pem.OE`). Under Gaussian
+   excitation the BLA is G1·G2 up to a gain (Bussgang), so its poles and zeros are the two filters'.
+2. **Best split**: every sharing of the BLA's poles and zeros between G1 and G2 (conjugate pairs together, at
+   most 2^12) is scored on the first ``split_samples`` samples by the spline fitted by linear least squares
+   to G2[B_k(G1 u)] on knots at quantiles; the lowest RMS residual wins.
+3. **Refinement**: knots placed again over all records, then every coefficient of B1, A1, f, B2, A2 by
+   Levenberg–Marquardt on the simulation error with the exact Jacobian
+   (:func:`sysid.nonlinear.wh_blocks.jacobian`), B2's largest coefficient pinned (the gain f and G2 exchange
+   exactly). ``extra_zeros`` zero coefficients are then appended to B1 and B2 and a second search starts from
+   the first one's end; while x leaves the knots' interval the knots are placed again and the search
+   repeated (``RESTAGES``). Unstable trials are rejected; a result worse than the start is never kept.
 
-Several records are separate experiments, each simulated from rest with its first ``warmup`` samples out of the
-cost. Prediction is the free run from rest: an output-error model, so every ``horizon`` gives the same output;
-``max_lag_ = warmup`` leading samples are copied from the measurement (set ``warmup`` to the benchmark's
-initialisation window, 50 samples on Wiener–Hammerstein 2009, so the transient of the zero start is not scored).
-
-Single input, single output.
+Records are separate experiments, each simulated from rest, its first ``warmup`` samples out of the cost.
+Prediction is the free run from rest (every ``horizon`` alike), the first ``max_lag_ = warmup`` samples copied
+from the measurement (the benchmark's initialisation window: 50 on Wiener–Hammerstein 2009). Single input,
+single output. Measurements behind these choices: docs/identifiers.md.
 """
 
 from __future__ import annotations

@@ -123,6 +123,8 @@ def _recursive_residuals_impl(model: PolynomialModel, records, s, terms_all, the
     out = []
     for rec in records:
         _, e = sim.one_step(m, rec.u.reshape(len(rec), -1), rec.output.reshape(len(rec), -1))
+        if e is None:  # a model with e terms (NARMAX) always returns its residuals
+            raise RuntimeError("one-step prediction of a NARMAX model returned no residuals")
         out.append(e)
     model._compiled = None
     return out

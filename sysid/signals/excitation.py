@@ -70,58 +70,33 @@ def multisine(
     seed: int | None = None,
     return_info: bool = False,
 ):
-    r"""Multisine of eq. (2-1): :math:`u(t) = \sum_{k=1}^{n_f} A\cos(2\pi f_k t + \phi_k)`.
+    r"""Multisine of eq. (2-1), :math:`u(t) = \sum_{k=1}^{n_f} A\cos(2\pi f_k t + \phi_k)`, built by inverse FFT.
 
-    The lines lie on the DFT grid of one period :math:`T_0`, so that one period (or a whole number of them)
-    has an exactly line spectrum; the signal is built in the frequency domain and brought to the time domain
-    with one inverse real FFT (dissertation §2.2: "computationally easier to define those components in the
-    frequency domain and then use the inverse Fourier transform").
+    The lines lie on the DFT grid of one period :math:`T_0` and one inverse real FFT gives the time signal, so a
+    whole number of periods has an exactly line spectrum (dissertation §2.2).
 
     Parameters
     ----------
-    fs : float
-        Sampling rate [Hz].
-    duration : float, optional
-        Length of the returned signal [s]. Without ``resolution`` the period is ``duration / periods``.
-        With ``resolution`` the period is ``1/resolution`` and the signal is that period repeated and cut to
-        ``duration`` (which then need not be a whole number of periods: ``info['periodic']`` says so).
+    fs, duration, periods, resolution : float, float, int, float
+        Sampling rate [Hz], length [s], periods in it, line spacing :math:`1/T_0` [Hz] (``fs/resolution`` an
+        integer). The period is ``duration / periods``, or ``1/resolution`` repeated and cut to ``duration``
+        (``info['periodic']`` says whether that is whole periods); without ``duration``, ``periods/resolution``.
     band : (fmin, fmax)
-        Excited band [Hz], both ends included; ``fmax`` must lie below the Nyquist frequency ``fs/2``.
-        ``fmax=None`` means just below Nyquist. DC is never excited.
+        Excited band [Hz], ends included, ``fmax`` below ``fs/2`` (None: just below it). DC is never excited.
     components : int, optional
-        Number of lines :math:`n_f` taken from the grid in the band (spread evenly over the candidate
-        lines, always including the first and the last). Default: every candidate line. More components
-        than candidate lines is an error (choose a finer ``resolution`` or a longer period).
-        Detection lines (below) are removed from these.
-    resolution : float, optional
-        Line spacing :math:`1/T_0` [Hz]; ``fs/resolution`` must be an integer (samples per period).
+        Lines taken evenly from the candidates in the band, first and last included (default all of them).
     amplitude : float
-        Peak value of the signal (``max|u|``), or its RMS value when ``rms=True``.
+        Peak value ``max|u|``, or the RMS value when ``rms=True``.
     phase : {"random", "schroeder"}
-        ``random``: :math:`\phi_k` uniform in :math:`[0, 2\pi)` from ``seed``; ``schroeder``:
-        :math:`\phi_k = -k(k-1)\pi/n_f` with ``k = 1..n_f`` the component's rank (dissertation §2.2, [67]).
+        Uniform phases from ``seed``, or Schroeder's :math:`\phi_k = -k(k-1)\pi/n_f` (§2.2, [67]).
     grid : {"full", "odd", "odd-odd"}
-        Which grid lines (index :math:`m = f/\Delta f`) are candidates: all, odd :math:`m` only (even
-        nonlinear distortion falls on the empty even lines), or :math:`m = 1 \bmod 4` only ("odd-odd": odd
-        distortion of third order falls on :math:`m = 3 \bmod 4`, even distortion on even lines).
-    detection_fraction : float
-        Fraction in [0, 0.5] of the chosen lines left out at random (seeded) to detect odd nonlinear
-        distortion: the lines are split into consecutive blocks of ``round(1/detection_fraction)`` lines and
-        one line per block, picked at random, is not excited. The removed lines are ``info['detection_bins']``.
-    periods : int
-        Number of repeated periods when ``duration`` sets the period (``duration/periods`` per period) or
-        when no ``duration`` is given (length ``periods/resolution``).
-    seed : int, optional
-        Seed of the random phases and of the detection lines.
+        Candidate lines :math:`m = f/\Delta f`: all, odd (even distortion falls on empty lines), or
+        :math:`m = 1 \bmod 4` (odd third-order distortion falls on :math:`m = 3 \bmod 4`).
+    detection_fraction, seed : float, int
+        Share in [0, 0.5] of the lines left out, one at random per block, to detect odd distortion; the seed of
+        the phases and of those lines.
     return_info : bool
-        Also return a dict with ``crest_factor``, ``frequencies_hz`` (excited), ``excited_bins`` (line
-        indices :math:`m`, frequency :math:`m\Delta f`), ``detection_bins``, ``period_samples``,
-        ``resolution_hz``, ``periods`` (may be fractional), ``periodic``, ``n_components``, ``phases_rad``
-        and ``line_amplitude`` (the :math:`A` of eq. 2-1 after scaling).
-
-    Returns
-    -------
-    u : ndarray, or (u, info)
+        Also return a dict: crest factor, excited frequencies and bins, detection bins, period, ``periodic``, phases.
     """
     fs = positive("fs", fs)
     if phase not in PHASES:

@@ -1,35 +1,23 @@
-"""The linear chain H(f) = V_rx/V_oc of the piezoacoustic channel (physics notes B.1–B.3, B.8).
-
-Structure (everything a function of frequency, vectorised):
+"""The linear chain H(f) = V_rx/V_oc of the piezoacoustic channel (physics notes B.1–B.3, B.8), vectorised in f.
 
     V_oc ─R_s─ Tx PZT | epoxy | steel ║ fluid gap L ║ steel | epoxy | Rx PZT ─ Z_L → V_rx
 
-The fluid gap is written as its Fabry–Pérot series, which for plane waves is an identity of the 1-D chain:
+The fluid gap is written as its Fabry–Pérot series, an identity of the 1-D chain for plane waves:
 
     H = T_tx · R_v · Σ_n (R_tx R_rx)^n · e^{−jk(2n+1)L} · D((2n+1)L) · M_n  +  wall-echo terms  +  crosstalk
 
-- T_tx = p⁺/V_oc: forward pressure wave launched into a semi-infinite fluid by the driven Tx stack.
-- R_v = V_rx/p_inc: Rx voltage per incident pressure wave (its reflection R_rx included).
-- R_tx, R_rx: pressure reflection coefficients of the Tx stack (terminals loaded by R_s) and Rx stack (by Z_L)
-  seen from the fluid; n = 0 is the direct arrival, n ≥ 1 the inter-plate reverberations (2L/c apart).
-- D(z): aperture-dependent spreading, the coupling of two identical Gaussian modes a distance z apart,
-  D = (jω/(jω + ω_c))^m with ω_c = z c / w0² (m = 1/2 per transverse dimension of a rectangular face with
-  w0 = a·√(2/π) for a half-width a; m = 1 for a circular face with w0 = a/√2). These w0 match the far-field
-  on-axis amplitude of a uniform strip / piston pair (2a√(k/2πz) resp. ka²/2z), so D → 1 in the near field
-  (plane wave, the 70 × 25 mm plates at 100 mm lose 0.1 dB) and D → spherical/cylindrical spreading far away.
-  The phase of D is the Gouy phase. With D = 1 and all orders summed (``reverb_orders = −1``) the series is
-  the exact 1-D transfer-matrix chain (checked in tests).
-- M_n: misalignment (effect), lateral overlap × tilt phase-averaging factor (see :func:`misalignment_factor`).
-- Wall echo (effect): image path of length L_w = √(L² + (2w)²) off a side wall at lateral distance w:
-  a = R_wall · κ · D(L_w) · e^{−jkL_w}, delay (L_w − L)/c after the direct arrival; κ (``wall_coupling``) is
-  the fitted fraction of the beam reaching the wall path (edge waves / frame scattering: the far-field sinc
-  directivity of a 70 × 25 mm piston would put it below −60 dB; notes B.8 recommends fitting a_k). Or, as a
-  variant, a delayed copy of the whole received signal; either through a fitted first-order low-pass
-  (:func:`wall_echo_path`).
-- Crosstalk (effect): electrical coupling paths from the drive into the Rx node (Z_L ∥ Z_el,rx): the Tx
-  terminal voltage through a stray capacitance C_x, V_tx · Z_node/(Z_node + 1/(jωC_x)), plus an in-phase tap
-  g_r and a derivative tap τ_d·jω of V_oc (resistive / common-ground and capacitive-into-resistive or
-  inductive paths; :func:`crosstalk_path`).
+- T_tx = p⁺/V_oc, the wave launched into the fluid; R_v = V_rx/p_inc, the receiver's response; R_tx, R_rx the
+  stacks' reflection coefficients seen from the fluid (loaded by R_s, Z_L); n ≥ 1 the reverberations, 2L/c apart.
+- D(z) = (jω/(jω + ω_c))^m, ω_c = z c / w0²: the coupling of two Gaussian modes z apart (m = 1/2 per transverse
+  dimension of a rectangular face, w0 = a·√(2/π); m = 1 for a circular one, w0 = a/√2), matching the far-field
+  on-axis amplitude of a strip / piston pair, → 1 in the near field; its phase is the Gouy phase. With D = 1 and
+  every order (``reverb_orders = −1``) the series is the exact 1-D transfer-matrix chain (tests check it).
+- M_n: misalignment (effect), lateral overlap × tilt phase averaging (:func:`misalignment_factor`).
+- Wall echo (effect): the image path L_w = √(L² + (2w)²) off a side wall, a = R_wall · κ · D(L_w) · e^{−jkL_w}, κ
+  (``wall_coupling``) fitted (notes B.8: the far-field directivity of a 70 × 25 mm piston puts it below −60 dB),
+  or a delayed copy of the received signal, either through a first-order low-pass (:func:`wall_echo_path`).
+- Crosstalk (effect): the Tx terminal voltage through a stray capacitance C_x into the Rx node, plus an in-phase
+  tap g_r and a derivative tap τ_d·jω of V_oc (:func:`crosstalk_path`).
 - Amplifier bandwidth (first-order HP/LP) and ``output_gain`` multiply the whole.
 """
 

@@ -139,14 +139,14 @@ def fit_transducer(
 
     lo = np.array([1.2e-3, np.log(1e5), np.log(1e-4)])
     hi = np.array([2.6e-3, np.log(3e7), np.log(1e4)])
-    best = None
+    best: tuple[float, np.ndarray] = (np.inf, np.zeros(3))
     for tp in np.linspace(1.4e-3, 2.4e-3, 11):
         for zb in (1e6, 5e6, 15e6):
             x = np.array([tp, np.log(zb), 0.0])
             x[2] = -np.mean(residual(x)) / 20 * np.log(10)  # best gain for this cell
             x[2] = np.clip(x[2], lo[2], hi[2])
             cost = float(np.sum(residual(x) ** 2))
-            if best is None or cost < best[0]:
+            if cost < best[0]:
                 best = (cost, x)
     res = least_squares(residual, best[1], bounds=(lo, hi))
     fitted = build(res.x)

@@ -2,8 +2,7 @@
 
 A diagnosis simulates the same record thousands of times with one or two parameters changed (a pre-scan sweeps
 one field, a least-squares fit perturbs one at a time). Two parts of :meth:`CantileverTwin.simulate` depend on few
-of them and are cached here (measured on the 100 000-sample record of ``tests/perf/test_diagnose_long.py``:
-9 600 simulations, of which the FOH matrix exponential took 1.3 ms each and the drift trials' kernel runs 4 ms):
+of them and are cached here (their cost in docs/diagnosis.md, "Speed"):
 
 - the exact discretisation (Φ, G0, G1) of the linear part, a function of (A, B, h) only — the same for every
   simulation that changes no modal or sensor parameter (:func:`discretise`, an LRU of 64 systems);

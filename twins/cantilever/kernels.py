@@ -126,9 +126,8 @@ def expm_small(A: np.ndarray) -> np.ndarray:
 
     The argument is scaled by 2^-s so that its 1-norm is ≤ 1/4, the series is summed to 18 terms (truncation
     < 1e-24 relative), then squared s times (Moler & Van Loan 2003, "Nineteen dubious ways", method 3).
-    Used instead of ``scipy.linalg.expm`` for the 8 × 8 FOH matrix because on a loaded multi-core machine
-    SciPy's threaded LAPACK took ≈ 9 ms per call against ≈ 0.05 ms here; the tests check both agree to
-    1e-12.
+    Used instead of ``scipy.linalg.expm`` for the 8 × 8 FOH matrix: SciPy's threaded LAPACK is two orders of
+    magnitude slower per call on a loaded machine (docs/diagnosis.md); the tests check both agree to 1e-12.
     """
     A = np.array(A, dtype=float)
     # diagonal balancing by powers of 2 (Parlett & Reinsch): exp(D⁻¹AD) = D⁻¹exp(A)D, exact in floating point

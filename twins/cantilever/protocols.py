@@ -75,26 +75,19 @@ def thesis_multisine(options: dict[str, Any]) -> tuple[np.ndarray, float, dict[s
     if period < duration:
         period = duration
     n = int(round(fs * duration))
-    generator = "twins.cantilever.protocols.multisine_local"
-    try:  # the project's signal library (team signals) when present, else the local irfft version
-        from sysid.signals.excitation import multisine
-    except ImportError:
-        multisine = None
-    if multisine is not None:
-        u = multisine(
-            fs=fs,
-            duration=duration,
-            band=(1.0 / period, f_max),
-            components=n_comp,
-            resolution=1.0 / period,
-            amplitude=1.0,
-            phase="random",
-            seed=seed,
-        )
-        generator = "sysid.signals.multisine"
-    else:
-        x = multisine_local(fs, period, n_comp, f_max, seed)
-        u = np.tile(x, int(np.ceil(n / x.size)))[:n]
+    from sysid.signals.excitation import multisine
+
+    u = multisine(
+        fs=fs,
+        duration=duration,
+        band=(1.0 / period, f_max),
+        components=n_comp,
+        resolution=1.0 / period,
+        amplitude=1.0,
+        phase="random",
+        seed=seed,
+    )
+    generator = "sysid.signals.multisine"
     u = np.asarray(u, dtype=float)[:n]
     u = amp * u / np.max(np.abs(u))
     meta = {

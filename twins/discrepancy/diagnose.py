@@ -2,41 +2,23 @@
 
 ``diagnose(twin, data, val)`` runs these steps, each a function below with typed inputs and outputs:
 
-0. **Prepare** (:func:`_prepare`): split off a validation record that carries excitation and let the twin's
-   ranges follow the records (:mod:`.realdata`). **Saturation** (:func:`.features.saturation_rails`): where a
-   measured record sits exactly at its extreme value on a flat top while the given configuration predicts
-   beyond it, the instrument clipped (e.g. an 8-bit scope at ±50 V). Those samples are censored: every
-   prediction of that record is compared *clipped to the rails*, as the instrument would have shown it.
-   Without this, a validation record that clips leaves a residual made of the clipping (for the acoustic
-   twin's 0.4 V validation chirp 10.9 V RMS against 0.8 V of hidden crosstalk) that no candidate can explain
-   and that hides every small effect. The rails are detected once, with the configuration as given, and
-   reported under ``saturation``; rounding (quantisation) stays unpredictable.
-1. **Calibrate** (:func:`_calibrate`) the twin's current configuration (its ``CALIBRATION_PARAMS``) to the
-   estimation record, with the measurement-noise effect switched off so that the simulation is the
-   deterministic prediction; the parameters of the effects that are on stay as configured, so that a
-   mis-sized default shows as the gain of its re-test (:mod:`.defaults`).
-2. **Analyse** the residual ``e = y − ŷ`` on estimation and validation data (:func:`.trials.make_stage`,
-   :func:`.features.analyse`).
-3. **Trial every catalog effect** the configuration lacks (:func:`.candidates.round_trials`): add it, pre-scan each of
-   its parameters over its documented range plus the values the residual features suggest (:mod:`.prescan`),
-   then fit its parameters together with the core calibration parameters by free-run output error, and
-   re-simulate the validation record (:mod:`.trials`). The validation gain of the trial is the decisive
-   evidence; the signature score (:mod:`.evidence`) explains it in numbers and breaks ties. Effects that are on
-   are re-tested beside them.
-4. **Rank** (:mod:`.ranking`): significance (F-test, Bonferroni over the candidates, and a relative validation
-   NRMSE reduction of at least ``min_rel_gain``), order, the group the data cannot tell apart, confidence.
-   The relative-gain floor was kept: the acoustic crosstalk and even-order cases that stayed under it
-   (0.1–0.7 %) did so because the uncensored clipping of the validation record dominated the residual; with
-   the saturation step they gain 27–86 %.
-5. **Extend** (:func:`_extend`, :mod:`.rounds`): keep the leading cause if significant, repeat (at most
-   ``max_rounds``) until nothing significant remains; then revisit each added effect but the last with the
-   others in place, since a first-round leader can mimic the sum of two hidden effects (:func:`.rounds.revisit`).
-   Quantisation is judged by the lattice of the measured values alone.
-6. **Verdict** (:func:`_conclude`): test what is left for structure no catalog entry explains
-   (:func:`.unexplained.generic_residual_model`); the verdict is ``unexplained`` when the final residual stays
-   far above the noise measured from the data, else ``discrepancy`` with causes or ``none``. With
-   ``unexplained``, the hybrid twin (the final configuration plus a black-box remainder, :mod:`.hybrid`) is fitted
-   and its validation gain reported under ``hybrid``; the verdict and the causes stay as they are.
+0. **Prepare** (:func:`_prepare`): split off a validation record that carries excitation, let the twin's ranges
+   follow the records (:mod:`.realdata`), and find saturation rails (:func:`.features.saturation_rails`): where
+   a record sits exactly at its extreme on a flat top while the configuration predicts beyond it, every
+   prediction of it is compared clipped to the rails, as the instrument showed it.
+1. **Calibrate** (:func:`_calibrate`) the core parameters to the estimation record, noise off, the effects that
+   are on held at their configured sizes (a mis-sized default shows as the gain of its re-test, :mod:`.defaults`).
+2. **Analyse** the residual ``e = y − ŷ`` of both records (:func:`.trials.make_stage`, :func:`.features.analyse`).
+3. **Trial every catalog effect** the configuration lacks (:func:`.candidates.round_trials`): pre-scan its
+   parameters (:mod:`.prescan`), fit them with the core by free-run output error (:mod:`.trials`), re-simulate the
+   validation record. The validation gain is the evidence; the signature score (:mod:`.evidence`) explains it.
+4. **Rank** (:mod:`.ranking`): F-test (Bonferroni over the candidates) and a relative validation NRMSE reduction
+   of at least ``min_rel_gain``, the group the data cannot tell apart, the confidence.
+5. **Extend** (:mod:`.rounds`): keep a significant leader and repeat (``max_rounds``); then revisit each added
+   effect but the last, since a first-round leader can mimic the sum of two hidden effects.
+6. **Verdict** (:func:`_conclude`): ``unexplained`` when the final residual stays far above the noise measured
+   from the data (its structure described by :func:`.unexplained.generic_residual_model`, and with ``hybrid`` a
+   black-box remainder fitted, :mod:`.hybrid`), else ``discrepancy`` with causes or ``none``.
 
 :func:`run_diagnosis` returns the typed :class:`.result.Diagnosis`; :func:`diagnose` its dict view.
 """
@@ -120,9 +102,8 @@ def run_diagnosis(
 
     ``threads``: threads of the twin's compiled (numba) kernels during the diagnosis. Default: 1 for records
     under 2²⁰ samples in all — the diagnosis simulates short records thousands of times, and a parallel
-    kernel's fork-join costs more than its work there (acoustic twin, 10⁴ samples on a shared 2-core machine:
-    17 ms instead of 31 ms CPU per simulation; a whole acoustic diagnosis 48 → 34 s CPU, though 25 → 33 s wall
-    time when the second core is idle); None keeps numba's setting for longer records.
+    kernel's fork-join costs more than its work there (docs/diagnosis.md, "Measurements behind the code's
+    choices"); None keeps numba's setting for longer records.
     """
     opts = options if options is not None else DiagnoseOptions()
     n_total = sum(len(r) for r in (data, val) if isinstance(r, Record))
@@ -181,7 +162,8 @@ class _Inputs:
     saturation: dict[str, Any]
     t_start: float
     substep_auto: bool = False  # the integration sub-step follows the configuration (:func:`.ranges.substep_for`)
-    noise: dict[str, Any] | None = None  # the noise level of both records (:func:`.unexplained.noise_level`)
+    # the noise level of both records (:func:`.unexplained.noise_level`)
+    noise: dict[str, Any] = dataclasses.field(default_factory=dict)
 
     @property
     def railed(self) -> bool:

@@ -13,48 +13,24 @@ __all__ = ["DiagnoseOptions"]
 class DiagnoseOptions:
     """Settings of :func:`twins.discrepancy.diagnose` (its keyword arguments).
 
-    candidates
-        Catalog effects to try (default: every effect not in the configuration, except noise).
-    calibrate_baseline
-        Refit the configuration as given before anything is added.
-    calibration_params
-        Core parameters refitted with every trial (default ``twin.CALIBRATION_PARAMS``).
-    alpha, min_rel_gain
-        Significance level (Bonferroni over the candidates) and minimum relative validation NRMSE reduction.
-    trial_nfev, scan_nfev, scan_points, refine
-        Budgets: least-squares evaluations of a full trial (effect + core parameters) and of the first-stage
-        fit (effect parameters only, core held), points of each parameter pre-scan, and how many of the best
-        first-stage candidates get the full refit.
-    max_lag, max_echo_s
-        Lags of the correlation tests and nonlinear correlations; longest echo delay searched [s].
-    skip
-        Leading samples not scored (initial transient).
-    split
-        Estimation share of ``data`` when no validation record is given.
-    generic_lags
-        FIR length of the generic residual model (what no catalog effect explains).
-    keep_stages
-        Attach the predictions (``_stages``) to the dict result, for :func:`twins.discrepancy.report.write_report`.
-    retest_defaults
-        Re-test the deterministic effects that are on (their own parameters refitted).
-    follow_ranges
-        Adjust the twin's amplitude limit, time constants and integration step to the records.
-    starts
-        With ``starts > 1`` every candidate gets the full refit (its parameters with the core), from its first-stage
-        fit and from ``starts − 1`` points spread over its parameters' ranges, the best estimation fit kept
-        (:func:`.rounds.refine_trials`). For models whose effects pay only once the core moves with them (a
-        sensor offset under a square-root outflow law: no gain with the core held); about ``starts`` × the
-        candidates full fits per round, so meant for models that simulate in milliseconds.
-    pairs
-        When a round's leader is not significant alone and the residual is still far above the noise, try it
-        jointly with each other candidate (:mod:`.pairs`): two effects that mask each other are named together
-        when their joint gain is significant with both effects' parameters counted (Bonferroni over every
-        single and joint trial).
-    progress
-        Callable taking one message per step, or None.
-    hybrid
-        With an ``unexplained`` verdict, fit the hybrid twin (the final configuration plus a black-box remainder,
-        :mod:`.hybrid`) and report its validation gain under ``hybrid``.
+    - ``candidates``: catalog effects to try (default every effect not in the configuration, noise excepted).
+    - ``calibrate_baseline``: refit the configuration as given first; ``calibration_params``: the core parameters
+      refitted with every trial (default ``twin.CALIBRATION_PARAMS``).
+    - ``alpha``, ``min_rel_gain``: significance level (Bonferroni over the candidates) and least relative reduction
+      of the validation NRMSE.
+    - ``trial_nfev``, ``scan_nfev``, ``scan_points``, ``refine``: least-squares budgets of a full trial (effect and
+      core) and of stage A (effect only), points of each parameter's pre-scan, leaders given the full refit.
+    - ``max_lag``, ``max_echo_s``: lags of the correlation tests; longest echo delay searched [s].
+    - ``skip``: leading samples not scored; ``split``: estimation share of ``data`` without a validation record.
+    - ``generic_lags``: FIR length of the generic residual model (what no catalog effect explains).
+    - ``keep_stages``: attach the predictions (``_stages``) for :func:`twins.discrepancy.report.write_report`.
+    - ``retest_defaults``: re-test the deterministic effects that are on; ``follow_ranges``: fit the twin's
+      amplitude limit, time constants and integration step to the records.
+    - ``starts``: above 1, every candidate gets the full refit from ``starts`` points over its ranges, for effects
+      that pay only once the core moves with them; about ``starts`` × candidates fits a round.
+    - ``pairs``: try a leader that is not significant alone jointly with each other candidate (:mod:`.pairs`).
+    - ``progress``: a callable taking one message per step, or None.
+    - ``hybrid``: with an ``unexplained`` verdict, fit the hybrid twin (:mod:`.hybrid`) and report its gain.
     """
 
     candidates: Sequence[str] | None = None

@@ -43,13 +43,13 @@ class Trial:
     yhat_val: np.ndarray
     nrmse_val: float
     r2_val: float
+    base: Twin  # the configuration the effect was added to
     p_value: float = 1.0
     gain: float = 0.0
     significant: bool = False
     seconds: float = 0.0
     n_added: int = 0  # k: the effect's parameters the trial chose from the data (a variant choice counts one)
     n_total: int = 0  # k_total: every parameter the trial fitted (k and the core parameters refitted with them)
-    base: Twin | None = None
     retest: bool = False  # an effect that was already on, its own parameters refitted (:mod:`.defaults`)
     judged_samples: int = 0  # validation samples (after skip) its gain and p-value were judged on (:mod:`.ranking`)
 
@@ -81,7 +81,7 @@ def run_trial(
     if start is None and choice is None and cat_fields and eff_fields:
         info = param_info(type(tw.params))
         best: Trial | None = None
-        combos = list(itertools.islice(itertools.product(*(info[c].choices for c in cat_fields)), 8))
+        combos = list(itertools.islice(itertools.product(*(info[c].choices or () for c in cat_fields)), 8))
         for combo in combos:
             tr = run_trial(base, effect, est, val, core, a_val, opts, refit_core, choice=dict(zip(cat_fields, combo)))
             if best is None or tr.sse_est < best.sse_est:

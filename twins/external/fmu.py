@@ -3,30 +3,22 @@
 :func:`fmu_twin_class` reads the FMU's model description (FMPy) and builds an
 :class:`twins.external.twin.ExternalTwin` whose core simulates the FMU:
 
-- **parameters**: every variable of causality ``parameter`` becomes a field of the twin's parameter dataclass
-  (Real → float with the declared ``unit``, ``min``/``max`` as its range and ``start`` as default; Integer,
-  Boolean, String likewise, set with ``--set``). The calibration parameters are ``names`` (``--param``), by
-  default every Real parameter with declared ``min`` and ``max``; the rest stay at their start values. A named
-  parameter without a declared range is refused (no range, no calibration), as is a String the run needs (an
-  input or output, or a parameter without a start value).
-- **rate**: a Real parameter ``fs`` in Hz (the convention of the FMUs ``piezotwin export-fmu`` writes) is set
-  to the record's rate; the communication step is 1/fs.
-- **samples**: the input sample ``u[k]`` is applied over the step from t_k to t_{k+1}; the output read after
-  that step is ``y[k]`` (the convention of :func:`twins.fmu.check.fmu_simulate`, under which an exported twin
-  and its FMU give the same samples).
-- **speed**: a co-simulation FMU is instantiated once and, for each simulation, reset, given the parameter
-  values and stepped through FMPy's low-level ``FMU2Slave`` (cantilever FMU, 2000 samples, 50 runs: 20 ms CPU
-  per run against 71 ms through ``fmpy.simulate_fmu(..., fmu_instance=...)`` on the same instance, outputs equal
-  to 1e-13; docs/diagnosis.md). A model-exchange FMU (or FMI 1/3) is simulated by ``fmpy.simulate_fmu`` with
-  its own solver.
-- **effects the FMU declares**: ``effects={"overflow": ["x1_max", "overflow_share"]}`` (CLI ``--fmu-effect
-  overflow=x1_max,overflow_share``) names a mechanism the FMU models itself behind a Boolean parameter, its switch
-  ``effect_<id>`` (the convention of ``piezotwin export-fmu``) or ``<id>``, with the ranged Real parameters it
-  fits. The diagnosis tries it beside the generic effects (switched on, its parameters fitted); its parameters
-  leave the default calibration set. The switch is set from the twin's effects on every run.
-- **failures**: an FMU that cannot be instantiated is refused at once (one line); a simulation that fails
-  during a diagnosis raises :class:`sysid.errors.DataError`, which the diagnosis counts as a failed trial (the
-  instance is re-created for the next run).
+- **parameters**: every ``parameter`` variable becomes a field of the twin's parameter dataclass (Real → float
+  with its ``unit``, ``min``/``max`` as range, ``start`` as default; Integer, Boolean, String likewise). The
+  calibration parameters are ``names`` (``--param``), by default every Real with a declared range; a named
+  parameter without one is refused, as is a String the run needs.
+- **rate**: a Real parameter ``fs`` [Hz] (the convention of ``piezotwin export-fmu``) is set to the record's
+  rate; the communication step is 1/fs.
+- **samples**: ``u[k]`` is applied from t_k to t_{k+1} and the output read after that step is ``y[k]`` (as
+  :func:`twins.fmu.check.fmu_simulate`, so an exported twin and its FMU give the same samples).
+- **speed**: a co-simulation FMU is instantiated once and, per simulation, reset, given its parameters and
+  stepped through FMPy's low-level ``FMU2Slave`` (measured in docs/diagnosis.md); a model-exchange FMU (or
+  FMI 1/3) runs through ``fmpy.simulate_fmu`` with its own solver.
+- **effects the FMU declares**: ``effects={"overflow": ["x1_max", "overflow_share"]}`` (``--fmu-effect``) names
+  a mechanism behind a Boolean switch (``effect_<id>`` or ``<id>``) with the ranged Reals it fits; the diagnosis
+  tries it beside the generic effects, and its parameters leave the default calibration set.
+- **failures**: an FMU that cannot be instantiated is refused at once (one line); a simulation that fails in a
+  diagnosis raises :class:`sysid.errors.DataError`, a failed trial (the instance is re-created).
 """
 
 from __future__ import annotations

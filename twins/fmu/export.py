@@ -145,7 +145,10 @@ def export_fmu(
         top = type(twin).__module__.split(".")[0]
         if top not in shipped:  # a twin defined outside the project (e.g. a user's module): ship it too
             mod = sys.modules[top]
-            src = Path(inspect.getsourcefile(mod))
+            source = inspect.getsourcefile(mod)
+            if source is None:
+                raise ConfigError(f"cannot export {type(twin).__name__}: its module {top} has no Python source file")
+            src = Path(source)
             if src.name == "__init__.py":
                 _copy_package(src.parent, pkg_dir / top)
                 files.append(pkg_dir / top)

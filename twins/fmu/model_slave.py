@@ -72,4 +72,7 @@ class ModelSlave(PiezoSlave):
         return self._stepper
 
     def _step(self, u: float, n: int, current_time: float) -> float:
-        return self._stepper.step(u)
+        stepper = self._stepper
+        if stepper is None:  # do_step checks _stepping() first
+            raise RuntimeError("doStep before the model was loaded")
+        return stepper.step(u)

@@ -122,7 +122,7 @@ def plan(
     arrival = int(np.searchsorted(np.cumsum(e), 1e-6 * total, side="right"))
     nz = np.flatnonzero(h)
     last = int(nz[-1]) + 1
-    best = None
+    best: tuple[float, int, list, float] | None = None
     B = block_min
     while B <= block_max:
         head, dropped = sparse_segments(h[:B], energy_tol, total=total)
@@ -135,6 +135,8 @@ def plan(
         if best is None or cost < best[0]:
             best = (cost, B, head, dropped)
         B *= 2
+    if best is None:
+        raise ValueError(f"no block size between {block_min} and {block_max}")
     cost, B, head, dropped = best
     tail = h[B:last]  # trailing exact zeros cost FFT length and nothing else
     return {

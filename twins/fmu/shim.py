@@ -203,8 +203,9 @@ def build_shim(wrapped_name: str) -> bytes | None:
     """The loader binary (bytes of a shared library) that forwards to ``wrapped_name`` in its own folder,
     or None, with a logged warning, where it cannot be built (the FMU then needs a host with libpython)."""
     why = _why_not()
-    if why is None:
-        path, soname = libpython()
+    found = libpython()
+    if why is None and found is not None:
+        path, soname = found
         head = (
             f"#define LIBPYTHON {_c_string(path)}\n#define LIBPYTHON_SONAME {_c_string(soname)}\n"
             f"#define WRAPPED {_c_string(wrapped_name)}\n"

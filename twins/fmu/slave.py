@@ -372,15 +372,18 @@ class TwinSlave(PiezoSlave):
         return self._core
 
     def _step(self, u: float, n: int, current_time: float) -> float:
+        core = self._core
+        if core is None:  # do_step checks _stepping() first
+            raise RuntimeError("doStep before the core was built")
         if self._retune:
             try:  # the new parameters act from this step on; the core keeps its dynamic state
-                self._core.retune(self.make_twin())
+                core.retune(self.make_twin())
             except Exception as exc:
                 return self._fail(
                     f"tunable parameter change at t={current_time!r} s refused: {type(exc).__name__}: {exc}"
                 )
             self._retune = False
-        step = self._core.step
+        step = core.step
         if n == 1:
             return step(u)
         for _ in range(n):

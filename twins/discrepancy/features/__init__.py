@@ -1,40 +1,25 @@
 """Residual analysis of a twin's free-run simulation against measured data: :func:`analyse` and its features.
 
-Every function takes plain arrays and an explicit sampling rate ``fs`` [Hz] and returns numbers (dicts of
-floats), in the manner of ``scipy.signal``. The residual is ``e = y - y_sim`` (measured minus simulated), as
-the dissertation's eq. 2-30 writes ξ(t) = y(t) − ŷ(t).
+Plain arrays and an explicit ``fs`` [Hz] in, dicts of floats out, in the manner of ``scipy.signal``. The
+residual is ``e = y - y_sim``, eq. 2-30's ξ(t) = y(t) − ŷ(t). Each feature and the effect it points to:
 
-What is measured, and which physical effect it points to:
-
-- :func:`trend` — linear trend and slow drift of the residual (thermal drift, creep, offsets);
-- :func:`step_drift` — slow residual drift after input steps, regressed on ``Δu·log10(t)`` (creep's
-  logarithmic law, physics notes A.5);
-- :func:`lag_regression` — regression of the residual on a delayed copy of a reference signal at every lag
-  (reference = the simulated output or the input): a peak at lag τ > 0 is an echo (a delayed scaled copy,
-  physics notes B.8) of amplitude ≈ the regression coefficient; a derivative-shaped peak at lag 0 is a delay;
-- :func:`delay_estimate` — the sub-sample shift that best aligns the simulated output with the measured one
-  (and the input–output delay from the cross-correlation of u and y);
-- :func:`early_input_correlation` — residual–input cross-correlation at lags before the model's first arrival
-  (a time of flight): a physical path there is electrical (crosstalk), the acoustic path has nothing yet;
-- :func:`band_powers` — residual power inside and outside the band the input excites;
-- :func:`product_bands` — for a band-pass input narrower than an octave, residual power where even-order
-  products fall (difference band 0…B and sum band 2f₀…2f₁: outside the excited band) versus the excited band
-  and the third-order skirts (the detection-line principle for a band instead of a line grid);
-- :func:`harmonics` — residual power at the harmonics of a sine input (odd versus even);
-- :func:`odd_even_lines` — power on the non-excited odd and even lines of a periodic (odd) multisine
-  (odd-order versus even-order distortion, Pintelon & Schoukens' detection lines);
-- :func:`nonlinear_correlation` — correlation of the residual with the parts of u², u³ (and ŷ², ŷ³) that are
-  orthogonal to the linear terms (even- versus odd-order static nonlinearity);
+- :func:`trend`, :func:`step_drift` — slow drift, and drift after steps regressed on ``Δu·log10(t)`` (creep's
+  logarithmic law, physics notes A.5): thermal drift, creep, offsets;
+- :func:`lag_regression` — the residual on a delayed copy of the output or input: a peak at τ > 0 is an echo
+  (notes B.8), a derivative-shaped peak at 0 a delay; :func:`delay_estimate` — the sub-sample alignment;
+- :func:`early_input_correlation` — residual–input correlation before the first arrival: crosstalk;
+- :func:`band_powers`, :func:`product_bands`, :func:`harmonics`, :func:`odd_even_lines` — power in and out of
+  the excited band, at even-order products of a narrow band, at a sine's harmonics, on a multisine's detection
+  lines (Pintelon & Schoukens): odd versus even distortion;
+- :func:`nonlinear_correlation` — correlation with the parts of u², u³, ŷ², ŷ³ orthogonal to the linear terms;
 - :func:`resonance_peaks` — narrow peaks of the residual spectrum (unmodelled resonances);
-- :func:`quantization_step` — a lattice in the measured values (sensor / ADC quantisation);
-- :func:`saturation_rails` — flat tops where the measurement saturates (an ADC or sensor at the end of its
-  range) while the prediction goes beyond: the samples there are censored, not errors of the model;
-- :func:`hysteresis_by_segment` — loop width and phase lag, measured versus simulated, per sine segment;
-- :func:`correlation_tests` — the five tests of eq. 2-32, with the failing lags (``sysid.evaluation.residuals``, the
-  one implementation; :func:`tests_summary` is its compact form for JSON).
+- :func:`quantization_step`, :func:`saturation_rails` — a lattice in the measured values; flat tops where the
+  measurement saturated (censored samples, not model errors);
+- :func:`hysteresis_by_segment` — loop width and phase lag per sine segment, measured versus simulated;
+- :func:`correlation_tests` — the five tests of eq. 2-32 (:mod:`sysid.evaluation.residuals`).
 
-The time-domain features live in :mod:`.timing`, the spectral ones in :mod:`.spectra`, the value lattice,
-saturation rails and hysteresis loops in :mod:`.levels`; this module combines them.
+Time-domain features live in :mod:`.timing`, spectral ones in :mod:`.spectra`, levels and loops in
+:mod:`.levels`; this module combines them.
 """
 
 from __future__ import annotations
