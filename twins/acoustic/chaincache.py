@@ -40,6 +40,8 @@ __all__ = [
     "grid_key",
     "CHAIN",
     "LINEAR",
+    "STACK",
+    "AMP_BANDWIDTH",
     "enabled",
     "disabled",
 ]
@@ -144,6 +146,10 @@ _ENABLED = [True]
 CHAIN = LRU(6)
 #: impulse responses (and their spectra) per (fs, grid length, linear key)
 LINEAR = LRU(6)
+#: the transducer stacks' fluid-independent parts per (grid, the layer, plate and load values they use)
+STACK = LRU(4)
+#: the amplifier's bandwidth response per (grid, corner frequencies)
+AMP_BANDWIDTH = LRU(4)
 
 
 def enabled() -> bool:

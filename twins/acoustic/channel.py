@@ -23,6 +23,7 @@ The fluid gap is written as its Fabry–Pérot series, an identity of the 1-D ch
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 from typing import Any
 
@@ -146,22 +147,17 @@ def channel_parts(f_hz: np.ndarray, p, effects=frozenset()) -> dict[str, Any]:
     area = g.area_m2
     fl = g.fluid
     zf = fl.density * fl.speed * area
-    epoxy, steel = _layers(p, fl)
-    m_ep = layer_matrix(f, epoxy, area)
-    m_st = layer_matrix(f, steel, area)
-    m_tx = chain([m_ep, m_st])  # PZT face → fluid
-    m_rx = chain([m_st, m_ep])  # fluid → PZT face
-    tp = plate_two_port(f, g.piezo, p.pzt_thickness_m, area, p.backing_rayl * area)
+    st = _stack(f, p, g)
+    m_tx, m_rx, tp, z_load = st["m_tx"], st["m_rx"], st["tp"], st["z_load"]
     # transmitter
     z_front = input_impedance(m_tx, zf)
     force0, u0, v_tx = transmit(tp, z_front, p.source_resistance_ohm)
     force1, _ = propagate_forward(m_tx, force0, u0)
     t_tx = force1 / area  # p⁺ per volt of V_oc
-    z_tx_back = input_impedance(m_st, input_impedance(m_ep, face_impedance(tp, p.source_resistance_ohm)))
+    z_tx_back = st["z_tx_back"]
     r_tx = (z_tx_back - zf) / (z_tx_back + zf)
     # receiver
-    z_load = parallel_rc(f, p.rx_load_ohm, p.rx_load_capacitance_f)
-    z_rx_in = input_impedance(m_rx, face_impedance(tp, z_load))
+    z_rx_in = st["z_rx_in"]
     r_rx = (z_rx_in - zf) / (z_rx_in + zf)
     force_in = area * (1.0 + r_rx)
     _, u2 = propagate_forward(m_rx, force_in, force_in / z_rx_in)
@@ -179,6 +175,44 @@ def channel_parts(f_hz: np.ndarray, p, effects=frozenset()) -> dict[str, Any]:
         "z_load": z_load,
         "geometry": g,
     }
+
+
+def _stack(f: np.ndarray, p, g: ChannelGeometry) -> dict[str, Any]:
+    """The parts of the two transducer stacks that do not depend on the fluid or the gap (layer matrices, the
+    plate's two-port, the impedances seen from the fluid side), cached by exactly what they depend on
+    (:data:`twins.acoustic.chaincache.STACK`): a diagnosis that moves the temperature, the gap or the fluid
+    recomputes only the fluid's part."""
+    epoxy, steel = _layers(p, g.fluid)
+    area = g.area_m2
+    key = (
+        cc.grid_key(f),
+        dataclasses.astuple(epoxy),
+        dataclasses.astuple(steel),
+        area,
+        dataclasses.astuple(g.piezo),
+        p.pzt_thickness_m,
+        p.backing_rayl,
+        p.source_resistance_ohm,
+        p.rx_load_ohm,
+        p.rx_load_capacitance_f,
+    )
+
+    def make() -> dict[str, Any]:
+        m_ep = layer_matrix(f, epoxy, area)
+        m_st = layer_matrix(f, steel, area)
+        tp = plate_two_port(f, g.piezo, p.pzt_thickness_m, area, p.backing_rayl * area)
+        z_load = parallel_rc(f, p.rx_load_ohm, p.rx_load_capacitance_f)
+        m_rx = chain([m_st, m_ep])  # fluid → PZT face
+        return {
+            "m_tx": chain([m_ep, m_st]),  # PZT face → fluid
+            "m_rx": m_rx,
+            "tp": tp,
+            "z_load": z_load,
+            "z_tx_back": input_impedance(m_st, input_impedance(m_ep, face_impedance(tp, p.source_resistance_ohm))),
+            "z_rx_in": input_impedance(m_rx, face_impedance(tp, z_load)),
+        }
+
+    return cc.STACK.get_or(key, make)
 
 
 def frequency_response(
@@ -215,7 +249,8 @@ def frequency_response(
     if g.crosstalk and not direct_only:
         h = h + crosstalk_path(fp, p, parts)
     if include_amplifier:
-        h = h * amplifier_bandwidth(fp, p.amp_f_low_hz, p.amp_f_high_hz)
+        key = (cc.grid_key(fp), p.amp_f_low_hz, p.amp_f_high_hz)
+        h = h * cc.AMP_BANDWIDTH.get_or(key, lambda: amplifier_bandwidth(fp, p.amp_f_low_hz, p.amp_f_high_hz))
     out[pos] = h * p.output_gain
     return out
 

@@ -268,6 +268,35 @@ class AcousticTwin(Twin):
         h = entry["h"]
         return h if n is None else h[:n]
 
+    def within(self, window_s: float, margin: int = 2) -> AcousticTwin:
+        """This twin summing only the reverberation orders that arrive within ``window_s`` [s], plus ``margin``
+        more (a gap or sound speed the diagnosis moves shifts the arrivals; a band-limited arrival has an onset).
+
+        By causality the others add nothing to the first ``window_s`` of the response but their band-limited
+        precursors (at most a few 1e-4 of the signal when H is cut at ``model_max_hz`` below ``fs/2``, 1e-6 or
+        less otherwise), and summing them lengthens the grid H is evaluated on (a 0.4 ms record of a 5 ms
+        response): :meth:`follow_records` applies it for a diagnosis."""
+        p = self.params
+        if p.reverb_orders <= 0:  # gated, or the closed form of every order
+            return self
+        g = geometry(p, self.effects)
+        arriving = int(np.floor((window_s * g.fluid.speed / g.distance_m - 1.0) / 2.0)) + 1
+        keep = max(arriving + margin, 0)
+        return self if keep >= p.reverb_orders else self.with_params(reverb_orders=keep)
+
+    def follow_records(self, est: Record, val: Record) -> tuple[AcousticTwin, list[str]]:
+        """The diagnosis's range rule (:func:`twins.discrepancy.ranges.follow_record`): sum only the
+        reverberation orders that can reach the longer record (:meth:`within`)."""
+        window = max(len(est) / est.fs, len(val) / val.fs)
+        tw = self.within(window)
+        if tw is self:
+            return self, []
+        note = (
+            f"reverberation orders summed: {tw.params.reverb_orders} of {self.params.reverb_orders} (the others arrive "
+            f"after the {1e3 * window:.3g} ms records)"
+        )
+        return tw, [note]
+
     def _linear_entry(self, fs: float) -> dict[str, Any]:
         """h at ``fs`` with its tail energy and spectra, shared by every twin whose linear chain is the same
         (:mod:`twins.acoustic.chaincache`: a diagnosis's amplifier trials reuse it)."""
