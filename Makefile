@@ -7,7 +7,7 @@ STAMP  := $(VENV)/.installed
 # on a 2-core machine (measured 9 ms vs <1 ms per 8x8 expm when both cores are busy).
 export OPENBLAS_NUM_THREADS ?= 1
 
-.PHONY: run run-quick test test-all lint bench fmus docs install clean floors floors-full lock
+.PHONY: run run-quick test test-all lint bench bench-diagnosis fmus docs install clean floors floors-full lock
 
 # Exact versions: requirements.lock holds every package of the environment the floors and stored rows were
 # measured with (docs/regression-check.md); `make lock` refreshes it from pyproject.toml.
@@ -64,6 +64,11 @@ bench: $(STAMP)
 	$(PY) -m pytest -q -m perf tests/perf --benchmark-enable --benchmark-only \
 	  --benchmark-json=docs/perf/bench.json -p no:randomly
 	$(PY) -m tests.perf.summarise docs/perf/bench.json -o docs/perf/summary.md
+
+# The diagnosis benchmark's full set (benchmarks/settings/diagnosis_bench.toml): hours on two cores; resumes where
+# it stopped (docs/diagnosis-benchmark/results.jsonl), then renders docs/diagnosis-benchmark.md.
+bench-diagnosis: $(STAMP)
+	$(VENV)/bin/piezotwin bench-diagnosis --workers 2
 
 fmus: $(STAMP)
 	$(VENV)/bin/piezotwin export-fmu cantilever -o fmus/cantilever.fmu

@@ -132,6 +132,7 @@ def run(args: argparse.Namespace) -> int:
         pairs=args.pairs,
         trial_nfev=args.trial_nfev,
         progress=(lambda msg: print(f"[diagnose] {msg}", file=sys.stderr, flush=True)) if show else None,
+        on_round=None if args.quiet else (lambda msg: print(f"[diagnose] {msg}", file=sys.stderr, flush=True)),
     )
     diagnosis = run_diagnosis(twin, data, val, max_rounds=args.max_rounds, options=opts)
     result = diagnosis.to_dict()

@@ -40,6 +40,7 @@ COMMAND_MODULES = (
     "records",
     "thesis",
     "diagnose",
+    "bench_diagnosis",
     "sweep",
     "export_fmu",
     "run",

@@ -107,7 +107,10 @@ def _refine(
     The estimation leader is refined because stage A holds the core at a calibration that bent to mimic the
     missing effect: creep added to a core whose gain absorbed creep's slow rise overshoots, fits the estimation
     record better but the validation record worse, and without the core refit it would never be judged as it
-    fits (two hidden effects, creep + thermal drift on steps: creep lost 0 % gain against a 2nd-mode 3 %)."""
+    fits (two hidden effects, creep + thermal drift on steps: creep lost 0 % gain against a 2nd-mode 3 %). Every
+    other trial with that symptom — a better estimation fit, a worse validation fit — is refined too: with a
+    delay leading the estimation record, a creep whose held-core fit lost validation gain was never refitted
+    (a trapezoid-and-hold creep record: 0 % gain held, 97 % refitted)."""
     trials.sort(key=lambda t: t.sse_val)
     n = min(max(int(opts.refine), 0), len(trials))
     picked = [
@@ -115,10 +118,17 @@ def _refine(
         for i, tr in enumerate(trials[:n])
         if i == 0 or not (tr.sse_val > 1.5 * trials[0].sse_val or tr.sse_val >= stage.sse_val * (1 - 1e-9))
     ]
+    base_est = sse(inp.est.y, stage.yhat_est, opts.skip)
     if n and trials:
         j = min(range(len(trials)), key=lambda k: trials[k].sse_est)
-        if j not in picked and trials[j].sse_est < sse(inp.est.y, stage.yhat_est, opts.skip):
+        if j not in picked and trials[j].sse_est < base_est:
             picked.append(j)
+        # the same symptom anywhere in the round: better on the estimation record, worse on the validation record
+        picked += [
+            i
+            for i, tr in enumerate(trials)
+            if i not in picked and tr.sse_est < base_est * (1 - 1e-9) and tr.sse_val > stage.sse_val
+        ]
     # the leader's group is refined with it, so its members are judged alike (a core that absorbed a settling drift
     # leaves thermal_drift no gain with the core held, while slow_drift, refitted, takes it)
     group = inp.twin.EFFECTS[trials[0].effect].group if trials else ""

@@ -13,24 +13,25 @@ __all__ = ["DiagnoseOptions"]
 class DiagnoseOptions:
     """Settings of :func:`twins.discrepancy.diagnose` (its keyword arguments).
 
-    - ``candidates``: catalog effects to try (default every effect not in the configuration, noise excepted).
-    - ``calibrate_baseline``: refit the configuration as given first; ``calibration_params``: the core parameters
-      refitted with every trial (default ``twin.CALIBRATION_PARAMS``).
-    - ``alpha``, ``min_rel_gain``: significance level (Bonferroni over the candidates) and least relative reduction
-      of the validation NRMSE.
-    - ``trial_nfev``, ``scan_nfev``, ``scan_points``, ``refine``: least-squares budgets of a full trial (effect and
-      core) and of stage A (effect only), points of each parameter's pre-scan, leaders given the full refit.
-    - ``max_lag``, ``max_echo_s``: lags of the correlation tests; longest echo delay searched [s].
-    - ``skip``: leading samples not scored; ``split``: estimation share of ``data`` without a validation record.
-    - ``generic_lags``: FIR length of the generic residual model (what no catalog effect explains).
-    - ``keep_stages``: attach the predictions (``_stages``) for :func:`twins.discrepancy.report.write_report`.
-    - ``retest_defaults``: re-test the deterministic effects that are on; ``follow_ranges``: fit the twin's
-      amplitude limit, time constants and integration step to the records.
-    - ``starts``: above 1, every candidate gets the full refit from ``starts`` points over its ranges, for effects
-      that pay only once the core moves with them; about ``starts`` × candidates fits a round.
-    - ``pairs``: try a leader that is not significant alone jointly with each other candidate (:mod:`.pairs`).
-    - ``progress``: a callable taking one message per step, or None.
-    - ``hybrid``: with an ``unexplained`` verdict, fit the hybrid twin (:mod:`.hybrid`) and report its gain.
+      - ``candidates``: catalog effects to try (default every effect not in the configuration, noise excepted).
+      - ``calibrate_baseline``: refit the configuration as given first; ``calibration_params``: the core parameters
+        refitted with every trial (default ``twin.CALIBRATION_PARAMS``).
+      - ``alpha``, ``min_rel_gain``: significance level (Bonferroni over the candidates) and least relative reduction
+        of the validation NRMSE.
+      - ``trial_nfev``, ``scan_nfev``, ``scan_points``, ``refine``: least-squares budgets of a full trial (effect and
+        core) and of stage A (effect only), points of each parameter's pre-scan, leaders given the full refit.
+      - ``max_lag``, ``max_echo_s``: lags of the correlation tests; longest echo delay searched [s].
+      - ``skip``: leading samples not scored; ``split``: estimation share of ``data`` without a validation record.
+      - ``generic_lags``: FIR length of the generic residual model (what no catalog effect explains).
+      - ``keep_stages``: attach the predictions (``_stages``) for :func:`twins.discrepancy.report.write_report`.
+      - ``retest_defaults``: re-test the deterministic effects that are on; ``follow_ranges``: fit the twin's
+        amplitude limit, time constants and integration step to the records.
+      - ``starts``: above 1, every candidate gets the full refit from ``starts`` points over its ranges, for effects
+        that pay only once the core moves with them; about ``starts`` × candidates fits a round.
+      - ``pairs``: try a leader that is not significant alone jointly with each other candidate (:mod:`.pairs`).
+      - ``progress``: a callable taking one message per step, or None; ``on_round``: one line per finished round
+    (trial count, leader, elapsed time), or None.
+      - ``hybrid``: with an ``unexplained`` verdict, fit the hybrid twin (:mod:`.hybrid`) and report its gain.
     """
 
     candidates: Sequence[str] | None = None
@@ -54,6 +55,7 @@ class DiagnoseOptions:
     pairs: bool = False
     progress: Callable[[str], Any] | None = None
     hybrid: bool = True
+    on_round: Callable[[str], Any] | None = None
 
     def __post_init__(self) -> None:
         for name in ("trial_nfev", "scan_nfev", "scan_points", "skip", "max_lag", "starts"):
@@ -62,4 +64,11 @@ class DiagnoseOptions:
     def say(self, msg: str) -> None:
         """Report one step to ``progress`` (nothing when it is not callable)."""
         if callable(self.progress):
+            self.progress(msg)
+
+    def round_done(self, msg: str) -> None:
+        """Report a finished round to ``on_round`` (one line: trials, leader, elapsed time) and to ``progress``."""
+        if callable(self.on_round):
+            self.on_round(msg)
+        elif callable(self.progress):
             self.progress(msg)

@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import time
 from typing import Any
 
 from twins.base import Twin
@@ -216,6 +217,11 @@ def _greedy(loop: _Loop, ext: Extension, n_max: int) -> None:
         if rnd == 1:
             loop.first = ranking
         top = ranking.top
+        opts.round_done(
+            f"round {rnd}: {len(trials)} trials, leader {top.effect} (validation gain {top.gain:.3g}, "
+            f"p = {top.p_value:.2g}, {'significant' if top.significant else 'not significant'}), "
+            f"{time.perf_counter() - inp.t_start:.0f} s"
+        )
         if not top.significant:
             if joint_step(loop, ext, ranking, rnd, n_max):
                 continue

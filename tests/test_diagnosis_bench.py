@@ -1,0 +1,157 @@
+"""The diagnosis benchmark's own parts: cases drawn from seeds, the generator's mechanisms against closed forms,
+the scoring rules on made-up rows, the CI comparison. (The diagnosis itself is run by ``bench-diagnosis``.)"""
+
+import math
+
+import numpy as np
+import pytest
+
+from benchmarks.diagnosis_bench import mechanisms as mech
+from benchmarks.diagnosis_bench.cases import KINDS, RECORDS, draw_case, excitation
+from benchmarks.diagnosis_bench.check import compare
+from benchmarks.diagnosis_bench.score import calibration, detection_limit, outcome, score
+
+
+def test_a_seed_is_one_case_and_the_draws_cover_the_space():
+    assert draw_case(17) == draw_case(17) and draw_case(17) != draw_case(18)
+    cases = [draw_case(s) for s in range(400)]
+    assert {c.model for c in cases} == set(RECORDS)
+    assert {c.est_kind for c in cases} == set(KINDS) == {c.val_kind for c in cases}
+    assert 0.05 < sum(c.mechanism is None for c in cases) / len(cases) < 0.16
+    for c in cases:
+        lo, hi = RECORDS[c.model]["fs"]
+        assert lo <= c.fs <= hi and 0.003 <= c.noise <= 0.03
+        if c.mechanism:
+            s_lo, s_hi = mech.MECHANISMS[c.mechanism].size_range
+            assert s_lo <= c.size <= s_hi and c.mechanism in mech.TWIN_MECHANISMS[c.family]
+    acoustic = [c for c in cases if c.model == "acoustic"]
+    assert min(c.n / c.fs for c in acoustic) >= 2.2e-4  # past the first arrival
+    assert max(c.fs for c in acoustic) > 60e6 and min(c.fs for c in acoustic) < 8e6
+
+
+@pytest.mark.parametrize("kind", KINDS)
+def test_excitations_have_the_drawn_peak(kind):
+    c = draw_case(3)
+    u = excitation(c, kind, np.random.default_rng(0))
+    assert u.shape == (c.n,) and np.isclose(np.max(np.abs(u - c.centre)), c.peak)
+
+
+def test_delay_line_shifts_a_sine_by_its_delay():
+    fs, f, d = 1000.0, 7.0, 0.0123
+    t = np.arange(4000) / fs
+    out = mech.apply_input("delay", np.sin(2 * math.pi * f * t), fs, {"delay_s": d})
+    np.testing.assert_allclose(out[100:], np.sin(2 * math.pi * f * (t[100:] - d)), atol=2e-3)
+
+
+@pytest.mark.parametrize("shape", ["tanh", "cubic", "hardclip", "rapp"])
+def test_limiter_compresses_the_peak_by_the_size(shape):
+    peak, comp = 3.0, 0.15
+    level = mech.limiter_level(peak, shape, comp, 2.5)
+    p = {"shape": shape, "level": level, "centre": 0.0, "rapp_p": 2.5}
+    out = mech.apply_input("limiter", np.array([peak, -peak, 0.01]), 1.0, p)
+    np.testing.assert_allclose(out[:2], [(1 - comp) * peak, -(1 - comp) * peak], rtol=1e-9)
+    assert abs(out[2] - 0.01) < 1e-3  # small signals pass
+
+
+def test_lowpasses_are_3db_down_at_their_corner():
+    fs, fc = 10_000.0, 300.0
+    t = np.arange(20_000) / fs
+    x = np.sin(2 * math.pi * fc * t)
+    for out, want in (
+        (mech.apply_input("drive_lowpass", x, fs, {"corner_hz": fc}), 1 / math.sqrt(2)),
+        (mech.apply_output("sensor_lowpass", x, x, fs, {"corner_hz": fc}), 1 / math.sqrt(2)),
+    ):
+        assert abs(np.std(out[5000:]) / np.std(x[5000:]) - want) < 0.01
+
+
+def test_play_operator_and_dead_zone():
+    u = np.array([0.0, 1.0, 2.0, 1.5, 1.0, 0.0, -1.0])
+    np.testing.assert_allclose(mech.apply_input("backlash", u, 1.0, {"width": 0.5}), [0, 0.5, 1.5, 1.5, 1.5, 0.5, -0.5])
+    np.testing.assert_allclose(
+        mech.apply_input("dead_zone", u, 1.0, {"width": 0.5, "centre": 0.0}), [0, 0.5, 1.5, 1.0, 0.5, 0, -0.5]
+    )
+
+
+def test_quantizer_lattice_and_second_mode_limits():
+    y = np.linspace(-1, 1, 101)
+    q = mech.quantize(y, 0.1)
+    assert np.allclose(q / 0.1, np.round(q / 0.1)) and np.max(np.abs(q - y)) <= 0.05 + 1e-12
+    p = {"share": 0.0, "f1_hz": 700.0, "zeta1": 0.02, "f2_hz": 4389.0, "zeta2": 0.02}
+    x = np.sin(np.arange(5000) / 30.0)
+    np.testing.assert_allclose(mech.apply_output("second_mode", x, x, 10_000.0, p), x)  # no share: the same output
+    slow = np.ones(3000)
+    out = mech.apply_output("second_mode", slow, slow, 10_000.0, {**p, "share": 0.1})
+    np.testing.assert_allclose(out[-100:], 1.0, atol=1e-6)  # both modes carry the static deflection
+
+
+def test_creep_grows_by_its_rate_per_decade():
+    fs = 100.0
+    v = np.r_[0.0, np.ones(60_000)]  # a 1 V step held 600 s
+    out = mech.apply_output("creep", np.zeros_like(v), v, fs, {"drive": v, "rate": 0.02, "gain": 1.0, "tau1_s": 0.1})
+    t = np.arange(v.size) / fs
+    a, b = out[np.searchsorted(t, 1.0)], out[np.searchsorted(t, 10.0)]
+    assert 0.8 * 0.02 < b - a < 1.25 * 0.02  # about one rate per decade of time (log law)
+
+
+def _row(mechanism, family, verdict, causes, size=0.1, cpu=10.0, seed=0):
+    return {
+        "case": {
+            "seed": seed,
+            "model": family,
+            "family": family,
+            "mechanism": mechanism,
+            "fs": 1e4,
+            "est_kind": "chirp",
+            "val_kind": "steps",
+        },
+        "verdict": verdict,
+        "causes": causes,
+        "size_est": size,
+        "size_val": size,
+        "cpu_s": cpu,
+        "params": {},
+    }
+
+
+def _c(effect, conf, group=()):
+    return {"effect": effect, "confidence": conf, "group": list(group), "params": {}}
+
+
+def test_outcomes_follow_the_rules():
+    assert outcome(_row("creep", "cantilever", "discrepancy", [_c("creep", 0.9)]))["outcome"] == "right"
+    o = outcome(_row("creep", "cantilever", "discrepancy", [_c("slow_drift", 0.8)]))
+    assert o["outcome"] == "wrong" and o["confident_wrong"]
+    grp = _c("distance_offset", 0.6, ["distance_offset", "temperature_offset"])
+    assert outcome(_row("temperature", "acoustic", "discrepancy", [grp]))["outcome"] == "right"
+    assert outcome(_row("creep", "cantilever", "none", []))["outcome"] == "missed"
+    out = _row("gain_sag", "cantilever", "unexplained", [_c("rate_dependent_hysteresis", 0.3)])
+    assert outcome(out)["outcome"] == "right"  # outside, unexplained, no confident name
+    out["causes"][0]["confidence"] = 0.7
+    assert outcome(out)["outcome"] == "wrong" and outcome(out)["confident_wrong"]
+    assert outcome(_row(None, "user", "none", []))["outcome"] == "right"
+    assert outcome(_row(None, "user", "discrepancy", [_c("sensor_offset", 0.2)]))["outcome"] == "wrong"
+
+
+def test_detection_limit_and_calibration():
+    sizes = [0.001, 0.002, 0.004, 0.01, 0.02, 0.05, 0.1]
+    assert math.isclose(detection_limit(sizes, [False, False, False, True, True, True, True]), math.sqrt(0.04e-3))
+    dl = detection_limit(sizes, [False, True, False, False, True, True, True])
+    assert 0.002 < dl < 0.02
+    assert detection_limit(sizes, [False] * 7) is None
+    rows = [_row("creep", "cantilever", "discrepancy", [_c("creep", 0.85)], seed=i) for i in range(8)]
+    rows += [_row("creep", "cantilever", "discrepancy", [_c("thermal_drift", 0.85)], seed=8 + i) for i in range(2)]
+    cal = calibration([dict(r) for r in rows])
+    assert cal["n"] == 10 and cal["bins"][0]["observed"] == pytest.approx(0.8)
+    assert cal["brier"] == pytest.approx(0.8 * 0.15**2 + 0.2 * 0.85**2)
+    s = score(rows)
+    assert s["confident_wrong"]["k"] == 2 and s["outcomes"] == {"right": 8, "wrong": 2}
+
+
+def test_ci_check_fails_when_a_rate_drops_beyond_its_sampling_error():
+    stored = [_row("creep", "cantilever", "discrepancy", [_c("creep", 0.9)], seed=i, size=1.0) for i in range(6)]
+    limits = {"cantilever:creep": 0.01}
+    same = compare(stored, stored, limits, {"catalog:cantilever": 0.95})
+    assert same["passed"] and same["groups"][0]["now"] == 1.0
+    worse = [_row("creep", "cantilever", "none", [], seed=i, size=1.0) for i in range(3)] + stored[3:]
+    dropped = compare(worse, stored, limits, {"catalog:cantilever": 0.95})
+    assert not dropped["passed"] and dropped["groups"][0]["now"] == 0.5
