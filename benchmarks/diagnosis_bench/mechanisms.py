@@ -238,9 +238,9 @@ def apply_output(name: str, y: np.ndarray, u: np.ndarray, fs: float, p: dict[str
         return y + _creep(p["drive"], fs, p["rate"], p["gain"], p["tau1_s"])
     if name == "second_mode":
         return _second_mode(y, fs, p["f1_hz"], p["zeta1"], p["f2_hz"], p["zeta2"], p["share"])
-    if name == "tilt":  # averaging over a spread of arrival times across the tilted face, and an overlap loss
-        n = max(int(round(p["spread_s"] * fs)), 1)
-        return p["overlap"] * signal.lfilter(np.ones(n) / n, [1.0], y)
+    if name == "tilt":  # averaging over arrival times spread symmetrically about the face's centre, an overlap loss
+        n = 2 * int(round(p["spread_s"] * fs / 2.0)) + 1
+        return p["overlap"] * np.convolve(y, np.ones(n) / n, mode="same")
     if name == "quantization":  # applied after the noise by quantize()
         return y
     raise KeyError(name)

@@ -28,15 +28,29 @@ ROW_FORMAT = "piezotwin-diagnosis-bench/1"
 MAX_ROUNDS = 3
 
 
+#: what the benchmark keeps of a named cause: enough to score it and to refit its confidence
+CAUSE_KEYS = (
+    "effect",
+    "confidence",
+    "score",
+    "group",
+    "params",
+    "p_value",
+    "kind",
+    "round",
+    "family",
+    "nrmse_val_before",
+    "nrmse_val_after",
+    "joint_with",
+    "replaces",
+)
+
+
 def _cause(c: dict[str, Any]) -> dict[str, Any]:
-    return {
-        "effect": c["effect"],
-        "confidence": float(c.get("confidence", 0.0)),
-        "group": list(c.get("group", [])),
-        "params": c.get("params", {}),
-        "p_value": c.get("p_value"),
-        "kind": c.get("kind"),
-    }
+    out = {k: c[k] for k in CAUSE_KEYS if k in c}
+    out["confidence"] = float(c.get("confidence", 0.0))
+    out["group"] = list(c.get("group", []))
+    return out
 
 
 def run_case(seed: int) -> dict[str, Any]:
@@ -58,7 +72,7 @@ def run_case(seed: int) -> dict[str, Any]:
     row["verdict"] = out["verdict"]
     row["causes"] = [_cause(c) for c in out["causes"]]
     row["nrmse_val"] = {"before": out["baseline"]["nrmse_val"], "after": out["extended"]["nrmse_val"]}
-    row["residual_vs_noise"] = out.get("residual_vs_noise", {}).get("ratio")
+    row["residual_vs_noise"] = out.get("residual_vs_noise", {}).get("excess_ratio")
     row["ranges"] = out.get("ranges", [])
     return row
 

@@ -41,6 +41,7 @@ __all__ = [
     "CHAIN",
     "LINEAR",
     "STACK",
+    "FLUID",
     "AMP_BANDWIDTH",
     "enabled",
     "disabled",
@@ -148,6 +149,8 @@ CHAIN = LRU(6)
 LINEAR = LRU(6)
 #: the transducer stacks' fluid-independent parts per (grid, the layer, plate and load values they use)
 STACK = LRU(4)
+#: the factors of H that depend on the stacks and the fluid, not on the gap, per (grid, stack values, fluid state)
+FLUID = LRU(4)
 #: the amplifier's bandwidth response per (grid, corner frequencies)
 AMP_BANDWIDTH = LRU(4)
 

@@ -144,6 +144,12 @@ def channel_parts(f_hz: np.ndarray, p, effects=frozenset()) -> dict[str, Any]:
     if np.any(f <= 0):
         raise ValueError("channel_parts needs f > 0")
     g = geometry(p, effects)
+    key = (cc.grid_key(f), _stack_key(p, g), dataclasses.astuple(g.fluid))
+    return {**cc.FLUID.get_or(key, lambda: _fluid_side(f, p, g)), "geometry": g}
+
+
+def _fluid_side(f: np.ndarray, p, g: ChannelGeometry) -> dict[str, Any]:
+    """The factors of H that depend on the stacks and the fluid but not on the gap (:func:`channel_parts`)."""
     area = g.area_m2
     fl = g.fluid
     zf = fl.density * fl.speed * area
@@ -173,8 +179,23 @@ def channel_parts(f_hz: np.ndarray, p, effects=frozenset()) -> dict[str, Any]:
         "z_el": z_el,
         "k": k,
         "z_load": z_load,
-        "geometry": g,
     }
+
+
+def _stack_key(p, g: ChannelGeometry) -> tuple:
+    """The values the stacks' parts depend on (besides the frequency grid)."""
+    epoxy, steel = _layers(p, g.fluid)
+    return (
+        dataclasses.astuple(epoxy),
+        dataclasses.astuple(steel),
+        g.area_m2,
+        dataclasses.astuple(g.piezo),
+        p.pzt_thickness_m,
+        p.backing_rayl,
+        p.source_resistance_ohm,
+        p.rx_load_ohm,
+        p.rx_load_capacitance_f,
+    )
 
 
 def _stack(f: np.ndarray, p, g: ChannelGeometry) -> dict[str, Any]:
@@ -184,18 +205,7 @@ def _stack(f: np.ndarray, p, g: ChannelGeometry) -> dict[str, Any]:
     recomputes only the fluid's part."""
     epoxy, steel = _layers(p, g.fluid)
     area = g.area_m2
-    key = (
-        cc.grid_key(f),
-        dataclasses.astuple(epoxy),
-        dataclasses.astuple(steel),
-        area,
-        dataclasses.astuple(g.piezo),
-        p.pzt_thickness_m,
-        p.backing_rayl,
-        p.source_resistance_ohm,
-        p.rx_load_ohm,
-        p.rx_load_capacitance_f,
-    )
+    key = (cc.grid_key(f), _stack_key(p, g))
 
     def make() -> dict[str, Any]:
         m_ep = layer_matrix(f, epoxy, area)

@@ -20,7 +20,7 @@ from . import unexplained as unx
 from .fields import core_for
 from .options import DiagnoseOptions
 from .prediction import sse
-from .trials import Stage, Trial, make_stage, run_trial
+from .trials import Stage, Trial, core_refit_sse, make_stage, run_trial
 
 __all__ = ["round_trials", "spread_starts", "adopt", "beyond_noise", "TRIAL_ERRORS"]
 
@@ -77,6 +77,10 @@ def round_trials(
         if best_tr is not None:
             trials.append(best_tr)
     _refine(trials, stage, inp, core_r, a_est, opts)
+    if trials:  # every trial is judged against the better of the stage and its core refitted alone
+        ref = core_refit_sse(stage, inp.est, inp.val, core_r, opts)
+        for tr in trials:
+            tr.ref_sse_val = ref
     if retest_left:
         opts.say(f"round {rnd}: re-testing {', '.join(retest_left)}")
         trials += dflt.retest_trials(bases, retest_left, inp.est, inp.val, core_r, a_est, opts)

@@ -44,6 +44,7 @@ from . import ranges as rg
 from . import realdata
 from . import unexplained as unx
 from .candidates import adopt
+from .confidence import calibrate_causes
 from .fields import core_for, numeric_fields, quant_params
 from .hybrid import hybrid_block
 from .options import DiagnoseOptions
@@ -296,10 +297,11 @@ def _conclude(inp: _Inputs, cal: _Calibrated, base: Stage, ext: Extension, opts:
                 "params": {},
             }
         )
-    causes.sort(key=lambda c: -float(c["confidence"]))  # strongest first (stable: round order among equals)
     verdict, beyond, at_bound = realdata.final_verdict(
         inp.val, stage.yhat_val, causes, stage.twin, cal.info, opts.skip, inp.noise
     )
+    calibrate_causes(causes, verdict, beyond.get("excess_ratio"))
+    causes.sort(key=lambda c: -float(c["confidence"]))  # strongest first (stable: round order among equals)
     opts.say(f"verdict {verdict}")
     defaults = dflt.contributions(stage.twin, cal.retest, inp.est, inp.val, opts.skip)
     hybrid, hybrid_twin = None, None

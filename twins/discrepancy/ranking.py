@@ -114,7 +114,10 @@ def _judge(
         n_eff = min(n_eff0, ft.effective_samples(val.output[skip:] - tr.yhat_val[skip:]))
         # the validation residual has no parameter fitted to it: its denominator keeps N_eff − k (k_total, the
         # in-sample count, would make a 98.6 % gain of a creep re-test insignificant at N_eff = 8: d2 = 1)
-        tr.p_value = significance(stage.sse_val, tr.sse_val, n_eff, tr.n_added)
+        # judged against the better of the stage and its core refitted alone: a gain that more iterations of the
+        # core alone reach too (a calibration short of its optimum) is not the effect's
+        ref = min(stage.sse_val, tr.ref_sse_val) if tr.ref_sse_val is not None else stage.sse_val
+        tr.p_value = significance(ref, tr.sse_val, n_eff, tr.n_added)
         tr.gain = max(0.0, 1.0 - tr.nrmse_val / stage.nrmse_val) if stage.nrmse_val > 0 else 0.0
     level = opts.alpha / len(trials)
     for tr in trials:

@@ -52,6 +52,9 @@ class Trial:
     n_total: int = 0  # k_total: every parameter the trial fitted (k and the core parameters refitted with them)
     retest: bool = False  # an effect that was already on, its own parameters refitted (:mod:`.defaults`)
     judged_samples: int = 0  # validation samples (after skip) its gain and p-value were judged on (:mod:`.ranking`)
+    # validation SSE of the configuration with only its core refitted (None: not computed), the reference a trial
+    # is tested against beside the stage (:func:`core_refit_sse`)
+    ref_sse_val: float | None = None
 
 
 def run_trial(
@@ -207,6 +210,19 @@ def _least_squares(
         if sse(est.output, held[3], opts.skip) < cost_start:
             best = (held[0], {**on_bound, **held[1]}, {**{f: float("nan") for f in on_bound}, **held[2]}, held[3])
     return best
+
+
+def core_refit_sse(stage: Stage, est: Record, val: Record, core: list[str], opts: DiagnoseOptions) -> float | None:
+    """Validation SSE of ``stage``'s configuration with its core parameters refitted alone, from the same start and
+    with the same budget as a stage-B trial (None without a core to refit). A trial that refits the core beside its
+    effect is nested in this fit, not in the calibration, and whatever the refit gains without any effect (a
+    calibration short of its optimum) is not an effect's gain either: every trial is tested against the better of
+    the two (conservative for a trial fitted with the core held)."""
+    names = core_for(stage.twin, core)
+    if not names:
+        return None
+    fit_tw, _, _, _ = _least_squares(stage.twin, stage.twin, est, core, {}, names, opts, refit_core=True)
+    return sse(val.output, simulate_val(fit_tw, est, val), opts.skip)
 
 
 @dataclasses.dataclass
