@@ -7,9 +7,11 @@ import numpy as np
 import pytest
 
 from benchmarks.diagnosis_bench import mechanisms as mech
+from benchmarks.diagnosis_bench.calibrate import fit, held_out
 from benchmarks.diagnosis_bench.cases import KINDS, RECORDS, draw_case, excitation
 from benchmarks.diagnosis_bench.check import compare
-from benchmarks.diagnosis_bench.score import calibration, detection_limit, outcome, score
+from benchmarks.diagnosis_bench.score import calibration, current, detection_limit, outcome, score
+from twins.discrepancy import confidence
 
 
 def test_a_seed_is_one_case_and_the_draws_cover_the_space():
@@ -132,7 +134,8 @@ def test_outcomes_follow_the_rules():
     assert outcome(_row(None, "user", "discrepancy", [_c("sensor_offset", 0.2)]))["outcome"] == "wrong"
 
 
-def test_detection_limit_and_calibration():
+def test_detection_limit_and_calibration(monkeypatch):
+    monkeypatch.setattr(confidence, "COEFFICIENTS", None)  # the scoring rules alone: stated = raw score
     sizes = [0.001, 0.002, 0.004, 0.01, 0.02, 0.05, 0.1]
     assert math.isclose(detection_limit(sizes, [False, False, False, True, True, True, True]), math.sqrt(0.04e-3))
     dl = detection_limit(sizes, [False, True, False, False, True, True, True])
@@ -155,3 +158,37 @@ def test_ci_check_fails_when_a_rate_drops_beyond_its_sampling_error():
     worse = [_row("creep", "cantilever", "none", [], seed=i, size=1.0) for i in range(3)] + stored[3:]
     dropped = compare(worse, stored, limits, {"catalog:cantilever": 0.95})
     assert not dropped["passed"] and dropped["groups"][0]["now"] == 0.5
+
+
+def test_stored_rows_read_with_the_calibration_of_now(monkeypatch):
+    """A row stored before the calibration was fitted (confidence = raw score) is read with the current map, the
+    causes re-ordered by it; reading again (a row written after the fit) changes nothing."""
+    coef = (0.0, 2.0) + (0.0,) * (len(confidence.FEATURES) - 1)  # P = logistic(2 logit(score)) only
+    monkeypatch.setattr(confidence, "COEFFICIENTS", coef)
+    row = _row("creep", "cantilever", "discrepancy", [_c("thermal_drift", 0.7), _c("creep", 0.6)])
+    row["causes"][1]["p_value"] = 1e-9  # features the map ignores here
+    now = current(row)
+    expect = [1 / (1 + ((1 - s) / s) ** 2) for s in (0.7, 0.6)]
+    assert [c["effect"] for c in now["causes"]] == ["thermal_drift", "creep"]
+    assert [c["confidence"] for c in now["causes"]] == pytest.approx(expect)
+    assert [c["score"] for c in now["causes"]] == [0.7, 0.6] and row["causes"][0]["confidence"] == 0.7
+    again = current(now)
+    assert [c["confidence"] for c in again["causes"]] == pytest.approx(expect)
+    flipped = (0.0, -2.0) + coef[2:]  # a map that reverses the order re-sorts the causes
+    monkeypatch.setattr(confidence, "COEFFICIENTS", flipped)
+    assert [c["effect"] for c in current(row)["causes"]] == ["creep", "thermal_drift"]
+
+
+def test_calibration_fit_recovers_a_known_logistic_model():
+    rng = np.random.default_rng(3)
+    x = rng.standard_normal((4000, 2))
+    w_true = np.array([-0.5, 1.5, -1.0])
+    p = 1 / (1 + np.exp(-(w_true[0] + x @ w_true[1:])))
+    y = (rng.uniform(size=p.size) < p).astype(float)
+    w = fit(x, y, ridge=1e-6)
+    assert np.allclose(w, w_true, atol=0.15)
+    seeds = np.arange(p.size)
+    ho = held_out(x, y, seeds)
+    assert ho["n_train"] == ho["n_test"] == 2000
+    assert ho["brier"] == pytest.approx(float(np.mean(p * (1 - p))), abs=0.02)  # the irreducible Brier score
+    assert all(abs(b["stated"] - b["observed"]) < 0.1 for b in ho["bins"] if b["n"] >= 100)

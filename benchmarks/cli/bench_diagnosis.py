@@ -45,6 +45,7 @@ def _settings() -> dict:
 
 def run(args: argparse.Namespace) -> int:
     from benchmarks.diagnosis_bench import page
+    from benchmarks.diagnosis_bench.calibrate import examples, held_out
     from benchmarks.diagnosis_bench.run import read_rows, run_cases
     from benchmarks.diagnosis_bench.score import score
 
@@ -67,6 +68,7 @@ def run(args: argparse.Namespace) -> int:
         finally:
             ex.close()
     scores = score(rows)
+    scores["calibration_held_out"] = held_out(*examples(rows))
     docs = Path(args.report) if args.report else page.DOCS_DIR.parent
     out_dir = docs / page.DOCS_DIR.name
     meta = {

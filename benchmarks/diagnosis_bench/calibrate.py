@@ -62,6 +62,8 @@ def _predict(x: np.ndarray, w: np.ndarray) -> np.ndarray:
 def held_out(x: np.ndarray, y: np.ndarray, seeds: np.ndarray, bins: int = 10) -> dict[str, Any]:
     """Fit on even seeds, judge on odd: Brier score and reliability table of the held-out causes."""
     train, test = seeds % 2 == 0, seeds % 2 == 1
+    if not train.any() or not test.any():
+        return {"n_train": int(train.sum()), "n_test": int(test.sum()), "brier": None, "bins": [], "weights": []}
     w = fit(x[train], y[train])
     p = _predict(x[test], w)
     edges = np.linspace(0, 1, bins + 1)

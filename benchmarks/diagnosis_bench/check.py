@@ -12,7 +12,7 @@ from __future__ import annotations
 import math
 from typing import Any
 
-from .score import _acceptable, _size, outcome
+from .score import _acceptable, _size, current, outcome
 
 __all__ = ["group_of", "choose_sample", "compare"]
 
@@ -59,7 +59,8 @@ def compare(
     full_rates: dict[str, float],
 ) -> dict[str, Any]:
     """Per group: stored and current right rate of the sample, the allowed drop, pass/fail (module docstring)."""
-    ref = {r["case"]["seed"]: r for r in stored}
+    ref = {r["case"]["seed"]: current(r) for r in stored}
+    now = [current(r) for r in now]
     by_group: dict[str, list[tuple[bool, bool]]] = {}
     wrong_now = wrong_then = 0
     for r in now:

@@ -15,7 +15,7 @@ from typing import Any
 
 from sysid.data.safeio import atomic_write_text
 
-from .score import CONFIDENT, _size, outcome
+from .score import CONFIDENT, _size, current, outcome
 
 __all__ = ["DOCS_DIR", "PAGE", "render", "figure"]
 
@@ -72,7 +72,7 @@ def figure(rows: list[dict[str, Any]], scores: dict[str, Any], path: Path) -> Pa
         sel = [r for r in rows if "error" not in r and r["case"]["family"] == fam and r["case"]["mechanism"]]
         mechs = sorted({r["case"]["mechanism"] for r in sel})
         for r in sel:
-            o = outcome(r)["outcome"]
+            o = outcome(current(r))["outcome"]
             ax.scatter(max(_size(r), 1e-5), mechs.index(r["case"]["mechanism"]), s=14, c=colour[o], alpha=0.7)
         for i, m in enumerate(mechs):
             dl = scores["detection_limits"].get(f"{fam}:{m}")

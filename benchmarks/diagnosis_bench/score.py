@@ -25,9 +25,11 @@ from typing import Any
 
 import numpy as np
 
+from twins.discrepancy.confidence import calibrate_causes
+
 from .mechanisms import EXPECTED
 
-__all__ = ["outcome", "score", "CONFIDENT", "RELIABILITY_BINS"]
+__all__ = ["outcome", "score", "current", "CONFIDENT", "RELIABILITY_BINS"]
 
 CONFIDENT = 0.5
 RELIABILITY_BINS = 10
@@ -37,6 +39,19 @@ RATE_EDGES: dict[str, tuple[float, ...]] = {
     "acoustic": (5e6, 15e6, 40e6, 100e6),
     "user": (0.0, 1.0, 1e4, 1e6),
 }
+
+
+def current(row: dict[str, Any]) -> dict[str, Any]:
+    """The row with its causes' confidence as the diagnosis states it now: the calibration
+    (:func:`twins.discrepancy.confidence.calibrate_causes`) applied to each cause's stored raw ``score``, the
+    causes re-sorted by it. A row written before the calibration was fitted (confidence = score) and a row written
+    after it read the same; the stored file is not changed."""
+    if "error" in row or not row.get("causes"):
+        return row
+    causes = [dict(c) for c in row["causes"]]
+    calibrate_causes(causes, row["verdict"], row.get("residual_vs_noise"))
+    causes.sort(key=lambda c: -float(c["confidence"]))
+    return dict(row, causes=causes)
 
 
 def _named(row: dict[str, Any]) -> list[dict[str, Any]]:
@@ -131,6 +146,7 @@ def _stratum(row: dict[str, Any]) -> dict[str, str]:
 
 def score(rows: list[dict[str, Any]]) -> dict[str, Any]:
     """Every figure of the benchmark page from the rows of a run (module docstring)."""
+    rows = [current(r) for r in rows]
     rows = [dict(r, _o=outcome(r)) for r in rows]
     ok = [r for r in rows if r["_o"]["outcome"] != "error"]
     confusion: dict[str, Counter] = defaultdict(Counter)

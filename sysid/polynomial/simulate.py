@@ -14,10 +14,8 @@ Three predictions:
   on the way, e(t) = y(t) − ŷ(t|t−1) (eq. 2-16), zero before ``max_lag``;
 - :func:`free_run` — eq. 2-29: the first ``max_lag`` samples are copied from the measurement, afterwards every
   output regressor is the model's own past output and noise regressors are zero;
-- :func:`k_step` — a true k-step-ahead prediction at *every* sample t: the model starts at origin
-  s = max(t−k+1, max_lag) from measured data before s (noise regressors from the one-step residuals) and runs
-  free until t. ``k = 1`` is the one-step prediction, ``k ≥ N − max_lag`` is the free run (same arithmetic,
-  bit-identical).
+- :func:`k_step` — k steps ahead at *every* sample t: from measured data before s = max(t−k+1, max_lag) (noise
+  regressors from the one-step residuals), free until t; k = 1 is one-step, k ≥ N − max_lag the free run.
 
 Speed: the terms of each output are grouped as [input-only | output-dependent | noise] (the parameters'
 order inside the model is unchanged). The input-only part cannot feed back, so it is computed for all samples

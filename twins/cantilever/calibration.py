@@ -34,18 +34,6 @@ from twins.calibration import CalibrationResult, calibrate, check_calibration_da
 
 __all__ = ["calibrate_cantilever", "continues"]
 
-#: parameters that the lab-data fit uses (the issue's list plus the sensor offset and initial state)
-LAB_FIT = (
-    "gain_um_per_v",
-    "bw_alpha",
-    "bw_beta",
-    "bw_gamma",
-    "f1_hz",
-    "zeta1",
-    "creep_per_decade",
-    "offset_um",
-    "initial_state_um",
-)
 PI_FIT = (
     "gain_um_per_v",
     "pi_p0_fraction",
