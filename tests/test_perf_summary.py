@@ -22,7 +22,7 @@ DATA = {
     "benchmarks": [
         _b("test_signals", "test_decimate_10M_points", 0.5),
         _b("test_signals", "test_decimate_scipy_reference", 2.0),
-        _b("test_signals", "test_chirp_10M_points", 0.1, target_s=0.05),
+        _b("test_signals", "test_chirp_10M_points", 0.1, target_s=0.05, note="N=10 at 1 Hz; load 0.5"),
         _b("test_frols", "test_ours", 1.0, reference="test_theirs", items=1_000_000),
         _b("test_frols", "test_theirs", 30.0),
     ],
@@ -38,6 +38,7 @@ def test_pairs_and_ratios(tmp_path):
     assert "| signals: decimate_10M_points | 500.0 ms |" in text and "| 4× |" in text
     assert "| 30× |" in text and "1 M/s" in text
     assert "no (2× over)" in text  # the chirp misses its 0.05 s target
+    assert "| no (2× over) | N=10 at 1 Hz; load 0.5 |" in text  # the note in the last column
     p = tmp_path / "bench.json"
     p.write_text(json.dumps(DATA))
     assert main([str(p), "-o", str(tmp_path / "s.md")]) == 0

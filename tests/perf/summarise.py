@@ -4,7 +4,8 @@
 For every benchmark: mean and min time per call, throughput when ``extra_info['items']`` is given, its
 reference (``extra_info['reference']`` or the naming rule of :mod:`tests.perf.conftest`) with the speed
 ratio reference/ours (> 1 = faster than the reference; per item when both give ``items``), and its target
-(``extra_info['target_s']``) with the margin. The machine line comes from the JSON (CPU, cores) — timings on a shared
+(``extra_info['target_s']``) with the margin, and ``extra_info['note']`` (what the mean does not say: N, rate, load,
+CPU time, the goal's own measure). The machine line comes from the JSON (CPU, cores) — timings on a shared
 machine are inflated."""
 
 from __future__ import annotations
@@ -90,8 +91,9 @@ def summarise(data: dict[str, Any]) -> str:
         f"Machine: {cpu}, {cores} logical cores, Python {mi.get('python_version', '?')}; "
         f"{data.get('datetime', '')[:19]}. Shared machine: absolute times are inflated.",
         "",
-        "| benchmark | mean | min | throughput | reference (mean) | speed-up vs reference | target | meets target |",
-        "|---|---|---|---|---|---|---|---|",
+        "| benchmark | mean | min | throughput | reference (mean) | speed-up vs reference | target | meets target "
+        "| notes |",
+        "|---|---|---|---|---|---|---|---|---|",
     ]
     for b in sorted(benches, key=lambda x: x["fullname"]):
         st, info = b["stats"], b.get("extra_info") or {}
@@ -116,7 +118,7 @@ def summarise(data: dict[str, Any]) -> str:
         module = b["fullname"].split("::")[0].rsplit("/", 1)[-1].removesuffix(".py").removeprefix("test_")
         lines.append(
             f"| {module}: {_label(b['name'])} | {_fmt_s(mean)} | {_fmt_s(mn)} | {thr} | {rtxt} | {ratio} | "
-            f"{ttxt} | {ok} |"
+            f"{ttxt} | {ok} | {str(info.get('note', '')).replace('|', '/')} |"
         )
     return "\n".join(lines) + "\n"
 
