@@ -3,7 +3,8 @@
 
 For every benchmark: mean and min time per call, throughput when ``extra_info['items']`` is given, its
 reference (``extra_info['reference']`` or the naming rule of :mod:`tests.perf.conftest`) with the speed
-ratio reference/ours (> 1 = faster than the reference; per item when both give ``items``), and its target
+ratio reference/ours (> 1 = faster than the reference; per item when both give ``items``; ``reference: None``
+says that no benchmark of the run is one), and its target
 (``extra_info['target_s']``) with the margin, and ``extra_info['note']`` (what the mean does not say: N, rate, load,
 CPU time, the goal's own measure). The machine line comes from the JSON (CPU, cores) — timings on a shared
 machine are inflated."""
@@ -54,7 +55,10 @@ def pair_references(benches: list[dict[str, Any]]) -> dict[str, str]:
                 out[b["fullname"]] = match["fullname"]
     refs = [b for b in benches if _is_reference(b["name"])]
     for b in benches:
-        if b["fullname"] in out or _is_reference(b["name"]) or (b.get("extra_info") or {}).get("ratio") is not None:
+        info = b.get("extra_info") or {}
+        if b["fullname"] in out or _is_reference(b["name"]) or info.get("ratio") is not None:
+            continue
+        if "reference" in info and not info["reference"]:  # stated: nothing of this run is its reference
             continue
         module = b["fullname"].split("::")[0]
         best, best_len = None, 0

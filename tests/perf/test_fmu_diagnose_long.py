@@ -111,8 +111,7 @@ def test_fmu_diagnose_80k_samples_hidden_delay(benchmark, tmp_path, machine, cap
             "cpu_s": out["cpu_s"],
             "wall_s": out["wall_s"],
             "loadavg": load,
-            "goal_cpu_s": GOAL_CPU_S,
-            "target_s": GOAL_CPU_S,
+            "goal_cpu_s": GOAL_CPU_S,  # a CPU goal: the summary's target_s would judge the wall time
             "note": note,
         }
     )
