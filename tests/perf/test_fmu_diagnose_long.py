@@ -101,7 +101,7 @@ def test_fmu_diagnose_80k_samples_hidden_delay(benchmark, tmp_path, machine, cap
         f"N={N} at fs={FS:g} Hz ({int(0.6 * N)} est + {N - int(0.6 * N)} val); CPU {out['cpu_s']:.1f} s (goal "
         f"{GOAL_CPU_S:.0f} s: {out['cpu_s'] / GOAL_CPU_S:.3f}x), wall {out['wall_s']:.1f} s; load {load[0]:.2f} -> "
         f"{load[1]:.2f}; cause {top.get('effect')} {fitted * 1e3:.4f} ms (hidden {DELAY_S * 1e3:g} ms), "
-        f"verdict {result['verdict']}"
+        f"verdict {result['verdict']}; all causes {[c['effect'] for c in result['causes']]}"
     )
     benchmark.extra_info.update(
         {
