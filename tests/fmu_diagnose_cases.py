@@ -5,8 +5,8 @@ The FMU is configured as the native twin the native diagnosis starts from: its m
 never predicted), its quantiser replaced by the generic ``output_quantization`` at the same 10 nm step (on, so
 that it is not a candidate: the data carry it as the native start twin does); for the sensor case its own sensor
 off, so that the generic ``sensor_lowpass`` is what the diagnosis can add. The 10 kHz records are cut to
-``n`` samples each (the FMU steps 20 µs per sample through its Python slave: a full-length diagnosis would
-take ~30 min).
+``n`` samples each, which keeps the ten-seed statistics affordable (a long record's diagnosis through the FMU:
+``tests/perf/test_fmu_diagnose_long.py``).
 """
 
 from __future__ import annotations
@@ -31,8 +31,8 @@ def fmu_case(effect: str | None, seed: int, n: int = 2000, route: str = "fmu"):
     """(twin as configured, est, val, true parameters, checked fields) for one case (None = noise only).
 
     ``route="fmu"``: the twin of ``fmus/cantilever.fmu``; ``route="kernel"``: the native cantilever kernel
-    wrapped as a user's model with the same configuration (the same samples as the FMU, bit for bit, at a tenth
-    of its CPU per diagnosis), so that the default suite and the ten-seed statistics can afford the same diagnosis."""
+    wrapped as a user's model with the same configuration (the same samples as the FMU, bit for bit), the route
+    the default suite runs: one diagnosis of it is the FMU's diagnosis without the FMI machinery."""
     _, est, val, params, checked = hidden_case("cantilever", effect, seed)
     if est.fs > 2000.0:  # the 10 kHz multisine/broadband cases; the 1 kHz step records (drift) stay whole
         est, val = est[:n], val[-n:]

@@ -22,9 +22,10 @@ DATA = {
     "benchmarks": [
         _b("test_signals", "test_decimate_10M_points", 0.5),
         _b("test_signals", "test_decimate_scipy_reference", 2.0),
-        _b("test_signals", "test_chirp_10M_points", 0.1, target_s=0.05),
+        _b("test_signals", "test_chirp_10M_points", 0.1, target_s=0.05, note="N=10 at 1 Hz; load 0.5"),
         _b("test_frols", "test_ours", 1.0, reference="test_theirs", items=1_000_000),
         _b("test_frols", "test_theirs", 30.0),
+        _b("test_signals", "test_decimate_busy", 0.7, reference=None),
     ],
 }
 
@@ -34,10 +35,13 @@ def test_pairs_and_ratios(tmp_path):
     assert refs["tests/perf/test_signals.py::test_decimate_10M_points"].endswith("test_decimate_scipy_reference")
     assert refs["tests/perf/test_frols.py::test_ours"].endswith("test_theirs")
     assert "tests/perf/test_signals.py::test_chirp_10M_points" not in refs
+    assert "tests/perf/test_signals.py::test_decimate_busy" not in refs  # reference=None: stated none
     text = summarise(DATA)
     assert "| signals: decimate_10M_points | 500.0 ms |" in text and "| 4× |" in text
     assert "| 30× |" in text and "1 M/s" in text
     assert "no (2× over)" in text  # the chirp misses its 0.05 s target
+    assert "| no (2× over) | N=10 at 1 Hz; load 0.5 |" in text  # the note in the last column
+    assert "| signals: decimate_busy | 700.0 ms | 630.0 ms |  |  |  |" in text  # reference=None: not paired
     p = tmp_path / "bench.json"
     p.write_text(json.dumps(DATA))
     assert main([str(p), "-o", str(tmp_path / "s.md")]) == 0

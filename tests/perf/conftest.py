@@ -18,6 +18,8 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
+import pytest
+
 os.environ.setdefault("MPLBACKEND", "Agg")
 
 RESULTS = Path(__file__).resolve().parents[2] / "docs" / "perf"
@@ -25,3 +27,14 @@ RESULTS = Path(__file__).resolve().parents[2] / "docs" / "perf"
 
 def pytest_configure(config) -> None:
     RESULTS.mkdir(parents=True, exist_ok=True)
+
+
+@pytest.fixture(scope="session")
+def machine() -> str:
+    """The machine line a benchmark prints beside its figures: CPU model (``/proc/cpuinfo``) and logical cores."""
+    try:
+        text = Path("/proc/cpuinfo").read_text()
+        model = next(line.split(":", 1)[1].strip() for line in text.splitlines() if line.startswith("model name"))
+    except (OSError, StopIteration):
+        model = "CPU"
+    return f"{model}, {os.cpu_count()} logical cores"

@@ -3,8 +3,10 @@
 
 For every benchmark: mean and min time per call, throughput when ``extra_info['items']`` is given, its
 reference (``extra_info['reference']`` or the naming rule of :mod:`tests.perf.conftest`) with the speed
-ratio reference/ours (> 1 = faster than the reference; per item when both give ``items``), and its target
-(``extra_info['target_s']``) with the margin. The machine line comes from the JSON (CPU, cores) — timings on a shared
+ratio reference/ours (> 1 = faster than the reference; per item when both give ``items``; ``reference: None``
+says that no benchmark of the run is one), and its target
+(``extra_info['target_s']``) with the margin, and ``extra_info['note']`` (what the mean does not say: N, rate, load,
+CPU time, the goal's own measure). The machine line comes from the JSON (CPU, cores) — timings on a shared
 machine are inflated."""
 
 from __future__ import annotations
@@ -53,7 +55,10 @@ def pair_references(benches: list[dict[str, Any]]) -> dict[str, str]:
                 out[b["fullname"]] = match["fullname"]
     refs = [b for b in benches if _is_reference(b["name"])]
     for b in benches:
-        if b["fullname"] in out or _is_reference(b["name"]) or (b.get("extra_info") or {}).get("ratio") is not None:
+        info = b.get("extra_info") or {}
+        if b["fullname"] in out or _is_reference(b["name"]) or info.get("ratio") is not None:
+            continue
+        if "reference" in info and not info["reference"]:  # stated: nothing of this run is its reference
             continue
         module = b["fullname"].split("::")[0]
         best, best_len = None, 0
@@ -90,8 +95,9 @@ def summarise(data: dict[str, Any]) -> str:
         f"Machine: {cpu}, {cores} logical cores, Python {mi.get('python_version', '?')}; "
         f"{data.get('datetime', '')[:19]}. Shared machine: absolute times are inflated.",
         "",
-        "| benchmark | mean | min | throughput | reference (mean) | speed-up vs reference | target | meets target |",
-        "|---|---|---|---|---|---|---|---|",
+        "| benchmark | mean | min | throughput | reference (mean) | speed-up vs reference | target | meets target "
+        "| notes |",
+        "|---|---|---|---|---|---|---|---|---|",
     ]
     for b in sorted(benches, key=lambda x: x["fullname"]):
         st, info = b["stats"], b.get("extra_info") or {}
@@ -116,7 +122,7 @@ def summarise(data: dict[str, Any]) -> str:
         module = b["fullname"].split("::")[0].rsplit("/", 1)[-1].removesuffix(".py").removeprefix("test_")
         lines.append(
             f"| {module}: {_label(b['name'])} | {_fmt_s(mean)} | {_fmt_s(mn)} | {thr} | {rtxt} | {ratio} | "
-            f"{ttxt} | {ok} |"
+            f"{ttxt} | {ok} | {str(info.get('note', '')).replace('|', '/')} |"
         )
     return "\n".join(lines) + "\n"
 

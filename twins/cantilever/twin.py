@@ -436,6 +436,7 @@ class CantileverStepper:
         self._noise_um = self.twin.params.noise_um
         self._n[0] = 0.0
         self._args = _run_args(self._u, self._n, self._y, self._cfg, self._st)
+        self._native: tuple[int, np.ndarray] | None = None
 
     def retune(self, twin: CantileverTwin) -> None:
         """Continue with the parameters of ``twin`` from the next :meth:`step` on, keeping the dynamic state.
@@ -480,6 +481,18 @@ class CantileverStepper:
         self.twin, self._cfg = twin, cfg
         self._noise_on = twin.has("measurement_noise") and twin.params.noise_um > 0
         self._bind()
+
+    def native_step(self) -> tuple[int, np.ndarray] | None:
+        """(address of a C function ``double f(int64_t *ctx, double u)``, ``ctx``) that does what :meth:`step` does
+        for a finite ``u``, for the FMU's loader (:mod:`twins.cantilever.native`); None while the measurement noise
+        is on (drawn in Python). Valid until the next :meth:`reset` or :meth:`retune`."""
+        if self._noise_on:
+            return None
+        if self._native is None:
+            from twins.cantilever.native import native_step
+
+            self._native = native_step(self._args)
+        return self._native
 
     def step(self, u: float) -> float:
         """Apply the voltage sample ``u`` [V]; returns the displacement reading y [µm] at this sample."""

@@ -12,8 +12,11 @@
 - **samples**: ``u[k]`` is applied from t_k to t_{k+1} and the output read after that step is ``y[k]`` (as
   :func:`twins.fmu.check.fmu_simulate`, so an exported twin and its FMU give the same samples).
 - **speed**: a co-simulation FMU is instantiated once and, per simulation, reset, given its parameters and
-  stepped through FMPy's low-level ``FMU2Slave`` (measured in docs/diagnosis.md); a model-exchange FMU (or
-  FMI 1/3) runs through ``fmpy.simulate_fmu`` with its own solver.
+  stepped sample by sample through the FMI C functions of FMPy's ``FMU2Slave`` from a compiled loop
+  (:mod:`.fmiloop`: FMPy's per-call Python costs more than a step of a fast FMU); a model-exchange FMU (or FMI 1/3)
+  runs through ``fmpy.simulate_fmu`` with its own solver. A run repeated with the same input, rate and parameter
+  values is answered from memory (:class:`_Results`): the diagnosis simulates the same core many times while it
+  fits effects that act on the core's output (measured in docs/diagnosis.md).
 - **effects the FMU declares**: ``effects={"overflow": ["x1_max", "overflow_share"]}`` (``--fmu-effect``) names
   a mechanism behind a Boolean switch (``effect_<id>`` or ``<id>``) with the ranged Reals it fits; the diagnosis
   tries it beside the generic effects, and its parameters leave the default calibration set.
@@ -27,6 +30,7 @@ import dataclasses
 import math
 import sys
 import threading
+from collections import OrderedDict
 from collections.abc import Iterable, Mapping
 from pathlib import Path
 from typing import Any
@@ -37,6 +41,7 @@ from sysid.errors import ConfigError, DataError
 from twins.base import EffectSpec
 from twins.paramfields import pfield
 
+from .fmiloop import fmi_functions, run_steps
 from .twin import ExternalTwin, external_twin_class
 
 __all__ = ["FMUCore", "fmu_twin_class"]
@@ -64,8 +69,53 @@ def _start(var: Any) -> Any:
     return s
 
 
+class _Results:
+    """Outputs of earlier runs by (input, rate, parameter values), least recently used dropped beyond ``limit`` bytes.
+
+    Sound because every run starts from a reset instance given all its parameters (FMI 2.0: ``fmi2Reset`` returns
+    the instance to its state after instantiation): the output is a function of the key. The key holds every
+    value and a sample of the input; a hit is confirmed on the whole input, bit for bit."""
+
+    def __init__(self, limit: int):
+        self.limit, self.size = int(limit), 0
+        self.items: OrderedDict[tuple, tuple[np.ndarray, np.ndarray]] = OrderedDict()
+        self.hits = self.misses = 0
+
+    @staticmethod
+    def key(u: np.ndarray, fs: float, values: Mapping[str, Any]) -> tuple:
+        sample = u[:: max(1, len(u) // 256)].tobytes()
+        # repr: exact for floats (and tells 1, 1.0, True and -0.0 apart)
+        return sample, len(u), repr(float(fs)), tuple(sorted((k, repr(v)) for k, v in values.items()))
+
+    def get(self, key: tuple, u: np.ndarray) -> np.ndarray | None:
+        item = self.items.get(key)
+        if item is None or not np.array_equal(item[0].view(np.int64), u.view(np.int64)):
+            self.misses += 1
+            return None
+        self.hits += 1
+        self.items.move_to_end(key)
+        return item[1].copy()
+
+    def put(self, key: tuple, u: np.ndarray, y: np.ndarray) -> None:
+        size = u.nbytes + y.nbytes
+        if self.limit <= 0 or size > self.limit:
+            return
+        old = self.items.pop(key, None)
+        if old is not None:
+            self.size -= old[0].nbytes + old[1].nbytes
+        self.items[key] = (u.copy(), y.copy())
+        self.size += size
+        while self.size > self.limit:
+            _, (ou, oy) = self.items.popitem(last=False)
+            self.size -= ou.nbytes + oy.nbytes
+
+
 class FMUCore:
     """Simulates one FMU for input arrays: ``core(u, fs, params, effects) -> y`` (module docstring)."""
+
+    #: memory for the inputs and outputs of earlier runs (0: none); 128 MB hold what a diagnosis of 80 000
+    #: samples re-uses
+    CACHE_BYTES = 128 << 20
 
     def __init__(self, path: str | Path, input_name: str | None = None, output_name: str | None = None):
         import fmpy
@@ -95,7 +145,9 @@ class FMUCore:
         self._lock = threading.Lock()
         self._slave: Any = None
         self._used = False
+        self._functions: tuple[Any, Any, Any] | None = None  # the slave's FMI functions for the stepping loop
         self._unzip: str | None = None
+        self.results = _Results(self.CACHE_BYTES)
         self._instantiate()
 
     def _pick(self, causality: str, name: str | None) -> Any:
@@ -146,7 +198,7 @@ class FMUCore:
             # a Python FMU (pythonfmu) puts its resources folder first on sys.path; processes started from this one
             # later (Dask workers, multiprocessing) would import the FMU's bundled copies of packages from it
             sys.path[:] = saved
-        self._slave, self._used = slave, False
+        self._slave, self._used, self._functions = slave, False, None
 
     def _drop_instance(self) -> None:
         slave, self._slave = self._slave, None
@@ -162,16 +214,24 @@ class FMUCore:
         values.update({sw: eid in effects for eid, sw in self.switches.items()})
         if self.fs_name:
             values[self.fs_name] = float(fs)
+        u = np.ascontiguousarray(u, dtype=float)
+        key = _Results.key(u, fs, values)
         with self._lock:
+            y = self.results.get(key, u)
+            if y is not None:
+                return y
             if not self.cs:
-                return self._run_fmpy(u, fs, values)
-            if self._slave is None:
-                self._instantiate()
-            try:
-                return self._run_slave(u, fs, values)
-            except Exception as exc:  # noqa: BLE001 — an FMU error status: a failed run, the instance re-made
-                self._drop_instance()
-                raise DataError(f"{self.path.name}: simulation failed ({type(exc).__name__}: {exc})") from None
+                y = self._run_fmpy(u, fs, values)
+            else:
+                if self._slave is None:
+                    self._instantiate()
+                try:
+                    y = self._run_slave(u, fs, values)
+                except Exception as exc:  # noqa: BLE001 — an FMU error status: a failed run, the instance re-made
+                    self._drop_instance()
+                    raise DataError(f"{self.path.name}: simulation failed ({type(exc).__name__}: {exc})") from None
+            self.results.put(key, u, y)
+            return y
 
     def _set(self, values: Mapping[str, Any]) -> None:
         s = self._slave
@@ -204,15 +264,14 @@ class FMUCore:
         s.setupExperiment(startTime=0.0)
         s.enterInitializationMode()
         s.exitInitializationMode()
-        h = 1.0 / fs
-        ru, ry = [self.u_var.valueReference], [self.y_var.valueReference]
-        y = np.empty(len(u))
-        set_real, do_step, get_real = s.setReal, s.doStep, s.getReal
-        for k, uk in enumerate(np.asarray(u, float).tolist()):
-            set_real(ru, [uk])
-            do_step(k * h, h)
-            y[k] = get_real(ry)[0]
-        return y
+        return self._steps(u, 1.0 / fs)
+
+    def _steps(self, u: np.ndarray, h: float) -> np.ndarray:
+        """One FMI step per sample, the loop compiled (:mod:`.fmiloop`); its C functions looked up once."""
+        s = self._slave
+        if self._functions is None:
+            self._functions = fmi_functions(s.dll)
+        return run_steps(self._functions, s.component, u, h, self.u_var.valueReference, self.y_var.valueReference)
 
     def _run_fmpy(self, u: np.ndarray, fs: float, values: Mapping[str, Any]) -> np.ndarray:
         """Model exchange (or FMI 1/3): ``fmpy.simulate_fmu`` with the input as a signal table."""

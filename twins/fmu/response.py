@@ -16,10 +16,12 @@ of ~6900 samples for 100 mm of water):
   It holds what arrives before the sound: for the acoustic twin ~5e-9 of the energy (the precursor of its
   frequency-domain attenuation model) and, with the ``crosstalk`` effect, the electrical path. Only
   32-sample pieces holding together <= ``energy_tol`` (1e-14) of the energy are dropped;
-- tail ``h[B:]``: every ``B`` input samples, the finished block is convolved with the whole tail by one FFT
-  pair and added into an output accumulator. The tail's contribution of block ``m`` is only needed from
-  sample ``(m+1)B`` on, i.e. after the block is complete, so the output is exact at every sample with no
-  delay; the cost is two real FFTs of ``~len(h)`` points per ``B`` samples (amortised microseconds).
+- tail ``h[B:]``: cut into ``P`` partitions of ``B`` taps, whose spectra (``2B`` points) are computed once. Every
+  ``B`` input samples the finished block's spectrum joins a delay line of the last ``P`` block spectra, and the
+  next ``B`` outputs receive ``sum_p X_{m-p} H_p`` (one inverse FFT, overlap-add into the next two blocks): the
+  uniformly partitioned convolution. Partition ``p`` of block ``m`` reaches the output only from sample
+  ``(m+1+p)B`` on, so each is added just in time: the output is exact at every sample with no delay. Per block
+  that is two FFTs of ``2B`` points and ``P(B+1)`` complex products (measured in docs/fmu.md).
 
 Nothing else of ``h`` is dropped, so the core equals the native ``simulate`` up to that and FFT round-off; the
 export measures it on a chirp and stores the figure in the FMU. The measurement is applied per sample with
@@ -96,9 +98,9 @@ def sparse_segments(
     return out, float(dropped[n_drop - 1]) if n_drop else 0.0
 
 
-#: rough costs on x86-64 (numpy/pocketfft) used only to choose the block size: a numpy.dot call, a tap,
-#: and one real FFT pair per ``n log2 n``
-_NS_PER_DOT, _NS_PER_TAP, _NS_PER_FFT_NLOGN = 1000.0, 0.5, 0.9
+#: rough costs on x86-64 (numpy/pocketfft) used only to choose the block size: a numpy.dot call on a slice, a
+#: tap, one real FFT pair per ``n log2 n``, one complex product of the partitioned tail (einsum)
+_NS_PER_DOT, _NS_PER_TAP, _NS_PER_FFT_NLOGN, _NS_PER_MAC = 1500.0, 0.25, 0.9, 2.7
 
 
 def plan(
@@ -111,7 +113,8 @@ def plan(
 
     For every power of two ``B`` in [block_min, block_max] the head is ``h[:B]`` without its weakest
     32-sample pieces (together <= ``energy_tol`` of the total energy); the block with the lowest estimated
-    cost per sample (head dots + one FFT pair of the tail per block) is chosen. For a response whose energy
+    cost per sample (head dots + per block an FFT pair of ``2B`` points and the partitioned tail's products) is
+    chosen. For a response whose energy
     arrives after a flight time the head is (nearly) empty up to that time, so ``B`` grows to it.
     """
     h = np.asarray(h, dtype=float)
@@ -126,11 +129,11 @@ def plan(
     B = block_min
     while B <= block_max:
         head, dropped = sparse_segments(h[:B], energy_tol, total=total)
-        n = scipy.fft.next_fast_len(max(last, B + 1) - 1, real=True)
+        partitions = -(-max(last - B, 0) // B)
         cost = (
             len(head) * _NS_PER_DOT
             + sum(len(t) for _, t in head) * _NS_PER_TAP
-            + _NS_PER_FFT_NLOGN * n * np.log2(n) / B
+            + (_NS_PER_FFT_NLOGN * 2 * B * np.log2(2 * B) + _NS_PER_MAC * partitions * (B + 1)) / B * (partitions > 0)
         )
         if best is None or cost < best[0]:
             best = (cost, B, head, dropped)
@@ -171,9 +174,12 @@ class ResponseCore:
         self.head_len = max([s + len(t) for s, t in self.head] or [1])
         tail = p["tail"]
         self.tail_len = len(tail)
-        self.nfft = scipy.fft.next_fast_len(B + max(len(tail), 1) - 1, real=True)
-        self.tail_spec = scipy.fft.rfft(tail, self.nfft) if len(tail) else None
-        self.n_acc = B + max(len(tail), 1)  # contributions reach at most B + len(tail) - 1 samples ahead
+        self.partitions = -(-len(tail) // B)
+        padded = np.zeros(self.partitions * B)
+        padded[: len(tail)] = tail
+        # spectra of the tail's B-tap partitions on 2B points (linear convolution of a block with a partition)
+        self.tail_spec = scipy.fft.rfft(padded.reshape(self.partitions, B), 2 * B, axis=1) if len(tail) else None
+        self.n_acc = 2 * B  # the outputs of this block and the next
         self.amplifier = amplifier
         self.measure = measure
         self.fs = float(fs)
@@ -193,6 +199,9 @@ class ResponseCore:
         self.bpos = 0
         self.acc = np.zeros(self.n_acc)
         self.apos = 0
+        # the delay line of block spectra, twice: rows s .. s+P-1 are the newest block first, then the older ones
+        self.spectra = np.zeros((2 * self.partitions, self.block + 1), dtype=complex)
+        self.newest = 0
         self.rng = np.random.default_rng(self.seed)
         self._u: float | None = None
         self._a = 0.0
@@ -232,16 +241,19 @@ class ResponseCore:
         return y
 
     def _flush(self) -> None:
-        """Add the finished block's tail contribution to the samples from the next one on."""
+        """Block ``m`` is complete: add ``sum_p x_{m-p} * h_p`` to the next two blocks' outputs (module docstring)."""
         self.bpos = 0
         if self.tail_spec is None:
             return
-        n = self.block + self.tail_len - 1
-        c = scipy.fft.irfft(scipy.fft.rfft(self.blockbuf, self.nfft) * self.tail_spec, self.nfft)[:n]
-        first = min(n, self.n_acc - self.apos)
-        self.acc[self.apos : self.apos + first] += c[:first]
-        if first < n:
-            self.acc[: n - first] += c[first:]
+        B, P = self.block, self.partitions
+        s = (self.newest - 1) % P
+        self.spectra[s] = self.spectra[s + P] = scipy.fft.rfft(self.blockbuf, 2 * B)
+        self.newest = s
+        z = scipy.fft.irfft(np.einsum("pk,pk->k", self.spectra[s : s + P], self.tail_spec), 2 * B)
+        a = self.apos  # the start of the next block: 0 or B
+        self.acc[a : a + B] += z[:B]
+        b = B - a
+        self.acc[b : b + B - 1] += z[B : 2 * B - 1]
 
     def run(self, u: np.ndarray) -> np.ndarray:
         """``step`` over an array (for checks)."""

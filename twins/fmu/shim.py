@@ -12,9 +12,18 @@ loader
 2. loads the wrapper from its own folder, which then starts the interpreter as in any C host;
 3. forwards every ``fmi2*`` function to the wrapper (one indirect call each).
 
-It exports only the FMI functions (not the wrapper's ``finalizePythonInterpreter``, which the slave
-finds in the wrapper itself). Without ``gcc``, a shared libpython or on another platform the wrapper is
-shipped as before and a warning says that a C host must then preload libpython.
+**The per-sample calls in C.** Each instance the loader hands out is a block of its own (``Inst``) in front of
+the wrapper's. A slave of this project attaches to it at instantiation (:mod:`twins.fmu.native`) and then keeps
+its input ``u`` (value reference 0) and output ``y`` (1) there, so ``fmi2SetReal(u)`` and ``fmi2GetReal(y)`` are
+answered in C. A slave whose core has a native step (a C function ``y = f(ctx, u)``, the cantilever's kernel
+without measurement noise) arms it, and ``fmi2DoStep`` of that communication step with a finite ``u`` runs it
+without entering Python. Every other call goes to the wrapper and disarms the native step first (a parameter
+change, a reset, another step size: the slave's Python step handles it and arms again). A slave that does not
+attach (an older copy of the project in the process) gets every call, as before. Besides the FMI functions the
+loader exports ``piezotwin_instance`` (the block whose call is being forwarded).
+
+Without ``gcc``, a shared libpython or on another platform the wrapper is shipped as before and a warning says
+that a C host must then preload libpython.
 """
 
 from __future__ import annotations
@@ -39,6 +48,7 @@ WRAPPED_SUFFIX = ".pythonfmu.so"
 SHIM_SOURCE = r"""
 #define _GNU_SOURCE /* dladdr */
 #include <dlfcn.h>
+#include <math.h>
 #include <pthread.h>
 #include <stddef.h>
 #include <stdio.h>
@@ -60,20 +70,18 @@ typedef struct { Logger logger; void *alloc, *free, *step_finished, *env; } Call
                          int visible, int logging), (name, type, guid, res, cb, visible, logging)) \
   X(void, fmi2FreeInstance, (C c), (c))
 
-/* every other FMI 2.0 function returns an fmi2Status: forwarded, or fmi2Error (3) if the wrapper is not loaded */
-#define STATUS_FUNCTIONS(X) \
+/* every other FMI 2.0 function returns an fmi2Status: forwarded, or fmi2Error (3) if the wrapper is not loaded;
+   these as they are, OWN_FUNCTIONS through a definition of their own below (u, y and the native step) */
+#define PLAIN_FUNCTIONS(X) \
   X(S, fmi2SetDebugLogging, (C c, int on, size_t n, const char *const cat[]), (c, on, n, cat)) \
   X(S, fmi2SetupExperiment, (C c, int tol_on, double tol, double t0, int stop_on, double t1), \
     (c, tol_on, tol, t0, stop_on, t1)) \
   X(S, fmi2EnterInitializationMode, (C c), (c)) \
   X(S, fmi2ExitInitializationMode, (C c), (c)) \
   X(S, fmi2Terminate, (C c), (c)) \
-  X(S, fmi2Reset, (C c), (c)) \
-  X(S, fmi2GetReal, (C c, const VR vr[], size_t n, double v[]), (c, vr, n, v)) \
   X(S, fmi2GetInteger, (C c, const VR vr[], size_t n, int v[]), (c, vr, n, v)) \
   X(S, fmi2GetBoolean, (C c, const VR vr[], size_t n, int v[]), (c, vr, n, v)) \
   X(S, fmi2GetString, (C c, const VR vr[], size_t n, const char *v[]), (c, vr, n, v)) \
-  X(S, fmi2SetReal, (C c, const VR vr[], size_t n, const double v[]), (c, vr, n, v)) \
   X(S, fmi2SetInteger, (C c, const VR vr[], size_t n, const int v[]), (c, vr, n, v)) \
   X(S, fmi2SetBoolean, (C c, const VR vr[], size_t n, const int v[]), (c, vr, n, v)) \
   X(S, fmi2SetString, (C c, const VR vr[], size_t n, const char *const v[]), (c, vr, n, v)) \
@@ -88,13 +96,41 @@ typedef struct { Logger logger; void *alloc, *free, *step_finished, *env; } Call
   X(S, fmi2SetRealInputDerivatives, (C c, const VR vr[], size_t n, const int o[], const double v[]), \
     (c, vr, n, o, v)) \
   X(S, fmi2GetRealOutputDerivatives, (C c, const VR vr[], size_t n, const int o[], double v[]), (c, vr, n, o, v)) \
-  X(S, fmi2DoStep, (C c, double t, double h, int no_prior), (c, t, h, no_prior)) \
   X(S, fmi2CancelStep, (C c), (c)) \
   X(S, fmi2GetStatus, (C c, int kind, int *v), (c, kind, v)) \
-  X(S, fmi2GetRealStatus, (C c, int kind, double *v), (c, kind, v)) \
   X(S, fmi2GetIntegerStatus, (C c, int kind, int *v), (c, kind, v)) \
   X(S, fmi2GetBooleanStatus, (C c, int kind, int *v), (c, kind, v)) \
   X(S, fmi2GetStringStatus, (C c, int kind, const char **v), (c, kind, v))
+#define OWN_FUNCTIONS(X) \
+  X(S, fmi2Reset, (C c), (c)) \
+  X(S, fmi2GetReal, (C c, const VR vr[], size_t n, double v[]), (c, vr, n, v)) \
+  X(S, fmi2SetReal, (C c, const VR vr[], size_t n, const double v[]), (c, vr, n, v)) \
+  X(S, fmi2DoStep, (C c, double t, double h, int no_prior), (c, t, h, no_prior)) \
+  X(S, fmi2GetRealStatus, (C c, int kind, double *v), (c, kind, v))
+#define STATUS_FUNCTIONS(X) PLAIN_FUNCTIONS(X) OWN_FUNCTIONS(X)
+
+/* The instance handed to the host: u and y kept here once the slave attaches (twins.fmu.native._Block has the
+   same layout), and an armed native step that does one sample of the communication step h without Python. */
+typedef double (*NativeStep)(void *ctx, double u);
+typedef struct {
+    unsigned magic; /* INST_MAGIC */
+    int attached;   /* the slave keeps u and y here */
+    double u, y;    /* input (value reference 0) and output (1) */
+    double h;       /* the communication step the native step stands for */
+    NativeStep step; /* NULL: not armed */
+    void *ctx;
+    double last_time; /* end of the last step done here (fmi2LastSuccessfulTime) */
+    int stepped_here; /* the last step was done here */
+    int pad;
+    C inner; /* the wrapper's instance */
+} Inst;
+#define INST_MAGIC 0x50545731u
+#define VR_U 0u
+#define VR_Y 1u
+
+/* the instance whose call is being forwarded: a slave created in that call attaches to it */
+static __thread Inst *current;
+API void *piezotwin_instance(void) { return current; }
 
 #define POINTER(ret, name, params, args) static ret(*p_##name) params;
 SPECIAL_FUNCTIONS(POINTER)
@@ -152,19 +188,113 @@ API const char *fmi2GetVersion(void) { return loaded() ? p_fmi2GetVersion() : "2
 
 API C fmi2Instantiate(const char *name, int type, const char *guid, const char *res, const Callbacks *cb,
                       int visible, int logging) {
-    if (loaded()) return p_fmi2Instantiate(name, type, guid, res, cb, visible, logging);
-    if (cb && cb->logger) cb->logger(cb->env, name, 3, "logStatusError", "%s", problem);
-    else fprintf(stderr, "%s\n", problem);
-    return NULL;
+    if (!loaded()) {
+        if (cb && cb->logger) cb->logger(cb->env, name, 3, "logStatusError", "%s", problem);
+        else fprintf(stderr, "%s\n", problem);
+        return NULL;
+    }
+    Inst *in = calloc(1, sizeof *in);
+    if (!in) return NULL;
+    in->magic = INST_MAGIC;
+    current = in;
+    in->inner = p_fmi2Instantiate(name, type, guid, res, cb, visible, logging);
+    current = NULL;
+    if (!in->inner) {
+        free(in);
+        return NULL;
+    }
+    return in;
 }
 
 API void fmi2FreeInstance(C c) {
-    if (loaded()) p_fmi2FreeInstance(c);
+    Inst *in = c;
+    if (!in) return;
+    in->step = NULL;
+    current = in;
+    if (loaded()) p_fmi2FreeInstance(in->inner);
+    current = NULL;
+    free(in);
 }
 
+/* a call for the wrapper: the native step disarmed (the slave arms it again), the instance current */
 #define FORWARD(ret, name, params, args) \
-    API ret name params { return loaded() ? p_##name args : 3; }
+    static S forward_##name params { \
+        Inst *in = c; \
+        if (!in || !loaded()) return 3; \
+        in->step = NULL; \
+        in->stepped_here = 0; \
+        c = in->inner; \
+        current = in; \
+        S s = p_##name args; \
+        current = NULL; \
+        return s; \
+    }
 STATUS_FUNCTIONS(FORWARD)
+
+#define PLAIN(ret, name, params, args) \
+    API ret name params { return forward_##name args; }
+PLAIN_FUNCTIONS(PLAIN)
+
+API S fmi2Reset(C c) {
+    Inst *in = c;
+    if (in) in->attached = 0; /* the wrapper makes a new slave, which attaches again */
+    return forward_fmi2Reset(c);
+}
+
+API S fmi2SetReal(C c, const VR vr[], size_t n, const double v[]) {
+    Inst *in = c;
+    if (!in || !in->attached) return forward_fmi2SetReal(c, vr, n, v);
+    if (n == 1 && vr[0] == VR_U) {
+        in->u = v[0];
+        return 0;
+    }
+    S worst = 0;
+    for (size_t i = 0; i < n; i++) {
+        S s = 0;
+        if (vr[i] == VR_U) in->u = v[i];
+        else s = forward_fmi2SetReal(c, vr + i, 1, v + i);
+        if (s > worst) worst = s;
+    }
+    return worst;
+}
+
+API S fmi2GetReal(C c, const VR vr[], size_t n, double v[]) {
+    Inst *in = c;
+    if (!in || !in->attached) return forward_fmi2GetReal(c, vr, n, v);
+    S worst = 0;
+    for (size_t i = 0; i < n; i++) {
+        S s = 0;
+        if (vr[i] == VR_Y) v[i] = in->y;
+        else if (vr[i] == VR_U) v[i] = in->u;
+        else {
+            NativeStep armed = in->step; /* a read leaves the native step armed */
+            s = forward_fmi2GetReal(c, vr + i, 1, v + i);
+            in->step = armed;
+        }
+        if (s > worst) worst = s;
+    }
+    return worst;
+}
+
+API S fmi2DoStep(C c, double t, double h, int no_prior) {
+    Inst *in = c;
+    if (in && in->step && h == in->h && isfinite(in->u)) {
+        in->y = in->step(in->ctx, in->u);
+        in->last_time = t + h;
+        in->stepped_here = 1;
+        return 0;
+    }
+    return forward_fmi2DoStep(c, t, h, no_prior);
+}
+
+API S fmi2GetRealStatus(C c, int kind, double *v) {
+    Inst *in = c;
+    if (in && in->stepped_here && kind == 2 /* fmi2LastSuccessfulTime */) {
+        *v = in->last_time;
+        return 0;
+    }
+    return forward_fmi2GetRealStatus(c, kind, v);
+}
 """
 
 

@@ -26,6 +26,7 @@ from pythonfmu import Boolean, Fmi2Causality, Fmi2Initial, Fmi2Slave, Fmi2Variab
 from pythonfmu.default_experiment import DefaultExperiment
 from pythonfmu.enums import Fmi2Status
 
+from twins.fmu import native
 from twins.fmu.spec import CONFIG_NAME, FORMAT, decode_value
 
 __all__ = ["FastIO", "PiezoSlave", "TwinSlave", "load_fmu_config", "release_wrapper_state"]
@@ -182,7 +183,42 @@ _TYPES = {"Real": Real, "Integer": Integer, "Boolean": Boolean, "String": String
 class FastIO:
     """``set_real``/``get_real`` of the input ``u`` (value reference 0) and the output ``y`` (1) without
     pythonfmu's generic loop over variables: a host's step is a set, a ``do_step`` and a get, so these two
-    calls are on the per-sample path. Same effect as the generic ones; other value references go there."""
+    calls are on the per-sample path. Same effect as the generic ones; other value references go there.
+
+    ``u`` and ``y`` live in the loader's block once the slave has attached to it (:mod:`twins.fmu.native`):
+    the loader then answers the host's set and get of them in C, and these methods only serve hosts that
+    load pythonfmu's wrapper directly."""
+
+    _block: Any = None  # the loader's block (twins.fmu.native.Block), or None
+    _arms = False  # the core may have a native step (the loader disarms it before every call it forwards)
+    _u_value = 0.0
+    _y_value = 0.0
+
+    @property
+    def u(self) -> float:
+        b = self._block
+        return b.u if b is not None else self._u_value
+
+    @u.setter
+    def u(self, value: float) -> None:
+        b = self._block
+        if b is not None:
+            b.u = value
+        else:
+            self._u_value = value
+
+    @property
+    def y(self) -> float:
+        b = self._block
+        return b.y if b is not None else self._y_value
+
+    @y.setter
+    def y(self, value: float) -> None:
+        b = self._block
+        if b is not None:
+            b.y = value
+        else:
+            self._y_value = value
 
     def _check_io_refs(self) -> None:
         if [self.vars[0].name, self.vars[1].name] != ["u", "y"]:
@@ -222,6 +258,8 @@ class PiezoSlave(FastIO, Fmi2Slave):
         self.version = str(cfg.get("project_version", ""))
         self._fs = float(cfg["fs"])
         self.default_experiment = DefaultExperiment(start_time=0.0, step_size=1.0 / self._fs)
+        self._block = native.attach(self.resources)
+        self._armed: Any = None  # what the loader's armed native step uses (kept alive here)
         self.u = 0.0
         self.y = 0.0
         units = cfg.get("units", {})
@@ -247,6 +285,8 @@ class PiezoSlave(FastIO, Fmi2Slave):
         )
         self._check_io_refs()
         self._step_samples: tuple[float | None, int] = (None, 0)  # (communication step, samples per step) last checked
+        if self._block is not None:
+            self._block.attached = 1  # from now on the loader answers the host's set of u and get of y
 
     def to_xml(self, model_options=dict()) -> Element:  # noqa: B006 (signature of the base class)
         root = super().to_xml(model_options)
@@ -276,10 +316,17 @@ class PiezoSlave(FastIO, Fmi2Slave):
             if not math.isfinite(u):
                 return self._fail(f"input u={u!r} at t={current_time!r} s is not finite")
             self.y = float(self._step(u, n, current_time))
+            if self._arms and self._block is not None:  # the next steps of this size in C, until a call reaches Python
+                self._armed = native.arm(self._block, step_size, self._native_step() if n == 1 else None)
             return True
         except BaseException:
             self._before_raise()
             raise
+
+    def _native_step(self) -> tuple[int, Any] | None:
+        """(address of ``double f(int64_t *ctx, double u)``, ctx) that does what ``_step(u, 1, t)`` does for a
+        finite ``u`` (:mod:`twins.fmu.native`), or None: every step in Python."""
+        return None
 
     def _samples_per_step(self, step_size: float) -> int:
         """Sampling periods in the communication step ``step_size``, which must be a whole number of them (or
@@ -371,6 +418,10 @@ class TwinSlave(PiezoSlave):
     def _stepping(self):
         return self._core
 
+    def _native_step(self) -> tuple[int, Any] | None:
+        make = getattr(self._core, "native_step", None)
+        return make() if make is not None and not self._retune else None
+
     def _step(self, u: float, n: int, current_time: float) -> float:
         core = self._core
         if core is None:  # do_step checks _stepping() first
@@ -420,6 +471,7 @@ class TwinSlave(PiezoSlave):
             twin = self.make_twin()
             self._step_samples = (None, 0)  # fs is set now
             self._core = build_core(twin, self._fs, self._cfg["core"], self.resources)
+            self._arms = hasattr(self._core, "native_step")
         except Exception as exc:  # the message reaches the importing tool's log
             self.log(f"{type(exc).__name__}: {exc}", Fmi2Status.error)
             raise
