@@ -127,11 +127,15 @@ def _refine(
         j = min(range(len(trials)), key=lambda k: trials[k].sse_est)
         if j not in picked and trials[j].sse_est < base_est:
             picked.append(j)
-        # the same symptom anywhere in the round: better on the estimation record, worse on the validation record
+        # the same symptom anywhere in the round: better on the estimation record by at least the least gain the
+        # ranking credits (min_rel_gain of NRMSE; not a rounding-level difference), worse on the validation record
         picked += [
             i
             for i, tr in enumerate(trials)
-            if i not in picked and tr.sse_est < base_est * (1 - 1e-9) and tr.sse_val > stage.sse_val
+            if i not in picked
+            and tr.sse_val > stage.sse_val
+            and base_est > 0
+            and 1.0 - math.sqrt(max(tr.sse_est, 0.0) / base_est) >= opts.min_rel_gain
         ]
     # the leader's group is refined with it, so its members are judged alike (a core that absorbed a settling drift
     # leaves thermal_drift no gain with the core held, while slow_drift, refitted, takes it)
