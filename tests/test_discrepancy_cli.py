@@ -47,6 +47,9 @@ def test_cli_json_and_report(delayed_files):
         str(d / "rep"),
     )
     assert r.returncode == 0, r.stderr
+    # one progress line per finished round on stderr, with --json too (stdout stays the JSON document alone)
+    rounds = [ln for ln in r.stderr.splitlines() if ln.startswith("[diagnose] round 1: ")]
+    assert len(rounds) == 1 and "trials, leader input_delay" in rounds[0], r.stderr
     out = json.loads(r.stdout)
     assert out["verdict"] == "discrepancy"
     assert list(out["causes"][0])[:4] == ["effect", "confidence", "evidence", "params"]
