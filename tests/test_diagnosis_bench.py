@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from benchmarks.diagnosis_bench import mechanisms as mech
-from benchmarks.diagnosis_bench.calibrate import fit, held_out
+from benchmarks.diagnosis_bench.calibrate import examples, fit, held_out
 from benchmarks.diagnosis_bench.cases import KINDS, RECORDS, draw_case, excitation
 from benchmarks.diagnosis_bench.check import compare
 from benchmarks.diagnosis_bench.score import calibration, current, detection_limit, outcome, score
@@ -192,3 +192,20 @@ def test_calibration_fit_recovers_a_known_logistic_model():
     assert ho["n_train"] == ho["n_test"] == 2000
     assert ho["brier"] == pytest.approx(float(np.mean(p * (1 - p))), abs=0.02)  # the irreducible Brier score
     assert all(abs(b["stated"] - b["observed"]) < 0.1 for b in ho["bins"] if b["n"] >= 100)
+
+
+def test_the_page_renders_from_rows_and_says_when_the_run_is_partial(tmp_path):
+    from benchmarks.cli.bench_diagnosis import _ranges
+    from benchmarks.diagnosis_bench import page
+
+    assert _ranges([0, 1, 2, 5, 7, 8]) == "0–2, 5, 7–8"
+    rows = [_row("creep", "cantilever", "discrepancy", [_c("creep", 0.9)], seed=i, size=0.1) for i in range(4)]
+    rows += [_row(None, "user", "none", [], seed=4 + i) for i in range(2)]
+    scores = score(rows)
+    scores["calibration_held_out"] = held_out(*examples(rows))
+    meta = {"command": "c", "date": "d", "machine": "m", "seeds": _ranges(list(range(6))), "complete": False}
+    text = page.render(scores, meta, tmp_path / "p.md", tmp_path / "dir").read_text()
+    assert "seeds 0–5" in text and "The run is not complete" in text
+    assert "| cantilever:creep | yes | 4 |" in text
+    meta["complete"] = True
+    assert "not complete" not in page.render(scores, meta, tmp_path / "p.md", tmp_path / "dir").read_text()

@@ -75,7 +75,8 @@ def run(args: argparse.Namespace) -> int:
         "command": f"piezotwin bench-diagnosis --cases {n}",
         "date": datetime.date.today().isoformat(),
         "machine": page.machine(),
-        "seeds": f"0-{n - 1}",
+        "seeds": _ranges(sorted(r["case"]["seed"] for r in rows)),
+        "complete": len(rows) == n,
         "results": str(results),
     }
     page.figure(rows, scores, out_dir / "figure.png")
@@ -85,6 +86,17 @@ def run(args: argparse.Namespace) -> int:
     elif not args.quiet:
         _print(scores, written)
     return 0
+
+
+def _ranges(seeds: list[int]) -> str:
+    """``[0, 1, 2, 5, 7, 8]`` → ``"0–2, 5, 7–8"``: the seeds a page was scored on."""
+    parts: list[str] = []
+    for s in seeds:
+        if parts and s == int(parts[-1].split("–")[-1]) + 1:
+            parts[-1] = f"{parts[-1].split('–')[0]}–{s}"
+        else:
+            parts.append(str(s))
+    return ", ".join(parts)
 
 
 def _say(args: argparse.Namespace, row: dict) -> None:
