@@ -15,10 +15,12 @@ The model file (:func:`twins.external.load_model`) defines, besides ``Params``:
 and optionally ``initial_state(p, u0)`` (the state at the first sample; default zeros), ``INPUT`` (``"hold"``:
 the input held over each sample, the default; ``"linear"`` or ``"cubic"``: interpolated between samples, for a
 sampled smooth signal), ``SUBSTEPS``
-(Runge–Kutta steps per sample; default chosen from the records) and ``BOUNDS`` (state → (lo, hi), a state
-held within them, e.g. a level that cannot be negative). :class:`EquationSpec` checks and compiles all of it
-(a model that does not compile, returns NaN at its initial state or names an unknown role is refused with one
-line) and runs it with the mechanisms of :mod:`.catalog` switched in (:mod:`.kernel`).
+(Runge–Kutta steps per sample; default chosen from the records), ``BOUNDS`` (state → (lo, hi), numbers or
+parameter names: a state held within them, e.g. a level that cannot be negative) and ``input_map(u, fs, p)`` /
+``output_map(y, u, fs, p)`` (vectorised, around the equations: an actuator, a sensor). :class:`EquationSpec`
+checks and compiles all of it (a model that does not compile, returns NaN at its initial state or names an
+unknown role is refused with one line) and runs it with the mechanisms of :mod:`.catalog` switched in
+(:mod:`.kernel`).
 """
 
 from __future__ import annotations
@@ -118,7 +120,12 @@ class EquationSpec:
         sub = getattr(obj, "SUBSTEPS", None)
         self.auto_substeps = sub is None
         self.substeps = 1 if sub is None else _positive_int(sub, f"model {name}: SUBSTEPS")
-        self.lo, self.hi = _bounds(obj, name, self.states)
+        self.bounds = _bounds(obj, name, self.states, params_cls)
+        self.input_map = _optional(obj, "input_map", name)
+        self.output_map = _optional(obj, "output_map", name)
+        self.source = _source_file(obj)
+        calib = getattr(obj, "CALIBRATION_PARAMS", None)
+        self.calib = tuple(calib) if calib is not None else tuple(self.user_fields)
         self._integrators: dict[Any, Any] = {}
         self.memo: dict[str, Any] = {}  # the last results kept by the twin (:mod:`.twin`)
         p0 = params_cls()
@@ -256,9 +263,9 @@ class EquationSpec:
             self._integrators["tangent"] = build_tangent(self.rates, self.output)
         slots = self.active(effects)
         mech, extra = self.mech_table(slots, p)
-        u = apply_input(np.ascontiguousarray(u, dtype=np.float64), mech)
+        u = apply_input(self.mapped_input(np.ascontiguousarray(u, dtype=np.float64), fs, p), mech)
         x0 = np.concatenate([self.initial(p, float(u[0]) if u.size else 0.0), np.zeros(extra)])
-        lo, hi = self._limits(slots, mech, extra)
+        lo, hi = self._limits(slots, mech, extra, p)
         sub = int(getattr(p, SUBSTEPS_FIELD, self.substeps))
         args = (self.values(p), x0, self.stage_inputs(u, sub), 1.0 / float(fs), mech, lo, hi)
         return self._integrators["tangent"](*args, np.ascontiguousarray(phi, np.float64), np.asarray(rows, np.int64))
@@ -274,9 +281,13 @@ class EquationSpec:
                 memo.popitem(last=False)
         return memo[key]
 
-    def _limits(self, slots: list[MechanismSlot], mech: np.ndarray, extra: int) -> tuple[np.ndarray, np.ndarray]:
-        lo = np.concatenate([self.lo, np.full(extra, -np.inf)])
-        hi = np.concatenate([self.hi, np.full(extra, np.inf)])
+    def _limits(
+        self, slots: list[MechanismSlot], mech: np.ndarray, extra: int, p: Any
+    ) -> tuple[np.ndarray, np.ndarray]:
+        lo, hi = np.full(self.n + extra, -np.inf), np.full(self.n + extra, np.inf)
+        for i, (a, b) in self.bounds.items():
+            lo[i] = -np.inf if a is None else float(getattr(p, a) if isinstance(a, str) else a)
+            hi[i] = np.inf if b is None else float(getattr(p, b) if isinstance(b, str) else b)
         for r, s in enumerate(slots):
             if s.mech.kind == "overflow":
                 hi[s.acts] = min(hi[s.acts], mech[r, 4])
@@ -291,20 +302,35 @@ class EquationSpec:
         keep: bool = False,
         sparse: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
         force: np.ndarray | None = None,
+        x0: np.ndarray | None = None,
+        mode: str | None = None,
     ) -> tuple[np.ndarray, np.ndarray]:
         """``(y, X)``: the output for the input samples ``u`` at ``fs`` [Hz] with the mechanisms ``effects`` on, and
-        the states at every sample when ``keep`` (the added states after the model's own)."""
+        the states at every sample when ``keep`` (the added states after the model's own); ``x0`` a start other than
+        the initial state (augmented), ``mode`` an input interpolation other than the model's (a stepper's)."""
         slots = self.active(effects)
         mech, extra = self.mech_table(slots, p)
-        u = apply_input(np.ascontiguousarray(u, dtype=np.float64), mech)
-        x0 = np.concatenate([self.initial(p, float(u[0]) if u.size else 0.0), np.zeros(extra)])
-        lo, hi = self._limits(slots, mech, extra)
+        u_given = np.ascontiguousarray(u, dtype=np.float64)
+        u = apply_input(self.mapped_input(u_given, fs, p), mech)
+        if x0 is None:
+            x0 = np.concatenate([self.initial(p, float(u[0]) if u.size else 0.0), np.zeros(extra)])
+        lo, hi = self._limits(slots, mech, extra, p)
         sub = int(getattr(p, SUBSTEPS_FIELD, self.substeps))
         with_sparse = sparse is not None or force is not None
         sp_exp, sp_row, sp_coef = sparse or (np.zeros((0, self.n + 1), np.int64), np.zeros(0, np.int64), np.zeros(0))
         frc = np.zeros((0, self.n)) if force is None else np.ascontiguousarray(force, dtype=np.float64)
-        args = (self.values(p), x0, self.stage_inputs(u, sub), 1.0 / float(fs), mech, lo, hi)
-        return self.integrator(with_sparse)(*args, sp_exp, sp_row, sp_coef, frc, keep)
+        uf = self.stage_inputs(u, sub) if mode is None else stage_inputs(u, sub, mode)
+        args = (self.values(p), np.asarray(x0, dtype=np.float64), uf, 1.0 / float(fs), mech, lo, hi)
+        y, X = self.integrator(with_sparse)(*args, sp_exp, sp_row, sp_coef, frc, keep)
+        if self.output_map is not None:
+            y = np.asarray(self.output_map(y, u_given, float(fs), p), dtype=float)
+        return y, X
+
+    def mapped_input(self, u: np.ndarray, fs: float, p: Any) -> np.ndarray:
+        """The input through the model's own ``input_map`` (the input as it reaches the equations)."""
+        if self.input_map is None:
+            return u
+        return np.ascontiguousarray(self.input_map(u, float(fs), p), dtype=np.float64)
 
 
 def digest(a: np.ndarray) -> bytes:
@@ -346,15 +372,43 @@ def _states(obj: Any, name: str) -> tuple[list[str], list[str], list[str]]:
     return states, roles, units
 
 
-def _bounds(obj: Any, name: str, states: list[str]) -> tuple[np.ndarray, np.ndarray]:
-    lo, hi = np.full(len(states), -np.inf), np.full(len(states), np.inf)
+def _bounds(obj: Any, name: str, states: list[str], params_cls: type) -> dict[int, tuple[Any, Any]]:
+    """State index → (lo, hi), each a number, None or the name of a parameter (read at every run)."""
+    own = {f.name for f in dataclasses.fields(params_cls)}
+    out: dict[int, tuple[Any, Any]] = {}
     for key, pair in dict(getattr(obj, "BOUNDS", {}) or {}).items():
         if key not in states:
             raise ConfigError(f"model {name}: BOUNDS names {key!r}, not a state; valid: {', '.join(states)}")
-        a, b = pair
-        lo[states.index(key)] = -np.inf if a is None else float(a)
-        hi[states.index(key)] = np.inf if b is None else float(b)
-    return lo, hi
+        try:
+            a, b = pair
+        except (TypeError, ValueError):
+            raise ConfigError(f"model {name}: BOUNDS[{key!r}] must be (lo, hi), got {pair!r}") from None
+        for v in (a, b):
+            if isinstance(v, str) and v not in own:
+                raise ConfigError(f"model {name}: BOUNDS[{key!r}] names {v!r}, not a parameter of Params")
+            if v is not None and not isinstance(v, (str, int, float)):
+                raise ConfigError(f"model {name}: BOUNDS[{key!r}] must hold numbers, None or parameter names")
+        out[states.index(key)] = (a, b)
+    return out
+
+
+def _optional(obj: Any, attr: str, name: str) -> Callable | None:
+    fn = getattr(obj, attr, None)
+    if fn is not None and not callable(fn):
+        raise ConfigError(f"model {name}: {attr} must be a function")
+    return fn
+
+
+def _source_file(obj: Any) -> str | None:
+    """The .py file a model module came from (None for a model that is an object inside a module)."""
+    import inspect
+
+    if not isinstance(obj, types.ModuleType):
+        return None
+    try:
+        return inspect.getsourcefile(obj)
+    except TypeError:
+        return None
 
 
 def _numeric(v: Any) -> bool:

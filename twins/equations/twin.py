@@ -14,6 +14,7 @@ from __future__ import annotations
 import collections
 import dataclasses
 import inspect
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -122,6 +123,10 @@ class EquationTwin(ExternalTwin):
         """After the calibration: the steps per sample and the mechanisms' ranges from the calibrated model."""
         return self._follow(est, [])
 
+    def make_stepper(self, fs: float) -> EquationStepper:
+        """A per-sample stepper of this configuration at ``fs`` [Hz] (an FMU's core, :mod:`twins.fmu.cores`)."""
+        return EquationStepper(self, fs)
+
     def finer_step(self, est: Record, val: Record) -> EquationTwin:
         """This configuration with its steps per sample re-chosen, only ever more (a hook of the diagnosis for every
         configuration it adopts: an added hysteresis can need a finer step than the model as given)."""
@@ -133,9 +138,9 @@ class EquationTwin(ExternalTwin):
 
     def _follow(self, est: Record, notes: list[str]) -> tuple[EquationTwin, list[str]]:
         tw: EquationTwin = self
-        if self.SPEC.auto_substeps:
+        if self.SPEC.auto_substeps:  # only ever finer: a step the records needed once stays
             m0 = int(getattr(self.params, SUBSTEPS_FIELD))
-            m = choose_substeps(self, est)
+            m = choose_substeps(self, est, start=m0)
             if m != m0:
                 tw = tw.with_params(**{SUBSTEPS_FIELD: m})
                 notes.append(f"{SUBSTEPS_FIELD} {m0} -> {m}: Runge-Kutta steps per sample for this record")
@@ -155,6 +160,50 @@ class EquationTwin(ExternalTwin):
             for k in ranges
         }
         return type(self)(dataclasses.replace(params, **moved), self.effects, self.seed)
+
+
+class EquationStepper:
+    """``step(u_k) -> y_k``, one sample at a time, as :meth:`EquationTwin.simulate` gives them: the state advances
+    over [t_k−1, t_k] with u_k−1 held or interpolated linearly to u_k (a cubic input is interpolated linearly: the
+    next sample is not known yet), then y_k = output(x_k, u_k). Effects around the equations that act on the whole
+    record (a delay, a sensor filter, a drift; a model's ``input_map``/``output_map``) cannot be stepped: refused
+    with NotImplementedError, as :func:`twins.fmu.cores.choose_core` expects."""
+
+    def __init__(self, twin: EquationTwin, fs: float):
+        spec = twin.SPEC
+        around = sorted(twin.effects - twin.MODEL_EFFECTS - STEPPABLE)
+        maps = [m for m in ("input_map", "output_map") if getattr(spec, m) is not None]
+        if around or maps or any(s.mech.kind == "backlash" for s in spec.active(twin.effects)):
+            what = ", ".join(around + maps) or "backlash"
+            raise NotImplementedError(f"{twin.name}: {what} act on the whole record and cannot be stepped per sample")
+        self.twin, self.fs = twin, float(fs)
+        self.reset()
+
+    def reset(self) -> None:
+        self.x: np.ndarray | None = None
+        self.u_prev = 0.0
+
+    def retune(self, twin: EquationTwin) -> None:
+        self.twin = twin
+
+    def step(self, u: float) -> float:
+        tw, spec = self.twin, self.twin.SPEC
+        p = tw.model_params()
+        own = tw.effects & tw.MODEL_EFFECTS
+        if self.x is None:
+            y, X = spec.run(np.array([float(u)]), self.fs, p, own, keep=True)
+        else:
+            pair = np.array([self.u_prev, float(u)])
+            mode = "hold" if spec.input_mode == "hold" else "linear"
+            y, X = spec.run(pair, self.fs, p, own, keep=True, x0=self.x, mode=mode)
+            y, X = y[1:], X[1:]
+        self.x, self.u_prev = X[0].copy(), float(u)
+        gp = _Renamed(tw.params, tw.GENERIC_NAMES)
+        return float(apply_output(y, np.array([float(u)]), self.fs, tw.effects, gp)[0])
+
+
+#: effects around the equations that act sample by sample (a stepper applies them)
+STEPPABLE = frozenset({"sensor_offset", "input_crosstalk", "output_quantization"})
 
 
 def _start_value(field: str, rng: tuple[Any, Any]) -> float:
@@ -339,4 +388,8 @@ def equation_twin_class(obj: Any, default_name: str = "model") -> type[ExternalT
         base=EquationTwin,
     )
     cls.SPEC = spec
+    if spec.source is not None:  # found again from its file, where an FMU ships it (:mod:`.loaded`)
+        cls.__module__ = "twins.equations.loaded"
+        cls.__qualname__ = Path(spec.source).stem
+        cls.FMU_FILES = (spec.source,)
     return cls
