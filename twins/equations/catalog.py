@@ -177,7 +177,7 @@ MECHANISMS: dict[str, Mechanism] = {
             "resonance shifting with amplitude, odd harmonics, residual ∝ x³",
             _POSITION,
             "pair",
-            (MParam("k3", "cubic stiffness (per mass)", "{a}/({x})^3", 0.0, _sym("x", 3)),),
+            (MParam("k3", "cubic stiffness (per mass)", "{a}/({x})^3", 0.0, _sym("x", 3, 10.0)),),
             "restoring",
         ),
         Mechanism(
@@ -188,7 +188,7 @@ MECHANISMS: dict[str, Mechanism] = {
             "even harmonics, a shift of the mean position with amplitude",
             _POSITION,
             "pair",
-            (MParam("k2", "quadratic stiffness (per mass)", "{a}/({x})^2", 0.0, _sym("x", 2)),),
+            (MParam("k2", "quadratic stiffness (per mass)", "{a}/({x})^2", 0.0, _sym("x", 2, 10.0)),),
             "restoring",
         ),
         Mechanism(
