@@ -56,6 +56,9 @@ class EffectSpec:
     # effects of the same catalog that are special cases of this one (Stribeck friction contains Coulomb friction):
     # the diagnosis prefers them unless this one fits significantly better (twins.discrepancy.nesting)
     nests: tuple[str, ...] = ()
+    # weights (field, w) of a contrast Σ w·θ that is 0 where this effect is the one it nests (the two levels of an
+    # asymmetric friction equal, a Stribeck excess 0): a fit within its uncertainty of 0 yields to the simpler one
+    nest_contrast: tuple[tuple[str, float], ...] = ()
 
     def to_dict(self, params_cls: type | None = None) -> dict[str, Any]:
         d: dict[str, Any] = {

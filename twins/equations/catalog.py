@@ -73,7 +73,9 @@ class Mechanism:
     """One catalog entry (module docstring). ``enters``: ``self`` (the rate of the state acted on), ``pair`` (the
     rate of a position's velocity), ``input`` (the input before the equations) or ``bound`` (a bound on the state,
     spilling into the state it flows to). ``added_states``: states the mechanism adds (a hysteresis). ``nests``:
-    kinds it contains as a special case (Stribeck friction contains Coulomb friction)."""
+    kinds it contains as a special case (Stribeck friction contains Coulomb friction); ``nest_contrast``: weights
+    (key, w) of the parameters' combination that is 0 in that special case (Stribeck: fs = 0; a weight 0 lists
+    a parameter only for the contrast's scale, :mod:`twins.discrepancy.nesting`)."""
 
     kind: str
     title: str
@@ -86,6 +88,7 @@ class Mechanism:
     family: str
     added_states: int = 0
     nests: tuple[str, ...] = ()
+    nest_contrast: tuple[tuple[str, float], ...] = ()
 
 
 def _pos(lo: float, hi: float) -> Callable[[Scales], tuple[float, float]]:
@@ -131,6 +134,7 @@ MECHANISMS: dict[str, Mechanism] = {
             ),
             "friction",
             nests=("coulomb",),
+            nest_contrast=(("fs", 1.0), ("fc", 0.0)),
         ),
         Mechanism(
             "asymmetric_coulomb",
@@ -146,6 +150,7 @@ MECHANISMS: dict[str, Mechanism] = {
             ),
             "friction",
             nests=("coulomb",),
+            nest_contrast=(("f_pos", 1.0), ("f_neg", -1.0)),
         ),
         Mechanism(
             "quadratic_damping",

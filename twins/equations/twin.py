@@ -315,6 +315,7 @@ def _mechanism_effects(spec: EquationSpec, name: str) -> tuple[list[tuple[str, t
             dict(s.fields),
             group=f"{s.mech.family}@{s.state}",
             nests=tuple(f"{k}@{s.state}" for k in s.mech.nests),
+            nest_contrast=tuple((s.fields[k], w) for k, w in s.mech.nest_contrast if k in s.fields),
         )
     return fields, effects
 
