@@ -115,6 +115,9 @@ SHAPES: dict[str, tuple[str, ...]] = {
     "bouc_wen": ("b1", "b2"),
     "prandtl_ishlinskii": ("r",),
 }
+#: kinds whose term also acts as a linear stiffness: their sizes are solved beside a stiffness column (a nuisance)
+_HYSTERESIS = ("bouc_wen", "prandtl_ishlinskii")
+_STIFFNESS = "_stiffness"
 _LINEAR_KINDS = set(SHAPES) | {
     "coulomb",
     "asymmetric_coulomb",
@@ -195,17 +198,22 @@ def start_values(
                 where.append((g, key, sign))
     if not cols:
         return None
+    if kind in _HYSTERESIS:  # a hysteresis adds stiffness too, which the calibrated core has already taken up
+        cols.append(-X[:, slot.acts])
+        where.append((-1, _STIFFNESS, -1.0))
     S = sensitivities(np.column_stack(cols), np.full(len(cols), slot.enters))[skip:]
+    nuisance = [c for c, w in enumerate(where) if w[0] < 0 and np.all(np.isfinite(S[:, c]))]
     best: tuple[float, dict[str, float]] | None = None
     for g, shape in enumerate(points):
         idx = [c for c, w in enumerate(where) if w[0] == g and np.all(np.isfinite(S[:, c])) and np.any(S[:, c] != 0)]
         if not idx:
             continue
-        A = S[:, idx]
+        A = S[:, idx + nuisance]
         keys = [where[c][1] for c in idx]
         theta = np.linalg.lstsq(A, r, rcond=None)[0]
-        theta = np.array([np.clip(t, *rng[k]) for t, k in zip(theta, keys)])
+        theta[: len(keys)] = [np.clip(t, *rng[k]) for t, k in zip(theta, keys)]
         cost = float(np.sum((r - A @ theta) ** 2))
+        theta = theta[: len(keys)]
         if math.isfinite(cost) and (best is None or cost < best[0]):
             best = (cost, {**shape, **dict(zip(keys, theta.tolist()))})
     if best is None:

@@ -36,6 +36,8 @@ __all__ = ["EquationTwin", "equation_twin_class", "choose_substeps", "scales_of"
 MAX_SUBSTEPS = 64
 #: the step is fine enough when halving it moves the output by less than this share of its RMS
 SUBSTEP_TOL = 1e-3
+#: where in its range a bound's refits with the core start (:meth:`EquationTwin.core_starts`)
+BOUND_STARTS = (0.25, 0.45, 0.65)
 #: outputs of the equations kept per model (the estimation, validation and joined records of a few configurations)
 CORE_MEMO = 6
 
@@ -81,6 +83,29 @@ class EquationTwin(ExternalTwin):
 
             return direct_start(slot, self.params, y0, est, skip, run)
         return start_values(slot, self.params, X, y0, est, skip, lambda phi, rows: base.sensitivity(est, phi, rows))
+
+    def core_starts(self, effect: str, est: Record, skip: int = 0) -> list[dict[str, float]]:
+        """Starts of a refit of ``effect`` together with the core, for a mechanism that changes what the core's
+        parameters stand for (a hook of the diagnosis, which refits from each): a hysteresis adds stiffness the
+        calibration has taken up (its start from the equation residual); a bound caps a flow the calibration has
+        bent to (bounds at :data:`BOUND_STARTS` of the state's range, the spill at the middle of its range).
+        Empty for every other effect."""
+        slot = next((s for s in self.SPEC.slots if s.effect == effect), None)
+        if slot is None or slot.mech.family not in ("hysteresis", "bound"):
+            return []
+        tw = self.with_effects(set(self.effects) | {effect})
+        if slot.mech.family == "hysteresis":
+            start = tw.start_values(effect, est, skip)
+            return [start] if start else []
+        info = param_info(type(tw.params))
+        lo, hi = info[slot.fields["level"]].bounds()
+        out = []
+        for q in BOUND_STARTS:
+            point = {slot.fields["level"]: lo + q * (hi - lo)}
+            if "share" in slot.fields:
+                point[slot.fields["share"]] = 0.5 * sum(info[slot.fields["share"]].bounds())
+            out.append(point)
+        return out
 
     def sensitivity(self, rec: Record, phi: np.ndarray, rows: np.ndarray) -> np.ndarray:
         """The output's sensitivity to forcings ``phi`` (samples × C) added to the rates ``rows`` (:mod:`.tangent`),
