@@ -116,7 +116,7 @@ SHAPES: dict[str, tuple[str, ...]] = {
     "prandtl_ishlinskii": ("r",),
 }
 #: kinds whose term also acts as a linear stiffness: their sizes are solved beside a stiffness column (a nuisance)
-_HYSTERESIS = ("bouc_wen", "prandtl_ishlinskii")
+_STIFFENING = ("bouc_wen", "prandtl_ishlinskii", "cubic_spring", "quadratic_spring", "clearance_spring")
 _STIFFNESS = "_stiffness"
 _LINEAR_KINDS = set(SHAPES) | {
     "coulomb",
@@ -198,7 +198,7 @@ def start_values(
                 where.append((g, key, sign))
     if not cols:
         return None
-    if kind in _HYSTERESIS:  # a hysteresis adds stiffness too, which the calibrated core has already taken up
+    if kind in _STIFFENING:  # the term adds stiffness too, which the calibrated core has already taken up
         cols.append(-X[:, slot.acts])
         where.append((-1, _STIFFNESS, -1.0))
     S = sensitivities(np.column_stack(cols), np.full(len(cols), slot.enters))[skip:]

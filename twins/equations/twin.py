@@ -86,15 +86,15 @@ class EquationTwin(ExternalTwin):
 
     def core_starts(self, effect: str, est: Record, skip: int = 0) -> list[dict[str, float]]:
         """Starts of a refit of ``effect`` together with the core, for a mechanism that changes what the core's
-        parameters stand for (a hook of the diagnosis, which refits from each): a hysteresis adds stiffness the
-        calibration has taken up (its start from the equation residual); a bound caps a flow the calibration has
-        bent to (bounds at :data:`BOUND_STARTS` of the state's range, the spill at the middle of its range).
-        Empty for every other effect."""
+        parameters stand for (a hook of the diagnosis, which refits from each): a restoring force or a hysteresis
+        adds stiffness the calibration has taken up (its start from the equation residual); a bound caps a flow the
+        calibration has bent to (bounds at :data:`BOUND_STARTS` of the state's range, the spill at the middle of its
+        range). Empty for every other effect: rivals for the same residual are refitted alike."""
         slot = next((s for s in self.SPEC.slots if s.effect == effect), None)
-        if slot is None or slot.mech.family not in ("hysteresis", "bound"):
+        if slot is None or slot.mech.family not in ("restoring", "hysteresis", "bound"):
             return []
         tw = self.with_effects(set(self.effects) | {effect})
-        if slot.mech.family == "hysteresis":
+        if slot.mech.family != "bound":
             start = tw.start_values(effect, est, skip)
             return [start] if start else []
         info = param_info(type(tw.params))
