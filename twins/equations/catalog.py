@@ -3,8 +3,8 @@
 A :class:`Mechanism` names a physical phenomenon, the roles of the states it can act on, where its term enters
 (the state's own rate; the rate of the velocity paired with a position; the input; a bound on the state), its
 parameters with the ranges the records give them (:func:`param_ranges`, from the calibrated model's state
-amplitudes) and its law (:mod:`.laws`). ``piezotwin list effects --model FILE.py`` lists the entries a model
-gets, one effect ``KIND@STATE`` each (``cubic_spring@x``), which the diagnosis tries beside the generic effects.
+amplitudes) and its law (:mod:`.laws`). A model gets one effect ``KIND@STATE`` per entry and state of a role it
+takes (``cubic_spring@x``, :mod:`.twin`), which the diagnosis tries beside the generic effects.
 
 Roles: a position and the velocity whose value is its rate form a pair (found from the model's Jacobian,
 :mod:`.model`); a friction or a damping acts on a velocity, a restoring force or a hysteresis on a position and

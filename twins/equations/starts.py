@@ -212,7 +212,8 @@ def start_values(
         keys = [where[c][1] for c in idx]
         theta = np.linalg.lstsq(A, r, rcond=None)[0]
         theta[: len(keys)] = [np.clip(t, *rng[k]) for t, k in zip(theta, keys)]
-        cost = float(np.sum((r - A @ theta) ** 2))
+        with np.errstate(over="ignore", invalid="ignore"):  # a size far off the range: an inf cost, skipped
+            cost = float(np.sum((r - A @ theta) ** 2))
         theta = theta[: len(keys)]
         if math.isfinite(cost) and (best is None or cost < best[0]):
             best = (cost, {**shape, **dict(zip(keys, theta.tolist()))})
