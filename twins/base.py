@@ -53,6 +53,12 @@ class EffectSpec:
     # its law changes with the time since the record's start (a drift of the reading or of the gain): between
     # separate records the diagnosis judges it only over the time both records cover (twins.discrepancy.ranking)
     time_varying: bool = False
+    # effects of the same catalog that are special cases of this one (Stribeck friction contains Coulomb friction):
+    # the diagnosis prefers them unless this one fits significantly better (twins.discrepancy.nesting)
+    nests: tuple[str, ...] = ()
+    # weights (field, w) of a contrast Σ w·θ that is 0 where this effect is the one it nests (the two levels of an
+    # asymmetric friction equal, a Stribeck excess 0): a fit within its uncertainty of 0 yields to the simpler one
+    nest_contrast: tuple[tuple[str, float], ...] = ()
 
     def to_dict(self, params_cls: type | None = None) -> dict[str, Any]:
         d: dict[str, Any] = {
@@ -64,6 +70,8 @@ class EffectSpec:
             "group": self.group,
             "time_varying": self.time_varying,
         }
+        if self.nests:
+            d["nests"] = list(self.nests)
         info = param_info(params_cls) if params_cls is not None else {}
         d["params"] = {
             k: (

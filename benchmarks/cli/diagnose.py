@@ -102,6 +102,12 @@ def register(sub) -> None:
         help="with an 'unexplained' verdict, save the hybrid twin (the extended twin plus its black-box remainder "
         "model) here; a shipped twin only",
     )
+    p.add_argument(
+        "--save-model",
+        metavar="EXTENDED.py",
+        help="with --model given by its equations (STATES, rates, output): write the extended model (calibrated, with "
+        "the mechanisms the diagnosis added) here as a Python model file",
+    )
     p.set_defaults(func=run)
 
 
@@ -113,6 +119,16 @@ def run(args: argparse.Namespace) -> int:
         raise ConfigError(f"--max-rounds must be >= 0, got {args.max_rounds}")
     twin, label = _twin(args)
     save_hybrid = getattr(args, "save_hybrid", None)
+    save_model = getattr(args, "save_model", None)
+    if save_model:
+        if not hasattr(twin, "SPEC"):
+            raise ConfigError(
+                "--save-model: only a --model given by its equations (STATES, rates(x, u, p), output(x, u, p)) "
+                "can be written back"
+            )
+        if not str(save_model).endswith(".py"):
+            raise ConfigError(f"--save-model {save_model}: the extended model is a Python file; give a .py name")
+        check_output_path(save_model, [args.data] + ([args.val] if args.val else []) + [args.model])
     if save_hybrid:
         if not args.twin:
             raise ConfigError("--save-hybrid: only the hybrid of a shipped twin can be saved (not of --fmu/--model)")
@@ -141,6 +157,8 @@ def run(args: argparse.Namespace) -> int:
             result["hybrid"]["saved"] = str(diagnosis.hybrid_twin.save(save_hybrid))
         else:
             result.setdefault("hybrid", {})["saved"] = None
+    if save_model:
+        result["saved_model"] = str(_save_model(diagnosis, result, save_model))
     if args.report:
         from twins.discrepancy.report import write_report
 
@@ -172,6 +190,14 @@ def run(args: argparse.Namespace) -> int:
         print(f"  {result['residual_vs_noise']['text']}")
     if result.get("hybrid", {}).get("fitted") is not None:
         print(f"  {hybrid_text(result['hybrid'])}")
+    sparse = result.get("sparse_term") or {}
+    if sparse.get("fitted"):
+        print(
+            f"  sparse term inside the equations ({'significant' if sparse['significant'] else 'not significant'}, "
+            f"p = {sparse['p_value']:.2g}): {sparse['text']}"
+        )
+    if save_model:
+        print(f"  extended model -> {result['saved_model']}")
     if save_hybrid:
         saved = result["hybrid"].get("saved")
         print(
@@ -187,6 +213,29 @@ def run(args: argparse.Namespace) -> int:
     if args.report:
         print(f"  report -> {result['report']}")
     return 0
+
+
+def _save_model(diagnosis, result: dict, path: str):
+    """Write the diagnosis's final configuration as a Python model (:func:`twins.equations.writer.write_model`)."""
+    from twins.equations.writer import write_model
+
+    b, e = result["baseline"], result["extended"]
+    named = [c["effect"] for c in result["causes"] if c["effect"] != "unexplained"]
+    summary = (
+        f"Verdict {result['verdict']}; causes named: {', '.join(named) or 'none'}. Validation NRMSE "
+        f"{b['nrmse_val']:.4g} (calibrated as given) -> {e['nrmse_val']:.4g} (this model)."
+    )
+    sparse = result.get("sparse_term") or {}
+    term = diagnosis.sparse_model if sparse.get("significant") else None
+    if term is not None:
+        summary += (
+            f" The sparse term (no catalog mechanism has its form; added to {sparse['added_to']}) takes the validation "
+            f"NRMSE to {sparse['nrmse_val_after']:.4g}."
+        )
+    twin = diagnosis.extended.twin
+    if term is not None and sparse.get("added_to") != "the final configuration":
+        twin = diagnosis.baseline.twin
+    return write_model(twin, path, summary, term, sparse.get("text", ""))
 
 
 def _twin(args: argparse.Namespace):

@@ -18,7 +18,12 @@ from benchmarks.cli.common import FS, add_twin_args, emit_json, twin_from_args
 def register(sub) -> None:
     p = sub.add_parser("export-fmu", help="export a twin or an identified model as an FMI 2.0 co-simulation FMU")
     p.add_argument("twin", nargs="?", help="twin to export (or give --model)")
-    p.add_argument("--model", metavar="MODEL", help="export this identified model file (identify -o) instead of a twin")
+    p.add_argument(
+        "--model",
+        metavar="MODEL",
+        help="export this identified model file (identify -o), or a Python model file given by its equations "
+        "(diagnose --save-model; needs --fs), instead of a twin",
+    )
     p.add_argument(
         "--hybrid",
         metavar="FILE",
@@ -120,6 +125,8 @@ def _run_model(args: argparse.Namespace) -> int:
 
     if args.fs is not None and not args.fs > 0:
         raise ConfigError(f"--fs must be positive, got {args.fs}")
+    if str(args.model).endswith(".py"):
+        return _run_python_model(args)
     model = load_model(args.model)
     out = args.output or f"fmus/{Path(args.model).stem}.fmu"
     path, seconds, problems = _export(export_model_fmu, model, out, args)
@@ -138,6 +145,45 @@ def _run_model(args: argparse.Namespace) -> int:
         summary,
         f"exported {model.name} model {args.model} (fs {fs:g} Hz, step 1/fs) -> {path} "
         f"({summary['bytes'] / 1e3:.0f} kB, {'valid' if not problems else 'INVALID'})",
+    )
+
+
+def _run_python_model(args: argparse.Namespace) -> int:
+    """A Python model file given by its equations (``diagnose --save-model`` writes one) as a twin FMU: the file
+    travels in the FMU and is loaded there again (:mod:`twins.equations.loaded`)."""
+    from pathlib import Path
+
+    from sysid.errors import ConfigError
+    from twins.external import load_model
+    from twins.fmu import export_fmu
+
+    if args.fs is None:
+        raise ConfigError(f"export-fmu --model {args.model}: give the sampling rate with --fs (a model file has none)")
+    cls = load_model(args.model)
+    if not hasattr(cls, "SPEC"):
+        raise ConfigError(
+            f"export-fmu --model {args.model}: only a model given by its equations (STATES, rates, output) exports"
+        )
+    twin = cls.from_options(
+        params_file=args.params, set_=args.set_, effect=args.effect, without=args.without, effects=args.effects
+    )
+    out = args.output or f"fmus/{Path(args.model).stem}.fmu"
+    path, seconds, problems = _export(export_fmu, twin, out, args)
+    summary = {
+        "model": str(args.model),
+        "twin": twin.name,
+        "effects": sorted(twin.effects),
+        "fmu": str(path),
+        "bytes": Path(path).stat().st_size,
+        "fs": float(args.fs),
+        "validation_problems": problems,
+        "build_seconds": round(seconds, 3),
+    }
+    return _finish(
+        args,
+        summary,
+        f"exported model {args.model} (fs {args.fs:g} Hz, step 1/fs) -> {path} ({summary['bytes'] / 1e3:.0f} kB, "
+        f"{'valid' if not problems else 'INVALID'})",
     )
 
 

@@ -143,12 +143,17 @@ def _refine(
     picked += [
         i for i, tr in enumerate(trials) if group and i not in picked and inp.twin.EFFECTS[tr.effect].group == group
     ]
+    # an effect that also changes what the core stands for (a hysteresis adds stiffness, an overflow caps the flow
+    # the calibrated core has taken up) cannot be fitted with the core held: refined from the twin's own starts
+    own = {i: _own_starts(tr, inp, opts) for i, tr in enumerate(trials)}
+    own = {i: v for i, v in own.items() if v}
+    picked += [i for i in own if i not in picked]
     if opts.starts > 1:  # every candidate, from several starts (DiagnoseOptions.starts)
         picked = list(range(len(trials)))
     for i in picked:
         tr = trials[i]
         spent = tr.seconds  # stage A and every full refit, kept or not
-        for start in [tr.effect_params] + spread_starts(tr, opts.starts):
+        for start in [tr.effect_params] + own.get(i, []) + spread_starts(tr, opts.starts):
             try:
                 trB = run_trial(tr.base, tr.effect, inp.est, inp.val, core_r, a_est, opts, refit_core=True, start=start)
             except TRIAL_ERRORS:
@@ -157,6 +162,15 @@ def _refine(
             if trB.sse_est <= trials[i].sse_est:
                 trials[i] = trB
         trials[i].seconds = spent
+
+
+def _own_starts(tr: Trial, inp: Any, opts: DiagnoseOptions) -> list[dict[str, float]]:
+    """Starts of a full refit (core and effect together) that the twin gives for the trial's effect (the hook
+    ``core_starts`` of a twin, :mod:`twins.equations.twin`); empty for every other effect."""
+    hook = getattr(tr.base, "core_starts", None)
+    if not callable(hook):
+        return []
+    return list(hook(tr.effect, inp.est, opts.skip))
 
 
 def spread_starts(tr: Trial, starts: int) -> list[dict[str, float]]:

@@ -47,6 +47,7 @@ from .candidates import adopt
 from .confidence import calibrate_causes
 from .fields import core_for, numeric_fields, quant_params
 from .hybrid import hybrid_block
+from .inside import follow_calibration, sparse_inside
 from .options import DiagnoseOptions
 from .prediction import (
     MIN_SCORED_SAMPLES,
@@ -112,6 +113,7 @@ def run_diagnosis(
     with _numba_threads(nt):
         inp = _prepare(twin, data, val, opts)
         cal = _calibrate(inp, opts)
+        follow_calibration(inp, cal, opts)  # a twin whose ranges follow its calibrated state (twins.equations)
         base = adopt(inp, cal.twin, opts)
         ext = _extend(inp, cal, base, max_rounds, opts)
         return _conclude(inp, cal, base, ext, opts)
@@ -308,6 +310,7 @@ def _conclude(inp: _Inputs, cal: _Calibrated, base: Stage, ext: Extension, opts:
     if verdict == "unexplained" and opts.hybrid:
         opts.say("fitting the hybrid twin (black-box remainder)")
         hybrid, hybrid_twin = hybrid_block(inp, stage, opts.skip)
+    sparse, sparse_term = sparse_inside(inp, stage, base, verdict, causes, opts)
     return Diagnosis(
         verdict=verdict,
         causes=causes,
@@ -328,6 +331,8 @@ def _conclude(inp: _Inputs, cal: _Calibrated, base: Stage, ext: Extension, opts:
         seconds=time.perf_counter() - inp.t_start,
         hybrid=hybrid,
         hybrid_twin=hybrid_twin,
+        sparse_term=sparse,
+        sparse_model=sparse_term,
     )
 
 

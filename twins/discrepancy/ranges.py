@@ -89,7 +89,7 @@ def follow_record(twin: Twin, est: Record, val: Record) -> tuple[Twin, list[str]
     if callable(follow):
         tw, more = follow(est, val)
         notes += more
-    if substep_followed(twin):
+    if substep_followed(twin) and twin.name == "cantilever":
         cur = float(tw.params.max_substep_s)
         h = _chosen_substep(tw, est, val)
         if h > cur * (1 + 1e-9):
@@ -105,6 +105,8 @@ def follow_record(twin: Twin, est: Record, val: Record) -> tuple[Twin, list[str]
 def substep_followed(twin: Twin) -> bool:
     """The twin's integration sub-step is chosen from the records (a cantilever at the default ``max_substep_s``;
     a value the user set is kept)."""
+    if callable(getattr(twin, "finer_step", None)):  # a twin that re-chooses its own step (twins.equations)
+        return True
     info = param_info(type(twin.params))
     return (
         twin.name == "cantilever"
@@ -129,6 +131,9 @@ def substep_for(twin: Twin, est: Record, val: Record) -> Twin:
     The sub-step is chosen once from the starting configuration; the bound depends on the hysteresis curvature
     (Bouc–Wen α, β, γ as calibrated, an added asymmetry), so a configuration the diagnosis adopts gets it
     re-chosen. Only finer: a configuration that drops an effect keeps the step it had."""
+    own = getattr(twin, "finer_step", None)
+    if callable(own):
+        return own(est, val)
     if twin.name != "cantilever":
         return twin
     cur = float(twin.params.max_substep_s)

@@ -39,6 +39,7 @@ from . import defaults as dflt
 from . import evidence as ev
 from . import features as ft
 from .fields import fmt_params
+from .nesting import prefer_simpler
 from .options import DiagnoseOptions
 from .prediction import MIN_SCORED_SAMPLES, continues, significance, sse
 from .separating import separating_experiment
@@ -77,6 +78,7 @@ def rank_round(
         for tr in trials
     }
     trials.sort(key=lambda t: (t.significant, t.gain + 0.01 * sig_ev[t.effect]["score"] * t.gain), reverse=True)
+    prefer_simpler(trials, twin, val.output, opts.skip, opts.alpha)  # a nested simpler effect, where it suffices
     group = _group(trials, twin, val, opts)
     return Ranking(trials, group, _rows(trials, group, sig_ev))
 

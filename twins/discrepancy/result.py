@@ -42,6 +42,8 @@ class Diagnosis:
     seconds: float
     hybrid: dict[str, Any] | None = None  # the hybrid twin's block (:mod:`.hybrid`), with an ``unexplained`` verdict
     hybrid_twin: Any = None  # the fitted :class:`twins.hybrid.HybridTwin` itself (not in the dict view)
+    sparse_term: dict[str, Any] | None = None  # a model given by its equations: the sparse term found inside them
+    sparse_model: Any = None  # that term as the model's integrator takes it (not in the dict view)
 
     def to_dict(self, keep_stages: bool = False) -> dict[str, Any]:
         """The result as a dict: ``verdict``, ``causes``, ``baseline``, ``extended``, ``gain`` and the details
@@ -78,6 +80,8 @@ class Diagnosis:
         }
         if self.hybrid is not None:
             out["hybrid"] = self.hybrid
+        if self.sparse_term is not None:
+            out["sparse_term"] = self.sparse_term
         if keep_stages:
             out["_stages"] = {"baseline": base, "extended": ext, "est": self.est, "val": self.val}
         return out

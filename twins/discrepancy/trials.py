@@ -99,7 +99,8 @@ def run_trial(
         tw = tw.with_params(**choice)
         x0 = {**(prescan(tw, est, eff_fields, a_val, opts.scan_points, opts.skip, ()) if eff_fields else {}), **choice}
     elif start is None:
-        x0 = (
+        own = getattr(tw, "start_values", None)  # a twin that finds its effects' starting values itself
+        x0 = (own(effect, est, opts.skip) if callable(own) else None) or (
             prescan(tw, est, eff_fields, a_val, opts.scan_points, opts.skip, cat_fields)
             if (eff_fields or cat_fields)
             else {}

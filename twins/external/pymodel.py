@@ -79,6 +79,12 @@ def _is_windows_drive(spec: str) -> bool:
 
 def model_twin_class(obj: Any, default_name: str = "model") -> type[ExternalTwin]:
     """The twin class of a model object (module, class or namespace with ``Params`` and ``simulate`` or ``step``)."""
+    from twins.equations.model import is_equation_model
+
+    if is_equation_model(obj):  # STATES, rates(x, u, p), output(x, u, p): the catalog's mechanisms inside
+        from twins.equations.twin import equation_twin_class
+
+        return equation_twin_class(obj, default_name)
     name = f"model:{getattr(obj, 'NAME', default_name)}"  # prefixed: never mistaken for a shipped twin
     params_cls = getattr(obj, "Params", None)
     if params_cls is None:

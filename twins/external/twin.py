@@ -119,11 +119,12 @@ def external_twin_class(
     calibration_params: Iterable[str] | None = None,
     units: Mapping[str, str] | None = None,
     doc: str = "",
+    base: type[ExternalTwin] | None = None,
 ) -> type[ExternalTwin]:
     """A :class:`ExternalTwin` subclass for a model: ``core`` simulates, ``params_cls`` is its parameter dataclass
     (fields with unit and range from :func:`twins.base.pfield`), ``model_effects`` its own effects,
     ``calibration_params`` what ``calibrate`` and the diagnosis fit by default (default: every numeric field
-    with a range that belongs to no effect).
+    with a range that belongs to no effect); ``base`` the class to derive from (a subclass of ExternalTwin).
 
     Refused with a ConfigError: a parameter class that is not a dataclass, a field or effect name that clashes
     with the generic catalog, an effect naming a field the class lacks.
@@ -195,7 +196,7 @@ def external_twin_class(
         "GENERIC_NAMES": gnames,
         "__doc__": doc or ExternalTwin.__doc__,
     }
-    return type(f"{params_cls.__name__}Twin", (ExternalTwin,), attrs)
+    return type(f"{params_cls.__name__}Twin", (base or ExternalTwin,), attrs)
 
 
 def _copy_field(f: Any) -> Any:

@@ -142,6 +142,7 @@ def export_fmu(
         packages = list(packages)
         files += stage_packages(stage, packages)
         shipped, pkg_dir = set(packages), stage / "pkgs"
+        files += [Path(f) for f in getattr(type(twin), "FMU_FILES", ())]  # a model file the twin is built from
         top = type(twin).__module__.split(".")[0]
         if top not in shipped:  # a twin defined outside the project (e.g. a user's module): ship it too
             mod = sys.modules[top]

@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import re
 from typing import Any
 
 from sysid.errors import ConfigError
@@ -159,7 +160,8 @@ def fmu_variables(twin: Twin, fs: float, tunable: bool = False) -> list[dict[str
     for eid, spec in type(twin).EFFECTS.items():
         out.append(
             {
-                "name": f"effect_{eid}",
+                # FMI's structured names take letters, digits and "_" here ("cubic_spring@x" -> effect_cubic_spring_x)
+                "name": "effect_" + re.sub(r"\W", "_", eid),
                 "kind": "effect",
                 "field": eid,
                 "type": "Boolean",
