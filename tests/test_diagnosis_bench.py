@@ -158,6 +158,9 @@ def test_ci_check_fails_when_a_rate_drops_beyond_its_sampling_error():
     worse = [_row("creep", "cantilever", "none", [], seed=i, size=1.0) for i in range(3)] + stored[3:]
     dropped = compare(worse, stored, limits, {"catalog:cantilever": 0.95})
     assert not dropped["passed"] and dropped["groups"][0]["now"] == 0.5
+    one = [_row("creep", "cantilever", "discrepancy", [_c("creep", 0.9)], seed=0, size=1.0)]
+    flipped = [_row("creep", "cantilever", "none", [], seed=0, size=1.0)]
+    assert not compare(flipped, one, limits, {"catalog:cantilever": 0.95})["passed"]  # one case can fail too
 
 
 def test_stored_rows_read_with_the_calibration_of_now(monkeypatch):
