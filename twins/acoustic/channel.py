@@ -144,16 +144,17 @@ def channel_parts(f_hz: np.ndarray, p, effects=frozenset()) -> dict[str, Any]:
     if np.any(f <= 0):
         raise ValueError("channel_parts needs f > 0")
     g = geometry(p, effects)
-    key = (cc.grid_key(f), _stack_key(p, g), dataclasses.astuple(g.fluid))
-    return {**cc.FLUID.get_or(key, lambda: _fluid_side(f, p, g)), "geometry": g}
+    stack_key = (cc.grid_key(f), _stack_key(p, g))  # hashed once: the stacks' cache key and a part of the fluid's
+    key = (*stack_key, dataclasses.astuple(g.fluid))
+    return {**cc.FLUID.get_or(key, lambda: _fluid_side(f, p, g, stack_key)), "geometry": g}
 
 
-def _fluid_side(f: np.ndarray, p, g: ChannelGeometry) -> dict[str, Any]:
+def _fluid_side(f: np.ndarray, p, g: ChannelGeometry, stack_key: tuple) -> dict[str, Any]:
     """The factors of H that depend on the stacks and the fluid but not on the gap (:func:`channel_parts`)."""
     area = g.area_m2
     fl = g.fluid
     zf = fl.density * fl.speed * area
-    st = _stack(f, p, g)
+    st = _stack(f, p, g, stack_key)
     m_tx, m_rx, tp, z_load = st["m_tx"], st["m_rx"], st["tp"], st["z_load"]
     # transmitter
     z_front = input_impedance(m_tx, zf)
@@ -198,14 +199,13 @@ def _stack_key(p, g: ChannelGeometry) -> tuple:
     )
 
 
-def _stack(f: np.ndarray, p, g: ChannelGeometry) -> dict[str, Any]:
+def _stack(f: np.ndarray, p, g: ChannelGeometry, key: tuple) -> dict[str, Any]:
     """The parts of the two transducer stacks that do not depend on the fluid or the gap (layer matrices, the
     plate's two-port, the impedances seen from the fluid side), cached by exactly what they depend on
     (:data:`twins.acoustic.chaincache.STACK`): a diagnosis that moves the temperature, the gap or the fluid
-    recomputes only the fluid's part."""
+    recomputes only the fluid's part. ``key``: the grid's key and :func:`_stack_key`, as the caller computed them."""
     epoxy, steel = _layers(p, g.fluid)
     area = g.area_m2
-    key = (cc.grid_key(f), _stack_key(p, g))
 
     def make() -> dict[str, Any]:
         m_ep = layer_matrix(f, epoxy, area)
