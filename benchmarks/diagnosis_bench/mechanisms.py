@@ -137,10 +137,13 @@ def limiter_level(peak: float, shape: str, compression: float, p: float = 2.0) -
     return math.sqrt(lo * hi)
 
 
-def _first_order(x: np.ndarray, fc: float, fs: float) -> np.ndarray:
-    """1/(1 + s/ω_c) by the bilinear map with prewarping at ω_c, started in steady state at x[0]."""
+def _first_order(x: np.ndarray, fc: float, fs: float, at_rest: bool = False) -> np.ndarray:
+    """1/(1 + s/ω_c) by the bilinear map with prewarping at ω_c, started in steady state at x[0] (at rest at 0
+    with ``at_rest``)."""
     wc = math.tan(math.pi * min(fc, 0.49 * fs) / fs)
     bz, az = np.array([wc, wc]) / (1 + wc), np.array([1.0, (wc - 1) / (1 + wc)])
+    if at_rest:
+        return signal.lfilter(bz, az, x)
     zi = signal.lfilter_zi(bz, az) * x[0]
     return signal.lfilter(bz, az, x, zi=zi)[0]
 
@@ -184,12 +187,17 @@ def _butter2(y: np.ndarray, fc: float, fs: float) -> np.ndarray:
 
 def _creep(v: np.ndarray, fs: float, rate: float, gain: float, tau1: float) -> np.ndarray:
     """Logarithmic creep as first-order lags one decade apart from ``tau1``: each decade adds ``rate`` × the
-    static deflection ``gain``·v (the Kelvin–Voigt picture of the log law, built here by the generator)."""
+    static deflection ``gain``·v (the Kelvin–Voigt picture of the log law, built here by the generator).
+
+    The lags start at rest at 0 V, as the model they are added to does (the twins start at rest; a drive whose
+    first sample is not 0 V is a step at t = 0 for every part of the rig). Started in equilibrium at v[0]
+    instead, the creep of a record whose drive starts at −3 V lacked the step's slow transient that the model's
+    creep has, and a thermal drift fitted it better than creep itself (seeds 15 and 40)."""
     out = np.zeros_like(v)
     T = v.size / fs
     tau = tau1
     while tau < 30 * T:
-        lag = _first_order(v - v[0], 1.0 / (2 * math.pi * tau), fs)
+        lag = _first_order(v, 1.0 / (2 * math.pi * tau), fs, at_rest=True)
         out += rate * gain * lag
         tau *= 10.0
     return out
