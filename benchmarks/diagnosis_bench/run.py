@@ -3,7 +3,8 @@
 :func:`run_case` builds a case's records (:mod:`.truth`), diagnoses them with the defaults a user gets
 (:func:`twins.discrepancy.diagnose`, three rounds) and returns one JSON row: the case, the mechanism's
 parameters and realised size, the verdict, the named causes (effect, confidence, group, parameters, p-value),
-the validation NRMSE before and after, and the CPU and wall seconds of the diagnosis. A case that cannot be
+the validation NRMSE before and after, the CPU and wall seconds of the diagnosis and the code's git commit
+(``code``). A case that cannot be
 built or diagnosed is a row with ``error`` (the benchmark counts it, nothing is dropped). :func:`run_cases`
 runs many on the project's execution backend (:mod:`benchmarks.execution`: in-process, ``--workers N`` or a
 Dask scheduler), appending each row to a JSON-lines file; cases already in the file are not run again.
@@ -55,10 +56,11 @@ def _cause(c: dict[str, Any]) -> dict[str, Any]:
 
 def run_case(seed: int) -> dict[str, Any]:
     """Build and diagnose the case of ``seed``; one JSON row (module docstring)."""
+    from sysid.report.provenance import commit
     from twins.discrepancy import diagnose
 
     case = draw_case(seed)
-    row: dict[str, Any] = {"format": ROW_FORMAT, "case": case.to_dict()}
+    row: dict[str, Any] = {"format": ROW_FORMAT, "case": case.to_dict(), "code": commit()}
     try:
         built = _build(case)
         row.update(params=_plain(built["params"]), size_est=built["size_est"], size_val=built["size_val"])

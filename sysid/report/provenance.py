@@ -21,7 +21,7 @@ from typing import Any
 
 from sysid.report.html import REPORT_CSS, provenance_section  # noqa: F401  (REPORT_CSS: importable from its old home)
 
-__all__ = ["collect", "html_block", "file_sha256"]
+__all__ = ["collect", "commit", "html_block", "file_sha256"]
 
 _ROOT = Path(__file__).resolve().parents[2]  # the checkout: sysid/report/provenance.py
 
@@ -52,6 +52,14 @@ def _git(*args: str) -> str | None:
     return out.stdout.strip() if out.returncode == 0 else None
 
 
+def commit() -> str:
+    """The git commit of this checkout (with a note when tracked files are modified), or why there is none."""
+    head = _git("rev-parse", "HEAD")
+    if not head:
+        return "unknown (not a git checkout)"
+    return head + (" (with uncommitted changes)" if _git("status", "--porcelain", "--untracked-files=no") else "")
+
+
 def collect(
     files: Iterable[str | os.PathLike] = (),
     records: Iterable[Any] = (),
@@ -63,8 +71,6 @@ def collect(
     a file (hashed too; a record built in memory is listed by its source name only); ``command``: the command
     line (default ``sys.argv``).
     """
-    commit = _git("rev-parse", "HEAD")
-    dirty = _git("status", "--porcelain", "--untracked-files=no")
     data = []
     seen: set[str] = set()
     paths = [Path(f) for f in files] + [Path(str(getattr(r, "source", ""))) for r in records]
@@ -83,9 +89,7 @@ def collect(
     return {
         "package": "piezotwin",
         "version": _version(),
-        "commit": (commit + (" (with uncommitted changes)" if dirty else ""))
-        if commit
-        else "unknown (not a git checkout)",
+        "commit": commit(),
         "command": shlex.join(argv) if argv else "",
         "date_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
         "machine": f"{platform.node()} — {platform.platform()}, {platform.machine()}, {os.cpu_count()} CPUs, "
