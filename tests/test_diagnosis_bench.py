@@ -192,7 +192,7 @@ def test_calibration_fit_recovers_a_known_logistic_model():
     assert np.allclose(w, w_true, atol=0.15)
     seeds = np.arange(p.size)
     ho = held_out(x, y, seeds)
-    assert ho["n_train"] == ho["n_test"] == 2000
+    assert ho["n"] == 4000 and ho["folds"] == 10
     assert ho["brier"] == pytest.approx(float(np.mean(p * (1 - p))), abs=0.02)  # the irreducible Brier score
     assert all(abs(b["stated"] - b["observed"]) < 0.1 for b in ho["bins"] if b["n"] >= 100)
 

@@ -1,10 +1,10 @@
 """Fitting the diagnosis's confidence (:mod:`twins.discrepancy.confidence`) on the benchmark's rows.
 
 Every named catalog cause of a row is one example: its covariates (:func:`twins.discrepancy.confidence.features`,
-from the cause as stored, its row's verdict and final residual-to-noise ratio) and whether it was right
-(:func:`.score._is_right`). A logistic regression with a small ridge (L2, λ = 1) is fitted by Newton's method on
-the rows of even seeds and judged on the odd ones (reliability table and Brier score of the held-out half),
-then refitted on all rows for the coefficients the diagnosis uses. ``python -m
+from the cause as stored) and whether it was right (:func:`.score._is_right`). A logistic regression with a small
+ridge (L2, λ = 1) is fitted by Newton's method; it is judged held out by ten folds of cases (a case's causes are
+predicted by the model fitted on the cases of the other nine folds, seed mod 10: all causes of one case stay in
+one fold), then refitted on all rows for the coefficients the diagnosis uses. ``python -m
 benchmarks.diagnosis_bench.calibrate ROWS.jsonl`` prints both and the coefficient tuple.
 """
 
@@ -59,13 +59,16 @@ def _predict(x: np.ndarray, w: np.ndarray) -> np.ndarray:
     return 1.0 / (1.0 + np.exp(-np.clip(w[0] + x @ w[1:], -35, 35)))
 
 
-def held_out(x: np.ndarray, y: np.ndarray, seeds: np.ndarray, bins: int = 10) -> dict[str, Any]:
-    """Fit on even seeds, judge on odd: Brier score and reliability table of the held-out causes."""
-    train, test = seeds % 2 == 0, seeds % 2 == 1
-    if not train.any() or not test.any():
-        return {"n_train": int(train.sum()), "n_test": int(test.sum()), "brier": None, "bins": [], "weights": []}
-    w = fit(x[train], y[train])
-    p = _predict(x[test], w)
+def held_out(x: np.ndarray, y: np.ndarray, seeds: np.ndarray, bins: int = 10, folds: int = 10) -> dict[str, Any]:
+    """Cross-validated Brier score and reliability table: the causes of the cases with ``seed % folds == k`` are
+    predicted by the model fitted on the other folds (module docstring)."""
+    fold = np.asarray(seeds) % folds
+    if len(np.unique(fold)) < 2:
+        return {"n": int(len(y)), "folds": folds, "brier": None, "bins": []}
+    p = np.empty(len(y))
+    for k in np.unique(fold):
+        test = fold == k
+        p[test] = _predict(x[test], fit(x[~test], y[~test]))
     edges = np.linspace(0, 1, bins + 1)
     idx = np.clip(np.searchsorted(edges, p, side="right") - 1, 0, bins - 1)
     table = [
@@ -73,18 +76,12 @@ def held_out(x: np.ndarray, y: np.ndarray, seeds: np.ndarray, bins: int = 10) ->
             "lo": float(edges[b]),
             "n": int((idx == b).sum()),
             "stated": float(p[idx == b].mean()),
-            "observed": float(y[test][idx == b].mean()),
+            "observed": float(y[idx == b].mean()),
         }
         for b in range(bins)
         if (idx == b).any()
     ]
-    return {
-        "n_train": int(train.sum()),
-        "n_test": int(test.sum()),
-        "brier": float(np.mean((p - y[test]) ** 2)),
-        "bins": table,
-        "weights": w.tolist(),
-    }
+    return {"n": int(len(y)), "folds": folds, "brier": float(np.mean((p - y) ** 2)), "bins": table}
 
 
 if __name__ == "__main__":  # pragma: no cover - a maintainer's tool

@@ -14,9 +14,9 @@ own parameters (:func:`.defaults.attributable`).
 **Order**: significant first, then by gain, ties broken by the signature score (:mod:`.evidence`).
 
 **Group** what the data cannot tell apart: candidates of the leading cause's ``EffectSpec.group`` whose NRMSE
-is within 2× of the leader's, and any candidate whose validation residual variance is within the sampling
-error ``2·√(2/N_eff)`` of the leader's (or not significantly larger) while its prediction differs from the
-leader's by less than half the residual RMS. The group is reported with the experiment that would separate it.
+is within 2× of the leader's, and any candidate (significant, or with at least half the leader's gain) whose
+validation residual variance is within the sampling error ``2·√(2/N_eff)`` of the leader's (or not significantly
+larger) while its prediction differs from the leader's by less than half the residual RMS. The group is reported with the experiment that would separate it.
 
 **Confidence** of a cause (in [0, 1]): ``(1 − p_value) · (0.5 + 0.5·√(1 − g₂/g₁)) · (0.8 + 0.2·s)`` with ``g₁``
 its relative validation gain, ``g₂`` the best gain of a candidate outside its group and ``s`` its signature
@@ -148,7 +148,10 @@ def _group(trials: list[Trial], twin: Twin, val: Record, opts: DiagnoseOptions) 
             and tr.nrmse_val <= 2.0 * top.nrmse_val
         )
         d_pred = float(np.sqrt(np.mean((tr.yhat_val[skip:] - top.yhat_val[skip:]) ** 2)))
-        equal = tr.significant and (tr.sse_val <= top.sse_val * (1 + tol) or not_better) and d_pred < 0.5 * e_rms_top
+        # comparable: significant itself, or at least half the leader's gain (a richer candidate with the leader's
+        # gain can miss the Bonferroni level on a short, coloured residual and still be what the data show)
+        comparable = tr.significant or (top.gain > 0 and tr.gain >= 0.5 * top.gain)
+        equal = comparable and (tr.sse_val <= top.sse_val * (1 + tol) or not_better) and d_pred < 0.5 * e_rms_top
         if same_group or equal:
             group.append(tr.effect)
     return group
