@@ -78,6 +78,7 @@ def run(args: argparse.Namespace) -> int:
         "seeds": _ranges(sorted(r["case"]["seed"] for r in rows)),
         "complete": len(rows) == n,
         "results": str(results),
+        "code": _codes(rows),
     }
     page.figure(rows, scores, out_dir / "figure.png")
     written = page.render(scores, meta, docs / page.PAGE.name, out_dir)
@@ -86,6 +87,14 @@ def run(args: argparse.Namespace) -> int:
     elif not args.quiet:
         _print(scores, written)
     return 0
+
+
+def _codes(rows: list[dict]) -> list[tuple[str, int]]:
+    """(commit, rows diagnosed by it), most rows first; rows from before rows carried it are "earlier"."""
+    from collections import Counter
+
+    n = Counter(str(r.get("code", "earlier"))[:7] if r.get("code") else "earlier" for r in rows)
+    return n.most_common()
 
 
 def _ranges(seeds: list[int]) -> str:
