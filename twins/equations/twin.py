@@ -46,6 +46,7 @@ class EquationTwin(ExternalTwin):
     """A model's equations with the generic effects around them and the catalog's mechanisms inside."""
 
     SPEC: Any = None  # the model's EquationSpec
+    JOINT_TRIALS = True  # the diagnosis tries a sizeable leader that is not significant alone in pairs (.pairs)
 
     def states(self, u: np.ndarray, fs: float) -> np.ndarray:
         """The model's states (and the mechanisms' added states) at every sample of the input ``u`` at ``fs``."""
