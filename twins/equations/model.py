@@ -46,6 +46,8 @@ __all__ = ["EquationSpec", "MechanismSlot", "is_equation_model", "compile_functi
 SUBSTEPS_FIELD = "ode_substeps"
 #: how the input goes on between samples (:func:`.kernel.stage_inputs`)
 INPUT_MODES = ("hold", "linear", "cubic")
+#: inputs at the RK4 stages kept per model (:meth:`EquationSpec.stage_inputs`)
+STAGE_MEMO = 8
 #: a periodic steady state is reached when one more period moves no state by more than this share of its range
 PERIODIC_TOL = 1e-7
 #: most periods simulated in the search for the periodic steady state
@@ -275,15 +277,18 @@ class EquationSpec:
         return self._integrators["tangent"](*args, np.ascontiguousarray(phi, np.float64), np.asarray(rows, np.int64))
 
     def stage_inputs(self, u: np.ndarray, substeps: int) -> np.ndarray:
-        """The input at the RK4 stages (:func:`.kernel.stage_inputs`), the last few kept (a trial simulates the same
-        records again and again)."""
+        """The input at the RK4 stages (:func:`.kernel.stage_inputs`), the :data:`STAGE_MEMO` last used kept (a trial
+        simulates the same records again and again; a trial of an input effect, a delay, makes a new input at every
+        evaluation, which should not push the records' own out first)."""
         key = (digest(u), substeps)
         memo = self.memo.setdefault("stage_inputs", collections.OrderedDict())
-        if key not in memo:
-            memo[key] = stage_inputs(u, substeps, self.input_mode)
-            if len(memo) > 4:
-                memo.popitem(last=False)
-        return memo[key]
+        if key in memo:
+            memo.move_to_end(key)
+            return memo[key]
+        memo[key] = out = stage_inputs(u, substeps, self.input_mode)
+        if len(memo) > STAGE_MEMO:
+            memo.popitem(last=False)
+        return out
 
     def _limits(
         self, slots: list[MechanismSlot], mech: np.ndarray, extra: int, p: Any
