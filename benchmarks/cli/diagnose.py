@@ -78,8 +78,16 @@ def register(sub) -> None:
     p.add_argument(
         "--pairs",
         action="store_true",
+        default=None,
         help="when a round's leader is not significant alone, try it jointly with each other candidate (two effects "
-        "that mask each other)",
+        "that mask each other; default: for a model given by its equations, a leader that lowers the validation NRMSE "
+        "by 5 %% or more)",
+    )
+    p.add_argument(
+        "--no-pairs",
+        dest="pairs",
+        action="store_false",
+        help="never try a round's leader jointly with the others",
     )
     p.add_argument(
         "--trial-nfev",

@@ -28,7 +28,8 @@ class DiagnoseOptions:
         amplitude limit, time constants and integration step to the records.
       - ``starts``: above 1, every candidate gets the full refit from ``starts`` points over its ranges, for effects
         that pay only once the core moves with them; about ``starts`` × candidates fits a round.
-      - ``pairs``: try a leader that is not significant alone jointly with each other candidate (:mod:`.pairs`).
+      - ``pairs``: try a leader that is not significant alone jointly with each other candidate (:mod:`.pairs`);
+        None: for a model given by its equations, a leader that lowers the validation NRMSE by 5 % or more.
       - ``progress``: a callable taking one message per step, or None; ``on_round``: one line per finished round
     (trial count, leader, elapsed time), or None.
       - ``hybrid``: with an ``unexplained`` verdict, fit the hybrid twin (:mod:`.hybrid`) and report its gain.
@@ -52,7 +53,7 @@ class DiagnoseOptions:
     retest_defaults: bool = True
     follow_ranges: bool = True
     starts: int = 1
-    pairs: bool = False
+    pairs: bool | None = None
     progress: Callable[[str], Any] | None = None
     hybrid: bool = True
     on_round: Callable[[str], Any] | None = None

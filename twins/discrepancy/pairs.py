@@ -13,7 +13,11 @@ configuration *before* the leader: an F-test with both effects' parameter counts
 that residual, at ``alpha`` divided by every single and joint trial of the round (Bonferroni), and the relative
 gain floor ``min_rel_gain``. The best passing pair names both effects, each marked with ``joint_with`` and the
 pair's ``p_joint``; their confidence is at most ½ (a pair found together can trade gain between its members).
-Off unless :attr:`.options.DiagnoseOptions.pairs` is set.
+:attr:`.options.DiagnoseOptions.pairs` True tries every such leader, False none; None (the default) tries, for a
+twin whose class sets ``JOINT_TRIALS`` (a model given by its equations: compiled, cheap to simulate, and its
+mechanisms inside the equations are those the core's parameters bend to stand in for), a leader that lowers the
+validation NRMSE by at least :data:`PAIR_GAIN` alone — the mark of a mechanism held back by another (the tanks'
+overflow: 11.7 %) — and skips the small gains of a configuration that lacks nothing.
 """
 
 from __future__ import annotations
@@ -27,7 +31,10 @@ from .prediction import significance
 from .ranking import Ranking, cause_from, rank_round
 from .trials import Stage, Trial
 
-__all__ = ["joint_step"]
+__all__ = ["joint_step", "PAIR_GAIN"]
+
+#: the least relative gain of a leader that is not significant alone for which the default tries its pairs
+PAIR_GAIN = 0.05
 
 
 def joint_step(loop: Any, ext: Any, ranking: Ranking, rnd: int, n_max: int) -> bool:
@@ -36,8 +43,10 @@ def joint_step(loop: Any, ext: Any, ranking: Ranking, rnd: int, n_max: int) -> b
     inp, cal, opts, skip = loop.inp, loop.cal, loop.opts, loop.opts.skip
     stage: Stage = ext.stage
     top = ranking.top
+    gain0 = 1.0 - top.nrmse_val / stage.nrmse_val if stage.nrmse_val > 0 else 0.0
     if (
-        not opts.pairs
+        opts.pairs is False
+        or (opts.pairs is None and not (getattr(type(stage.twin), "JOINT_TRIALS", False) and gain0 >= PAIR_GAIN))
         or top.retest
         or len(ext.causes) + 2 > n_max
         or top.sse_val >= stage.sse_val

@@ -46,22 +46,36 @@ class EquationTwin(ExternalTwin):
     """A model's equations with the generic effects around them and the catalog's mechanisms inside."""
 
     SPEC: Any = None  # the model's EquationSpec
+    JOINT_TRIALS = True  # the diagnosis tries a sizeable leader that is not significant alone in pairs (.pairs)
 
     def states(self, u: np.ndarray, fs: float) -> np.ndarray:
         """The model's states (and the mechanisms' added states) at every sample of the input ``u`` at ``fs``."""
         return self.run(u, fs, keep=True)[1]
 
+    def simulate_periodic(self, u: np.ndarray, fs: float) -> np.ndarray:
+        """:meth:`simulate` of a record that is whole periods of a periodic input in steady state (a multisine test
+        record taken after its transient): the equations start in their periodic steady state
+        (:meth:`.model.EquationSpec.periodic_state`); the effects around them start as in :meth:`simulate`."""
+        return self.run(u, fs, x0="periodic")[0]
+
     def run(
-        self, u: np.ndarray, fs: float, keep: bool = False, force: np.ndarray | None = None, sparse: Any = None
+        self,
+        u: np.ndarray,
+        fs: float,
+        keep: bool = False,
+        force: np.ndarray | None = None,
+        sparse: Any = None,
+        x0: np.ndarray | str | None = None,
     ) -> tuple[np.ndarray, np.ndarray]:
         """``(y, X)``: :meth:`simulate` with the generic effects around the equations, the states X at every
         sample when ``keep``, an additive forcing of the rates (samples × states) when ``force`` is given, a sparse
-        term (:mod:`.sparse`) when ``sparse`` is."""
+        term (:mod:`.sparse`) when ``sparse`` is, the equations started at ``x0`` (an augmented state, or
+        ``"periodic"``) when it is given."""
         gp = _Renamed(self.params, self.GENERIC_NAMES)
         u = np.asarray(u, float)
         v = apply_input(u, fs, self.effects, gp)
         own = self.effects & self.MODEL_EFFECTS
-        y, X = self.SPEC.run(v, fs, self.model_params(), own, keep=keep, force=force, sparse=sparse)
+        y, X = self.SPEC.run(v, fs, self.model_params(), own, keep=keep, force=force, sparse=sparse, x0=x0)
         return apply_output(y, u, fs, self.effects, gp), X
 
     def start_values(self, effect: str, est: Record, skip: int = 0) -> dict[str, float] | None:
