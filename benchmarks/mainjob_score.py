@@ -292,7 +292,12 @@ def stored_records(ctx: Context) -> int:
         for test, rm in (e.get("rmse") or {}).items():
             rec = (e.get("record") or {}).get(test) or {}
             unit = (e.get("units") or {}).get(test) or rec.get("unit", "")
-            pub = f"{fmt_value(rec.get('value'), rec.get('unit', unit))} ({esc(rec.get('model', ''))})" if rec else "—"
+            src = f"; {rec['source']}" if rec.get("source") else ""
+            pub = (
+                f"{fmt_value(rec.get('value'), rec.get('unit', unit))} ({esc(rec.get('model', '') + src)})"
+                if rec
+                else "—"
+            )
             value = fmt_spread(rm, unit) if isinstance(rm, dict) else _fmt(rm)
             rows.append(
                 [

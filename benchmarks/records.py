@@ -281,14 +281,23 @@ def _test_rmse(r: dict[str, Any]) -> dict[str, Any]:
 
 
 def _record(r: dict[str, Any]) -> dict[str, Any] | None:
-    """The best published result on the row's test: from today's reference table (a published figure is not part
-    of the measurement, so a corrected or added one shows without refitting), else as the row stored it."""
+    """The best published result on the row's test: from today's published results (a published figure is not part
+    of the measurement, so a corrected or added one shows without refitting), with its source, else as the row
+    stored it (without a source)."""
+    from benchmarks import published
     from benchmarks.datasets.references import references_for
 
-    best = references_for(r.get("dataset", "")).get(r.get("test", ""), {}).get("best_published") or (
-        r.get("references") or {}
-    ).get("best_published")
-    return {k: best[k] for k in ("value", "unit", "model")} if best else None
+    dname, test = r.get("dataset", ""), r.get("test", "")
+    best = references_for(dname).get(test, {}).get("best_published") or (r.get("references") or {}).get(
+        "best_published"
+    )
+    if not best:
+        return None
+    out = {k: best[k] for k in ("value", "unit", "model")}
+    shown = published.best_published(dname, test)
+    if shown:
+        out["source"] = shown["source"]
+    return out
 
 
 def summarise_row(row: dict[str, Any]) -> dict[str, Any]:
@@ -374,7 +383,7 @@ def page_context(entries: Sequence[Entry], rows: dict[str, dict[str, Any]], miss
                     "settings": _settings_text(r.get("params") or {}),
                     "rmse": fmt_spread(entry["rmse"][r["test"]], unit),
                     "seconds": "—" if entry["seconds"] is None else f"{entry['seconds']:.3g}",
-                    "record": f"{fmt_value(rec['value'], unit)} ({rec['model']})" if rec else "—",
+                    "record": _record_text(rec, unit),
                     "command": row["command"],
                 }
             )
@@ -396,11 +405,53 @@ def page_context(entries: Sequence[Entry], rows: dict[str, dict[str, Any]], miss
         )
     return {
         "lines": lines,
+        "published": _published_context(entries),
+        "baselines": _baselines_context(),
         "measurements": measurements,
         "why": [(e.dataset, e.identifier, e.why) for e in entries],
         "missing": [{"dataset": e.dataset, "identifier": e.identifier, "command": measure_command(e)} for e in missing],
         "default_seeds": seeds_text(DEFAULT_SEEDS),
     }
+
+
+def _record_text(rec: dict[str, Any] | None, unit: str) -> str:
+    """The record cell: ``0.260 mV (PNLSS; Paduart et al. 2010 in Champneys et al. 2024)``."""
+    if not rec:
+        return "—"
+    source = f"; {rec['source']}" if rec.get("source") else ""
+    return f"{fmt_value(rec['value'], unit)} ({rec['model']}{source})"
+
+
+def _published_context(entries: Sequence[Entry]) -> list[dict[str, str]]:
+    """One line per test of the table's datasets that has a best published result: the number as the paper prints
+    it, the model, the source in full and where this project read it."""
+    from benchmarks import published
+    from benchmarks.datasets.references import references_for
+
+    out = []
+    for e in entries:
+        for test in references_for(e.dataset):
+            best = published.best_published(e.dataset, test)
+            if best:
+                out.append(
+                    {
+                        "dataset": e.dataset,
+                        "test": test,
+                        "value": f"{best['value']:g} {best['unit']}",
+                        "model": best["model"],
+                        "cite": best["cite"],
+                        "read_from": best["read_from"],
+                    }
+                )
+    return out
+
+
+def _baselines_context() -> dict[str, Any]:
+    """The baselines table (:func:`benchmarks.published.baselines_text`), figures in the page's format."""
+    from benchmarks import published
+    from benchmarks.scoring.floors import load_baselines
+
+    return published.baselines_text(fmt_value, load_baselines().get("modes", {}).get("full", {}))
 
 
 def render_markdown(entries: Sequence[Entry], rows: dict[str, dict[str, Any]], missing: Sequence[Entry]) -> str:
