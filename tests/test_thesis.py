@@ -125,6 +125,8 @@ def test_row_selection():
         (["--rows", "table-9.9"], "--rows: 'table-9.9' is not a row id or table"),
         (["--render-only", "--rows", "table-4.2"], "--render-only renders every stored row"),
         (["--quick", "--tier", "full"], "--quick is --tier quick"),
+        (["--grid-sample", "0"], "--grid-sample must be a positive count or 'all'"),
+        (["--render-only", "--grid-sample", "3"], "--render-only renders every stored row"),
     ],
 )
 def test_bad_input_exits_2_with_one_line(argv, expected, tmp_path, capsys):

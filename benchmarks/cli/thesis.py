@@ -117,7 +117,7 @@ def run(args: argparse.Namespace) -> int:
                 extra = f"  | preset {'failed' if pm is None else f'{pm:.4g}'}  {pre['verdict']}"
             print(f"{rid:<34} dissertation {d['value']:.4g}  project {mean}{sd} (n={p['n']})  {r['verdict']}{extra}")
         if args.store:
-            print(f"{len(rows)} rows stored -> {stored}, {page}")
+            print(f"{len(rows)} rows stored -> {stored}, {page}" if rows else f"page -> {page}")
     return 0
 
 

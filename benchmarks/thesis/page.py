@@ -247,6 +247,16 @@ def _grid_section(grid: dict[str, Any] | None, rows: dict[str, dict[str, Any]]) 
             f"{c['n_parameters']} | {_num(c['r2_frs_est'])} | {_num(c['r2_frs_val'])} | "
             f"{_num(c['r2_osa_est'])}; {_num(c['r2_osa_val'])} | {c['cpu_seconds']:.1f} |"
         )
+    per = grid["cpu_seconds"] / max(len(cs), 1)
+    whole = per * grid["grid_size"]
+    out += [
+        "",
+        f"Cost of the whole grid, estimated from this uniform sample (an unbiased estimate of the mean over the "
+        f"grid): {per:.1f} CPU s per configuration ({grid['runs_per_configuration']} runs) × "
+        f"{grid['grid_size']:,} = **{_hours(whole)} CPU-hours**, {_hours(whole / 32)} h of wall time on 32 "
+        "workers (`--grid-sample all --scheduler ADDRESS`); the sample's CPU times were measured on "
+        f"{_machine(grid['measured'])}.",
+    ]
     best = next((c for c in cs if c["label"] == grid.get("best")), None)
     if best:
         out += [
@@ -257,6 +267,13 @@ def _grid_section(grid: dict[str, Any] | None, rows: dict[str, dict[str, Any]]) 
             f"choice (n_u = n_y = 512, 75-75 sigmoid) on the same data: {_choice(rows)}.",
         ]
     return out + [""]
+
+
+def _machine(m: dict[str, Any]) -> str:
+    mach = m.get("machine") or {}
+    load = m.get("load_average_before")
+    text = f"{mach.get('cpu', '?')}, {mach.get('cores', '?')} cores"
+    return text + (f", load average {load[0]:.1f} before the run" if load else "")
 
 
 def _choice(rows: dict[str, dict[str, Any]]) -> str:
@@ -322,6 +339,13 @@ def _section(title: str, rs: list[dict[str, Any]], histogram: str | None) -> lis
         spreads.setdefault(r["dissertation"]["note"] or "± one published SD", []).append(r["id"])
     text = "; ".join(k if len(spreads) == 1 else f"{k} ({', '.join(v)})" for k, v in spreads.items())
     out += ["", f"Metric: {rs[0]['metric']}. Published spread: {text}.", ""]
+    if any(r.get("preset") for r in rs):
+        out += [
+            "Thesis preset column: the same protocol, seeds and budget on the preset's twin and acquisition (the "
+            "choices in [The thesis preset](#the-thesis-preset)); the differences below are the default twin's, "
+            "and hold for the preset except where a choice there replaces them.",
+            "",
+        ]
     seen: list[list[str]] = []
     for r in rs:
         if r["differences"] not in seen:

@@ -253,6 +253,7 @@ def measure_grid(
     configs = grid.sample(n, seed)
     tasks = grid.grid_tasks(configs)
     keys = list(tasks)
+    load0 = list(os.getloadavg())
     w0, c0 = time.perf_counter(), time.process_time()
 
     def report(i: int, res: dict[str, Any]) -> None:
@@ -273,6 +274,8 @@ def measure_grid(
     )
     measured = provenance()
     measured.update(
+        load_average_before=load0,
+        load_average_after=list(os.getloadavg()),
         wall_seconds=time.perf_counter() - w0,
         cpu_seconds_here=time.process_time() - c0,
         process="in-process" if getattr(ex, "client", None) is None else f"dask ({ex.n_workers} workers)",
