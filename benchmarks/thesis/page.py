@@ -463,7 +463,17 @@ def write_histogram(rows: dict[str, dict[str, Any]], path: str | Path) -> Path |
     for ax, r, title in ((axes[0], est, "estimation"), (axes[1], val, "validation")):
         v = [x for x in r["project"]["values"] if x is not None]
         d = r["dissertation"]
-        ax.hist(v, bins=min(20, max(5, len(v) // 2)), color="tab:blue", alpha=0.7, label=f"project, {len(v)} runs")
+        ax.hist(v, bins=min(20, max(5, len(v) // 2)), color="tab:blue", alpha=0.6, label=f"default twin, {len(v)} runs")
+        pre = r.get("preset")
+        if pre:
+            w = [x for x in pre["project"]["values"] if x is not None]
+            ax.hist(
+                w,
+                bins=min(20, max(5, len(w) // 2)),
+                color="tab:green",
+                alpha=0.6,
+                label=f"thesis preset, {len(w)} runs",
+            )
         for x, ls in ((d["value"], "-"), (d["value"] - d["sd"], ":"), (d["value"] + d["sd"], ":")):
             ax.axvline(x, color="tab:red", ls=ls)
         ax.plot([], [], color="tab:red", label=f"dissertation {d['value']:.3f} ± {d['sd']:.3f} (n = {d['n']})")
