@@ -266,6 +266,15 @@ def _grid_section(grid: dict[str, Any] | None, rows: dict[str, dict[str, Any]]) 
             f"{_num(best['r2_frs_est'])} estimation, {_num(best['r2_frs_val'])} validation. The dissertation's "
             f"choice (n_u = n_y = 512, 75-75 sigmoid) on the same data: {_choice(rows)}.",
         ]
+    validated = [c for c in cs if c["r2_frs_est"] is not None and c["r2_frs_val"] is not None]
+    if best and best["r2_frs_val"] is None and validated:
+        b2 = max(validated, key=lambda c: c["r2_frs_est"])
+        out.append(
+            f"A validation R² of '—': the regressor is longer than the 1000-sample validation record (§3.2's "
+            f"truncation). The best of the sample that can be validated: n_u = {b2['nu']}, n_y = {b2['ny']}, "
+            f"{'-'.join(map(str, b2['hidden']))} {b2['activation']}: {_num(b2['r2_frs_est'])} estimation, "
+            f"{_num(b2['r2_frs_val'])} validation."
+        )
     return out + [""]
 
 
@@ -408,7 +417,8 @@ def _cost_section(rows: dict[str, dict[str, Any]]) -> list[str]:
             f"{c['grid_configurations']:,} configurations, {g['runs']} runs each, as §5.2 ran them), at the "
             f"mean CPU time of the data-set-2 fits above ({c['ds2_fit_cpu_seconds']:.1f} s at 75 epochs): "
             f"**{_hours(c['grid_cpu_seconds'])} CPU-hours** — wide and deep networks with 1024 lags cost "
-            "more than the eight measured, so this is a lower bound; "
+            "more than the eight measured, so this is a lower bound (the random sample of the grid above, where "
+            "stored, estimates the grid's mean directly); "
             f"{_hours(c['grid_cpu_seconds'] / 32)} h of wall time on 32 workers."
         )
     out += [
