@@ -87,7 +87,9 @@ def test_committed_page_is_the_rendering_of_the_committed_rows():
     rows = rows_mod.load_rows(thesis.ROWS_PATH)
     assert rows, "docs/dissertation/rows.json holds no rows"
     link = "dissertation/" + thesis.HISTOGRAM_NAME if "fig-5.13/est" in rows else None
-    assert thesis.PAGE_PATH.read_text(encoding="utf-8") == render(rows, link), (
+    from benchmarks.thesis.grid import load
+
+    assert thesis.PAGE_PATH.read_text(encoding="utf-8") == render(rows, link, load(thesis.GRID_PATH)), (
         "docs/dissertation.md differs from the stored rows: run `piezotwin thesis --render-only`"
     )
 
@@ -123,6 +125,8 @@ def test_row_selection():
         (["--rows", "table-9.9"], "--rows: 'table-9.9' is not a row id or table"),
         (["--render-only", "--rows", "table-4.2"], "--render-only renders every stored row"),
         (["--quick", "--tier", "full"], "--quick is --tier quick"),
+        (["--grid-sample", "0"], "--grid-sample must be a positive count or 'all'"),
+        (["--render-only", "--grid-sample", "3"], "--render-only renders every stored row"),
     ],
 )
 def test_bad_input_exits_2_with_one_line(argv, expected, tmp_path, capsys):
@@ -179,6 +183,15 @@ def test_every_committed_row_is_within_better_or_explained_by_measurement():
     for rid in ("table-5.6/frs-val", "fig-5.13/val", "table-5.5/75x2-sigmoid"):
         if rid in rows and rows[rid]["verdict"] not in ("within", "better"):
             assert "plates 0.05 m apart" in expl[rid], rid
+    # the thesis preset's column: every Chapter 5 row and Figure 3.4 measured on it; one below says why
+    for rid, r in rows.items():
+        if rid.split("/")[0] in ("fig-3.4", "table-5.2", "table-5.4", "table-5.5", "table-5.6", "fig-5.13"):
+            pre = r.get("preset")
+            assert pre and pre["name"] == "thesis" and pre["fits"], f"{rid}: not measured on the thesis preset"
+            if pre["verdict"] not in ("within", "better"):
+                assert pre["explanation"], f"{rid} ({pre['verdict']} on the preset) has no measured explanation"
+        else:
+            assert "preset" not in r, rid  # Chapter 4 and Figure 3.9 stay the default twin's
     for f in ("0.1", "1", "10"):
         rid = f"table-4.3/{f}hz"
         if rows[rid]["verdict"] not in ("within", "better"):

@@ -51,32 +51,40 @@ NARX_LR_SMALL = 1e-5
 NARMAX_RHO_SMALL = 1e-9
 #: input delay [samples at 6.75 MHz] of the candidate beside Tables 5.4-5.6: near the time of flight
 DS2_CANDIDATE_NK = 450
-#: plate gap [m] tried beside Tables 5.4-5.6 (the twin's 0.100 m puts the time of flight at the 512th lag; the
-#: dissertation does not state its rig's gap): a measured explanation, not the tables' twin
+#: plate gap [m] tried beside Tables 5.4-5.6 (the twin's 0.100 m puts the time of flight at the 512th lag; §3.2
+#: gives 100 mm between the actuators, which the thesis preset reads as 87.3 mm of water): a measured explanation
 DS2_DISTANCE_TRIAL_M = 0.05
 
 
-@functools.lru_cache(maxsize=2)
-def dataset1(short: bool = False):
-    """Data set 1: 2000 samples at 10 MHz from the start of the 100 ms chirp (default twin, seed 0).
+@functools.lru_cache(maxsize=4)
+def dataset1(short: bool = False, preset: bool = False):
+    """Data set 1: 2000 samples at 10 MHz from the start of the 100 ms chirp (default twin, seed 0), or with
+    ``preset`` the thesis preset's steady-state window (:func:`benchmarks.thesis.preset.dataset1_record`).
 
-    Only the first 0.5 ms of the sweep is simulated (0.3 ms in the quick tier): the kept 0.2 ms and a margin for
+    Only 0.5 ms of the sweep is recorded (0.3 ms in the quick tier): the kept 0.2 ms and a margin for
     the zero-phase band-pass's end effects; the sweep itself is the 100 ms one (rate 4.5 kHz/ms)."""
     from sysid.signals.preprocess import apply_steps
     from twins.acoustic import AcousticTwin
 
-    rec = AcousticTwin(seed=0).generate("thesis-chirp-100ms", duration=0.0003 if short else 0.0005)
+    duration = 0.0003 if short else 0.0005
+    if preset:
+        from benchmarks.thesis.preset import dataset1_record
+
+        rec = dataset1_record(duration)
+    else:
+        rec = AcousticTwin(seed=0).generate("thesis-chirp-100ms", duration=duration)
     out = apply_steps(rec, DS1_STEPS)
     return out[:DS1_KEEP]
 
 
-@functools.lru_cache(maxsize=4)
-def dataset2(short: bool = False, distance_m: float | None = None):
+@functools.lru_cache(maxsize=6)
+def dataset2(short: bool = False, distance_m: float | None = None, preset: bool = False):
     """Data set 2: (multisine 2000 samples, 1 ms chirp 1000 samples) at 6.75 MHz after the §3.2 recipe.
 
     0.6 ms / 0.4 ms are simulated after the twin's steady-state warm-up (the kept records last 0.30 / 0.15 ms).
-    ``distance_m``: the plates' gap of the twin (default: its 0.100 m), a measured explanation only."""
-    tw = _twin(distance_m)
+    ``distance_m``: the plates' gap of the twin (default: its 0.100 m), a measured explanation only;
+    ``preset``: the thesis preset's twin (:mod:`benchmarks.thesis.preset`)."""
+    tw = _twin(distance_m, preset)
     est = tw.generate("thesis-multisine", preprocess=True, duration=0.0004 if short else 0.0006)
     val = tw.generate("thesis-chirp-1ms", preprocess=True, duration=0.0003 if short else 0.0004)
     return est, val
@@ -132,17 +140,18 @@ def ds1_task(
     t: Tier,
     nk: str = "1",
     lr: float | None = None,
+    preset: bool = False,
 ) -> dict[str, Any]:
     """One Table 5.2 line fitted on data set 1: FRS R² (and one-step R²) on the estimation samples. ``nk="tof"``
     delays the input by the direct path's time of flight, ``lr`` changes the NARX learning rate (measured
     explanations, not the table's settings). The result also carries what explains a failing fit: for a NARX
     the one-step and FRS R² of its fixed linear term alone (the ARX of the same regressor), for a NARMAX the
     input terms FROLS chose and the share of the output the output-lag terms leave unexplained (1 − ΣERR), for
-    an ARMAX the prediction-error fit's status."""
+    an ARMAX the prediction-error fit's status. ``preset``: data set 1 of the thesis preset."""
     from sysid.errors import DataError
     from sysid.evaluation.metrics import r2
 
-    rec = dataset1(t.short_records)
+    rec = dataset1(t.short_records, preset)
     c0, w0 = time.process_time(), time.perf_counter()
     est, ident, kw = ds1_model(model, nu, ny, ne, rho, seed, t, _delay(nk, rec.fs))
     if lr is not None:
@@ -202,25 +211,30 @@ def _ds1_diagnostics(model: str, est, rec, kw: dict[str, Any]) -> dict[str, Any]
     return {}
 
 
-def _twin(distance_m: float | None = None):
-    """The acoustic twin of the protocols (seed 0), with the plates ``distance_m`` apart when given."""
+def _twin(distance_m: float | None = None, preset: bool = False):
+    """The acoustic twin of the protocols (seed 0), with the plates ``distance_m`` apart when given, or the
+    thesis preset's twin."""
     from dataclasses import replace
 
     from twins.acoustic import AcousticTwin
     from twins.acoustic.params import AcousticParams
 
+    if preset:
+        from benchmarks.thesis.preset import acoustic_params
+
+        return AcousticTwin(params=acoustic_params(), seed=0)
     if distance_m is None:
         return AcousticTwin(seed=0)
     return AcousticTwin(params=replace(AcousticParams(), distance_m=float(distance_m)), seed=0)
 
 
-def ds1_wavenet_task(nu: int, ny: int, t: Tier, nk: str = "1") -> dict[str, Any]:
+def ds1_wavenet_task(nu: int, ny: int, t: Tier, nk: str = "1", preset: bool = False) -> dict[str, Any]:
     """A wavelet network (:class:`benchmarks.thesis.wavenet.WaveletNARX`, :data:`NARX_HIDDEN` units) on a Table 5.2
     NARX line's lags: FRS and one-step R² on data set 1 (deterministic: one fit)."""
     from benchmarks.thesis.wavenet import WaveletNARX
     from sysid.evaluation.metrics import r2
 
-    rec = dataset1(t.short_records)
+    rec = dataset1(t.short_records, preset)
     c0, w0 = time.process_time(), time.perf_counter()
     model = WaveletNARX(ny=ny, nu=nu, nk=_delay(nk, rec.fs), units=sum(NARX_HIDDEN)).fit(rec)
     return {
@@ -237,20 +251,29 @@ def ds1_wavenet_task(nu: int, ny: int, t: Tier, nk: str = "1") -> dict[str, Any]
 
 
 def ds2_task(
-    ny: int, hidden: tuple[int, ...], activation: str, seed: int, t: Tier, nk: int = 1, distance_m: float | None = None
+    ny: int,
+    hidden: tuple[int, ...],
+    activation: str,
+    seed: int,
+    t: Tier,
+    nk: int = 1,
+    distance_m: float | None = None,
+    preset: bool = False,
+    nu: int = 512,
 ) -> dict[str, Any]:
     """One training of a Table 5.3 network (n_u = 512, n_y = ``ny``) on data set 2: R² OSA/FRS on estimation and
     validation (the four columns of Table 5.6). ``distance_m``: data set 2 of the twin with that plate gap (a
-    measured explanation); the result gives the direct path's time of flight in samples at 6.75 MHz."""
+    measured explanation); the result gives the direct path's time of flight in samples at 6.75 MHz.
+    ``preset``: data set 2 of the thesis preset; ``nu``: other input lags (Table 5.3's grid)."""
     from sysid.evaluation.metrics import r2
     from sysid.registry import get_identifier
 
-    est, val = dataset2(t.short_records, distance_m)
-    tw = _twin(distance_m)
+    est, val = dataset2(t.short_records, distance_m, preset)
+    tw = _twin(distance_m, preset)
     c0, w0 = time.process_time(), time.perf_counter()
     kw = {
         "ny": ny,
-        "nu": 512,
+        "nu": nu,
         "nk": nk,
         "hidden": list(hidden),
         "activation": activation,
@@ -266,8 +289,9 @@ def ds2_task(
         "seed": seed,
         "r2_osa_est": float(r2(est.output, model.predict(est, 1), lag)),
         "r2_frs_est": _frs_r2(model, est),
-        "r2_osa_val": float(r2(val.output, model.predict(val, 1), lag)),
-        "r2_frs_val": _frs_r2(model, val),
+        # a regressor longer than the 1000-sample validation record (Table 5.3's 1024 lags) cannot be validated
+        "r2_osa_val": float(r2(val.output, model.predict(val, 1), lag)) if len(val) > lag + 1 else float("nan"),
+        "r2_frs_val": _frs_r2(model, val) if len(val) > lag + 1 else float("nan"),
         "n_parameters": int(model.n_parameters_),
         "distance_m": float(tw.params.distance_m),
         "tof_samples": float(tw.time_of_flight() * est.fs),

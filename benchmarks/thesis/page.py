@@ -11,6 +11,7 @@ from typing import Any
 
 import numpy as np
 
+from benchmarks.thesis import grid as grid_5_3
 from benchmarks.thesis import targets
 from benchmarks.thesis.plan import TIERS
 
@@ -30,7 +31,13 @@ _TITLES = OrderedDict(
     ]
 )
 #: Table 5.3's grid, one width for every layer: lag values (n_u and n_y each), layers, widths, activations
-GRID_5_3 = {"lags": 15, "layers": 8, "widths": 21, "activations": 3, "runs": 2}
+GRID_5_3 = {
+    "lags": len(grid_5_3.LAGS),
+    "layers": len(grid_5_3.LAYERS),
+    "widths": len(grid_5_3.WIDTHS),
+    "activations": len(grid_5_3.ACTIVATIONS),
+    "runs": grid_5_3.RUNS,
+}
 _EPOCH_FIELD = {
     "cant/": "cantilever_epochs",
     "cant-cand/narx-mlp": "cantilever_epochs",
@@ -99,12 +106,14 @@ def full_tier_cost(rows: dict[str, dict[str, Any]]) -> dict[str, Any]:
     per: dict[str, list[float]] = {}
     for r in rows.values():
         tier = r["measured"].get("tier", {})
-        for f in r["fits"] + r.get("other_fits", []):
+        pre = r.get("preset") or {}
+        for f in r["fits"] + r.get("other_fits", []) + pre.get("fits", []) + pre.get("other_fits", []):
             if f["cpu_seconds"] is None:
                 continue
             key = f["key"]
-            field = next((v for k, v in _EPOCH_FIELD.items() if key.startswith(k)), None)
-            if key.startswith("cant/peak"):
+            bare = key.removeprefix("preset/")
+            field = next((v for k, v in _EPOCH_FIELD.items() if bare.startswith(k)), None)
+            if bare.startswith("cant/peak"):
                 field = None
             scale = getattr(full, field) / tier[field] if field and tier.get(field) else 1.0
             per.setdefault(key.rsplit("/", 1)[0] if key.rsplit("/", 1)[-1].isdigit() else key, []).append(
@@ -118,7 +127,7 @@ def full_tier_cost(rows: dict[str, dict[str, Any]]) -> dict[str, Any]:
             total += float(np.mean(per[group]))
         else:
             missing.append(group)
-    ds2 = [v for k, vals in per.items() if k.startswith("ds2/") for v in vals]
+    ds2 = [v for k, vals in per.items() if k.removeprefix("preset/").startswith("ds2/") for v in vals]
     g = GRID_5_3
     n_grid = g["lags"] ** 2 * g["layers"] * g["widths"] * g["activations"]
     grid_cpu = n_grid * g["runs"] * float(np.mean(ds2)) if ds2 else None
@@ -136,8 +145,8 @@ def _hours(s: float) -> str:
     return f"{s / 3600:.1f}" if s >= 360 else f"{s / 3600:.2f}"
 
 
-def render(rows: dict[str, dict[str, Any]], histogram: str | None = None) -> str:
-    """The whole page (Markdown) from the stored rows."""
+def render(rows: dict[str, dict[str, Any]], histogram: str | None = None, grid: dict[str, Any] | None = None) -> str:
+    """The whole page (Markdown) from the stored rows (and Table 5.3's stored sample, ``grid``)."""
     out = [
         "# The dissertation, table by table",
         "",
@@ -156,19 +165,31 @@ def render(rows: dict[str, dict[str, Any]], histogram: str | None = None) -> str
     out += [
         "## Summary",
         "",
-        "| item | rows | within | better | below / outside | failed | CPU s |",
-        "|---|---|---|---|---|---|---|",
+        "Default twin: the twins as they are; thesis preset: the rigs as the dissertation's text describes them "
+        "(see [The thesis preset](#the-thesis-preset)), measured for Chapter 5 and Figure 3.4.",
+        "",
+        "| item | rows | within | better | below / outside | failed | CPU s | preset: within | better | below / "
+        "outside | failed | CPU s |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
+    totals: dict[str, list[int]] = {}
     for fam, title in _TITLES.items():
         rs = [r for rid, r in rows.items() if rid.startswith(fam + "/")]
         if not rs:
             continue
-        count = {v: sum(r["verdict"] == v for r in rs) for v in ("within", "better", "below", "outside", "failed")}
-        cpu = sum({f["key"]: f["cpu_seconds"] or 0.0 for r in rs for f in r["fits"]}.values())
-        out.append(
-            f"| {title.split(' — ')[0]} | {len(rs)} | {count['within']} | {count['better']} | "
-            f"{count['below'] + count['outside']} | {count['failed']} | {cpu:.0f} |"
-        )
+        out.append(f"| {title.split(' — ')[0]} | {len(rs)} | {_counts(rs)} | {_counts(rs, True)} |")
+        ch = "5" if fam.split("-")[1].startswith("5") else fam
+        agg = totals.setdefault(ch, [0, 0, 0])
+        agg[0] += len(rs)
+        agg[1] += sum(r["verdict"] in ("within", "better") for r in rs)
+        agg[2] += sum((r.get("preset") or {}).get("verdict") in ("within", "better") for r in rs)
+    if "5" in totals:
+        n, d, p = totals["5"]
+        out += [
+            "",
+            f"Chapter 5: {d} of {n} rows within the published spread or better on the default twin, "
+            f"{p} of {n} on the thesis preset.",
+        ]
     missing = [rid for rid in targets.TARGETS if rid not in rows]
     out += [
         "",
@@ -181,28 +202,159 @@ def render(rows: dict[str, dict[str, Any]], histogram: str | None = None) -> str
         rs = [r for rid, r in rows.items() if rid.startswith(fam + "/")]
         if rs:
             out += _section(title, rs, histogram if fam == "fig-5.13" else None)
-    out += _cost_section(rows) + _measurements(rows)
+    out += _preset_section() + _grid_section(grid, rows) + _cost_section(rows) + _measurements(rows)
     return "\n".join(out).rstrip() + "\n"
 
 
-def _section(title: str, rs: list[dict[str, Any]], histogram: str | None) -> list[str]:
+def _counts(rs: list[dict[str, Any]], preset: bool = False) -> str:
+    """``within | better | below/outside | failed | CPU s`` of the rows (or of their preset parts)."""
+    parts = [r.get("preset") for r in rs] if preset else rs
+    ok = [p for p in parts if p]
+    if not ok:
+        return "— | — | — | — | —"
+    count = {v: sum(p["verdict"] == v for p in ok) for v in ("within", "better", "below", "outside", "failed")}
+    cpu = sum({f["key"]: f["cpu_seconds"] or 0.0 for p in ok for f in p["fits"]}.values())
+    return (
+        f"{count['within']} | {count['better']} | {count['below'] + count['outside']} | {count['failed']} | {cpu:.0f}"
+    )
+
+
+def _grid_section(grid: dict[str, Any] | None, rows: dict[str, dict[str, Any]]) -> list[str]:
+    """Table 5.3's sample (:mod:`benchmarks.thesis.grid`): its size, each configuration, the best beside the
+    dissertation's choice."""
+    if not grid:
+        return []
+    cs = grid["configurations"]
     out = [
-        f"## {title}",
+        "## Table 5.3 — a random sample of the grid",
         "",
-        "| row | dissertation | project (mean ± SD, n) | verdict | project's best on this protocol | budget | CPU s |",
-        "|---|---|---|---|---|---|---|",
+        f"{grid['sample_size']} of the grid's {grid['grid_size']:,} configurations (n_u, n_y, depth, one width, "
+        f"activation), drawn uniformly without replacement with `numpy.random.default_rng({grid['seed']})`, each "
+        f"trained {grid['runs_per_configuration']} times (§5.2: 'each model was run twice') at "
+        f"{grid['epochs']} epochs on {grid['data']}; means over the runs, {grid['cpu_seconds']:.0f} CPU s in all "
+        f"(measured {grid['measured'].get('date', '?')}, {grid['measured'].get('process', '?')}). "
+        "Reproduce: `piezotwin thesis --grid-sample "
+        f"{grid['sample_size']} --grid-seed {grid['seed']} --store`; the whole grid: `--grid-sample all "
+        "--scheduler ADDRESS` on a Dask cluster.",
+        "",
+        "| n_u | n_y | hidden | activation | parameters | estimation FRS R² | validation FRS R² | one-step R² "
+        "(est; val) | CPU s |",
+        "|---|---|---|---|---|---|---|---|---|",
     ]
-    for r in rs:
-        unit = r["dissertation"]["unit"]
+    for c in sorted(cs, key=lambda c: -(c["r2_frs_est"] if c["r2_frs_est"] is not None else -math.inf)):
         out.append(
-            f"| `{r['id']}` | {_dissertation(r['dissertation'])} | {_project(r['project'])} | {r['verdict']} | "
-            f"{_best(r['best'], unit)} | {_budget(r)} | {r['cpu_seconds']:.1f} |"
+            f"| {c['nu']} | {c['ny']} | {'-'.join(map(str, c['hidden']))} | {c['activation']} | "
+            f"{c['n_parameters']} | {_num(c['r2_frs_est'])} | {_num(c['r2_frs_val'])} | "
+            f"{_num(c['r2_osa_est'])}; {_num(c['r2_osa_val'])} | {c['cpu_seconds']:.1f} |"
         )
+    per = grid["cpu_seconds"] / max(len(cs), 1)
+    whole = per * grid["grid_size"]
+    out += [
+        "",
+        f"Cost of the whole grid, estimated from this uniform sample (an unbiased estimate of the mean over the "
+        f"grid): {per:.1f} CPU s per configuration ({grid['runs_per_configuration']} runs) × "
+        f"{grid['grid_size']:,} = **{_hours(whole)} CPU-hours**, {_hours(whole / 32)} h of wall time on 32 "
+        "workers (`--grid-sample all --scheduler ADDRESS`); the sample's CPU times were measured on "
+        f"{_machine(grid['measured'])}.",
+    ]
+    best = next((c for c in cs if c["label"] == grid.get("best")), None)
+    if best:
+        out += [
+            "",
+            f"Best of the sample by estimation FRS R² (the dissertation chose on estimation, §5.2): n_u = "
+            f"{best['nu']}, n_y = {best['ny']}, {'-'.join(map(str, best['hidden']))} {best['activation']}: "
+            f"{_num(best['r2_frs_est'])} estimation, {_num(best['r2_frs_val'])} validation. The dissertation's "
+            f"choice (n_u = n_y = 512, 75-75 sigmoid) on the same data: {_choice(rows)}.",
+        ]
+    validated = [c for c in cs if c["r2_frs_est"] is not None and c["r2_frs_val"] is not None]
+    if best and best["r2_frs_val"] is None and validated:
+        b2 = max(validated, key=lambda c: c["r2_frs_est"])
+        out.append(
+            f"A validation R² of '—': the regressor is longer than the 1000-sample validation record (§3.2's "
+            f"truncation). The best of the sample that can be validated: n_u = {b2['nu']}, n_y = {b2['ny']}, "
+            f"{'-'.join(map(str, b2['hidden']))} {b2['activation']}: {_num(b2['r2_frs_est'])} estimation, "
+            f"{_num(b2['r2_frs_val'])} validation."
+        )
+    return out + [""]
+
+
+def _machine(m: dict[str, Any]) -> str:
+    mach = m.get("machine") or {}
+    load = m.get("load_average_before")
+    text = f"{mach.get('cpu', '?')}, {mach.get('cores', '?')} cores"
+    return text + (f", load average {load[0]:.1f} before the run" if load else "")
+
+
+def _choice(rows: dict[str, dict[str, Any]]) -> str:
+    """The preset's Table 5.4 / 5.5 values of the dissertation's chosen network, as stored."""
+    parts = []
+    for fam, what in (("table-5.4", "estimation"), ("table-5.5", "validation")):
+        p = (rows.get(f"{fam}/{targets.BEST_DS2}") or {}).get("preset")
+        if p:
+            parts.append(f"{_project(p['project'])} {what} ({fam.replace('table-', 'Table ')})")
+    return ", ".join(parts) if parts else "not measured on the preset yet"
+
+
+def _preset_section() -> list[str]:
+    from benchmarks.thesis.preset import CHOICES
+
+    out = [
+        "## The thesis preset",
+        "",
+        "A named parameter set of the twins (`benchmarks/thesis/preset.py`), used by `piezotwin thesis` only; the "
+        "twins' defaults and every accuracy floor stay as they are. Each choice and the passage it comes from "
+        "(none is fitted to a row's R²):",
+        "",
+        "| choice | passage |",
+        "|---|---|",
+    ]
+    return out + [f"| {c} | {p} |" for c, p in CHOICES] + [""]
+
+
+def _section(title: str, rs: list[dict[str, Any]], histogram: str | None) -> list[str]:
+    if any(r.get("preset") for r in rs):
+        out = [
+            f"## {title}",
+            "",
+            "| row | dissertation | thesis preset (mean ± SD, n) | verdict | default twin (mean ± SD, n) | verdict | "
+            "project's best on this protocol (preset; default twin) | budget | CPU s (preset; default) |",
+            "|---|---|---|---|---|---|---|---|---|",
+        ]
+        for r in rs:
+            unit, p = r["dissertation"]["unit"], r.get("preset") or {}
+            pre = (_project(p["project"]), p["verdict"], _best(p.get("best"), unit)) if p else ("—", "—", "—")
+            cpu = f"{p['cpu_seconds']:.1f}; " if p else "—; "
+            out.append(
+                f"| `{r['id']}` | {_dissertation(r['dissertation'])} | {pre[0]} | {pre[1]} | "
+                f"{_project(r['project'])} | {r['verdict']} | {pre[2]}; {_best(r['best'], unit)} | {_budget(r)} | "
+                f"{cpu}{r['cpu_seconds']:.1f} |"
+            )
+    else:
+        out = [
+            f"## {title}",
+            "",
+            "| row | dissertation | project (mean ± SD, n) | verdict | project's best on this protocol | budget | "
+            "CPU s |",
+            "|---|---|---|---|---|---|---|",
+        ]
+        for r in rs:
+            unit = r["dissertation"]["unit"]
+            out.append(
+                f"| `{r['id']}` | {_dissertation(r['dissertation'])} | {_project(r['project'])} | {r['verdict']} | "
+                f"{_best(r['best'], unit)} | {_budget(r)} | {r['cpu_seconds']:.1f} |"
+            )
     spreads: dict[str, list[str]] = {}
     for r in rs:
         spreads.setdefault(r["dissertation"]["note"] or "± one published SD", []).append(r["id"])
     text = "; ".join(k if len(spreads) == 1 else f"{k} ({', '.join(v)})" for k, v in spreads.items())
     out += ["", f"Metric: {rs[0]['metric']}. Published spread: {text}.", ""]
+    if any(r.get("preset") for r in rs):
+        out += [
+            "Thesis preset column: the same protocol, seeds and budget on the preset's twin and acquisition (the "
+            "choices in [The thesis preset](#the-thesis-preset)); the differences below are the default twin's, "
+            "and hold for the preset except where a choice there replaces them.",
+            "",
+        ]
     seen: list[list[str]] = []
     for r in rs:
         if r["differences"] not in seen:
@@ -217,7 +369,16 @@ def _section(title: str, rs: list[dict[str, Any]], histogram: str | None) -> lis
         if note:
             notes.setdefault(str(note), []).append(f"`{r['id']}` ({r['verdict']})")
     if notes:
-        out += ["Measured explanations:", ""] + [f"- {', '.join(ids)}: {text}" for text, ids in notes.items()] + [""]
+        out += ["Measured explanations (default twin):", ""]
+        out += [f"- {', '.join(ids)}: {text}" for text, ids in notes.items()] + [""]
+    pnotes: dict[str, list[str]] = {}
+    for r in rs:
+        p = r.get("preset") or {}
+        if p.get("explanation"):
+            pnotes.setdefault(str(p["explanation"]), []).append(f"`{r['id']}` ({p['verdict']})")
+    if pnotes:
+        out += ["Measured explanations (thesis preset):", ""]
+        out += [f"- {', '.join(ids)}: {text}" for text, ids in pnotes.items()] + [""]
     cmds = sorted({r["command"].replace(r["id"], fam_of(r["id"])) for r in rs})
     out += ["Reproduce: " + "; ".join(f"`{c}`" for c in cmds) + " (or one row: `--rows " + rs[0]["id"] + "`).", ""]
     if histogram:
@@ -256,7 +417,8 @@ def _cost_section(rows: dict[str, dict[str, Any]]) -> list[str]:
             f"{c['grid_configurations']:,} configurations, {g['runs']} runs each, as §5.2 ran them), at the "
             f"mean CPU time of the data-set-2 fits above ({c['ds2_fit_cpu_seconds']:.1f} s at 75 epochs): "
             f"**{_hours(c['grid_cpu_seconds'])} CPU-hours** — wide and deep networks with 1024 lags cost "
-            "more than the eight measured, so this is a lower bound; "
+            "more than the eight measured, so this is a lower bound (the random sample of the grid above, where "
+            "stored, estimates the grid's mean directly); "
             f"{_hours(c['grid_cpu_seconds'] / 32)} h of wall time on 32 workers."
         )
     out += [
@@ -311,7 +473,17 @@ def write_histogram(rows: dict[str, dict[str, Any]], path: str | Path) -> Path |
     for ax, r, title in ((axes[0], est, "estimation"), (axes[1], val, "validation")):
         v = [x for x in r["project"]["values"] if x is not None]
         d = r["dissertation"]
-        ax.hist(v, bins=min(20, max(5, len(v) // 2)), color="tab:blue", alpha=0.7, label=f"project, {len(v)} runs")
+        ax.hist(v, bins=min(20, max(5, len(v) // 2)), color="tab:blue", alpha=0.6, label=f"default twin, {len(v)} runs")
+        pre = r.get("preset")
+        if pre:
+            w = [x for x in pre["project"]["values"] if x is not None]
+            ax.hist(
+                w,
+                bins=min(20, max(5, len(w) // 2)),
+                color="tab:green",
+                alpha=0.6,
+                label=f"thesis preset, {len(w)} runs",
+            )
         for x, ls in ((d["value"], "-"), (d["value"] - d["sd"], ":"), (d["value"] + d["sd"], ":")):
             ax.axvline(x, color="tab:red", ls=ls)
         ax.plot([], [], color="tab:red", label=f"dissertation {d['value']:.3f} ± {d['sd']:.3f} (n = {d['n']})")

@@ -11,7 +11,10 @@ A row (format :data:`ROW_FORMAT`) holds one published figure beside the project'
 - ``command`` (reproduces the row), ``best`` (the project's best model on the same protocol: ``value``,
   ``identifier``, ``settings``), ``explanation`` (measured statements only, or ``null``);
 - ``fits`` (per fit: key, CPU and wall seconds), ``cpu_seconds`` (their sum) and ``measured`` (date, machine,
-  versions, load, tier).
+  versions, load, tier);
+- ``preset`` (Chapter 5's rows and Figure 3.4, when measured on the thesis preset too): ``name``, ``project``,
+  ``verdict``, ``settings``, ``best``, ``fits``, ``cpu_seconds``, ``explanation`` of the same row on
+  :mod:`benchmarks.thesis.preset` (the keys above stay those of the default twin).
 
 The whole file (``docs/dissertation/rows.json``) maps ids to rows; the page is rendered from it alone
 (:mod:`benchmarks.thesis.page`).
@@ -160,7 +163,38 @@ def build_row(rid: str, results: dict[str, dict[str, Any]], t: Tier, measured: d
     }
     row["cpu_seconds"] = float(sum(f["cpu_seconds"] or 0.0 for f in row["fits"]))
     row["explanation"] = explain.explanation(row, results, t)
+    pre = _preset_part(rid, builder, results, t, tg)
+    if pre is not None:
+        row["preset"] = pre
     return row
+
+
+def _preset_part(rid: str, builder, results: dict[str, dict[str, Any]], t: Tier, tg) -> dict[str, Any] | None:
+    """The same row built from the thesis preset's fits (keys ``preset/...``), or ``None`` without them."""
+    from benchmarks.thesis import preset
+
+    prefix = "preset/"
+    sub = {k[len(prefix) :]: v for k, v in results.items() if k.startswith(prefix)}
+    fam, name = rid.split("/", 1)
+    try:
+        values, fits, settings, best = builder(fam, name, sub, t)
+    except (KeyError, IndexError):  # no preset fit of this row in this run
+        return None
+    if not fits:
+        return None
+    proj = {**stats(values), "unit": tg.unit}
+    part: dict[str, Any] = {
+        "name": preset.NAME,
+        "project": proj,
+        "verdict": _verdict(proj["mean"], tg),
+        "settings": settings,
+        "best": best,
+        "fits": [_fit(prefix + k, r) for k, r in fits],
+        "other_fits": [_fit(prefix + k, r) for k, r in sorted(sub.items()) if k.startswith(_OTHER.get(fam, "\0"))],
+    }
+    part["cpu_seconds"] = float(sum(f["cpu_seconds"] or 0.0 for f in part["fits"]))
+    part["explanation"] = explain.preset_explanation(rid, part, sub, t)
+    return part
 
 
 #: the fits of the project's other models beside a family's rows (the "best" column, the explanations)

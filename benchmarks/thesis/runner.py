@@ -18,7 +18,16 @@ from benchmarks.thesis.plan import Tier
 from benchmarks.thesis.rows import build_row
 from sysid.errors import ConfigError
 
-__all__ = ["ROW_IDS", "select_rows", "tasks_for", "measure"]
+__all__ = [
+    "ROW_IDS",
+    "select_rows",
+    "tasks_for",
+    "preset_tasks_for",
+    "measure",
+    "PRESET_FAMILIES",
+    "PRESET_PREFIX",
+    "measure_grid",
+]
 
 ROW_IDS: list[str] = list(targets.TARGETS)
 _ARCH = targets.ARCH
@@ -131,11 +140,54 @@ def tasks_for(row_ids: Sequence[str], t: Tier) -> dict[str, Task]:
                 acoustic.ds2_task,
                 (ny, hidden, act, s, t, 1, acoustic.DS2_DISTANCE_TRIAL_M),
             )
+    tasks.update(preset_tasks_for(row_ids, t))
     return tasks
+
+
+#: the rows measured a second time on the thesis preset (:mod:`benchmarks.thesis.preset`), and their keys' prefix
+PRESET_FAMILIES = ("fig-3.4", "table-5.2", "table-5.4", "table-5.5", "table-5.6", "fig-5.13")
+PRESET_PREFIX = "preset/"
+
+
+def preset_tasks_for(row_ids: Sequence[str], t: Tier) -> dict[str, Task]:
+    """The fits of the rows of :data:`PRESET_FAMILIES` on the thesis preset (keys ``preset/<key>``): each row's own
+    fits and, for Table 5.2's NARX lines, the smaller RMSprop step and the wavelet network beside them."""
+    tasks: dict[str, Task] = {}
+    for rid in row_ids:
+        fam, name = rid.split("/", 1)
+        if fam not in PRESET_FAMILIES:
+            continue
+        if fam == "table-5.2":
+            line = next(x for x in targets.TABLE_5_2 if targets.table_5_2_id(*x[:5]) == rid)
+            for s in range(t.narx_repeats if line[0] == "narx" else 1):
+                tasks[f"ds1/{name}/{s}"] = (acoustic.ds1_task, (*line[:5], s, t, "1", None, True))
+            if line[0] == "narx":
+                tasks[f"ds1-cand/wavenet-{line[1]}-{line[2]}/0"] = (
+                    acoustic.ds1_wavenet_task,
+                    (line[1], line[2], t, "1", True),
+                )
+                for s in range(t.narx_repeats):
+                    tasks[f"ds1-cand/{name}-lr{acoustic.NARX_LR_SMALL:g}/{s}"] = (
+                        acoustic.ds1_task,
+                        (*line[:5], s, t, "1", acoustic.NARX_LR_SMALL, True),
+                    )
+        elif fam in ("table-5.4", "table-5.5", "table-5.6", "fig-5.13"):
+            arch = name if fam in ("table-5.4", "table-5.5") else BEST_DS2
+            ny, hidden, act = _ARCH[arch]
+            if fam in ("table-5.4", "table-5.5"):
+                runs = t.acoustic_repeats
+            else:
+                runs = t.table_5_6_runs if fam == "table-5.6" else t.fig_5_13_runs
+            for s in range(runs):
+                tasks[f"ds2/{arch}/{s}"] = (acoustic.ds2_task, (ny, hidden, act, s, t, 1, None, True))
+        elif fam == "fig-3.4":
+            tasks["cant/peak"] = (cantilever.output_peak_task, (t, True))
+    return {PRESET_PREFIX + k: v for k, v in tasks.items()}
 
 
 def _cost(key: str) -> float:
     """Rough relative cost, to start the long fits first on a cluster."""
+    key = key.removeprefix(PRESET_PREFIX)
     if key.startswith("cant/") and "x" in key:
         layers, width = key.split("/")[1].split("x")
         return float(layers) * float(width) ** 2
@@ -182,6 +234,53 @@ def measure(
         tier=t.as_dict(),
     )
     return {rid: build_row(rid, by_key, t, measured) for rid in row_ids}
+
+
+def measure_grid(
+    n: int | None,
+    seed: int = 0,
+    executor=None,
+    progress: bool = False,
+    on_task: Callable[[str, dict[str, Any]], None] | None = None,
+) -> dict[str, Any]:
+    """Table 5.3's grid: ``n`` configurations drawn with ``seed`` (``None``: all), each trained as §5.2 did, on the
+    thesis preset's data set 2 (:mod:`benchmarks.thesis.grid`); the stored summary."""
+    from benchmarks.execution import Executor
+    from benchmarks.records import provenance
+    from benchmarks.thesis import grid
+
+    ex = executor or Executor()
+    configs = grid.sample(n, seed)
+    tasks = grid.grid_tasks(configs)
+    keys = list(tasks)
+    load0 = list(os.getloadavg())
+    w0, c0 = time.perf_counter(), time.process_time()
+
+    def report(i: int, res: dict[str, Any]) -> None:
+        if on_task is not None:
+            on_task(keys[i], res)
+
+    def cost(k: str) -> float:
+        a = tasks[k][1]
+        return float(a[8] + a[0]) * float(sum(a[1])) * float(max(a[1]))
+
+    results = ex.map(
+        _run,
+        [(tasks[k][0], tasks[k][1]) for k in keys],
+        desc="Table 5.3 sample",
+        progress=progress,
+        on_result=report,
+        priorities=[cost(k) for k in keys],
+    )
+    measured = provenance()
+    measured.update(
+        load_average_before=load0,
+        load_average_after=list(os.getloadavg()),
+        wall_seconds=time.perf_counter() - w0,
+        cpu_seconds_here=time.process_time() - c0,
+        process="in-process" if getattr(ex, "client", None) is None else f"dask ({ex.n_workers} workers)",
+    )
+    return grid.summarize(configs, dict(zip(keys, results)), seed, measured)
 
 
 def _run(fn: Callable[..., dict[str, Any]], args: tuple) -> dict[str, Any]:
