@@ -16,7 +16,8 @@ own parameters (:func:`.defaults.attributable`).
 **Group** what the data cannot tell apart: candidates of the leading cause's ``EffectSpec.group`` whose NRMSE
 is within 2× of the leader's, and any candidate (significant, or with at least half the leader's gain) whose
 validation residual variance is within the sampling error ``2·√(2/N_eff)`` of the leader's (or not significantly
-larger) while its prediction differs from the leader's by less than half the residual RMS. The group is reported with the experiment that would separate it.
+larger) while its prediction differs from the leader's by less than half the residual RMS. The group is
+reported with the experiment that would separate it.
 
 **Confidence** of a cause (in [0, 1]): ``(1 − p_value) · (0.5 + 0.5·√(1 − g₂/g₁)) · (0.8 + 0.2·s)`` with ``g₁``
 its relative validation gain, ``g₂`` the best gain of a candidate outside its group and ``s`` its signature
