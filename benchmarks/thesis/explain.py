@@ -191,16 +191,7 @@ def explanation(row: dict[str, Any], results: dict[str, dict[str, Any]], t: Tier
     if fam == "table-5.2":
         return _table_5_2(row, name, results, t)
     if fam in ("table-5.4", "table-5.5", "table-5.6", "fig-5.13"):
-        key = {
-            "table-5.4": "r2_frs_est",
-            "table-5.5": "r2_frs_val",
-            "osa-est": "r2_osa_est",
-            "frs-est": "r2_frs_est",
-            "osa-val": "r2_osa_val",
-            "frs-val": "r2_frs_val",
-            "est": "r2_frs_est",
-            "val": "r2_frs_val",
-        }
+        key = DS2_KEYS
         k = key[fam] if fam in key else key[name]
         cand = [r for kk, r in results.items() if kk.startswith("ds2-cand/")]
         parts = []
@@ -415,7 +406,7 @@ def preset_explanation(rid: str, part: dict[str, Any], sub: dict[str, dict[str, 
                 f"{_fmt(_mean([r['r2_osa_val'] for r in runs]))} (validation); the direct path arrives after "
                 f"{runs[0]['tof_samples']:.0f} of the 512 input lags"
             )
-            vals = [r.get(_DS2_KEY.get(fam, _DS2_KEY.get(name, ""))) for r in runs]
+            vals = [r.get(DS2_KEYS.get(fam, DS2_KEYS.get(name, ""))) for r in runs]
             ok = [v for v in vals if v is not None and math.isfinite(v)]
             if ok:
                 parts.append(f"runs from {_fmt(min(ok))} to {_fmt(max(ok))}")
@@ -430,7 +421,8 @@ def preset_explanation(rid: str, part: dict[str, Any], sub: dict[str, dict[str, 
     return ("Measured on the preset: " + "; ".join(parts) + ".") if parts else None
 
 
-_DS2_KEY = {
+#: the data-set-2 rows' metric: the row family (or the row's name) → the result key it reports
+DS2_KEYS = {
     "table-5.4": "r2_frs_est",
     "table-5.5": "r2_frs_val",
     "osa-est": "r2_osa_est",

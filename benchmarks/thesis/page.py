@@ -296,19 +296,19 @@ def _choice(rows: dict[str, dict[str, Any]]) -> str:
 
 
 def _preset_section() -> list[str]:
-    from benchmarks.thesis.preset import CHOICES
+    from benchmarks.thesis.preset import CHOICES, HOW_CHOSEN
 
     out = [
         "## The thesis preset",
         "",
         "A named parameter set of the twins (`benchmarks/thesis/preset.py`), used by `piezotwin thesis` only; the "
         "twins' defaults and every accuracy floor stay as they are. Each choice and the passage it comes from "
-        "(none is fitted to a row's R²):",
+        "(none is fitted to a row's R²; how two of them were chosen is said below the table):",
         "",
         "| choice | passage |",
         "|---|---|",
     ]
-    return out + [f"| {c} | {p} |" for c, p in CHOICES] + [""]
+    return out + [f"| {c} | {p} |" for c, p in CHOICES] + ["", HOW_CHOSEN, ""]
 
 
 def _section(title: str, rs: list[dict[str, Any]], histogram: str | None) -> list[str]:

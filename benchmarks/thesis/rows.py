@@ -37,16 +37,7 @@ __all__ = ["ROW_FORMAT", "FILE_FORMAT", "build_row", "write_rows", "load_rows", 
 
 ROW_FORMAT = "piezotwin-thesis-row/1"
 FILE_FORMAT = "piezotwin-thesis-rows/1"
-_DS2_KEYS = {
-    "table-5.4": "r2_frs_est",
-    "table-5.5": "r2_frs_val",
-    "osa-est": "r2_osa_est",
-    "frs-est": "r2_frs_est",
-    "osa-val": "r2_osa_val",
-    "frs-val": "r2_frs_val",
-    "est": "r2_frs_est",
-    "val": "r2_frs_val",
-}
+_DS2_KEYS = explain.DS2_KEYS
 _METRIC = {
     "table-4.2": "mean over the 12 sines of the validation FRS R²",
     "table-4.3": "validation FRS R² of the sine",

@@ -202,37 +202,9 @@ def measure(
     on_task: Callable[[str, dict[str, Any]], None] | None = None,
 ) -> dict[str, dict[str, Any]]:
     """Run the fits of ``row_ids`` at tier ``t`` and return the rows (id -> row), each with how it was measured."""
-    from benchmarks.execution import Executor
-    from benchmarks.records import provenance
-
-    ex = executor or Executor()
     tasks = tasks_for(row_ids, t)
-    keys = list(tasks)
-    load0 = list(os.getloadavg())
-    w0, c0 = time.perf_counter(), time.process_time()
-
-    def report(i: int, res: dict[str, Any]) -> None:
-        if on_task is not None:
-            on_task(keys[i], res)
-
-    results = ex.map(
-        _run,
-        [(tasks[k][0], tasks[k][1]) for k in keys],
-        desc="thesis fits",
-        progress=progress,
-        on_result=report,
-        priorities=[_cost(k) for k in keys],
-    )
-    by_key = dict(zip(keys, results))
-    measured = provenance()
-    measured.update(
-        load_average_before=load0,
-        load_average_after=list(os.getloadavg()),
-        wall_seconds=time.perf_counter() - w0,
-        cpu_seconds_here=time.process_time() - c0,
-        process="in-process" if getattr(ex, "client", None) is None else f"dask ({ex.n_workers} workers)",
-        tier=t.as_dict(),
-    )
+    by_key, measured = _run_tasks(tasks, {k: _cost(k) for k in tasks}, "thesis fits", executor, progress, on_task)
+    measured.update(tier=t.as_dict())
     return {rid: build_row(rid, by_key, t, measured) for rid in row_ids}
 
 
@@ -245,13 +217,33 @@ def measure_grid(
 ) -> dict[str, Any]:
     """Table 5.3's grid: ``n`` configurations drawn with ``seed`` (``None``: all), each trained as §5.2 did, on the
     thesis preset's data set 2 (:mod:`benchmarks.thesis.grid`); the stored summary."""
-    from benchmarks.execution import Executor
-    from benchmarks.records import provenance
     from benchmarks.thesis import grid
 
-    ex = executor or Executor()
     configs = grid.sample(n, seed)
     tasks = grid.grid_tasks(configs)
+
+    def cost(k: str) -> float:
+        a = tasks[k][1]
+        return float(a[8] + a[0]) * float(sum(a[1])) * float(max(a[1]))
+
+    by_key, measured = _run_tasks(tasks, {k: cost(k) for k in tasks}, "Table 5.3 sample", executor, progress, on_task)
+    return grid.summarize(configs, by_key, seed, measured)
+
+
+def _run_tasks(
+    tasks: dict[str, tuple],
+    priorities: dict[str, float],
+    desc: str,
+    executor,
+    progress: bool,
+    on_task: Callable[[str, dict[str, Any]], None] | None,
+) -> tuple[dict[str, dict[str, Any]], dict[str, Any]]:
+    """Run ``tasks`` (key -> (function, args)) on the executor, costliest first; their results by key and how they
+    were measured (provenance, load before and after, wall and CPU seconds here, the process)."""
+    from benchmarks.execution import Executor
+    from benchmarks.records import provenance
+
+    ex = executor or Executor()
     keys = list(tasks)
     load0 = list(os.getloadavg())
     w0, c0 = time.perf_counter(), time.process_time()
@@ -260,17 +252,13 @@ def measure_grid(
         if on_task is not None:
             on_task(keys[i], res)
 
-    def cost(k: str) -> float:
-        a = tasks[k][1]
-        return float(a[8] + a[0]) * float(sum(a[1])) * float(max(a[1]))
-
     results = ex.map(
         _run,
         [(tasks[k][0], tasks[k][1]) for k in keys],
-        desc="Table 5.3 sample",
+        desc=desc,
         progress=progress,
         on_result=report,
-        priorities=[cost(k) for k in keys],
+        priorities=[priorities[k] for k in keys],
     )
     measured = provenance()
     measured.update(
@@ -280,7 +268,7 @@ def measure_grid(
         cpu_seconds_here=time.process_time() - c0,
         process="in-process" if getattr(ex, "client", None) is None else f"dask ({ex.n_workers} workers)",
     )
-    return grid.summarize(configs, dict(zip(keys, results)), seed, measured)
+    return dict(zip(keys, results)), measured
 
 
 def _run(fn: Callable[..., dict[str, Any]], args: tuple) -> dict[str, Any]:
