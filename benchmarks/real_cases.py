@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import logging
 import resource
 import sys
 from dataclasses import dataclass, field
@@ -28,6 +29,8 @@ import numpy as np
 __all__ = ["CASES", "RealCase", "run_case", "score_tests"]
 
 EXAMPLES = Path(__file__).resolve().parent / "examples"
+#: the progress line of each round (INFO; ``main`` shows it on stderr)
+log = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True)
@@ -78,7 +81,7 @@ def run_case(name: str, rounds: int = 3, progress: bool = True, **options: Any) 
     twin = load_model(str(EXAMPLES / case.model))()
 
     def say(msg: str) -> None:
-        print(f"[{name}] {msg}", file=sys.stderr, flush=True)
+        log.info("[%s] %s", name, msg)
 
     opts = DiagnoseOptions(**{"on_round": say if progress else None, **case.options, **options})
     val = data.tests[case.validate_on] if case.validate_on else None
@@ -108,6 +111,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--trial-nfev", type=int, default=None)
     ap.add_argument("--json", action="store_true")
     args = ap.parse_args(argv)
+    logging.basicConfig(stream=sys.stderr, level=logging.INFO, format="%(message)s")
     extra: dict[str, Any] = {"pairs": True} if args.pairs else {}
     if args.starts is not None:
         extra["starts"] = args.starts
