@@ -90,11 +90,15 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _codes(rows: list[dict]) -> list[tuple[str, int]]:
-    """(commit, rows diagnosed by it), most rows first; rows from before rows carried it are "earlier"."""
+    """(commit, rows diagnosed by it), most rows first: the short hash, with its note when the tree had uncommitted
+    changes; rows from before rows carried it are "earlier"."""
     from collections import Counter
 
-    n = Counter(str(r.get("code", "earlier"))[:7] if r.get("code") else "earlier" for r in rows)
-    return n.most_common()
+    def short(code: str) -> str:
+        head, _, note = code.partition(" ")
+        return head[:7] + (f" {note}" if note else "")
+
+    return Counter(short(str(r["code"])) if r.get("code") else "earlier" for r in rows).most_common()
 
 
 def _ranges(seeds: list[int]) -> str:

@@ -49,7 +49,7 @@ def current(row: dict[str, Any]) -> dict[str, Any]:
     if "error" in row or not row.get("causes"):
         return row
     causes = [dict(c) for c in row["causes"]]
-    calibrate_causes(causes, row["verdict"], row.get("residual_vs_noise"))
+    calibrate_causes(causes)
     causes.sort(key=lambda c: -float(c["confidence"]))
     return dict(row, causes=causes)
 

@@ -30,10 +30,10 @@ FEATURES = ("logit_score", "log10_gain", "later_round", "quantization")
 COEFFICIENTS: tuple[float, ...] | None = (1.726984, 0.799706, 1.497741, -1.847641, 0.030481)
 
 
-def features(cause: dict[str, Any], verdict: str, excess: float | None) -> np.ndarray:
-    """The covariates of one named cause (:data:`FEATURES`); ``verdict`` and ``excess`` (final residual variance
-    / noise) are accepted for the callers' sake and not used: the noise level behind ``excess`` is measured from
-    the data, and on the benchmark it ranged from 0.07 to 12 times the residual in cases named right."""
+def features(cause: dict[str, Any]) -> np.ndarray:
+    """The covariates of one named cause (:data:`FEATURES`). The verdict and the final residual-to-noise ratio are
+    not among them: the noise level behind that ratio is measured from the data, and on the benchmark it ranged
+    from 0.07 to 12 times the residual in cases named right."""
     score = float(cause.get("score", cause.get("confidence", 0.0)))
     s = min(max(score, 0.01), 0.99)
     before, after = cause.get("nrmse_val_before"), cause.get("nrmse_val_after")
@@ -53,7 +53,7 @@ def _probability(x: np.ndarray, coef: Sequence[float]) -> float:
     return float(1.0 / (1.0 + math.exp(-z))) if z > -700 else 0.0
 
 
-def calibrate_causes(causes: list[dict[str, Any]], verdict: str, excess: float | None) -> None:
+def calibrate_causes(causes: list[dict[str, Any]]) -> None:
     """Replace each catalog cause's ``confidence`` by the calibrated probability (the score kept as ``score``),
     in place; the ``unexplained`` entry keeps its own."""
     for c in causes:
@@ -61,4 +61,4 @@ def calibrate_causes(causes: list[dict[str, Any]], verdict: str, excess: float |
             continue
         c.setdefault("score", float(c["confidence"]))
         if COEFFICIENTS is not None:
-            c["confidence"] = _probability(features(c, verdict, excess), COEFFICIENTS)
+            c["confidence"] = _probability(features(c), COEFFICIENTS)

@@ -35,14 +35,20 @@ class _Search:
     def __init__(self, tw: Twin, est: Record, skip: int, start: dict[str, Any]):
         self.tw, self.est, self.skip = tw, est, skip
         self.info = param_info(type(tw.params))
-        self.best = start
-        self.best_cost = self.cost(start)
+        self.best = self.start = start
+        #: the whole record simulated at the start (None where it fails): its cost, and the first arrival's search
+        self.y_start = self.simulate(start)
+        self.best_cost = float("inf") if self.y_start is None else sse(est.output, self.y_start, skip)
+
+    def simulate(self, vals: dict[str, Any]) -> np.ndarray | None:
+        try:
+            return simulate(self.tw.with_params(**vals), self.est)
+        except (ConfigError, DataError, ValueError, FloatingPointError):
+            return None
 
     def cost(self, vals: dict[str, Any]) -> float:
-        try:
-            return sse(self.est.output, simulate(self.tw.with_params(**vals), self.est), self.skip)
-        except (ConfigError, DataError, ValueError, FloatingPointError):
-            return float("inf")
+        y = self.simulate(vals)
+        return float("inf") if y is None else sse(self.est.output, y, self.skip)
 
     def offer(self, trial: dict[str, Any], c: float | None = None) -> float:
         """Keep ``trial`` when it is better; returns its cost."""
@@ -92,7 +98,9 @@ def _shift_guesses(s: _Search, fields: list[str], a: dict[str, Any] | None = Non
     trial ended on its range's bound, validation NRMSE 0.28 against 0.027 for the distance trial)."""
     est, best = s.est, s.best
     lin_guess: dict[str, list[float]] = {}
-    y_all = simulate(s.tw.with_params(**best), est)
+    y_all = s.y_start
+    if y_all is None or s.best is not s.start:
+        y_all = simulate(s.tw.with_params(**best), est)
     big = np.flatnonzero(np.abs(y_all) > 0.05 * (np.max(np.abs(y_all)) or 1.0))
     i0 = max(int(big[0]) - 16, 0) if big.size else 0
     m = min(len(est), max(len(est) // 8, min(len(est), 256), i0 + max(128, len(est) // 16)))
