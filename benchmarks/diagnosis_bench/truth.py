@@ -1,9 +1,9 @@
 """The records of a benchmark case: the configured model, the hidden mechanism by the generator's code, noise.
 
 :func:`make_records` returns the model to diagnose (as its user configured it), the estimation and validation
-records, the mechanism's parameters and its realised size: the RMS of what it changes in the noise-free
-estimation output over that output's RMS (the size the detection limit is stated in, comparable across
-mechanisms).
+records, the noise added to each, the mechanism's parameters and its realised size: the RMS of what it changes
+in the noise-free estimation output over that output's RMS (the size the detection limit is stated in,
+comparable across mechanisms).
 """
 
 from __future__ import annotations
@@ -128,15 +128,24 @@ def make_records(case: Case) -> dict[str, Any]:
     params: dict[str, Any] = {}
     if case.mechanism is not None:
         params = draw_params(case, twin, u_est, twin.simulate(u_est, case.fs), rng)
-    recs, sizes = [], []
+    recs, sizes, noises = [], [], []
     for u in (u_est, u_val):
         y0, y = _truth(case, twin, params, u)
         if case.mechanism == "quantization":  # the quantiser acts after the noise: its error RMS is step/√12
             sizes.append(float(params["step"] / math.sqrt(12.0) / (np.std(y0) or 1.0)))
         else:
             sizes.append(float(np.std(y - y0) / (np.std(y0) or 1.0)))
-        y = y + _noise(case, y, rng)
+        noises.append(_noise(case, y, rng))
+        y = y + noises[-1]
         if case.mechanism == "quantization":
             y = mech.quantize(y, params["step"])
         recs.append(Record(u=u, y=y, fs=case.fs, units=dict(twin.units), source=f"case {case.seed}"))
-    return {"twin": twin, "est": recs[0], "val": recs[1], "params": params, "size_est": sizes[0], "size_val": sizes[1]}
+    return {
+        "twin": twin,
+        "est": recs[0],
+        "val": recs[1],
+        "params": params,
+        "size_est": sizes[0],
+        "size_val": sizes[1],
+        "noise": tuple(noises),  # the noise added to each record (what a perfect model leaves)
+    }

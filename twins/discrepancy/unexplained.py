@@ -6,8 +6,9 @@ from the data themselves (never from the twin's noise parameter):
 - **hold segments**: stretches where u is constant (|Δu| ≤ 10⁻⁹·span) for ≥ 40 samples; the second half of
   each hold (after the settling of the modes and the sensor) is detrended linearly (slow creep/drift) and its
   variance taken; the median over the holds;
-- **high-frequency floor**: the median periodogram level of y in the top 10 % of the band (f > 0.9·fs/2),
-  times the band (white noise has the flat one-sided density 2σ²/fs);
+- **high-frequency floor**: the median periodogram level of y in the top 10 % of the band (f > 0.9·fs/2) over
+  ln 2, times the band (white noise has the flat one-sided density 2σ²/fs; a periodogram bin of it is that
+  density times an exponential variable, whose median is ln 2 of its mean);
 - **second differences**: σ² ≈ (1.4826·MAD(Δ²y))²/6 (Δ² of white noise has variance 6σ²; the median ignores
   the few samples where a step or an edge dominates).
 
@@ -18,8 +19,11 @@ The excess ratio R = mean(e²)/σ² (validation, after the extension). When R > 
 and its signature: where the residual's power lies in frequency (share below f_low = fs/200, between, and
 above f_high = fs/10; the peak of its Welch spectrum) and its correlation with u, |u|, sign(u̇) and the slow
 trend (which tells a dead zone, a backlash, a resonance and a drift apart in words). The limit 9 (residual
-RMS 3× the noise) leaves a wide margin on both sides as measured (docs/diagnosis.md): noise-only data give
-0.10–0.57, correctly extended mis-sized cases 0.006–0.93, the out-of-catalog cases 2.8·10³–4.9·10⁵.
+RMS 3× the noise) leaves a wide margin on both sides as measured (docs/diagnosis.md; before the floor's ln 2,
+which lowers R by at most that factor): noise-only data gave 0.10–0.57, correctly extended mis-sized cases
+0.006–0.93, the out-of-catalog cases 2.8·10³–4.9·10⁵. Coloured noise is seen at its floor (AR(1): R up to
+(1 + ρ)/(1 − ρ) from the noise alone; measured over the diagnosis benchmark's cases in
+docs/discrepancy-notes.md).
 
 :func:`generic_residual_model` tests what is left for structure no catalog entry explains: a generic
 linear-in-parameters residual model (FIR of u, (u²)′, (u³)′ and a trend) fitted on the estimation residual and
@@ -78,7 +82,7 @@ def noise_level(u: np.ndarray, y: np.ndarray, fs: float) -> dict[str, Any]:
         f, p = sps.periodogram(y - np.mean(y), fs=fs, detrend="linear")
         band = f > 0.9 * fs / 2
         if np.count_nonzero(band) >= 8:
-            est["hf_floor"] = float(np.median(p[band]) * fs / 2)
+            est["hf_floor"] = float(np.median(p[band]) / math.log(2.0) * fs / 2)
     if y.size >= 16:
         d2 = np.diff(y, 2)
         mad = float(np.median(np.abs(d2 - np.median(d2))))
