@@ -202,10 +202,21 @@ def stage_inputs(u: np.ndarray, substeps: int, mode: str) -> np.ndarray:
         return u[:, None] + (nxt - u)[:, None] * frac[None, :]
     from scipy.interpolate import CubicSpline
 
-    k = np.arange(u.size, dtype=float)
-    t = (k[:, None] + frac[None, :]).ravel()
-    out = CubicSpline(k, u)(np.minimum(t, k[-1])).reshape(u.size, frac.size)
-    out[-1, :] = u[-1]
+    # the spline's cubic on each interval, evaluated at the fixed fractions by Horner's rule rather than by
+    # CubicSpline.__call__, which locates every point (15 → 3 ms for 40 000 samples and 9 fractions)
+    return _horner_stages(CubicSpline(np.arange(u.size, dtype=float), u).c, frac, u[-1])
+
+
+@njit(cache=True)
+def _horner_stages(c, frac, last):  # pragma: no cover - compiled
+    n, m = c.shape[1] + 1, frac.size
+    out = np.empty((n, m))
+    for i in range(n - 1):
+        for j in range(m):
+            t = frac[j]
+            out[i, j] = ((c[0, i] * t + c[1, i]) * t + c[2, i]) * t + c[3, i]
+    for j in range(m):
+        out[n - 1, j] = last
     return out
 
 
