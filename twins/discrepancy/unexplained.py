@@ -19,11 +19,9 @@ The excess ratio R = mean(e²)/σ² (validation, after the extension). When R > 
 and its signature: where the residual's power lies in frequency (share below f_low = fs/200, between, and
 above f_high = fs/10; the peak of its Welch spectrum) and its correlation with u, |u|, sign(u̇) and the slow
 trend (which tells a dead zone, a backlash, a resonance and a drift apart in words). The limit 9 (residual
-RMS 3× the noise) leaves a wide margin on both sides as measured (docs/diagnosis.md; before the floor's ln 2,
-which lowers R by at most that factor): noise-only data gave 0.10–0.57, correctly extended mis-sized cases
-0.006–0.93, the out-of-catalog cases 2.8·10³–4.9·10⁵. Coloured noise is seen at its floor (AR(1): R up to
-(1 + ρ)/(1 − ρ) from the noise alone; measured over the diagnosis benchmark's cases in
-docs/discrepancy-notes.md).
+RMS 3× the noise) left a wide margin as measured before the floor's ln 2 (docs/diagnosis.md): noise-only data
+0.10–0.57, mis-sized cases 0.006–0.93, out-of-catalog cases 2.8·10³–4.9·10⁵. Coloured noise is seen at its floor
+(AR(1): R up to (1 + ρ)/(1 − ρ) from the noise alone; over the benchmark's cases: docs/discrepancy-notes.md).
 
 :func:`generic_residual_model` tests what is left for structure no catalog entry explains: a generic
 linear-in-parameters residual model (FIR of u, (u²)′, (u³)′ and a trend) fitted on the estimation residual and
