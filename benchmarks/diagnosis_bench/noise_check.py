@@ -1,7 +1,7 @@
 """The verdict's noise level judged on the benchmark's cases: what a perfect model's residual scores against it.
 
 The ``unexplained`` verdict compares the validation residual with the noise level measured from the data
-(:func:`twins.discrepancy.unexplained.noise_level`; R = mean(e²)/σ² above
+(:func:`twins.discrepancy.unexplained.records_noise`; R = mean(e²)/σ² above
 :data:`~twins.discrepancy.unexplained.EXCESS_LIMIT`). A model that is exactly right leaves the added noise as its
 residual, so R of that noise is the excess the verdict sees from the noise estimate alone: near 1 when the
 estimate is right, above the limit a false ``unexplained``, far below it a margin in which a real discrepancy
@@ -35,17 +35,14 @@ COLOURS = (
 def perfect_excess(seed: int) -> dict[str, Any]:
     """R of the validation record's own noise against the noise level of the case's two records (module
     docstring), with the case's noise colour and the estimator the level came from."""
-    from twins.discrepancy.unexplained import noise_level
+    from twins.discrepancy.unexplained import records_noise
 
     from .cases import draw_case
     from .truth import make_records
 
     case = draw_case(seed)
     b = make_records(case)
-    est, val = b["est"], b["val"]
-    u = np.concatenate([np.asarray(est.u, float), np.asarray(val.u, float)])
-    y = np.concatenate([np.asarray(est.output, float), np.asarray(val.output, float)])
-    nl = noise_level(u, y, case.fs)
+    nl = records_noise(b["est"], b["val"])
     p_noise = float(np.mean(np.asarray(b["noise"][1], float) ** 2))
     return {
         "seed": seed,

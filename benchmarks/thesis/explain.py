@@ -191,8 +191,7 @@ def explanation(row: dict[str, Any], results: dict[str, dict[str, Any]], t: Tier
     if fam == "table-5.2":
         return _table_5_2(row, name, results, t)
     if fam in ("table-5.4", "table-5.5", "table-5.6", "fig-5.13"):
-        key = DS2_KEYS
-        k = key[fam] if fam in key else key[name]
+        k = DS2_KEYS[fam] if fam in DS2_KEYS else DS2_KEYS[name]
         cand = [r for kk, r in results.items() if kk.startswith("ds2-cand/")]
         parts = []
         arch = name if fam in ("table-5.4", "table-5.5") else "75x2-sigmoid"

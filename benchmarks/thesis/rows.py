@@ -37,7 +37,6 @@ __all__ = ["ROW_FORMAT", "FILE_FORMAT", "build_row", "write_rows", "load_rows", 
 
 ROW_FORMAT = "piezotwin-thesis-row/1"
 FILE_FORMAT = "piezotwin-thesis-rows/1"
-_DS2_KEYS = explain.DS2_KEYS
 _METRIC = {
     "table-4.2": "mean over the 12 sines of the validation FRS R²",
     "table-4.3": "validation FRS R² of the sine",
@@ -287,9 +286,9 @@ def _ds1(fam, name, results, t: Tier):
 def _ds2(fam, name, results, t: Tier):
     BEST_DS2, _ARCH = targets.BEST_DS2, targets.ARCH
     if fam in ("table-5.4", "table-5.5"):  # the 75-75 network also has Fig. 5.13's runs: the tier's repeats here
-        arch, key, n = name, _DS2_KEYS[fam], t.acoustic_repeats
+        arch, key, n = name, explain.DS2_KEYS[fam], t.acoustic_repeats
     else:
-        arch, key = BEST_DS2, _DS2_KEYS[name]
+        arch, key = BEST_DS2, explain.DS2_KEYS[name]
         n = t.table_5_6_runs if fam == "table-5.6" else t.fig_5_13_runs
     runs = _runs(results, f"ds2/{arch}/", n)
     values = [r[key] for _, r in runs]

@@ -165,7 +165,7 @@ class _Inputs:
     saturation: dict[str, Any]
     t_start: float
     substep_auto: bool = False  # the integration sub-step follows the configuration (:func:`.ranges.substep_for`)
-    # the noise level of both records (:func:`.unexplained.noise_level`)
+    # the noise level of both records (:func:`.unexplained.records_noise`)
     noise: dict[str, Any] = dataclasses.field(default_factory=dict)
 
     @property
@@ -211,7 +211,7 @@ def _prepare(twin: Twin, data: Record, val: Record | None, opts: DiagnoseOptions
         "validation": ft.saturation_rails(val.output, simulate_val(given, data, val)),
     }
     data, val = with_rails(data, saturation["estimation"]), with_rails(val, saturation["validation"])
-    noise = unx.noise_level(np.concatenate([data.u, val.u]), np.concatenate([data.y, val.y]), data.fs)
+    noise = unx.records_noise(data, val)
     return _Inputs(twin, given, data, val, core, split_info, range_notes, saturation, t_start, substep_auto, noise)
 
 

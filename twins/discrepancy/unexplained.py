@@ -41,7 +41,7 @@ from sysid.data.record import Record
 from .features import effective_samples
 from .prediction import significance
 
-__all__ = ["EXCESS_LIMIT", "noise_level", "excess_ratio", "outside", "judge", "generic_residual_model"]
+__all__ = ["EXCESS_LIMIT", "noise_level", "records_noise", "excess_ratio", "outside", "judge", "generic_residual_model"]
 
 #: residual power / noise power above which the residual is "far above the noise"
 EXCESS_LIMIT = 9.0
@@ -91,6 +91,13 @@ def noise_level(u: np.ndarray, y: np.ndarray, fs: float) -> dict[str, Any]:
         return {"sigma2": pos[src], "source": src, "estimates": est}
     # exactly repeatable (noise-free, e.g. quantised and constant) data: a tiny floor from the value spacing
     return {"sigma2": 0.0, "source": "none", "estimates": est}
+
+
+def records_noise(est: Record, val: Record) -> dict[str, Any]:
+    """:func:`noise_level` of the estimation and validation records together: the level the verdict compares the
+    validation residual with."""
+    u = np.concatenate([np.asarray(est.u, float), np.asarray(val.u, float)])
+    return noise_level(u, np.concatenate([est.output, val.output]), est.fs)
 
 
 def excess_ratio(p_e: float, s2: float) -> float:
