@@ -66,6 +66,25 @@ def test_lowpasses_are_3db_down_at_their_corner():
         assert abs(np.std(out[5000:]) / np.std(x[5000:]) - want) < 0.01
 
 
+def test_lowpasses_above_nyquist_are_the_analog_parts():
+    """A corner above the record's Nyquist frequency (a fast sensor sampled slowly) keeps the analog response:
+    gain and phase of H(j2πf) at a sine well inside the band, not a filter clipped below Nyquist."""
+    fs, f = 2277.5, 50.0
+    t = np.arange(20_000) / fs
+    x = np.sin(2 * math.pi * f * t)
+    for fc in (4_000.0, 16_000.0):
+        w, s = 2 * math.pi * fc, 2j * math.pi * f
+        for out, h in (
+            (mech.apply_input("drive_lowpass", x, fs, {"corner_hz": fc}), 1 / (1 + s / w)),
+            (
+                mech.apply_output("sensor_lowpass", x, x, fs, {"corner_hz": fc}),
+                w * w / (s * s + math.sqrt(2) * w * s + w * w),
+            ),
+        ):
+            want = abs(h) * np.sin(2 * math.pi * f * t + np.angle(h))
+            assert np.max(np.abs(out[2000:] - want[2000:])) < 2e-3  # the input taken linear between samples
+
+
 def test_play_operator_and_dead_zone():
     u = np.array([0.0, 1.0, 2.0, 1.5, 1.0, 0.0, -1.0])
     np.testing.assert_allclose(mech.apply_input("backlash", u, 1.0, {"width": 0.5}), [0, 0.5, 1.5, 1.5, 1.5, 0.5, -0.5])

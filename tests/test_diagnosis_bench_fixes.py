@@ -7,6 +7,9 @@
   offset drift's gain (0.921 against 0.922) but missed the Bonferroni level with twice its parameters, so the offset
   drift was named alone instead of as a group with it.
 - The generator's creep starts at rest at 0 V, as the models it is added to.
+- Case 118: a 16 kHz sensor on a stage sampled at 2.3 kHz (a 14 µs lag). The baseline calibration absorbed part of
+  it, the sensor's trial with the core held ended on its "no filter" bound, and an echo one sample late (no
+  group) took the round with the delay tied to it: the sensor was never refitted with the core.
 """
 
 from __future__ import annotations
@@ -72,6 +75,22 @@ def test_a_drift_matching_the_leaders_gain_joins_its_group():
     first = out["causes"][0]
     assert first["effect"] in ("slow_drift", "offset_drift")
     assert "slow_drift" in [first["effect"], *first.get("group", [])]
+
+
+def test_a_fast_sensor_tied_with_an_echo_is_refitted_with_its_group():
+    from benchmarks.diagnosis_bench.run import MAX_ROUNDS
+    from twins.discrepancy import diagnose
+
+    case = draw_case(118)
+    assert case.mechanism == "sensor_lowpass" and case.family == "user"
+    b = make_records(case)
+    corner = b["params"]["corner_hz"]
+    assert corner > 5 * case.fs  # above the record's Nyquist frequency: an analog sensor, a sub-sample lag
+    out = diagnose(b["twin"], b["est"], b["val"], max_rounds=MAX_ROUNDS, threads=1)
+    first = out["causes"][0]
+    assert "sensor_lowpass" in [first["effect"], *first.get("group", [])]
+    sensor = next(r for r in out["rounds"][0]["candidates"] if r["effect"] == "sensor_lowpass")
+    assert sensor["params"]["sensor_bandwidth_hz"] == pytest.approx(corner, rel=0.1)
 
 
 def test_the_generated_creep_is_the_log_law_from_rest():

@@ -88,8 +88,8 @@ GENERIC_FIELDS: dict[str, GenericField] = {
         "Hz",
         1e-9,
         1e12,
-        "corner of the 2nd-order Butterworth sensor low-pass",
-        lambda um, ys, fs, T: (fs / 500.0, 0.45 * fs),
+        "corner of the 2nd-order Butterworth sensor low-pass (an analog part: above Nyquist it is a sub-sample lag)",
+        lambda um, ys, fs, T: (fs / 500.0, 10.0 * fs),
     ),
     "echo_delay_s": GenericField(
         1e-3, "s", 0.0, 1e6, "delay of the output echo", lambda um, ys, fs, T: (1.0 / fs, min(200.0 / fs, 0.25 * T))

@@ -137,15 +137,23 @@ def limiter_level(peak: float, shape: str, compression: float, p: float = 2.0) -
     return math.sqrt(lo * hi)
 
 
+def _analog(num: list[float], den: list[float], x: np.ndarray, fs: float, at_rest: bool = False) -> np.ndarray:
+    """``x`` through the analog filter num(s)/den(s), simulated exactly for an input linear between samples
+    (:func:`scipy.signal.lsim`), from steady state at x[0] (at rest at 0 with ``at_rest``).
+
+    A sensor or an amplifier is an analog part: its corner may lie near or above the Nyquist frequency of the
+    record (a 16 kHz sensor sampled at 2.3 kHz is a delay of 14 µs). A bilinear map cannot place a corner there;
+    clipped below Nyquist, it made such a part a half-sample filter far larger than the drawn size (seeds 20, 118).
+    """
+    a, b, c, d = signal.tf2ss(num, den)
+    x0 = np.zeros(a.shape[0]) if at_rest or not x.size else -np.linalg.solve(a, b[:, 0] * float(x[0]))
+    t = np.arange(x.size) / fs
+    return np.asarray(signal.lsim((a, b, c, d), x, t, X0=x0)[1], dtype=float)
+
+
 def _first_order(x: np.ndarray, fc: float, fs: float, at_rest: bool = False) -> np.ndarray:
-    """1/(1 + s/ω_c) by the bilinear map with prewarping at ω_c, started in steady state at x[0] (at rest at 0
-    with ``at_rest``)."""
-    wc = math.tan(math.pi * min(fc, 0.49 * fs) / fs)
-    bz, az = np.array([wc, wc]) / (1 + wc), np.array([1.0, (wc - 1) / (1 + wc)])
-    if at_rest:
-        return signal.lfilter(bz, az, x)
-    zi = signal.lfilter_zi(bz, az) * x[0]
-    return signal.lfilter(bz, az, x, zi=zi)[0]
+    """1/(1 + s/ω_c) (:func:`_analog`), started in steady state at x[0] (at rest at 0 with ``at_rest``)."""
+    return _analog([1.0], [1.0 / (2 * math.pi * fc), 1.0], x, fs, at_rest)
 
 
 def _play(u: np.ndarray, r: float) -> np.ndarray:
@@ -181,8 +189,9 @@ def apply_input(name: str, u: np.ndarray, fs: float, p: dict[str, Any]) -> np.nd
 
 # ------------------------------------------------------------------------------------------------ output side
 def _butter2(y: np.ndarray, fc: float, fs: float) -> np.ndarray:
-    b, a = signal.butter(2, min(fc, 0.45 * fs), fs=fs)
-    return signal.lfilter(b, a, y, zi=signal.lfilter_zi(b, a) * y[0])[0]
+    """The 2nd-order Butterworth low-pass ω_c²/(s² + √2·ω_c·s + ω_c²) (:func:`_analog`)."""
+    wc = 2 * math.pi * fc
+    return _analog([wc * wc], [1.0, math.sqrt(2.0) * wc, wc * wc], y, fs)
 
 
 def _creep(v: np.ndarray, fs: float, rate: float, gain: float, tau1: float) -> np.ndarray:
@@ -205,12 +214,11 @@ def _creep(v: np.ndarray, fs: float, rate: float, gain: float, tau1: float) -> n
 
 def _second_mode(y: np.ndarray, fs: float, f1: float, zeta1: float, f2: float, zeta2: float, share: float):
     """(1 − s)·y + s·(H₂/H₁)·y: a share s of the deflection through a second mode instead of the first (both
-    unit-DC second-order sections, discretised by the bilinear map; the first mode's section is inverted)."""
-    w1, w2 = 2 * math.pi * f1, 2 * math.pi * min(f2, 0.45 * fs)
+    unit-DC second-order sections, simulated as analog filters; the first mode's section is inverted)."""
+    w1, w2 = 2 * math.pi * f1, 2 * math.pi * f2
     num = [1 / w1**2, 2 * zeta1 / w1, 1.0]  # H₂/H₁ = (s²/ω₁² + 2ζ₁s/ω₁ + 1)/(s²/ω₂² + 2ζ₂s/ω₂ + 1)
     den = [1 / w2**2, 2 * zeta2 / w2, 1.0]
-    b, a = signal.bilinear(num, den, fs)
-    ratio = signal.lfilter(b, a, y, zi=signal.lfilter_zi(b, a) * y[0])[0]
+    ratio = _analog(num, den, y, fs)
     return (1 - share) * y + share * ratio
 
 

@@ -137,12 +137,13 @@ def _refine(
             and base_est > 0
             and 1.0 - math.sqrt(max(tr.sse_est, 0.0) / base_est) >= opts.min_rel_gain
         ]
-    # the leader's group is refined with it, so its members are judged alike (a core that absorbed a settling drift
-    # leaves thermal_drift no gain with the core held, while slow_drift, refitted, takes it)
-    group = inp.twin.EFFECTS[trials[0].effect].group if trials else ""
-    picked += [
-        i for i, tr in enumerate(trials) if group and i not in picked and inp.twin.EFFECTS[tr.effect].group == group
-    ]
+    # the groups of the refined trials are refined with them, so their members are judged alike (a core that
+    # absorbed a settling drift leaves thermal_drift no gain with the core held, while slow_drift, refitted, takes
+    # it; a core that absorbed a fast sensor's sub-sample lag left the sensor on its "no filter" bound while an
+    # echo and a delay, refined, fitted it: seed 118 of the benchmark). Not only the leader's: an echo leads
+    # with no group, the delay that ties with it carries the lag group.
+    groups = {inp.twin.EFFECTS[trials[i].effect].group for i in picked} - {""}
+    picked += [i for i, tr in enumerate(trials) if i not in picked and inp.twin.EFFECTS[tr.effect].group in groups]
     # an effect that also changes what the core stands for (a hysteresis adds stiffness, an overflow caps the flow
     # the calibrated core has taken up) cannot be fitted with the core held: refined from the twin's own starts
     own = {i: _own_starts(tr, inp, opts) for i, tr in enumerate(trials)}
