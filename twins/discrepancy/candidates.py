@@ -105,8 +105,8 @@ def _refine(
 ) -> None:
     """Stage B: the leader, and whoever comes close to it (within a factor 1.5 in validation SSE), refitted
     together with the core parameters (``opts.refine`` at most), the estimation leader if it is not among them and
-    the other members of the leader's ambiguity group (``EffectSpec.group``); kept where the estimation SSE
-    improves.
+    the other members of the ambiguity groups (``EffectSpec.group``) of every trial refined; kept where the
+    estimation SSE improves.
 
     The estimation leader is refined because stage A holds the core at a calibration that bent to mimic the
     missing effect: creep added to a core whose gain absorbed creep's slow rise overshoots, fits the estimation
