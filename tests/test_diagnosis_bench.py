@@ -201,6 +201,18 @@ def test_stored_rows_read_with_the_calibration_of_now(monkeypatch):
     assert [c["effect"] for c in current(row)["causes"]] == ["creep", "thermal_drift"]
 
 
+def test_the_case_residual_to_noise_ratio_enters_the_confidence(monkeypatch):
+    """R (the final validation residual over the noise level) is a covariate of every named cause of its case: read
+    from the row as stored (``residual_vs_noise``), and by the diagnosis from its verdict."""
+    c = _c("creep", 0.6)
+    assert confidence.features(c, 100.0)[-1] == pytest.approx(2.0)
+    assert confidence.features(c, None)[-1] == 0.0 and confidence.features(c, float("nan"))[-1] == 0.0
+    coef = (0.0,) * len(confidence.FEATURES) + (-1.0,)  # P = logistic(−log10 R) only
+    monkeypatch.setattr(confidence, "COEFFICIENTS", coef)
+    row = dict(_row("creep", "cantilever", "unexplained", [c]), residual_vs_noise=1000.0)
+    assert current(row)["causes"][0]["confidence"] == pytest.approx(1 / (1 + math.exp(3.0)))
+
+
 def test_calibration_fit_recovers_a_known_logistic_model():
     rng = np.random.default_rng(3)
     x = rng.standard_normal((4000, 2))

@@ -32,7 +32,7 @@ def examples(rows: list[dict[str, Any]]) -> tuple[np.ndarray, np.ndarray, np.nda
             continue
         acc = _acceptable(r)
         for c in _named(r):
-            xs.append(features(c))
+            xs.append(features(c, r.get("residual_vs_noise")))
             ys.append(1.0 if _is_right(c, acc) else 0.0)
             seeds.append(r["case"]["seed"])
     return np.array(xs).reshape(-1, len(FEATURES)), np.array(ys), np.array(seeds)

@@ -49,7 +49,7 @@ def current(row: dict[str, Any]) -> dict[str, Any]:
     if "error" in row or not row.get("causes"):
         return row
     causes = [dict(c) for c in row["causes"]]
-    calibrate_causes(causes)
+    calibrate_causes(causes, row.get("residual_vs_noise"))
     causes.sort(key=lambda c: -float(c["confidence"]))
     return dict(row, causes=causes)
 

@@ -6,9 +6,9 @@ runner-up, clarity of the signature). A score is not a probability: on the bench
 ``confidence`` of each catalog cause is a logistic model (Platt scaling with covariates) of what the diagnosis
 knows when it concludes: the score, the validation gain (log: on the first 51 cases 8 of the 13 wrong names
 gained under 6 %, 4 of the 25 right ones), whether the cause came in a later round (a proxy fitting what the first
-cause's model leaves: 7 of 7 later-round names there were wrong) and whether it is a quantiser judged by its
-lattice (no gain). Four covariates: the ten of the first version scored worse held out (Brier 0.15–0.16 against
-0.13–0.14) on tens of causes.
+cause's model leaves: 7 of 7 later-round names there were wrong), whether it is a quantiser judged by its
+lattice (no gain) and the case's final residual-to-noise ratio R (log). The ten covariates of the first version
+scored worse held out (Brier 0.15–0.16 against 0.13–0.14) on tens of causes.
 :data:`COEFFICIENTS` are fitted on the benchmark's rows and judged held out by folds of cases
 (:mod:`benchmarks.diagnosis_bench.calibrate`); the raw score stays under ``score``.
 """
@@ -24,29 +24,30 @@ import numpy as np
 __all__ = ["FEATURES", "COEFFICIENTS", "features", "calibrate_causes"]
 
 #: the covariates, in the order of :data:`COEFFICIENTS` (after the intercept)
-FEATURES = ("logit_score", "log10_gain", "later_round", "quantization")
+FEATURES = ("logit_score", "log10_gain", "later_round", "quantization", "log10_excess")
 #: intercept, then one weight per feature (None: not fitted, the confidence is the score). Fitted 2026-11-29 on the
-#: 101 named causes of the benchmark's 142 stored cases (seeds 0–143); ten-fold held-out Brier 0.093 (on the first
-#: 66 cases: 0.073, the raw score 0.159). The raw score's weight fell to −0.03: the gain carries what it told.
-COEFFICIENTS: tuple[float, ...] | None = (2.924091, -0.030991, 1.762973, -1.925906, 0.504618)
+#: 173 named causes of the benchmark's 257 stored cases (seeds 0–258); ten-fold held-out Brier 0.116 (the four
+#: covariates without R: 0.123). Each decade of R lowers the odds 5×: a name that leaves the residual far above the
+#: noise is less often right, though coloured noise raises R for right names too (docs/discrepancy-notes.md).
+COEFFICIENTS: tuple[float, ...] | None = (1.898505, 0.458025, 1.549428, -1.564644, 0.898452, -0.719004)
 
 
-def features(cause: dict[str, Any]) -> np.ndarray:
-    """The covariates of one named cause (:data:`FEATURES`). The verdict and the final residual-to-noise ratio are
-    not among them: the noise level behind that ratio is measured from the data, and on the benchmark it ranged
-    from 0.07 to 12 times the residual in cases named right."""
+def features(cause: dict[str, Any], excess_ratio: float | None = None) -> np.ndarray:
+    """The covariates of one named cause (:data:`FEATURES`); ``excess_ratio`` is the case's final R, the validation
+    residual's power over the noise level measured from the data (:mod:`.unexplained`; None: 1)."""
     score = float(cause.get("score", cause.get("confidence", 0.0)))
     s = min(max(score, 0.01), 0.99)
     before, after = cause.get("nrmse_val_before"), cause.get("nrmse_val_after")
     gain = 1.0 - float(after) / float(before) if before and after is not None and float(before) > 0 else 1.0
-    return np.array(
-        [
-            math.log(s / (1.0 - s)),
-            math.log10(min(max(gain, 1e-3), 1.0)),
-            1.0 if int(cause.get("round", 1) or 0) >= 2 else 0.0,
-            1.0 if cause.get("family") == "quantization" else 0.0,
-        ]
-    )
+    r = float(excess_ratio) if excess_ratio is not None and math.isfinite(float(excess_ratio)) else 1.0
+    x = [
+        math.log(s / (1.0 - s)),
+        math.log10(min(max(gain, 1e-3), 1.0)),
+        1.0 if int(cause.get("round", 1) or 0) >= 2 else 0.0,
+        1.0 if cause.get("family") == "quantization" else 0.0,
+        math.log10(min(max(r, 1e-2), 1e4)),
+    ]
+    return np.array(x[: len(FEATURES)])
 
 
 def _probability(x: np.ndarray, coef: Sequence[float]) -> float:
@@ -54,12 +55,12 @@ def _probability(x: np.ndarray, coef: Sequence[float]) -> float:
     return float(1.0 / (1.0 + math.exp(-z))) if z > -700 else 0.0
 
 
-def calibrate_causes(causes: list[dict[str, Any]]) -> None:
+def calibrate_causes(causes: list[dict[str, Any]], excess_ratio: float | None = None) -> None:
     """Replace each catalog cause's ``confidence`` by the calibrated probability (the score kept as ``score``),
-    in place; the ``unexplained`` entry keeps its own."""
+    in place; the ``unexplained`` entry keeps its own. ``excess_ratio``: the case's final R (:func:`features`)."""
     for c in causes:
         if c["effect"] == "unexplained":
             continue
         c.setdefault("score", float(c["confidence"]))
         if COEFFICIENTS is not None:
-            c["confidence"] = _probability(features(c), COEFFICIENTS)
+            c["confidence"] = _probability(features(c, excess_ratio), COEFFICIENTS)
