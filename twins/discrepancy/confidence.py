@@ -27,8 +27,9 @@ __all__ = ["FEATURES", "COEFFICIENTS", "features", "calibrate_causes"]
 FEATURES = ("logit_score", "log10_gain", "later_round", "quantization", "log10_excess")
 #: intercept, then one weight per feature (None: not fitted, the confidence is the score). Fitted 2026-11-29 on the
 #: 173 named causes of the benchmark's 257 stored cases (seeds 0–258); ten-fold held-out Brier 0.116 (the four
-#: covariates without R: 0.123). Each decade of R lowers the odds 5×: a name that leaves the residual far above the
-#: noise is less often right, though coloured noise raises R for right names too (docs/discrepancy-notes.md).
+#: covariates without R: 0.123). Each decade of R halves the odds (e^−0.72): a name that leaves the residual far
+#: above the noise is less often right, though coloured noise raises R for right names too
+#: (docs/discrepancy-notes.md).
 COEFFICIENTS: tuple[float, ...] | None = (1.898505, 0.458025, 1.549428, -1.564644, 0.898452, -0.719004)
 
 
@@ -47,7 +48,7 @@ def features(cause: dict[str, Any], excess_ratio: float | None = None) -> np.nda
         1.0 if cause.get("family") == "quantization" else 0.0,
         math.log10(min(max(r, 1e-2), 1e4)),
     ]
-    return np.array(x[: len(FEATURES)])
+    return np.array(x)
 
 
 def _probability(x: np.ndarray, coef: Sequence[float]) -> float:
