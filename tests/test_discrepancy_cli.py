@@ -70,6 +70,8 @@ def test_cli_bad_input(delayed_files, tmp_path):
     assert r.returncode == 2 and "unknown effect" in r.stderr and "Traceback" not in r.stderr
     r = _cli("cantilever", "--data", str(tmp_path / "missing.npz"))
     assert r.returncode == 2 and "Traceback" not in r.stderr
+    r = _cli("cantilever", "--data", str(d / "est.npz"), "--validation-start", "rest", "--max-rounds", "0")
+    assert r.returncode == 2 and "validation_start 'rest'" in r.stderr and len(r.stderr.strip().splitlines()) == 1
 
 
 def test_cli_refuses_a_skip_that_leaves_nothing_to_score(delayed_files):

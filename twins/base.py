@@ -104,6 +104,9 @@ class Twin(ABC):
     units: ClassVar[dict[str, str]] = {"u": "V", "y": ""}
     #: parameters that ``piezotwin calibrate`` fits by default (fields of ``Params``)
     CALIBRATION_PARAMS: ClassVar[tuple[str, ...]] = ()
+    #: parameters that set the state a record starts from, not the system (a remanent state, initial levels): a
+    #: calibration fits them per record, and the diagnosis fits them again on a separate validation record
+    INITIAL_CONDITION_PARAMS: ClassVar[tuple[str, ...]] = ()
 
     def __init__(self, params: Any = None, effects: Iterable[str] | None = None, seed: int | None = 0):
         self.params = params if params is not None else self.Params()

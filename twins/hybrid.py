@@ -20,6 +20,7 @@ format, :mod:`sysid.data.modelfile`); :meth:`HybridTwin.load` reads it back and 
 
 from __future__ import annotations
 
+import copy
 import json
 import math
 import tempfile
@@ -119,6 +120,13 @@ class HybridTwin:
         """ŷ_twin + r̂ for the drive ``u`` at ``fs`` [Hz] (the twin starts at rest, the remainder from zero)."""
         y_twin = np.asarray(self.physics.simulate(u, fs), float)
         return y_twin + self.remainder(u, y_twin, fs)
+
+    def with_params(self, **changes: Any) -> HybridTwin:
+        """The same hybrid, its fitted remainder kept, with some of the physics twin's parameters changed (a
+        record's own start state: :func:`twins.discrepancy.prediction.simulate_val`)."""
+        new = copy.copy(self)
+        new.physics = self.physics.with_params(**changes)
+        return new
 
     @property
     def fs_(self) -> float | None:

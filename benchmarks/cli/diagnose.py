@@ -69,6 +69,13 @@ def register(sub) -> None:
     p.add_argument("--no-calibrate", action="store_true", help="do not re-fit the starting configuration")
     p.add_argument("--skip", type=NONNEG_INT, default=0, help="leading samples not scored (initial transient)")
     p.add_argument(
+        "--validation-start",
+        default="given",
+        metavar="HOW",
+        help="the state a separate validation record starts in (a remanent state): 'given' as configured "
+        "(default), 'fitted' on that record, or 'estimation': the estimation record's fitted start",
+    )
+    p.add_argument(
         "--starts",
         type=number(1, 20, integer=True),
         default=1,
@@ -155,6 +162,7 @@ def run(args: argparse.Namespace) -> int:
         starts=args.starts,
         pairs=args.pairs,
         trial_nfev=args.trial_nfev,
+        validation_start=args.validation_start,
         progress=(lambda msg: print(f"[diagnose] {msg}", file=sys.stderr, flush=True)) if show else None,
         on_round=None if args.quiet else (lambda msg: print(f"[diagnose] {msg}", file=sys.stderr, flush=True)),
     )

@@ -66,6 +66,8 @@ class CantileverTwin(Twin):
         "offset_um",
         "initial_state_um",
     )
+    #: the remanent hysteresis state a record starts in (the actuator's history before it): per record
+    INITIAL_CONDITION_PARAMS = ("initial_state_um",)
     #: parameters that may change while a simulation runs (FMU ``tunable``, :meth:`CantileverStepper.retune`):
     #: every real-valued field except the three that are not a property of the running physics:
     #: ``input_delay_s`` (sets the length of the delay buffer, a state), ``max_substep_s`` (sets the number

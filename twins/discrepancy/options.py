@@ -6,7 +6,12 @@ import dataclasses
 from collections.abc import Callable, Sequence
 from typing import Any
 
-__all__ = ["DiagnoseOptions"]
+from sysid.errors import ConfigError
+
+__all__ = ["DiagnoseOptions", "VALIDATION_STARTS"]
+
+#: how a separate validation record's start state is set (:func:`twins.discrepancy.diagnose._validation_start`)
+VALIDATION_STARTS = ("given", "fitted", "estimation")
 
 
 @dataclasses.dataclass
@@ -33,6 +38,9 @@ class DiagnoseOptions:
       - ``progress``: a callable taking one message per step, or None; ``on_round``: one line per finished round
     (trial count, leader, elapsed time), or None.
       - ``hybrid``: with an ``unexplained`` verdict, fit the hybrid twin (:mod:`.hybrid`) and report its gain.
+      - ``validation_start``: the state a separate validation record starts in (the twin's
+        ``INITIAL_CONDITION_PARAMS``): ``"given"`` (the configuration's), ``"fitted"`` (on the record) or
+        ``"estimation"`` (the estimation record's fitted start).
     """
 
     candidates: Sequence[str] | None = None
@@ -57,10 +65,13 @@ class DiagnoseOptions:
     progress: Callable[[str], Any] | None = None
     hybrid: bool = True
     on_round: Callable[[str], Any] | None = None
+    validation_start: str = "given"
 
     def __post_init__(self) -> None:
         for name in ("trial_nfev", "scan_nfev", "scan_points", "skip", "max_lag", "starts"):
             setattr(self, name, int(getattr(self, name)))
+        if self.validation_start not in VALIDATION_STARTS:
+            raise ConfigError(f"validation_start {self.validation_start!r}: give one of {', '.join(VALIDATION_STARTS)}")
 
     def say(self, msg: str) -> None:
         """Report one step to ``progress`` (nothing when it is not callable)."""
