@@ -49,7 +49,6 @@ EFFECTS: dict[str, EffectSpec] = {
         signature="residual grows with frequency near the sensor corner: phase lag ≈ √2·f/f_c rad and roll-off "
         "above; nothing below ≈ 100 Hz",
         default_on=True,
-        group="",
     ),
     "sensor_quantization": EffectSpec(
         "sensor_quantization",
