@@ -9,7 +9,8 @@ residual, and with a strongly correlated residual it would refuse real gains (``
 (:func:`.features.effective_samples`), Bonferroni-corrected over the candidates tried (``p_value < alpha /
 n_candidates``), *and* a relative validation NRMSE reduction of at least ``min_rel_gain`` (a floor against
 gains of no practical size on very long records). A re-tested effect that is on must also owe its gain to its
-own parameters (:func:`.defaults.attributable`).
+own parameters (:func:`.defaults.attributable`), an added one to itself: switched off, with the core as refitted
+beside it, the trial must be significantly worse (:func:`_owes_its_gain`).
 
 **Order**: significant first, then by gain, ties broken by the signature score (:mod:`.evidence`).
 
@@ -42,7 +43,7 @@ from . import features as ft
 from .fields import fmt_params
 from .nesting import prefer_simpler
 from .options import DiagnoseOptions
-from .prediction import MIN_SCORED_SAMPLES, continues, significance, sse
+from .prediction import MIN_SCORED_SAMPLES, continues, significance, simulate_val, sse
 from .separating import separating_experiment
 from .trials import Stage, Trial
 
@@ -127,6 +128,24 @@ def _judge(
         tr.significant = bool(tr.p_value < level and tr.gain >= opts.min_rel_gain)
         if tr.significant and tr.retest:
             tr.significant = dflt.attributable(tr, est, val, prior, n_eff0, level, opts.min_rel_gain, skip)
+        elif tr.significant:
+            tr.significant = _owes_its_gain(tr, est, val, n_eff0, level, opts.min_rel_gain, skip)
+
+
+def _owes_its_gain(
+    tr: Trial, est: Record, val: Record, n_eff: float, level: float, min_rel_gain: float, skip: int
+) -> bool:
+    """The trial's configuration with its effect switched off — the core as refitted with the effect — must be
+    significantly worse on the validation record (over the span the effect is judged on): else the gain came from
+    the core's refit, which the effect's parameters only steered on the estimation record, not from the effect."""
+    off = tr.twin.with_effects(set(tr.twin.effects) - {tr.effect})
+    m = judged_span(tr.effect, tr.base, est, val)
+    sse0, sse1 = sse(val.output[:m], simulate_val(off, est, val)[:m], skip), sse(val.output[:m], tr.yhat_val[:m], skip)
+    if not (math.isfinite(sse0) and sse0 > 0):
+        return True
+    if m < val.n:
+        n_eff = ft.effective_samples(val.output[skip:m] - tr.yhat_val[skip:m])
+    return bool(significance(sse0, sse1, n_eff, tr.n_added) < level and 1.0 - math.sqrt(sse1 / sse0) >= min_rel_gain)
 
 
 def _group(trials: list[Trial], twin: Twin, val: Record, opts: DiagnoseOptions) -> list[str]:
