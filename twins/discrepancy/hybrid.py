@@ -22,7 +22,7 @@ from sysid.evaluation.metrics import nrmse, r2
 from twins.base import Twin
 from twins.hybrid import HybridTwin
 
-from .prediction import deterministic, simulate_val, sse
+from .prediction import INITIAL_KEY, continues, deterministic, simulate_val, sse
 from .trials import Stage
 
 __all__ = ["hybrid_block", "hybrid_text"]
@@ -39,6 +39,9 @@ def hybrid_block(inp: Any, stage: Stage, skip: int) -> tuple[dict[str, Any], Hyb
         hy = HybridTwin(deterministic(stage.twin)).fit(est, skip=skip)
     except (ConfigError, DataError, ValueError, np.linalg.LinAlgError) as exc:
         return {"fitted": False, "error": str(exc), "before": before, "seconds": time.perf_counter() - t0}, None
+    start = val.meta.get(INITIAL_KEY)
+    if start and not continues(est, val):  # handed back starting as the scored prediction of a new record did
+        hy = hy.with_params(**start)
     yh = simulate_val(cast(Twin, hy), est, val)
     ok = bool(np.all(np.isfinite(yh[skip:])))
     s0, s1 = stage.sse_val, sse(y, yh, skip)
