@@ -105,7 +105,8 @@ class Twin(ABC):
     #: parameters that ``piezotwin calibrate`` fits by default (fields of ``Params``)
     CALIBRATION_PARAMS: ClassVar[tuple[str, ...]] = ()
     #: parameters that set the state a record starts from, not the system (a remanent state, initial levels): a
-    #: calibration fits them per record, and the diagnosis fits them again on a separate validation record
+    #: calibration fits them to its record; the diagnosis starts a separate validation record from the state its
+    #: ``validation_start`` option says (:func:`twins.discrepancy.diagnose._validation_start`)
     INITIAL_CONDITION_PARAMS: ClassVar[tuple[str, ...]] = ()
 
     def __init__(self, params: Any = None, effects: Iterable[str] | None = None, seed: int | None = 0):

@@ -39,8 +39,8 @@ NOISE_EFFECTS: tuple[str, ...] = ("measurement_noise",)
 
 #: meta key under which the diagnosis attaches the saturation rails to its working copies of the records
 RAILS_KEY = "diagnose_saturation_rails"
-#: meta key of a separate validation record's own initial conditions (the twin's ``INITIAL_CONDITION_PARAMS``
-#: fitted on that record, :func:`.diagnose._fit_validation_start`): every prediction of the record starts there
+#: meta key of a separate validation record's own start state (the twin's ``INITIAL_CONDITION_PARAMS``, set by
+#: :func:`.diagnose._validation_start`): every prediction of the record starts there
 INITIAL_KEY = "diagnose_initial_conditions"
 
 #: fewest samples after skip that a diagnosis scores: residual gradients, spectra and correlation lags need a record
@@ -83,7 +83,7 @@ def continues(est: Record, val: Record) -> bool:
 
 def simulate_val(twin: Twin, est: Record, val: Record) -> np.ndarray:
     """The prediction of the validation record: the continuation of ``est`` where it continues it, else a
-    simulation from the record's own initial conditions where the diagnosis fitted them (``INITIAL_KEY``) — a
+    simulation from the record's own start state where the diagnosis set one (``INITIAL_KEY``) — a
     start state is a property of a record, not of the system, and one fitted on the estimation record does not
     carry to a separate experiment."""
     if continues(est, val):
