@@ -106,7 +106,7 @@ class Twin(ABC):
     CALIBRATION_PARAMS: ClassVar[tuple[str, ...]] = ()
     #: parameters that set the state a record starts from, not the system (a remanent state, initial levels): a
     #: calibration fits them to its record; the diagnosis starts a separate validation record from the state its
-    #: ``validation_start`` option says (:func:`twins.discrepancy.diagnose._validation_start`)
+    #: ``validation_start`` option says (:func:`twins.discrepancy.prediction.validation_start`)
     INITIAL_CONDITION_PARAMS: ClassVar[tuple[str, ...]] = ()
 
     def __init__(self, params: Any = None, effects: Iterable[str] | None = None, seed: int | None = 0):

@@ -50,16 +50,15 @@ from .hybrid import hybrid_block
 from .inside import follow_calibration, sparse_inside
 from .options import DiagnoseOptions
 from .prediction import (
-    INITIAL_KEY,
     MIN_SCORED_SAMPLES,
     NOISE_EFFECTS,
-    continues,
     deterministic,
     significance,
     simulate,
     simulate_val,
     sse,
     unpredictable,
+    validation_start,
     with_rails,
 )
 from .result import Diagnosis
@@ -238,7 +237,10 @@ def _calibrate(inp: _Inputs, opts: DiagnoseOptions) -> _Calibrated:
     info: dict[str, Any] = {}
     if opts.calibrate_baseline and core0:
         current, info = _fit_baseline(current, core0, inp, opts)
-        _validation_start(current, core0, inp, info, opts)
+        inp.val, start = validation_start(current, inp.given, inp.est, inp.val, core0, opts.validation_start, opts.skip)
+        if start is not None:  # the state a separate validation record starts in
+            info["validation_start"] = {"how": opts.validation_start, **start}
+            opts.say(f"validation record's start ({opts.validation_start}): {start}")
     return _Calibrated(current, inp.given, info, retest, held)
 
 
@@ -266,35 +268,6 @@ def _fit_baseline(current: Twin, core0: list[str], inp: _Inputs, opts: DiagnoseO
     info["kept"] = False
     info["note"] = "calibration did not improve on the given configuration; the given one is used"
     return current, info
-
-
-def _validation_start(twin: Twin, core0: list[str], inp: _Inputs, info: dict[str, Any], opts: DiagnoseOptions) -> None:
-    """Set the state a separate validation record starts in (the twin's ``INITIAL_CONDITION_PARAMS`` that the
-    baseline calibrates), attached to the record (:data:`.prediction.INITIAL_KEY`) for every prediction of it.
-
-    A start state is the rig's history before a record, not a property of the system. ``opts.validation_start``:
-    ``"given"`` (default) the configuration's — a prediction of the record that uses none of its data;
-    ``"fitted"`` fitted on the record (as MATLAB's ``compare`` estimates x0), for records that start in unknown
-    states — it also absorbs level differences between the records, which a drift is judged by;
-    ``"estimation"`` the estimation record's fitted start, carried over: one read from that record's first
-    samples (coloured noise, another record's history) offsets the whole validation record, and a trial that
-    mends the offset is named for it (docs/discrepancy-notes.md, "start states")."""
-    names = [n for n in type(twin).INITIAL_CONDITION_PARAMS if n in core0]
-    if not names or continues(inp.est, inp.val) or opts.validation_start == "estimation":
-        return
-    if opts.validation_start == "fitted":
-        res = ls_calibrate(twin, inp.val, names, simulate=simulate, skip=opts.skip)
-        better = sse(inp.val.output, simulate(res.twin, inp.val), opts.skip) < sse(
-            inp.val.output, simulate(twin, inp.val), opts.skip
-        )
-        start = {n: float(getattr((res.twin if better else twin).params, n)) for n in names}
-    else:
-        start = {n: float(getattr(inp.given.params, n)) for n in names}
-    inp.val = inp.val.replace(meta={**inp.val.meta, INITIAL_KEY: start})
-    info["validation_start"] = {"how": opts.validation_start, **start}
-    opts.say(
-        f"validation record's start ({opts.validation_start}): " + ", ".join(f"{n} = {v:.4g}" for n, v in start.items())
-    )
 
 
 def _own_calibration(twin: Twin) -> bool:

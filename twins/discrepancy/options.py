@@ -10,7 +10,7 @@ from sysid.errors import ConfigError
 
 __all__ = ["DiagnoseOptions", "VALIDATION_STARTS"]
 
-#: how a separate validation record's start state is set (:func:`twins.discrepancy.diagnose._validation_start`)
+#: how a separate validation record's start state is set (:func:`twins.discrepancy.prediction.validation_start`)
 VALIDATION_STARTS = ("given", "fitted", "estimation")
 
 

@@ -16,6 +16,7 @@ from scipy import stats
 
 from sysid.data.record import Record
 from twins.base import Twin
+from twins.calibration import calibrate
 
 from . import evidence as ev
 from .features import clip_to_rails
@@ -31,6 +32,7 @@ __all__ = [
     "significance",
     "continues",
     "INITIAL_KEY",
+    "validation_start",
     "MIN_SCORED_SAMPLES",
 ]
 
@@ -40,7 +42,7 @@ NOISE_EFFECTS: tuple[str, ...] = ("measurement_noise",)
 #: meta key under which the diagnosis attaches the saturation rails to its working copies of the records
 RAILS_KEY = "diagnose_saturation_rails"
 #: meta key of a separate validation record's own start state (the twin's ``INITIAL_CONDITION_PARAMS``, set by
-#: :func:`.diagnose._validation_start`): every prediction of the record starts there
+#: :func:`validation_start`): every prediction of the record starts there
 INITIAL_KEY = "diagnose_initial_conditions"
 
 #: fewest samples after skip that a diagnosis scores: residual gradients, spectra and correlation lags need a record
@@ -112,3 +114,27 @@ def significance(sse0: float, sse1: float, n_eff: float, p_extra: int, p_total: 
     d2 = max(n_eff - max(int(p_total) if p_total is not None else p, p), 1.0)
     F = d2 / p * (sse0 - sse1) / sse1
     return float(stats.f.sf(F, p, d2))
+
+
+def validation_start(
+    twin: Twin, given: Twin, est: Record, val: Record, core: list[str], how: str, skip: int
+) -> tuple[Record, dict[str, float] | None]:
+    """The validation record with the state it starts in attached (:data:`INITIAL_KEY`), and that state: the
+    calibrated ``twin``'s ``INITIAL_CONDITION_PARAMS`` among the calibrated ``core`` (none: the record unchanged).
+
+    A start state is the rig's history before a record, not a property of the system. ``how``: ``"given"`` the
+    configuration's (``given``) — a prediction of the record that uses none of its data; ``"fitted"`` fitted on
+    the record (as MATLAB's ``compare`` estimates x0), for records that start in unknown states — it also takes up
+    level differences between the records, which a drift is judged by; ``"estimation"`` the estimation record's
+    fitted start, carried over: one read from that record's first samples (coloured noise, another record's
+    history) offsets the whole validation record, and a trial that mends the offset is named for it."""
+    names = [n for n in type(twin).INITIAL_CONDITION_PARAMS if n in core]
+    if not names or continues(est, val) or how == "estimation":
+        return val, None
+    if how == "fitted":
+        fit = calibrate(twin, val, names, simulate=simulate, skip=skip).twin
+        better = sse(val.output, simulate(fit, val), skip) < sse(val.output, simulate(twin, val), skip)
+        start = {n: float(getattr((fit if better else twin).params, n)) for n in names}
+    else:
+        start = {n: float(getattr(given.params, n)) for n in names}
+    return val.replace(meta={**val.meta, INITIAL_KEY: start}), start
