@@ -39,7 +39,7 @@ from twins.base import Twin
 
 from .fields import choice_fields, effect_fields
 from .options import DiagnoseOptions
-from .prediction import significance, simulate_val, sse
+from .prediction import significantly_better, simulate_val, sse
 from .trials import Trial, run_trial
 
 __all__ = ["retestable", "owned_fields", "retest_trials", "attributable", "holds", "cause_fields", "contributions"]
@@ -118,11 +118,7 @@ def holds(
     significantly worse (F-test below ``level`` and a relative gain of at least ``min_rel_gain``)."""
     fields = _fields(configured, effect) + choice_fields(configured, configured.EFFECTS[effect].params.values())
     yv0 = simulate_val(twin.with_params(**{f: getattr(configured.params, f) for f in fields}), est, val)
-    sse0 = sse(val.output, yv0, skip)
-    if not (math.isfinite(sse0) and sse0 > 0):
-        return True
-    g0 = 1.0 - math.sqrt(sse_val / sse0)
-    return bool(significance(sse0, sse_val, n_eff, n_added) < level and g0 >= min_rel_gain)
+    return significantly_better(sse(val.output, yv0, skip), sse_val, n_eff, n_added, level, min_rel_gain)
 
 
 def cause_fields(tr: Trial, nrmse_before: float, configured: Twin) -> dict[str, Any]:

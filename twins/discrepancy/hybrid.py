@@ -22,7 +22,7 @@ from sysid.evaluation.metrics import nrmse, r2
 from twins.base import Twin
 from twins.hybrid import HybridTwin
 
-from .prediction import INITIAL_KEY, continues, deterministic, simulate_val, sse
+from .prediction import INITIAL_KEY, deterministic, simulate_val, sse
 from .trials import Stage
 
 __all__ = ["hybrid_block", "hybrid_text"]
@@ -40,7 +40,7 @@ def hybrid_block(inp: Any, stage: Stage, skip: int) -> tuple[dict[str, Any], Hyb
     except (ConfigError, DataError, ValueError, np.linalg.LinAlgError) as exc:
         return {"fitted": False, "error": str(exc), "before": before, "seconds": time.perf_counter() - t0}, None
     start = val.meta.get(INITIAL_KEY)
-    if start and not continues(est, val):  # handed back starting as the scored prediction of a new record did
+    if start:  # a separate validation record's start: handed back starting where its scored prediction did
         hy = hy.with_params(**start)
     yh = simulate_val(cast(Twin, hy), est, val)
     ok = bool(np.all(np.isfinite(yh[skip:])))

@@ -30,6 +30,7 @@ __all__ = [
     "with_rails",
     "sse",
     "significance",
+    "significantly_better",
     "continues",
     "INITIAL_KEY",
     "validation_start",
@@ -114,6 +115,15 @@ def significance(sse0: float, sse1: float, n_eff: float, p_extra: int, p_total: 
     d2 = max(n_eff - max(int(p_total) if p_total is not None else p, p), 1.0)
     F = d2 / p * (sse0 - sse1) / sse1
     return float(stats.f.sf(F, p, d2))
+
+
+def significantly_better(sse0: float, sse1: float, n_eff: float, k: int, level: float, min_rel_gain: float) -> bool:
+    """A fit of validation SSE ``sse1`` is significantly better than a reference of ``sse0`` (F-test of
+    :func:`significance` below ``level`` with ``k`` added parameters, and a relative NRMSE gain of at least
+    ``min_rel_gain``); a reference that is not finite or is exact counts as beaten."""
+    if not (math.isfinite(sse0) and sse0 > 0):
+        return True
+    return bool(significance(sse0, sse1, n_eff, k) < level and 1.0 - math.sqrt(sse1 / sse0) >= min_rel_gain)
 
 
 def validation_start(

@@ -43,7 +43,7 @@ from . import features as ft
 from .fields import fmt_params
 from .nesting import prefer_simpler
 from .options import DiagnoseOptions
-from .prediction import MIN_SCORED_SAMPLES, continues, significance, simulate_val, sse
+from .prediction import MIN_SCORED_SAMPLES, continues, significance, significantly_better, simulate_val, sse
 from .separating import separating_experiment
 from .trials import Stage, Trial
 
@@ -137,15 +137,16 @@ def _owes_its_gain(
 ) -> bool:
     """The trial's configuration with its effect switched off — the core as refitted with the effect — must be
     significantly worse on the validation record (over the span the effect is judged on): else the gain came from
-    the core's refit, which the effect's parameters only steered on the estimation record, not from the effect."""
+    the core's refit, which the effect's parameters only steered on the estimation record, not from the effect. A
+    trial that refitted no core parameter switched off is the stage, which its own test already beat."""
+    if tr.n_total <= tr.n_added:
+        return True
     off = tr.twin.with_effects(set(tr.twin.effects) - {tr.effect})
     m = judged_span(tr.effect, tr.base, est, val)
     sse0, sse1 = sse(val.output[:m], simulate_val(off, est, val)[:m], skip), sse(val.output[:m], tr.yhat_val[:m], skip)
-    if not (math.isfinite(sse0) and sse0 > 0):
-        return True
     if m < val.n:
         n_eff = ft.effective_samples(val.output[skip:m] - tr.yhat_val[skip:m])
-    return bool(significance(sse0, sse1, n_eff, tr.n_added) < level and 1.0 - math.sqrt(sse1 / sse0) >= min_rel_gain)
+    return significantly_better(sse0, sse1, n_eff, tr.n_added, level, min_rel_gain)
 
 
 def _group(trials: list[Trial], twin: Twin, val: Record, opts: DiagnoseOptions) -> list[str]:
