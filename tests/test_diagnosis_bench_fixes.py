@@ -110,22 +110,26 @@ def test_the_generated_creep_is_the_log_law_from_rest():
 
 
 def test_the_start_state_fitted_on_the_estimation_record_stays_there():
-    """Case 194: nothing hidden, AR(1) noise of pole 0.87 on a noise-driven estimation record. The calibration
-    reads the noise's slow start as a remanent state of 0.26 µm; carried to the validation record (steps, from
-    rest) it offset every hold by −0.17 µm, and a drift settling in 41 ms was named for it (0.86). The validation
-    record now starts as configured: the baseline leaves the noise the generator added, no more."""
-    from twins.discrepancy.diagnose import _calibrate, _prepare
-    from twins.discrepancy.prediction import simulate_val
+    """Case 194: nothing hidden, AR(1) noise of pole 0.87 on a noise-driven estimation record. A calibration read
+    the noise's slow start as a remanent state of 0.26 µm; carried to the validation record (steps, from rest) it
+    offset every hold by −0.17 µm, and a drift settling in 41 ms was named for it (0.86). The validation record
+    now starts as configured: the baseline leaves the noise the generator added, no more. (That calibration is no
+    longer adopted either: it is not significantly better than the configuration, the test below.)"""
+    from twins.discrepancy.prediction import simulate_val, validation_start
 
     case = draw_case(194)
     assert case.mechanism is None and case.val_kind == "steps"
     b = make_records(case)
-    opts = DiagnoseOptions()
-    inp = _prepare(b["twin"], b["est"], b["val"], opts)
-    cal = _calibrate(inp, opts)
-    assert abs(cal.twin.params.initial_state_um) > 0.1  # the estimation record's own (noise-made) start
-    e = inp.val.output - simulate_val(cal.twin, inp.est, inp.val)
-    assert np.sqrt(np.mean(e**2)) < 1.1 * np.sqrt(np.mean(b["noise"][1] ** 2))
+    given = b["twin"]
+    fitted = given.with_params(initial_state_um=0.26)  # what the calibration read from the noise
+    core = ["gain_um_per_v", "initial_state_um"]
+    noise_rms = np.sqrt(np.mean(b["noise"][1] ** 2))
+    rms = {}
+    for how in ("given", "estimation"):
+        val, start = validation_start(fitted, given, b["est"], b["val"], core, how, 0)
+        e = val.output - simulate_val(fitted, b["est"], val)
+        rms[how] = np.sqrt(np.mean(e**2))
+    assert rms["given"] < 1.1 * noise_rms < 1.1 * 1.2 * noise_rms < rms["estimation"]
 
 
 @pytest.mark.parametrize(("est_start", "val_start", "how"), [(1.5, 0.0, "given"), (0.0, 1.5, "fitted")])
@@ -200,3 +204,44 @@ def test_a_drift_that_only_steers_the_cores_refit_is_not_named():
     named = [c["effect"] for c in out["causes"]]
     assert not {"slow_drift", "thermal_drift"} & set(named), out["causes"]
     assert "sensor_lowpass" in [named[0], *out["causes"][0].get("group", [])]
+
+
+def _calibrated(twin, b):
+    from twins.discrepancy.diagnose import _calibrate, _numba_threads, _prepare
+
+    opts = DiagnoseOptions()
+    with _numba_threads(1):
+        inp = _prepare(twin, b["est"], b["val"], opts)
+        return _calibrate(inp, opts)
+
+
+def test_a_calibration_that_only_fits_coloured_noise_is_not_adopted():
+    """Case 60: nothing hidden, AR(1) noise 0.86 on steps records at 1.3 kHz. The calibration lowered the
+    estimation SSE by 0.7 % (under the F-test's level on ~450 effective samples) and carried the noise it fitted
+    into the validation record as an input-dependent error: R 10.3, verdict ``unexplained`` with nothing named."""
+    from benchmarks.diagnosis_bench.run import MAX_ROUNDS
+    from twins.discrepancy import diagnose
+
+    case = draw_case(60)
+    assert case.mechanism is None and case.noise_ar > 0.8 and case.est_kind == "steps"
+    b = make_records(case)
+    cal = _calibrated(b["twin"], b)
+    assert cal.info["kept"] is False and "not significantly better" in cal.info["note"]
+    out = diagnose(b["twin"], b["est"], b["val"], max_rounds=MAX_ROUNDS, threads=1)
+    assert out["verdict"] == "none" and out["residual_vs_noise"]["excess_ratio"] < 9
+
+
+def test_a_calibration_of_a_core_that_is_off_is_adopted():
+    """The same records with the configured gain 4 % low: the calibration is far beyond the noise and adopted;
+    its validation SSE falls by ~90 % (to 1.3× the generator's configuration's: the noise it also fits)."""
+    b = make_records(draw_case(60))
+    true_gain = float(b["twin"].params.gain_um_per_v)
+    off = b["twin"].with_params(gain_um_per_v=0.96 * true_gain)
+    cal = _calibrated(off, b)
+    assert cal.info.get("kept", True) is True
+    val = b["val"]
+    err = {
+        name: sse(val.output, simulate(tw, val), 0)
+        for name, tw in (("true", b["twin"]), ("off", off), ("cal", cal.twin))
+    }
+    assert err["true"] < err["cal"] < 0.15 * err["off"]

@@ -7,7 +7,8 @@
    a record sits exactly at its extreme on a flat top while the configuration predicts beyond it, every
    prediction of it is compared clipped to the rails, as the instrument showed it.
 1. **Calibrate** (:func:`_calibrate`) the core parameters to the estimation record, noise off, the effects that
-   are on held at their configured sizes (a mis-sized default shows as the gain of its re-test, :mod:`.defaults`).
+   are on held at their configured sizes (a mis-sized default shows as the gain of its re-test, :mod:`.defaults`);
+   adopted only when significantly better than the configuration as given (F-test on effective samples).
 2. **Analyse** the residual ``e = y − ŷ`` of both records (:func:`.trials.make_stage`, :func:`.features.analyse`).
 3. **Trial every catalog effect** the configuration lacks (:func:`.candidates.round_trials`): pre-scan its
    parameters (:mod:`.prescan`), fit them with the core by free-run output error (:mod:`.trials`), re-simulate the
@@ -54,6 +55,7 @@ from .prediction import (
     NOISE_EFFECTS,
     deterministic,
     significance,
+    significantly_better,
     simulate,
     simulate_val,
     sse,
@@ -262,11 +264,24 @@ def _fit_baseline(current: Twin, core0: list[str], inp: _Inputs, opts: DiagnoseO
     fitted, wide_info = realdata.refit_at_bounds(fitted, core0, est, cost, simulate, opts.say)
     info = wide_info or info
     # keep the calibration only if it improves on the configuration as given (an unconverged fit would
-    # otherwise hand every trial that restarts from the prior a spurious gain)
-    if cost(fitted) <= cost(current):
+    # otherwise hand every trial that restarts from the prior a spurious gain), and by more than fitting the
+    # noise would: the F-test on the estimation residual's effective samples (coloured noise has few), with
+    # every fitted parameter counted. A fit to the noise carries it into the validation record as a
+    # deterministic error no effect explains (docs/discrepancy-notes.md, "a calibration must beat the noise").
+    c_given, c_fit = cost(current), cost(fitted)
+    if c_fit > c_given:
+        info["kept"] = False
+        info["note"] = "calibration did not improve on the given configuration; the given one is used"
+        return current, info
+    n_eff = ft.effective_samples(est.output[skip:] - simulate(fitted, est)[skip:])
+    k = max(len(info.get("fitted", {})), 1)
+    if significantly_better(c_given, c_fit, n_eff, k, opts.alpha, 0.0):
         return fitted, info
     info["kept"] = False
-    info["note"] = "calibration did not improve on the given configuration; the given one is used"
+    info["note"] = (
+        f"calibration not significantly better than the given configuration on the estimation record (SSE "
+        f"{c_fit:.4g} against {c_given:.4g}, {k} parameters, {n_eff:.0f} effective samples); the given one is used"
+    )
     return current, info
 
 
