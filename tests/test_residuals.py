@@ -96,3 +96,30 @@ def test_bad_input():
     with pytest.raises(DataError, match="max_lag"):
         rng = np.random.default_rng(0)
         correlation_tests(rng.standard_normal(10), rng.standard_normal(10), max_lag=50)
+
+
+def test_ar_prewhitening_recovers_an_ar1_pole_and_whitens_it():
+    from sysid.evaluation.residuals import ar_prewhiten
+
+    rng = np.random.default_rng(3)
+    w = rng.standard_normal(20_000)
+    x = np.zeros_like(w)
+    for t in range(1, w.size):
+        x[t] = 0.9 * x[t - 1] + w[t]
+    eps, a = ar_prewhiten(x, 10)
+    assert a.size == 1 and a[0] == pytest.approx(0.9, abs=0.01)  # BIC picks the true order
+    assert np.std(eps) == pytest.approx(1.0, rel=0.02)  # the innovations' unit variance
+    eps5, a5 = ar_prewhiten(x, 5, select=False)
+    assert a5.size == 5 and eps5.size == x.size - 5
+
+
+def test_fisher_periodicity_test_holds_its_level_and_finds_a_line():
+    from sysid.evaluation.residuals import periodicity_test
+
+    rng = np.random.default_rng(4)
+    p = np.array([periodicity_test(rng.standard_normal(1001))["p_value"] for _ in range(1000)])
+    # under white noise P(p < α) = α: 1000 draws at α = 0.05 lie within 0.05 ± 3·0.007
+    assert 0.029 < np.mean(p < 0.05) < 0.071
+    t = np.arange(4000)
+    line = periodicity_test(rng.standard_normal(4000) + 0.2 * np.sin(2 * np.pi * 0.1234 * t))
+    assert line["p_value"] < 1e-6 and line["index"] == round(0.1234 * 4000)

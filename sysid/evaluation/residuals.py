@@ -25,7 +25,15 @@ from scipy import signal, stats
 
 from sysid.errors import DataError
 
-__all__ = ["xcorr", "correlation_tests", "tests_summary", "residual_spectrum", "normality"]
+__all__ = [
+    "xcorr",
+    "correlation_tests",
+    "tests_summary",
+    "residual_spectrum",
+    "normality",
+    "ar_prewhiten",
+    "periodicity_test",
+]
 
 
 def _vector(x, name: str) -> np.ndarray:
@@ -173,3 +181,54 @@ def normality(e, alpha: float = 0.05) -> dict[str, Any]:
         "skewness": float(stats.skew(e)),
         "excess_kurtosis": float(stats.kurtosis(e)),
     }
+
+
+def ar_prewhiten(x, max_order: int, select: bool = True) -> tuple[np.ndarray, np.ndarray]:
+    """Innovations of an AR model of ``x`` fitted by least squares, and its coefficients a (x(t) ≈ Σ a_k x(t−k)).
+
+    ``select``: the order minimising BIC (N ln σ̂² + p ln N) over 1 … ``max_order``; else ``max_order`` itself.
+    Prewhitening (Box & Jenkins; Ljung, *System Identification*, 2nd ed., §16.6) turns a coloured series into one
+    whose sample statistics have their white-noise distributions. Returns (ε of length N − p, a), x mean-removed.
+    """
+    x = _vector(x, "series x")
+    x = x - x.mean()
+    n = x.size
+    top = int(min(max_order, max(n // 10, 1)))
+    best: tuple[float, np.ndarray, np.ndarray] | None = None
+    for p in range(1, top + 1) if select else [top]:
+        X = np.column_stack([x[p - k : n - k] for k in range(1, p + 1)])
+        a = np.linalg.lstsq(X, x[p:], rcond=None)[0]
+        eps = x[p:] - X @ a
+        bic = eps.size * np.log(max(float(np.mean(eps * eps)), 1e-300)) + p * np.log(eps.size)
+        if best is None or bic < best[0]:
+            best = (float(bic), eps, a)
+    assert best is not None
+    return best[1], best[2]
+
+
+def periodicity_test(e) -> dict[str, Any]:
+    """Fisher's g test for a hidden periodic component in a white series (Fisher 1929; Brockwell & Davis,
+    *Time Series*, §10.2): g = the largest periodogram ordinate over their sum (0 < f < fs/2, m ordinates),
+    P(G > g) = Σ_{j=1}^{⌊1/g⌋} (−1)^{j−1} C(m, j) (1 − j g)^{m−1} under white Gaussian noise. Coloured series:
+    prewhiten first (:func:`ar_prewhiten`). Returns ``{p_value, g, m, index}`` (``index``: the ordinate's bin)."""
+    e = _vector(e, "series e")
+    e = e - e.mean()
+    per = np.abs(np.fft.rfft(e)) ** 2
+    per = per[1 : (e.size - 1) // 2 + 1]  # 0 < f < fs/2
+    m = per.size
+    tot = float(per.sum())
+    if m < 2 or tot <= 0:
+        return {"p_value": 1.0, "g": 0.0, "m": m, "index": None}
+    k = int(np.argmax(per))
+    g = float(per[k]) / tot
+    # the alternating sum: its terms shrink fast for small g; the first term alone is a tight upper bound
+    p = 0.0
+    for j in range(1, min(int(1.0 / g), 50) + 1):
+        p += (-1) ** (j - 1) * float(np.exp(_log_comb(m, j) + (m - 1) * np.log1p(-j * g)))
+    return {"p_value": float(min(max(p, 0.0), 1.0)), "g": g, "m": m, "index": k + 1}
+
+
+def _log_comb(n: int, k: int) -> float:
+    from math import lgamma
+
+    return lgamma(n + 1) - lgamma(k + 1) - lgamma(n - k + 1)

@@ -18,8 +18,9 @@
 5. **Extend** (:mod:`.rounds`): keep a significant leader and repeat (``max_rounds``); then revisit each added
    effect but the last, since a first-round leader can mimic the sum of two hidden effects.
 6. **Verdict** (:func:`_conclude`): ``unexplained`` when the final residual stays far above the noise measured
-   from the data (its structure described by :func:`.unexplained.generic_residual_model`, and with ``hybrid`` a
-   black-box remainder fitted, :mod:`.hybrid`), else ``discrepancy`` with causes or ``none``.
+   from the data and is more than coloured noise (:func:`.unexplained.structure`; its structure described by
+   :func:`.unexplained.generic_residual_model`, and with ``hybrid`` a black-box remainder fitted,
+   :mod:`.hybrid`), else ``discrepancy`` with causes or ``none``.
 
 :func:`run_diagnosis` returns the typed :class:`.result.Diagnosis`; :func:`diagnose` its dict view.
 """

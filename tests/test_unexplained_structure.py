@@ -1,0 +1,52 @@
+"""The verdict's test of a residual far above the noise floor: more than coloured noise? (twins.discrepancy.
+unexplained.structure). AR(1) noise of pole ρ raises the residual-to-floor ratio R to (1 + ρ)/(1 − ρ) (19 at 0.9),
+past the limit 9, with a model that is right; a residual that depends on the drive or the prediction, or holds a
+periodic line, is more."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy import signal
+
+from twins.discrepancy import unexplained as unx
+
+FS = 10_000.0
+N = 8000
+
+
+def _record(seed: int):
+    rng = np.random.default_rng(seed)
+    u = signal.lfilter([0.2], [1.0, -0.8], rng.standard_normal(N))  # a band-limited drive
+    b, a = signal.butter(2, 300.0, fs=FS)
+    yhat = signal.lfilter(b, a, u) * 5.0  # the model's prediction: a low-pass plant
+    w = rng.standard_normal(N) * 0.05
+    noise = signal.lfilter([1.0], [1.0, -0.9], w)  # AR(1), pole 0.9
+    return u, yhat, noise
+
+
+def test_coloured_noise_alone_is_not_outside_the_model_class():
+    below = 0
+    for seed in range(30):
+        u, yhat, noise = _record(seed)
+        j = unx.judge(u, yhat + noise, yhat, FS)
+        assert j["excess_ratio"] > unx.EXCESS_LIMIT  # the white floor alone would call it unexplained
+        below += j["structure"]["p_value"] < unx.STRUCTURE_LEVEL
+        assert j["outside"] == (j["structure"]["p_value"] < unx.STRUCTURE_LEVEL)
+    # the doubled smaller of two p-values is conservative: under the null at most ~1 % of 30 → P(≥ 4) < 1e-3
+    assert below <= 3
+
+
+@pytest.mark.parametrize("kind", ["even", "gain_sag", "line"])
+def test_a_residual_with_structure_stays_outside(kind):
+    u, yhat, noise = _record(1)
+    t = np.arange(N) / FS
+    extra = {
+        "even": 0.02 * (yhat**2 - np.mean(yhat**2)),  # a sensor's quadratic term
+        "gain_sag": -0.08 * yhat * t / t[-1],  # a gain that sags over the record
+        "line": 0.08 * np.sin(2 * np.pi * 50.0 * t),  # mains hum
+    }[kind]
+    j = unx.judge(u, yhat + noise + extra, yhat, FS)
+    assert j["excess_ratio"] > unx.EXCESS_LIMIT and j["outside"]
+    key = "p_periodic" if kind == "line" else "p_dependence"
+    assert j["structure"][key] < 1e-6
