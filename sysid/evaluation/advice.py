@@ -29,6 +29,7 @@ from typing import Any
 import numpy as np
 
 from sysid.data.record import Record
+from sysid.evaluation.residuals import ar_prewhiten
 
 __all__ = ["practitioner_warnings", "closed_loop_correlation"]
 
@@ -61,10 +62,7 @@ def closed_loop_correlation(
             continue
         thr = CORR_SIGMAS / math.sqrt(N - p - max_lag)
         for i in range(u.shape[1]):
-            x = u[:, i] - u[:, i].mean()
-            X = np.column_stack([x[p - k : N - k] for k in range(1, p + 1)])
-            a = np.linalg.lstsq(X, x[p:], rcond=None)[0]
-            eps = x[p:] - X @ a
+            eps = ar_prewhiten(u[:, i], p, select=False)[0]
             for o in range(y.shape[1]):
                 yy = y[p:, o] - y[p:, o].mean()
                 se, sy = float(np.std(eps)), float(np.std(yy))

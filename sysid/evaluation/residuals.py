@@ -18,6 +18,7 @@ of the five tests runs at level α/10, so a white residual passes all five with 
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import numpy as np
@@ -229,6 +230,4 @@ def periodicity_test(e) -> dict[str, Any]:
 
 
 def _log_comb(n: int, k: int) -> float:
-    from math import lgamma
-
-    return lgamma(n + 1) - lgamma(k + 1) - lgamma(n - k + 1)
+    return math.lgamma(n + 1) - math.lgamma(k + 1) - math.lgamma(n - k + 1)
