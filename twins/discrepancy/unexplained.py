@@ -12,20 +12,16 @@ from the data themselves (never from the twin's noise parameter):
 - **second differences**: σ² ≈ (1.4826·MAD(Δ²y))²/6 (Δ² of white noise has variance 6σ²; the median ignores
   the few samples where a step or an edge dominates).
 
-Each estimate can only be raised by signal content leaking into it, so the smallest is used.
-
-The excess ratio R = mean(e²)/σ² (validation, after the extension). These floors see white noise; coloured noise
-lifts R with a right model (AR(1) of pole ρ: up to (1 + ρ)/(1 − ρ), 19 at 0.9). So when R > :data:`EXCESS_LIMIT`
-the residual must also be more than coloured noise (:func:`structure`, level :data:`STRUCTURE_LEVEL`): prewhitened
-by its own AR model, it depends on the drive or the prediction (a model error is a function of the input history;
-noise is not), or it holds a periodic line (hum). Then the verdict is ``unexplained``: "outside the model class: X %
-of residual power unexplained" with X = 100·(1 − σ²/mean(e²)), and its signature: where the residual's power lies in
-frequency (share below f_low = fs/200, between, and above f_high = fs/10; the peak of its Welch spectrum) and its
-correlation with u, |u|, sign(u̇) and the slow trend (which tells a dead zone, a backlash, a resonance and a drift
-apart in words). The limit 9 (residual RMS 3× the noise) left a wide margin as measured before the floor's ln 2
-(docs/diagnosis.md): noise-only data 0.10–0.57, mis-sized cases 0.006–0.93, out-of-catalog cases 2.8·10³–4.9·10⁵.
-Coloured noise is seen at its floor (AR(1): R up to (1 + ρ)/(1 − ρ) from the noise alone; over the benchmark's
-cases: docs/discrepancy-notes.md).
+Each estimate can only be raised by signal content leaking into it, so the smallest is used. The excess ratio R =
+mean(e²)/σ² (validation, after the extension). These floors see white noise; coloured noise lifts R with a right
+model (AR(1) of pole ρ: up to (1 + ρ)/(1 − ρ), 19 at 0.9). So when R > :data:`EXCESS_LIMIT` the residual must also
+be more than coloured noise (:func:`structure`, level :data:`STRUCTURE_LEVEL`): prewhitened by its own AR model, it
+depends on the drive or the prediction (a model error is a function of the input history; noise is not), or it holds
+a periodic line (hum). Then the verdict is ``unexplained``: "outside the model class: X % of residual power
+unexplained" with X = 100·(1 − σ²/mean(e²)), and its signature: where the residual's power lies in frequency (share
+below f_low = fs/200, between, and above f_high = fs/10; the peak of its Welch spectrum) and its correlation with u,
+|u|, sign(u̇) and the slow trend (which tells a dead zone, a backlash, a resonance and a drift apart in words). The
+limit 9 (residual RMS 3× the noise) and its margins: docs/diagnosis.md.
 
 :func:`generic_residual_model` tests what is left for structure no catalog entry explains: a generic
 linear-in-parameters residual model (FIR of u, (u²)′, (u³)′ and a trend) fitted on the estimation residual and
