@@ -269,12 +269,13 @@ def _fit_baseline(current: Twin, core0: list[str], inp: _Inputs, opts: DiagnoseO
     # noise would: the F-test on the estimation residual's effective samples (coloured noise has few), with
     # every fitted parameter counted. A fit to the noise carries it into the validation record as a
     # deterministic error no effect explains (docs/discrepancy-notes.md, "a calibration must beat the noise").
-    c_given, c_fit = cost(current), cost(fitted)
+    y_fit = simulate(fitted, est)
+    c_given, c_fit = cost(current), sse(est.output, y_fit, skip)
     if c_fit > c_given:
         info["kept"] = False
         info["note"] = "calibration did not improve on the given configuration; the given one is used"
         return current, info
-    n_eff = ft.effective_samples(est.output[skip:] - simulate(fitted, est)[skip:])
+    n_eff = ft.effective_samples(est.output[skip:] - y_fit[skip:])
     k = max(len(info.get("fitted", {})), 1)
     if significantly_better(c_given, c_fit, n_eff, k, opts.alpha, 0.0):
         return fitted, info

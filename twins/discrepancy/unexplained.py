@@ -135,13 +135,14 @@ def judge(
     coloured noise (:func:`structure`, tested only then)."""
     u = np.asarray(u, float).ravel()[skip:]
     y = np.asarray(y, float).ravel()[skip:]
-    e = y - np.asarray(yhat, float).ravel()[skip:]
+    yh = np.asarray(yhat, float).ravel()[skip:]
+    e = y - yh
     nl = noise or noise_level(u, y, fs)
     s2 = float(nl["sigma2"])
     p_e = float(np.mean(e * e))
     ratio = excess_ratio(p_e, s2)
     frac = max(0.0, 1.0 - s2 / p_e) if p_e > 0 else 0.0
-    st = structure(u, np.asarray(yhat, float).ravel()[skip:], e) if ratio > EXCESS_LIMIT else None
+    st = structure(u, yh, e) if ratio > EXCESS_LIMIT else None
     structured = st is None or st["p_value"] < STRUCTURE_LEVEL
     out: dict[str, Any] = {
         "noise_var": s2,
