@@ -261,3 +261,21 @@ def test_coloured_noise_far_above_the_white_floor_is_not_unexplained():
     beyond = out["residual_vs_noise"]
     assert beyond["excess_ratio"] > 9 and beyond["structure"]["p_value"] > 0.05
     assert out["verdict"] == "none" and not out["causes"]
+
+
+def test_a_backlash_left_on_a_sines_record_is_structure_not_noise():
+    """Case 321: a play of 12 % of the drive's peak before the piezo stage (outside its catalog), noise for
+    estimation, sines for validation. An input delay takes round 1 and leaves R 28 under white noise. The residual
+    is a few lines of the sines: an AR model fitted to it predicts them, so prewhitened by its own AR model it
+    looked like noise (p 0.07); the noise's AR model is now fitted to what the regression leaves (feasible GLS):
+    it depends on the drive (p < 10⁻²⁰) and the verdict is `unexplained` (before: `discrepancy`)."""
+    from benchmarks.diagnosis_bench.run import MAX_ROUNDS
+    from twins.discrepancy import diagnose
+
+    case = draw_case(321)
+    assert case.mechanism == "backlash" and case.val_kind == "sines"
+    b = make_records(case)
+    out = diagnose(b["twin"], b["est"], b["val"], max_rounds=MAX_ROUNDS, threads=1)
+    beyond = out["residual_vs_noise"]
+    assert beyond["excess_ratio"] > 9 and beyond["structure"]["p_dependence"] < 1e-20
+    assert out["verdict"] == "unexplained"

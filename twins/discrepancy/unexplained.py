@@ -217,12 +217,13 @@ def lagged_powers(z: np.ndarray, lags: int) -> np.ndarray:
 
 
 def structure(u: np.ndarray, yhat: np.ndarray, e: np.ndarray, lags: int = STRUCTURE_LAGS) -> dict[str, Any]:
-    """Is the residual ``e`` more than noise? Two tests on e prewhitened by its own AR model (order by BIC ≤ 10),
-    valid for coloured noise (module docstring):
+    """Is the residual ``e`` more than noise? Two tests valid for coloured noise (module docstring):
 
     - **dependence**: e regressed on the lagged powers (:func:`lagged_powers`) of u and of the prediction ŷ, ŷ·t
-      and t, all filtered by the same AR polynomial (generalised least squares); F-test of the regression;
-    - **periodicity**: Fisher's g on the prewhitened e (:func:`sysid.evaluation.residuals.periodicity_test`).
+      and t by feasible generalised least squares: both sides filtered by the AR polynomial (order by BIC ≤ 10)
+      of the ordinary least-squares residual of that regression; F-test of the regression;
+    - **periodicity**: Fisher's g on e prewhitened by its own AR model
+      (:func:`sysid.evaluation.residuals.periodicity_test`).
 
     ``p_value``: the smaller p, Bonferroni-doubled. Noise independent of the drive gives a uniform p."""
     u = np.asarray(u, float).ravel()
@@ -231,12 +232,18 @@ def structure(u: np.ndarray, yhat: np.ndarray, e: np.ndarray, lags: int = STRUCT
     n = e.size
     if n < 4 * (6 * (lags + 1) + 3) + STRUCTURE_AR_ORDER + lags:  # too short to test: R alone decides
         return {"p_value": 0.0, "p_dependence": 0.0, "p_periodic": 1.0, "ar_order": 0, "explained": 0.0}
-    eps, a = ar_prewhiten(e, STRUCTURE_AR_ORDER)
-    filt = np.r_[1.0, -a]
+    eps, _ = ar_prewhiten(e, STRUCTURE_AR_ORDER)
     t = np.linspace(-1.0, 1.0, n)
     zu = (u - u.mean()) / (float(np.std(u)) or 1.0)
     zy = (yh - yh.mean()) / (float(np.std(yh)) or 1.0)
     Z = np.column_stack([lagged_powers(zu, lags), lagged_powers(zy, lags), zy * t, t])
+    # feasible GLS (Cochrane & Orcutt 1949): the noise's AR model is fitted to what an ordinary least-squares fit
+    # of the regression leaves, not to e itself — an AR model of e absorbs a deterministic narrow-band residual
+    # (the harmonics of a sines record: ten lags predict five lines exactly) and the test's power with it
+    Z1 = np.column_stack([np.ones(n), Z])[lags:]
+    r0 = e[lags:] - Z1 @ np.linalg.lstsq(Z1, e[lags:], rcond=None)[0]
+    _, a = ar_prewhiten(r0, STRUCTURE_AR_ORDER)
+    filt = np.r_[1.0, -a]
     cut = a.size + lags
     et = sps.lfilter(filt, [1.0], e - e.mean())[cut:]
     Zt = np.column_stack([np.ones(et.size), sps.lfilter(filt, [1.0], Z, axis=0)[cut:]])
