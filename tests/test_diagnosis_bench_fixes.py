@@ -279,3 +279,22 @@ def test_a_backlash_left_on_a_sines_record_is_structure_not_noise():
     beyond = out["residual_vs_noise"]
     assert beyond["excess_ratio"] > 9 and beyond["structure"]["p_dependence"] < 1e-20
     assert out["verdict"] == "unexplained"
+
+
+def test_a_start_level_fitted_on_the_estimation_record_does_not_offset_the_validation_record():
+    """Case 71: the cascaded tanks (a user's model) with a delay of 0.015 cycles at the highest excited frequency,
+    sines then a chirp, two records each starting at the configured levels. The calibration fitted the start
+    levels x1_0, x2_0 on the estimation record (taking up the delay's effect there) and carried them to the
+    validation record: its level was offset and `sensor_offset` was named with confidence 0.90. The model now
+    declares them its ``INITIAL_CONDITION_PARAMS`` and the validation record starts at its own levels: nothing
+    is named (the delay is below what the records resolve, R 0.4)."""
+    from benchmarks.diagnosis_bench.run import MAX_ROUNDS
+    from twins.discrepancy import diagnose
+
+    case = draw_case(71)
+    assert case.model == "cascaded-tanks" and case.mechanism == "delay"
+    b = make_records(case)
+    out = diagnose(b["twin"], b["est"], b["val"], max_rounds=MAX_ROUNDS, threads=1)
+    assert out["calibration"]["validation_start"]["how"] == "given"
+    assert not any(c["effect"] == "sensor_offset" for c in out["causes"])
+    assert out["verdict"] == "none"

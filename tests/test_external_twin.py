@@ -190,6 +190,14 @@ def test_bad_models_refused(tmp_path):
     )
     with pytest.raises(DataError, match="simulation failed"):
         load_model(str(fails))().simulate(np.ones(10), 10.0)
+    unknown_start = tmp_path / "start.py"
+    unknown_start.write_text(
+        "from dataclasses import dataclass\nfrom twins.base import pfield\n"
+        "@dataclass\nclass Params:\n    k: float = pfield(1.0, '1', 0.1, 2.0, 'gain')\n"
+        "INITIAL_CONDITION_PARAMS = ('x0',)\ndef simulate(u, fs, p):\n    return p.k * u\n"
+    )
+    with pytest.raises(ConfigError, match="initial-condition parameter 'x0' is not a field"):
+        load_model(str(unknown_start))
 
 
 def test_cli_model_bad_input_one_line(tmp_path):
@@ -234,6 +242,7 @@ def test_tanks_model_steady_state_and_overflow():
     at x1_max and, with no share reaching it, the lower tank settles at (k₂/k₃)²·x1_max."""
     cls = load_model(str(ROOT / "benchmarks" / "examples" / "cascaded_tanks.py"))
     assert "overflow" in cls.EFFECTS and cls.name == "model:cascaded-tanks"
+    assert cls.INITIAL_CONDITION_PARAMS == ("x1_0", "x2_0")  # each record's own start levels
     tw = cls.from_options(set_=["k1=0.05,k2=0.04,k3=0.05,k4=0.03,x1_0=1,x2_0=1"])
     u = np.full(3000, 4.0)  # 12 000 s at Ts = 4 s: many time constants
     x1 = (0.03 * 4.0 / 0.05) ** 2

@@ -13,9 +13,11 @@ The model is a module (a ``.py`` file or an importable name), or an object in it
     Either may take a keyword ``effects``: the set of the model's own effects (``EFFECTS``) that are on.
 
 and optionally ``NAME`` (the twin's name, default the file's), ``UNITS`` (``{"u": "V", "y": "V"}``),
-``CALIBRATION_PARAMS`` (field names) and ``EFFECTS``: effects the model knows itself, id → ``EffectSpec`` or a
-dict with ``description``, ``signature`` and ``params`` (key → field of ``Params``). The generic effects
-(:mod:`twins.generic_effects`) are added around the model in any case.
+``CALIBRATION_PARAMS`` (field names), ``INITIAL_CONDITION_PARAMS`` (the fields that are a record's start state,
+e.g. the initial levels: fitted on the estimation record, they do not carry to a separate validation record) and
+``EFFECTS``: effects the model knows itself, id → ``EffectSpec`` or a dict with ``description``, ``signature`` and
+``params`` (key → field of ``Params``). The generic effects (:mod:`twins.generic_effects`) are added around the
+model in any case.
 """
 
 from __future__ import annotations
@@ -103,7 +105,14 @@ def model_twin_class(obj: Any, default_name: str = "model") -> type[ExternalTwin
     effects = {k: _effect_spec(name, k, v) for k, v in dict(getattr(obj, "EFFECTS", {}) or {}).items()}
     calib = getattr(obj, "CALIBRATION_PARAMS", None)
     return external_twin_class(
-        name, core, params_cls, effects, calib, getattr(obj, "UNITS", None), doc=inspect.getdoc(obj) or ""
+        name,
+        core,
+        params_cls,
+        effects,
+        calib,
+        getattr(obj, "UNITS", None),
+        doc=inspect.getdoc(obj) or "",
+        initial_condition_params=tuple(getattr(obj, "INITIAL_CONDITION_PARAMS", ()) or ()),
     )
 
 

@@ -120,11 +120,14 @@ def external_twin_class(
     units: Mapping[str, str] | None = None,
     doc: str = "",
     base: type[ExternalTwin] | None = None,
+    initial_condition_params: Iterable[str] = (),
 ) -> type[ExternalTwin]:
     """A :class:`ExternalTwin` subclass for a model: ``core`` simulates, ``params_cls`` is its parameter dataclass
     (fields with unit and range from :func:`twins.base.pfield`), ``model_effects`` its own effects,
     ``calibration_params`` what ``calibrate`` and the diagnosis fit by default (default: every numeric field
-    with a range that belongs to no effect); ``base`` the class to derive from (a subclass of ExternalTwin).
+    with a range that belongs to no effect); ``base`` the class to derive from (a subclass of ExternalTwin);
+    ``initial_condition_params`` the fields that are the state a record starts in, not properties of the system
+    (:attr:`twins.base.Twin.INITIAL_CONDITION_PARAMS`: fitted on one record, they do not carry to another).
 
     Refused with a ConfigError: a parameter class that is not a dataclass, a field or effect name that clashes
     with the generic catalog, an effect naming a field the class lacks.
@@ -183,6 +186,12 @@ def external_twin_class(
     unknown = [c for c in calib if c not in own]
     if unknown:
         raise ConfigError(f"model {name}: calibration parameter {unknown[0]!r} is not a field of {params_cls.__name__}")
+    initial = tuple(initial_condition_params)
+    unknown = [c for c in initial if c not in own]
+    if unknown:
+        raise ConfigError(
+            f"model {name}: initial-condition parameter {unknown[0]!r} is not a field of {params_cls.__name__}"
+        )
     attrs = {
         "name": name,
         "Params": all_params,
@@ -190,6 +199,7 @@ def external_twin_class(
         "PROTOCOLS": {},
         "units": units,
         "CALIBRATION_PARAMS": calib,
+        "INITIAL_CONDITION_PARAMS": initial,
         "CORE": staticmethod(core),
         "MODEL_PARAMS": params_cls,
         "MODEL_EFFECTS": frozenset(model_effects),
