@@ -15,9 +15,9 @@ from the data themselves (never from the twin's noise parameter):
 Each estimate can only be raised by signal content leaking into it, so the smallest is used. The excess ratio R =
 mean(e²)/σ² (validation, after the extension). These floors see white noise; coloured noise lifts R with a right
 model (AR(1) of pole ρ: up to (1 + ρ)/(1 − ρ), 19 at 0.9). So when R > :data:`EXCESS_LIMIT` the residual must also
-be more than coloured noise (:func:`structure`, level :data:`STRUCTURE_LEVEL`): prewhitened by its own AR model, it
-depends on the drive or the prediction (a model error is a function of the input history; noise is not), or it holds
-a periodic line (hum). Then the verdict is ``unexplained``: "outside the model class: X % of residual power
+be more than coloured noise (:func:`structure`, level :data:`STRUCTURE_LEVEL`): it depends on the drive or the
+prediction by generalised least squares (a model error is a function of the input history; noise is not), or it
+holds a periodic line (hum). Then the verdict is ``unexplained``: "outside the model class: X % of residual power
 unexplained" with X = 100·(1 − σ²/mean(e²)), and its signature: where the residual's power lies in frequency (share
 below f_low = fs/200, between, and above f_high = fs/10; the peak of its Welch spectrum) and its correlation with u,
 |u|, sign(u̇) and the slow trend (which tells a dead zone, a backlash, a resonance and a drift apart in words). The
