@@ -69,6 +69,9 @@ def test_generic_laws_closed_forms():
     u = np.arange(n, dtype=float)
     d = ge.delay_input(u, 0.025, fs)  # 2.5 samples
     assert np.allclose(d[3:], u[3:] - 2.5) and d[0] == 0.0
+    # a model that starts at an operating point: before the record the input was its first value
+    held = ge.delay_input(u + 4.0, 0.025, fs, before=4.0)
+    assert np.allclose(held[3:], u[3:] + 1.5) and np.allclose(held[:3], 4.0)
     assert np.allclose(ge.drift(n, fs, 2.0, 0.1), 2.0 * (1 - np.exp(-np.arange(n) / fs / 0.1)))
     v = ge.soft_limit(np.array([1e-3, 1e3]), 10.0, 4.0)
     assert v[0] == pytest.approx(1e-3, rel=1e-9) and v[1] == pytest.approx(10.0, rel=1e-6)
@@ -198,6 +201,9 @@ def test_bad_models_refused(tmp_path):
     )
     with pytest.raises(ConfigError, match="initial-condition parameter 'x0' is not a field"):
         load_model(str(unknown_start))
+    unknown_start.write_text(unknown_start.read_text().replace("('x0',)", "('k',)\nINPUT_BEFORE = 'warm'"))
+    with pytest.raises(ConfigError, match="INPUT_BEFORE must be 'zero' or 'held', got 'warm'"):
+        load_model(str(unknown_start))
 
 
 def test_cli_model_bad_input_one_line(tmp_path):
@@ -243,6 +249,7 @@ def test_tanks_model_steady_state_and_overflow():
     cls = load_model(str(ROOT / "benchmarks" / "examples" / "cascaded_tanks.py"))
     assert "overflow" in cls.EFFECTS and cls.name == "model:cascaded-tanks"
     assert cls.INITIAL_CONDITION_PARAMS == ("x1_0", "x2_0")  # each record's own start levels
+    assert cls.INPUT_HELD  # the pump ran before the record: a delay shifts in the first input, not 0
     tw = cls.from_options(set_=["k1=0.05,k2=0.04,k3=0.05,k4=0.03,x1_0=1,x2_0=1"])
     u = np.full(3000, 4.0)  # 12 000 s at Ts = 4 s: many time constants
     x1 = (0.03 * 4.0 / 0.05) ** 2

@@ -295,13 +295,13 @@ def data_ranges(u: np.ndarray, y: np.ndarray, fs: float) -> dict[str, tuple[floa
 
 
 # ------------------------------------------------------------------------------------------------ the laws
-def delay_input(u: np.ndarray, delay_s: float, fs: float) -> np.ndarray:
-    """``u`` delayed by ``delay_s`` [s]: D whole samples and the fraction μ by linear interpolation, zero
-    before the first sample (the state at rest), as the cantilever kernel's delay line."""
+def delay_input(u: np.ndarray, delay_s: float, fs: float, before: float = 0.0) -> np.ndarray:
+    """``u`` delayed by ``delay_s`` [s]: D whole samples and the fraction μ by linear interpolation, ``before``
+    before the first sample (0: the state at rest, as the cantilever kernel's delay line)."""
     dl = max(0.0, float(delay_s) * fs)
     D = int(math.floor(dl + 1e-12))
     mu = max(0.0, dl - D)
-    pad = np.concatenate([np.zeros(D + 1), np.asarray(u, float)])
+    pad = np.concatenate([np.full(D + 1, float(before)), np.asarray(u, float)])
     n = len(u)
     return (1.0 - mu) * pad[1 : n + 1] + mu * pad[:n]
 
@@ -343,11 +343,12 @@ def drift(
     return out
 
 
-def apply_input(u: np.ndarray, fs: float, effects: frozenset[str] | set[str], p: Any) -> np.ndarray:
-    """The input the model sees: ``u`` through the input-side effects that are on (fields of ``p``)."""
+def apply_input(u: np.ndarray, fs: float, effects: frozenset[str] | set[str], p: Any, held: bool = False) -> np.ndarray:
+    """The input the model sees: ``u`` through the input-side effects that are on (fields of ``p``). ``held``: the
+    input before the record was its first value (a model that starts at an operating point), else 0 (at rest)."""
     v = np.asarray(u, float)
     if "input_delay" in effects:
-        v = delay_input(v, p.input_delay_s, fs)
+        v = delay_input(v, p.input_delay_s, fs, float(v[0]) if held and v.size else 0.0)
     if "drive_compression" in effects:
         v = soft_limit(v, p.compression_knee, p.compression_sharpness)
     return v

@@ -27,6 +27,7 @@ NAME = "cascaded-tanks"
 UNITS = {"u": "V", "y": "V"}
 CALIBRATION_PARAMS = ("k1", "k2", "k3", "k4", "x1_0", "x2_0")
 INITIAL_CONDITION_PARAMS = ("x1_0", "x2_0")  # the levels a record starts at: each record's own
+INPUT_BEFORE = "held"  # a record starts at a level the pump held: before it, the pump ran at the first input
 EFFECTS = {
     "overflow": {
         "description": "the upper tank overflows above x1_max; a share of the excess falls into the lower tank",

@@ -73,7 +73,7 @@ class EquationTwin(ExternalTwin):
         ``"periodic"``) when it is given."""
         gp = _Renamed(self.params, self.GENERIC_NAMES)
         u = np.asarray(u, float)
-        v = apply_input(u, fs, self.effects, gp)
+        v = apply_input(u, fs, self.effects, gp, self.INPUT_HELD)
         own = self.effects & self.MODEL_EFFECTS
         y, X = self.SPEC.run(v, fs, self.model_params(), own, keep=keep, force=force, sparse=sparse, x0=x0)
         return apply_output(y, u, fs, self.effects, gp), X
@@ -125,7 +125,7 @@ class EquationTwin(ExternalTwin):
         """The output's sensitivity to forcings ``phi`` (samples × C) added to the rates ``rows`` (:mod:`.tangent`),
         through the generic output effects that are linear in the output (others are ignored: a start value)."""
         gp = _Renamed(self.params, self.GENERIC_NAMES)
-        v = apply_input(np.asarray(rec.u, float), rec.fs, self.effects, gp)
+        v = apply_input(np.asarray(rec.u, float), rec.fs, self.effects, gp, self.INPUT_HELD)
         own = self.effects & self.MODEL_EFFECTS
         S = self.SPEC.sensitivities(v, rec.fs, self.model_params(), own, phi, rows)[1]
         if "sensor_lowpass" in self.effects:
@@ -426,6 +426,8 @@ def equation_twin_class(obj: Any, default_name: str = "model") -> type[ExternalT
         getattr(obj, "UNITS", None),
         doc=inspect.getdoc(obj) or "",
         base=EquationTwin,
+        initial_condition_params=tuple(getattr(obj, "INITIAL_CONDITION_PARAMS", ()) or ()),
+        input_before=str(getattr(obj, "INPUT_BEFORE", "zero")),
     )
     cls.SPEC = spec
     if spec.source is not None:  # found again from its file, where an FMU ships it (:mod:`.loaded`)

@@ -141,6 +141,10 @@ def _section(twin: Any, slots: list[MechanismSlot], generic: list[str], sparse: 
         lines.append(f"BOUNDS = {{**globals().get('BOUNDS', {{}}), {entries}}}")
     calib = ", ".join(repr(name) for name, _f in fields if name in spec.calib or name not in spec.user_fields)
     lines += [f"CALIBRATION_PARAMS = ({calib},)", ""]
+    if type(twin).INITIAL_CONDITION_PARAMS:  # what the model declared, kept
+        lines.insert(-1, f"INITIAL_CONDITION_PARAMS = {tuple(type(twin).INITIAL_CONDITION_PARAMS)!r}")
+    if type(twin).INPUT_HELD:
+        lines.insert(-1, 'INPUT_BEFORE = "held"')
     written = [dataclasses.replace(s, fields={k: rename[f] for k, f in s.fields.items()}) for s in slots]
     # an offset and a crosstalk of the input as given act sample by sample: written into output() (an FMU steps
     # them); other effects around the equations act on the whole record (input_map / output_map)
@@ -263,7 +267,8 @@ def _maps_code(twin: Any, slots: list[MechanismSlot], generic: list[str]) -> lis
     if inputs or backlash:
         lines += ["", "", "def input_map(u, fs, p):", '    """The input as it reaches the equations."""']
         if inputs:
-            lines.append(f"    u = _generic.apply_input(u, fs, {set(inputs)!r}, p)")
+            held = ", held=True" if type(twin).INPUT_HELD else ""
+            lines.append(f"    u = _generic.apply_input(u, fs, {set(inputs)!r}, p{held})")
         for s in backlash:
             lines.append(f"    u = laws.backlash(u, p.{s.fields['r']})")
         lines.append("    return u")

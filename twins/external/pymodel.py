@@ -14,7 +14,9 @@ The model is a module (a ``.py`` file or an importable name), or an object in it
 
 and optionally ``NAME`` (the twin's name, default the file's), ``UNITS`` (``{"u": "V", "y": "V"}``),
 ``CALIBRATION_PARAMS`` (field names), ``INITIAL_CONDITION_PARAMS`` (the fields that are a record's start state,
-e.g. the initial levels: fitted on the estimation record, they do not carry to a separate validation record) and
+e.g. the initial levels: fitted on the estimation record, they do not carry to a separate validation record),
+``INPUT_BEFORE`` (``"zero"``, the default: the model starts at rest; ``"held"``: the input before a record was its
+first value, for a model that starts at an operating point) and
 ``EFFECTS``: effects the model knows itself, id → ``EffectSpec`` or a dict with ``description``, ``signature`` and
 ``params`` (key → field of ``Params``). The generic effects (:mod:`twins.generic_effects`) are added around the
 model in any case.
@@ -113,6 +115,7 @@ def model_twin_class(obj: Any, default_name: str = "model") -> type[ExternalTwin
         getattr(obj, "UNITS", None),
         doc=inspect.getdoc(obj) or "",
         initial_condition_params=tuple(getattr(obj, "INITIAL_CONDITION_PARAMS", ()) or ()),
+        input_before=str(getattr(obj, "INPUT_BEFORE", "zero")),
     )
 
 

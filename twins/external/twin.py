@@ -45,6 +45,8 @@ class ExternalTwin(Twin):
     MODEL_EFFECTS: ClassVar[frozenset[str]] = frozenset()  # effects the core applies itself
     #: generic field → its name here (``generic_<name>`` where the model has a parameter of that name)
     GENERIC_NAMES: ClassVar[dict[str, str]] = {}
+    #: the input before a record was its first value (the model starts at an operating point), not 0 (at rest)
+    INPUT_HELD: ClassVar[bool] = False
 
     def model_params(self) -> Any:
         """The model's own parameter dataclass instance (its fields of :attr:`params`)."""
@@ -61,7 +63,7 @@ class ExternalTwin(Twin):
         if not np.isfinite(fs) or fs <= 0:
             raise DataError(f"{self.name}: sampling rate fs must be positive and finite, got {fs}")
         gp = _Renamed(self.params, self.GENERIC_NAMES)
-        v = apply_input(u, fs, self.effects, gp)
+        v = apply_input(u, fs, self.effects, gp, self.INPUT_HELD)
         try:
             y = np.asarray(type(self).CORE(v, fs, self.model_params(), self.effects & self.MODEL_EFFECTS), dtype=float)
         except (ConfigError, DataError):
@@ -121,13 +123,16 @@ def external_twin_class(
     doc: str = "",
     base: type[ExternalTwin] | None = None,
     initial_condition_params: Iterable[str] = (),
+    input_before: str = "zero",
 ) -> type[ExternalTwin]:
     """A :class:`ExternalTwin` subclass for a model: ``core`` simulates, ``params_cls`` is its parameter dataclass
     (fields with unit and range from :func:`twins.base.pfield`), ``model_effects`` its own effects,
     ``calibration_params`` what ``calibrate`` and the diagnosis fit by default (default: every numeric field
     with a range that belongs to no effect); ``base`` the class to derive from (a subclass of ExternalTwin);
     ``initial_condition_params`` the fields that are the state a record starts in, not properties of the system
-    (:attr:`twins.base.Twin.INITIAL_CONDITION_PARAMS`: fitted on one record, they do not carry to another).
+    (:attr:`twins.base.Twin.INITIAL_CONDITION_PARAMS`: fitted on one record, they do not carry to another);
+    ``input_before`` what drove the model before a record: ``"zero"`` (at rest) or ``"held"`` (the record's first
+    input value: a model that starts at an operating point, such as tanks at a level; what an input delay shifts in).
 
     Refused with a ConfigError: a parameter class that is not a dataclass, a field or effect name that clashes
     with the generic catalog, an effect naming a field the class lacks.
@@ -192,6 +197,8 @@ def external_twin_class(
         raise ConfigError(
             f"model {name}: initial-condition parameter {unknown[0]!r} is not a field of {params_cls.__name__}"
         )
+    if input_before not in ("zero", "held"):
+        raise ConfigError(f"model {name}: INPUT_BEFORE must be 'zero' or 'held', got {input_before!r}")
     attrs = {
         "name": name,
         "Params": all_params,
@@ -200,6 +207,7 @@ def external_twin_class(
         "units": units,
         "CALIBRATION_PARAMS": calib,
         "INITIAL_CONDITION_PARAMS": initial,
+        "INPUT_HELD": input_before == "held",
         "CORE": staticmethod(core),
         "MODEL_PARAMS": params_cls,
         "MODEL_EFFECTS": frozenset(model_effects),
