@@ -249,10 +249,9 @@ def _with_named(loop: _Loop, ext: Extension, ranking: Ranking, rnd: int) -> bool
         return False
     twin = stage.twin
     named = [c["effect"] for c in ext.causes if c.get("kind") != "mis-sized default" and c["effect"] in twin.effects]
-    own = [f for o in named for f in effect_fields(twin, twin.EFFECTS[o].params.values()) if f not in loop.core_r]
-    if not own:
+    core_x = _core_with(loop, twin, named)
+    if core_x == loop.core_r:
         return False
-    core_x = loop.core_r + own
     start = dict(top.effect_params)
     opts.say(f"round {rnd}: {top.effect} is not significant alone; refitted jointly with {', '.join(named)}")
     try:
@@ -305,9 +304,7 @@ def revisit(loop: _Loop, ext: Extension) -> bool:
         eff, retest = cause["effect"], cause.get("kind") == "mis-sized default"
         base = make_stage(_taken_out(twin, eff, retest, cal.prior), inp.est, inp.val, opts)
         others = [c["effect"] for c in ext.causes if c is not cause]
-        core_x = loop.core_r + [
-            f for o in others for f in effect_fields(twin, twin.EFFECTS[o].params.values()) if f not in loop.core_r
-        ]
+        core_x = _core_with(loop, twin, others)
         cands = [e for e in loop.pool if e not in base.twin.effects]
         opts.say(f"revisiting {eff}: {len(cands) + retest} candidates in its place")
         trials, errors = round_trials(inp, cal, base, cands, [eff] if retest else [], core_x, f"revisit {eff}", opts)
@@ -343,6 +340,13 @@ def revisit(loop: _Loop, ext: Extension) -> bool:
         changed = True
         _refresh_params(ext, [c["effect"] for c in ext.causes if c is not new])
     return changed
+
+
+def _core_with(loop: _Loop, twin: Twin, effects: list[str]) -> list[str]:
+    """The core the rounds refit, with the parameters of ``effects`` (causes named before) refitted beside it."""
+    return loop.core_r + [
+        f for o in effects for f in effect_fields(twin, twin.EFFECTS[o].params.values()) if f not in loop.core_r
+    ]
 
 
 def _taken_out(twin: Twin, effect: str, retest: bool, prior: Twin) -> Twin:
