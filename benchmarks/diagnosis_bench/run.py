@@ -43,6 +43,7 @@ CAUSE_KEYS = (
     "nrmse_val_before",
     "nrmse_val_after",
     "joint_with",
+    "joint_with_named",
     "replaces",
 )
 
