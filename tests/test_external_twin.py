@@ -185,25 +185,22 @@ def test_bad_models_refused(tmp_path):
     boom.write_text("raise RuntimeError('no')\n")
     with pytest.raises(ConfigError, match="failed to load"):
         load_model(str(boom))
-    fails = tmp_path / "fails.py"
-    fails.write_text(
+    params = (
         "from dataclasses import dataclass\nfrom twins.base import pfield\n"
         "@dataclass\nclass Params:\n    k: float = pfield(1.0, '1', 0.1, 2.0, 'gain')\n"
-        "def simulate(u, fs, p):\n    raise ZeroDivisionError('x')\n"
     )
+    fails = tmp_path / "fails.py"
+    fails.write_text(params + "def simulate(u, fs, p):\n    raise ZeroDivisionError('x')\n")
     with pytest.raises(DataError, match="simulation failed"):
         load_model(str(fails))().simulate(np.ones(10), 10.0)
-    unknown_start = tmp_path / "start.py"
-    unknown_start.write_text(
-        "from dataclasses import dataclass\nfrom twins.base import pfield\n"
-        "@dataclass\nclass Params:\n    k: float = pfield(1.0, '1', 0.1, 2.0, 'gain')\n"
-        "INITIAL_CONDITION_PARAMS = ('x0',)\ndef simulate(u, fs, p):\n    return p.k * u\n"
-    )
-    with pytest.raises(ConfigError, match="initial-condition parameter 'x0' is not a field"):
-        load_model(str(unknown_start))
-    unknown_start.write_text(unknown_start.read_text().replace("('x0',)", "('k',)\nINPUT_BEFORE = 'warm'"))
-    with pytest.raises(ConfigError, match="INPUT_BEFORE must be 'zero' or 'held', got 'warm'"):
-        load_model(str(unknown_start))
+    declared = tmp_path / "declared.py"
+    for line, message in (
+        ("INITIAL_CONDITION_PARAMS = ('x0',)", "initial-condition parameter 'x0' is not a field"),
+        ("INPUT_BEFORE = 'warm'", "INPUT_BEFORE must be 'zero' or 'held', got 'warm'"),
+    ):
+        declared.write_text(params + line + "\ndef simulate(u, fs, p):\n    return p.k * u\n")
+        with pytest.raises(ConfigError, match=message):
+            load_model(str(declared))
 
 
 def test_cli_model_bad_input_one_line(tmp_path):
