@@ -12,7 +12,8 @@ The shipped twins build on the same catalog entries: the cantilever's ``input_de
 ``thermal_drift``, ``slow_drift`` and ``saturation`` are :func:`specialise`-d from ``input_delay``,
 ``sensor_lowpass``, ``offset_drift``, ``slow_drift`` and ``drive_compression`` (same law, the twin's own field
 names and signature wording; its compiled kernel applies them inside its sub-steps). The sample-level laws are
-those of the cantilever kernel: delay by linear interpolation between samples (zero before the start), the soft
+those of the cantilever kernel: delay by linear interpolation between samples (zero before the start; a model
+that starts at an operating point holds its first input value there), the soft
 limiter v = u/(1 + |u/V_s|^p)^(1/p), the drift D·(1 − e^(−t/τ)) (settling) and r·t + a·sin(2πt/P) + b·(1 − cos(2πt/P))
 (the slow drift: a ramp and a slow cycle) with t = k/fs; the sensor is the 2nd-order
 Butterworth low-pass ω_c²/(s² + √2·ω_c·s + ω_c²) discretised with a first-order hold of the sampled output
