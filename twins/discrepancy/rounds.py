@@ -231,7 +231,7 @@ def _greedy(loop: _Loop, ext: Extension, n_max: int) -> None:
             f"{time.perf_counter() - inp.t_start:.0f} s"
         )
         if not top.significant:
-            if _with_named(loop, ext, ranking, rnd) or joint_step(loop, ext, ranking, rnd, n_max):
+            if _with_named(loop, ext, ranking, rnd, n_eff0) or joint_step(loop, ext, ranking, rnd, n_max):
                 continue
             break
         ext.causes.append(cause_from(ranking, stage, inp.twin, cal.prior, rnd))
@@ -240,10 +240,11 @@ def _greedy(loop: _Loop, ext: Extension, n_max: int) -> None:
         ext.stage = adopt(inp, top.twin, opts)
 
 
-def _with_named(loop: _Loop, ext: Extension, ranking: Ranking, rnd: int) -> bool:
+def _with_named(loop: _Loop, ext: Extension, ranking: Ranking, rnd: int, n_eff0: float) -> bool:
     """A later round's leader that is not significant, refitted jointly with the causes named before it (their
     parameters refitted beside it and the core); True when it then is, and was added to ``ext`` (module docstring).
-    Judged in its round against the better of the stage and the stage refitted the same way without it."""
+    Judged in its round (``n_eff0``: the effective samples of its stage's residual) against the better of the stage
+    and the stage refitted the same way without it."""
     inp, cal, opts, skip = loop.inp, loop.cal, loop.opts, loop.opts.skip
     stage, top = ext.stage, ranking.top
     if not ext.causes or top.retest or top.gain < PAIR_GAIN or top.sse_val >= stage.sse_val:
@@ -272,7 +273,6 @@ def _with_named(loop: _Loop, ext: Extension, ranking: Ranking, rnd: int) -> bool
         tr.ref_sse_val = core_refit_sse(stage, inp.est, inp.val, core_x, opts)
     except TRIAL_ERRORS:
         return False
-    n_eff0 = ft.effective_samples(inp.val.y[skip:] - stage.yhat_val[skip:])
     joint = rank_round(
         [tr] + [t for t in ranking.trials if t is not top], stage, inp.est, inp.val, inp.twin, cal.prior, n_eff0, opts
     )

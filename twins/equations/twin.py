@@ -22,7 +22,7 @@ import numpy as np
 from sysid.data.record import Record
 from sysid.errors import ConfigError
 from twins.base import EffectSpec
-from twins.external.twin import ExternalTwin, _Renamed, external_twin_class
+from twins.external.twin import ExternalTwin, _Renamed, external_twin_class, start_declarations
 from twins.generic_effects import apply_input, apply_output, sensor_lowpass
 from twins.paramfields import param_info, pfield, with_ranges
 
@@ -426,8 +426,7 @@ def equation_twin_class(obj: Any, default_name: str = "model") -> type[ExternalT
         getattr(obj, "UNITS", None),
         doc=inspect.getdoc(obj) or "",
         base=EquationTwin,
-        initial_condition_params=tuple(getattr(obj, "INITIAL_CONDITION_PARAMS", ()) or ()),
-        input_before=str(getattr(obj, "INPUT_BEFORE", "zero")),
+        **start_declarations(obj),
     )
     cls.SPEC = spec
     if spec.source is not None:  # found again from its file, where an FMU ships it (:mod:`.loaded`)

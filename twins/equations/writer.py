@@ -140,11 +140,12 @@ def _section(twin: Any, slots: list[MechanismSlot], generic: list[str], sparse: 
         entries = ", ".join(f'"{s.state}": (None, "{rename[s.fields["level"]]}")' for s in bounds)
         lines.append(f"BOUNDS = {{**globals().get('BOUNDS', {{}}), {entries}}}")
     calib = ", ".join(repr(name) for name, _f in fields if name in spec.calib or name not in spec.user_fields)
-    lines += [f"CALIBRATION_PARAMS = ({calib},)", ""]
+    lines.append(f"CALIBRATION_PARAMS = ({calib},)")
     if type(twin).INITIAL_CONDITION_PARAMS:  # what the model declared, kept
-        lines.insert(-1, f"INITIAL_CONDITION_PARAMS = {tuple(type(twin).INITIAL_CONDITION_PARAMS)!r}")
+        lines.append(f"INITIAL_CONDITION_PARAMS = {tuple(type(twin).INITIAL_CONDITION_PARAMS)!r}")
     if type(twin).INPUT_HELD:
-        lines.insert(-1, 'INPUT_BEFORE = "held"')
+        lines.append('INPUT_BEFORE = "held"')
+    lines.append("")
     written = [dataclasses.replace(s, fields={k: rename[f] for k, f in s.fields.items()}) for s in slots]
     # an offset and a crosstalk of the input as given act sample by sample: written into output() (an FMU steps
     # them); other effects around the equations act on the whole record (input_map / output_map)

@@ -37,7 +37,7 @@ import numpy as np
 from sysid.errors import ConfigError
 from twins.base import EffectSpec
 
-from .twin import ExternalTwin, external_twin_class
+from .twin import ExternalTwin, external_twin_class, start_declarations
 
 __all__ = ["load_model", "model_twin_class"]
 
@@ -114,8 +114,7 @@ def model_twin_class(obj: Any, default_name: str = "model") -> type[ExternalTwin
         calib,
         getattr(obj, "UNITS", None),
         doc=inspect.getdoc(obj) or "",
-        initial_condition_params=tuple(getattr(obj, "INITIAL_CONDITION_PARAMS", ()) or ()),
-        input_before=str(getattr(obj, "INPUT_BEFORE", "zero")),
+        **start_declarations(obj),
     )
 
 

@@ -113,6 +113,15 @@ def _generic_field(name: str, field_name: str, units: Mapping[str, str]) -> tupl
     return field_name, float, pfield(g.default, unit, g.lo, g.hi, g.doc, source="twins.generic_effects")
 
 
+def start_declarations(obj: Any) -> dict[str, Any]:
+    """The keywords of :func:`external_twin_class` that a model file (or object) declares about the state its records
+    start in: ``INITIAL_CONDITION_PARAMS`` and ``INPUT_BEFORE`` (defaults: none, ``"zero"``)."""
+    return {
+        "initial_condition_params": tuple(getattr(obj, "INITIAL_CONDITION_PARAMS", ()) or ()),
+        "input_before": str(getattr(obj, "INPUT_BEFORE", "zero")),
+    }
+
+
 def external_twin_class(
     name: str,
     core: Core,
