@@ -180,3 +180,51 @@ def test_periodic_start_matches_the_steady_state_sine_response(tmp_path):
     exact = g * abs(h) * np.sin(w * t + np.angle(h))
     assert np.max(np.abs(twin.simulate_periodic(u, fs) - exact)) < 1e-4 * g
     assert np.max(np.abs(twin.simulate(u, fs) - exact)) > 0.1 * g
+
+
+TANK = '''"""One tank by Torricelli's law, filled by a pump."""
+import math
+from dataclasses import dataclass
+
+from twins.base import pfield
+
+STATES = {"h": ("level", "m")}
+INPUT = "hold"
+
+
+@dataclass
+class Params:
+    k1: float = pfield(0.2, "m^0.5/s", 1e-3, 1.0, "outflow coefficient")
+    k4: float = pfield(0.1, "m/(V s)", 1e-3, 1.0, "pump gain")
+
+
+def rates(x, u, p):
+    return (p.k4 * u - p.k1 * math.sqrt(max(x[0], 0.0)),)
+
+
+def output(x, u, p):
+    return x[0]
+'''
+
+
+@pytest.mark.parametrize("c, beta", [(0.05, 1.0), (-0.02, 0.8), (0.08, 0.0)])
+def test_power_outflow_settles_where_the_flows_balance(tmp_path, c, beta):
+    """``power_outflow@h`` adds −c·h^β to the level's rate: under a constant pump the level settles where
+    k4·u = k1·√h + c·h^β (the root by brentq), and the model ``--save-model`` writes with it simulates the same."""
+    from scipy.optimize import brentq
+
+    from twins.equations.writer import write_model
+
+    twin = load_model(str(_model(tmp_path, TANK, "tank")))()
+    ext = twin.with_effects(set(twin.effects) | {"power_outflow@h"}).with_params(
+        power_outflow_h_c=c, power_outflow_h_beta=beta
+    )
+    u = np.full(4000, 3.0)
+    y = ext.simulate(u, 1.0)
+    level = brentq(lambda h: 0.1 * 3.0 - 0.2 * math.sqrt(h) - c * h**beta, 1e-9, 100.0)
+    assert y[-1] == pytest.approx(level, rel=1e-6)
+    assert abs(y[-1] - 2.25) > 0.05  # the model's own level, 2.25 m, is not where the extended one settles
+    out = write_model(ext, tmp_path / "tank_extended.py")
+    assert "laws.power_outflow(" in out.read_text()
+    again = load_model(str(out))()
+    assert np.allclose(again.simulate(u, 1.0), y, rtol=0, atol=1e-9)

@@ -34,7 +34,8 @@ class DiagnoseOptions:
       - ``starts``: above 1, every candidate gets the full refit from ``starts`` points over its ranges, for effects
         that pay only once the core moves with them; about ``starts`` × candidates fits a round.
       - ``pairs``: try a leader that is not significant alone jointly with each other candidate (:mod:`.pairs`);
-        None: for a model given by its equations, a leader that lowers the validation NRMSE by 5 % or more.
+        None: for a model given by its equations, a leader that lowers the validation NRMSE by 5 % or more; True:
+        every such leader, and a later one refitted with the causes named before it whatever its gain alone.
       - ``progress``: a callable taking one message per step, or None; ``on_round``: one line per finished round
     (trial count, leader, elapsed time), or None.
       - ``hybrid``: with an ``unexplained`` verdict, fit the hybrid twin (:mod:`.hybrid`) and report its gain.

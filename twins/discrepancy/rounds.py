@@ -24,9 +24,10 @@ is revisited.
 parameters at the values fitted without the new one, and an earlier cause fitted alone takes up part of the one
 still missing (a thermal drift fitted before creep on steps: its size 13 % and its time constant 34 % short), so
 the new one gains too little for its F-test (creep: 41 %, p 0.03). A leader that is not significant but gains at
-least :data:`.pairs.PAIR_GAIN`, while the residual is still far above the noise (the ``unexplained`` verdict's rule),
-is refitted with the earlier causes' parameters beside it and the core, and judged in its round against the better
-of the stage and the stage refitted the same way without it; significant, it is named.
+least :data:`.pairs.PAIR_GAIN` (any gain with ``DiagnoseOptions.pairs`` True, as for the pairs' step), while the
+residual is still far above the noise (the ``unexplained`` verdict's rule), is refitted with the earlier causes'
+parameters beside it and the core, and judged in its round against the better of the stage and the stage refitted
+the same way without it; significant, it is named.
 """
 
 from __future__ import annotations
@@ -247,7 +248,8 @@ def _with_named(loop: _Loop, ext: Extension, ranking: Ranking, rnd: int, n_eff0:
     and the stage refitted the same way without it."""
     inp, cal, opts, skip = loop.inp, loop.cal, loop.opts, loop.opts.skip
     stage, top = ext.stage, ranking.top
-    if not ext.causes or top.retest or top.gain < PAIR_GAIN or top.sse_val >= stage.sse_val:
+    small = top.gain < PAIR_GAIN and opts.pairs is not True  # DiagnoseOptions.pairs True: every leader
+    if not ext.causes or top.retest or small or top.sse_val >= stage.sse_val:
         return False
     if not beyond_noise(inp, stage, skip):  # what is left is noise: no parameters to trade for a second name
         return False

@@ -75,7 +75,9 @@ class Mechanism:
     spilling into the state it flows to). ``added_states``: states the mechanism adds (a hysteresis). ``nests``:
     kinds it contains as a special case (Stribeck friction contains Coulomb friction); ``nest_contrast``: weights
     (key, w) of the parameters' combination that is 0 in that special case (Stribeck: fs = 0; a weight 0 lists
-    a parameter only for the contrast's scale, :mod:`twins.discrepancy.nesting`)."""
+    a parameter only for the contrast's scale, :mod:`twins.discrepancy.nesting`). ``refit_core``: the term changes
+    what the model's own parameters stand for (a power-law outflow bends the model's outflow law), so its trials
+    refit the core with it, as a restoring force's, a hysteresis's and a bound's do."""
 
     kind: str
     title: str
@@ -89,6 +91,7 @@ class Mechanism:
     added_states: int = 0
     nests: tuple[str, ...] = ()
     nest_contrast: tuple[tuple[str, float], ...] = ()
+    refit_core: bool = False
 
 
 def _pos(lo: float, hi: float) -> Callable[[Scales], tuple[float, float]]:
@@ -278,6 +281,29 @@ MECHANISMS: dict[str, Mechanism] = {
                 ),
             ),
             "leak",
+        ),
+        Mechanism(
+            "power_outflow",
+            "power-law outflow",
+            "an outflow whose flow follows the stored quantity to a power β other than the model's law (a partly "
+            "laminar or throttled outlet, a pipe whose losses change with the flow); c < 0 takes back part of the "
+            "model's own outflow",
+            "d{x}/dt −= c·{x}^β",
+            "residual growing with the level where the model's outflow law is too steep or too flat",
+            ("level", "pressure"),
+            "self",
+            (
+                MParam(
+                    "c",
+                    "outflow coefficient",
+                    "{a}/({x})^β",
+                    0.0,
+                    lambda s: (-s.rate_x / min(1.0, s.x**1.5), s.rate_x / min(1.0, s.x**1.5)),
+                ),
+                MParam("beta", "exponent of the outflow law", "1", 0.5, lambda s: (0.0, 1.5)),
+            ),
+            "leak",
+            refit_core=True,
         ),
         Mechanism(
             "overflow",

@@ -50,6 +50,7 @@ KIND = {
     "dead_zone": 14,
     "input_polynomial": 15,
     "backlash": 16,
+    "power_outflow": 17,
 }
 #: play operators of the Prandtl–Ishlinskii mechanism (thresholds r·(q + ½)/N_PLAY, equal weights)
 N_PLAY = 4
@@ -94,6 +95,8 @@ def _mech_rates(xa, mech, out):
             out[i] -= a * xa[i]
         elif kind == 12:
             out[i] -= a * math.sqrt(max(xa[i], 0.0))
+        elif kind == 17:
+            out[i] -= laws.power_outflow(xa[i], a, b)
     for m in range(mech.shape[0]):  # bounds last: they move what is left of the rate
         if int(mech[m, 0]) == 13:
             i, j = int(mech[m, 1]), int(mech[m, 2])

@@ -31,6 +31,7 @@ __all__ = [
     "clearance_spring",
     "bouc_wen_rate",
     "play_rate",
+    "power_outflow",
     "dead_zone",
     "input_polynomial",
     "backlash",
@@ -106,6 +107,13 @@ def play_rate(xdot: float, x: float, p: float, r: float) -> float:
     if (xdot > 0.0 and x - p >= r) or (xdot < 0.0 and x - p <= -r):
         return xdot
     return 0.0
+
+
+@njit(cache=True)
+def power_outflow(x: float, c: float, beta: float) -> float:
+    """An outflow growing as a power of the stored quantity: ``c·x^β`` for x > 0, 0 otherwise (β = ½ is
+    Torricelli's orifice, β = 1 a linear, laminar leak; c < 0 takes back part of the model's own outflow)."""
+    return c * x**beta if x > 0.0 else 0.0
 
 
 @njit(cache=True)

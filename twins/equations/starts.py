@@ -105,6 +105,8 @@ def _bases(
         return [("c", x, -1.0)]
     if kind == "orifice_leak":
         return [("c", np.sqrt(np.maximum(x, 0.0)), -1.0)]
+    if kind == "power_outflow":
+        return [("c", np.where(x > 0.0, np.maximum(x, 0.0) ** shape["beta"], 0.0), -1.0)]
     return []
 
 
@@ -114,6 +116,7 @@ SHAPES: dict[str, tuple[str, ...]] = {
     "clearance_spring": ("gap",),
     "bouc_wen": ("b1", "b2"),
     "prandtl_ishlinskii": ("r",),
+    "power_outflow": ("beta",),
 }
 #: kinds whose term also acts as a linear stiffness: their sizes are solved beside a stiffness column (a nuisance)
 _STIFFENING = ("bouc_wen", "prandtl_ishlinskii", "cubic_spring", "quadratic_spring", "clearance_spring")

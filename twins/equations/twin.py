@@ -103,9 +103,10 @@ class EquationTwin(ExternalTwin):
         parameters stand for (a hook of the diagnosis, which refits from each): a restoring force or a hysteresis
         adds stiffness the calibration has taken up (its start from the equation residual); a bound caps a flow the
         calibration has bent to (bounds at :data:`BOUND_STARTS` of the state's range, the spill at the middle of its
-        range). Empty for every other effect: rivals for the same residual are refitted alike."""
+        range); a mechanism declared ``refit_core`` (a power-law outflow) from its equation-residual start. Empty for
+        every other effect: rivals for the same residual are refitted alike."""
         slot = next((s for s in self.SPEC.slots if s.effect == effect), None)
-        if slot is None or slot.mech.family not in ("restoring", "hysteresis", "bound"):
+        if slot is None or not (slot.mech.family in ("restoring", "hysteresis", "bound") or slot.mech.refit_core):
             return []
         tw = self.with_effects(set(self.effects) | {effect})
         if slot.mech.family != "bound":

@@ -211,6 +211,7 @@ def _rates_code(spec: Any, slots: list[MechanismSlot], names: list[str], sparse:
             "cubic_damping": f"laws.cubic_damping({xi}, p.{f.get('c3')})",
             "leak": f"p.{f.get('c')} * {xi}",
             "orifice_leak": f"p.{f.get('c')} * math.sqrt(max({xi}, 0.0))",
+            "power_outflow": f"laws.power_outflow({xi}, p.{f.get('c')}, p.{f.get('beta')})",
         }
         if k in law:
             lines.append(f"    {d[i]} -= {law[k]}  # {s.mech.title}")
