@@ -45,6 +45,7 @@ CAUSE_KEYS = (
     "joint_with",
     "joint_with_named",
     "replaces",
+    "above_nyquist",
 )
 
 

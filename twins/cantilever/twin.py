@@ -127,6 +127,13 @@ class CantileverTwin(Twin):
         p = self.params
         return p.creep_tau_min_s * 10.0 ** np.arange(int(p.creep_elements))
 
+    def effect_frequency_hz(self, effect: str, params: dict[str, float]) -> float | None:
+        """The frequency [Hz] an effect stands for (:mod:`twins.discrepancy.band`): the second mode's f₂ =
+        mode_ratio·f₁; None for the others (their parameters in Hz are used)."""
+        if effect != "second_mode":
+            return None
+        return float(params.get("mode_ratio", self.params.mode_ratio)) * float(self.params.f1_hz)
+
     def linear_system(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Continuous (A, B, C) of D(s) followed by the sensor low-pass; states [x₁, ẋ₁, x₂, ẋ₂, s, ṡ]."""
         p = self.params

@@ -21,7 +21,7 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["FEATURES", "COEFFICIENTS", "features", "calibrate_causes"]
+__all__ = ["FEATURES", "COEFFICIENTS", "BAND_CAP", "features", "calibrate_causes"]
 
 #: the covariates, in the order of :data:`COEFFICIENTS` (after the intercept)
 FEATURES = ("logit_score", "log10_gain", "later_round", "quantization", "log10_excess")
@@ -31,6 +31,11 @@ FEATURES = ("logit_score", "log10_gain", "later_round", "quantization", "log10_e
 #: above the noise is less often right, though coloured noise raises R for right names too
 #: (docs/discrepancy-notes.md).
 COEFFICIENTS: tuple[float, ...] | None = (1.898505, 0.458025, 1.549428, -1.564644, 0.898452, -0.719004)
+
+
+#: the most a cause whose frequency lies above the records' Nyquist frequency may state (:mod:`.band`: 6 of 23 such
+#: causes right on the benchmark)
+BAND_CAP = 0.4
 
 
 def features(cause: dict[str, Any], excess_ratio: float | None = None) -> np.ndarray:
@@ -58,10 +63,13 @@ def _probability(x: np.ndarray, coef: Sequence[float]) -> float:
 
 def calibrate_causes(causes: list[dict[str, Any]], excess_ratio: float | None = None) -> None:
     """Replace each catalog cause's ``confidence`` by the calibrated probability (the score kept as ``score``),
-    in place; the ``unexplained`` entry keeps its own. ``excess_ratio``: the case's final R (:func:`features`)."""
+    at most :data:`BAND_CAP` for one marked ``above_nyquist`` (:mod:`.band`), in place; the ``unexplained`` entry
+    keeps its own. ``excess_ratio``: the case's final R (:func:`features`)."""
     for c in causes:
         if c["effect"] == "unexplained":
             continue
         c.setdefault("score", float(c["confidence"]))
         if COEFFICIENTS is not None:
             c["confidence"] = _probability(features(c, excess_ratio), COEFFICIENTS)
+        if c.get("above_nyquist"):
+            c["confidence"] = min(float(c["confidence"]), BAND_CAP)

@@ -45,6 +45,7 @@ from . import features as ft
 from . import ranges as rg
 from . import realdata
 from . import unexplained as unx
+from .band import mark_above_nyquist
 from .candidates import adopt
 from .confidence import calibrate_causes
 from .fields import core_for, numeric_fields, quant_params
@@ -324,6 +325,7 @@ def _conclude(inp: _Inputs, cal: _Calibrated, base: Stage, ext: Extension, opts:
     verdict, beyond, at_bound = realdata.final_verdict(
         inp.val, stage.yhat_val, causes, stage.twin, cal.info, opts.skip, inp.noise
     )
+    mark_above_nyquist(causes, stage.twin, max(inp.est.fs, inp.val.fs))
     calibrate_causes(causes, beyond.get("excess_ratio"))
     causes.sort(key=lambda c: -float(c["confidence"]))  # strongest first (stable: round order among equals)
     opts.say(f"verdict {verdict}")

@@ -1,0 +1,63 @@
+"""A named cause whose frequency lies above the records' Nyquist frequency (:mod:`twins.discrepancy.band`): marked,
+and its confidence capped at ``BAND_CAP`` (< ½), since within the band it acts only as its low-frequency form.
+
+The rule on the cantilever's second mode (f₂ = mode_ratio·f₁) and a sensor's corner in Hz, then two cases of the
+diagnosis benchmark that named such a cause with confidence ≥ ½ (docs/diagnosis-benchmark.md): case 19, a lag of
+the drive before the piezo stage (outside its catalog) named `sensor_lowpass` at 1.5× the Nyquist frequency
+(confidence 0.81); case 91, crosstalk of the drive into the cantilever's sensor (outside its catalog) named
+`second_mode` at 4.4 kHz, 2.6× the Nyquist frequency of 3.4 kHz sampling (0.50).
+"""
+
+from __future__ import annotations
+
+import pytest
+
+from benchmarks.diagnosis_bench.cases import draw_case
+from benchmarks.diagnosis_bench.run import MAX_ROUNDS
+from benchmarks.diagnosis_bench.truth import make_records
+from twins.discrepancy import diagnose
+from twins.discrepancy.band import characteristic_hz, mark_above_nyquist
+from twins.discrepancy.confidence import BAND_CAP, calibrate_causes
+from twins.registry import get_twin
+
+
+def _cause(effect: str, params: dict[str, float]) -> dict:
+    return {
+        "effect": effect,
+        "confidence": 0.9,
+        "score": 0.99,
+        "params": params,
+        "evidence": "fits",
+        "nrmse_val_before": 0.2,
+        "nrmse_val_after": 0.05,
+        "round": 1,
+    }
+
+
+@pytest.mark.parametrize("fs, marked", [(20e3, False), (8e3, True), (2e3, True)])
+def test_a_second_mode_above_the_nyquist_frequency_is_marked_and_capped(fs, marked):
+    twin = get_twin("cantilever")()
+    f2 = twin.params.mode_ratio * twin.params.f1_hz  # 4.4 kHz
+    assert characteristic_hz(twin, "second_mode", {"mode2_share": 0.1}) == pytest.approx(f2)
+    causes = [_cause("second_mode", {"mode2_share": 0.1}), _cause("sensor_lowpass", {"sensor_bandwidth_hz": 500.0})]
+    mark_above_nyquist(causes, twin, fs)
+    calibrate_causes(causes, 1.0)
+    assert bool(causes[0].get("above_nyquist")) is marked
+    assert (causes[0]["confidence"] <= BAND_CAP) is marked
+    assert not causes[1].get("above_nyquist") and causes[1]["confidence"] > BAND_CAP  # its 500 Hz corner is seen
+    if marked:
+        assert causes[0]["above_nyquist"] == {"hz": pytest.approx(f2), "nyquist_hz": fs / 2}
+        assert "Nyquist" in causes[0]["evidence"]
+
+
+@pytest.mark.parametrize(
+    "seed, mechanism, effect", [(19, "input_lag", "sensor_lowpass"), (91, "crosstalk", "second_mode")]
+)
+def test_a_cause_named_above_the_band_is_not_stated_confidently(seed, mechanism, effect):
+    case = draw_case(seed)
+    assert case.mechanism == mechanism
+    b = make_records(case)
+    out = diagnose(b["twin"], b["est"], b["val"], max_rounds=MAX_ROUNDS, threads=1)
+    cause = next(c for c in out["causes"] if c["effect"] == effect)
+    assert cause["above_nyquist"]["hz"] > cause["above_nyquist"]["nyquist_hz"] == pytest.approx(case.fs / 2)
+    assert max(c["confidence"] for c in out["causes"] if c["effect"] != "unexplained") <= BAND_CAP
