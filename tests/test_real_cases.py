@@ -44,8 +44,8 @@ def test_bouc_wen_multisine_test_is_a_steady_state_period():
 
 @pytest.mark.slow
 def test_cascaded_tanks_bounds_named_and_official_test_within_0_30_v():
-    """Issue 48: the Torricelli model with no overflow written → the upper tank's bound named by the diagnosis
-    (with the lower tank's), official test ≤ 0.30 V (0.685 V as given)."""
+    """The Torricelli model with no overflow written → the upper tank's bound named by the diagnosis (with the
+    lower tank's), official test ≤ 0.30 V (0.685 V as given)."""
     res = run_case("cascaded-tanks", progress=False)
     assert {"overflow@x1", "overflow@x2"} <= set(res["named"]), res
     assert res["test_rmse_after"]["test-official"] <= 0.30 < 0.6 < res["test_rmse_before"]["test-official"], res

@@ -24,10 +24,9 @@ is revisited.
 parameters at the values fitted without the new one, and an earlier cause fitted alone takes up part of the one
 still missing (a thermal drift fitted before creep on steps: its size 13 % and its time constant 34 % short), so
 the new one gains too little for its F-test (creep: 41 %, p 0.03). A leader that is not significant but gains at
-least :data:`.pairs.PAIR_GAIN` (any gain with ``DiagnoseOptions.pairs`` True, as for the pairs' step), while the
-residual is still far above the noise (the ``unexplained`` verdict's rule), is refitted with the earlier causes'
-parameters beside it and the core, and judged in its round against the better of the stage and the stage refitted
-the same way without it; significant, it is named.
+least :data:`.pairs.PAIR_GAIN` (any gain with ``pairs`` True), while the residual is still far above the noise
+(the ``unexplained`` verdict's rule), is refitted with the earlier causes' parameters beside it and the core, and
+judged against the better of the stage and the stage refitted the same way without it; significant, it is named.
 """
 
 from __future__ import annotations
