@@ -180,19 +180,26 @@ N_TANKS = 1200
 TANKS_TRUE = {"k1": 0.1, "k2": 0.09, "k3": 0.08, "k4": 0.15}
 
 
-def tanks_case(seed: int) -> tuple[Record, Record, dict[str, float]]:
+def tanks_case(seed: int, hidden: str = "overflow") -> tuple[Record, Record, dict[str, float]]:
     """Estimation and validation records of two cascaded tanks whose upper tank overflows at a level drawn from
     the seed, half of the spill reaching the lower tank (``level``, ``share``: the spill per unit of the cut
-    inflow, in the lower tank's rate)."""
-    rng = np.random.default_rng(seed)
+    inflow, in the lower tank's rate); ``hidden="power_outflow"``: no overflow, the lower tank drained beside its
+    orifice by a weir-like outflow c·x₂^β (β 1.1–1.4; at 10 cm 20–40 % of the orifice's flow)."""
+    rng = np.random.default_rng(seed if hidden == "overflow" else 1000 + seed)
     k1, k2, k3, k4 = (TANKS_TRUE[k] for k in ("k1", "k2", "k3", "k4"))
-    level = float(rng.uniform(8.0, 12.0))
-    share = 0.5 * k2 / k1  # half of the spill, in the lower tank's units
+    if hidden == "overflow":
+        level = float(rng.uniform(8.0, 12.0))
+        share = 0.5 * k2 / k1  # half of the spill, in the lower tank's units
+        beta = c_out = 0.0
+    else:
+        level, share = math.inf, 0.0
+        beta = float(rng.uniform(1.1, 1.4))
+        c_out = float(rng.uniform(0.05, 0.1)) / 10.0**beta
 
     def f(x: np.ndarray, u: float) -> np.ndarray:
         q1 = math.sqrt(max(x[0], 0.0))
         d1 = k4 * u - k1 * q1
-        d2 = k2 * q1 - k3 * math.sqrt(max(x[1], 0.0))
+        d2 = k2 * q1 - k3 * math.sqrt(max(x[1], 0.0)) - (c_out * x[1] ** beta if x[1] > 0 else 0.0)
         if x[0] >= level and d1 > 0:
             d2 += share * d1
             d1 = 0.0
@@ -221,4 +228,6 @@ def tanks_case(seed: int) -> tuple[Record, Record, dict[str, float]]:
                 x[0] = min(x[0], level)
         y = X[:, 1] + 0.02 * rng.standard_normal(N_TANKS)
         recs.append(Record(u=u, y=y, fs=FS_TANKS, units={"u": "V", "y": "cm"}, source=f"tanks-{seed}-{part}"))
-    return recs[0], recs[1], {"level": level, "share": share}
+    if hidden == "overflow":
+        return recs[0], recs[1], {"level": level, "share": share}
+    return recs[0], recs[1], {"c": c_out, "beta": beta}

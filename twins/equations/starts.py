@@ -27,7 +27,7 @@ from twins.paramfields import param_info
 
 from .model import MechanismSlot
 
-__all__ = ["start_values", "direct_start", "GRID"]
+__all__ = ["start_values", "start_shapes", "direct_start", "GRID"]
 
 #: points of the grid over each shape parameter
 GRID = 7
@@ -181,10 +181,46 @@ def start_values(
 ) -> dict[str, float] | None:
     """The start of ``slot``'s parameters (module docstring): ``X``/``y0`` the model's states and output on ``rec``
     without it, ``sensitivities(phi, rows)`` the output's sensitivity to each column of ``phi`` added to the rate
-    of state ``rows[c]`` (:mod:`.tangent`)."""
+    of state ``rows[c]`` (:mod:`.tangent`). :func:`start_shapes` keeps the best of several shapes."""
+    found = _linearised(slot, params, X, y0, rec, skip, sensitivities)
+    return found[0][1] if found else None
+
+
+def start_shapes(
+    slot: MechanismSlot,
+    params: Any,
+    X: np.ndarray,
+    y0: np.ndarray,
+    rec: Record,
+    skip: int,
+    sensitivities: Callable[[np.ndarray, np.ndarray], np.ndarray],
+    keep: int = 3,
+) -> list[dict[str, float]]:
+    """Starts spread over the shape grid: the grid's points cut into ``keep`` runs of neighbours, the best
+    linearised start of each run (best first). A term refitted with the core is refitted from shapes apart, not
+    only from the one its linearisation picks: the calibrated core has taken up part of the term (a steeper
+    outflow beside the model's Torricelli outflow raises its coefficient), and the residual it leaves favours
+    the shapes the core can trade against."""
+    found = _linearised(slot, params, X, y0, rec, skip, sensitivities, ordered=False)
+    runs = [r for r in np.array_split(np.arange(len(found)), keep) if r.size]
+    picked = [min((found[i] for i in run), key=lambda t: t[0]) for run in runs]
+    return [vals for _, vals in sorted(picked, key=lambda t: t[0])]
+
+
+def _linearised(
+    slot: MechanismSlot,
+    params: Any,
+    X: np.ndarray,
+    y0: np.ndarray,
+    rec: Record,
+    skip: int,
+    sensitivities: Callable[[np.ndarray, np.ndarray], np.ndarray],
+    ordered: bool = True,
+) -> list[tuple[float, dict[str, float]]]:
+    """(linearised estimation cost, start) of every shape, best first (``ordered``) or in the grid's order."""
     kind = slot.mech.kind
     if kind not in _LINEAR_KINDS:
-        return None
+        return []
     info = param_info(type(params))
     rng = {k: info[f].bounds() for k, f in slot.fields.items()}
     r = (np.asarray(rec.output, float) - y0)[skip:]
@@ -200,13 +236,17 @@ def start_values(
                 cols.append(sign * phi)
                 where.append((g, key, sign))
     if not cols:
-        return None
+        return []
     if kind in _STIFFENING:  # the term adds stiffness too, which the calibrated core has already taken up
         cols.append(-X[:, slot.acts])
         where.append((-1, _STIFFNESS, -1.0))
+    if kind == "power_outflow":  # the calibrated core has taken up part of it in its own outflow (orifice, leak)
+        for j, law in enumerate((np.sqrt(np.maximum(X[:, slot.acts], 0.0)), X[:, slot.acts])):
+            cols.append(-law)
+            where.append((-1, f"{_STIFFNESS}{j}", -1.0))
     S = sensitivities(np.column_stack(cols), np.full(len(cols), slot.enters))[skip:]
     nuisance = [c for c, w in enumerate(where) if w[0] < 0 and np.all(np.isfinite(S[:, c]))]
-    best: tuple[float, dict[str, float]] | None = None
+    found: list[tuple[float, dict[str, float]]] = []
     for g, shape in enumerate(points):
         idx = [c for c, w in enumerate(where) if w[0] == g and np.all(np.isfinite(S[:, c])) and np.any(S[:, c] != 0)]
         if not idx:
@@ -218,9 +258,8 @@ def start_values(
         with np.errstate(over="ignore", invalid="ignore"):  # a size far off the range: an inf cost, skipped
             cost = float(np.sum((r - A @ theta) ** 2))
         theta = theta[: len(keys)]
-        if math.isfinite(cost) and (best is None or cost < best[0]):
-            best = (cost, {**shape, **dict(zip(keys, theta.tolist()))})
-    if best is None:
-        return None
-    vals = best[1]
-    return {f: float(vals.get(k, getattr(params, f))) for k, f in slot.fields.items()}
+        if math.isfinite(cost):
+            found.append((cost, {**shape, **dict(zip(keys, theta.tolist()))}))
+    if ordered:
+        found.sort(key=lambda t: t[0])
+    return [(cost, {f: float(vals.get(k, getattr(params, f))) for k, f in slot.fields.items()}) for cost, vals in found]

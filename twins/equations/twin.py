@@ -28,7 +28,7 @@ from twins.paramfields import param_info, pfield, with_ranges
 
 from .catalog import Scales, param_ranges, units_of
 from .model import SUBSTEPS_FIELD, EquationSpec, MechanismSlot, digest
-from .starts import direct_start, start_values
+from .starts import direct_start, start_shapes, start_values
 
 __all__ = ["EquationTwin", "equation_twin_class", "choose_substeps", "scales_of"]
 
@@ -81,13 +81,22 @@ class EquationTwin(ExternalTwin):
     def start_values(self, effect: str, est: Record, skip: int = 0) -> dict[str, float] | None:
         """Starting values of a mechanism's parameters from the equation residual (:mod:`.starts`), for the
         diagnosis's trials; None for an effect that is not a mechanism or that the residual cannot size."""
+        found = self._starts(effect, est, skip, spread=False)
+        return found[0] if found else None
+
+    def _starts(self, effect: str, est: Record, skip: int, spread: bool) -> list[dict[str, float]]:
+        """The start of ``effect`` (:meth:`start_values`), or with ``spread`` the starts of shapes spread over
+        its grid (:func:`.starts.start_shapes`); empty where there is none."""
         slot = next((s for s in self.SPEC.slots if s.effect == effect), None)
         if slot is None:
-            return None
+            return []
         base = self.with_effects(self.effects - {effect})
         y0, X = base._baseline(est)
         if not (np.all(np.isfinite(y0)) and np.all(np.isfinite(X))):
-            return None
+            return []
+        sens = lambda phi, rows: base.sensitivity(est, phi, rows)  # noqa: E731 — one use, in either branch
+        if spread:
+            return start_shapes(slot, self.params, X, y0, est, skip, sens)
         if slot.mech.kind in ("overflow", "dead_zone", "backlash", "input_polynomial"):
 
             def run(vals: dict[str, Any]) -> np.ndarray:
@@ -95,20 +104,24 @@ class EquationTwin(ExternalTwin):
                     return base.run(vals["_u"], est.fs)[0]
                 return self.with_params(**vals).run(est.u, est.fs)[0]
 
-            return direct_start(slot, self.params, y0, est, skip, run)
-        return start_values(slot, self.params, X, y0, est, skip, lambda phi, rows: base.sensitivity(est, phi, rows))
+            start = direct_start(slot, self.params, y0, est, skip, run)
+        else:
+            start = start_values(slot, self.params, X, y0, est, skip, sens)
+        return [start] if start else []
 
     def core_starts(self, effect: str, est: Record, skip: int = 0) -> list[dict[str, float]]:
         """Starts of a refit of ``effect`` together with the core, for a mechanism that changes what the core's
         parameters stand for (a hook of the diagnosis, which refits from each): a restoring force or a hysteresis
         adds stiffness the calibration has taken up (its start from the equation residual); a bound caps a flow the
         calibration has bent to (bounds at :data:`BOUND_STARTS` of the state's range, the spill at the middle of its
-        range); a mechanism declared ``refit_core`` (a power-law outflow) from its equation-residual start. Empty for
-        every other effect: rivals for the same residual are refitted alike."""
+        range); a mechanism declared ``refit_core`` (a power-law outflow) from the equation-residual starts of its
+        three best shapes. Empty for every other effect: rivals for the same residual are refitted alike."""
         slot = next((s for s in self.SPEC.slots if s.effect == effect), None)
         if slot is None or not (slot.mech.family in ("restoring", "hysteresis", "bound") or slot.mech.refit_core):
             return []
         tw = self.with_effects(set(self.effects) | {effect})
+        if slot.mech.refit_core:
+            return tw._starts(effect, est, skip, spread=True)
         if slot.mech.family != "bound":
             start = tw.start_values(effect, est, skip)
             return [start] if start else []
