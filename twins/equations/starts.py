@@ -27,7 +27,7 @@ from twins.paramfields import param_info
 
 from .model import MechanismSlot
 
-__all__ = ["start_values", "start_shapes", "direct_start", "GRID"]
+__all__ = ["start_values", "best_start", "spread_starts", "direct_start", "GRID"]
 
 #: points of the grid over each shape parameter
 GRID = 7
@@ -170,6 +170,22 @@ def direct_start(
     return None if best is None else best[1]
 
 
+def best_start(found: list[tuple[float, dict[str, float]]]) -> dict[str, float] | None:
+    """The start of the shape whose linearised fit is best (:func:`start_values`' list), or None."""
+    return min(found, key=lambda t: t[0])[1] if found else None
+
+
+def spread_starts(found: list[tuple[float, dict[str, float]]], keep: int = 3) -> list[dict[str, float]]:
+    """Starts spread over the shape grid (:func:`start_values`' list, in the grid's order): the grid's points cut
+    into ``keep`` runs of neighbours, the best linearised start of each run, best first. A term refitted with the
+    core is refitted from shapes apart, not only from the one its linearisation picks: the calibrated core has
+    taken up part of the term (a steeper outflow beside the model's Torricelli outflow raises its coefficient), and
+    the residual it leaves favours the shapes the core can trade against."""
+    runs = [r for r in np.array_split(np.arange(len(found)), keep) if r.size]
+    picked = [min((found[i] for i in run), key=lambda t: t[0]) for run in runs]
+    return [vals for _, vals in sorted(picked, key=lambda t: t[0])]
+
+
 def start_values(
     slot: MechanismSlot,
     params: Any,
@@ -178,46 +194,11 @@ def start_values(
     rec: Record,
     skip: int,
     sensitivities: Callable[[np.ndarray, np.ndarray], np.ndarray],
-) -> dict[str, float] | None:
-    """The start of ``slot``'s parameters (module docstring): ``X``/``y0`` the model's states and output on ``rec``
-    without it, ``sensitivities(phi, rows)`` the output's sensitivity to each column of ``phi`` added to the rate
-    of state ``rows[c]`` (:mod:`.tangent`). :func:`start_shapes` keeps the best of several shapes."""
-    found = _linearised(slot, params, X, y0, rec, skip, sensitivities)
-    return found[0][1] if found else None
-
-
-def start_shapes(
-    slot: MechanismSlot,
-    params: Any,
-    X: np.ndarray,
-    y0: np.ndarray,
-    rec: Record,
-    skip: int,
-    sensitivities: Callable[[np.ndarray, np.ndarray], np.ndarray],
-    keep: int = 3,
-) -> list[dict[str, float]]:
-    """Starts spread over the shape grid: the grid's points cut into ``keep`` runs of neighbours, the best
-    linearised start of each run (best first). A term refitted with the core is refitted from shapes apart, not
-    only from the one its linearisation picks: the calibrated core has taken up part of the term (a steeper
-    outflow beside the model's Torricelli outflow raises its coefficient), and the residual it leaves favours
-    the shapes the core can trade against."""
-    found = _linearised(slot, params, X, y0, rec, skip, sensitivities, ordered=False)
-    runs = [r for r in np.array_split(np.arange(len(found)), keep) if r.size]
-    picked = [min((found[i] for i in run), key=lambda t: t[0]) for run in runs]
-    return [vals for _, vals in sorted(picked, key=lambda t: t[0])]
-
-
-def _linearised(
-    slot: MechanismSlot,
-    params: Any,
-    X: np.ndarray,
-    y0: np.ndarray,
-    rec: Record,
-    skip: int,
-    sensitivities: Callable[[np.ndarray, np.ndarray], np.ndarray],
-    ordered: bool = True,
 ) -> list[tuple[float, dict[str, float]]]:
-    """(linearised estimation cost, start) of every shape, best first (``ordered``) or in the grid's order."""
+    """(linearised estimation cost, start) of ``slot``'s parameters for every shape of the grid, in the grid's order
+    (module docstring; :func:`best_start`, :func:`spread_starts`): ``X``/``y0`` the model's states and output on
+    ``rec`` without it, ``sensitivities(phi, rows)`` the output's sensitivity to each column of ``phi`` added to the
+    rate of state ``rows[c]`` (:mod:`.tangent`)."""
     kind = slot.mech.kind
     if kind not in _LINEAR_KINDS:
         return []
@@ -260,6 +241,4 @@ def _linearised(
         theta = theta[: len(keys)]
         if math.isfinite(cost):
             found.append((cost, {**shape, **dict(zip(keys, theta.tolist()))}))
-    if ordered:
-        found.sort(key=lambda t: t[0])
     return [(cost, {f: float(vals.get(k, getattr(params, f))) for k, f in slot.fields.items()}) for cost, vals in found]

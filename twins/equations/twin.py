@@ -28,7 +28,7 @@ from twins.paramfields import param_info, pfield, with_ranges
 
 from .catalog import Scales, param_ranges, units_of
 from .model import SUBSTEPS_FIELD, EquationSpec, MechanismSlot, digest
-from .starts import direct_start, start_shapes, start_values
+from .starts import best_start, direct_start, spread_starts, start_values
 
 __all__ = ["EquationTwin", "equation_twin_class", "choose_substeps", "scales_of"]
 
@@ -86,7 +86,7 @@ class EquationTwin(ExternalTwin):
 
     def _starts(self, effect: str, est: Record, skip: int, spread: bool) -> list[dict[str, float]]:
         """The start of ``effect`` (:meth:`start_values`), or with ``spread`` the starts of shapes spread over
-        its grid (:func:`.starts.start_shapes`); empty where there is none."""
+        its grid (:func:`.starts.spread_starts`); empty where there is none."""
         slot = next((s for s in self.SPEC.slots if s.effect == effect), None)
         if slot is None:
             return []
@@ -94,9 +94,6 @@ class EquationTwin(ExternalTwin):
         y0, X = base._baseline(est)
         if not (np.all(np.isfinite(y0)) and np.all(np.isfinite(X))):
             return []
-        sens = lambda phi, rows: base.sensitivity(est, phi, rows)  # noqa: E731 — one use, in either branch
-        if spread:
-            return start_shapes(slot, self.params, X, y0, est, skip, sens)
         if slot.mech.kind in ("overflow", "dead_zone", "backlash", "input_polynomial"):
 
             def run(vals: dict[str, Any]) -> np.ndarray:
@@ -105,8 +102,11 @@ class EquationTwin(ExternalTwin):
                 return self.with_params(**vals).run(est.u, est.fs)[0]
 
             start = direct_start(slot, self.params, y0, est, skip, run)
-        else:
-            start = start_values(slot, self.params, X, y0, est, skip, sens)
+            return [start] if start else []
+        found = start_values(slot, self.params, X, y0, est, skip, lambda phi, rows: base.sensitivity(est, phi, rows))
+        if spread:
+            return spread_starts(found)
+        start = best_start(found)
         return [start] if start else []
 
     def core_starts(self, effect: str, est: Record, skip: int = 0) -> list[dict[str, float]]:
