@@ -3,7 +3,8 @@
 :func:`run_case` builds a case's records (:mod:`.truth`), diagnoses them with the defaults a user gets
 (:func:`twins.discrepancy.diagnose`, three rounds) and returns one JSON row: the case, the mechanism's
 parameters and realised size, the verdict, the named causes (effect, confidence, group, parameters, p-value),
-the validation NRMSE before and after, the CPU and wall seconds of the diagnosis and the code's git commit
+the validation NRMSE before and after, the fitted parameters that ended on a bound of their range
+(``at_bound``), the CPU and wall seconds of the diagnosis and the code's git commit
 (``code``). A case that cannot be
 built or diagnosed is a row with ``error`` (the benchmark counts it, nothing is dropped). :func:`run_cases`
 runs many on the project's execution backend (:mod:`benchmarks.execution`: in-process, ``--workers N`` or a
@@ -78,6 +79,7 @@ def run_case(seed: int) -> dict[str, Any]:
     row["nrmse_val"] = {"before": out["baseline"]["nrmse_val"], "after": out["extended"]["nrmse_val"]}
     row["residual_vs_noise"] = out.get("residual_vs_noise", {}).get("excess_ratio")
     row["ranges"] = out.get("ranges", [])
+    row["at_bound"] = _plain(out.get("at_bound", []))  # fitted parameters on a range's bound: a mimic's mark
     return row
 
 
