@@ -79,7 +79,7 @@ def run_case(seed: int) -> dict[str, Any]:
     row["nrmse_val"] = {"before": out["baseline"]["nrmse_val"], "after": out["extended"]["nrmse_val"]}
     row["residual_vs_noise"] = out.get("residual_vs_noise", {}).get("excess_ratio")
     row["ranges"] = out.get("ranges", [])
-    row["at_bound"] = _plain(out.get("at_bound", []))  # fitted parameters on a range's bound: a mimic's mark
+    row["at_bound"] = _plain(out.get("at_bound", []))  # parameters on a range's bound: a mimic's mark
     return row
 
 
@@ -90,9 +90,11 @@ def _build(case: Case) -> dict[str, Any]:
 
 
 def _plain(obj: Any) -> Any:
-    """JSON-able copy of a parameter dict (numpy scalars to floats)."""
+    """JSON-able copy of a parameter dict or a list of them (numpy scalars to floats)."""
     if isinstance(obj, dict):
         return {k: _plain(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_plain(v) for v in obj]
     if hasattr(obj, "item"):
         return obj.item()
     return obj
