@@ -61,3 +61,4 @@ def test_a_cause_named_above_the_band_is_not_stated_confidently(seed, mechanism,
     cause = next(c for c in out["causes"] if c["effect"] == effect)
     assert cause["above_nyquist"]["hz"] > cause["above_nyquist"]["nyquist_hz"] == pytest.approx(case.fs / 2)
     assert max(c["confidence"] for c in out["causes"] if c["effect"] != "unexplained") <= BAND_CAP
+    assert out["verdict"] == "unexplained"  # no cause stated as the cause (:func:`.confidence.attributed_verdict`)

@@ -25,13 +25,12 @@ from typing import Any
 
 import numpy as np
 
-from twins.discrepancy.confidence import calibrate_causes
+from twins.discrepancy.confidence import CONFIDENT, attributed_verdict, calibrate_causes
 
 from .mechanisms import EXPECTED
 
 __all__ = ["outcome", "score", "current", "CONFIDENT", "RELIABILITY_BINS"]
 
-CONFIDENT = 0.5
 RELIABILITY_BINS = 10
 #: strata of the sampling rate per family: the decade edges [Hz]
 RATE_EDGES: dict[str, tuple[float, ...]] = {
@@ -44,14 +43,15 @@ RATE_EDGES: dict[str, tuple[float, ...]] = {
 def current(row: dict[str, Any]) -> dict[str, Any]:
     """The row with its causes' confidence as the diagnosis states it now: the calibration
     (:func:`twins.discrepancy.confidence.calibrate_causes`) applied to each cause's stored raw ``score``, the
-    causes re-sorted by it. A row written before the calibration was fitted (confidence = score) and a row written
-    after it read the same; the stored file is not changed."""
+    causes re-sorted by it, and the verdict attributed by it
+    (:func:`~twins.discrepancy.confidence.attributed_verdict`). A row written before the calibration was fitted
+    (confidence = score) and a row written after it read the same; the stored file is not changed."""
     if "error" in row or not row.get("causes"):
         return row
     causes = [dict(c) for c in row["causes"]]
     calibrate_causes(causes, row.get("residual_vs_noise"))
     causes.sort(key=lambda c: -float(c["confidence"]))
-    return dict(row, causes=causes)
+    return dict(row, causes=causes, verdict=attributed_verdict(row["verdict"], causes))
 
 
 def _named(row: dict[str, Any]) -> list[dict[str, Any]]:

@@ -47,7 +47,7 @@ from . import realdata
 from . import unexplained as unx
 from .band import mark_above_nyquist
 from .candidates import adopt
-from .confidence import calibrate_causes
+from .confidence import attributed_verdict, calibrate_causes
 from .fields import core_for, numeric_fields, quant_params
 from .hybrid import hybrid_block
 from .inside import follow_calibration, sparse_inside
@@ -328,13 +328,15 @@ def _conclude(inp: _Inputs, cal: _Calibrated, base: Stage, ext: Extension, opts:
     mark_above_nyquist(causes, stage.twin, max(inp.est.fs, inp.val.fs))
     calibrate_causes(causes, beyond.get("excess_ratio"))
     causes.sort(key=lambda c: -float(c["confidence"]))  # strongest first (stable: round order among equals)
+    residual_verdict, verdict = verdict, attributed_verdict(verdict, causes)
     opts.say(f"verdict {verdict}")
     defaults = dflt.contributions(stage.twin, cal.retest, inp.est, inp.val, opts.skip)
     hybrid, hybrid_twin = None, None
-    if verdict == "unexplained" and opts.hybrid:
+    # a remainder to model only where the residual is above the noise (not where no cause is confident)
+    if residual_verdict == "unexplained" and opts.hybrid:
         opts.say("fitting the hybrid twin (black-box remainder)")
         hybrid, hybrid_twin = hybrid_block(inp, stage, opts.skip)
-    sparse, sparse_term = sparse_inside(inp, stage, base, verdict, causes, opts)
+    sparse, sparse_term = sparse_inside(inp, stage, base, residual_verdict, causes, opts)
     return Diagnosis(
         verdict=verdict,
         causes=causes,
