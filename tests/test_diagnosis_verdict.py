@@ -49,3 +49,23 @@ def test_a_mimic_that_explains_an_outside_mechanism_leaves_the_verdict_unexplain
     assert not out["residual_vs_noise"]["outside"]  # it explains the record to the noise...
     assert out["verdict"] == "unexplained"  # ...but is not stated as the cause
     assert out.get("hybrid") is None
+
+
+def test_the_cli_says_why_a_fitted_discrepancy_is_unexplained(tmp_path):
+    import subprocess
+    import sys
+
+    from sysid.data.io import write_record
+
+    b = make_records(draw_case(208))
+    write_record(b["est"], tmp_path / "est.npz")
+    write_record(b["val"], tmp_path / "val.npz")
+    r = subprocess.run(
+        [sys.executable, "-m", "benchmarks.cli", "diagnose", "--model", "benchmarks/examples/piezo_stage.py"]
+        + ["--data", str(tmp_path / "est.npz"), "--val", str(tmp_path / "val.npz"), "--max-rounds", str(MAX_ROUNDS)],
+        capture_output=True,
+        text=True,
+    )
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.splitlines()[0].endswith("verdict unexplained"), r.stdout
+    assert "no cause stated" in r.stdout and "outside the model class" not in r.stdout, r.stdout

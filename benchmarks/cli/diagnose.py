@@ -128,6 +128,7 @@ def register(sub) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from twins.discrepancy import DiagnoseOptions, run_diagnosis
+    from twins.discrepancy.confidence import CONFIDENT
     from twins.discrepancy.hybrid import hybrid_text
 
     if args.max_rounds < 0:
@@ -203,7 +204,14 @@ def run(args: argparse.Namespace) -> int:
         print(f"  cause {c['effect']} (confidence {c['confidence']:.2f}) {params}")
         print(f"    {c['evidence']}")
     if result["verdict"] == "unexplained":
-        print(f"  {result['residual_vs_noise']['text']}")
+        rvn = result["residual_vs_noise"]
+        if rvn.get("outside", True):
+            print(f"  {rvn['text']}")
+        else:  # attributed to no cause (twins.discrepancy.confidence.attributed_verdict)
+            print(
+                f"  no cause stated: the candidates above fit (residual {rvn['excess_ratio']:.3g}x the noise power) "
+                f"but none states a confidence of {CONFIDENT}; the mechanism may lie outside the catalog"
+            )
     if result.get("hybrid", {}).get("fitted") is not None:
         print(f"  {hybrid_text(result['hybrid'])}")
     sparse = result.get("sparse_term") or {}
