@@ -21,7 +21,16 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["FEATURES", "COEFFICIENTS", "BAND_CAP", "CONFIDENT", "features", "calibrate_causes", "attributed_verdict"]
+__all__ = [
+    "FEATURES",
+    "COEFFICIENTS",
+    "BAND_CAP",
+    "TRANSFER_CAP",
+    "CONFIDENT",
+    "features",
+    "calibrate_causes",
+    "attributed_verdict",
+]
 
 #: the covariates, in the order of :data:`COEFFICIENTS` (after the intercept)
 FEATURES = ("logit_score", "log10_gain", "later_round", "quantization", "log10_excess")
@@ -36,6 +45,8 @@ COEFFICIENTS: tuple[float, ...] | None = (1.898505, 0.458025, 1.549428, -1.56464
 #: the most a cause whose frequency lies above the records' Nyquist frequency may state (:mod:`.band`: 6 of 23 such
 #: causes right on the benchmark)
 BAND_CAP = 0.4
+#: the most a cause whose parameters do not carry over to the validation record may state (:mod:`.transfer`)
+TRANSFER_CAP = 0.4
 
 #: the confidence at which a named cause is stated as the cause: a discrepancy is attributed (verdict
 #: ``discrepancy``) only when some catalog cause states at least this, as likely right as not
@@ -67,7 +78,8 @@ def _probability(x: np.ndarray, coef: Sequence[float]) -> float:
 
 def calibrate_causes(causes: list[dict[str, Any]], excess_ratio: float | None = None) -> None:
     """Replace each catalog cause's ``confidence`` by the calibrated probability (the score kept as ``score``),
-    at most :data:`BAND_CAP` for one marked ``above_nyquist`` (:mod:`.band`), in place; the ``unexplained`` entry
+    at most :data:`BAND_CAP` for one marked ``above_nyquist`` (:mod:`.band`) and :data:`TRANSFER_CAP` for one
+    marked ``untransferable`` (:mod:`.transfer`), in place; the ``unexplained`` entry
     keeps its own. ``excess_ratio``: the case's final R (:func:`features`)."""
     for c in causes:
         if c["effect"] == "unexplained":
@@ -77,6 +89,8 @@ def calibrate_causes(causes: list[dict[str, Any]], excess_ratio: float | None = 
             c["confidence"] = _probability(features(c, excess_ratio), COEFFICIENTS)
         if c.get("above_nyquist"):
             c["confidence"] = min(float(c["confidence"]), BAND_CAP)
+        if c.get("untransferable"):
+            c["confidence"] = min(float(c["confidence"]), TRANSFER_CAP)
 
 
 def attributed_verdict(verdict: str, causes: Sequence[dict[str, Any]]) -> str:

@@ -67,6 +67,7 @@ from .prediction import (
 )
 from .result import Diagnosis
 from .rounds import Extension, extend
+from .transfer import mark_untransferable
 from .trials import Stage
 from .unexplained import generic_residual_model
 
@@ -326,6 +327,8 @@ def _conclude(inp: _Inputs, cal: _Calibrated, base: Stage, ext: Extension, opts:
         inp.val, stage.yhat_val, causes, stage.twin, cal.info, opts.skip, inp.noise
     )
     mark_above_nyquist(causes, stage.twin, max(inp.est.fs, inp.val.fs))
+    opts.say("refitting the named causes on the validation record (do they carry over?)")
+    mark_untransferable(causes, stage.twin, inp.val, opts.skip)
     calibrate_causes(causes, beyond.get("excess_ratio"))
     causes.sort(key=lambda c: -float(c["confidence"]))  # strongest first (stable: round order among equals)
     residual_verdict, verdict = verdict, attributed_verdict(verdict, causes)
