@@ -6,10 +6,9 @@ estimation record and judges them on the validation record. A catalog effect tha
 catalog — a delay or an echo for a backlash on the drive, a delay for a first-order lag — fits each record with
 values that suit that record's excitation (a lag's equivalent delay depends on the frequencies driven, a play's on
 the amplitude). Refitted on the validation record alone (the rest of the extended twin as fitted), its parameters
-move and the validation residual falls; a right cause's refit only fits noise. On the diagnosis benchmark
-(docs/discrepancy-notes.md, "Issue 46: a cause that does not carry over") the fall was ≤ 3 % of the residual power
-for 55 of the 56 right names of fixed-parameter effects checked and 4–30 % for 7 of the 8 confident wrong names on
-the piezo stage.
+move and the validation residual falls; a right cause's refit fits little but noise. On the diagnosis benchmark's
+313 cantilever and user-model cases (docs/discrepancy-notes.md, "Issue 46: no cause stated is unexplained; a cause
+that does not carry over") the rule below marks 5 of the 143 right names and 14 of the 58 wrong ones.
 
 :func:`mark_untransferable` refits each named cause and marks one (``untransferable``: the fall, its p-value, the
 parameters before and after) whose refit moves a parameter by at least :data:`MIN_MOVE` of its value and lowers
