@@ -327,16 +327,14 @@ def _conclude(inp: _Inputs, cal: _Calibrated, base: Stage, ext: Extension, opts:
         inp.val, stage.yhat_val, causes, stage.twin, cal.info, opts.skip, inp.noise
     )
     mark_above_nyquist(causes, stage.twin, max(inp.est.fs, inp.val.fs))
-    opts.say("refitting the named causes on the validation record (do they carry over?)")
-    mark_untransferable(causes, stage.twin, inp.val, opts.skip)
+    mark_untransferable(causes, stage.twin, inp.val, opts.skip, say=opts.say)
     calibrate_causes(causes, beyond.get("excess_ratio"))
     causes.sort(key=lambda c: -float(c["confidence"]))  # strongest first (stable: round order among equals)
     residual_verdict, verdict = verdict, attributed_verdict(verdict, causes)
     opts.say(f"verdict {verdict}")
     defaults = dflt.contributions(stage.twin, cal.retest, inp.est, inp.val, opts.skip)
     hybrid, hybrid_twin = None, None
-    # a remainder to model only where the residual is above the noise (not where no cause is confident)
-    if residual_verdict == "unexplained" and opts.hybrid:
+    if residual_verdict == "unexplained" and opts.hybrid:  # a remainder to model: above the noise only
         opts.say("fitting the hybrid twin (black-box remainder)")
         hybrid, hybrid_twin = hybrid_block(inp, stage, opts.skip)
     sparse, sparse_term = sparse_inside(inp, stage, base, residual_verdict, causes, opts)

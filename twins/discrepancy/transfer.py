@@ -7,8 +7,8 @@ catalog — a delay or an echo for a backlash on the drive, a delay for a first-
 values that suit that record's excitation (a lag's equivalent delay depends on the frequencies driven, a play's on
 the amplitude). Refitted on the validation record alone (the rest of the extended twin as fitted), its parameters
 move and the validation residual falls; a right cause's refit fits little but noise. On the diagnosis benchmark's
-313 cantilever and user-model cases (docs/discrepancy-notes.md, "Issue 46: no cause stated is unexplained; a cause
-that does not carry over") the rule below marks 5 of the 143 right names and 14 of the 58 wrong ones.
+313 cantilever and user-model cases (docs/discrepancy-notes.md, "a cause that does not carry over") the rule below
+marks 5 of the 143 right names and 14 of the 58 wrong ones.
 
 :func:`mark_untransferable` refits each named cause and marks one (``untransferable``: the fall, its p-value, the
 parameters before and after) whose refit moves a parameter by at least :data:`MIN_MOVE` of its value and lowers
@@ -21,6 +21,7 @@ quantiser's lattice).
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Any
 
 from sysid.data.record import Record
@@ -57,9 +58,15 @@ def refit_parameters(twin: Twin, cause: dict[str, Any]) -> list[str]:
     return [k for k in names if k not in discrete]
 
 
-def mark_untransferable(causes: list[dict[str, Any]], twin: Twin, val: Record, skip: int = 0) -> None:
+def mark_untransferable(
+    causes: list[dict[str, Any]], twin: Twin, val: Record, skip: int = 0, say: Callable[[str], Any] | None = None
+) -> None:
     """Refit each catalog cause's parameters on ``val`` alone (``twin``: the extended twin as fitted) and mark the
-    causes whose values do not carry over (module docstring), in place."""
+    causes whose values do not carry over (module docstring), in place; ``say`` reports the step."""
+    if not any(c["effect"] != "unexplained" and refit_parameters(twin, c) for c in causes):
+        return
+    if say is not None:
+        say("refitting the named causes on the validation record: do they carry over?")
     yhat = simulate(twin, val)
     s0 = sse(val.output, yhat, skip)
     if not s0 > 0:
