@@ -327,7 +327,7 @@ def _conclude(inp: _Inputs, cal: _Calibrated, base: Stage, ext: Extension, opts:
         inp.val, stage.yhat_val, causes, stage.twin, cal.info, opts.skip, inp.noise
     )
     mark_above_nyquist(causes, stage.twin, max(inp.est.fs, inp.val.fs))
-    mark_untransferable(causes, stage.twin, inp.val, opts.skip, say=opts.say)
+    mark_untransferable(causes, stage.twin, inp.est, inp.val, stage.yhat_val, opts.skip, say=opts.say)
     calibrate_causes(causes, beyond.get("excess_ratio"))
     causes.sort(key=lambda c: -float(c["confidence"]))  # strongest first (stable: round order among equals)
     residual_verdict, verdict = verdict, attributed_verdict(verdict, causes)

@@ -24,6 +24,8 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Any
 
+import numpy as np
+
 from sysid.data.record import Record
 from sysid.errors import ConfigError, DataError
 from twins.base import Twin
@@ -32,7 +34,7 @@ from twins.paramfields import param_info
 
 from . import features as ft
 from .fields import choice_fields, int_fields
-from .prediction import significance, simulate, sse
+from .prediction import significance, simulate_val, sse
 
 __all__ = ["MIN_DROP", "MIN_MOVE", "LEVEL", "refit_parameters", "mark_untransferable"]
 
@@ -59,29 +61,34 @@ def refit_parameters(twin: Twin, cause: dict[str, Any]) -> list[str]:
 
 
 def mark_untransferable(
-    causes: list[dict[str, Any]], twin: Twin, val: Record, skip: int = 0, say: Callable[[str], Any] | None = None
+    causes: list[dict[str, Any]],
+    twin: Twin,
+    est: Record,
+    val: Record,
+    yhat_val: np.ndarray,
+    skip: int = 0,
+    say: Callable[[str], Any] | None = None,
 ) -> None:
-    """Refit each catalog cause's parameters on ``val`` alone (``twin``: the extended twin as fitted) and mark the
-    causes whose values do not carry over (module docstring), in place; ``say`` reports the step."""
-    if not any(c["effect"] != "unexplained" and refit_parameters(twin, c) for c in causes):
+    """Refit each catalog cause's parameters on ``val`` alone (``twin``: the extended twin as fitted, ``yhat_val``
+    its validation prediction) and mark the causes whose values do not carry over (module docstring), in place;
+    ``say`` reports the step. The refit predicts ``val`` as the diagnosis does (:func:`.prediction.simulate_val`:
+    from the record's own start state, or continuing ``est``)."""
+    work = [(c, names) for c in causes if c["effect"] != "unexplained" and (names := refit_parameters(twin, c))]
+    s0 = sse(val.output, yhat_val, skip)
+    if not work or not s0 > 0:
         return
     if say is not None:
         say("refitting the named causes on the validation record: do they carry over?")
-    yhat = simulate(twin, val)
-    s0 = sse(val.output, yhat, skip)
-    if not s0 > 0:
-        return
-    for c in causes:
-        if c["effect"] == "unexplained":
-            continue
-        names = refit_parameters(twin, c)
-        if not names:
-            continue
+
+    def predict(tw: Twin, rec: Record) -> np.ndarray:
+        return simulate_val(tw, est, rec)
+
+    for c, names in work:
         try:
-            res = calibrate(twin, val, names, skip=skip, simulate=simulate, max_nfev=MAX_NFEV)
+            res = calibrate(twin, val, names, skip=skip, simulate=predict, max_nfev=MAX_NFEV)
         except (ConfigError, DataError, ValueError, ArithmeticError):
             continue
-        y1 = simulate(res.twin, val)
+        y1 = predict(res.twin, val)
         s1 = sse(val.output, y1, skip)
         drop = 1.0 - s1 / s0
         if not drop >= MIN_DROP:
