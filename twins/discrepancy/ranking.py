@@ -15,10 +15,11 @@ beside it, the trial must be significantly worse (:func:`_owes_its_gain`).
 **Order**: significant first, then by gain, ties broken by the signature score (:mod:`.evidence`).
 
 **Group** what the data cannot tell apart: candidates of the leading cause's ``EffectSpec.group`` whose NRMSE
-is within 2× of the leader's, and any candidate (significant, or with at least half the leader's gain) whose
-validation residual variance is within the sampling error ``2·√(2/N_eff)`` of the leader's (or not significantly
-larger) while its prediction differs from the leader's by less than half the residual RMS. The group is
-reported with the experiment that would separate it.
+is within 2× of the leader's or whose fitted corner lies above the Nyquist frequency (:func:`_beyond_band`), and
+any candidate (significant, or with at least half the leader's gain) whose validation residual variance is within
+the sampling error ``2·√(2/N_eff)`` of the leader's (or not significantly larger) while its prediction differs
+from the leader's by less than half the residual RMS. The group is reported with the experiment that would
+separate it.
 
 **Confidence** of a cause (in [0, 1]): ``(1 − p_value) · (0.5 + 0.5·√(1 − g₂/g₁)) · (0.8 + 0.2·s)`` with ``g₁``
 its relative validation gain, ``g₂`` the best gain of a candidate outside its group and ``s`` its signature
@@ -40,6 +41,7 @@ from twins.base import Twin
 from . import defaults as dflt
 from . import evidence as ev
 from . import features as ft
+from .band import characteristic_hz
 from .fields import fmt_params
 from .nesting import prefer_simpler
 from .options import DiagnoseOptions
@@ -161,12 +163,13 @@ def _group(trials: list[Trial], twin: Twin, val: Record, opts: DiagnoseOptions) 
     for tr in trials[1:]:
         # the data cannot tell tr from the leader when the leader's residual is not significantly smaller
         not_better = significance(tr.sse_val, top.sse_val, n_eff_top, 1) > opts.alpha
-        # a catalog ambiguity group: members that explain the data nearly as well (NRMSE within 2×) go together
+        # a catalog ambiguity group: members that explain the data nearly as well (NRMSE within 2×) go together,
+        # and a member whose frequency lies above the band, which acts there as the group's shared form
         same_group = (
             bool(top_group)
             and twin.EFFECTS[tr.effect].group == top_group
             and tr.significant
-            and tr.nrmse_val <= 2.0 * top.nrmse_val
+            and (tr.nrmse_val <= 2.0 * top.nrmse_val or _beyond_band(twin, tr, val.fs))
         )
         d_pred = float(np.sqrt(np.mean((tr.yhat_val[skip:] - top.yhat_val[skip:]) ** 2)))
         # comparable: significant itself, or at least half the leader's gain (a richer candidate with the leader's
@@ -176,6 +179,18 @@ def _group(trials: list[Trial], twin: Twin, val: Record, opts: DiagnoseOptions) 
         if same_group or equal:
             group.append(tr.effect)
     return group
+
+
+def _beyond_band(twin: Twin, tr: Trial, fs: float) -> bool:
+    """Whether the trial's fitted frequency (a corner, :func:`.band.characteristic_hz`) lies above the Nyquist
+    frequency of the records: within the band such a member is its low-frequency form — a first-order corner f_c a lag
+    of 1/(2π·f_c), the group's shared law, with a gain roll-off of at most (f_N/f_c)²/2 — so the data cannot tell it
+    from the leader of its group. Its fit on the record can still be much worse: the corner acts only on how the drive
+    runs between samples, which the model assumes (linear) and the rig does not share (benchmark seed 146: a drive
+    filtered at 12.8 kHz and then sampled at 2.37 kHz; the twin's amplifier low-pass gained 0.43 where a 0.03-sample
+    delay, the same in-band lag, gained 0.79)."""
+    f = characteristic_hz(twin, tr.effect, tr.effect_params)
+    return f is not None and f > 0.5 * float(fs)
 
 
 def _confidence(tr: Trial, top: Trial, in_group: bool, g2: float, score: float) -> float:
