@@ -34,12 +34,13 @@ __all__ = [
 
 #: the covariates, in the order of :data:`COEFFICIENTS` (after the intercept)
 FEATURES = ("logit_score", "log10_gain", "later_round", "quantization", "log10_excess")
-#: intercept, then one weight per feature (None: not fitted, the confidence is the score). Fitted 2026-11-29 on the
-#: 173 named causes of the benchmark's 257 stored cases (seeds 0–258); ten-fold held-out Brier 0.116 (the four
-#: covariates without R: 0.123). Each decade of R halves the odds (e^−0.72): a name that leaves the residual far
-#: above the noise is less often right, though coloured noise raises R for right names too
-#: (docs/discrepancy-notes.md).
-COEFFICIENTS: tuple[float, ...] | None = (1.898505, 0.458025, 1.549428, -1.564644, 0.898452, -0.719004)
+#: intercept, then one weight per feature (None: not fitted, the confidence is the score). Refitted 2026-11-30 on the
+#: 289 named causes of the benchmark's 500 stored cases (first fitted 2026-11-29 on 173 causes of 257 cases);
+#: ten-fold held-out Brier 0.106, 0.100 with the caps below (the 2026-11-29 weights on the same rows: 0.103 with
+#: the caps, in sample). Each decade of R divides the odds by 2.2 (e^−0.81): a name that leaves the residual far
+#: above the noise is less often right, though coloured noise raises R for right names too; the raw score weighs
+#: less than on the first cases (0.18 against 0.46) (docs/discrepancy-notes.md).
+COEFFICIENTS: tuple[float, ...] | None = (2.480129, 0.181306, 1.365835, -2.159746, 1.454856, -0.808893)
 
 
 #: the most a cause whose frequency lies above the records' Nyquist frequency may state (:mod:`.band`: 6 of 23 such
