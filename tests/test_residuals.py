@@ -123,3 +123,22 @@ def test_fisher_periodicity_test_holds_its_level_and_finds_a_line():
     t = np.arange(4000)
     line = periodicity_test(rng.standard_normal(4000) + 0.2 * np.sin(2 * np.pi * 0.1234 * t))
     assert line["p_value"] < 1e-6 and line["index"] == round(0.1234 * 4000)
+
+
+def test_thomson_line_test_holds_its_level_in_coloured_noise_and_finds_a_strong_line():
+    from scipy import signal
+
+    from sysid.evaluation.residuals import ar_prewhiten, line_test, periodicity_test
+
+    rng = np.random.default_rng(5)
+    ar1 = [signal.lfilter([1.0], [1.0, -0.9], rng.standard_normal(1500))[500:] for _ in range(300)]
+    p = np.array([line_test(x)["p_value"] for x in ar1])
+    # Bonferroni over the grid is conservative: P(p < 0.05) ≤ 0.05, 300 draws → below 0.05 + 3·0.013
+    assert np.mean(p < 0.05) < 0.09
+    t = np.arange(4000)
+    x = signal.lfilter([1.0], [1.0, -0.8], rng.standard_normal(4000))
+    x = x / np.std(x) + 5.0 * np.sqrt(2.0) * np.sin(2 * np.pi * 0.02135 * t)  # 85.4 bins: off the Fourier grid
+    line = line_test(x)
+    assert line["p_value"] < 1e-4 and abs(line["index"] - 0.02135 * 4000) <= 0.25
+    eps, _ = ar_prewhiten(x, 10)  # the AR model predicts the line: Fisher's g after it does not see it
+    assert periodicity_test(eps)["p_value"] > line["p_value"] * 1e3

@@ -37,7 +37,7 @@ import numpy as np
 from scipy import signal as sps
 
 from sysid.data.record import Record
-from sysid.evaluation.residuals import ar_prewhiten, periodicity_test
+from sysid.evaluation.residuals import ar_prewhiten, line_test, periodicity_test
 
 from .features import effective_samples
 from .prediction import significance
@@ -143,7 +143,7 @@ def judge(
     ratio = excess_ratio(p_e, s2)
     frac = max(0.0, 1.0 - s2 / p_e) if p_e > 0 else 0.0
     st = structure(u, yh, e) if ratio > EXCESS_LIMIT else None
-    structured = st is None or st["p_value"] < STRUCTURE_LEVEL
+    structured = st is None or st["p_value"] < STRUCTURE_LEVEL or st["p_line"] < STRUCTURE_LEVEL
     out: dict[str, Any] = {
         "noise_var": s2,
         "noise_source": nl["source"],
@@ -166,7 +166,8 @@ def judge(
         out["text"] = (
             f"residual {ratio:.3g}× the noise floor's power ({nl['source'].replace('_', ' ')}), but no more than "
             f"coloured noise: prewhitened by an AR({st['ar_order']}) model it depends neither on the drive nor on "
-            f"the prediction (p {st['p_dependence']:.2g}) and has no periodic line (p {st['p_periodic']:.2g})"
+            f"the prediction (p {st['p_dependence']:.2g}) and has no periodic line (p {st['p_periodic']:.2g}; "
+            f"against the smooth spectrum around it, p {st['p_line']:.2g})"
         )
     return out
 
@@ -223,15 +224,22 @@ def structure(u: np.ndarray, yhat: np.ndarray, e: np.ndarray, lags: int = STRUCT
       and t by feasible generalised least squares: both sides filtered by the AR polynomial (order by BIC ≤ 10)
       of the ordinary least-squares residual of that regression; F-test of the regression;
     - **periodicity**: Fisher's g on e prewhitened by its own AR model
-      (:func:`sysid.evaluation.residuals.periodicity_test`).
+      (:func:`sysid.evaluation.residuals.periodicity_test`);
+    - **a line** against the smooth spectrum around it: Thomson's harmonic F-test on e itself
+      (:func:`sysid.evaluation.residuals.line_test`, ``p_line``). An AR model fitted to e absorbs a strong line
+      (two poles on the unit circle predict a sinusoid), which leaves Fisher's g blind to it: of 20 drawn lines
+      3–5× the noise RMS it found 3–5, the line test 20 (diagnosis benchmark seeds 143 and 413, a mains hum at
+      R 12 and 26, ended ``none``).
 
-    ``p_value``: the smaller p, Bonferroni-doubled. Noise independent of the drive gives a uniform p."""
+    ``p_value``: the smaller p of the first two, Bonferroni-doubled; the residual is structured when it or
+    ``p_line`` is below the level (a false-alarm rate of at most twice the level: on AR(1) noise, ρ 0–0.97, 600–
+    50 000 samples, the line test alone rejected 0–2.5 % at 0.01). Noise independent of the drive gives uniform p."""
     u = np.asarray(u, float).ravel()
     yh = np.asarray(yhat, float).ravel()
     e = np.asarray(e, float).ravel()
     n = e.size
     if n < 4 * (6 * (lags + 1) + 3) + STRUCTURE_AR_ORDER + lags:  # too short to test: R alone decides
-        return {"p_value": 0.0, "p_dependence": 0.0, "p_periodic": 1.0, "ar_order": 0, "explained": 0.0}
+        return {"p_value": 0.0, "p_dependence": 0.0, "p_periodic": 1.0, "p_line": 1.0, "ar_order": 0, "explained": 0.0}
     eps, _ = ar_prewhiten(e, STRUCTURE_AR_ORDER)
     t = np.linspace(-1.0, 1.0, n)
     zu = (u - u.mean()) / (float(np.std(u)) or 1.0)
@@ -255,6 +263,7 @@ def structure(u: np.ndarray, yhat: np.ndarray, e: np.ndarray, lags: int = STRUCT
         "p_value": float(min(1.0, 2.0 * min(p_dep, p_per))),
         "p_dependence": float(p_dep),
         "p_periodic": p_per,
+        "p_line": float(line_test(e)["p_value"]),
         "ar_order": int(a.size),
         "explained": float(1.0 - (r @ r) / (et @ et)) if float(et @ et) > 0 else 0.0,
     }
