@@ -20,7 +20,7 @@ from typing import Any
 
 from twins.paramfields import param_info
 
-__all__ = ["characteristic_hz", "mark_above_nyquist"]
+__all__ = ["characteristic_hz", "above_band_hz", "mark_above_nyquist"]
 
 
 def characteristic_hz(twin: Any, effect: str, params: dict[str, float]) -> float | None:
@@ -35,14 +35,21 @@ def characteristic_hz(twin: Any, effect: str, params: dict[str, float]) -> float
     return max(hz) if hz else None
 
 
+def above_band_hz(twin: Any, effect: str, params: dict[str, float], fs: float) -> float | None:
+    """The frequency [Hz] of ``effect`` with ``params`` (:func:`characteristic_hz`) when it lies above the Nyquist
+    frequency ``fs``/2, else None."""
+    f = characteristic_hz(twin, effect, params)
+    return f if f is not None and f > 0.5 * float(fs) else None
+
+
 def mark_above_nyquist(causes: list[dict[str, Any]], twin: Any, fs: float) -> None:
     """Mark each catalog cause of ``causes`` whose frequency lies above ``fs``/2 (module docstring), in place."""
     nyquist = 0.5 * float(fs)
     for c in causes:
         if c["effect"] == "unexplained" or c["effect"] not in getattr(twin, "EFFECTS", {}):
             continue
-        f = characteristic_hz(twin, c["effect"], c.get("params", {}))
-        if f is None or not f > nyquist:
+        f = above_band_hz(twin, c["effect"], c.get("params", {}), fs)
+        if f is None:
             continue
         c["above_nyquist"] = {"hz": f, "nyquist_hz": nyquist}
         c["evidence"] = (

@@ -41,7 +41,7 @@ from twins.base import Twin
 from . import defaults as dflt
 from . import evidence as ev
 from . import features as ft
-from .band import characteristic_hz
+from .band import above_band_hz
 from .fields import fmt_params
 from .nesting import prefer_simpler
 from .options import DiagnoseOptions
@@ -189,8 +189,7 @@ def _beyond_band(twin: Twin, tr: Trial, fs: float) -> bool:
     runs between samples, which the model assumes (linear) and the rig does not share (benchmark seed 146: a drive
     filtered at 12.8 kHz and then sampled at 2.37 kHz; the twin's amplifier low-pass gained 0.43 where a 0.03-sample
     delay, the same in-band lag, gained 0.79)."""
-    f = characteristic_hz(twin, tr.effect, tr.effect_params)
-    return f is not None and f > 0.5 * float(fs)
+    return above_band_hz(twin, tr.effect, tr.effect_params, fs) is not None
 
 
 def _confidence(tr: Trial, top: Trial, in_group: bool, g2: float, score: float) -> float:
