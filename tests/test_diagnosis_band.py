@@ -5,7 +5,8 @@ The rule on the cantilever's second mode (f₂ = mode_ratio·f₁) and a sensor'
 diagnosis benchmark that named such a cause with confidence ≥ ½ (docs/diagnosis-benchmark.md): case 19, a lag of
 the drive before the piezo stage (outside its catalog) named `sensor_lowpass` at 1.5× the Nyquist frequency
 (confidence 0.81); case 91, crosstalk of the drive into the cantilever's sensor (outside its catalog) named
-`second_mode` at 4.4 kHz, 2.6× the Nyquist frequency of 3.4 kHz sampling (0.50).
+`second_mode` at 4.4 kHz, 2.6× the Nyquist frequency of 3.4 kHz sampling (0.50). At the band's low end, a cause
+whose time constant exceeds the records (``beyond_record``): the rule, and case 141.
 """
 
 from __future__ import annotations
@@ -16,7 +17,7 @@ from benchmarks.diagnosis_bench.cases import draw_case
 from benchmarks.diagnosis_bench.run import MAX_ROUNDS
 from benchmarks.diagnosis_bench.truth import make_records
 from twins.discrepancy import diagnose
-from twins.discrepancy.band import characteristic_hz, mark_above_nyquist
+from twins.discrepancy.band import characteristic_hz, mark_above_nyquist, mark_beyond_record, memory_s
 from twins.discrepancy.confidence import BAND_CAP, calibrate_causes
 from twins.registry import get_twin
 
@@ -81,3 +82,39 @@ def test_a_lag_group_member_above_the_band_joins_the_leaders_group():
     row = out["rounds"][0]["candidates"]
     amp = next(r for r in row if r["effect"] == "amplifier_bandwidth")
     assert amp["params"]["amp_bandwidth_hz"] > case.fs / 2 and amp["nrmse_val"] > 2 * row[0]["nrmse_val"]
+
+
+@pytest.mark.parametrize("tau_s, marked", [(0.01, False), (0.5, False), (1.37, True)])
+def test_a_time_constant_longer_than_the_records_is_marked_and_capped(tau_s, marked):
+    """Rate-dependent hysteresis scales the hysteresis by 1 + ρ/rate_ref, ρ a low-pass of |v̇| with time constant τ
+    starting from rest: with τ beyond the record (0.8 s here) ρ ≈ t/τ·mean|v̇| never settles, and the cause is a
+    hysteretic slope growing over the record. A thermal drift's τ (a law of time itself) is not marked."""
+    twin = get_twin("cantilever")()
+    rdh = {"rate_ref_v_per_s": 2.6e4, "rate_tau_s": tau_s}
+    assert memory_s(twin, "rate_dependent_hysteresis", rdh) == tau_s
+    assert memory_s(twin, "creep", {"creep_per_decade": 0.02, "creep_tau_min_s": 0.3}) == 0.3
+    assert memory_s(twin, "thermal_drift", {"thermal_drift_um": 1.0, "thermal_tau_s": 60.0}) is None
+    causes = [_cause("rate_dependent_hysteresis", rdh), _cause("thermal_drift", {"thermal_tau_s": 60.0})]
+    mark_beyond_record(causes, twin, 0.8)
+    calibrate_causes(causes, 1.0)
+    assert bool(causes[0].get("beyond_record")) is marked and (causes[0]["confidence"] <= BAND_CAP) is marked
+    assert "beyond_record" not in causes[1] and causes[1]["confidence"] > BAND_CAP
+    if marked:
+        assert causes[0]["beyond_record"] == {"tau_s": tau_s, "record_s": 0.8}
+        assert "never settles" in causes[0]["evidence"]
+
+
+def test_a_gain_sagging_over_the_record_is_not_named_as_rate_dependent_hysteresis():
+    """Case 141: the cantilever's sensor gain sags by 13.6 % over each record (outside its catalog; 35.7 kHz,
+    8241 samples, noise for estimation, a chirp for validation). Rate-dependent hysteresis fits it with its rate
+    envelope's τ at 1.37 s, 5.9× the 0.23 s record (validation gain 0.14; on the chirp a gain falling with time is
+    also one falling with frequency) and was stated at 0.68, with verdict ``discrepancy``: the confident wrong
+    name of the issue's sagging-gain record."""
+    case = draw_case(141)
+    assert case.mechanism == "gain_sag"
+    b = make_records(case)
+    out = diagnose(b["twin"], b["est"], b["val"], max_rounds=1, threads=1)
+    cause = next(c for c in out["causes"] if c["effect"] == "rate_dependent_hysteresis")
+    assert cause["beyond_record"]["tau_s"] > cause["beyond_record"]["record_s"] == pytest.approx(case.n / case.fs)
+    assert max(c["confidence"] for c in out["causes"] if c["effect"] != "unexplained") <= BAND_CAP
+    assert out["verdict"] == "unexplained"

@@ -1,4 +1,5 @@
-"""A named cause whose characteristic frequency lies above the records' Nyquist frequency.
+"""A named cause whose characteristic frequency lies outside the records' band: above the Nyquist frequency, or a
+time constant longer than the records.
 
 A first-order low-pass of corner f_c acts within the band |f| < f_N ≪ f_c as 1 − j·f/f_c: a lag of 1/(2π·f_c), which
 a delay, a slower drive or a filtered sensor give alike; a mode above the band acts as its static share, a
@@ -11,6 +12,16 @@ right, and 11 of the 32 wrong names stated with confidence ≥ ½ were such caus
 
 A twin may say which frequency an effect stands for (``effect_frequency_hz(effect, params)``: the cantilever's
 second mode at mode_ratio·f₁); otherwise it is the largest of the effect's parameters in Hz.
+
+At the low end, a stationary effect with a memory — the rate envelope of rate-dependent hysteresis, the fastest
+element of a creep spectrum, its catalog keys ``tau`` / ``tau_min`` — starts each record from rest and settles as
+1 − e^(−t/τ). With τ longer than the record it never settles: within the record it is a ramp over time (the
+envelope ρ(t) ≈ t/τ·mean|v̇|, a hysteretic slope that grows through the record), which a gain drifting over the
+record gives alike, and the rate or creep law it stands for is not seen. On the benchmark's 500 cases the four causes
+so fitted (rate-dependent hysteresis with τ 3.5–29× the record) were all wrong, two stated with confidence ≥ ½ (a
+gain sagging over each record, a crosstalk of the drive; cases 141, 358). Such a cause is marked
+(``beyond_record``: its time constant and the records' duration, in s) and capped as one above the band. An effect
+whose law is itself a change over the record (``time_varying``: a drift) is exempt: its τ may exceed the record.
 """
 
 from __future__ import annotations
@@ -20,7 +31,7 @@ from typing import Any
 
 from twins.paramfields import param_info
 
-__all__ = ["characteristic_hz", "above_band_hz", "mark_above_nyquist"]
+__all__ = ["characteristic_hz", "above_band_hz", "mark_above_nyquist", "memory_s", "mark_beyond_record"]
 
 
 def characteristic_hz(twin: Any, effect: str, params: dict[str, float]) -> float | None:
@@ -56,4 +67,37 @@ def mark_above_nyquist(causes: list[dict[str, Any]], twin: Any, fs: float) -> No
             c.get("evidence", "")
             + f"; its frequency, {f:.4g} Hz, lies above the records' Nyquist frequency ({nyquist:.4g} Hz): within "
             "the band it acts as its low-frequency form (a lag, a feed-through), which other mechanisms share"
+        )
+
+
+#: catalog keys of an effect's time constant (:class:`twins.base.EffectSpec` ``params``): one τ, or the fastest
+#: of a spectrum (creep's τ_1; its elements are τ_1·10^(i−1), all slower)
+_TIME_CONSTANT_KEYS = ("tau", "tau_min")
+
+
+def memory_s(twin: Any, effect: str, params: dict[str, float]) -> float | None:
+    """The time constant [s] the stationary effect ``effect`` of ``twin`` settles with, from its fitted ``params``
+    (module docstring), or None: no such key, or an effect whose law changes over the record (``time_varying``)."""
+    spec = getattr(twin, "EFFECTS", {}).get(effect)
+    if spec is None or spec.time_varying:
+        return None
+    taus = [float(params[f]) for k, f in spec.params.items() if k in _TIME_CONSTANT_KEYS and f in params]
+    taus = [t for t in taus if math.isfinite(t)]
+    return max(taus) if taus else None
+
+
+def mark_beyond_record(causes: list[dict[str, Any]], twin: Any, duration_s: float) -> None:
+    """Mark each catalog cause of ``causes`` whose time constant (:func:`memory_s`) exceeds ``duration_s``, the
+    longer record's duration (module docstring), in place."""
+    for c in causes:
+        if c["effect"] == "unexplained":
+            continue
+        tau = memory_s(twin, c["effect"], c.get("params", {}))
+        if tau is None or tau <= float(duration_s):
+            continue
+        c["beyond_record"] = {"tau_s": tau, "record_s": float(duration_s)}
+        c["evidence"] = (
+            c.get("evidence", "")
+            + f"; its time constant, {tau:.4g} s, is longer than the records ({float(duration_s):.4g} s): it never "
+            "settles within them and acts as a change over the record, which a drifting gain or reading gives alike"
         )
