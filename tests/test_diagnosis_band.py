@@ -17,7 +17,7 @@ from benchmarks.diagnosis_bench.cases import draw_case
 from benchmarks.diagnosis_bench.run import MAX_ROUNDS
 from benchmarks.diagnosis_bench.truth import make_records
 from twins.discrepancy import diagnose
-from twins.discrepancy.band import characteristic_hz, mark_above_nyquist, mark_beyond_record, memory_s
+from twins.discrepancy.band import characteristic_hz, mark_above_nyquist, mark_beyond_record, memory_s, pinned_hz
 from twins.discrepancy.confidence import BAND_CAP, calibrate_causes
 from twins.registry import get_twin
 
@@ -116,5 +116,39 @@ def test_a_gain_sagging_over_the_record_is_not_named_as_rate_dependent_hysteresi
     out = diagnose(b["twin"], b["est"], b["val"], max_rounds=1, threads=1)
     cause = next(c for c in out["causes"] if c["effect"] == "rate_dependent_hysteresis")
     assert cause["beyond_record"]["tau_s"] > cause["beyond_record"]["record_s"] == pytest.approx(case.n / case.fs)
+    assert max(c["confidence"] for c in out["causes"] if c["effect"] != "unexplained") <= BAND_CAP
+    assert out["verdict"] == "unexplained"
+
+
+@pytest.mark.parametrize("ratio, marked", [(6.0, False), (10.0, True)])
+def test_a_frequency_at_the_top_of_its_range_is_marked_and_capped(ratio, marked):
+    """The second mode's f₂ = mode_ratio·f₁ with the ratio at its documented upper bound (10): the fit would place
+    the mode higher, its resonance is not found in the data — within a band of 13.8 kHz as above it."""
+    twin = get_twin("cantilever")()
+    params = {"mode_ratio": ratio, "mode2_share": 0.25, "zeta2": 0.016}
+    assert (pinned_hz(twin, "second_mode", params) is not None) is marked
+    causes = [_cause("second_mode", params)]
+    mark_above_nyquist(causes, twin, 27.5e3)
+    calibrate_causes(causes, 1.0)
+    assert "above_nyquist" not in causes[0]
+    assert bool(causes[0].get("pinned_frequency")) is marked and (causes[0]["confidence"] <= BAND_CAP) is marked
+    if marked:
+        assert causes[0]["pinned_frequency"] == {
+            "hz": pytest.approx(10 * twin.params.f1_hz),
+            "param": "mode_ratio",
+            "bound": 10.0,
+        }
+
+
+def test_a_feedthrough_named_as_a_second_mode_pinned_at_its_top_is_not_stated():
+    """Case 399: crosstalk of the drive into the cantilever's sensor (outside its catalog; 27.5 kHz, a chirp for
+    estimation, sines for validation), named `second_mode` with its ratio refitted to the bound 10 (7.0 kHz, in the
+    band: a feed-through is a mode at infinity) at 0.83 — a confident wrong name."""
+    case = draw_case(399)
+    assert case.mechanism == "crosstalk"
+    b = make_records(case)
+    out = diagnose(b["twin"], b["est"], b["val"], max_rounds=MAX_ROUNDS, threads=1)
+    cause = next(c for c in out["causes"] if c["effect"] == "second_mode")
+    assert cause["pinned_frequency"]["param"] == "mode_ratio" and cause["pinned_frequency"]["hz"] < case.fs / 2
     assert max(c["confidence"] for c in out["causes"] if c["effect"] != "unexplained") <= BAND_CAP
     assert out["verdict"] == "unexplained"

@@ -47,6 +47,7 @@ CAUSE_KEYS = (
     "joint_with_named",
     "replaces",
     "above_nyquist",
+    "pinned_frequency",
     "beyond_record",
     "untransferable",
 )

@@ -43,8 +43,9 @@ FEATURES = ("logit_score", "log10_gain", "later_round", "quantization", "log10_e
 COEFFICIENTS: tuple[float, ...] | None = (2.480129, 0.181306, 1.365835, -2.159746, 1.454856, -0.808893)
 
 
-#: the most a cause whose frequency lies above the records' Nyquist frequency, or whose time constant exceeds the
-#: records, may state (:mod:`.band`: 6 of 23 and 0 of 4 such causes right on the benchmark)
+#: the most a cause whose frequency lies above the records' Nyquist frequency or at the top of its range, or whose
+#: time constant exceeds the records, may state (:mod:`.band`: 6 of 23, 2 of 3 and 0 of 4 such causes right on the
+#: benchmark)
 BAND_CAP = 0.4
 #: the most a cause whose parameters do not carry over to the validation record may state (:mod:`.transfer`)
 TRANSFER_CAP = 0.4
@@ -79,16 +80,16 @@ def _probability(x: np.ndarray, coef: Sequence[float]) -> float:
 
 def calibrate_causes(causes: list[dict[str, Any]], excess_ratio: float | None = None) -> None:
     """Replace each catalog cause's ``confidence`` by the calibrated probability (the score kept as ``score``),
-    at most :data:`BAND_CAP` for one marked ``above_nyquist`` or ``beyond_record`` (:mod:`.band`) and
-    :data:`TRANSFER_CAP` for one marked ``untransferable`` (:mod:`.transfer`), in place; the ``unexplained`` entry
-    keeps its own. ``excess_ratio``: the case's final R (:func:`features`)."""
+    at most :data:`BAND_CAP` for one marked ``above_nyquist``, ``pinned_frequency`` or ``beyond_record``
+    (:mod:`.band`) and :data:`TRANSFER_CAP` for one marked ``untransferable`` (:mod:`.transfer`), in place; the
+    ``unexplained`` entry keeps its own. ``excess_ratio``: the case's final R (:func:`features`)."""
     for c in causes:
         if c["effect"] == "unexplained":
             continue
         c.setdefault("score", float(c["confidence"]))
         if COEFFICIENTS is not None:
             c["confidence"] = _probability(features(c, excess_ratio), COEFFICIENTS)
-        if c.get("above_nyquist") or c.get("beyond_record"):
+        if c.get("above_nyquist") or c.get("pinned_frequency") or c.get("beyond_record"):
             c["confidence"] = min(float(c["confidence"]), BAND_CAP)
         if c.get("untransferable"):
             c["confidence"] = min(float(c["confidence"]), TRANSFER_CAP)

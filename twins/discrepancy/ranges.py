@@ -154,24 +154,29 @@ def at_bounds(twin: Twin, names: Iterable[str], tol: float = BOUND_TOL) -> list[
         lo, hi = info[n].range
         if lo is None or hi is None or not float(hi) > float(lo):
             continue
-        lo, hi, v = float(lo), float(hi), float(v)
-        w = hi - lo
-        if lo > 0 and hi / lo > 30:  # log-scaled range: closeness in log units
-            x, a, b = math.log(max(v, 1e-300)), math.log(lo), math.log(hi)
-            near_lo, near_hi = x - a <= tol * (b - a), b - x <= tol * (b - a)
-        else:
-            near_lo, near_hi = v - lo <= tol * w, hi - v <= tol * w
-        if near_lo or near_hi:
+        side = bound_side(float(v), float(lo), float(hi), tol)
+        if side is not None:
             out.append(
                 {
                     "param": n,
-                    "value": v,
-                    "bound": lo if near_lo else hi,
-                    "side": "lower" if near_lo else "upper",
+                    "value": float(v),
+                    "bound": float(lo) if side == "lower" else float(hi),
+                    "side": side,
                     "unit": info[n].unit,
                 }
             )
     return out
+
+
+def bound_side(v: float, lo: float, hi: float, tol: float = BOUND_TOL) -> str | None:
+    """``"lower"`` / ``"upper"`` when ``v`` lies within ``tol`` of the range width from that bound of [lo, hi]
+    (in log units for a positive range spanning more than 30×), else None."""
+    if lo > 0 and hi / lo > 30:  # log-scaled range: closeness in log units
+        x, a, b = math.log(max(v, 1e-300)), math.log(lo), math.log(hi)
+        near_lo, near_hi = x - a <= tol * (b - a), b - x <= tol * (b - a)
+    else:
+        near_lo, near_hi = v - lo <= tol * (hi - lo), hi - v <= tol * (hi - lo)
+    return "lower" if near_lo else ("upper" if near_hi else None)
 
 
 def widened(twin: Twin, hits: list[dict[str, Any]]) -> tuple[Twin, list[dict[str, Any]]]:
