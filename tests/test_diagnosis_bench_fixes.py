@@ -10,6 +10,8 @@
 - Case 118: a 16 kHz sensor on a stage sampled at 2.3 kHz (a 14 µs lag). The baseline calibration absorbed part of
   it, the sensor's trial with the core held ended on its "no filter" bound, and an echo one sample late (no
   group) took the round with the delay tied to it: the sensor was never refitted with the core.
+- Case 364: a slow drift that is nearly all of the tanks' residual, refused while its F-test counted the stage's
+  effective samples (the drift's own smoothness).
 - Cases 299, 495: a second mode above the Nyquist frequency; the generator's version of it was not the modal
   response (the H₂/H₁ ratio amplified the sampled output's interpolation error).
 """
@@ -319,3 +321,22 @@ def test_the_generators_second_mode_is_the_modal_response_below_its_nyquist_rate
     y = np.asarray(b["val"].y, float) - b["noise"][1]
     y0 = twin.simulate(u, case.fs)
     assert np.std(y - modal.simulate(u, case.fs)) < 0.01 * np.std(y0)
+
+
+def test_a_drift_that_takes_the_whole_residual_is_judged_on_the_noise_it_leaves():
+    """Case 364 (the cascaded tanks, a ramp + slow cycle of 8 % of the level's RMS, steps then a multisine, AR(1)
+    noise 0.54): the stage's validation residual is the drift itself, N_eff 6 of 748 samples; `slow_drift` took
+    97 % of it (NRMSE 0.545 → 0.017) and was refused at p = 0.003 (Bonferroni level 0.001) when the F-test counted
+    the smaller of that N_eff and its own residual's. Counted on its own residual, the noise once the drift is in,
+    it is named."""
+    from twins.discrepancy import diagnose
+
+    case = draw_case(364)
+    assert case.model == "cascaded-tanks" and case.mechanism == "drift_slow"
+    b = make_records(case)
+    out = diagnose(b["twin"], b["est"], b["val"], max_rounds=1, threads=1)
+    first = out["rounds"][0]
+    assert first["n_eff"] < 10  # the stage's residual: the drift, smooth
+    drift = next(r for r in first["candidates"] if r["effect"] == "slow_drift")
+    assert drift["significant"] and drift["gain"] > 0.9
+    assert out["causes"][0]["effect"] == "slow_drift" and out["verdict"] == "discrepancy"
