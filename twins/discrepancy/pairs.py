@@ -65,9 +65,8 @@ def joint_step(loop: Any, ext: Any, ranking: Ranking, rnd: int, n_max: int) -> b
     n_eff0 = ft.effective_samples(inp.val.y[skip:] - stage.yhat_val[skip:])
     level = opts.alpha / (len(ranking.trials) + len(trials))
     judged = []
-    for tr in trials:  # on the effective samples of the pair's residual (:func:`.ranking._judge`)
-        n_eff = ft.effective_samples(inp.val.y[skip:] - tr.yhat_val[skip:])
-        p = significance(stage.sse_val, tr.sse_val, n_eff, top.n_added + tr.n_added)
+    for tr in trials:
+        p = significance(stage.sse_val, tr.sse_val, n_eff0, top.n_added + tr.n_added)
         gain = max(0.0, 1.0 - tr.nrmse_val / stage.nrmse_val) if stage.nrmse_val > 0 else 0.0
         judged.append((tr, p, gain))
     row: dict[str, Any] = {
@@ -105,7 +104,7 @@ def _name_pair(
 ) -> None:
     """Both causes of a significant pair, with the rows and groups a round would give them, added to ``ext``; the
     configuration with both becomes the stage."""
-    inp, cal, opts = loop.inp, loop.cal, loop.opts
+    inp, cal, opts, skip = loop.inp, loop.cal, loop.opts, loop.opts.skip
     stage: Stage = ext.stage
     top = ranking.top
     # the second effect's row and group as a round from the tentative configuration would give them
@@ -116,6 +115,7 @@ def _name_pair(
         inp.val,
         inp.twin,
         cal.prior,
+        ft.effective_samples(inp.val.y[skip:] - tent.yhat_val[skip:]),
         opts,
     )
     i2 = next(i for i, t in enumerate(ranking2.trials) if t is second)

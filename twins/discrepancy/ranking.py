@@ -73,10 +73,11 @@ def rank_round(
     val: Record,
     twin: Twin,
     prior: Twin,
+    n_eff0: float,
     opts: DiagnoseOptions,
 ) -> Ranking:
     """Judge, order and group the (non-empty) ``trials`` of a round that started from ``stage``."""
-    _judge(trials, stage, est, val, prior, opts)
+    _judge(trials, stage, est, val, prior, n_eff0, opts)
     sig_ev = {
         tr.effect: ev.signature_evidence(twin.EFFECTS[tr.effect], stage.analysis_val, twin, also=stage.analysis_est)
         for tr in trials
@@ -99,7 +100,9 @@ def judged_span(effect: str, twin: Twin, est: Record, val: Record) -> int:
     return min(val.n, int(round(len(est) / est.fs * val.fs)))
 
 
-def _judge(trials: list[Trial], stage: Stage, est: Record, val: Record, prior: Twin, opts: DiagnoseOptions) -> None:
+def _judge(
+    trials: list[Trial], stage: Stage, est: Record, val: Record, prior: Twin, n_eff0: float, opts: DiagnoseOptions
+) -> None:
     """p-value, gain and significance of each trial against ``stage`` (module docstring); a drift between separate
     records on the validation samples of :func:`judged_span` only."""
     skip = opts.skip
@@ -129,13 +132,10 @@ def _judge(trials: list[Trial], stage: Stage, est: Record, val: Record, prior: T
     level = opts.alpha / len(trials)
     for tr in trials:
         tr.significant = bool(tr.p_value < level and tr.gain >= opts.min_rel_gain)
-        if not tr.significant:
-            continue
-        n_eff = ft.effective_samples(val.output[skip:] - tr.yhat_val[skip:])  # the trial's noise, as above
-        if tr.retest:
-            tr.significant = dflt.attributable(tr, est, val, prior, n_eff, level, opts.min_rel_gain, skip)
-        else:
-            tr.significant = _owes_its_gain(tr, est, val, n_eff, level, opts.min_rel_gain, skip)
+        if tr.significant and tr.retest:
+            tr.significant = dflt.attributable(tr, est, val, prior, n_eff0, level, opts.min_rel_gain, skip)
+        elif tr.significant:
+            tr.significant = _owes_its_gain(tr, est, val, n_eff0, level, opts.min_rel_gain, skip)
 
 
 def _owes_its_gain(

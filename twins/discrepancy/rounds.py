@@ -36,7 +36,6 @@ import math
 import time
 from typing import Any
 
-from sysid.data.record import Record
 from twins.base import Twin
 
 from . import defaults as dflt
@@ -213,7 +212,7 @@ def _greedy(loop: _Loop, ext: Extension, n_max: int) -> None:
         ext.rounds += errors
         if not trials:
             break
-        ranking = rank_round(trials, stage, inp.est, inp.val, inp.twin, cal.prior, opts)
+        ranking = rank_round(trials, stage, inp.est, inp.val, inp.twin, cal.prior, n_eff0, opts)
         ext.rounds.append(
             {
                 "round": rnd,
@@ -244,8 +243,8 @@ def _greedy(loop: _Loop, ext: Extension, n_max: int) -> None:
 def _with_named(loop: _Loop, ext: Extension, ranking: Ranking, rnd: int, n_eff0: float) -> bool:
     """A later round's leader that is not significant, refitted jointly with the causes named before it (their
     parameters refitted beside it and the core); True when it then is, and was added to ``ext`` (module docstring).
-    Judged in its round against the better of the stage and the stage refitted the same way without it (``n_eff0``,
-    the effective samples of the stage's residual, is reported with the round)."""
+    Judged in its round (``n_eff0``: the effective samples of its stage's residual) against the better of the stage
+    and the stage refitted the same way without it."""
     inp, cal, opts, skip = loop.inp, loop.cal, loop.opts, loop.opts.skip
     stage, top = ext.stage, ranking.top
     small = top.gain < PAIR_GAIN and opts.pairs is not True  # DiagnoseOptions.pairs True: every leader
@@ -276,7 +275,7 @@ def _with_named(loop: _Loop, ext: Extension, ranking: Ranking, rnd: int, n_eff0:
     except TRIAL_ERRORS:
         return False
     joint = rank_round(
-        [tr] + [t for t in ranking.trials if t is not top], stage, inp.est, inp.val, inp.twin, cal.prior, opts
+        [tr] + [t for t in ranking.trials if t is not top], stage, inp.est, inp.val, inp.twin, cal.prior, n_eff0, opts
     )
     ext.rounds.append(
         {
@@ -317,7 +316,7 @@ def revisit(loop: _Loop, ext: Extension) -> bool:
         if not trials:
             continue
         n_eff0 = ft.effective_samples(inp.val.y[skip:] - base.yhat_val[skip:])
-        ranking = rank_round(trials, base, inp.est, inp.val, inp.twin, cal.prior, opts)
+        ranking = rank_round(trials, base, inp.est, inp.val, inp.twin, cal.prior, n_eff0, opts)
         row = {
             "round": cause["round"],
             "revisit": eff,
@@ -332,7 +331,7 @@ def revisit(loop: _Loop, ext: Extension) -> bool:
         if top.effect == eff:
             _keep_refit(ext, cause, top, inp, opts)
             continue
-        if not top.significant or not _beats(top, trials, eff, ext.stage, inp.val, opts):
+        if not top.significant or not _beats(top, trials, eff, ext.stage, n_eff0, opts):
             continue
         new = cause_from(ranking, base, inp.twin, cal.prior, cause["round"])
         new["replaces"] = eff
@@ -384,10 +383,8 @@ def _refresh_params(ext: Extension, effects: list[str]) -> None:
             c["params"] = {f: getattr(twin.params, f) for f in c["params"]}
 
 
-def _beats(top: Trial, trials: list[Trial], incumbent: str, stage: Stage, val: Record, opts: DiagnoseOptions) -> bool:
+def _beats(top: Trial, trials: list[Trial], incumbent: str, stage: Stage, n_eff: float, opts: DiagnoseOptions) -> bool:
     """The slot's leader explains the validation record significantly better than the incumbent (its refit in the
-    slot, or the configuration as it stands, whichever is better), on the effective samples of the leader's
-    residual (:func:`.ranking._judge`)."""
+    slot, or the configuration as it stands, whichever is better)."""
     ref = min([t.sse_val for t in trials if t.effect == incumbent] + [stage.sse_val])
-    n_eff = ft.effective_samples(val.output[opts.skip :] - top.yhat_val[opts.skip :])
     return bool(top.sse_val < ref and significance(ref, top.sse_val, n_eff, 1) < opts.alpha)
