@@ -3,8 +3,9 @@
 **Significance** of a gain: an F-test of nested models on the validation residual variance
 (:func:`.prediction.significance`) on (k, N_eff − k) degrees of freedom, ``k`` the parameters the effect adds
 (its fitted parameters, plus one where its variant was chosen by the data: a richer family needs a larger
-gain) and ``N_eff`` the effective number of independent samples of the trial's residual (the noise once the
-effect is in; not the stage's, whose smoothness is the structure the effect removes). The in-sample form (k, N_eff −
+gain) and ``N_eff`` the effective number of independent residual samples: in the first round the trial's (the
+noise once the effect is in; the calibrated configuration's residual is the discrepancy, whose smoothness is the
+mechanism's), in later rounds the smaller of the trial's and the stage's. The in-sample form (k, N_eff −
 k_total), k_total every parameter the trial fitted, is not used: no parameter was fitted to the validation
 residual, and with a strongly correlated residual it would refuse real gains (``n_params_total`` is reported)
 (:func:`.features.effective_samples`), Bonferroni-corrected over the candidates tried (``p_value < alpha /
@@ -75,9 +76,11 @@ def rank_round(
     prior: Twin,
     n_eff0: float,
     opts: DiagnoseOptions,
+    first: bool = False,
 ) -> Ranking:
-    """Judge, order and group the (non-empty) ``trials`` of a round that started from ``stage``."""
-    _judge(trials, stage, est, val, prior, n_eff0, opts)
+    """Judge, order and group the (non-empty) ``trials`` of a round that started from ``stage`` (``first``: the
+    calibrated configuration, no cause named yet; ``n_eff0``: the effective samples of ``stage``'s residual)."""
+    _judge(trials, stage, est, val, prior, n_eff0, opts, first)
     sig_ev = {
         tr.effect: ev.signature_evidence(twin.EFFECTS[tr.effect], stage.analysis_val, twin, also=stage.analysis_est)
         for tr in trials
@@ -101,7 +104,14 @@ def judged_span(effect: str, twin: Twin, est: Record, val: Record) -> int:
 
 
 def _judge(
-    trials: list[Trial], stage: Stage, est: Record, val: Record, prior: Twin, n_eff0: float, opts: DiagnoseOptions
+    trials: list[Trial],
+    stage: Stage,
+    est: Record,
+    val: Record,
+    prior: Twin,
+    n_eff0: float,
+    opts: DiagnoseOptions,
+    first: bool = False,
 ) -> None:
     """p-value, gain and significance of each trial against ``stage`` (module docstring); a drift between separate
     records on the validation samples of :func:`judged_span` only."""
@@ -119,9 +129,14 @@ def _judge(
             tr.gain = max(0.0, 1.0 - math.sqrt(sse1 / sse0)) if sse0 > 0 else 0.0
             continue
         n_eff = ft.effective_samples(val.output[skip:] - tr.yhat_val[skip:])
-        # N_eff of the trial's residual, the noise once the effect is in: the stage's residual holds the structure
-        # the effect removes, and its smoothness is not the noise's (benchmark seed 364: a slow cycle 97 % of the
-        # tanks' residual gave the stage N_eff 6 of 748 samples, and the drift that took it away p = 0.003, refused)
+        # in the first round, N_eff of the trial's residual, the noise once the effect is in: the calibrated
+        # configuration's residual is the discrepancy itself, and its smoothness is the mechanism's, not the noise's
+        # (benchmark seed 364: a slow cycle 97 % of the tanks' residual gave the stage N_eff 6 of 748 samples, and
+        # the drift that took it away p = 0.003, refused). In a later round the stage's residual is what the named
+        # causes leave, whose smooth remainder is as often their own misfit as a second mechanism (seeds 70, 285: a
+        # drift fitted to what a named delay left, p ≈ 0 on its own residual): there the smaller of the two counts
+        if not first:
+            n_eff = min(n_eff0, n_eff)
         # the validation residual has no parameter fitted to it: its denominator keeps N_eff − k (k_total, the
         # in-sample count, would make a 98.6 % gain of a creep re-test insignificant at N_eff = 8: d2 = 1)
         # judged against the better of the stage and its core refitted alone: a gain that more iterations of the

@@ -212,7 +212,7 @@ def _greedy(loop: _Loop, ext: Extension, n_max: int) -> None:
         ext.rounds += errors
         if not trials:
             break
-        ranking = rank_round(trials, stage, inp.est, inp.val, inp.twin, cal.prior, n_eff0, opts)
+        ranking = rank_round(trials, stage, inp.est, inp.val, inp.twin, cal.prior, n_eff0, opts, not ext.causes)
         ext.rounds.append(
             {
                 "round": rnd,
