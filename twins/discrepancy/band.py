@@ -1,35 +1,24 @@
-"""A named cause whose characteristic frequency lies outside the records' band: above the Nyquist frequency, or a
-time constant longer than the records.
+"""A named cause whose characteristic frequency lies outside the records' band: above the Nyquist frequency, pinned at
+the top of its range, or a time constant longer than the records.
 
 A first-order low-pass of corner f_c acts within the band |f| < f_N ≪ f_c as 1 − j·f/f_c: a lag of 1/(2π·f_c), which
 a delay, a slower drive or a filtered sensor give alike; a mode above the band acts as its static share, a
-feed-through of the drive that crosstalk gives alike. The data then say that such a term fits, not which one: its
-corner or its resonance is not seen. On the diagnosis benchmark's 500 stored cases (docs/diagnosis-benchmark.md),
-6 of the 23 named causes whose frequency (a corner, a bandwidth, a second mode) lay above the Nyquist frequency were
-right, and 11 of the 32 wrong names stated with confidence ≥ ½ were such causes. Such a cause is marked
-(``above_nyquist``: its frequency and the Nyquist frequency, in Hz) and its confidence capped at
-:data:`twins.discrepancy.confidence.BAND_CAP` (:func:`.confidence.calibrate_causes`).
-
-A frequency fitted at the top of its documented range (its corner, or the parameter it rises with: the second mode's
-ratio to the first) is the same case within the band: the fit would place it higher, so the corner or resonance it
-stands for is not found in the data, only its low-frequency form. On the benchmark, of the three causes so fitted
-two were right and already above the band (242, 299); the third, a crosstalk of the drive into the cantilever's
-sensor sampled at 27.5 kHz, was named `second_mode` with its ratio pinned at 10 (7.0 kHz, under the Nyquist
-frequency of 13.8 kHz) at 0.83 (case 399). Marked ``pinned_frequency`` (the frequency, the parameter and its
-bound) and capped alike.
-
+feed-through of the drive that crosstalk gives alike. The data then say that such a term fits, not which one. On the
+diagnosis benchmark's 500 cases (docs/diagnosis-benchmark.md) 6 of the 23 causes named above the Nyquist frequency
+were right. Such a cause is marked ``above_nyquist`` (its frequency and the Nyquist frequency, in Hz). A frequency
+fitted at the top of its documented range (a corner, the second mode's ratio to the first) is the same case within
+the band — the fit would place it higher (case 399: a drive feed-through named `second_mode` at the ratio's bound,
+7.0 kHz under a 13.8 kHz Nyquist frequency, at 0.83) — marked ``pinned_frequency`` (frequency, parameter, bound).
 A twin may say which frequency an effect stands for (``effect_frequency_hz(effect, params)``: the cantilever's
 second mode at mode_ratio·f₁); otherwise it is the largest of the effect's parameters in Hz.
 
-At the low end, a stationary effect with a memory — the rate envelope of rate-dependent hysteresis, the fastest
-element of a creep spectrum, its catalog keys ``tau`` / ``tau_min`` — starts each record from rest and settles as
-1 − e^(−t/τ). With τ longer than the record it never settles: within the record it is a ramp over time (the
-envelope ρ(t) ≈ t/τ·mean|v̇|, a hysteretic slope that grows through the record), which a gain drifting over the
-record gives alike, and the rate or creep law it stands for is not seen. On the benchmark's 500 cases the four causes
-so fitted (rate-dependent hysteresis with τ 3.5–29× the record) were all wrong, two stated with confidence ≥ ½ (a
-gain sagging over each record, a crosstalk of the drive; cases 141, 358). Such a cause is marked
-(``beyond_record``: its time constant and the records' duration, in s) and capped as one above the band. An effect
-whose law is itself a change over the record (``time_varying``: a drift) is exempt: its τ may exceed the record.
+At the low end, a stationary effect with a memory (catalog keys ``tau`` / ``tau_min``: rate-dependent hysteresis's
+rate envelope, the fastest element of a creep spectrum) starts each record from rest and settles as 1 − e^(−t/τ).
+With τ longer than the records it never settles: within them it is a change over time (ρ(t) ≈ t/τ·mean|v̇|, a
+hysteretic slope growing through the record), which a drifting gain gives alike. On the benchmark the four causes so
+fitted were wrong, two stated ≥ ½ (cases 141: a sagging sensor gain; 358). Marked ``beyond_record`` (τ and the
+records' duration, in s); a ``time_varying`` effect (a drift) is exempt. Every mark caps the confidence at
+:data:`twins.discrepancy.confidence.BAND_CAP` (:func:`.confidence.calibrate_causes`).
 """
 
 from __future__ import annotations
@@ -41,7 +30,15 @@ from twins.paramfields import param_info
 
 from .ranges import bound_side
 
-__all__ = ["characteristic_hz", "above_band_hz", "mark_above_nyquist", "pinned_hz", "memory_s", "mark_beyond_record"]
+__all__ = [
+    "characteristic_hz",
+    "above_band_hz",
+    "mark_above_nyquist",
+    "pinned_hz",
+    "memory_s",
+    "mark_beyond_record",
+    "mark_outside_band",
+]
 
 
 def characteristic_hz(twin: Any, effect: str, params: dict[str, float]) -> float | None:
@@ -143,3 +140,10 @@ def mark_beyond_record(causes: list[dict[str, Any]], twin: Any, duration_s: floa
             + f"; its time constant, {tau:.4g} s, is longer than the records ({float(duration_s):.4g} s): it never "
             "settles within them and acts as a change over the record, which a drifting gain or reading gives alike"
         )
+
+
+def mark_outside_band(causes: list[dict[str, Any]], twin: Any, fs: float, duration_s: float) -> None:
+    """Both ends of the band (module docstring): :func:`mark_above_nyquist` at the larger sampling rate ``fs`` and
+    :func:`mark_beyond_record` at the longer record's ``duration_s``, in place."""
+    mark_above_nyquist(causes, twin, fs)
+    mark_beyond_record(causes, twin, duration_s)

@@ -45,7 +45,7 @@ from . import features as ft
 from . import ranges as rg
 from . import realdata
 from . import unexplained as unx
-from .band import mark_above_nyquist, mark_beyond_record
+from .band import mark_outside_band
 from .candidates import adopt
 from .confidence import attributed_verdict, calibrate_causes
 from .fields import core_for, numeric_fields, quant_params
@@ -326,8 +326,7 @@ def _conclude(inp: _Inputs, cal: _Calibrated, base: Stage, ext: Extension, opts:
     verdict, beyond, at_bound = realdata.final_verdict(
         inp.val, stage.yhat_val, causes, stage.twin, cal.info, opts.skip, inp.noise
     )
-    mark_above_nyquist(causes, stage.twin, max(inp.est.fs, inp.val.fs))
-    mark_beyond_record(causes, stage.twin, max(inp.est.duration, inp.val.duration))
+    mark_outside_band(causes, stage.twin, max(inp.est.fs, inp.val.fs), max(inp.est.duration, inp.val.duration))
     mark_untransferable(causes, stage.twin, inp.est, inp.val, stage.yhat_val, opts.skip, say=opts.say)
     calibrate_causes(causes, beyond.get("excess_ratio"))
     causes.sort(key=lambda c: -float(c["confidence"]))  # strongest first (stable: round order among equals)
