@@ -11,13 +11,15 @@ whose time constant exceeds the records (``beyond_record``): the rule, and case 
 
 from __future__ import annotations
 
+import math
+
 import pytest
 
 from benchmarks.diagnosis_bench.cases import draw_case
 from benchmarks.diagnosis_bench.run import MAX_ROUNDS
 from benchmarks.diagnosis_bench.truth import make_records
 from twins.discrepancy import diagnose
-from twins.discrepancy.band import characteristic_hz, mark_above_nyquist, mark_beyond_record, memory_s, pinned_hz
+from twins.discrepancy.band import characteristic_hz, mark_outside_band, memory_s, pinned_hz
 from twins.discrepancy.confidence import BAND_CAP, calibrate_causes
 from twins.registry import get_twin
 
@@ -41,7 +43,7 @@ def test_a_second_mode_above_the_nyquist_frequency_is_marked_and_capped(fs, mark
     f2 = twin.params.mode_ratio * twin.params.f1_hz  # 4.4 kHz
     assert characteristic_hz(twin, "second_mode", {"mode2_share": 0.1}) == pytest.approx(f2)
     causes = [_cause("second_mode", {"mode2_share": 0.1}), _cause("sensor_lowpass", {"sensor_bandwidth_hz": 500.0})]
-    mark_above_nyquist(causes, twin, fs)
+    mark_outside_band(causes, twin, fs, math.inf)
     calibrate_causes(causes, 1.0)
     assert bool(causes[0].get("above_nyquist")) is marked
     assert (causes[0]["confidence"] <= BAND_CAP) is marked
@@ -95,7 +97,7 @@ def test_a_time_constant_longer_than_the_records_is_marked_and_capped(tau_s, mar
     assert memory_s(twin, "creep", {"creep_per_decade": 0.02, "creep_tau_min_s": 0.3}) == 0.3
     assert memory_s(twin, "thermal_drift", {"thermal_drift_um": 1.0, "thermal_tau_s": 60.0}) is None
     causes = [_cause("rate_dependent_hysteresis", rdh), _cause("thermal_drift", {"thermal_tau_s": 60.0})]
-    mark_beyond_record(causes, twin, 0.8)
+    mark_outside_band(causes, twin, 1e9, 0.8)
     calibrate_causes(causes, 1.0)
     assert bool(causes[0].get("beyond_record")) is marked and (causes[0]["confidence"] <= BAND_CAP) is marked
     assert "beyond_record" not in causes[1] and causes[1]["confidence"] > BAND_CAP
@@ -128,7 +130,7 @@ def test_a_frequency_at_the_top_of_its_range_is_marked_and_capped(ratio, marked)
     params = {"mode_ratio": ratio, "mode2_share": 0.25, "zeta2": 0.016}
     assert (pinned_hz(twin, "second_mode", params) is not None) is marked
     causes = [_cause("second_mode", params)]
-    mark_above_nyquist(causes, twin, 27.5e3)
+    mark_outside_band(causes, twin, 27.5e3, math.inf)
     calibrate_causes(causes, 1.0)
     assert "above_nyquist" not in causes[0]
     assert bool(causes[0].get("pinned_frequency")) is marked and (causes[0]["confidence"] <= BAND_CAP) is marked

@@ -33,10 +33,8 @@ from .ranges import bound_side
 __all__ = [
     "characteristic_hz",
     "above_band_hz",
-    "mark_above_nyquist",
     "pinned_hz",
     "memory_s",
-    "mark_beyond_record",
     "mark_outside_band",
 ]
 
@@ -58,36 +56,6 @@ def above_band_hz(twin: Any, effect: str, params: dict[str, float], fs: float) -
     frequency ``fs``/2, else None."""
     f = characteristic_hz(twin, effect, params)
     return f if f is not None and f > 0.5 * float(fs) else None
-
-
-def mark_above_nyquist(causes: list[dict[str, Any]], twin: Any, fs: float) -> None:
-    """Mark each catalog cause of ``causes`` whose frequency lies above ``fs``/2, or is fitted at the top of its
-    range (module docstring), in place."""
-    nyquist = 0.5 * float(fs)
-    for c in causes:
-        if c["effect"] == "unexplained" or c["effect"] not in getattr(twin, "EFFECTS", {}):
-            continue
-        f = above_band_hz(twin, c["effect"], c.get("params", {}), fs)
-        if f is None:
-            continue
-        c["above_nyquist"] = {"hz": f, "nyquist_hz": nyquist}
-        c["evidence"] = (
-            c.get("evidence", "")
-            + f"; its frequency, {f:.4g} Hz, lies above the records' Nyquist frequency ({nyquist:.4g} Hz): within "
-            "the band it acts as its low-frequency form (a lag, a feed-through), which other mechanisms share"
-        )
-    for c in causes:
-        if c["effect"] == "unexplained" or c.get("above_nyquist") or c["effect"] not in getattr(twin, "EFFECTS", {}):
-            continue
-        pinned = pinned_hz(twin, c["effect"], c.get("params", {}))
-        if pinned is None:
-            continue
-        c["pinned_frequency"] = pinned
-        c["evidence"] = (
-            c.get("evidence", "")
-            + f"; its frequency, {pinned['hz']:.4g} Hz, is fitted with {pinned['param']} at the top of its range "
-            f"({pinned['bound']:.4g}): the fit would place it higher, its corner or resonance is not found in the data"
-        )
 
 
 def pinned_hz(twin: Any, effect: str, params: dict[str, float]) -> dict[str, Any] | None:
@@ -125,25 +93,46 @@ def memory_s(twin: Any, effect: str, params: dict[str, float]) -> float | None:
     return max(taus) if taus else None
 
 
-def mark_beyond_record(causes: list[dict[str, Any]], twin: Any, duration_s: float) -> None:
-    """Mark each catalog cause of ``causes`` whose time constant (:func:`memory_s`) exceeds ``duration_s``, the
-    longer record's duration (module docstring), in place."""
-    for c in causes:
-        if c["effect"] == "unexplained":
-            continue
-        tau = memory_s(twin, c["effect"], c.get("params", {}))
-        if tau is None or tau <= float(duration_s):
-            continue
-        c["beyond_record"] = {"tau_s": tau, "record_s": float(duration_s)}
-        c["evidence"] = (
-            c.get("evidence", "")
-            + f"; its time constant, {tau:.4g} s, is longer than the records ({float(duration_s):.4g} s): it never "
-            "settles within them and acts as a change over the record, which a drifting gain or reading gives alike"
-        )
-
-
 def mark_outside_band(causes: list[dict[str, Any]], twin: Any, fs: float, duration_s: float) -> None:
-    """Both ends of the band (module docstring): :func:`mark_above_nyquist` at the larger sampling rate ``fs`` and
-    :func:`mark_beyond_record` at the longer record's ``duration_s``, in place."""
-    mark_above_nyquist(causes, twin, fs)
-    mark_beyond_record(causes, twin, duration_s)
+    """Mark each catalog cause of ``causes`` outside the band (module docstring), in place: ``above_nyquist`` when its
+    frequency lies above ``fs``/2 (the larger sampling rate), else ``pinned_frequency`` when it is fitted at the top
+    of its range, and ``beyond_record`` when its time constant exceeds ``duration_s`` (the longer record)."""
+    nyquist = 0.5 * float(fs)
+    for c in causes:
+        if c["effect"] == "unexplained" or c["effect"] not in getattr(twin, "EFFECTS", {}):
+            continue
+        params = c.get("params", {})
+        f = above_band_hz(twin, c["effect"], params, fs)
+        pinned = pinned_hz(twin, c["effect"], params) if f is None else None
+        tau = memory_s(twin, c["effect"], params)
+        if f is not None:
+            _mark(
+                c,
+                "above_nyquist",
+                {"hz": f, "nyquist_hz": nyquist},
+                f"its frequency, {f:.4g} Hz, lies above the records' Nyquist frequency ({nyquist:.4g} Hz): within the "
+                "band it acts as its low-frequency form (a lag, a feed-through), which other mechanisms share",
+            )
+        elif pinned is not None:
+            _mark(
+                c,
+                "pinned_frequency",
+                pinned,
+                f"its frequency, {pinned['hz']:.4g} Hz, is fitted with {pinned['param']} at the top of its range "
+                f"({pinned['bound']:.4g}): the fit would place it higher, its corner or resonance is not found in the "
+                "data",
+            )
+        if tau is not None and tau > float(duration_s):
+            _mark(
+                c,
+                "beyond_record",
+                {"tau_s": tau, "record_s": float(duration_s)},
+                f"its time constant, {tau:.4g} s, is longer than the records ({float(duration_s):.4g} s): it never "
+                "settles within them and acts as a change over the record, which a drifting gain or reading gives "
+                "alike",
+            )
+
+
+def _mark(cause: dict[str, Any], key: str, value: Any, why: str) -> None:
+    cause[key] = value
+    cause["evidence"] = cause.get("evidence", "") + "; " + why
