@@ -99,6 +99,7 @@ class SequenceIdentifier(TorchFileSave, Identifier):
         self.n_inputs_, self.n_outputs_ = n_in, n_out
         self.max_lag_ = int(lag)
         self.device_used_ = str(device)
+        self.cuda_graphs_ = bool(res.cuda_graphs)
         t0, c0 = self._clocks
         self.fit_seconds_ = time.perf_counter() - t0
         self.fit_cpu_seconds_ = time.process_time() - c0

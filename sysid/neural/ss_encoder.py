@@ -71,6 +71,9 @@ class SSEncoder(SequenceIdentifier):
         Gradient-norm clipping (0: off).
     seed, device :
         Seeds weights and section order; ``auto`` | ``cpu`` | ``cuda`` (:mod:`sysid.neural.device`).
+    cuda_graphs : bool
+        On a CUDA device, replay each training step and hold-out run as a CUDA graph
+        (:mod:`sysid.neural.cuda_graphs`; the same model to float rounding); ignored on the CPU.
     """
 
     name = "ss-encoder"
@@ -95,6 +98,7 @@ class SSEncoder(SequenceIdentifier):
         clip: float = 0.0,
         seed: int = 0,
         device: str = "auto",
+        cuda_graphs: bool = True,
     ):
         self.nx = nx
         self.ny = ny
@@ -114,6 +118,7 @@ class SSEncoder(SequenceIdentifier):
         self.clip = clip
         self.seed = seed
         self.device = device
+        self.cuda_graphs = cuda_graphs
 
     # ------------------------------------------------------------------ checks
     def _check_params(self, check_device: bool = True) -> None:
@@ -130,8 +135,9 @@ class SSEncoder(SequenceIdentifier):
             setattr(self, key, hidden_widths(getattr(self, key), key, self.name))
         if self.activation not in _ACT_NP:
             raise ConfigError(f"{self.name}: activation={self.activation!r} not one of: {', '.join(_ACT_NP)}")
-        if not isinstance(self.feedthrough, (bool, np.bool_)):
-            raise ConfigError(f"{self.name}: feedthrough={self.feedthrough!r} must be true or false")
+        for key in ("feedthrough", "cuda_graphs"):
+            if not isinstance(getattr(self, key), (bool, np.bool_)):
+                raise ConfigError(f"{self.name}: {key}={getattr(self, key)!r} must be true or false")
         self._check_step_size("lr")
         if self.lr_min is not None and not (
             isinstance(self.lr_min, (int, float)) and not isinstance(self.lr_min, bool) and 0 <= self.lr_min <= self.lr
@@ -196,6 +202,7 @@ class SSEncoder(SequenceIdentifier):
             device=device,
             lr_min=None if self.lr_min is None else float(self.lr_min),
             log=lambda msg: _LOG.info("%s: %s", self.name, msg),
+            cuda_graphs=bool(self.cuda_graphs),
         )
         self.weights_ = export_weights(model)
         self.n_parameters_ = int(sum(p.numel() for p in model.parameters()))

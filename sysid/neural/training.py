@@ -33,6 +33,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import torch
 
+from sysid.neural.cuda_graphs import GraphedRollout, GraphedStep
 from sysid.progress import progress
 
 __all__ = [
@@ -91,7 +92,7 @@ class Sections:
 class SimTrainResult:
     """What :func:`train_simulation` did: per-epoch training loss (mean section MSE, normalised units), the
     validation RMSE after each epoch (index 0: before training), the epoch whose weights were kept (0 = the
-    initial ones) and the CPU seconds spent."""
+    initial ones), the CPU and wall seconds spent, and whether CUDA graphs replayed the steps."""
 
     loss_history: list[float] = field(default_factory=list)
     val_history: list[float] = field(default_factory=list)
@@ -99,6 +100,7 @@ class SimTrainResult:
     epochs_run: int = 0
     cpu_seconds: float = 0.0
     wall_seconds: float = 0.0
+    cuda_graphs: bool = False
 
 
 @dataclass
@@ -138,10 +140,16 @@ class BestWeights:
 
 
 def _optimiser(
-    model: torch.nn.Module, lr: float, epochs: int, lr_min: float | None
+    model: torch.nn.Module, lr: float, epochs: int, lr_min: float | None, graph_device: torch.device | None = None
 ) -> tuple[torch.optim.Optimizer, torch.optim.lr_scheduler.CosineAnnealingLR | None]:
-    """Adam on the trainable parameters and, with ``lr_min``, the cosine schedule from ``lr`` to it over ``epochs``."""
-    opt = torch.optim.Adam([p for p in model.parameters() if p.requires_grad], lr=float(lr))
+    """Adam on the trainable parameters and, with ``lr_min``, the cosine schedule from ``lr`` to it over ``epochs``.
+    ``graph_device``: a CUDA device whose steps a CUDA graph replays — Adam is then ``capturable`` with its step
+    size a tensor there, which the schedule rewrites in place between replays."""
+    params = [p for p in model.parameters() if p.requires_grad]
+    if graph_device is not None:
+        opt = torch.optim.Adam(params, lr=torch.tensor(float(lr), device=graph_device), capturable=True)
+    else:
+        opt = torch.optim.Adam(params, lr=float(lr))
     sched = (
         torch.optim.lr_scheduler.CosineAnnealingLR(opt, T_max=max(int(epochs), 1), eta_min=float(lr_min))
         if lr_min is not None
@@ -204,6 +212,7 @@ def train_simulation(
     draws: int | None = None,
     dtype: torch.dtype = torch.float32,
     desc: str | None = None,
+    cuda_graphs: bool = False,
 ) -> SimTrainResult:
     """Minimise the truncated T-step simulation loss of ``model`` on ``train`` with Adam (see the module
     docstring); early stopping on the free-run RMSE of ``val`` when given (the best weights are loaded back into
@@ -215,17 +224,30 @@ def train_simulation(
     ``draws``: ``None`` — each epoch takes every section once, in an order shuffled by ``generator``; an integer —
     each epoch draws that many section starts with replacement. ``dtype``: the precision of the data (and of the
     model, which the caller has cast). ``desc``: label of the epoch progress bar (``None``: no bar).
+    ``cuda_graphs`` (CUDA devices only; the model's forward must not leave the GPU): full batches and the hold-out
+    free runs replay CUDA graphs (:mod:`sysid.neural.cuda_graphs`) instead of launching each kernel.
     Returns a :class:`SimTrainResult`; a parameter without gradient (``requires_grad`` off) stays fixed."""
     gen = generator or torch.Generator().manual_seed(0)
     sec = Sections(train, lag, T, device, dtype)
     if len(sec) == 0:
         raise ValueError(f"no record has lag + T = {lag + T} samples for one section")
-    opt, sched = _optimiser(model, lr, epochs, lr_min)
-    res = SimTrainResult()
+    graphs = bool(cuda_graphs) and device.type == "cuda"
+    opt, sched = _optimiser(model, lr, epochs, lr_min, device if graphs else None)
+    res = SimTrainResult(cuda_graphs=graphs)
     c0, w0 = time.process_time(), time.perf_counter()
     best = BestWeights()
+    step = GraphedStep(model, opt, sec.batch, int(batch_size), clip) if graphs else None
+    rollouts = [GraphedRollout(model, u, y, lag) for u, y in val if u.shape[0] > lag] if graphs and val else None
+
+    def hold_out() -> float:
+        if rollouts is None:
+            return validation_rmse(model, val or [], lag, device)
+        parts = [r.sse() for r in rollouts]
+        se, n = sum(p[0] for p in parts), sum(p[1] for p in parts)
+        return math.sqrt(se / n) if n and math.isfinite(se) else math.inf
+
     if val:
-        res.val_history.append(validation_rmse(model, val, lag, device))
+        res.val_history.append(hold_out())
         best.update(res.val_history[0], model, 0, force=True)
         res.best_epoch = 0
     starts = torch.as_tensor(sec.starts, device=device)
@@ -237,10 +259,13 @@ def train_simulation(
             pick = torch.randint(0, len(sec), (int(draws),), generator=gen).to(device)
         total = torch.zeros((), dtype=torch.float64, device=device)
         for sel in pick.split(int(batch_size)):
-            ypast, upast, useq, target = sec.batch(starts[sel])
-            d = model(ypast, upast, useq) - target
-            loss = (d * d).mean()
-            adam_step(model, opt, loss, clip)
+            if step is not None:
+                loss = step(starts[sel])
+            else:
+                ypast, upast, useq, target = sec.batch(starts[sel])
+                d = model(ypast, upast, useq) - target
+                loss = (d * d).mean()
+                adam_step(model, opt, loss, clip)
             total += loss.detach().double() * sel.numel()
         res.loss_history.append(float(total.item()) / pick.numel())
         res.epochs_run = ep
@@ -248,7 +273,7 @@ def train_simulation(
             sched.step()
         msg = f"epoch {ep}: train loss {res.loss_history[-1]:.4g}"
         if val:
-            v = validation_rmse(model, val, lag, device)
+            v = hold_out()
             res.val_history.append(v)
             msg += f", validation RMSE {v:.4g}"
             best.update(v, model, ep)
