@@ -121,25 +121,35 @@ N_SCAL = 8
 NZ = 6
 
 
-def expm_small(A: np.ndarray) -> np.ndarray:
-    """Matrix exponential of a small matrix by scaling and squaring with a Taylor series (numpy only).
+@njit(cache=True)
+def _matmul(X: np.ndarray, Y: np.ndarray) -> np.ndarray:
+    """X @ Y by explicit loops: the same sums on every CPU (no BLAS kernel chosen at run time)."""
+    n, m, p = X.shape[0], X.shape[1], Y.shape[1]
+    out = np.zeros((n, p))
+    for i in range(n):
+        for k in range(m):
+            x = X[i, k]
+            if x != 0.0:
+                for j in range(p):
+                    out[i, j] += x * Y[k, j]
+    return out
 
-    The argument is scaled by 2^-s so that its 1-norm is ≤ 1/4, the series is summed to 18 terms (truncation
-    < 1e-24 relative), then squared s times (Moler & Van Loan 2003, "Nineteen dubious ways", method 3).
-    Used instead of ``scipy.linalg.expm`` for the 8 × 8 FOH matrix: SciPy's threaded LAPACK is two orders of
-    magnitude slower per call on a loaded machine (docs/diagnosis.md); the tests check both agree to 1e-12.
-    """
-    A = np.array(A, dtype=float)
-    # diagonal balancing by powers of 2 (Parlett & Reinsch): exp(D⁻¹AD) = D⁻¹exp(A)D, exact in floating point
+
+@njit(cache=True)
+def _expm_balanced(A: np.ndarray) -> np.ndarray:
     n = A.shape[0]
     d = np.ones(n)
-    for _ in range(20):
+    for _ in range(20):  # diagonal balancing by powers of 2 (Parlett & Reinsch): exact in floating point
         changed = False
         for i in range(n):
-            c = float(np.sum(np.abs(A[:, i])) - abs(A[i, i]))
-            r = float(np.sum(np.abs(A[i, :])) - abs(A[i, i]))
+            c = 0.0
+            r = 0.0
+            for j in range(n):
+                if j != i:
+                    c += abs(A[j, i])
+                    r += abs(A[i, j])
             if c > 0 and r > 0:
-                f = 2.0 ** round(0.5 * math.log2(r / c))
+                f = 2.0 ** np.rint(0.5 * math.log2(r / c))
                 if f != 1.0:
                     A[:, i] *= f
                     A[i, :] /= f
@@ -147,17 +157,40 @@ def expm_small(A: np.ndarray) -> np.ndarray:
                     changed = True
         if not changed:
             break
-    norm = float(np.max(np.sum(np.abs(A), axis=0))) if A.size else 0.0
+    norm = 0.0
+    for j in range(n):
+        col = 0.0
+        for i in range(n):
+            col += abs(A[i, j])
+        norm = max(norm, col)
     s = max(0, int(math.ceil(math.log2(norm / 0.25)))) if norm > 0.25 else 0
     X = A / (2.0**s)
-    E = np.eye(A.shape[0])
-    term = np.eye(A.shape[0])
+    E = np.eye(n)
+    term = np.eye(n)
     for k in range(1, 19):
-        term = term @ X / k
+        term = _matmul(term, X) / k
         E = E + term
     for _ in range(s):
-        E = E @ E
-    return E * d[:, None] / d[None, :]
+        E = _matmul(E, E)
+    for i in range(n):
+        for j in range(n):
+            E[i, j] = E[i, j] * d[i] / d[j]
+    return E
+
+
+def expm_small(A: np.ndarray) -> np.ndarray:
+    """Matrix exponential of a small matrix by scaling and squaring with a Taylor series (compiled by numba).
+
+    The argument is balanced by powers of 2, scaled by 2^-s so that its 1-norm is ≤ 1/4, the series is summed to
+    18 terms (truncation < 1e-24 relative), then squared s times (Moler & Van Loan 2003, "Nineteen dubious ways",
+    method 3). Used instead of ``scipy.linalg.expm`` for the 8 × 8 FOH matrix: SciPy's threaded LAPACK is two
+    orders of magnitude slower per call on a loaded machine (docs/diagnosis.md); the tests check both agree to
+    1e-12. Compiled with explicit loops (1.4 ms → µs per call; a diagnosis discretises thousands of systems).
+    """
+    A = np.array(A, dtype=np.float64)
+    if A.size == 0:
+        return np.eye(A.shape[0])
+    return _expm_balanced(np.ascontiguousarray(A))
 
 
 def foh_discretise(A: np.ndarray, B: np.ndarray, h: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
