@@ -26,6 +26,7 @@ from typing import Any
 import numpy as np
 
 from twins.discrepancy.confidence import CONFIDENT, attributed_verdict, calibrate_causes
+from twins.discrepancy.unexplained import EXCESS_LIMIT
 
 from .mechanisms import EXPECTED
 
@@ -49,7 +50,11 @@ def current(row: dict[str, Any]) -> dict[str, Any]:
     if "error" in row or not row.get("causes"):
         return row
     causes = [dict(c) for c in row["causes"]]
-    calibrate_causes(causes, row.get("residual_vs_noise"))
+    excess = row.get("residual_vs_noise")
+    # the residual verdict: a stored `unexplained` far above the noise (a row keeps the verdict after attribution,
+    # which also says `unexplained` for a residual near the noise that no cause states confidently)
+    outside = row["verdict"] == "unexplained" and excess is not None and float(excess) > EXCESS_LIMIT
+    calibrate_causes(causes, excess, outside=outside)
     causes.sort(key=lambda c: -float(c["confidence"]))
     return dict(row, causes=causes, verdict=attributed_verdict(row["verdict"], causes))
 

@@ -328,7 +328,7 @@ def _conclude(inp: _Inputs, cal: _Calibrated, base: Stage, ext: Extension, opts:
     )
     mark_outside_band(causes, stage.twin, max(inp.est.fs, inp.val.fs), max(inp.est.duration, inp.val.duration))
     mark_untransferable(causes, stage.twin, inp.est, inp.val, stage.yhat_val, opts.skip, say=opts.say)
-    calibrate_causes(causes, beyond.get("excess_ratio"))
+    calibrate_causes(causes, beyond.get("excess_ratio"), outside=verdict == "unexplained")
     causes.sort(key=lambda c: -float(c["confidence"]))  # strongest first (stable: round order among equals)
     residual_verdict, verdict = verdict, attributed_verdict(verdict, causes)
     opts.say(f"verdict {verdict}")
