@@ -1,4 +1,4 @@
-"""A named cause beside a residual outside the model class is a candidate, not the cause (issue 46).
+"""A named cause beside a residual outside the model class is a candidate, not the cause.
 
 When the extended twin still leaves a validation residual far above the noise and structured (the residual verdict
 ``unexplained``), a catalog cause explains part of the discrepancy at most: on the diagnosis benchmark four such
