@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import weakref
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
@@ -62,10 +63,31 @@ class ParamInfo:
         return float(lo), float(hi)
 
 
+#: param_info per class, read once: the fields' metadata do not change (a class with other ranges is a new class,
+#: :func:`with_ranges`); weak keys, so that the classes a diagnosis makes do not stay alive through the cache
+_INFO: weakref.WeakKeyDictionary[type, tuple[dict[str, ParamInfo], dict[str, Any]]] = weakref.WeakKeyDictionary()
+
+
 def param_info(params_cls: type) -> dict[str, ParamInfo]:
-    """Field name → :class:`ParamInfo` for a parameter dataclass."""
-    out = {}
+    """Field name → :class:`ParamInfo` for a parameter dataclass (a new dict each call; a list or dict default is a
+    fresh copy each call, as the dataclass makes it). Read once per class: a twin validates its parameters on every
+    simulation, and a diagnosis simulates thousands of times."""
+    cached = _INFO.get(params_cls)
+    if cached is None:
+        cached = _read_info(params_cls)
+        _INFO[params_cls] = cached
+    infos, factories = cached
+    out = dict(infos)
+    for name, make in factories.items():
+        out[name] = dataclasses.replace(infos[name], default=make())
+    return out
+
+
+def _read_info(params_cls: type) -> tuple[dict[str, ParamInfo], dict[str, Any]]:
+    out, factories = {}, {}
     for f in dataclasses.fields(params_cls):
+        if f.default is dataclasses.MISSING and f.default_factory is not dataclasses.MISSING:
+            factories[f.name] = f.default_factory
         md: Mapping[str, Any] = f.metadata or {}
         default = (
             f.default
@@ -81,7 +103,7 @@ def param_info(params_cls: type) -> dict[str, ParamInfo]:
             md.get("source", ""),
             md.get("choices"),
         )
-    return out
+    return out, factories
 
 
 def with_ranges(params: Any, ranges: dict[str, tuple[float, float]], note: str = "ranges changed") -> Any:
