@@ -50,6 +50,7 @@ COST_RTOL = 1e-6  # searches whose final costs differ by less (relative) are tie
 # other paths (trust region shapes) to a minimum; the lowest cost (hold-out RMSE when held out) of the converged
 # searches is kept (of all, when none converged).
 SEARCHES = (("trf", "jac"), ("lm", "jac"), ("lm", 1.0))
+MONOMIALS_OF = ("xu", "x")  # the variables ζ and η are monomials of (option ``monomials_of``)
 
 
 class _Stop(Exception):
@@ -82,6 +83,11 @@ class PNLSS(Identifier):
         by the Jacobian's columns, then LM unscaled), 1 … 3: one search can stop in a local minimum.
     constant : bool
         Add the constant 1 to η: an output offset (measured data keep their means).
+    monomials_of : str
+        ``xu``: ζ and η are monomials of (x, u) (the paper's); ``x``: of the states alone, the input entering
+        through B u and D u only — a system whose nonlinearity acts on its own state (a Duffing oscillator such as
+        Silverbox: m ÿ + d ẏ + k y + k₃ y³ = u), whose model then extrapolates to larger inputs as its state
+        polynomial does rather than through every cross term with u.
     """
 
     name = "pnlss"
@@ -98,6 +104,7 @@ class PNLSS(Identifier):
         patience: int = 0,
         starts: int = 2,
         constant: bool = True,
+        monomials_of: str = "xu",
     ):
         self.nx = nx
         self.degree = degree
@@ -109,6 +116,7 @@ class PNLSS(Identifier):
         self.patience = patience
         self.starts = starts
         self.constant = constant
+        self.monomials_of = monomials_of
 
     # ------------------------------------------------------------------ options
     def _check_options(self) -> tuple[int, int, int]:
@@ -157,7 +165,11 @@ class PNLSS(Identifier):
         if not isinstance(self.constant, (bool, np.bool_)):
             raise ConfigError(f"pnlss: constant={self.constant!r} must be true or false")
         c = bool(self.constant)
+        if self.monomials_of not in MONOMIALS_OF:
+            raise ConfigError(f"pnlss: monomials_of={self.monomials_of!r} not one of: {', '.join(MONOMIALS_OF)}")
         self.facE_, self.facF_ = ps.monomials(n + m, d), ps.monomials(n + m, do, c)
+        if self.monomials_of == "x":  # rows whose factors are all states (-1 pads; the constant is all pads)
+            self.facE_, self.facF_ = (f[np.all(f < n, axis=1)] for f in (self.facE_, self.facF_))
         n_par = ps.n_state_params(n, m, self.facE_.shape[0]) + ps.n_output_params(n, m, p, self.facF_.shape[0])
         check_records(records, 2 * n, n_par + n * len(records) + 1, self.name)
         us = [r.u.reshape(len(r), -1).astype(float) for r in records]
