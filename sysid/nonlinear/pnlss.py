@@ -85,9 +85,9 @@ class PNLSS(Identifier):
         Add the constant 1 to η: an output offset (measured data keep their means).
     monomials_of : str
         ``xu``: ζ and η are monomials of (x, u) (the paper's); ``x``: of the states alone, the input entering
-        through B u and D u only — a system whose nonlinearity acts on its own state (a Duffing oscillator such as
-        Silverbox: m ÿ + d ẏ + k y + k₃ y³ = u), whose model then extrapolates to larger inputs as its state
-        polynomial does rather than through every cross term with u.
+        through B u and D u only (fewer parameters; a continuous-time system affine in its input, such as a Duffing
+        oscillator, is so only approximately once sampled: measured on Silverbox and a simulated Duffing
+        oscillator in docs/benchmarks-sota.md).
     """
 
     name = "pnlss"
