@@ -27,7 +27,7 @@ import pytest
 torch = pytest.importorskip("torch")
 
 from benchmarks.datasets import load_dataset  # noqa: E402
-from benchmarks.scoring.settings import settings_for  # noqa: E402
+from benchmarks.scoring.settings import NORMALISE, settings_for  # noqa: E402
 from sysid.registry import get_identifier  # noqa: E402
 
 CASES = {  # case: (identifier, dataset, option overrides)
@@ -44,7 +44,7 @@ needs_cuda = pytest.mark.skipif(not torch.cuda.is_available(), reason="no CUDA d
 def _fit(case: str, mode: str, epochs: int | None = None):
     identifier, dataset, extra = CASES[case]
     params = {**settings_for(identifier, dataset), **extra, **MODES[mode]}
-    params.pop("normalise", None)
+    params.pop(NORMALISE, None)
     if epochs is not None:
         params["epochs"] = epochs
     model = get_identifier(identifier)(**params)

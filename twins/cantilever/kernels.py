@@ -185,7 +185,7 @@ def expm_small(A: np.ndarray) -> np.ndarray:
     18 terms (truncation < 1e-24 relative), then squared s times (Moler & Van Loan 2003, "Nineteen dubious ways",
     method 3). Used instead of ``scipy.linalg.expm`` for the 8 × 8 FOH matrix: SciPy's threaded LAPACK is two
     orders of magnitude slower per call on a loaded machine (docs/diagnosis.md); the tests check both agree to
-    1e-12. Compiled with explicit loops (1.4 ms → µs per call; a diagnosis discretises thousands of systems).
+    1e-12. Compiled with explicit loops (0.33 ms → 0.009 ms per call; a diagnosis discretises thousands of systems).
     """
     A = np.array(A, dtype=np.float64)
     if A.size == 0:
