@@ -12,6 +12,7 @@
   group) took the round with the delay tied to it: the sensor was never refitted with the core.
 - Case 364: a slow drift that is nearly all of the tanks' residual, refused while its F-test counted the stage's
   effective samples (the drift's own smoothness).
+- Case 387: a gain that sags linearly over each record, which the settling gain drift could not follow.
 - Cases 299, 495: a second mode above the Nyquist frequency; the generator's version of it was not the modal
   response (the H₂/H₁ ratio amplified the sampled output's interpolation error).
 """
@@ -340,3 +341,25 @@ def test_a_drift_that_takes_the_whole_residual_is_judged_on_the_noise_it_leaves(
     drift = next(r for r in first["candidates"] if r["effect"] == "slow_drift")
     assert drift["significant"] and drift["gain"] > 0.9
     assert out["causes"][0]["effect"] == "slow_drift" and out["verdict"] == "discrepancy"
+
+
+def test_a_gain_that_sags_without_settling_is_named_a_gain_drift():
+    """Case 387 (the cascaded tanks, a sensor gain that falls linearly by 10 % over each record, sines then a
+    chirp): the catalog's gain drift was a settling exponential g·(1 − e^(−t/τ)) with |g| ≤ 0.5 and τ ≤ 10 T, which
+    cannot follow a ramp of the gain; it ended on its bound (g = −0.5) at a validation NRMSE of 0.115 and an offset
+    drift was listed (0.038, the residual still 21× the noise). With the ramp ρ·t of a drift that has not settled
+    (as `slow_drift` has for the offset) the gain drift is named in the first round."""
+    from twins.discrepancy import diagnose
+
+    case = draw_case(387)
+    assert case.model == "cascaded-tanks" and case.mechanism == "gain_sag"
+    b = make_records(case)
+    out = diagnose(b["twin"], b["est"], b["val"], max_rounds=1, threads=1)
+    first = out["rounds"][0]
+    gain = next(r for r in first["candidates"] if r["effect"] == "gain_drift")
+    assert gain["significant"] and gain["gain"] > 0.98
+    sag_per_s = -b["params"]["sag"] * case.fs / case.n
+    p = gain["params"]
+    initial_slope = p["gain_drift_rate"] + p["gain_drift"] / p["gain_drift_tau_s"]
+    assert initial_slope == pytest.approx(sag_per_s, rel=0.1)
+    assert out["causes"][0]["effect"] == "gain_drift"

@@ -9,6 +9,7 @@ import re
 import subprocess
 import sys
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -73,6 +74,11 @@ def test_generic_laws_closed_forms():
     held = ge.delay_input(u + 4.0, 0.025, fs, before=4.0)
     assert np.allclose(held[3:], u[3:] + 1.5) and np.allclose(held[:3], 4.0)
     assert np.allclose(ge.drift(n, fs, 2.0, 0.1), 2.0 * (1 - np.exp(-np.arange(n) / fs / 0.1)))
+    # a gain drift that settles and one that has not (a ramp): y·(1 + g(1 − e^(−t/τ)) + ρ·t)
+    t = np.arange(n) / fs
+    p = SimpleNamespace(gain_drift=0.2, gain_drift_tau_s=0.1, gain_drift_rate=-0.5)
+    y_gain = ge.apply_output(np.full(n, 2.0), u, fs, {"gain_drift"}, p)
+    assert np.allclose(y_gain, 2.0 * (1.0 + 0.2 * (1.0 - np.exp(-t / 0.1)) - 0.5 * t), rtol=1e-12)
     v = ge.soft_limit(np.array([1e-3, 1e3]), 10.0, 4.0)
     assert v[0] == pytest.approx(1e-3, rel=1e-9) and v[1] == pytest.approx(10.0, rel=1e-6)
     # sensor: unit DC gain, −3 dB and −90° at the corner (the FOH discretisation at 40 samples per period)

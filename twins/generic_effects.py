@@ -163,6 +163,14 @@ GENERIC_FIELDS: dict[str, GenericField] = {
     "gain_drift_tau_s": GenericField(
         1.0, "s", 1e-12, 1e12, "time constant τ of the gain drift", lambda um, ys, fs, T: (10.0 / fs, 10.0 * T)
     ),
+    "gain_drift_rate": GenericField(
+        0.0,
+        "1/s",
+        -1e12,
+        1e12,
+        "ramp ρ of a gain drift that has not settled (ρ·t, the relative gain change per second)",
+        lambda um, ys, fs, T: (-0.5 / T, 0.5 / T),
+    ),
     "quant_step": GenericField(
         1e-6,
         "{y}",
@@ -244,9 +252,9 @@ GENERIC_EFFECTS: dict[str, EffectSpec] = {
     "gain_drift": EffectSpec(
         "gain_drift",
         _T,
-        "slow change of the gain: y·(1 + g·(1 − e^(−t/τ)))",
+        "slow change of the gain, settling or not: y·(1 + g·(1 − e^(−t/τ)) + ρ·t)",
         "residual ∝ y with a weight growing slowly over the record",
-        {"gain": "gain_drift", "tau": "gain_drift_tau_s"},
+        {"gain": "gain_drift", "tau": "gain_drift_tau_s", "rate": "gain_drift_rate"},
         time_varying=True,
     ),
     "output_quantization": EffectSpec(
@@ -366,7 +374,7 @@ def apply_output(y: np.ndarray, u: np.ndarray, fs: float, effects: frozenset[str
     if "input_crosstalk" in effects:
         y = y + p.crosstalk_gain * np.asarray(u, float)
     if "gain_drift" in effects:
-        y = y * (1.0 + drift(len(y), fs, p.gain_drift, p.gain_drift_tau_s))
+        y = y * (1.0 + drift(len(y), fs, p.gain_drift, p.gain_drift_tau_s, p.gain_drift_rate))
     if "offset_drift" in effects:
         y = y + drift(len(y), fs, p.drift_offset, p.drift_tau_s)
     if "slow_drift" in effects:
