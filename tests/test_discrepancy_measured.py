@@ -124,6 +124,24 @@ def test_noise_level_from_holds_matches_the_known_sigma():
     assert nl["sigma2"] == pytest.approx(1e-4, rel=0.2)
 
 
+def test_noise_level_of_a_coarsely_quantised_reading_is_not_the_rounding_of_its_grid():
+    """The diagnosis benchmark's cases 47, 142 and 227: readings on a grid 5–13× coarser than their noise. More than
+    half their second differences were 0 or the rounding of grid values (1e-16 of the span), and their MAD gave
+    σ² ~ 1e-30: the residual of a model with the right quantiser was then 1e26–1e29 × "the noise" and the verdict
+    `unexplained`. The level now lies between the noise's power and the quantiser's q²/12 + σ²."""
+    from benchmarks.diagnosis_bench.cases import draw_case
+    from benchmarks.diagnosis_bench.truth import make_records
+
+    for seed in (47, 142, 227):
+        case = draw_case(seed)
+        assert case.mechanism == "quantization"
+        b = make_records(case)
+        nl = unexplained.records_noise(b["est"], b["val"])
+        noise = float(np.var(np.concatenate(b["noise"])))
+        q2 = b["params"]["step"] ** 2 / 12.0
+        assert 0.3 * noise <= nl["sigma2"] <= 2.0 * (q2 + noise), (seed, nl)
+
+
 # ------------------------------------------------------------------------------------------ whole diagnoses
 def test_missized_default_creep_is_named_with_its_rate():
     start, est, val, true, field = C.missized_case("creep", 0)

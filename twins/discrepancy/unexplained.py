@@ -10,7 +10,7 @@ from the data themselves (never from the twin's noise parameter):
   ln 2, times the band (white noise has the flat one-sided density 2σ²/fs; a periodogram bin of it is that
   density times an exponential variable, whose median is ln 2 of its mean);
 - **second differences**: σ² ≈ (1.4826·MAD(Δ²y))²/6 (Δ² of white noise has variance 6σ²; the median ignores
-  the few samples where a step or an edge dominates).
+  the few samples where a step or an edge dominates; none on a quantised reading whose Δ² are mostly 0).
 
 Each estimate can only be raised by signal content leaking into it, so the smallest is used. The excess ratio R =
 mean(e²)/σ² (validation, after the extension). These floors see white noise; coloured noise lifts R with a right
@@ -101,7 +101,9 @@ def noise_level(u: np.ndarray, y: np.ndarray, fs: float) -> dict[str, Any]:
     if y.size >= 16:
         d2 = np.diff(y, 2)
         mad = float(np.median(np.abs(d2 - np.median(d2))))
-        est["second_diff"] = (1.4826 * mad) ** 2 / 6.0
+        # a reading on a grid (a quantiser finer than its noise is not): when most Δ² are 0, the MAD is 0 up to
+        # rounding (1e-31 of the span) and no estimate of σ² — counted as 0 and left out, as an exact 0 is
+        est["second_diff"] = (1.4826 * mad) ** 2 / 6.0 if mad > 1e-9 * float(np.ptp(y)) else 0.0
     pos = {k: v for k, v in est.items() if v > 0 and math.isfinite(v)}
     if pos:
         src = min(pos, key=lambda k: pos[k])
