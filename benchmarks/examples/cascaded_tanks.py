@@ -10,7 +10,8 @@ with the levels x₁, x₂ in the sensor's volts. The model's own effect ``overf
 benchmark is known for: the upper tank holds at most ``x1_max``; of what flows in beyond that a share
 ``overflow_share`` falls into the lower tank, the rest is lost. Integrated by the classical Runge–Kutta
 scheme with the input held over each sample (zero-order hold, as the pump is driven) and ``substeps`` steps per
-sample.
+sample, compiled by numba (the same operations in the same order as the plain Python loop, ~100× faster: a
+diagnosis simulates the model thousands of times).
 """
 
 from __future__ import annotations
@@ -20,6 +21,7 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+from numba import njit
 
 from twins.base import pfield
 
@@ -51,34 +53,41 @@ class Params:
     substeps: int = pfield(4, "1", 1, 64, "Runge-Kutta steps per sample")
 
 
-def _rates(x1: float, x2: float, u: float, p: Params, overflow: bool) -> tuple[float, float]:
-    q1 = p.k1 * math.sqrt(max(x1, 0.0))
-    d1 = -q1 + p.k4 * u
-    d2 = p.k2 * math.sqrt(max(x1, 0.0)) - p.k3 * math.sqrt(max(x2, 0.0))
-    if overflow and x1 >= p.x1_max and d1 > 0.0:
-        d2 += p.overflow_share * d1 * p.k2 / p.k1  # the spill, in the lower tank's level units
+@njit(cache=False)
+def _rates(x1, x2, u, k1, k2, k3, k4, x1_max, share, overflow):
+    q1 = k1 * math.sqrt(max(x1, 0.0))
+    d1 = -q1 + k4 * u
+    d2 = k2 * math.sqrt(max(x1, 0.0)) - k3 * math.sqrt(max(x2, 0.0))
+    if overflow and x1 >= x1_max and d1 > 0.0:
+        d2 += share * d1 * k2 / k1  # the spill, in the lower tank's level units
         d1 = 0.0
     return d1, d2
 
 
-def simulate(u, fs, p: Params, effects=frozenset()):
-    """Level y [V] of the lower tank for the pump inputs u [V] at fs [Hz]; y[k] at the end of sample k."""
-    overflow = "overflow" in effects
-    h = 1.0 / (fs * p.substeps)
-    x1, x2 = p.x1_0, p.x2_0
-    y = np.empty(len(u))
-    for k, uk in enumerate(np.asarray(u, float).tolist()):
-        for _ in range(p.substeps):
-            a1, a2 = _rates(x1, x2, uk, p, overflow)
-            b1, b2 = _rates(x1 + 0.5 * h * a1, x2 + 0.5 * h * a2, uk, p, overflow)
-            c1, c2 = _rates(x1 + 0.5 * h * b1, x2 + 0.5 * h * b2, uk, p, overflow)
-            d1, d2 = _rates(x1 + h * c1, x2 + h * c2, uk, p, overflow)
+@njit(cache=False)
+def _run(u, h, substeps, x1, x2, k1, k2, k3, k4, x1_max, share, overflow):
+    y = np.empty(u.size)
+    for k in range(u.size):
+        uk = u[k]
+        for _ in range(substeps):
+            a1, a2 = _rates(x1, x2, uk, k1, k2, k3, k4, x1_max, share, overflow)
+            b1, b2 = _rates(x1 + 0.5 * h * a1, x2 + 0.5 * h * a2, uk, k1, k2, k3, k4, x1_max, share, overflow)
+            c1, c2 = _rates(x1 + 0.5 * h * b1, x2 + 0.5 * h * b2, uk, k1, k2, k3, k4, x1_max, share, overflow)
+            d1, d2 = _rates(x1 + h * c1, x2 + h * c2, uk, k1, k2, k3, k4, x1_max, share, overflow)
             x1 = max(x1 + h * (a1 + 2 * b1 + 2 * c1 + d1) / 6.0, 0.0)
             x2 = max(x2 + h * (a2 + 2 * b2 + 2 * c2 + d2) / 6.0, 0.0)
             if overflow:
-                x1 = min(x1, p.x1_max)
+                x1 = min(x1, x1_max)
         y[k] = x2
     return y
+
+
+def simulate(u, fs, p: Params, effects=frozenset()):
+    """Level y [V] of the lower tank for the pump inputs u [V] at fs [Hz]; y[k] at the end of sample k."""
+    u = np.ascontiguousarray(u, dtype=float)
+    h = 1.0 / (fs * p.substeps)
+    args = (float(p.k1), float(p.k2), float(p.k3), float(p.k4), float(p.x1_max), float(p.overflow_share))
+    return _run(u, h, int(p.substeps), float(p.x1_0), float(p.x2_0), *args, "overflow" in effects)
 
 
 #: the diagnosis settings of :func:`diagnose_cascaded_tanks`: the model simulates 1024 samples in ~20 ms, so every
