@@ -527,7 +527,8 @@ def test_committed_cheap_row_is_reproduced_by_its_command(capsys):
 @pytest.mark.slow
 def test_committed_pnlss_row_beside_silverbox_is_reproduced_by_its_command(capsys):
     """The stored PNLSS row shown beside Silverbox's chosen row (a fit of about 20 s) equals a fresh run of its
-    printed command (slow: 32 s of the default suite's 5 minutes; CI runs it after the suite, `.ci/run`). Run again with OPENBLAS_CORETYPE = Prescott / SkylakeX / Haswell it differed from the stored
+    printed command (slow: 32 s of the default suite's 5 minutes; `.ci/run` runs it before the suite). Run again
+    with OPENBLAS_CORETYPE = Prescott / SkylakeX / Haswell it differed from the stored
     row by at most 2.5e-6 / 1.4e-6 / 0 relative over every number (2026-11-27), inside :data:`KERNEL_SET_REL`."""
     row = json.loads((records.STORED_DIR / "silverbox--pnlss.json").read_text())
     assert row["identifier"] == "pnlss" and row["dataset"] == "silverbox"
