@@ -90,7 +90,7 @@ def simulate(u, fs, p: Params, effects=frozenset()):
     return _run(u, h, int(p.substeps), float(p.x1_0), float(p.x2_0), *args, "overflow" in effects)
 
 
-#: the diagnosis settings of :func:`diagnose_cascaded_tanks`: the model simulates 1024 samples in ~20 ms, so every
+#: the diagnosis settings of :func:`diagnose_cascaded_tanks`: the model simulates 1024 samples in ~0.2 ms, so every
 #: candidate is refitted with the core from three starts (a sensor offset gains nothing with the core held) and a
 #: leader that is not significant alone is tried jointly with the others (docs/diagnosis.md)
 #: the measured records start at nearly the same lower level (5.21 V and 4.97 V; the upper level is not measured):
