@@ -54,7 +54,8 @@ class Params:
 
 
 @njit(cache=False)
-def _rates(x1, x2, u, k1, k2, k3, k4, x1_max, share, overflow):
+def _rates(x1, x2, u, c, overflow):
+    k1, k2, k3, k4, x1_max, share = c
     q1 = k1 * math.sqrt(max(x1, 0.0))
     d1 = -q1 + k4 * u
     d2 = k2 * math.sqrt(max(x1, 0.0)) - k3 * math.sqrt(max(x2, 0.0))
@@ -65,19 +66,20 @@ def _rates(x1, x2, u, k1, k2, k3, k4, x1_max, share, overflow):
 
 
 @njit(cache=False)
-def _run(u, h, substeps, x1, x2, k1, k2, k3, k4, x1_max, share, overflow):
+def _run(u, h, substeps, x1, x2, c, overflow):
+    """The RK4 loop; ``c`` = (k1, k2, k3, k4, x1_max, overflow_share)."""
     y = np.empty(u.size)
     for k in range(u.size):
         uk = u[k]
         for _ in range(substeps):
-            a1, a2 = _rates(x1, x2, uk, k1, k2, k3, k4, x1_max, share, overflow)
-            b1, b2 = _rates(x1 + 0.5 * h * a1, x2 + 0.5 * h * a2, uk, k1, k2, k3, k4, x1_max, share, overflow)
-            c1, c2 = _rates(x1 + 0.5 * h * b1, x2 + 0.5 * h * b2, uk, k1, k2, k3, k4, x1_max, share, overflow)
-            d1, d2 = _rates(x1 + h * c1, x2 + h * c2, uk, k1, k2, k3, k4, x1_max, share, overflow)
+            a1, a2 = _rates(x1, x2, uk, c, overflow)
+            b1, b2 = _rates(x1 + 0.5 * h * a1, x2 + 0.5 * h * a2, uk, c, overflow)
+            c1, c2 = _rates(x1 + 0.5 * h * b1, x2 + 0.5 * h * b2, uk, c, overflow)
+            d1, d2 = _rates(x1 + h * c1, x2 + h * c2, uk, c, overflow)
             x1 = max(x1 + h * (a1 + 2 * b1 + 2 * c1 + d1) / 6.0, 0.0)
             x2 = max(x2 + h * (a2 + 2 * b2 + 2 * c2 + d2) / 6.0, 0.0)
             if overflow:
-                x1 = min(x1, x1_max)
+                x1 = min(x1, c[4])
         y[k] = x2
     return y
 
@@ -86,8 +88,8 @@ def simulate(u, fs, p: Params, effects=frozenset()):
     """Level y [V] of the lower tank for the pump inputs u [V] at fs [Hz]; y[k] at the end of sample k."""
     u = np.ascontiguousarray(u, dtype=float)
     h = 1.0 / (fs * p.substeps)
-    args = (float(p.k1), float(p.k2), float(p.k3), float(p.k4), float(p.x1_max), float(p.overflow_share))
-    return _run(u, h, int(p.substeps), float(p.x1_0), float(p.x2_0), *args, "overflow" in effects)
+    c = (float(p.k1), float(p.k2), float(p.k3), float(p.k4), float(p.x1_max), float(p.overflow_share))
+    return _run(u, h, int(p.substeps), float(p.x1_0), float(p.x2_0), c, "overflow" in effects)
 
 
 #: the diagnosis settings of :func:`diagnose_cascaded_tanks`: the model simulates 1024 samples in ~0.2 ms, so every

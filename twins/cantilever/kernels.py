@@ -187,10 +187,10 @@ def expm_small(A: np.ndarray) -> np.ndarray:
     orders of magnitude slower per call on a loaded machine (docs/diagnosis.md); the tests check both agree to
     1e-12. Compiled with explicit loops (0.33 ms → 0.009 ms per call; a diagnosis discretises thousands of systems).
     """
-    A = np.array(A, dtype=np.float64)
+    A = np.array(A, dtype=np.float64, order="C")  # a copy: the balancing scales it in place
     if A.size == 0:
         return np.eye(A.shape[0])
-    return _expm_balanced(np.ascontiguousarray(A))
+    return _expm_balanced(A)
 
 
 def foh_discretise(A: np.ndarray, B: np.ndarray, h: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
