@@ -13,6 +13,8 @@
 - Case 364: a slow drift that is nearly all of the tanks' residual, refused while its F-test counted the stage's
   effective samples (the drift's own smoothness).
 - Case 387: a gain that sags linearly over each record, which the settling gain drift could not follow.
+- Case 405: a 0.5 % gain sag on the tanks, refused by the test that its gain was the effect's while that test counted
+  the stage's effective samples (the discrepancy's own smoothness) in the first round.
 - Cases 299, 495: a second mode above the Nyquist frequency; the generator's version of it was not the modal
   response (the H₂/H₁ ratio amplified the sampled output's interpolation error).
 """
@@ -363,3 +365,23 @@ def test_a_gain_that_sags_without_settling_is_named_a_gain_drift():
     initial_slope = p["gain_drift_rate"] + p["gain_drift"] / p["gain_drift_tau_s"]
     assert initial_slope == pytest.approx(sag_per_s, rel=0.1)
     assert out["causes"][0]["effect"] == "gain_drift"
+
+
+def test_a_small_gain_sag_is_judged_on_the_noise_the_effect_leaves():
+    """Case 405 (the tanks, a sensor gain falling by 0.5 % over each record, chirps): the gain drift took the
+    residual from 28× the noise to near it in the first round, but the test that its gain was the effect's and not
+    the core's refit (the configuration with the effect switched off) counted the stage residual's effective samples,
+    14.5 of 1416 (the sag's own smoothness): p = 0.0019 against the Bonferroni level 0.001, nothing named. Counted on
+    the trial's own residual, as the trial's own test is, the gain drift is named."""
+    from twins.discrepancy import diagnose
+
+    case = draw_case(405)
+    assert case.model == "cascaded-tanks" and case.mechanism == "gain_sag"
+    b = make_records(case)
+    out = diagnose(b["twin"], b["est"], b["val"], max_rounds=1, threads=1)
+    gain = next(r for r in out["rounds"][0]["candidates"] if r["effect"] == "gain_drift")
+    assert gain["significant"]
+    assert out["causes"] and out["causes"][0]["effect"] == "gain_drift"
+    sag_per_s = -b["params"]["sag"] * case.fs / case.n
+    p = gain["params"]
+    assert p["gain_drift_rate"] + p["gain_drift"] / p["gain_drift_tau_s"] == pytest.approx(sag_per_s, rel=0.3)
