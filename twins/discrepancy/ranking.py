@@ -145,7 +145,7 @@ def _judge(
         ref = min(stage.sse_val, tr.ref_sse_val) if tr.ref_sse_val is not None else stage.sse_val
         tr.p_value = significance(ref, tr.sse_val, n_eff, tr.n_added)
         tr.gain = max(0.0, 1.0 - tr.nrmse_val / stage.nrmse_val) if stage.nrmse_val > 0 else 0.0
-        if first:  # the test that the gain is the effect's counts the same noise (benchmark seed 405)
+        if first:  # the test that the gain is the effect's counts the same noise (benchmark seeds 405, 395)
             owed_n_eff[tr.effect] = n_eff
     level = opts.alpha / len(trials)
     for tr in trials:
@@ -163,7 +163,8 @@ def _owes_its_gain(
     """The trial's configuration with its effect switched off — the core as refitted with the effect — must be
     significantly worse on the validation record (over the span the effect is judged on): else the gain came from
     the core's refit, which the effect's parameters only steered on the estimation record, not from the effect. A
-    trial that refitted no core parameter switched off is the stage, which its own test already beat."""
+    trial that refitted no core parameter switched off is the stage, which its own test already beat. ``n_eff``: the
+    effective samples the trial's own test counted (in the first round its residual's, not the discrepancy's)."""
     if tr.n_total <= tr.n_added:
         return True
     off = tr.twin.with_effects(set(tr.twin.effects) - {tr.effect})
