@@ -53,7 +53,7 @@ class Params:
     substeps: int = pfield(4, "1", 1, 64, "Runge-Kutta steps per sample")
 
 
-@njit(cache=False)
+@njit(cache=True)
 def _rates(x1, x2, u, c, overflow):
     k1, k2, k3, k4, x1_max, share = c
     q1 = k1 * math.sqrt(max(x1, 0.0))
@@ -65,7 +65,7 @@ def _rates(x1, x2, u, c, overflow):
     return d1, d2
 
 
-@njit(cache=False)
+@njit(cache=True)
 def _run(u, h, substeps, x1, x2, c, overflow):
     """The RK4 loop; ``c`` = (k1, k2, k3, k4, x1_max, overflow_share)."""
     y = np.empty(u.size)
