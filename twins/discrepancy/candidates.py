@@ -19,10 +19,10 @@ from . import ranges as rg
 from . import unexplained as unx
 from .fields import core_for
 from .options import DiagnoseOptions
-from .prediction import significantly_better, sse
+from .prediction import sse
 from .trials import Stage, Trial, core_refit_sse, make_stage, run_trial
 
-__all__ = ["round_trials", "spread_starts", "core_refit_pays", "adopt", "beyond_noise", "TRIAL_ERRORS"]
+__all__ = ["round_trials", "spread_starts", "adopt", "beyond_noise", "TRIAL_ERRORS"]
 
 #: the failures that mean "this candidate cannot run here" (it is left out of the round)
 TRIAL_ERRORS = (ConfigError, DataError, ValueError, np.linalg.LinAlgError)
@@ -160,23 +160,9 @@ def _refine(
             except TRIAL_ERRORS:
                 continue
             spent += trB.seconds
-            if trB.sse_est <= trials[i].sse_est and core_refit_pays(tr, trB, opts):
+            if trB.sse_est <= trials[i].sse_est:
                 trials[i] = trB
         trials[i].seconds = spent
-
-
-def core_refit_pays(held: Trial, refit: Trial, opts: DiagnoseOptions) -> bool:
-    """A trial refitted with the core (stage B) replaces its fit with the core held (stage A) only where it is
-    significantly better on the estimation record: the F-test the calibration passes (:mod:`.diagnose`), on the
-    refit's residual N_eff, the core parameters it freed counted. A smaller gain is the core fitting the estimation
-    record's noise, which the validation record then reads as a deterministic error: benchmark seed 516 (the tanks,
-    a sensor gain sagging 1.8 %): the true gain drift at the noise held (validation NRMSE 0.0127), refitted with
-    the six core parameters 0.15 % better on the estimation record and 0.0171 on the validation record, behind a
-    slow offset drift (0.0154)."""
-    k = refit.n_total - held.n_total
-    if k <= 0:
-        return True
-    return significantly_better(held.sse_est, refit.sse_est, refit.n_eff_est, k, opts.alpha, 0.0)
 
 
 def _own_starts(tr: Trial, inp: Any, opts: DiagnoseOptions) -> list[dict[str, float]]:
