@@ -93,6 +93,22 @@ def test_generic_laws_closed_forms():
     assert np.allclose(ge.sensor_lowpass(np.full(100, 3.0), 10.0, fs2), 3.0)  # steady state at y[0]
 
 
+def test_the_drive_lowpass_is_the_analog_first_order_filter():
+    """1/(1 + s/ω_c) from rest: a drive rising linearly from 0 one sample before the record to 1 at its start and
+    held there gives 1 − (1 − e^(−ω_c·T))/(ω_c·T)·e^(−ω_c·t) (T = 1/fs); with the corner far above the Nyquist
+    frequency the filter is the lag 1/ω_c, which the delay line gives exactly for a drive linear between samples."""
+    fs, fc = 1e5, 1e3
+    t = np.arange(500) / fs
+    wc, T = 2 * np.pi * fc, 1.0 / fs
+    ramp = 1.0 - (1.0 - np.exp(-wc * T)) / (wc * T) * np.exp(-wc * t)
+    assert np.allclose(ge.drive_lowpass(np.ones(500), fc, fs), ramp, atol=1e-12)
+    assert np.allclose(ge.drive_lowpass(np.full(50, 3.0), fc, fs, before=3.0), 3.0)  # held at its first value
+    fs2, fc2 = 1e3, 2e4
+    u = np.sin(2 * np.pi * 5.0 * np.arange(2000) / fs2)
+    lag = ge.drive_lowpass(u, fc2, fs2)
+    assert np.max(np.abs(lag[10:] - ge.delay_input(u, 1.0 / (2 * np.pi * fc2), fs2)[10:])) < 1e-12
+
+
 def test_generic_effects_match_the_cantilever_kernel():
     """The cantilever's delay and drift are the generic laws: its kernel and the wrapper agree to rounding."""
     from twins.cantilever import CantileverTwin

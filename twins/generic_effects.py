@@ -1,11 +1,11 @@
 """Model-agnostic effects: what sits between a model and the measurement, for any twin.
 
 Each effect wraps a simulator's input or output and needs nothing of its physics: a pure input delay, a drive
-compression (soft limiter), a sensor low-pass, an echo of the output, electrical crosstalk of the input,
-offset and gain drift, a constant sensor offset, and a quantiser. :data:`GENERIC_EFFECTS` is their catalog
-(id, description, residual signature, parameters with units); :data:`GENERIC_FIELDS` the parameter fields,
-each with a documented default range and a rule for its range from the records (:func:`data_ranges`);
-:func:`apply_input` and :func:`apply_output` the sample-level implementations that
+low-pass (the amplifier's bandwidth), a drive compression (soft limiter), a sensor low-pass, an echo of the output,
+electrical crosstalk of the input, offset and gain drift, a constant sensor offset, and a quantiser.
+:data:`GENERIC_EFFECTS` is their catalog (id, description, residual signature, parameters with units);
+:data:`GENERIC_FIELDS` the parameter fields, each with a documented default range and a rule for its range from the
+records (:func:`data_ranges`); :func:`apply_input` and :func:`apply_output` the sample-level implementations that
 :class:`twins.external.ExternalTwin` wraps around a user's Python model or FMU.
 
 The shipped twins build on the same catalog entries: the cantilever's ``input_delay``, ``sensor_lowpass``,
@@ -45,6 +45,7 @@ __all__ = [
     "apply_output",
     "delay_input",
     "soft_limit",
+    "drive_lowpass",
     "sensor_lowpass",
     "drift",
 ]
@@ -90,6 +91,14 @@ GENERIC_FIELDS: dict[str, GenericField] = {
         1e-9,
         1e12,
         "corner of the 2nd-order Butterworth sensor low-pass (an analog part: above Nyquist it is a sub-sample lag)",
+        lambda um, ys, fs, T: (fs / 500.0, 10.0 * fs),
+    ),
+    "drive_bandwidth_hz": GenericField(
+        1e3,
+        "Hz",
+        1e-9,
+        1e12,
+        "corner of the drive's 1st-order low-pass (an amplifier's bandwidth; above Nyquist a sub-sample lag)",
         lambda um, ys, fs, T: (fs / 500.0, 10.0 * fs),
     ),
     "echo_delay_s": GenericField(
@@ -191,6 +200,15 @@ GENERIC_EFFECTS: dict[str, EffectSpec] = {
         {"delay": "input_delay_s"},
         group="lag",
     ),
+    "drive_lowpass": EffectSpec(
+        "drive_lowpass",
+        _T,
+        "1st-order low-pass of the drive 1/(1 + s/ω_c): the bandwidth of the amplifier that drives the model",
+        "residual grows with frequency, phase lag ≈ f/f_c rad before the model; at f ≪ f_c a delay of 1/(2π f_c), "
+        "which a pure delay gives alike",
+        {"bandwidth": "drive_bandwidth_hz"},
+        group="lag",
+    ),
     "drive_compression": EffectSpec(
         "drive_compression",
         _T,
@@ -267,7 +285,7 @@ GENERIC_EFFECTS: dict[str, EffectSpec] = {
 }
 
 #: effects applied to the input, in this order, before the model; the others act on its output
-INPUT_SIDE: tuple[str, ...] = ("input_delay", "drive_compression")
+INPUT_SIDE: tuple[str, ...] = ("input_delay", "drive_lowpass", "drive_compression")
 #: output effects in the order they act (the quantiser last, as the instrument reads)
 OUTPUT_ORDER: tuple[str, ...] = (
     "sensor_lowpass",
@@ -321,6 +339,18 @@ def soft_limit(u: np.ndarray, knee: float, sharpness: float) -> np.ndarray:
     return u / (1.0 + np.abs(u / float(knee)) ** p) ** (1.0 / p)
 
 
+def drive_lowpass(u: np.ndarray, bandwidth_hz: float, fs: float, before: float = 0.0) -> np.ndarray:
+    """``u`` through the 1st-order low-pass 1/(1 + s/ω_c) at ``bandwidth_hz`` (FOH discretisation: exact for a drive
+    linear between samples, so a corner above the Nyquist frequency is the sub-sample lag 1/ω_c), in steady state
+    at ``before`` before the first sample (0: at rest)."""
+    wc = 2.0 * math.pi * float(bandwidth_hz)
+    b, a, _ = signal.cont2discrete(([wc], [1.0, wc]), 1.0 / fs, method="foh")
+    b = np.ravel(b)
+    v = np.asarray(u, float)
+    zi = signal.lfilter_zi(b, a) * float(before)
+    return signal.lfilter(b, a, v, zi=zi)[0]
+
+
 def sensor_lowpass(y: np.ndarray, bandwidth_hz: float, fs: float) -> np.ndarray:
     """``y`` through the 2nd-order Butterworth low-pass at ``bandwidth_hz`` (FOH discretisation), in steady
     state at ``y[0]`` before the first sample."""
@@ -358,6 +388,8 @@ def apply_input(u: np.ndarray, fs: float, effects: frozenset[str] | set[str], p:
     v = np.asarray(u, float)
     if "input_delay" in effects:
         v = delay_input(v, p.input_delay_s, fs, float(v[0]) if held and v.size else 0.0)
+    if "drive_lowpass" in effects:
+        v = drive_lowpass(v, p.drive_bandwidth_hz, fs, float(v[0]) if held and v.size else 0.0)
     if "drive_compression" in effects:
         v = soft_limit(v, p.compression_knee, p.compression_sharpness)
     return v
