@@ -15,6 +15,8 @@
 - Case 387: a gain that sags linearly over each record, which the settling gain drift could not follow.
 - Case 405: a 0.5 % gain sag on the tanks, refused by the test that its gain was the effect's while that test counted
   the stage's effective samples (the discrepancy's own smoothness) in the first round.
+- Case 666 (seeds beyond the stored 600): an acoustic estimation record of one 16 µs tone burst at 87 MHz, which the
+  acoustic calibration's frequency-response estimate refuses (fewer than 3 excited bins): the diagnosis stopped there.
 - Cases 299, 495: a second mode above the Nyquist frequency; the generator's version of it was not the modal
   response (the H₂/H₁ ratio amplified the sampled output's interpolation error).
 """
@@ -385,3 +387,23 @@ def test_a_small_gain_sag_is_judged_on_the_noise_the_effect_leaves():
     sag_per_s = -b["params"]["sag"] * case.fs / case.n
     p = gain["params"]
     assert p["gain_drift_rate"] + p["gain_drift"] / p["gain_drift_tau_s"] == pytest.approx(sag_per_s, rel=0.3)
+
+
+def test_a_record_the_twins_own_calibration_refuses_is_calibrated_by_output_error():
+    """Case 666 (the acoustic twin at 87 MHz, a quantiser hidden, one 16 µs tone burst for estimation): the twin's
+    own calibration needs at least 3 excited frequency bins and raised a DataError, which ended the diagnosis. The
+    generic output-error fit takes the record instead (and the diagnosis keeps it only if it beats the noise)."""
+    from sysid.errors import DataError
+    from twins.discrepancy.prediction import simulate
+    from twins.discrepancy.realdata import calibrate_core
+
+    case = draw_case(666)
+    assert case.model == "acoustic" and case.est_kind == "steps"
+    b = make_records(case)
+    twin, names = b["twin"], list(b["twin"].CALIBRATION_PARAMS)
+    with pytest.raises(DataError, match="fewer than 3 frequency bins"):
+        twin.calibrate(b["est"], val=b["val"], names=names)
+    res = calibrate_core(twin, b["est"], b["val"], names, True, simulate)
+    # the configured stack is the truth: the fit stays at it
+    for n in names:
+        assert res.fitted[n] == pytest.approx(float(getattr(twin.params, n)), rel=0.01)

@@ -37,7 +37,6 @@ import numpy as np
 from sysid.data.record import Record
 from sysid.errors import ConfigError, DataError
 from twins.base import Twin, param_info
-from twins.calibration import calibrate as ls_calibrate
 
 from . import defaults as dflt
 from . import evidence as ev
@@ -252,11 +251,9 @@ def _calibrate(inp: _Inputs, opts: DiagnoseOptions) -> _Calibrated:
 def _fit_baseline(current: Twin, core0: list[str], inp: _Inputs, opts: DiagnoseOptions) -> tuple[Twin, dict[str, Any]]:
     est, skip = inp.est, opts.skip
     opts.say("calibrating the configuration as given")
-    if inp.railed or not _own_calibration(current):
-        # the twin's own calibration does not know the rails: output error on the clipped prediction
-        res = ls_calibrate(current, est, core0, val=inp.val, simulate=simulate)
-    else:
-        res = current.calibrate(est, val=inp.val, names=core0)
+    # the twin's own calibration does not know the rails: output error on the clipped prediction
+    own = not inp.railed and _own_calibration(current)
+    res = realdata.calibrate_core(current, est, inp.val, core0, own, simulate)
     fitted = deterministic(res.twin)
     info: dict[str, Any] = {"fitted": res.fitted, "stderr": res.stderr}
 

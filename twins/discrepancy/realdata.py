@@ -19,7 +19,7 @@ from . import ranges as rg
 from . import splitting
 from . import unexplained as unx
 
-__all__ = ["prepare", "refit_at_bounds", "final_verdict"]
+__all__ = ["prepare", "calibrate_core", "refit_at_bounds", "final_verdict"]
 
 
 def prepare(
@@ -36,6 +36,19 @@ def prepare(
     if follow_ranges and isinstance(twin, Twin) and data.u.ndim == 1 and val.u.ndim == 1:
         twin, notes = rg.follow_record(twin, data, val)
     return twin, data, val, split_info, notes
+
+
+def calibrate_core(twin: Twin, est: Record, val: Record, names: list[str], own: bool, simulate: Callable) -> Any:
+    """The core ``names`` of ``twin`` fitted to ``est``: by the twin's own calibration where ``own`` (it knows its
+    physics: the acoustic stack from the H1 frequency response), else — and where that one refuses the record (one
+    tone burst excites fewer frequencies than it needs; diagnosis benchmark seed 666) — by the generic output-error
+    fit (:func:`twins.calibration.calibrate`), which the diagnosis then keeps only if it beats the noise."""
+    if own:
+        try:
+            return twin.calibrate(est, val=val, names=names)
+        except DataError:
+            pass
+    return ls_calibrate(twin, est, names, val=val, simulate=simulate)
 
 
 def refit_at_bounds(
