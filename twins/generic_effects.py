@@ -339,27 +339,28 @@ def soft_limit(u: np.ndarray, knee: float, sharpness: float) -> np.ndarray:
     return u / (1.0 + np.abs(u / float(knee)) ** p) ** (1.0 / p)
 
 
+def _foh_filter(num: list[float], den: list[float], x: np.ndarray, fs: float, before: float) -> np.ndarray:
+    """``x`` through the analog filter num(s)/den(s) of unit DC gain, discretised with a first-order hold (exact for
+    a signal linear between samples), in steady state at ``before`` before the first sample."""
+    b, a, _ = signal.cont2discrete((num, den), 1.0 / fs, method="foh")
+    b = np.ravel(b)
+    zi = signal.lfilter_zi(b, a) * float(before)
+    return signal.lfilter(b, a, np.asarray(x, float), zi=zi)[0]
+
+
 def drive_lowpass(u: np.ndarray, bandwidth_hz: float, fs: float, before: float = 0.0) -> np.ndarray:
     """``u`` through the 1st-order low-pass 1/(1 + s/ω_c) at ``bandwidth_hz`` (FOH discretisation: exact for a drive
     linear between samples, so a corner above the Nyquist frequency is the sub-sample lag 1/ω_c), in steady state
     at ``before`` before the first sample (0: at rest)."""
     wc = 2.0 * math.pi * float(bandwidth_hz)
-    b, a, _ = signal.cont2discrete(([wc], [1.0, wc]), 1.0 / fs, method="foh")
-    b = np.ravel(b)
-    v = np.asarray(u, float)
-    zi = signal.lfilter_zi(b, a) * float(before)
-    return signal.lfilter(b, a, v, zi=zi)[0]
+    return _foh_filter([wc], [1.0, wc], u, fs, before)
 
 
 def sensor_lowpass(y: np.ndarray, bandwidth_hz: float, fs: float) -> np.ndarray:
     """``y`` through the 2nd-order Butterworth low-pass at ``bandwidth_hz`` (FOH discretisation), in steady
     state at ``y[0]`` before the first sample."""
     wc = 2.0 * math.pi * float(bandwidth_hz)
-    num, den = [wc * wc], [1.0, math.sqrt(2.0) * wc, wc * wc]
-    b, a, _ = signal.cont2discrete((num, den), 1.0 / fs, method="foh")
-    b = np.ravel(b)
-    zi = signal.lfilter_zi(b, a) * (y[0] if len(y) else 0.0)
-    return signal.lfilter(b, a, y, zi=zi)[0]
+    return _foh_filter([wc * wc], [1.0, math.sqrt(2.0) * wc, wc * wc], y, fs, y[0] if len(y) else 0.0)
 
 
 def drift(

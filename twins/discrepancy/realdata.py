@@ -1,7 +1,8 @@
 """The steps that make the diagnosis hold on measured records, around its loop (:func:`twins.discrepancy.diagnose`):
-the split and ranges before anything is fitted (:mod:`.splitting`, :mod:`.ranges`), the widened refit of a baseline that
-ends at a bound, and the verdict against the noise measured from the data (:mod:`.unexplained`). The default-effect
-re-test is :mod:`.defaults`."""
+the split and ranges before anything is fitted (:mod:`.splitting`, :mod:`.ranges`), the core's calibration (the
+twin's own, or output error where it refuses the record), the widened refit of a baseline that ends at a bound, and
+the verdict against the noise measured from the data (:mod:`.unexplained`). The default-effect re-test is
+:mod:`.defaults`."""
 
 from __future__ import annotations
 
@@ -13,6 +14,7 @@ import numpy as np
 from sysid.data.record import Record
 from sysid.errors import ConfigError, DataError
 from twins.base import Twin
+from twins.calibration import CalibrationResult
 from twins.calibration import calibrate as ls_calibrate
 
 from . import ranges as rg
@@ -38,7 +40,9 @@ def prepare(
     return twin, data, val, split_info, notes
 
 
-def calibrate_core(twin: Twin, est: Record, val: Record, names: list[str], own: bool, simulate: Callable) -> Any:
+def calibrate_core(
+    twin: Twin, est: Record, val: Record, names: list[str], own: bool, simulate: Callable
+) -> CalibrationResult[Twin]:
     """The core ``names`` of ``twin`` fitted to ``est``: by the twin's own calibration where ``own`` (it knows its
     physics: the acoustic stack from the H1 frequency response), else — and where that one refuses the record (one
     tone burst excites fewer frequencies than it needs; diagnosis benchmark seed 666) — by the generic output-error
