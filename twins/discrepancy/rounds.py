@@ -212,7 +212,9 @@ def _greedy(loop: _Loop, ext: Extension, n_max: int) -> None:
         ext.rounds += errors
         if not trials:
             break
-        ranking = rank_round(trials, stage, inp.est, inp.val, inp.twin, cal.prior, n_eff0, opts, not ext.causes)
+        ranking = rank_round(
+            trials, stage, inp.est, inp.val, inp.twin, cal.prior, n_eff0, opts, not ext.causes, loop.core_r
+        )
         ext.rounds.append(
             {
                 "round": rnd,
@@ -316,7 +318,7 @@ def revisit(loop: _Loop, ext: Extension) -> bool:
         if not trials:
             continue
         n_eff0 = ft.effective_samples(inp.val.y[skip:] - base.yhat_val[skip:])
-        ranking = rank_round(trials, base, inp.est, inp.val, inp.twin, cal.prior, n_eff0, opts)
+        ranking = rank_round(trials, base, inp.est, inp.val, inp.twin, cal.prior, n_eff0, opts, core=core_x)
         row = {
             "round": cause["round"],
             "revisit": eff,
