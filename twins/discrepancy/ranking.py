@@ -20,9 +20,9 @@ beside it, the trial must be significantly worse (:func:`_owes_its_gain`).
 is within 2× of the leader's or whose fitted corner lies above the Nyquist frequency (:func:`_beyond_band`), and
 any candidate (significant, or with at least half the leader's gain) whose validation residual variance is within
 the sampling error ``2·√(2/N_eff)`` of the leader's (or not significantly larger) while its prediction differs
-from the leader's by less than half the residual RMS. A leading drift's group also takes the drifts that meet
-the first rule once fitted on the leader's core (:func:`_on_leader_core`). The group is reported with the
-experiment that would separate it.
+from the leader's by less than half the residual RMS; a member of the leader's ``EffectSpec.group`` that its own
+core refit set apart is judged by the first rule again, fitted on the leader's core (:func:`_on_leader_core`).
+The group is reported with the experiment that would separate it.
 
 **Confidence** of a cause (in [0, 1]): ``(1 − p_value) · (0.5 + 0.5·√(1 − g₂/g₁)) · (0.8 + 0.2·s)`` with ``g₁``
 its relative validation gain, ``g₂`` the best gain of a candidate outside its group and ``s`` its signature
@@ -220,26 +220,27 @@ def _on_leader_core(
     core: list[str],
     opts: Any,
 ) -> list[str]:
-    """Members of a leading drift's group that their own core refit set apart, judged again on the leader's core.
+    """Members of the leader's ambiguity group that their own core refit set apart, judged again on the leader's core.
 
-    A drift is a function of the time since the record's start, and on the estimation record it trades off against
-    the core's levels and gains: each member's stage-B refit moves the core its own way, and two drifts the data
-    cannot tell apart can then differ in validation by what their cores do (benchmark seed 497, a settling drift
-    on the tanks: ``offset_drift`` refitted with the core reached 2.3× the leader's validation NRMSE for an
-    estimation SSE 0.6 % below the one it has held on ``slow_drift``'s core, where its validation NRMSE is 0.0283
-    against the leader's 0.0322). Each time-varying member of the leader's group with a validation gain, not yet
+    Each member's stage-B refit moves the core its own way where the estimation record cannot pin it, and two
+    members the data cannot tell apart can then differ in validation by what their cores do. A drift trades off
+    against the core's levels (benchmark seed 497, a settling drift on the tanks: ``offset_drift`` refitted with the
+    core reached 2.3× the leader's validation NRMSE for an estimation SSE 0.6 % below the one it has held on
+    ``slow_drift``'s core, where its validation NRMSE is 0.0283 against the leader's 0.0322); a lag against its
+    resonance (seed 682, a drive low-pass at 3.8 kHz on the cantilever: ``amplifier_bandwidth`` fitted at 3.9 kHz,
+    2.6× the delay's validation NRMSE refitted). Each member of the leader's group with a validation gain, not yet
     grouped, is fitted with the core held where the leader's fit left it (stage A) and joins the group on the
     group's rule (validation NRMSE within 2× of the leader's)."""
     top = trials[0]
     spec = twin.EFFECTS[top.effect]
-    if not core or not top.significant or not spec.group or not spec.time_varying:
+    if not core or not top.significant or not spec.group:
         return []
     held = stage.twin.with_params(**{c: getattr(top.twin.params, c) for c in core_for(stage.twin, core)})
     a_est = {**stage.analysis_est, "fs": est.fs}
     out = []
     for tr in trials[1:]:
         other = twin.EFFECTS[tr.effect]
-        if tr.effect in group or other.group != spec.group or not other.time_varying or tr.gain <= 0:
+        if tr.effect in group or other.group != spec.group or tr.gain <= 0:
             continue
         try:
             on_top = run_trial(held, tr.effect, est, val, core, a_est, opts, refit_core=False)
