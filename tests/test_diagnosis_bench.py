@@ -213,6 +213,23 @@ def test_the_case_residual_to_noise_ratio_enters_the_confidence(monkeypatch):
     assert current(row)["causes"][0]["confidence"] == pytest.approx(1 / (1 + math.exp(3.0)))
 
 
+def test_the_calibration_is_fitted_on_the_causes_it_states_for():
+    """A cause under a cap (a band, a transfer or the outside mark) states the cap whatever the logistic model says:
+    it is no example for the model; the causes it states for are, right and wrong alike."""
+    free_right, free_wrong = _c("creep", 0.9), _c("slow_drift", 0.8)
+    banded, moved = dict(_c("creep", 0.9), above_nyquist=True), dict(_c("creep", 0.9), untransferable=True)
+    rows = [
+        _row("creep", "cantilever", "discrepancy", [free_right, free_wrong], seed=1),
+        _row("creep", "cantilever", "discrepancy", [banded, moved], seed=2),
+        dict(_row("creep", "cantilever", "unexplained", [_c("creep", 0.9)], seed=3), residual_vs_noise=100.0),
+        dict(_row("creep", "cantilever", "unexplained", [_c("creep", 0.3)], seed=4), residual_vs_noise=1.0),
+    ]
+    x, y, seeds = examples(rows)
+    assert list(seeds) == [1, 1, 4] and list(y) == [1.0, 0.0, 1.0]
+    assert confidence.capped(banded) and confidence.capped(moved) and confidence.capped(free_right, outside=True)
+    assert not confidence.capped(free_right)
+
+
 def test_calibration_fit_recovers_a_known_logistic_model():
     rng = np.random.default_rng(3)
     x = rng.standard_normal((4000, 2))

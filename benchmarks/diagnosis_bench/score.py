@@ -50,13 +50,16 @@ def current(row: dict[str, Any]) -> dict[str, Any]:
     if "error" in row or not row.get("causes"):
         return row
     causes = [dict(c) for c in row["causes"]]
-    excess = row.get("residual_vs_noise")
-    # the residual verdict: a stored `unexplained` far above the noise (a row keeps the verdict after attribution,
-    # which also says `unexplained` for a residual near the noise that no cause states confidently)
-    outside = row["verdict"] == "unexplained" and excess is not None and float(excess) > EXCESS_LIMIT
-    calibrate_causes(causes, excess, outside=outside)
+    calibrate_causes(causes, row.get("residual_vs_noise"), outside=_outside_residual(row))
     causes.sort(key=lambda c: -float(c["confidence"]))
     return dict(row, causes=causes, verdict=attributed_verdict(row["verdict"], causes))
+
+
+def _outside_residual(row: dict[str, Any]) -> bool:
+    """The residual verdict of a stored row: `unexplained` far above the noise (a row keeps the verdict after
+    attribution, which also says `unexplained` for a residual near the noise that no cause states confidently)."""
+    excess = row.get("residual_vs_noise")
+    return row["verdict"] == "unexplained" and excess is not None and float(excess) > EXCESS_LIMIT
 
 
 def _named(row: dict[str, Any]) -> list[dict[str, Any]]:

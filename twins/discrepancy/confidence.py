@@ -29,6 +29,7 @@ __all__ = [
     "OUTSIDE_CAP",
     "CONFIDENT",
     "features",
+    "capped",
     "calibrate_causes",
     "attributed_verdict",
 ]
@@ -49,6 +50,8 @@ COEFFICIENTS: tuple[float, ...] | None = (2.480129, 0.181306, 1.365835, -2.15974
 #: time constant exceeds the records, may state (:mod:`.band`: 6 of 23, 2 of 3 and 0 of 4 such causes right on the
 #: benchmark)
 BAND_CAP = 0.4
+#: the marks of :mod:`.band` that put a cause under :data:`BAND_CAP`
+_BAND_MARKS = ("above_nyquist", "pinned_frequency", "beyond_record")
 #: the most a cause whose parameters do not carry over to the validation record may state (:mod:`.transfer`): such
 #: causes are right at about the rate of a coin (on the benchmark's 500 cases 8 of the 14 outside the other caps, 7
 #: of the 11 the logistic model put above 0.4), so they state just under :data:`CONFIDENT`, as the outside cap does;
@@ -90,6 +93,12 @@ def _probability(x: np.ndarray, coef: Sequence[float]) -> float:
     return float(1.0 / (1.0 + math.exp(-z))) if z > -700 else 0.0
 
 
+def capped(cause: dict[str, Any], outside: bool = False) -> bool:
+    """Whether one of the caps below states this cause's confidence in place of the logistic model (a band, a
+    transfer or the outside mark; :func:`calibrate_causes`)."""
+    return bool(outside or cause.get("untransferable") or any(cause.get(m) for m in _BAND_MARKS))
+
+
 def calibrate_causes(causes: list[dict[str, Any]], excess_ratio: float | None = None, outside: bool = False) -> None:
     """Replace each catalog cause's ``confidence`` by the calibrated probability (the score kept as ``score``),
     at most :data:`BAND_CAP` for one marked ``above_nyquist``, ``pinned_frequency`` or ``beyond_record``
@@ -102,7 +111,7 @@ def calibrate_causes(causes: list[dict[str, Any]], excess_ratio: float | None = 
         c.setdefault("score", float(c["confidence"]))
         if COEFFICIENTS is not None:
             c["confidence"] = _probability(features(c, excess_ratio), COEFFICIENTS)
-        if c.get("above_nyquist") or c.get("pinned_frequency") or c.get("beyond_record"):
+        if any(c.get(m) for m in _BAND_MARKS):
             c["confidence"] = min(float(c["confidence"]), BAND_CAP)
         if c.get("untransferable"):
             c["confidence"] = min(float(c["confidence"]), TRANSFER_CAP)
