@@ -71,9 +71,11 @@ def score_tests(twin: Any, case: RealCase, data: Any) -> dict[str, float]:
     return out
 
 
-def run_case(name: str, rounds: int = 3, progress: bool = True, **options: Any) -> dict[str, Any]:
+def run_case(name: str, rounds: int = 3, progress: bool = True, hybrid: bool = False, **options: Any) -> dict[str, Any]:
     """Diagnose case ``name`` (:data:`CASES`) with :class:`twins.discrepancy.DiagnoseOptions` ``options`` over the
-    defaults, and score the configuration as given and the extended one on the tests."""
+    defaults, and score the configuration as given and the extended one on the tests; with ``hybrid``, also the
+    extended one plus a black-box remainder fitted on the estimation record (:class:`twins.hybrid.HybridTwin`,
+    its structure chosen on that record too)."""
     from benchmarks.datasets import load_dataset
     from twins.discrepancy import DiagnoseOptions, run_diagnosis
     from twins.external import load_model
@@ -91,6 +93,13 @@ def run_case(name: str, rounds: int = 3, progress: bool = True, **options: Any) 
     diag = run_diagnosis(twin, data.est_records[0], val, max_rounds=rounds, options=opts)
     before = score_tests(diag.baseline.twin, case, data)
     after = score_tests(diag.extended.twin, case, data)
+    extra: dict[str, Any] = {}
+    if hybrid:
+        from twins.discrepancy.prediction import deterministic
+        from twins.hybrid import HybridTwin
+
+        hy = HybridTwin(deterministic(diag.extended.twin)).fit(data.est_records[0])
+        extra = {"test_rmse_hybrid": score_tests(hy, case, data), "hybrid_remainder": hy.identifier_}
     return {
         "case": name,
         "model": case.model,
@@ -101,6 +110,7 @@ def run_case(name: str, rounds: int = 3, progress: bool = True, **options: Any) 
         "test_rmse_after": after,
         "nrmse_val": [diag.baseline.nrmse_val, diag.extended.nrmse_val],
         "rounds": rounds,
+        **extra,
         "cpu_user_s": _user_cpu() - cpu0,
     }
 
@@ -113,6 +123,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--pairs", action="store_true")
     ap.add_argument("--trial-nfev", type=int, default=None)
     ap.add_argument("--json", action="store_true")
+    ap.add_argument("--hybrid", action="store_true", help="also score the extended model plus a black-box remainder")
     args = ap.parse_args(argv)
     logging.basicConfig(stream=sys.stderr, level=logging.INFO, format="%(message)s")
     extra: dict[str, Any] = {"pairs": True} if args.pairs else {}
@@ -120,7 +131,7 @@ def main(argv: list[str] | None = None) -> int:
         extra["starts"] = args.starts
     if args.trial_nfev is not None:
         extra["trial_nfev"] = args.trial_nfev
-    res = run_case(args.case, rounds=args.rounds, **extra)
+    res = run_case(args.case, rounds=args.rounds, hybrid=args.hybrid, **extra)
     if args.json:
         print(json.dumps(res, indent=1))
     else:
