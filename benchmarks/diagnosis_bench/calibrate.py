@@ -5,10 +5,10 @@ Every named catalog cause of a row whose confidence the logistic model states is
 (:func:`.score._is_right`). A cause a cap states for (:func:`twins.discrepancy.confidence.capped`) is left out:
 whatever the model says of it, it states the cap, and fitted with them the model was pulled toward classes it does
 not speak for (700 cases, ten folds held out: the largest gap in a bin of ≥ 20 causes 0.12 fitted on every cause,
-0.08 on the uncapped ones). A logistic regression with a small
-ridge (L2, λ = 1) is fitted by Newton's method; it is judged held out by ten folds of cases (a case's causes are
-predicted by the model fitted on the cases of the other nine folds, seed mod 10: all causes of one case stay in
-one fold), then refitted on all rows for the coefficients the diagnosis uses. ``python -m
+0.08 on the uncapped ones). A logistic regression with a small ridge (L2, λ = 1) is fitted by Newton's method;
+it is judged held out by ten folds of cases (a case's causes are predicted by the model fitted on the cases of the
+other nine folds, seed mod 10: all causes of one case stay in one fold), then refitted on all rows for the
+coefficients the diagnosis uses. ``python -m
 benchmarks.diagnosis_bench.calibrate ROWS.jsonl`` prints both and the coefficient tuple.
 """
 

@@ -218,7 +218,7 @@ def _on_leader_core(
     est: Record,
     val: Record,
     core: list[str],
-    opts: Any,
+    opts: DiagnoseOptions,
 ) -> list[str]:
     """Members of the leader's ambiguity group that their own core refit set apart, judged again on the leader's core.
 
