@@ -20,9 +20,8 @@ beside it, the trial must be significantly worse (:func:`_owes_its_gain`).
 is within 2× of the leader's or whose fitted corner lies above the Nyquist frequency (:func:`_beyond_band`), and
 any candidate (significant, or with at least half the leader's gain) whose validation residual variance is within
 the sampling error ``2·√(2/N_eff)`` of the leader's (or not significantly larger) while its prediction differs
-from the leader's by less than half the residual RMS; a member of the leader's ``EffectSpec.group`` that its own
-core refit set apart is judged by the first rule again, fitted on the leader's core (:func:`_on_leader_core`).
-The group is reported with the experiment that would separate it.
+from the leader's by less than half the residual RMS; a group member its own core refit set apart is judged again
+on the leader's core (:func:`_on_leader_core`). The group is reported with the experiment that separates it.
 
 **Confidence** of a cause (in [0, 1]): ``(1 − p_value) · (0.5 + 0.5·√(1 − g₂/g₁)) · (0.8 + 0.2·s)`` with ``g₁``
 its relative validation gain, ``g₂`` the best gain of a candidate outside its group and ``s`` its signature
