@@ -412,20 +412,26 @@ def test_a_record_the_twins_own_calibration_refuses_is_calibrated_by_output_erro
         assert res.fitted[n] == pytest.approx(float(getattr(twin.params, n)), rel=0.01)
 
 
+def _first_round(seed: int, model: str, mechanism: str) -> tuple[dict, dict, dict]:
+    """Case ``seed`` (checked to be ``mechanism`` on ``model``) diagnosed for one round: its records and truth, the
+    first cause, and that round's candidate rows by effect."""
+    from twins.discrepancy import diagnose
+
+    case = draw_case(seed)
+    assert case.model == model and case.mechanism == mechanism
+    b = make_records(case)
+    out = diagnose(b["twin"], b["est"], b["val"], max_rounds=1, threads=1)
+    return b, out["causes"][0], {r["effect"]: r for r in out["rounds"][0]["candidates"]}
+
+
 def test_a_gain_sag_about_a_high_level_is_grouped_with_the_additive_drifts():
     """Case 516 (the tanks, a sensor gain falling by 1.8 % over each record about a 5 V level): y·g(t) is
     ȳ·g(t) + (y − ȳ)·g(t), an additive drift but for a term ȳ/σ_y times smaller. The slow drift led (validation NRMSE
     0.0154) and the gain drift, 11 % behind, was outside its group: a confident wrong name. In the drift group it is
     grouped with the leader."""
-    from twins.discrepancy import diagnose
-
-    case = draw_case(516)
-    assert case.model == "cascaded-tanks" and case.mechanism == "gain_sag"
-    b = make_records(case)
+    b, first, _ = _first_round(516, "cascaded-tanks", "gain_sag")
     y = np.asarray(b["val"].y, float)
     assert abs(float(np.mean(y))) > 10 * float(np.std(y))  # the output varies little about its level
-    out = diagnose(b["twin"], b["est"], b["val"], max_rounds=1, threads=1)
-    first = out["causes"][0]
     assert first["effect"] in ("slow_drift", "offset_drift", "gain_drift")
     assert "gain_drift" in [first["effect"], *first.get("group", [])]
 
@@ -435,14 +441,7 @@ def test_a_settling_drift_is_judged_on_the_leaders_core():
     law, refitted with the core ended at more than twice the leading slow drift's validation NRMSE, its core moved
     where the estimation record cannot pin it; fitted with the core held at the leader's, it is within the group's
     2× and joins the group."""
-    from twins.discrepancy import diagnose
-
-    case = draw_case(497)
-    assert case.model == "cascaded-tanks" and case.mechanism == "drift_exp"
-    b = make_records(case)
-    out = diagnose(b["twin"], b["est"], b["val"], max_rounds=1, threads=1)
-    rows = {r["effect"]: r for r in out["rounds"][0]["candidates"]}
-    first = out["causes"][0]
+    _, first, rows = _first_round(497, "cascaded-tanks", "drift_exp")
     assert first["effect"] == "slow_drift"
     assert rows["offset_drift"]["nrmse_val"] > 2.0 * rows["slow_drift"]["nrmse_val"]  # its own refit sets it apart
     assert "offset_drift" in first.get("group", [])
@@ -452,14 +451,7 @@ def test_a_drive_lag_is_judged_with_the_delay_on_the_delays_core():
     """Case 682 (seeds beyond the stored 600; the cantilever, a drive low-pass at 3.8 kHz sampled at 3.9 kHz, sines
     then steps): the delay led (validation NRMSE 0.020) and the amplifier's bandwidth, fitted at 3.9 kHz, reached
     2.6× that with its own core refit, outside the lag group: a wrong name. Fitted on the delay's core it is grouped."""
-    from twins.discrepancy import diagnose
-
-    case = draw_case(682)
-    assert case.model == "cantilever" and case.mechanism == "drive_lowpass"
-    b = make_records(case)
-    out = diagnose(b["twin"], b["est"], b["val"], max_rounds=1, threads=1)
-    rows = {r["effect"]: r for r in out["rounds"][0]["candidates"]}
-    first = out["causes"][0]
+    b, first, rows = _first_round(682, "cantilever", "drive_lowpass")
     assert first["effect"] == "input_delay"
     assert rows["amplifier_bandwidth"]["params"]["amp_bandwidth_hz"] == pytest.approx(b["params"]["corner_hz"], rel=0.1)
     assert rows["amplifier_bandwidth"]["nrmse_val"] > 2.0 * rows["input_delay"]["nrmse_val"]
