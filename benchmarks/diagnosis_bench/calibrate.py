@@ -8,8 +8,8 @@ not speak for (700 cases, ten folds held out: the largest gap in a bin of ≥ 20
 0.08 on the uncapped ones). A logistic regression with a small ridge (L2, λ = 1) is fitted by Newton's method;
 it is judged held out by ten folds of cases (a case's causes are predicted by the model fitted on the cases of the
 other nine folds, seed mod 10: all causes of one case stay in one fold), then refitted on all rows for the
-coefficients the diagnosis uses. ``python -m
-benchmarks.diagnosis_bench.calibrate ROWS.jsonl`` prints both and the coefficient tuple.
+coefficients the diagnosis uses. ``python -m benchmarks.diagnosis_bench.calibrate ROWS.jsonl`` prints both and
+the coefficient tuple.
 """
 
 from __future__ import annotations

@@ -54,6 +54,10 @@ from .trials import Stage, Trial, run_trial
 
 __all__ = ["Ranking", "rank_round", "cause_from", "judged_span"]
 
+#: a member of the leader's catalog group whose validation NRMSE is within this factor of the leader's is grouped
+#: with it (:func:`_group`, :func:`_on_leader_core`)
+GROUP_NRMSE_RATIO = 2.0
+
 
 @dataclasses.dataclass
 class Ranking:
@@ -197,7 +201,7 @@ def _group(trials: list[Trial], twin: Twin, val: Record, opts: DiagnoseOptions) 
             bool(top_group)
             and twin.EFFECTS[tr.effect].group == top_group
             and tr.significant
-            and (tr.nrmse_val <= 2.0 * top.nrmse_val or _beyond_band(twin, tr, val.fs))
+            and (tr.nrmse_val <= GROUP_NRMSE_RATIO * top.nrmse_val or _beyond_band(twin, tr, val.fs))
         )
         d_pred = float(np.sqrt(np.mean((tr.yhat_val[skip:] - top.yhat_val[skip:]) ** 2)))
         # comparable: significant itself, or at least half the leader's gain (a richer candidate with the leader's
@@ -245,7 +249,7 @@ def _on_leader_core(
             on_top = run_trial(held, tr.effect, est, val, core, a_est, opts, refit_core=False)
         except TRIAL_ERRORS:
             continue
-        if on_top.nrmse_val <= 2.0 * top.nrmse_val:
+        if on_top.nrmse_val <= GROUP_NRMSE_RATIO * top.nrmse_val:
             out.append(tr.effect)
     return out
 
