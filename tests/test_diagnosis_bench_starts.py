@@ -57,3 +57,25 @@ def test_a_drift_the_calibration_took_up_is_named(case515):
     first = out["causes"][0]
     assert "slow_drift" in [first["effect"], *first.get("group", [])]
     assert first["confidence"] >= 0.5
+
+
+@pytest.mark.parametrize(
+    ("seed", "mechanism", "named"),
+    [
+        (142, "quantization", {"output_quantization"}),  # an overflow that never engages is not named beside it
+        (58, "limiter", set()),  # a settling drift fitted to a calibration's error is not named
+    ],
+)
+def test_a_trial_from_the_configuration_as_given_is_judged_against_it(seed, mechanism, named):
+    """Cases 142 (a quantiser on the tanks, AR(1) noise of pole 0.93) and 58 (a limiter about the tanks' operating
+    level): the calibration bent to the estimation record predicts the validation record 3.6× and 21× worse than the
+    configuration as given. A trial started from that configuration (an overflow above every level reached) or a
+    settling drift refitted with the core claimed the difference as its gain, at 0.98 and 0.97."""
+    from twins.discrepancy import diagnose
+
+    case = draw_case(seed)
+    assert case.model == "cascaded-tanks" and case.mechanism == mechanism
+    b = make_records(case)
+    out = diagnose(b["twin"], b["est"], b["val"], max_rounds=3, threads=1)
+    stated = {c["effect"] for c in out["causes"] if c["effect"] != "unexplained" and c["confidence"] >= 0.5}
+    assert stated == named
