@@ -56,7 +56,6 @@ class Trial:
     # validation SSE of the configuration with only its core refitted (None: not computed), the reference a trial
     # is tested against beside the stage (:func:`core_refit_sse`)
     ref_sse_val: float | None = None
-    n_eff_est: float = 0.0  # effective samples of the estimation residual (:func:`.features.effective_samples`)
 
 
 def run_trial(
@@ -156,7 +155,6 @@ def _fit(
         effect_params={f: fitted.get(f, getattr(fit_tw.params, f)) for f in eff_all},
         stderr={f: stderr.get(f, float("nan")) for f in eff_fields},
         sse_est=sse(est.output, ye, opts.skip),
-        n_eff_est=ft.effective_samples(np.asarray(est.output)[opts.skip :] - np.asarray(ye)[opts.skip :]),
         sse_val=sse(val.output, yv, opts.skip),
         yhat_val=yv,
         nrmse_val=nrmse(val.y, yv, opts.skip) if ok else float("inf"),
