@@ -225,8 +225,10 @@ def _least_squares(
 INSIDE = 1e-4
 
 
-def _inside(v: float, rng: tuple[float, float]) -> float:
+def _inside(v: float, rng: tuple[float | None, float | None]) -> float:
     """``v`` (on a bound of ``rng``) moved inside by :data:`INSIDE` of the range's width."""
+    if rng[0] is None or rng[1] is None:
+        return v
     lo, hi = float(rng[0]), float(rng[1])
     if not (math.isfinite(lo) and math.isfinite(hi)) or hi <= lo:
         return v
