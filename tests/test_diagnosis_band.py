@@ -20,7 +20,7 @@ from benchmarks.diagnosis_bench.run import MAX_ROUNDS
 from benchmarks.diagnosis_bench.truth import make_records
 from twins.discrepancy import diagnose
 from twins.discrepancy.band import characteristic_hz, mark_outside_band, memory_s, pinned_hz
-from twins.discrepancy.confidence import BAND_CAP, calibrate_causes
+from twins.discrepancy.confidence import BAND_CAP, CONFIDENT, calibrate_causes
 from twins.registry import get_twin
 
 
@@ -145,12 +145,15 @@ def test_a_frequency_at_the_top_of_its_range_is_marked_and_capped(ratio, marked)
 def test_a_feedthrough_named_as_a_second_mode_pinned_at_its_top_is_not_stated():
     """Case 399: crosstalk of the drive into the cantilever's sensor (outside its catalog; 27.5 kHz, a chirp for
     estimation, sines for validation), named `second_mode` with its ratio refitted to the bound 10 (7.0 kHz, in the
-    band: a feed-through is a mode at infinity) at 0.83 — a confident wrong name."""
+    band: a feed-through is a mode at infinity) at 0.83 — a confident wrong name. Since a trial's start on a bound
+    moves inside its range the ratio may end below its top, and the mode's parameters then do not carry over to the
+    validation record: a cap either way (the pinned-frequency mark itself is checked on its own above)."""
     case = draw_case(399)
     assert case.mechanism == "crosstalk"
     b = make_records(case)
     out = diagnose(b["twin"], b["est"], b["val"], max_rounds=MAX_ROUNDS, threads=1)
     cause = next(c for c in out["causes"] if c["effect"] == "second_mode")
-    assert cause["pinned_frequency"]["param"] == "mode_ratio" and cause["pinned_frequency"]["hz"] < case.fs / 2
-    assert max(c["confidence"] for c in out["causes"] if c["effect"] != "unexplained") <= BAND_CAP
+    pinned = cause.get("pinned_frequency")
+    assert (pinned and pinned["param"] == "mode_ratio" and pinned["hz"] < case.fs / 2) or cause.get("untransferable")
+    assert max(c["confidence"] for c in out["causes"] if c["effect"] != "unexplained") < CONFIDENT  # capped
     assert out["verdict"] == "unexplained"

@@ -3,10 +3,12 @@
 
 Cases of the diagnosis benchmark (docs/diagnosis-benchmark.md) on the piezo stage (a linear resonator, the user's
 model): 412, a backlash on the drive (outside its catalog) fitted as an output echo (stated 0.96, verdict
-``discrepancy``); 166, a first-order lag of the drive (outside its catalog) fitted as an input delay (0.93). Their
-refits on the validation record move the echo's delay by 15 % and the delay by 4.4 %, and remove 17 % and 11 % of
-the validation residual power. Right names keep their confidence: case 102's echo and case 182's delay on the
-cantilever (their refits move them by under 1 % and remove under 0.3 %).
+``discrepancy``; its refit on the validation record moved the echo's delay by 15 % and removed 17 % of the
+validation residual power), now fitted as a drive low-pass whose parameters do not carry over either. Right names
+keep their confidence: case 102's echo and case 182's delay on the cantilever (their refits move them by under 1 %
+and remove under 0.3 %), and case 166, a first-order lag of the drive: outside the user catalog when it was fitted
+as a delay that did not carry over (0.93 capped), inside it since the generic drive low-pass (the lag group), and
+named as that group's delay at 0.99 since a trial's start on a bound moves inside its range.
 """
 
 from __future__ import annotations
@@ -26,13 +28,10 @@ def _run(seed: int) -> dict:
     return diagnose(b["twin"], b["est"], b["val"], max_rounds=MAX_ROUNDS, threads=1)
 
 
-@pytest.mark.parametrize(
-    "seed, mechanism, effect", [(412, "backlash", "output_echo"), (166, "input_lag", "input_delay")]
-)
-def test_a_mimic_whose_parameters_do_not_carry_over_is_not_stated(seed, mechanism, effect):
-    assert draw_case(seed).mechanism == mechanism
-    out = _run(seed)
-    cause = next(c for c in out["causes"] if c["effect"] == effect)
+def test_a_mimic_whose_parameters_do_not_carry_over_is_not_stated():
+    assert draw_case(412).mechanism == "backlash"
+    out = _run(412)
+    cause = next(c for c in out["causes"] if c["effect"] != "unexplained")  # the leading mimic, whichever it is
     mark = cause["untransferable"]
     assert mark["drop"] >= MIN_DROP and mark["p_value"] < 0.01
     assert max(abs(b - a) / abs(a) for a, b in mark["params"].values()) >= MIN_MOVE
@@ -40,7 +39,10 @@ def test_a_mimic_whose_parameters_do_not_carry_over_is_not_stated(seed, mechanis
     assert out["verdict"] == "unexplained"  # an outside mechanism: no cause stated
 
 
-@pytest.mark.parametrize("seed, mechanism, effect", [(102, "echo", "output_echo"), (182, "delay", "input_delay")])
+@pytest.mark.parametrize(
+    "seed, mechanism, effect",
+    [(102, "echo", "output_echo"), (182, "delay", "input_delay"), (166, "input_lag", "input_delay")],
+)
 def test_a_right_cause_carries_over(seed, mechanism, effect):
     assert draw_case(seed).mechanism == mechanism
     out = _run(seed)
