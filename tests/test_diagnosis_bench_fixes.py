@@ -443,9 +443,9 @@ def test_a_settling_drift_is_judged_on_the_leaders_core():
     """Case 497 (the tanks, a drift D·(1 − e^(−t/τ)) with τ = 0.56 of the record): ``offset_drift``, the drift's own
     law, refitted with the core ended at more than twice the leading slow drift's validation NRMSE, its core moved
     where the estimation record cannot pin it, and was named outside the slow drift's group. Fitted with the core
-    held at the leader's it joins the group; and the refit the estimation record cannot tell from its held fit is
-    not kept where the validation record prefers the held one, so the drift's own law leads."""
-    _, first, rows = _first_round(497, "cascaded-tanks", "drift_exp")
+    held at the leader's it joins the group; and since a core refit is kept only where it fits both records better,
+    the drift's own law keeps its held fit and leads."""
+    _, first, _ = _first_round(497, "cascaded-tanks", "drift_exp")
     assert "offset_drift" in [first["effect"], *first.get("group", [])]
     assert first["confidence"] >= 0.5
 

@@ -173,7 +173,7 @@ def _owes_its_gain(
     level: float,
     min_rel_gain: float,
     skip: int,
-    stage_twin: Twin | None = None,
+    stage_twin: Twin,
 ) -> bool:
     """The trial's configuration with its effect switched off — the core as refitted with the effect — must be
     significantly worse on the validation record (over the span the effect is judged on): else the gain came from
@@ -183,7 +183,7 @@ def _owes_its_gain(
     calibration that fitted coloured noise had the validation SSE 3.6× the given one's, and a trial from the given
     one claimed the difference as its gain). ``n_eff``: the effective samples the trial's own test counted (in the
     first round its residual's, not the discrepancy's)."""
-    if tr.n_total <= tr.n_added and (stage_twin is None or tr.base is stage_twin):
+    if tr.n_total <= tr.n_added and tr.base is stage_twin:
         return True
     off = tr.twin.with_effects(set(tr.twin.effects) - {tr.effect})
     m = judged_span(tr.effect, tr.base, est, val)
