@@ -14,6 +14,7 @@ from sysid.data.record import Record
 from sysid.errors import ConfigError
 from sysid.nonlinear import pnlss_sim as ps
 from sysid.nonlinear.pnlss import PNLSS
+from tests._polysys import duffing
 
 A = np.array([[0.6, 0.3], [-0.3, 0.6]])
 B = np.array([[1.0], [0.5]])
@@ -207,24 +208,6 @@ def test_cli_refuses_a_bad_option_with_one_line(tmp_path, capsys):
     assert main(["identify", "pnlss", "--est", str(tmp_path / "est.npz"), "--set", "nx=2,degree=2", "--json"]) == 0
 
 
-def _duffing(u: np.ndarray, fs: float = 2.0, substeps: int = 10) -> np.ndarray:
-    """ÿ + 0.4 ẏ + y + 2 y³ = u (a Duffing oscillator: the nonlinearity acts on the state it measures; resonance
-    near 0.16 Hz, sampled at 2 Hz as Silverbox's 60 Hz at 610 Hz), RK4 with the input held over each sample."""
-
-    def f(s, uk):
-        return np.array([s[1], uk - 0.4 * s[1] - s[0] - 2.0 * s[0] ** 3])
-
-    h, s, y = 1.0 / (fs * substeps), np.zeros(2), np.zeros(u.size)
-    for k, uk in enumerate(u):
-        y[k] = s[0]
-        for _ in range(substeps):
-            k1 = f(s, uk)
-            k2 = f(s + 0.5 * h * k1, uk)
-            k3 = f(s + 0.5 * h * k2, uk)
-            s = s + h / 6.0 * (k1 + 2 * k2 + 2 * k3 + f(s + h * k3, uk))
-    return y
-
-
 def test_state_monomials_leave_the_input_linear_and_fit_a_duffing_oscillator():
     """``monomials_of="x"``: ζ and η hold no power of u (the input enters through B u and D u alone), fewer
     parameters, and the model still follows a Duffing oscillator to 2 % (noise-free, 3000 samples). Not asserted:
@@ -233,7 +216,7 @@ def test_state_monomials_leave_the_input_linear_and_fit_a_duffing_oscillator():
     (docs/benchmarks-sota.md)."""
     rng = np.random.default_rng(1)
     u = 0.8 * rng.standard_normal(3000)
-    est = Record(u, _duffing(u), fs=2.0)
+    est = Record(u, duffing(u), fs=2.0)
     models = {of: PNLSS(nx=2, degree=3, max_nfev=200, starts=1, monomials_of=of).fit(est) for of in ("xu", "x")}
     names = models["x"].describe()
     assert not any("u" in name for name in names["monomials_state"] + names["monomials_output"])

@@ -9,6 +9,7 @@ import pytest
 
 from sysid.base import load_model
 from sysid.data.record import Record
+from sysid.errors import ConfigError
 from sysid.polynomial.polysim import NARXPolySim, simulate_sensitivity
 
 TRUE = {"y(k-1)": 1.2, "y(k-2)": -0.5, "u(k-1)": 0.5, "u(k-1)^2": 0.2, "y(k-1)*u(k-1)": -0.1}
@@ -83,3 +84,55 @@ def test_save_load_and_no_refinement(output_error_fit, tmp_path):
     m0 = NARXPolySim(ny=2, nu=1, degree=2, max_terms=5, criterion="err", rho_p=1e-12, constant=False, max_nfev=0)
     m0.fit(Record(u=u, y=y, fs=1.0))
     np.testing.assert_array_equal(m0.theta_[0], m.theta_ls_[0])
+
+
+def feedback_plant(u: np.ndarray) -> np.ndarray:
+    """A nonlinear feedback of the output: y(k) = 1.5 y(k-1) − 0.7 y(k-2) + 0.5 u(k-1) + 0.25 u(k-2) − 0.3 y(k-1)³
+    (a sampled lightly damped oscillator whose restoring force stiffens with its displacement)."""
+    y = np.zeros(u.size)
+    for t in range(2, u.size):
+        y[t] = 1.5 * y[t - 1] - 0.7 * y[t - 2] + 0.5 * u[t - 1] + 0.25 * u[t - 2] - 0.3 * y[t - 1] ** 3
+    return y
+
+
+def test_monomials_of_the_output_alone_keep_the_input_linear_and_recover_a_feedback_system():
+    """``monomials_of="y"``: no candidate multiplies an input regressor (degree 3 over ny = nu = 2: 1 + 4 linear +
+    7 products of y(k-1), y(k-2) = 12 candidates against 35), and from output-error data the refinement finds the
+    true terms and parameters within 4 standard errors; the model then follows an input twice as large (beyond
+    the estimation range) to 2 % of its spread, as the true structure must."""
+    rng = np.random.default_rng(3)
+    u = 0.3 * rng.uniform(-1, 1, 4000)
+    y0 = feedback_plant(u)
+    y = y0 + 0.02 * np.std(y0) * rng.standard_normal(u.size)
+    model = NARXPolySim(ny=2, nu=2, degree=3, max_terms=None, criterion="bic", monomials_of="y", max_nfev=200)
+    model.fit(Record(u=u, y=y, fs=1.0))
+    assert len(model.structure_.terms) == 12
+    assert len(NARXPolySim(ny=2, nu=2, degree=3)._structure(1, 1, 0, 3, True).terms) == 35
+    table = {row["term"]: row for row in model.term_table()}
+    assert not any("u" in name and ("*" in name or "^" in name) for name in table)
+    want = {"y(k-1)": 1.5, "y(k-2)": -0.7, "u(k-1)": 0.5, "u(k-2)": 0.25, "y(k-1)^3": -0.3}
+    assert set(want) <= set(table)
+    for name, value in want.items():
+        assert abs(table[name]["parameter"] - value) < 4 * table[name]["stderr"] + 1e-3, name
+    u2 = 0.6 * np.random.default_rng(4).uniform(-1, 1, 2000)
+    y2 = feedback_plant(u2)
+    assert np.max(np.abs(y2)) > 1.2 * np.max(np.abs(y0))  # the test leaves the estimation range
+    err = model.predict(Record(u=u2, y=y2, fs=1.0), None) - y2
+    assert np.sqrt(np.mean(err**2)) < 0.02 * np.std(y2)
+
+
+def test_monomials_of_rejects_an_unknown_choice():
+    with pytest.raises(ConfigError, match="monomials_of"):
+        NARXPolySim(monomials_of="u").fit(Record(u=np.zeros(100), y=np.zeros(100), fs=1.0))
+
+
+def test_a_diverging_start_with_many_terms_is_refined_on_enough_samples():
+    """The continuation in the data length starts on at least one sample more than there are parameters: a
+    least-squares start that diverges within its first few samples is refined, not refused (it used to raise
+    scipy's 'fewer residuals than variables')."""
+    from tests._polysys import duffing
+
+    u = 0.8 * np.random.default_rng(1).standard_normal(3000)
+    model = NARXPolySim(ny=3, nu=4, degree=3, max_terms=None, max_nfev=50).fit(Record(u=u, y=duffing(u), fs=2.0))
+    assert model.refine_info_["start_diverged_at"] >= 0
+    assert min(model.refine_info_["continuation_lengths"]) > model.n_parameters_

@@ -81,19 +81,26 @@ def make_regressors(ny: int, nu: int, ne: int = 0, nk: int = 1, n_outputs: int =
     return regs
 
 
-def candidate_terms(n_regressors: int, degree: int, constant: bool = True) -> list[tuple[int, ...]]:
-    """All products of 1..degree regressors (indices non-decreasing, eq. 2-24), plus the constant ``()``."""
+def candidate_terms(
+    n_regressors: int, degree: int, constant: bool = True, nonlinear_of: Sequence[int] | None = None
+) -> list[tuple[int, ...]]:
+    """All products of 1..degree regressors (indices non-decreasing, eq. 2-24), plus the constant ``()``; with
+    ``nonlinear_of``, the products of two or more factors are of those regressors only (every regressor still
+    enters linearly)."""
     if int(degree) != degree or degree < 1:
         raise ConfigError(f"degree must be an integer >= 1, got {degree}")
-    count = math.comb(n_regressors + int(degree), int(degree)) - 1 + bool(constant)
+    pool = sorted(range(n_regressors) if nonlinear_of is None else set(nonlinear_of))
+    k = len(pool)
+    count = n_regressors + math.comb(k + int(degree), int(degree)) - 1 - k + bool(constant)
     if count > MAX_CANDIDATES:
         raise ConfigError(
             f"degree {degree} over {n_regressors} regressors gives {count:.4g} candidate terms (limit "
             f"{MAX_CANDIDATES}: the Gram matrix needs {count * count * 8 / 1e9:.3g} GB); lower the degree or the lags"
         )
     terms: list[tuple[int, ...]] = [()] if constant else []
-    for d in range(1, degree + 1):
-        terms += list(combinations_with_replacement(range(n_regressors), d))
+    terms += [(r,) for r in range(n_regressors)]
+    for d in range(2, degree + 1):
+        terms += list(combinations_with_replacement(pool, d))
     return terms
 
 

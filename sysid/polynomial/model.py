@@ -19,6 +19,10 @@ from sysid.polynomial import simulate as sim
 
 __all__ = ["PolynomialModel", "DIVERGENCE_FACTOR"]
 
+#: what the products of two or more regressors are made of (option ``monomials_of``): lagged y and u (eq. 2-24), or
+#: lagged y alone (the input enters linearly: a nonlinear feedback of the output, e.g. a restoring force)
+MONOMIALS_OF = ("yu", "y")
+
 # A free run is declared diverged when it leaves ±DIVERGENCE_FACTOR × (largest |y| seen in estimation).
 DIVERGENCE_FACTOR = 1e3
 
@@ -39,7 +43,12 @@ class PolynomialModel(Identifier):
         regs = fr.make_regressors(self.ny, self.nu, ne, self.nk, n_outputs, n_inputs)
         if not regs:
             raise ConfigError(f"{self.name}: no regressors (ny = nu = 0)")
-        return fr.Structure(regs, fr.candidate_terms(len(regs), degree, constant), n_outputs, n_inputs)
+        of = getattr(self, "monomials_of", "yu")
+        if of not in MONOMIALS_OF:
+            raise ConfigError(f"{self.name}: monomials_of={of!r} not one of: {', '.join(MONOMIALS_OF)}")
+        nonlinear = None if of == "yu" else [r for r, (kind, _, _) in enumerate(regs) if kind == "y"]
+        terms = fr.candidate_terms(len(regs), degree, constant, nonlinear)
+        return fr.Structure(regs, terms, n_outputs, n_inputs)
 
     def fit(self, data: Record | Sequence[Record]) -> PolynomialModel:
         records = as_record_list(data)

@@ -66,6 +66,9 @@ class NARXPoly(PolynomialModel):
     max_terms : most terms scored (and selected); None = all candidates.
     constant : include the constant term among the candidates.
     chunk : rows per chunk in the one-pass Gram accumulation (memory ≈ chunk × candidates × 8 B).
+    monomials_of : ``"yu"``: candidate products of lagged y and u (eq. 2-24); ``"y"``: products of lagged y alone,
+        the input entering linearly (a nonlinear feedback of the output, such as a Duffing oscillator's restoring
+        force of its displacement: fewer candidates, and no powers of the input to grow beyond its estimation range).
     """
 
     name = "narx-poly"
@@ -81,6 +84,7 @@ class NARXPoly(PolynomialModel):
         max_terms: int = 40,
         constant: bool = True,
         chunk: int = fr.DEFAULT_CHUNK,
+        monomials_of: str = "yu",
     ):
         self.ny = ny
         self.nu = nu
@@ -91,6 +95,7 @@ class NARXPoly(PolynomialModel):
         self.max_terms = max_terms
         self.constant = constant
         self.chunk = chunk
+        self.monomials_of = monomials_of
 
     def _fit_records(self, records: list[Record]) -> None:
         _check_common(self)

@@ -154,7 +154,7 @@ class NARXPolySim(NARXPoly):
 
     Parameters
     ----------
-    ny, nu, nk, degree, criterion, rho_p, max_terms, constant, chunk :
+    ny, nu, nk, degree, criterion, rho_p, max_terms, constant, chunk, monomials_of :
         As :class:`sysid.polynomial.NARXPoly` (structure selection and starting point).
     max_nfev : int
         Most simulations in the refinement (0: no refinement, the model is ``narx-poly``'s).
@@ -178,6 +178,7 @@ class NARXPolySim(NARXPoly):
         max_nfev: int = 100,
         xtol: float = 1e-10,
         ftol: float = 1e-10,
+        monomials_of: str = "yu",
     ):
         super().__init__(
             ny=ny,
@@ -189,6 +190,7 @@ class NARXPolySim(NARXPoly):
             max_terms=max_terms,
             constant=constant,
             chunk=chunk,
+            monomials_of=monomials_of,
         )
         self.max_nfev = max_nfev
         self.xtol = xtol
@@ -258,10 +260,10 @@ class NARXPolySim(NARXPoly):
         r0, _, div0 = run(theta0)
         # Continuation when the least-squares start diverges in simulation: refine on each record's first n samples,
         # n = the divergence index, then doubling, so that every stage starts from a model that is bounded on most
-        # of its data (a diverged simulation has no useful gradient).
+        # of its data (a diverged simulation has no useful gradient); never fewer residuals than parameters.
         theta, nfev, stages = theta0, 0, []
         n_max = max(len(y) for y in ys)
-        n = None if div0 < 0 else max(div0, L + 50)
+        n = None if div0 < 0 else max(div0, L + 50, L + theta0.size + 1)
         while n is not None and n < n_max:
             sol = solve(theta, n)
             theta, nfev = sol.x, nfev + int(sol.nfev)
