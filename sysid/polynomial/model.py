@@ -38,15 +38,20 @@ class PolynomialModel(Identifier):
 
     # -------------------------------------------------------------- common learned state
     def _structure(
-        self, n_outputs: int, n_inputs: int, ne: int = 0, degree: int = 1, constant: bool = True
+        self,
+        n_outputs: int,
+        n_inputs: int,
+        ne: int = 0,
+        degree: int = 1,
+        constant: bool = True,
+        monomials_of: str = "yu",
     ) -> fr.Structure:
         regs = fr.make_regressors(self.ny, self.nu, ne, self.nk, n_outputs, n_inputs)
         if not regs:
             raise ConfigError(f"{self.name}: no regressors (ny = nu = 0)")
-        of = getattr(self, "monomials_of", "yu")
-        if of not in MONOMIALS_OF:
-            raise ConfigError(f"{self.name}: monomials_of={of!r} not one of: {', '.join(MONOMIALS_OF)}")
-        nonlinear = None if of == "yu" else [r for r, (kind, _, _) in enumerate(regs) if kind == "y"]
+        if monomials_of not in MONOMIALS_OF:
+            raise ConfigError(f"{self.name}: monomials_of={monomials_of!r} not one of: {', '.join(MONOMIALS_OF)}")
+        nonlinear = None if monomials_of == "yu" else [r for r, (kind, _, _) in enumerate(regs) if kind == "y"]
         terms = fr.candidate_terms(len(regs), degree, constant, nonlinear)
         return fr.Structure(regs, terms, n_outputs, n_inputs)
 

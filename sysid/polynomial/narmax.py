@@ -99,7 +99,7 @@ class NARXPoly(PolynomialModel):
 
     def _fit_records(self, records: list[Record]) -> None:
         _check_common(self)
-        s = self._structure(records[0].n_outputs, records[0].n_inputs, 0, self.degree, self.constant)
+        s = self._structure(records[0].n_outputs, records[0].n_inputs, 0, self.degree, self.constant, self.monomials_of)
         check_records(
             records,
             s.max_lag,
