@@ -53,6 +53,7 @@ def test_a_second_mode_above_the_nyquist_frequency_is_marked_and_capped(fs, mark
         assert "Nyquist" in causes[0]["evidence"]
 
 
+@pytest.mark.heavy
 @pytest.mark.parametrize(
     "seed, mechanism, effect", [(19, "input_lag", "sensor_lowpass"), (91, "crosstalk", "second_mode")]
 )
@@ -67,6 +68,7 @@ def test_a_cause_named_above_the_band_is_not_stated_confidently(seed, mechanism,
     assert out["verdict"] == "unexplained"  # no cause stated as the cause (:func:`.confidence.attributed_verdict`)
 
 
+@pytest.mark.heavy
 def test_a_lag_group_member_above_the_band_joins_the_leaders_group():
     """Case 146: a first-order drive low-pass at 12.8 kHz before the cantilever sampled at 2.37 kHz (Nyquist 1.19 kHz).
     Within the band it is a lag of 1/(2π·12.8 kHz) = 12.4 µs; the 0.03-sample delay that fits it best is stated,
@@ -142,6 +144,7 @@ def test_a_frequency_at_the_top_of_its_range_is_marked_and_capped(ratio, marked)
         }
 
 
+@pytest.mark.heavy
 def test_a_feedthrough_named_as_a_second_mode_pinned_at_its_top_is_not_stated():
     """Case 399: crosstalk of the drive into the cantilever's sensor (outside its catalog; 27.5 kHz, a chirp for
     estimation, sines for validation), named `second_mode` with its ratio refitted to the bound 10 (7.0 kHz, in the

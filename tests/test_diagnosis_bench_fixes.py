@@ -227,6 +227,7 @@ def _calibrated(twin, b):
         return _calibrate(inp, opts)
 
 
+@pytest.mark.heavy
 def test_a_calibration_that_only_fits_coloured_noise_is_not_adopted():
     """Case 60: nothing hidden, AR(1) noise 0.86 on steps records at 1.3 kHz. The calibration lowered the
     estimation SSE by 0.7 % (under the F-test's level on ~450 effective samples) and carried the noise it fitted
@@ -259,6 +260,7 @@ def test_a_calibration_of_a_core_that_is_off_is_adopted():
     assert err["true"] < err["cal"] < 0.15 * err["off"]
 
 
+@pytest.mark.heavy
 def test_coloured_noise_far_above_the_white_floor_is_not_unexplained():
     """Case 176: nothing hidden, steps then a chirp at 5.8 kHz. With the configuration as given the validation
     residual is the added noise, 13.5× the white floor measured from the data; it depends neither on the drive nor
@@ -450,6 +452,7 @@ def test_a_settling_drift_is_judged_on_the_leaders_core():
     assert first["confidence"] >= 0.5
 
 
+@pytest.mark.heavy
 def test_a_drive_lag_is_judged_with_the_delay_on_the_delays_core():
     """Case 682 (seeds beyond the stored 600; the cantilever, a drive low-pass at 3.8 kHz sampled at 3.9 kHz, sines
     then steps): the delay led (validation NRMSE 0.020) and the amplifier's bandwidth, fitted at 3.9 kHz, reached

@@ -12,6 +12,8 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import pytest
+
 from benchmarks.diagnosis_bench.cases import draw_case
 from benchmarks.diagnosis_bench.run import MAX_ROUNDS
 from benchmarks.diagnosis_bench.score import current, outcome
@@ -47,6 +49,7 @@ def test_stored_dead_zone_and_backlash_rows_state_no_cause():
         assert not outcome(row)["confident_wrong"]
 
 
+@pytest.mark.heavy
 def test_a_backlash_beside_the_catalog_is_not_named_a_sensor_lowpass():
     """Case 150: backlash on the cantilever (22.9 kHz, noise / chirp), `sensor_lowpass` named at 0.63 with the
     residual still 62× the noise; now a candidate under the cap and the verdict `unexplained`."""

@@ -28,6 +28,7 @@ def _run(seed: int) -> dict:
     return diagnose(b["twin"], b["est"], b["val"], max_rounds=MAX_ROUNDS, threads=1)
 
 
+@pytest.mark.heavy
 def test_a_mimic_whose_parameters_do_not_carry_over_is_not_stated():
     assert draw_case(412).mechanism == "backlash"
     out = _run(412)
@@ -39,6 +40,7 @@ def test_a_mimic_whose_parameters_do_not_carry_over_is_not_stated():
     assert out["verdict"] == "unexplained"  # an outside mechanism: no cause stated
 
 
+@pytest.mark.heavy
 @pytest.mark.parametrize(
     "seed, mechanism, effect",
     [(102, "echo", "output_echo"), (182, "delay", "input_delay"), (166, "input_lag", "input_delay")],

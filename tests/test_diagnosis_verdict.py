@@ -38,6 +38,7 @@ def test_a_discrepancy_is_attributed_only_to_a_confident_cause(verdict, causes, 
     assert attributed_verdict(verdict, causes) == expected
 
 
+@pytest.mark.heavy
 def test_a_mimic_that_explains_an_outside_mechanism_leaves_the_verdict_unexplained():
     case = draw_case(208)
     assert (case.family, case.mechanism) == ("user", "backlash")
@@ -51,6 +52,7 @@ def test_a_mimic_that_explains_an_outside_mechanism_leaves_the_verdict_unexplain
     assert out.get("hybrid") is None
 
 
+@pytest.mark.heavy
 def test_the_cli_says_why_a_fitted_discrepancy_is_unexplained(tmp_path):
     import subprocess
     import sys

@@ -62,6 +62,7 @@ def test_the_record_is_as_described(records):
     assert 1.0 < est.y[hold][-1] - est.y[hold][0] < 1.2  # µm crept during the 1 kV hold
 
 
+@pytest.mark.heavy
 def test_creep_is_named_from_the_configuration_without_it(records):
     est, val = records
     out = diagnose(CantileverTwin.from_options(without=["creep"]), est, val, max_rounds=1)

@@ -143,6 +143,7 @@ def test_noise_level_of_a_coarsely_quantised_reading_is_not_the_rounding_of_its_
 
 
 # ------------------------------------------------------------------------------------------ whole diagnoses
+@pytest.mark.heavy
 def test_missized_default_creep_is_named_with_its_rate():
     start, est, val, true, field = C.missized_case("creep", 0)
     out = diagnose(start, est, val, max_rounds=1)
@@ -152,6 +153,7 @@ def test_missized_default_creep_is_named_with_its_rate():
     assert "× the configured" in top["evidence"] and out["verdict"] == "discrepancy"
 
 
+@pytest.mark.heavy
 def test_dead_zone_outside_the_catalog_is_unexplained():
     start, est, val, _ = C.outside_case("dead_zone", 0)
     out = diagnose(start, est, val, max_rounds=1)

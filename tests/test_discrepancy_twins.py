@@ -51,6 +51,7 @@ def _staircase(rng, fs, duration, level):
 
 
 # ------------------------------------------------------------------------------------------ cantilever
+@pytest.mark.heavy
 def test_cantilever_creep_injected_as_sum_of_lags():
     """Creep = Σ g·d/(τ_i s + 1) on the input, τ_i = 0.05·10^i s (4 decades), g = 0.024 per decade (defaults:
     0.1 s and 0.015), added to the creep-free twin's output, on a random staircase."""

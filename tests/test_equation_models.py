@@ -137,6 +137,7 @@ def test_cli_refuses_a_bad_model_with_exit_2_and_one_line(cubic_files, case):
     assert len(lines) == 1 and "model" in lines[0], r.stderr
 
 
+@pytest.mark.heavy
 def test_save_model_round_trip(cubic_files, tmp_path):
     """``diagnose --model --save-model``: the cubic spring is named, and the written model loads and simulates the
     validation record as the diagnosis's extended twin (its NRMSE as reported, to 1e-6)."""
@@ -207,6 +208,7 @@ def output(x, u, p):
 '''
 
 
+@pytest.mark.heavy
 @pytest.mark.parametrize("c, beta", [(0.05, 1.0), (-0.02, 0.8), (0.08, 0.0)])
 def test_power_outflow_settles_where_the_flows_balance(tmp_path, c, beta):
     """``power_outflow@h`` adds −c·h^β to the level's rate: under a constant pump the level settles where

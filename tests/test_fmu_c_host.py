@@ -167,6 +167,7 @@ def _twin_fmu(twin, folder):
     return export_fmu(get_twin(twin)(), folder / f"{twin}.fmu"), {"acoustic": 100e6, "cantilever": 1e4}[twin]
 
 
+@pytest.mark.heavy
 @pytest.mark.parametrize("twin", ["acoustic", "cantilever"])
 def test_plain_c_host_twin_fmu_3_runs(plain_host, twin, tmp_path):
     """The fast variant of the 20-run check below: 3 runs of 300 steps, same outputs each time; the

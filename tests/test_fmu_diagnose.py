@@ -75,6 +75,7 @@ def test_fmu_and_kernel_routes_simulate_alike():
             assert np.array_equal(tw_f.simulate(est.u, est.fs), tw_k.simulate(est.u, est.fs))
 
 
+@pytest.mark.heavy
 @pytest.mark.parametrize("effect", list(CASES) + [None])
 def test_hidden_effect_named_as_native_kernel_route(effect):
     """One seed per effect (default suite): the native twin's cause, its parameters within 10 %; noise → none."""

@@ -107,6 +107,7 @@ def _cli(*args):
     return subprocess.run([sys.executable, "-m", "benchmarks.cli", "diagnose", *args], capture_output=True, text=True)
 
 
+@pytest.mark.heavy
 def test_cli_saves_the_hybrid_twin(backlash_files, tmp_path):
     d = backlash_files
     path = tmp_path / "h.json"

@@ -111,6 +111,7 @@ def judge(kind: str, seed: int, models) -> dict:
 KINDS = ["coulomb", "cubic", "bouc_wen", "overflow", "power_outflow", "none", "outside"]
 
 
+@pytest.mark.heavy
 @pytest.mark.parametrize("kind", KINDS)
 def test_hidden_mechanism_seed_0(kind, models):
     res = judge(kind, 0, models)

@@ -68,6 +68,7 @@ def test_every_identifier_is_covered():
     assert set(SETTINGS) == set(IDENTIFIERS)
 
 
+@pytest.mark.heavy
 @pytest.mark.parametrize("ident", list(SETTINGS))
 def test_identify_predict_compare_cli(ident, data, tmp_path, capsys):
     d, est, val = data

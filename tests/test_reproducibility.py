@@ -40,6 +40,7 @@ def _has_avx2() -> bool:
     return torch.backends.cpu.get_cpu_capability() in ("AVX2", "AVX512")
 
 
+@pytest.mark.heavy
 @pytest.mark.skipif(not _has_avx2(), reason="needs a CPU with AVX2 to compare torch's AVX2 and generic kernels")
 def test_float64_one_step_training_is_the_same_with_generic_and_avx2_kernels():
     """float64 training of the NARX-MLP gives the same weights with torch's generic and AVX2 kernels to ~1e-16

@@ -34,6 +34,7 @@ def quick(tmp_path_factory):
     return code, stored, page
 
 
+@pytest.mark.heavy
 def test_quick_tier_produces_every_row(quick):
     code, stored, page = quick
     assert code == 0
@@ -53,6 +54,7 @@ def test_quick_tier_produces_every_row(quick):
         assert r["verdict"] in ("within", "better", "below", "outside", "failed")
 
 
+@pytest.mark.heavy
 def test_quick_rows_against_the_published_spectra(quick):
     """Figure 3.9's peaks are physics of the calibrated stack (940 / 1162 kHz); Figure 3.4's peak is reported
     above the 500 Hz excitation band, whatever its distance from 750 Hz."""
@@ -67,6 +69,7 @@ def test_quick_rows_against_the_published_spectra(quick):
     assert rows["fig-5.13/val"]["project"]["values"][0] == rows["table-5.6/frs-val"]["project"]["values"][0]
 
 
+@pytest.mark.heavy
 def test_page_renders_every_row_from_the_stored_rows(quick, tmp_path):
     _, stored, page = quick
     text = page.read_text(encoding="utf-8")
@@ -94,6 +97,7 @@ def test_committed_page_is_the_rendering_of_the_committed_rows():
     )
 
 
+@pytest.mark.heavy
 def test_row_format_is_checked(quick, tmp_path):
     rows = rows_mod.load_rows(quick[1])
     row = dict(rows["fig-3.4/peak"])

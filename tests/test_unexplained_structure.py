@@ -66,6 +66,7 @@ def test_a_strong_hum_is_outside_though_an_ar_model_of_the_residual_predicts_it(
     assert j["structure"]["p_line"] < 1e-6
 
 
+@pytest.mark.heavy
 def test_benchmark_hum_case_is_unexplained():
     """Diagnosis benchmark seed 413: a 100 Hz hum on the cantilever's reading (outside its catalog), white noise,
     R 26 after the rounds; the verdict was ``none`` (Fisher's g after AR prewhitening, p 0.02) and is
