@@ -1,4 +1,4 @@
-"""``piezotwin search IDENTIFIER --est FILE --val FILE --grid SPEC [--repeats R] [--json]``.
+"""``piezotwin search IDENTIFIER --est FILE (--val FILE | --folds K) --grid SPEC [--repeats R] [--json]``.
 
 Structure sweep with repeated runs (dissertation Tables 4.2, 5.4–5.6, Fig. 5.13) on Optuna; see
 :mod:`sysid.search`. SPEC: ``KEY=V1,V2,...`` items separated by ``;`` — identifier options as for
@@ -39,7 +39,14 @@ def register(sub) -> None:
     )
     p.add_argument("identifier", help="identifier id (narx-mlp, narx-mlp-sim, rnn, narx-poly, ...)")
     p.add_argument("--est", required=True, action="append", metavar="FILE", help="estimation record; may repeat")
-    p.add_argument("--val", required=True, metavar="FILE", help="validation record")
+    p.add_argument("--val", metavar="FILE", help="validation record (or give --folds)")
+    p.add_argument(
+        "--folds",
+        type=COUNT,
+        metavar="K",
+        help="instead of --val: blocked K-fold cross-validation on the one --est record (K >= 2; each run "
+        "fitted K times, each contiguous K-th held out in turn; the scores are the folds' means)",
+    )
     p.add_argument(
         "--grid",
         required=True,
@@ -90,10 +97,14 @@ def run(args: argparse.Namespace) -> int:
 
     if args.workers < 1:
         raise ConfigError(f"--workers must be ≥ 1, got {args.workers}")
+    if (args.val is None) == (args.folds is None):
+        raise ConfigError("give exactly one of --val FILE and --folds K")
+    if args.folds is not None and len(args.est) != 1:
+        raise ConfigError(f"--folds cross-validates one estimation record; got {len(args.est)} --est files")
     check_storage(args.storage, args.study)  # before any work: a bad --storage leaves nothing behind
     est = [read_data(args, f) for f in args.est]
-    val = read_data(args, args.val)
-    same_fs(est + [val])
+    val = None if args.val is None else read_data(args, args.val)
+    same_fs(est + ([] if val is None else [val]))
     spec = SweepSpec(
         identifier=args.identifier,
         grid=parse_grid(args.grid, args.identifier),
@@ -101,6 +112,7 @@ def run(args: argparse.Namespace) -> int:
         seed=args.seed,
         fixed=parse_assignments(args.set_),
         sampler=args.sampler,
+        folds=args.folds or 0,
     )
     init_sqlite(storage_url(args.storage, args.study), _open_storage)  # new SQLite store: created under a lock
     with make_executor(scheduler=args.scheduler) as ex:
@@ -110,7 +122,7 @@ def run(args: argparse.Namespace) -> int:
                 "Dask workers: give one of them"
             )
         est_h = ex.share(est if len(est) > 1 else est[0]) if ex.kind == "dask" else (est if len(est) > 1 else est[0])
-        val_h = ex.share(val) if ex.kind == "dask" else val
+        val_h = ex.share(val) if ex.kind == "dask" and val is not None else val
         summary = run_sweep(
             spec,
             est_h,
@@ -131,6 +143,9 @@ def run(args: argparse.Namespace) -> int:
             "sampler": args.sampler,
             "repeats": args.repeats,
             "grid": spec.grid,
+            "validated_on": f"blocked {args.folds}-fold cross-validation on the estimation record"
+            if args.folds
+            else "the --val record",
         }
     )
     runs = collect(url, args.study) if args.export or args.plot else []
@@ -152,6 +167,8 @@ def run(args: argparse.Namespace) -> int:
         f"{args.identifier}: {summary['n_configs']} configurations, {summary['n_runs']} runs  "
         f"(storage {url}, study {args.study})"
     )
+    if args.folds:
+        print(f"  val = blocked {args.folds}-fold cross-validation on the estimation record: means over the folds")
     print(
         f"  {'configuration':<44} {'params':>7}  {'R2 OSA est':>10} {'R2 FRS est':>17} "
         f"{'R2 OSA val':>10} {'R2 FRS val':>17}"

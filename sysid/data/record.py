@@ -199,6 +199,23 @@ class Record:
             raise DataError(f"split: index {index} outside 1..{len(self) - 1}")
         return self[:index], self[index:]
 
+    def blocked_folds(self, k: int) -> list[tuple[list[Record], Record]]:
+        """Blocked k-fold cross-validation: the record cut into ``k`` contiguous blocks whose lengths differ by at
+        most one sample; fold i holds block i out for validation and estimates on what lies before and after it
+        (one or two records). The blocks keep their order: a dynamic record's samples are not exchangeable, so
+        shuffled folds would validate on samples the estimation part surrounds (Bergmeir & Benítez 2012)."""
+        if isinstance(k, bool) or not isinstance(k, (int, np.integer)) or k < 2:
+            raise DataError(f"blocked folds: k must be an integer of at least 2, got {k!r}")
+        n = len(self)
+        if n < 2 * k:
+            raise DataError(f"{self.source}: {n} samples are too few for {k} folds (at least {2 * k})")
+        edges = np.linspace(0, n, k + 1).round().astype(int)
+        out = []
+        for a, b in zip(edges[:-1], edges[1:]):
+            parts = ([self[:a]] if a > 0 else []) + ([self[b:]] if b < n else [])
+            out.append((parts, self[a:b]))
+        return out
+
     def segments(self) -> list[Record]:
         """Split at the boundaries listed in ``meta['segments']`` (list of dicts with start/stop indices)."""
         segs = self.meta.get("segments")

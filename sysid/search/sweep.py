@@ -123,12 +123,15 @@ class SweepSpec:
     seed: int = 0
     fixed: dict[str, str] = field(default_factory=dict)
     sampler: str = "grid"
+    folds: int = 0  # 0: score on the validation record; K ≥ 2: blocked K-fold cross-validation (:mod:`.folds`)
 
     def __post_init__(self) -> None:
         if self.sampler not in SAMPLERS:
             raise ConfigError(f"--sampler {self.sampler!r} not one of: {', '.join(SAMPLERS)}")
         if not isinstance(self.repeats, int) or self.repeats < 1:
             raise ConfigError(f"--repeats must be a positive integer, got {self.repeats!r}")
+        if isinstance(self.folds, bool) or not isinstance(self.folds, int) or self.folds == 1 or self.folds < 0:
+            raise ConfigError(f"--folds must be an integer of at least 2, got {self.folds!r}")
         defaults = _identifier_defaults(self.identifier)
         self.fixed = resolve_aliases(self.fixed, defaults, "--set")
         for k in self.fixed:
@@ -237,6 +240,8 @@ def _make_sampler(spec: SweepSpec):
 def _spec_dict(spec: SweepSpec) -> dict[str, Any]:
     d = asdict(spec)
     d.pop("sampler")  # a study may be continued with another sampler
+    if not d["folds"]:
+        d.pop("folds")  # a validation-record sweep's spec as stored before folds existed: its studies resume
     return d
 
 
@@ -277,24 +282,39 @@ def open_study(spec: SweepSpec, url: str, study_name: str, create: bool = True):
 
 # ---------------------------------------------------------------------------------------------- one configuration
 def run_one(
-    spec: SweepSpec, config: dict[str, str], repeat: int, est: Record | Sequence[Record], val: Record | Sequence[Record]
+    spec: SweepSpec,
+    config: dict[str, str],
+    repeat: int,
+    est: Record | Sequence[Record],
+    val: Record | Sequence[Record] | None,
 ) -> dict[str, Any]:
     """Fit one run (repeat ``repeat``, seed ``spec.seed + repeat``) of one configuration: a pure function of
-    its arguments, so a Dask worker gives the same numbers as this process."""
+    its arguments, so a Dask worker gives the same numbers as this process. With ``spec.folds`` the run is the
+    blocked cross-validation of :func:`sysid.search.folds.evaluate_folds` on ``est`` (``val`` unused)."""
     from sysid.evaluation.evaluate import evaluate
     from sysid.registry import get_identifier
 
     seed = spec.seed + repeat
-    model = get_identifier(spec.identifier).from_assignments(spec.assignments(config, seed))
+    cls = get_identifier(spec.identifier)
+    out: dict[str, Any] = {"config": dict(config), "repeat": repeat, "seed": seed}
+    if spec.folds:
+        from sysid.search.folds import evaluate_folds
+
+        rec = est[0] if not isinstance(est, Record) and len(est) == 1 else est
+        if not isinstance(rec, Record):
+            raise ConfigError("--folds cross-validates one estimation record; give one --est")
+        scored = evaluate_folds(lambda: cls.from_assignments(spec.assignments(config, seed)), rec, spec.folds)
+        return {**out, **scored, "pid": os.getpid()}
+    if val is None:
+        raise ConfigError("a sweep without --folds needs a validation record (--val)")
+    model = cls.from_assignments(spec.assignments(config, seed))
     t0 = time.perf_counter()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", DivergenceWarning)
         model.fit(est)
     fit_s = time.perf_counter() - t0
     return {
-        "config": dict(config),
-        "repeat": repeat,
-        "seed": seed,
+        **out,
         "n_parameters": model.n_parameters_,
         "fit_seconds": fit_s,
         "estimation": evaluate(model, est),
@@ -307,7 +327,7 @@ def run_config(
     spec: SweepSpec,
     config: dict[str, str],
     est: Record | Sequence[Record],
-    val: Record | Sequence[Record],
+    val: Record | Sequence[Record] | None,
     executor=None,
 ) -> list[dict[str, Any]]:
     """Fit ``spec.repeats`` models of one configuration; one dict per run with the identify-JSON scores.

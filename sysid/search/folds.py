@@ -1,0 +1,77 @@
+"""One run of a sweep scored by blocked k-fold cross-validation on the estimation record (``search --folds K``).
+
+Where no separate validation record exists, or one split of the record would rank structures by a single stretch
+of it, each configuration is fitted K times: fold i holds the i-th contiguous block of the estimation record out
+and fits on the rest (:meth:`sysid.data.record.Record.blocked_folds`), then scores the model one step ahead and in
+free run on the block it did not see (Bergmeir & Benítez, "On the use of cross-validation for time series
+predictor evaluation", Inf. Sci. 191, 2012). A run's scores are the means over its folds, so the sweep's tables,
+objective and exports read them as they read a validation record's; the folds' own scores travel with the run.
+A fold whose free run diverges makes the run's mean free-run R² non-finite: the run counts as diverged.
+"""
+
+from __future__ import annotations
+
+import time
+import warnings
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+
+from sysid.data.record import Record
+from sysid.errors import DivergenceWarning
+
+__all__ = ["evaluate_folds", "mean_scores"]
+
+
+def mean_scores(scores: list[dict[str, Any]]) -> dict[str, Any]:
+    """The mean of :func:`sysid.evaluation.evaluate.evaluate` dicts, metric by metric (``diverged_at`` becomes
+    ``diverged_folds``, the number of folds whose free run diverged)."""
+    out: dict[str, Any] = {}
+    for mode in scores[0]:
+        entry: dict[str, Any] = {}
+        for metric in scores[0][mode]:
+            if metric == "diverged_at":
+                continue
+            vals = [s[mode][metric] for s in scores]
+            entry[metric] = float(np.mean([np.nan if v is None else v for v in vals]))
+        diverged = sum("diverged_at" in s[mode] for s in scores)
+        if diverged:
+            entry["diverged_folds"] = diverged
+        out[mode] = entry
+    return out
+
+
+def evaluate_folds(make_model: Callable[[], Any], est: Record, k: int) -> dict[str, Any]:
+    """Fit ``make_model()`` on each of the ``k`` blocked folds of ``est`` and score it on what it was fitted on
+    (``estimation``) and on the block it was not (``validation``); means over the folds, the parameter count of
+    the folds' models (their mean, rounded, where a structure selection differs between folds), the summed fit
+    time, and each fold's scores under ``folds``."""
+    from sysid.evaluation.evaluate import evaluate
+
+    per: list[dict[str, Any]] = []
+    start = 0
+    for i, (parts, block) in enumerate(est.blocked_folds(k)):
+        model = make_model()
+        t0 = time.perf_counter()
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", DivergenceWarning)
+            model.fit(parts[0] if len(parts) == 1 else parts)
+        per.append(
+            {
+                "fold": i,
+                "held_out": [start, start + len(block)],  # sample indices [start, stop) of the block
+                "n_parameters": int(model.n_parameters_),
+                "fit_seconds": time.perf_counter() - t0,
+                "estimation": evaluate(model, parts),
+                "validation": evaluate(model, block),
+            }
+        )
+        start += len(block)
+    return {
+        "n_parameters": int(round(float(np.mean([f["n_parameters"] for f in per])))),
+        "fit_seconds": float(sum(f["fit_seconds"] for f in per)),
+        "estimation": mean_scores([f["estimation"] for f in per]),
+        "validation": mean_scores([f["validation"] for f in per]),
+        "folds": per,
+    }
