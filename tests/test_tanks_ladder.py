@@ -71,7 +71,7 @@ def test_the_documented_rungs_are_reproduced():
     rows = tl.run(starts=16, seed=0, substeps=8)
     by = {r["rung"]: r for r in rows}
     offsets = by[tl.RUNGS[4][0]]
-    assert offsets["test_official_window50"] == pytest.approx(0.232, abs=0.002)
+    assert offsets["test-official"] == pytest.approx(0.232, abs=0.002)
     assert offsets["fitted_on_test"] == pytest.approx(0.202, abs=0.002)
     assert by[tl.RUNGS[5][0]]["fitted_on_test"] == pytest.approx(0.181, abs=0.002)
     assert [r["estimation"] for r in rows] == sorted((r["estimation"] for r in rows), reverse=True)

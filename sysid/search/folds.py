@@ -11,15 +11,12 @@ A fold whose free run diverges makes the run's mean free-run R² non-finite: the
 
 from __future__ import annotations
 
-import time
-import warnings
 from collections.abc import Callable
 from typing import Any
 
 import numpy as np
 
 from sysid.data.record import Record
-from sysid.errors import DivergenceWarning
 
 __all__ = ["evaluate_folds", "mean_scores"]
 
@@ -33,8 +30,7 @@ def mean_scores(scores: list[dict[str, Any]]) -> dict[str, Any]:
         for metric in scores[0][mode]:
             if metric == "diverged_at":
                 continue
-            vals = [s[mode][metric] for s in scores]
-            entry[metric] = float(np.mean([np.nan if v is None else v for v in vals]))
+            entry[metric] = float(np.mean([s[mode][metric] for s in scores]))
         diverged = sum("diverged_at" in s[mode] for s in scores)
         if diverged:
             entry["diverged_folds"] = diverged
@@ -47,26 +43,13 @@ def evaluate_folds(make_model: Callable[[], Any], est: Record, k: int) -> dict[s
     (``estimation``) and on the block it was not (``validation``); means over the folds, the parameter count of
     the folds' models (their mean, rounded, where a structure selection differs between folds), the summed fit
     time, and each fold's scores under ``folds``."""
-    from sysid.evaluation.evaluate import evaluate
+    from sysid.search.sweep import fit_scored
 
     per: list[dict[str, Any]] = []
     start = 0
     for i, (parts, block) in enumerate(est.blocked_folds(k)):
-        model = make_model()
-        t0 = time.perf_counter()
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", DivergenceWarning)
-            model.fit(parts[0] if len(parts) == 1 else parts)
-        per.append(
-            {
-                "fold": i,
-                "held_out": [start, start + len(block)],  # sample indices [start, stop) of the block
-                "n_parameters": int(model.n_parameters_),
-                "fit_seconds": time.perf_counter() - t0,
-                "estimation": evaluate(model, parts),
-                "validation": evaluate(model, block),
-            }
-        )
+        scored = fit_scored(make_model(), parts[0] if len(parts) == 1 else parts, block)
+        per.append({"fold": i, "held_out": [start, start + len(block)], **scored})  # [start, stop) of the block
         start += len(block)
     return {
         "n_parameters": int(round(float(np.mean([f["n_parameters"] for f in per])))),

@@ -31,6 +31,7 @@ __all__ = [
     "storage_url",
     "heartbeat_settings",
     "open_study",
+    "fit_scored",
     "run_one",
     "run_config",
 ]
@@ -130,7 +131,7 @@ class SweepSpec:
             raise ConfigError(f"--sampler {self.sampler!r} not one of: {', '.join(SAMPLERS)}")
         if not isinstance(self.repeats, int) or self.repeats < 1:
             raise ConfigError(f"--repeats must be a positive integer, got {self.repeats!r}")
-        if isinstance(self.folds, bool) or not isinstance(self.folds, int) or self.folds == 1 or self.folds < 0:
+        if isinstance(self.folds, bool) or not isinstance(self.folds, int) or (self.folds != 0 and self.folds < 2):
             raise ConfigError(f"--folds must be an integer of at least 2, got {self.folds!r}")
         defaults = _identifier_defaults(self.identifier)
         self.fixed = resolve_aliases(self.fixed, defaults, "--set")
@@ -281,6 +282,24 @@ def open_study(spec: SweepSpec, url: str, study_name: str, create: bool = True):
 
 
 # ---------------------------------------------------------------------------------------------- one configuration
+def fit_scored(model, est: Record | Sequence[Record], val: Record | Sequence[Record]) -> dict[str, Any]:
+    """Fit ``model`` on ``est`` (a diverging free run is scored, not warned about) and score it on ``est`` and
+    ``val``: its parameter count, fit time [s] and the identify-JSON scores of both (one run, or one fold of one)."""
+    from sysid.evaluation.evaluate import evaluate
+
+    t0 = time.perf_counter()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", DivergenceWarning)
+        model.fit(est)
+    fit_s = time.perf_counter() - t0
+    return {
+        "n_parameters": model.n_parameters_,
+        "fit_seconds": fit_s,
+        "estimation": evaluate(model, est),
+        "validation": evaluate(model, val),
+    }
+
+
 def run_one(
     spec: SweepSpec,
     config: dict[str, str],
@@ -291,7 +310,6 @@ def run_one(
     """Fit one run (repeat ``repeat``, seed ``spec.seed + repeat``) of one configuration: a pure function of
     its arguments, so a Dask worker gives the same numbers as this process. With ``spec.folds`` the run is the
     blocked cross-validation of :func:`sysid.search.folds.evaluate_folds` on ``est`` (``val`` unused)."""
-    from sysid.evaluation.evaluate import evaluate
     from sysid.registry import get_identifier
 
     seed = spec.seed + repeat
@@ -304,23 +322,11 @@ def run_one(
         if not isinstance(rec, Record):
             raise ConfigError("--folds cross-validates one estimation record; give one --est")
         scored = evaluate_folds(lambda: cls.from_assignments(spec.assignments(config, seed)), rec, spec.folds)
-        return {**out, **scored, "pid": os.getpid()}
-    if val is None:
+    elif val is None:
         raise ConfigError("a sweep without --folds needs a validation record (--val)")
-    model = cls.from_assignments(spec.assignments(config, seed))
-    t0 = time.perf_counter()
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", DivergenceWarning)
-        model.fit(est)
-    fit_s = time.perf_counter() - t0
-    return {
-        **out,
-        "n_parameters": model.n_parameters_,
-        "fit_seconds": fit_s,
-        "estimation": evaluate(model, est),
-        "validation": evaluate(model, val),
-        "pid": os.getpid(),
-    }
+    else:
+        scored = fit_scored(cls.from_assignments(spec.assignments(config, seed)), est, val)
+    return {**out, **scored, "pid": os.getpid()}
 
 
 def run_config(
