@@ -1,4 +1,5 @@
-"""One run of a sweep scored by blocked k-fold cross-validation on the estimation record (``search --folds K``).
+"""How one run of a sweep is fitted and scored: on a validation record (:func:`fit_scored`), or by blocked k-fold
+cross-validation on the estimation record (:func:`evaluate_folds`, ``search --folds K``).
 
 Where no separate validation record exists, or one split of the record would rank structures by a single stretch
 of it, each configuration is fitted K times: fold i holds the i-th contiguous block of the estimation record out
@@ -11,14 +12,35 @@ A fold whose free run diverges makes the run's mean free-run R² non-finite: the
 
 from __future__ import annotations
 
-from collections.abc import Callable
+import time
+import warnings
+from collections.abc import Callable, Sequence
 from typing import Any
 
 import numpy as np
 
 from sysid.data.record import Record
+from sysid.errors import DivergenceWarning
 
-__all__ = ["evaluate_folds", "mean_scores"]
+__all__ = ["fit_scored", "evaluate_folds", "mean_scores"]
+
+
+def fit_scored(model: Any, est: Record | Sequence[Record], val: Record | Sequence[Record]) -> dict[str, Any]:
+    """Fit ``model`` on ``est`` (a diverging free run is scored, not warned about) and score it on ``est`` and
+    ``val``: its parameter count, fit time [s] and the identify-JSON scores of both (one run, or one fold of one)."""
+    from sysid.evaluation.evaluate import evaluate
+
+    t0 = time.perf_counter()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", DivergenceWarning)
+        model.fit(est)
+    fit_s = time.perf_counter() - t0
+    return {
+        "n_parameters": model.n_parameters_,
+        "fit_seconds": fit_s,
+        "estimation": evaluate(model, est),
+        "validation": evaluate(model, val),
+    }
 
 
 def mean_scores(scores: list[dict[str, Any]]) -> dict[str, Any]:
@@ -43,8 +65,6 @@ def evaluate_folds(make_model: Callable[[], Any], est: Record, k: int) -> dict[s
     (``estimation``) and on the block it was not (``validation``); means over the folds, the parameter count of
     the folds' models (their mean, rounded, where a structure selection differs between folds), the summed fit
     time, and each fold's scores under ``folds``."""
-    from sysid.search.sweep import fit_scored
-
     per: list[dict[str, Any]] = []
     start = 0
     for i, (parts, block) in enumerate(est.blocked_folds(k)):

@@ -22,7 +22,8 @@ import numpy as np
 
 from sysid.config import ALIASES, coerce, resolve_aliases
 from sysid.data.record import Record
-from sysid.errors import ConfigError, DivergenceWarning
+from sysid.errors import ConfigError
+from sysid.search.folds import evaluate_folds, fit_scored
 
 __all__ = [
     "SweepSpec",
@@ -31,7 +32,6 @@ __all__ = [
     "storage_url",
     "heartbeat_settings",
     "open_study",
-    "fit_scored",
     "run_one",
     "run_config",
 ]
@@ -282,24 +282,6 @@ def open_study(spec: SweepSpec, url: str, study_name: str, create: bool = True):
 
 
 # ---------------------------------------------------------------------------------------------- one configuration
-def fit_scored(model, est: Record | Sequence[Record], val: Record | Sequence[Record]) -> dict[str, Any]:
-    """Fit ``model`` on ``est`` (a diverging free run is scored, not warned about) and score it on ``est`` and
-    ``val``: its parameter count, fit time [s] and the identify-JSON scores of both (one run, or one fold of one)."""
-    from sysid.evaluation.evaluate import evaluate
-
-    t0 = time.perf_counter()
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", DivergenceWarning)
-        model.fit(est)
-    fit_s = time.perf_counter() - t0
-    return {
-        "n_parameters": model.n_parameters_,
-        "fit_seconds": fit_s,
-        "estimation": evaluate(model, est),
-        "validation": evaluate(model, val),
-    }
-
-
 def run_one(
     spec: SweepSpec,
     config: dict[str, str],
@@ -316,8 +298,6 @@ def run_one(
     cls = get_identifier(spec.identifier)
     out: dict[str, Any] = {"config": dict(config), "repeat": repeat, "seed": seed}
     if spec.folds:
-        from sysid.search.folds import evaluate_folds
-
         rec = est[0] if not isinstance(est, Record) and len(est) == 1 else est
         if not isinstance(rec, Record):
             raise ConfigError("--folds cross-validates one estimation record; give one --est")
