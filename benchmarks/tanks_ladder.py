@@ -3,16 +3,17 @@ its class stops (docs/benchmarks-sota.md, "How far a richer physical model goes"
 
 Each rung adds one piece of physics to Torricelli's two tanks (Schoukens et al. 2016, eqs. (1)–(2)):
 
-    ẋ₁ = k₄·(u − u₀)₊ − q₁,   q₁ = k₁·(x₁ − c₁)₊^a₁,   ẋ₂ = g·q₁ + s·spill − k₃·(x₂ − c₂)₊^a₂,
+    ẋ₁ = k₄·(u(t − τ) − u₀)₊ − q₁,   q₁ = k₁·(x₁ − c₁)₊^a₁,   ẋ₂ = g·q₁ + s·spill − k₃·(x₂ − c₂)₊^a₂,
     y = x₂ + e·q₁,
 
 x₁ held at its overflow level h₁ (what flows in beyond it spills, the share s into the lower tank), x₂ at h₂.
-Levels in the sensor's volts; u [V] is held over each 4 s sample; explicit Euler with ``substeps`` steps a
-sample. Every parameter of a rung and both start levels are fitted by least squares on the free-run error over
-the whole estimation record from ``starts`` starts (seed fixed); the fit with the lowest estimation error is
-scored on the test from its own start levels, or from levels fitted on the test's initialisation window (4 and
-50 samples, the benchmark's protocol). The last column fits the same class to the test record itself: the best
-the class can do there, whatever it is fitted on.
+Levels in the sensor's volts; u [V] is held over each 4 s sample and reaches the tank τ [s] later (the pump's
+transport delay; each Euler step takes the delayed input's mean over the step, so τ acts continuously); explicit
+Euler with ``substeps`` steps a sample. Every parameter of a rung and both start levels are fitted by least
+squares on the free-run error over the whole estimation record from ``starts`` starts (seed fixed); the fit with
+the lowest estimation error is scored on the test from its own start levels, or from levels fitted on the test's
+initialisation window (4 and 50 samples, the benchmark's protocol). The last column fits the same class to the
+test record itself: the best the class can do there, whatever it is fitted on.
 
 ``python -m benchmarks.tanks_ladder [--starts 16] [--substeps 8] [--json]`` prints the table (about 1 min).
 """
@@ -31,12 +32,15 @@ from scipy.optimize import least_squares
 __all__ = ["NAMES", "RUNGS", "simulate", "fit", "window_start", "run"]
 
 #: every parameter of the ladder's model, in the order :func:`simulate` takes them
-NAMES = ("k1", "k3", "k4", "a1", "a2", "u0", "h1", "s", "h2", "c2", "g", "c1", "e")
-#: value of a parameter a rung does not fit (a Torricelli tank, unbounded, outlets at the sensor's zero)
-FIXED = dict(k1=0.05, k3=0.05, k4=0.03, a1=0.5, a2=0.5, u0=0.0, h1=100.0, s=0.0, h2=100.0, c2=0.0, g=1.0, c1=0.0, e=0.0)
+NAMES = ("k1", "k3", "k4", "a1", "a2", "u0", "h1", "s", "h2", "c2", "g", "c1", "e", "tau")
+#: value of a parameter a rung does not fit (a Torricelli tank, unbounded, outlets at the sensor's zero, no delay)
+FIXED = dict(
+    k1=0.05, k3=0.05, k4=0.03, a1=0.5, a2=0.5, u0=0.0, h1=100.0, s=0.0, h2=100.0, c2=0.0, g=1.0, c1=0.0, e=0.0, tau=0.0
+)
 BOUNDS = dict(
     k1=(1e-3, 1.0), k3=(1e-3, 1.0), k4=(1e-3, 1.0), a1=(0.1, 1.5), a2=(0.1, 1.5), u0=(-3.0, 3.0), h1=(5.0, 15.0),
     s=(0.0, 2.0), h2=(8.0, 12.0), c2=(-5.0, 4.5), g=(0.1, 3.0), c1=(-5.0, 4.0), e=(-20.0, 20.0),
+    tau=(0.0, 16.0),
 )  # fmt: skip
 _CORE = ("k1", "k3", "k4", "h1", "s", "h2", "g")
 #: (rung, parameters it fits besides the two start levels)
@@ -46,7 +50,8 @@ RUNGS: tuple[tuple[str, tuple[str, ...]], ...] = (
     ("+ pump dead zone u₀", _CORE + ("a1", "a2", "u0")),
     ("+ lower outlet above the sensor's zero, c₂", _CORE + ("a1", "a2", "u0", "c2")),
     ("+ upper outlet offset c₁", _CORE + ("a1", "a2", "u0", "c2", "c1")),
-    ("+ a term of the upper outflow in the reading, e", _CORE + ("a1", "a2", "u0", "c2", "c1", "e")),
+    ("+ pump transport delay τ", _CORE + ("a1", "a2", "u0", "c2", "c1", "tau")),
+    ("+ a term of the upper outflow in the reading, e", _CORE + ("a1", "a2", "u0", "c2", "c1", "tau", "e")),
 )
 TS = 4.0  # s, the benchmark's sampling period
 
@@ -55,14 +60,18 @@ TS = 4.0  # s, the benchmark's sampling period
 def simulate(u: np.ndarray, p: np.ndarray, x10: float, x20: float, substeps: int) -> np.ndarray:
     """The output y [V] of the ladder's model (module docstring) for the held input ``u`` [V], parameters ``p`` in
     :data:`NAMES`' order and start levels x10, x20 [V]."""
-    k1, k3, k4, a1, a2, u0, h1, s, h2, c2, g, c1, e = p
+    k1, k3, k4, a1, a2, u0, h1, s, h2, c2, g, c1, e, tau = p
     y = np.empty(u.size)
     x1, x2, dt = x10, x20, TS / substeps
+    lag = int(np.floor(tau / dt))  # the delay in whole Euler steps, and the fraction of one
+    frac = tau / dt - lag
     q1 = k1 * max(x1 - c1, 0.0) ** a1
     for i in range(u.size):
         y[i] = x2 + e * q1
-        inflow = k4 * max(u[i] - u0, 0.0)
-        for _ in range(substeps):
+        for j in range(substeps):
+            m = i * substeps + j - lag  # the step whose input arrives now (before the record: its first sample)
+            ud = (1.0 - frac) * u[max(m, 0) // substeps] + frac * u[max(m - 1, 0) // substeps]
+            inflow = k4 * max(ud - u0, 0.0)
             q1 = k1 * max(x1 - c1, 0.0) ** a1
             d1 = inflow - q1
             spill = 0.0
@@ -80,7 +89,14 @@ def _full(theta: np.ndarray, free: tuple[str, ...]) -> np.ndarray:
 
 
 #: a start's draw of a coefficient (uniform over these), and the fixed start of the others (0 where not listed)
-_DRAWN = {"k1": (0.02, 0.2), "k3": (0.02, 0.2), "k4": (0.01, 0.1), "h1": (8.0, 12.0), "s": (0.0, 1.5)}
+_DRAWN = {
+    "k1": (0.02, 0.2),
+    "k3": (0.02, 0.2),
+    "k4": (0.01, 0.1),
+    "h1": (8.0, 12.0),
+    "s": (0.0, 1.5),
+    "tau": (0.0, 8.0),
+}
 _START = {"a1": 0.5, "a2": 0.5, "h2": 10.05, "g": 1.0}
 
 
