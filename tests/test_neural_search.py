@@ -82,6 +82,42 @@ def test_two_worker_processes_share_one_sqlite_storage(tmp_path, data):
     assert len({r["pid"] for r in runs}) == 2  # both workers ran configurations
 
 
+def test_a_claim_made_just_after_a_workers_read_does_not_end_it_with_a_configuration_missing(
+    tmp_path, data, monkeypatch
+):
+    """A worker decides from one read of the study per pass what is left and whether anything still runs. When its
+    decisions came from two reads, a claim made between them (here by a process that then died) hid the last
+    configuration from the first and showed nothing running in the second: the worker ended with it missing, and
+    `piezotwin search` exited 1 ("1 of 6 requested configurations did not complete")."""
+    import subprocess
+    import sys
+
+    import sysid.search.study as st
+    from sysid.search.sweep import open_study
+
+    est, val = data
+    spec = SweepSpec("narx-mlp", parse_grid("lags=2,3", "narx-mlp"), repeats=1, fixed=FIXED)
+    url = storage_url(str(tmp_path / "r.db"), "r")
+    open_study(spec, url, "r")
+    st.worker_loop(spec, url, "r", est, val, target=1)  # lags=2 finished
+    gone = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True)
+    dead_pid = int(gone.stdout)
+    real, reads = st._snapshot, []
+
+    def read(study):
+        reads.append(1)
+        if len(reads) == 2:  # another process claims lags=3 right after the worker's first read, then dies
+            t = study.ask()
+            for k, v in (("config_key", "lags=3"), ("host", st.HOST), ("pid", dead_pid)):
+                t.set_user_attr(k, v)
+        return real(study)
+
+    monkeypatch.setattr(st, "_snapshot", read)
+    st.worker_loop(spec, url, "r", est, val, target=2)
+    keys = [r["config_key"] for r in collect(url, "r")]
+    assert sorted(keys) == ["lags=2", "lags=3"]
+
+
 def test_cli_search_json_and_export(tmp_path, data, capsys):
     est, val = data
     write_record(est, tmp_path / "est.npz")

@@ -135,12 +135,11 @@ def claim(trial, key: str, target: int) -> str | None:
 
 
 def _next_grid_config(
-    study, spec, target: int, worker: int, n_workers: int, failed: dict[str, int], rng: random.Random | None
+    taken: set[str], spec, target: int, worker: int, n_workers: int, failed: dict[str, int], rng: random.Random | None
 ) -> dict[str, str] | None:
-    """A configuration among the first ``target`` grid points that is neither finished nor running (nor
-    given up here): this worker's share (index mod n_workers) first; a random one after a clash."""
-    done, running = _snapshot(study)
-    taken = done | running
+    """A configuration among the first ``target`` grid points that is not ``taken`` (finished or running, from the
+    caller's one read of the study, the same read that tells it whether anything is still running) nor given up
+    here: this worker's share (index mod n_workers) first; a random one after a clash."""
     missing = [
         (i, c)
         for i, c in enumerate(_grid_configs(spec)[:target])
@@ -192,7 +191,9 @@ def worker_loop(
             cfg = (
                 None
                 if waiting
-                else _next_grid_config(study, spec, target, worker, n_workers, failed, rng if state["clash"] else None)
+                else _next_grid_config(
+                    done | live, spec, target, worker, n_workers, failed, rng if state["clash"] else None
+                )
             )
             if cfg is None and not waiting:
                 if not live:
