@@ -86,8 +86,8 @@ def test_a_claim_made_just_after_a_workers_read_does_not_end_it_with_a_configura
     tmp_path, data, monkeypatch
 ):
     """A worker decides from one read of the study per pass what is left and whether anything still runs. When its
-    decisions came from two reads, a claim made between them (here by a process that then died) hid the last
-    configuration from the first and showed nothing running in the second: the worker ended with it missing, and
+    decisions came from two reads, a claim made between them (here by a process that then died) showed nothing
+    running in the first and hid the last configuration from the second: the worker ended with it missing, and
     `piezotwin search` exited 1 ("1 of 6 requested configurations did not complete")."""
     import subprocess
     import sys

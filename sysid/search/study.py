@@ -192,7 +192,7 @@ def worker_loop(
                 None
                 if waiting
                 else _next_grid_config(
-                    done | live, spec, target, worker, n_workers, failed, rng if state["clash"] else None
+                    done | running, spec, target, worker, n_workers, failed, rng if state["clash"] else None
                 )
             )
             if cfg is None and not waiting:

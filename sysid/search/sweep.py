@@ -296,16 +296,20 @@ def run_one(
 
     seed = spec.seed + repeat
     cls = get_identifier(spec.identifier)
+
+    def make_model():
+        return cls.from_assignments(spec.assignments(config, seed))
+
     out: dict[str, Any] = {"config": dict(config), "repeat": repeat, "seed": seed}
     if spec.folds:
         rec = est[0] if not isinstance(est, Record) and len(est) == 1 else est
         if not isinstance(rec, Record):
             raise ConfigError("--folds cross-validates one estimation record; give one --est")
-        scored = evaluate_folds(lambda: cls.from_assignments(spec.assignments(config, seed)), rec, spec.folds)
+        scored = evaluate_folds(make_model, rec, spec.folds)
     elif val is None:
         raise ConfigError("a sweep without --folds needs a validation record (--val)")
     else:
-        scored = fit_scored(cls.from_assignments(spec.assignments(config, seed)), est, val)
+        scored = fit_scored(make_model(), est, val)
     return {**out, **scored, "pid": os.getpid()}
 
 
